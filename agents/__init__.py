@@ -1,0 +1,1 @@
+"""Driving agents: training, evaluation, policies, the demo."""

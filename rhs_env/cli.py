@@ -1,0 +1,63 @@
+"""The ``rhs-slam`` console command.
+
+Each subcommand lives in its own module exposing ``configure(parser)`` and
+``run(args) -> int``; this file only dispatches, so importing the CLI stays
+cheap (torch, cvxpy and highway-env load only for the subcommand that needs them).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+# name -> (module, one-line help)
+SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    "demo": ("agents.demo", "one SLAM-in-the-loop episode with the shipped policy"),
+    "patterns": ("rhs_env.patterns.cli", "build or load a holographic pattern library and report it"),
+    "scan": ("rhs_env.scan_cli", "one radar cycle on targets from a scene JSON file"),
+    "scenario": ("slam.scenario_cli", "SLAM on a scripted run from a scenario JSON file"),
+    "train": ("agents.train", "train a driving agent with stable-baselines3"),
+    "evaluate": ("agents.evaluate", "evaluate a driving policy with SLAM metrics"),
+}
+
+
+def _available() -> dict[str, tuple[str, str]]:
+    out = {}
+    for name, (module, text) in SUBCOMMANDS.items():
+        if importlib.util.find_spec(module.rsplit(".", 1)[0]) is None:
+            continue
+        try:
+            if importlib.util.find_spec(module) is None:
+                continue
+        except ModuleNotFoundError:
+            continue
+        out[name] = (module, text)
+    return out
+
+
+def build_parser() -> tuple[argparse.ArgumentParser, dict[str, str]]:
+    parser = argparse.ArgumentParser(
+        prog="rhs-slam",
+        description="RHS radar SLAM on highway-env: patterns, radar scans, SLAM runs, agents.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    modules = {}
+    for name, (module, text) in _available().items():
+        p = sub.add_parser(name, help=text, description=text)
+        importlib.import_module(module).configure(p)
+        modules[name] = module
+    return parser, modules
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser, modules = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    return int(importlib.import_module(modules[args.command]).run(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

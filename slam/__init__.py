@@ -1,0 +1,1 @@
+"""Localization and mapping: registration, data association, RBPF, metrics."""
