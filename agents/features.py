@@ -1,0 +1,82 @@
+"""Feature extractor for padded point sets with masks (a small PointNet).
+
+SB3's default ``CombinedExtractor`` flattens ``points`` (N_max, 4): the policy
+then sees slot order, which is arbitrary, and zero padding as real points. Here
+each set key ``K`` with a mask ``K_mask`` goes through a shared per-point MLP and
+a masked max- and mean-pool (permutation invariant, padding ignored); every
+other Box key is flattened. Inputs are scaled to order one first:
+x, y / 50 m, radial velocity / 30 m/s, amplitude -> log10(1 + a) / 3.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import torch
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+from torch import nn
+
+# per-column scale of known set keys (x, y, radial velocity, amplitude) and (x, y)
+SET_SCALES = {"points": (50.0, 50.0, 30.0, None), "landmarks": (50.0, 50.0)}
+BOX_SCALES = {"pose": (100.0, 100.0, np.pi), "pose_std": (5.0, 5.0, 0.5)}
+
+
+def _scale_set(key: str, x: torch.Tensor) -> torch.Tensor:
+    scales = SET_SCALES.get(key)
+    if scales is None:
+        return x
+    cols = []
+    for j, s in enumerate(scales[: x.shape[-1]]):
+        col = x[..., j]
+        cols.append(torch.log10(1.0 + col.clamp(min=0.0)) / 3.0 if s is None else col / s)
+    return torch.stack(cols, dim=-1)
+
+
+class PointSetExtractor(BaseFeaturesExtractor):
+    """Masked PointNet over every ``K`` / ``K_mask`` pair, concatenated with the flattened other keys."""
+
+    def __init__(self, observation_space: gym.spaces.Dict, point_dim: int = 64, box_dim: int = 32):
+        set_keys = [k for k in observation_space.spaces if f"{k}_mask" in observation_space.spaces]
+        box_keys = [k for k in observation_space.spaces if k not in set_keys and not k.endswith("_mask")]
+        total = 2 * point_dim * len(set_keys) + (box_dim if box_keys else 0)
+        super().__init__(observation_space, features_dim=total)
+        self.set_keys, self.box_keys = set_keys, box_keys
+        self.point_nets = nn.ModuleDict(
+            {
+                k: nn.Sequential(
+                    nn.Linear(observation_space[k].shape[-1], point_dim),
+                    nn.ReLU(),
+                    nn.Linear(point_dim, point_dim),
+                    nn.ReLU(),
+                )
+                for k in set_keys
+            }
+        )
+        box_in = sum(int(np.prod(observation_space[k].shape)) for k in box_keys)
+        self.box_net = nn.Sequential(nn.Linear(box_in, box_dim), nn.ReLU()) if box_keys else None
+
+    def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        feats = []
+        for k in self.set_keys:
+            x = _scale_set(k, obs[k].float())
+            mask = obs[f"{k}_mask"].float().unsqueeze(-1)  # (B, N, 1)
+            h = self.point_nets[k](x)  # (B, N, D)
+            count = mask.sum(dim=1).clamp(min=1.0)
+            mean = (h * mask).sum(dim=1) / count
+            # masked max; an empty set gives zeros, not -inf
+            maxed = torch.where(mask > 0, h, torch.full_like(h, -1e9)).max(dim=1).values
+            maxed = torch.where(mask.sum(dim=1) > 0, maxed, torch.zeros_like(maxed))
+            feats += [maxed, mean]
+        if self.box_net is not None:
+            parts = []
+            for k in self.box_keys:
+                v = obs[k].float().flatten(1)
+                s = BOX_SCALES.get(k)
+                if s is not None and v.shape[1] == len(s):
+                    v = v / torch.tensor(s, dtype=v.dtype, device=v.device)
+                parts.append(v)
+            feats.append(self.box_net(torch.cat(parts, dim=1)))
+        return torch.cat(feats, dim=1)
+
+
+FEATURE_EXTRACTORS = {"point_set": PointSetExtractor}
