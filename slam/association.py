@@ -1,0 +1,263 @@
+"""Data association for the RBPF SLAM (paper section VII-B), vectorized with numpy.
+
+Three steps, all in SI units (m, m/s, rad):
+
+1. **Moving-point filter** (:func:`static_mask`). A static scatterer at vehicle-frame
+   position ``r`` seen by a sensor at ``s`` from a vehicle moving with velocity ``v``
+   (vehicle frame) and yaw rate ``w`` has the relative velocity ``-(v + w z x r)`` and
+   therefore the radial velocity (positive receding)
+
+   ``vr_static = -(v + w z x r) . u``,   ``u = (r - s) / |r - s|``.
+
+   With the sensor at the vehicle origin the rotation term vanishes (``z x r`` is
+   normal to ``r``). Points whose measured radial velocity departs from ``vr_static``
+   by more than a threshold are dynamic (other vehicles) and are kept out of the map
+   and of the registration.
+
+2. **Clustering** (:func:`cluster_points`). Points of one object (closer than a small
+   radius, single-linkage) are merged into one observation at their
+   amplitude-weighted centroid ``x_c = sum_i a_i x_i / sum_i a_i``.
+
+3. **Position compensation and cluster match** (:func:`to_map_frame`,
+   :func:`associate`). Observations are moved into the map frame with each
+   particle's predicted pose ``p = (px, py, th)``:
+
+   ``x_map = [px, py] + R(th) x_veh``,   ``R(th) = [[cos th, -sin th], [sin th, cos th]]``
+
+   and matched to the nearest active landmark of that particle; farther than
+   ``delta_m`` means a new landmark (paper: "Cluster Match"). Everything is batched
+   over particles (P), observations (M) and landmarks (L) with a P x M x L distance
+   tensor.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+__all__ = [
+    "NEW",
+    "DROPPED",
+    "static_mask",
+    "estimate_ego_velocity",
+    "cluster_points",
+    "to_map_frame",
+    "associate",
+]
+
+#: association code: observation starts a new landmark in this particle
+NEW = -1
+#: association code: observation lost a conflict (another observation of the same
+#: cycle is closer to the same landmark) and is ignored in this particle
+DROPPED = -2
+
+
+def static_mask(
+    points: np.ndarray,
+    ego_velocity_xy: np.ndarray | tuple[float, float] | None,
+    threshold: float = 1.0,
+    *,
+    yaw_rate: float = 0.0,
+    sensor_xy: np.ndarray | None = None,
+) -> np.ndarray:
+    """Boolean mask (N,) of points whose radial velocity fits a static scatterer.
+
+    Parameters
+    ----------
+    points : (N, >=3) array, columns x, y (vehicle frame, m), radial velocity (m/s,
+        positive receding).
+    ego_velocity_xy : (2,) ego velocity over ground in the vehicle frame (m/s). ``None``
+        means unknown: every point is kept.
+    threshold : allowed |vr_measured - vr_static| (m/s).
+    yaw_rate : ego yaw rate w (rad/s); only matters with ``sensor_xy``.
+    sensor_xy : optional (N, 2) or (2,) sensor positions in the vehicle frame (m); the
+        line of sight is taken from the sensor. Default: the vehicle origin.
+
+    Model: ``vr_static = -(v + w z x r) . u`` with ``u = (r - s)/|r - s|``.
+    """
+    if threshold < 0:
+        raise ValueError(f"threshold must be in [0, inf), got {threshold!r}")
+    pts = np.asarray(points, dtype=float)
+    n = pts.shape[0]
+    if n == 0 or ego_velocity_xy is None:
+        return np.ones(n, dtype=bool)
+    v = np.asarray(ego_velocity_xy, dtype=float).reshape(2)
+    r = pts[:, :2]
+    s = np.zeros(2) if sensor_xy is None else np.asarray(sensor_xy, dtype=float)
+    los = r - s
+    norm = np.linalg.norm(los, axis=1, keepdims=True)
+    u = los / np.maximum(norm, 1e-9)
+    # velocity of the static point relative to the vehicle, vehicle frame
+    rel = -(v[None, :] + yaw_rate * np.stack([-r[:, 1], r[:, 0]], axis=1))
+    vr_static = np.sum(rel * u, axis=1)
+    return np.abs(pts[:, 2] - vr_static) <= threshold
+
+
+def estimate_ego_velocity(
+    points: np.ndarray,
+    threshold: float = 0.5,
+    rng: np.random.Generator | None = None,
+    n_hypotheses: int = 64,
+    min_inliers: int = 3,
+) -> np.ndarray | None:
+    """Ego velocity (2,) in the vehicle frame (m/s) from the Doppler of static points.
+
+    Static points obey ``vr_i = -(vx cos b_i + vy sin b_i)`` (sensor at the origin),
+    a linear model in ``v``. RANSAC, vectorized over hypotheses: ``n_hypotheses``
+    random point pairs each give ``v`` from a 2x2 solve; the hypothesis with the most
+    points within ``threshold`` (m/s) wins and is refined by least squares on its
+    inliers. Returns ``None`` with fewer than ``min_inliers`` inliers or a degenerate
+    geometry (all points along one line of sight).
+    """
+    pts = np.asarray(points, dtype=float)
+    n = pts.shape[0] if pts.ndim == 2 else 0
+    if n < max(2, min_inliers):
+        return None
+    rng = rng if rng is not None else np.random.default_rng(0)
+    b = np.arctan2(pts[:, 1], pts[:, 0])
+    A = -np.stack([np.cos(b), np.sin(b)], axis=1)  # vr = A v
+    vr = pts[:, 2]
+    i = rng.integers(0, n, n_hypotheses)
+    j = rng.integers(0, n, n_hypotheses)
+    a1, a2 = A[i], A[j]
+    det = a1[:, 0] * a2[:, 1] - a1[:, 1] * a2[:, 0]
+    good = np.abs(det) > 1e-3
+    if not good.any():
+        return None
+    a1, a2, det = a1[good], a2[good], det[good]
+    r1, r2 = vr[i[good]], vr[j[good]]
+    vx = (r1 * a2[:, 1] - r2 * a1[:, 1]) / det
+    vy = (a1[:, 0] * r2 - a2[:, 0] * r1) / det
+    V = np.stack([vx, vy], axis=1)  # (H, 2)
+    res = np.abs(vr[None, :] - V @ A.T)  # (H, N)
+    count = (res <= threshold).sum(axis=1)
+    best = int(np.argmax(count))
+    inl = res[best] <= threshold
+    if inl.sum() < min_inliers:
+        return None
+    sol, *_ = np.linalg.lstsq(A[inl], vr[inl], rcond=None)
+    if np.linalg.matrix_rank(A[inl]) < 2:
+        return None
+    return sol
+
+
+def cluster_points(
+    points: np.ndarray, radius: float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Merge points of one object into single observations.
+
+    Points closer than ``radius`` (m) are linked (single linkage, connected components
+    of the radius graph from a cKDTree). Each cluster c becomes one observation:
+
+    - position: amplitude-weighted centroid ``x_c = sum_i a_i x_i / sum_i a_i``
+      (plain mean when every amplitude is zero),
+    - radial velocity: amplitude-weighted mean,
+    - amplitude: the largest amplitude of the cluster (strongest echo).
+
+    Returns ``(observations (C, 4), labels (N,))`` with ``labels[i]`` the cluster of
+    point i. ``radius <= 0`` disables clustering (one observation per point).
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, 4)
+    n = pts.shape[0]
+    if n == 0:
+        return np.zeros((0, 4)), np.zeros(0, dtype=int)
+    if radius <= 0 or n == 1:
+        return pts.copy(), np.arange(n)
+    pairs = cKDTree(pts[:, :2]).query_pairs(radius, output_type="ndarray")
+    if len(pairs) == 0:
+        return pts.copy(), np.arange(n)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    n_c, labels = connected_components(graph, directed=False)
+    amp = np.maximum(pts[:, 3], 0.0)
+    w = np.bincount(labels, weights=amp, minlength=n_c)
+    cnt = np.bincount(labels, minlength=n_c).astype(float)
+    # weights per point: amplitude, or 1 for all-zero-amplitude clusters
+    zero = w[labels] <= 0
+    wp = np.where(zero, 1.0, amp)
+    wsum = np.where(w > 0, w, cnt)
+    obs = np.empty((n_c, 4))
+    for k in range(3):  # x, y, radial velocity (3 bincounts, not a loop over points)
+        obs[:, k] = np.bincount(labels, weights=wp * pts[:, k], minlength=n_c) / wsum
+    obs[:, 3] = -np.inf
+    np.maximum.at(obs[:, 3], labels, pts[:, 3])
+    return obs, labels
+
+
+def to_map_frame(xy: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """Vehicle-frame points (M, 2) -> map frame for each pose (P, 3): (P, M, 2).
+
+    ``x_map = [px, py] + R(th) x_veh`` (position compensation, paper VII-B).
+    A single pose (3,) gives (M, 2).
+    """
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    poses = np.asarray(poses, dtype=float)
+    single = poses.ndim == 1
+    p = poses.reshape(-1, 3)
+    c, s = np.cos(p[:, 2])[:, None], np.sin(p[:, 2])[:, None]
+    x = p[:, 0:1] + c * xy[None, :, 0] - s * xy[None, :, 1]
+    y = p[:, 1:2] + s * xy[None, :, 0] + c * xy[None, :, 1]
+    out = np.stack([x, y], axis=-1)
+    return out[0] if single else out
+
+
+def associate(
+    obs_map: np.ndarray,
+    landmarks: np.ndarray,
+    active: np.ndarray,
+    delta_m: float = 2.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest-landmark association per particle (paper "Cluster Match").
+
+    Parameters
+    ----------
+    obs_map : (P, M, 2) observations in the map frame of each particle (m).
+    landmarks : (P, L, 2) landmark means (m).
+    active : (P, L) bool, which landmarks exist in each particle.
+    delta_m : association gate (m): the nearest landmark farther than this means a
+        new landmark.
+
+    Returns
+    -------
+    idx : (P, M) int, the matched landmark index in ``[0, L)``, or :data:`NEW` (-1)
+        for a new landmark, or :data:`DROPPED` (-2) when another observation of the
+        same cycle is closer to the same landmark (each landmark takes at most one
+        observation per cycle, so the batched EKF update has no write conflicts).
+    dist : (P, M) distance to the matched landmark (m), ``inf`` for NEW/DROPPED.
+
+    Cost: one P x M x L distance tensor; conflicts resolved with a P x M x M compare.
+    """
+    if delta_m <= 0:
+        raise ValueError(f"delta_m must be in (0, inf), got {delta_m!r}")
+    obs_map = np.asarray(obs_map, dtype=float)
+    P, M = obs_map.shape[:2]
+    L = landmarks.shape[1]
+    if M == 0:
+        return np.zeros((P, 0), dtype=int), np.zeros((P, 0))
+    if L == 0 or not active.any():
+        return np.full((P, M), NEW, dtype=int), np.full((P, M), np.inf)
+    # squared distances, per coordinate in place (exact, no cancellation)
+    d2 = obs_map[:, :, None, 0] - landmarks[:, None, :, 0]  # (P, M, L)
+    dy = obs_map[:, :, None, 1] - landmarks[:, None, :, 1]
+    d2 *= d2
+    dy *= dy
+    d2 += dy
+    d2[~np.broadcast_to(active[:, None, :], d2.shape)] = np.inf
+    idx = np.argmin(d2, axis=2)  # (P, M)
+    best = np.take_along_axis(d2, idx[:, :, None], axis=2)[:, :, 0]
+    ok = best <= delta_m * delta_m
+    dist = np.where(ok, np.sqrt(np.where(ok, best, 0.0)), np.inf)
+    idx = np.where(ok, idx, NEW)
+    # conflicts: obs m loses if another obs k matched the same landmark and is closer
+    # (ties broken by the lower observation index)
+    if M > 1:
+        same = (idx[:, :, None] == idx[:, None, :]) & ok[:, :, None] & ok[:, None, :]
+        closer = (dist[:, None, :] < dist[:, :, None]) | (
+            (dist[:, None, :] == dist[:, :, None])
+            & (np.arange(M)[None, None, :] < np.arange(M)[None, :, None])
+        )
+        lose = np.any(same & closer, axis=2)
+        idx = np.where(lose, DROPPED, idx)
+        dist = np.where(lose, np.inf, dist)
+    return idx, dist

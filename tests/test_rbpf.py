@@ -1,0 +1,188 @@
+"""RBPF SLAM: exactness, accuracy vs dead reckoning, resampling, numerics, memory."""
+
+import math
+
+import numpy as np
+import pytest
+
+from slam.rbpf import RBPFSlam, SlamConfig, circular_mean
+from slam.registration import ICPRegistration, OdometryRegistration
+from slam.scenario import SyntheticCloud, run_scenario
+
+NOISELESS = dict(trans_std_m=0.0, trans_frac=0.0, rot_std_rad=0.0, accel_std_mps2=0.0, yaw_accel_std_radps2=0.0)
+
+
+def _road(T=100, v=15.0, dt=0.1, n_lm=30, spacing=10.0):
+    lm = np.stack([np.arange(n_lm) * spacing, np.where(np.arange(n_lm) % 2, 8.0, -8.0)], axis=1)
+    x = np.arange(T) * v * dt
+    y = 2.0 * np.sin(x / 40.0)
+    th = np.arctan2(np.gradient(y), np.gradient(x))
+    return lm, np.stack([x, y, th], axis=1)
+
+
+def test_config_validation_names_field():
+    with pytest.raises(ValueError, match="n_particles"):
+        SlamConfig(n_particles=0)
+    with pytest.raises(ValueError, match="weighting"):
+        SlamConfig(weighting="max")
+    with pytest.raises(ValueError, match="range_std_m"):
+        SlamConfig(range_std_m=0.0)
+    with pytest.raises(ValueError, match="resample_threshold"):
+        SlamConfig(resample_threshold=1.5)
+
+
+def test_noiseless_reproduces_trajectory_and_map():
+    lm, poses = _road()
+    cfg = SlamConfig(n_particles=20, **NOISELESS)
+    cloud = SyntheticCloud(lm, 1, max_range_m=40.0, dt=0.1)
+    r = run_scenario(lm, poses, cloud, OdometryRegistration(), cfg, 0, dt=0.1)
+    assert r["ate_rmse_m"] < 1e-6
+    assert r["heading_rmse_rad"] < 1e-8
+    assert r["map_rmse_m"] < 1e-6
+    # every landmark that came within range was mapped, nothing spurious
+    seen = np.sum(lm[:, 0] <= poses[-1, 0] + 40.0)
+    assert r["map_matched"] == seen and r["map_spurious"] == 0
+    assert r["finite"]
+
+
+def test_noiseless_with_icp_registration():
+    lm, poses = _road(T=60)
+    cfg = SlamConfig(n_particles=10, **NOISELESS)
+    r = run_scenario(lm, poses, SyntheticCloud(lm, 1, max_range_m=40.0, dt=0.1), ICPRegistration(), cfg, 0, dt=0.1)
+    assert r["ate_rmse_m"] < 1e-3 and r["map_rmse_m"] < 1e-3
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_noisy_filter_beats_dead_reckoning(seed):
+    lm, poses = _road()
+    cfg = SlamConfig(
+        n_particles=100, trans_std_m=0.05, rot_std_rad=0.01, trans_frac=0.0, accel_std_mps2=0.0, yaw_accel_std_radps2=0.0
+    )
+    cloud = SyntheticCloud(
+        lm, 100 + seed, max_range_m=40.0, dt=0.1, range_std_m=0.2, bearing_std_rad=math.radians(1.0), p_miss=0.1, false_rate=1.0
+    )
+    odo = OdometryRegistration(200 + seed, trans_std_m=0.05, rot_std_rad=0.01)
+    r = run_scenario(lm, poses, cloud, odo, cfg, seed, dt=0.1)
+    assert r["finite"]
+    assert r["ate_rmse_m"] < 0.5 * r["dead_reckoning_rmse_m"]
+    assert r["map_rmse_m"] < 1.5 and r["map_matched"] >= 12
+
+
+def test_resampling_copies_particle_state():
+    slam = RBPFSlam(SlamConfig(n_particles=4, max_landmarks=8), 0)
+    slam.update(np.array([[10.0, 0.0, 0.0, 1.0], [0.0, 10.0, 0.0, 1.0]]), None, 0.1)
+    slam.logw = np.log(np.array([1.0, 1e-30, 1e-30, 1e-30]))
+    slam._normalize()
+    slam._resample()
+    assert np.all(slam.weights == pytest.approx(0.25))
+    for a in ("pose", "mean", "cov", "active", "hits", "last_seen"):
+        arr = getattr(slam, a)
+        assert arr.base is None or not np.shares_memory(arr[0], arr[1])
+    before = slam.mean[1].copy()
+    slam.mean[0, 0] += 100.0
+    slam.cov[0, 0] *= 5.0
+    np.testing.assert_array_equal(slam.mean[1], before)
+    assert not np.allclose(slam.cov[0, 0], slam.cov[1, 0])
+
+
+def test_all_zero_likelihood_gives_no_nan():
+    cfg = SlamConfig(n_particles=8, range_std_m=1e-6, bearing_std_rad=1e-9, delta_m=50.0)
+    slam = RBPFSlam(cfg, 0)
+    slam.update(np.array([[10.0, 0.0, 0.0, 1.0]]), None, 0.1)
+    # the landmark now appears 30 m away: every particle's likelihood underflows to 0
+    est = slam.update(np.array([[10.0, 30.0, 0.0, 1.0]]), np.zeros(3), 0.1)
+    assert np.all(np.isfinite(slam.logw)) and np.isclose(slam.weights.sum(), 1.0)
+    assert np.all(np.isfinite(est.pose)) and np.all(np.isfinite(est.landmarks))
+    # weights that are all -inf / NaN fall back to uniform
+    slam.logw = np.full(8, -np.inf)
+    slam._normalize()
+    np.testing.assert_allclose(slam.weights, 1.0 / 8)
+    slam.logw = np.full(8, np.nan)
+    slam._normalize()
+    np.testing.assert_allclose(slam.weights, 1.0 / 8)
+
+
+def test_heading_mean_on_circle():
+    a = np.radians([179.0, -179.0])
+    assert abs(abs(circular_mean(a)) - math.pi) < 1e-12
+    slam = RBPFSlam(SlamConfig(n_particles=2, **NOISELESS), 0)
+    slam.update(np.zeros((0, 4)), None, 0.1)
+    slam.pose[:, 2] = a
+    est = slam._estimate()
+    assert abs(abs(est.pose[2]) - math.pi) < 1e-12
+    assert est.pose_std[2] == pytest.approx(math.radians(1.0))
+
+
+def test_amplitude_weighting_runs():
+    lm, poses = _road(T=40)
+    cfg = SlamConfig(n_particles=30, weighting="amplitude", trans_std_m=0.05, rot_std_rad=0.01)
+    cloud = SyntheticCloud(lm, 3, max_range_m=40.0, dt=0.1, range_std_m=0.2, bearing_std_rad=math.radians(1.0))
+    r = run_scenario(lm, poses, cloud, OdometryRegistration(4, trans_std_m=0.05, rot_std_rad=0.01), cfg, 5, dt=0.1)
+    assert r["finite"] and r["ate_rmse_m"] < r["dead_reckoning_rmse_m"]
+
+
+def test_long_road_memory_bounded():
+    # 2000 cycles at 15 m/s x 0.1 s = 3 km; landmarks every 10 m on both sides
+    T, dt, v = 2000, 0.1, 15.0
+    n_lm = int(T * v * dt / 10.0) + 10
+    xs = np.arange(n_lm) * 10.0
+    lm = np.concatenate([np.stack([xs, np.full(n_lm, 8.0)], 1), np.stack([xs + 5.0, np.full(n_lm, -8.0)], 1)])
+    x = np.arange(T) * v * dt
+    poses = np.stack([x, np.zeros(T), np.zeros(T)], axis=1)
+    cfg = SlamConfig(n_particles=10, max_landmarks=64, prune_after_cycles=20, trans_std_m=0.03, rot_std_rad=0.002)
+    cloud = SyntheticCloud(
+        lm, 7, max_range_m=25.0, dt=dt, range_std_m=0.1, bearing_std_rad=math.radians(0.5), p_miss=0.1, false_rate=0.5
+    )
+    odo = OdometryRegistration(8, trans_std_m=0.03, rot_std_rad=0.002)
+    slam = RBPFSlam(cfg, 9)
+    in_view = 2 * (2 * 25.0 / 10.0)  # landmarks within 25 m ahead and behind, both sides
+    max_slots = 0
+    pose = poses[0]
+    for t in range(T):
+        pts = cloud(t, poses[t])
+        if t:
+            odo.set_true_motion(poses[t] - poses[t - 1])
+        est = slam.update(pts, odo.estimate(None, None) if t else None, dt)
+        assert np.all(np.isfinite(est.pose)) and np.all(np.isfinite(est.landmarks))
+        max_slots = max(max_slots, slam.n_landmark_slots)
+        pose = est.pose
+    assert max_slots <= cfg.max_landmarks
+    assert max_slots <= 3 * in_view  # in view + those waiting to be pruned
+    assert len(est.landmarks) <= 1.5 * in_view
+    assert abs(pose[0] - poses[-1, 0]) < 30.0  # still tracking after 3 km
+    xy, ids = slam.full_map()
+    assert len(ids) == len(np.unique(ids)) and len(xy) > 0.5 * len(lm)
+
+
+def test_capacity_eviction_keeps_bound():
+    cfg = SlamConfig(n_particles=5, max_landmarks=6, cluster_radius_m=0.0, **NOISELESS)
+    slam = RBPFSlam(cfg, 0)
+    rng = np.random.default_rng(0)
+    for t in range(20):
+        pts = np.column_stack([rng.uniform(-40, 40, (10, 2)), np.zeros(10), np.ones(10)])
+        est = slam.update(pts, np.zeros(3), 0.1)
+        assert slam.n_landmark_slots <= 6 and len(est.landmarks) <= 6
+        assert np.all(np.isfinite(est.landmarks))
+
+
+def test_ekf_update_matches_dense_reference():
+    cfg = SlamConfig(n_particles=1, **NOISELESS)
+    slam = RBPFSlam(cfg, 0)
+    slam.update(np.array([[10.0, 5.0, 0.0, 1.0]]), None, 0.1)
+    slam.pose[0] = [0.3, -0.2, 0.1]
+    slam.cov[0, 0] = [[0.4, 0.1], [0.1, 0.2]]
+    e0, L0, p = slam.mean[0, 0].copy(), slam.cov[0, 0].copy(), slam.pose[0].copy()
+    obs = np.array([9.5, 5.8])
+    loglik = np.zeros((1, 1))
+    z = np.array([[np.hypot(*obs), np.arctan2(obs[1], obs[0])]])
+    slam._ekf_update(np.array([[0]]), z, loglik)
+    d = e0 - p[:2]
+    q = d @ d
+    F = np.array([[d[0], d[1]] / np.sqrt(q), [-d[1] / q, d[0] / q]])
+    nu = z[0] - np.array([np.sqrt(q), np.arctan2(d[1], d[0]) - p[2]])
+    S = F @ L0 @ F.T + slam.Q
+    K = L0 @ F.T @ np.linalg.inv(S)
+    np.testing.assert_allclose(slam.mean[0, 0], e0 + K @ nu, rtol=1e-12)
+    np.testing.assert_allclose(slam.cov[0, 0], (np.eye(2) - K @ F) @ L0, rtol=1e-10, atol=1e-14)
+    ref = -0.5 * nu @ np.linalg.solve(S, nu) - np.log(2 * np.pi) - 0.5 * np.log(np.linalg.det(S))
+    assert loglik[0, 0] == pytest.approx(ref, rel=1e-12)

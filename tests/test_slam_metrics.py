@@ -1,0 +1,61 @@
+"""SLAM metrics: RMSEs, Hungarian map matching, point-cloud metrics."""
+
+import math
+
+import numpy as np
+import pytest
+
+from slam.metrics import heading_rmse, map_metrics, point_cloud_cycle, point_cloud_metrics, position_rmse
+
+
+def test_position_and_heading_rmse():
+    true = np.zeros((4, 3))
+    est = np.array([[3.0, 4.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    assert position_rmse(est, true) == pytest.approx(math.sqrt(25 / 4))
+    a = np.array([[0, 0, math.radians(179)], [0, 0, 0.1]])
+    b = np.array([[0, 0, math.radians(-179)], [0, 0, 0.1]])
+    assert heading_rmse(a, b) == pytest.approx(math.sqrt(math.radians(2) ** 2 / 2))
+    with pytest.raises(ValueError):
+        position_rmse(est, true[:2])
+
+
+def test_hungarian_map_one_to_one():
+    true = np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0]])
+    # two estimates near landmark 0 (greedy nearest would match both), one near 1,
+    # one far away (spurious); landmark 2 missed
+    est = np.array([[0.3, 0.0], [0.0, 1.0], [10.0, 0.4], [50.0, 50.0]])
+    r = map_metrics(est, true, gate=2.0)
+    assert r["matched"] == 2 and r["missed"] == 1 and r["spurious"] == 2
+    assert r["rmse"] == pytest.approx(math.sqrt((0.3**2 + 0.4**2) / 2))
+
+
+def test_hungarian_prefers_global_optimum():
+    # greedy matching from the true side pairs true 0 with its nearest, est 0 (0.9), and
+    # leaves est 1 unmatched (2.5 > gate);
+    # the assignment pairs est 0 -> true 1 and est 1 -> true 0
+    true = np.array([[0.0, 0.0], [1.5, 0.0]])
+    est = np.array([[0.9, 0.0], [-1.0, 0.0]])
+    r = map_metrics(est, true, gate=1.2)
+    assert r["matched"] == 2 and r["missed"] == 0 and r["spurious"] == 0
+    assert r["rmse"] == pytest.approx(math.sqrt((0.6**2 + 1.0**2) / 2))
+
+
+def test_map_metrics_empty():
+    r = map_metrics(np.zeros((0, 2)), np.ones((3, 2)), 1.0)
+    assert r["matched"] == 0 and r["missed"] == 3 and r["spurious"] == 0 and math.isnan(r["rmse"])
+    with pytest.raises(ValueError, match="gate"):
+        map_metrics(np.zeros((1, 2)), np.ones((1, 2)), 0.0)
+
+
+def test_point_cloud_metrics():
+    true = [np.array([[10.0, 0.0], [0.0, 20.0]]), np.array([[5.0, 5.0]])]
+    pts = [
+        np.array([[10.3, 0.0, 0.0, 1.0], [40.0, 0.0, 0.0, 1.0]]),  # one hit, one false
+        np.array([[5.0, 5.4, 0.0, 1.0]]),
+    ]
+    r = point_cloud_metrics(true, pts, gate=1.0)
+    assert r["detection_rate"] == pytest.approx(2 / 3)
+    assert r["rmse"] == pytest.approx(math.sqrt((0.09 + 0.16) / 2))
+    assert r["false_points_per_cycle"] == pytest.approx(0.5)
+    c = point_cloud_cycle(true[0], np.zeros((0, 4)))
+    assert c["detected"] == 0 and c["n_true"] == 2
