@@ -14,15 +14,14 @@ uniform false points, Doppler of a static scene (optionally moving targets).
 from __future__ import annotations
 
 import math
-import time
 from typing import Callable
 
 import numpy as np
 
 from rhs_env.validation import check_int, check_range
-from slam.association import estimate_ego_velocity, static_mask
 from slam.metrics import heading_rmse, map_metrics, position_rmse
-from slam.rbpf import RBPFSlam, SlamConfig
+from slam.pipeline import SlamPipeline
+from slam.rbpf import SlamConfig
 from slam.registration import Registration, relative_motion
 
 __all__ = ["run_scenario", "SyntheticCloud", "compose", "poses_in_frame"]
@@ -184,9 +183,8 @@ def run_scenario(
     check_int("len(poses)", T, 1, None)
     rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
     cfg = slam_config if slam_config is not None else SlamConfig()
-    slam = RBPFSlam(cfg, rng)
-    if hasattr(registration, "reset"):
-        registration.reset()
+    pipe = SlamPipeline(registration, cfg, rng, use_doppler=use_doppler)
+    slam = pipe.slam
     origin = poses[0]
     true_map = poses_in_frame(poses, origin)
     true_lm = _points_in_frame(np.asarray(landmarks, dtype=float).reshape(-1, 2), origin)
@@ -198,9 +196,6 @@ def run_scenario(
     stage_sum: dict[str, float] = {}
     max_slots = 0
     finite = True
-    prev_static = None
-    vel = None  # (vx, vy, yaw rate) in the current vehicle frame
-    last_motion = None
     it = range(T)
     if progress:
         from tqdm import tqdm
@@ -208,41 +203,12 @@ def run_scenario(
         it = tqdm(it, desc="SLAM", unit="cycle")
     for t in it:
         pts = np.asarray(cloud_fn(t, poses[t]), dtype=float).reshape(-1, 4)
-        thr = cfg.dynamic_threshold_mps
-        # ego velocity from the Doppler of static points (radar ego-motion), else
-        # from the registration (constant velocity) when too few points agree
-        v_dop = estimate_ego_velocity(pts, 0.5 * thr, rng) if use_doppler else None
-        if v_dop is not None:
-            vel = np.array([v_dop[0], v_dop[1], 0.0 if vel is None else vel[2]])
-        if t == 0:
-            motion = np.zeros(3)
-        else:
-            if hasattr(registration, "set_true_motion"):
-                registration.set_true_motion(relative_motion(poses[t - 1], poses[t]))
-            cur_static = pts[static_mask(pts, vel[:2], thr)] if (use_doppler and vel is not None) else pts
-            prior = None
-            if v_dop is not None:  # displacement over the cycle from the Doppler velocity
-                dth = 0.0 if last_motion is None else last_motion[2]
-                c, s = math.cos(dth), math.sin(dth)
-                prior = np.array([(c * v_dop[0] - s * v_dop[1]) * dt, (s * v_dop[0] + c * v_dop[1]) * dt, dth])
-            t0 = time.perf_counter()
-            motion = np.asarray(registration.estimate(prev_static, cur_static, prior=prior), dtype=float).reshape(3)
-            stage_sum["registration"] = stage_sum.get("registration", 0.0) + time.perf_counter() - t0
-            if not np.all(np.isfinite(motion)):
-                motion = np.zeros(3)
-            last_motion = motion
-            c, s = math.cos(motion[2]), math.sin(motion[2])
-            if v_dop is None:
-                vel = np.array(
-                    [(c * motion[0] + s * motion[1]) / dt, (-s * motion[0] + c * motion[1]) / dt, motion[2] / dt]
-                )
-            else:
-                vel[2] = motion[2] / dt
-        motions[t] = motion
-        est = slam.update(pts, motion, dt, ego_velocity=vel if use_doppler else None)
+        true_motion = relative_motion(poses[t - 1], poses[t]) if t > 0 else None
+        res = pipe.step(pts, dt, true_motion=true_motion)
+        est, motion = res.estimate, res.motion
         for k, v in est.stage_times.items():
             stage_sum[k] = stage_sum.get(k, 0.0) + v
-        prev_static = pts[static_mask(pts, vel[:2], thr)] if (use_doppler and vel is not None) else pts
+        motions[t] = motion
         est_poses[t] = est.pose
         pose_std[t] = est.pose_std
         dr[t] = motion if t == 0 else compose(dr[t - 1], motion)
