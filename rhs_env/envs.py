@@ -1,0 +1,284 @@
+"""highway-env scenes for the RHS radar: traffic plus static roadside landmarks.
+
+* :class:`RHSHighwayEnv` (``rhs-highway-v0``): highway-env's ``HighwayEnv``
+  with landmarks on both road sides. Defaults: 4 lanes, 30 other vehicles,
+  40 s episodes at a **5 Hz policy / SLAM-cycle rate** (200 cycles), simulation
+  at 15 Hz. At the ego's 20-30 m/s a cycle moves it 4-6 m, well under the
+  20 m landmark spacing, so consecutive point clouds overlap strongly and data
+  association is not aliased by the landmark period (1 Hz would move it 25 m,
+  more than a spacing).
+* :class:`RHSPaperEnv`: the paper's Fig. 5c layout (SPEC section 7). The
+  obstacles are at (10, 65), (25, 10), (30, 65), (35, 10), (50, 65) m and the
+  vehicle starts at (0, 37.5) heading +x, in the **world frame** (y up, see
+  :mod:`rhs_env.scene`). highway-env's y axis points down, so the road is built
+  at highway-env ``y = -37.5`` (three 4 m lanes, the ego in the middle one) and
+  the obstacles at highway-env ``y = -65 / -10``: on screen the picture looks
+  like the paper's figure. The ego drives at 6 m/s: 50 cycles at 5 Hz = 10 s
+  = 60 m. No traffic by default (``vehicles_count`` > 0 adds some ahead).
+
+Both take their highway-env config as ``config={...}`` and/or as keyword
+arguments (``gym.make("rhs-highway-v0", lanes_count=3, landmarks={"spacing_m": 10})``);
+unknown keys and out-of-range values raise ``ValueError`` naming the field.
+Landmarks are arrays on the env (``env.unwrapped.landmarks``, a
+:class:`rhs_env.scene.Landmarks`), never highway-env road objects, so they do
+not appear in the Kinematics observation and cannot end an episode. ``info``
+gets ``world_pose`` = (x, y, heading) of the ego in the world frame.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from highway_env import utils
+from highway_env.envs.highway_env import HighwayEnv
+from highway_env.road.lane import LineType, StraightLane
+from highway_env.road.road import Road, RoadNetwork
+
+from rhs_env.scene import LandmarkConfig, Landmarks, place_roadside_landmarks, world_pose
+from rhs_env.validation import check_int, check_range
+
+#: the paper's obstacles (world frame, m) and start pose (SPEC section 7)
+PAPER_OBSTACLES = ((10.0, 65.0), (25.0, 10.0), (30.0, 65.0), (35.0, 10.0), (50.0, 65.0))
+PAPER_START = (0.0, 37.5)
+
+LANDMARK_COLOR = (60, 220, 60)
+
+
+class RHSHighwayEnv(HighwayEnv):
+    """Highway with traffic and static roadside landmarks (the RHS radar's map features).
+
+    Extra config keys beyond highway-env's ``HighwayEnv``:
+        landmarks: dict of :class:`rhs_env.scene.LandmarkConfig` fields (validated).
+    """
+
+    @classmethod
+    def default_config(cls) -> dict:
+        config = super().default_config()
+        utils.update_config(
+            config,
+            {
+                "lanes_count": 4,
+                "vehicles_count": 30,
+                "duration": 40,  # [s] -> 200 cycles at 5 Hz
+                "policy_frequency": 5,  # [Hz] = radar / SLAM cycle rate
+                "simulation_frequency": 15,  # [Hz], a multiple of policy_frequency
+                "ego_spacing": 2,
+                "vehicles_density": 1,
+                "screen_width": 600,
+                "screen_height": 200,  # room for the roadside landmarks
+                "landmarks": LandmarkConfig().to_dict(),
+            },
+        )
+        return config
+
+    def __init__(self, config: dict | None = None, render_mode: str | None = None, **kwargs: Any) -> None:
+        merged = dict(config or {})
+        merged.update(kwargs)
+        super().__init__(merged, render_mode)
+
+    # ---- configuration
+    def configure(self, config: dict | None) -> None:
+        """Update the config (validated: unknown keys and bad values raise ``ValueError``)."""
+        if config:
+            known = set(self.default_config()) | set(self.config)
+            unknown = sorted(set(config) - known)
+            if unknown:
+                raise ValueError(
+                    f"unknown config key(s) {', '.join(map(repr, unknown))} for {type(self).__name__}; "
+                    f"allowed: {', '.join(sorted(known))}"
+                )
+            config = dict(config)
+            if "landmarks" in config:
+                # merge a partial dict onto the current landmark settings
+                current = dict(self.config.get("landmarks") or {})
+                lm = config["landmarks"]
+                if isinstance(lm, LandmarkConfig):
+                    lm = lm.to_dict()
+                if lm is not None and not isinstance(lm, Mapping):
+                    raise ValueError(f"landmarks must be a dict of LandmarkConfig fields, got {type(lm).__name__}")
+                current.update(lm or {})
+                config["landmarks"] = current
+        super().configure(config)
+        self._validate_config()
+
+    def _validate_config(self) -> None:
+        c = self.config
+        check_int("lanes_count", c["lanes_count"], 1, 20)
+        check_int("vehicles_count", c["vehicles_count"], 0, 500)
+        check_int("controlled_vehicles", c["controlled_vehicles"], 1, 10)
+        check_range("duration", c["duration"], 0.0, 3600.0, low_open=True)
+        check_range("simulation_frequency", c["simulation_frequency"], 1.0, 1000.0)
+        check_range("policy_frequency", c["policy_frequency"], 0.0, c["simulation_frequency"], low_open=True)
+        check_range("vehicles_density", c["vehicles_density"], 0.0, 100.0, low_open=True)
+        check_range("ego_spacing", c["ego_spacing"], 0.0, 100.0, low_open=True)
+        self.landmark_config = LandmarkConfig.make(c["landmarks"])
+        c["landmarks"] = self.landmark_config.to_dict()
+
+    # ---- scene
+    def _reset(self) -> None:
+        self._create_road()
+        self._create_landmarks()
+        self._create_vehicles()
+
+    def _create_landmarks(self) -> None:
+        """Place the roadside landmarks (drawn from ``np_random`` before the traffic)."""
+        self.landmarks: Landmarks = place_roadside_landmarks(self.road.network, self.landmark_config, self.np_random)
+
+    def _is_truncated(self) -> bool:
+        """Time limit, robust to the float sum of 1 / policy_frequency steps."""
+        return self.time >= self.config["duration"] - 1e-6
+
+    def _info(self, obs, action=None) -> dict:
+        info = super()._info(obs, action)
+        info["world_pose"] = world_pose(self.vehicle)
+        return info
+
+    # ---- rendering
+    def render(self) -> np.ndarray | None:
+        """highway-env's render with the landmarks drawn over the road (headless with rgb_array)."""
+        if self.render_mode is None:
+            return super().render()
+        from highway_env.envs.common.graphics import EnvViewer
+
+        if self.viewer is None:
+            self.viewer = EnvViewer(self)
+            if self.viewer.offscreen:
+                # highway-env disables its viewer under SDL_VIDEODRIVER=dummy, but
+                # offscreen drawing needs no display: keep rgb_array working headless.
+                self.viewer.enabled = True
+        self.enable_auto_render = True
+        self.viewer.display()
+        self._draw_landmarks()
+        if not self.viewer.offscreen:
+            import pygame
+
+            self.viewer.screen.blit(self.viewer.sim_surface, (0, 0))
+            pygame.display.flip()
+            self.viewer.handle_events()
+        if self.render_mode == "rgb_array":
+            return self.viewer.get_image()
+        return None
+
+    def _draw_landmarks(self) -> None:
+        import pygame
+
+        lms = getattr(self, "landmarks", None)
+        if not self.viewer.enabled or not isinstance(lms, Landmarks) or len(lms) == 0 or self.vehicle is None:
+            return
+        surface = self.viewer.sim_surface
+        view_m = np.hypot(surface.get_width(), surface.get_height()) / surface.scaling
+        center = np.asarray(surface.origin, float) + np.array([surface.get_width(), surface.get_height()]) / (
+            2 * surface.scaling
+        )
+        radius = max(3, surface.pix(0.6))
+        for i in lms.near(center, view_m):
+            pygame.draw.circle(surface, LANDMARK_COLOR, surface.vec2pix(lms.xy_he[i]), radius)
+
+
+class RHSPaperEnv(RHSHighwayEnv):
+    """The paper's Fig. 5c scenario: five obstacles beside a straight road, 50 cycles.
+
+    Extra config keys:
+        obstacles: list of (x, y) obstacle positions in the world frame (m).
+        obstacle_rcs_m2: their RCS (m^2).
+        start: (x, y) start position of the ego in the world frame, heading +x.
+        ego_speed: ego speed (m/s); the action's target speeds are built around it.
+        road_start_m, road_length_m: extent of the road along x.
+    The ``landmarks`` (roadside) are disabled by default; the obstacles are the map.
+    """
+
+    @classmethod
+    def default_config(cls) -> dict:
+        config = super().default_config()
+        utils.update_config(
+            config,
+            {
+                "lanes_count": 3,
+                "vehicles_count": 0,
+                "duration": 10,  # [s] -> 50 cycles at 5 Hz
+                "policy_frequency": 5,
+                "simulation_frequency": 15,
+                "ego_speed": 6.0,  # [m/s] -> 60 m in 10 s
+                "action": {"type": "DiscreteMetaAction", "target_speeds": [0.0, 3.0, 6.0, 9.0]},
+                "reward_speed_range": [3.0, 9.0],
+                "obstacles": [list(p) for p in PAPER_OBSTACLES],
+                "obstacle_rcs_m2": 5.0,
+                "start": list(PAPER_START),
+                "road_start_m": -50.0,
+                "road_length_m": 400.0,
+                "landmarks": {**LandmarkConfig().to_dict(), "enabled": False},
+                "screen_width": 600,
+                "screen_height": 400,
+                "scaling": 5.0,
+                "centering_position": [0.3, 0.5],
+            },
+        )
+        return config
+
+    def _validate_config(self) -> None:
+        super()._validate_config()
+        c = self.config
+        check_range("ego_speed", c["ego_speed"], 0.0, 40.0)
+        check_range("obstacle_rcs_m2", c["obstacle_rcs_m2"], 0.0, 1e4, low_open=True)
+        check_range("road_length_m", c["road_length_m"], 10.0, 1e5)
+        check_range("road_start_m", c["road_start_m"], -1e5, 1e5)
+        try:
+            obs = np.asarray(c["obstacles"], dtype=float).reshape(-1, 2)
+        except (TypeError, ValueError):
+            raise ValueError(f"obstacles must be a list of (x, y) pairs in metres, got {c['obstacles']!r}") from None
+        if not np.all(np.isfinite(obs)):
+            raise ValueError("obstacles must be finite (x, y) pairs in metres")
+        try:
+            start = np.asarray(c["start"], dtype=float).reshape(2)
+        except (TypeError, ValueError):
+            raise ValueError(f"start must be an (x, y) pair in metres, got {c['start']!r}") from None
+        x0, length = float(c["road_start_m"]), float(c["road_length_m"])
+        if not x0 < start[0] < x0 + length:
+            raise ValueError(
+                f"start x must lie on the road, in ({x0}, {x0 + length}) (road_start_m, road_start_m + road_length_m), "
+                f"got {start[0]}"
+            )
+
+    def _create_road(self) -> None:
+        """Straight lanes along +x centred on the start y (world), i.e. highway-env y = -start_y."""
+        n = int(self.config["lanes_count"])
+        width = StraightLane.DEFAULT_WIDTH
+        x0, length = float(self.config["road_start_m"]), float(self.config["road_length_m"])
+        y_center_he = -float(self.config["start"][1])
+        net = RoadNetwork()
+        for k in range(n):
+            y = y_center_he + (k - (n - 1) / 2) * width
+            line_types = [
+                LineType.CONTINUOUS_LINE if k == 0 else LineType.STRIPED,
+                LineType.CONTINUOUS_LINE if k == n - 1 else LineType.NONE,
+            ]
+            net.add_lane("a", "b", StraightLane([x0, y], [x0 + length, y], line_types=line_types, speed_limit=30))
+        self.road = Road(
+            network=net,
+            np_random=self.np_random,
+            record_history=self.config["show_trajectories"],
+            neighbour_vehicles_connected_lanes=self.config["neighbour_vehicles_connected_lanes"],
+        )
+
+    def _create_landmarks(self) -> None:
+        super()._create_landmarks()
+        obstacles = Landmarks.from_world(np.asarray(self.config["obstacles"], float), self.config["obstacle_rcs_m2"])
+        # the paper's obstacles first: ids 0..4 are the obstacles in the listed order
+        self.landmarks = obstacles.concat(self.landmarks)
+
+    def _create_vehicles(self) -> None:
+        """The ego exactly at the start position heading +x; optional traffic ahead."""
+        start_he = np.array([float(self.config["start"][0]), -float(self.config["start"][1])])
+        ego = self.action_type.vehicle_class(self.road, start_he, 0.0, float(self.config["ego_speed"]))
+        self.controlled_vehicles = [ego]
+        self.road.vehicles.append(ego)
+        other_type = utils.class_from_path(self.config["other_vehicles_type"])
+        for _ in range(int(self.config["vehicles_count"])):
+            v = other_type.create_random(self.road, spacing=1 / self.config["vehicles_density"])
+            v.randomize_behavior()
+            self.road.vehicles.append(v)
+
+
+__all__ = ["PAPER_OBSTACLES", "PAPER_START", "RHSHighwayEnv", "RHSPaperEnv"]

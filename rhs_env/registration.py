@@ -1,0 +1,89 @@
+"""Gymnasium registration of the RHS environments (called on ``import rhs_env``).
+
+Entry points are strings (``"module:callable"``), so subprocess vector envs
+(``gym.make_vec(..., vectorization_mode="async")``, stable-baselines3's
+``SubprocVecEnv``) can rebuild them after importing ``rhs_env``. Where a fresh
+worker process looks an id up by name (stable-baselines3's
+``make_vec_env(id, vec_env_cls=SubprocVecEnv)`` with the default forkserver
+start method), write it ``"rhs_env:rhs-highway-radar-v0"``: gymnasium then
+imports ``rhs_env`` first, which registers the ids. ``gym.make_vec`` needs no
+prefix (it ships the resolved spec, whose entry point imports the package).
+
+=========================  ==============================================  =====================
+id                         entry point                                     observation
+=========================  ==============================================  =====================
+``rhs-highway-v0``         ``rhs_env.envs:RHSHighwayEnv``                  Kinematics (truth)
+``rhs-highway-radar-v0``   ``rhs_env.registration:make_highway_radar``     radar point cloud
+``rhs-highway-slam-v0``    ``rhs_env.slam_wrapper:make_highway_slam``      cloud + SLAM
+``rhs-paper-v0``           ``rhs_env.slam_wrapper:make_paper_slam``        cloud + SLAM
+=========================  ==============================================  =====================
+
+Keyword arguments of ``gym.make`` go to the entry point: env config keys
+(``lanes_count=3``, ``landmarks={"spacing_m": 10}``, ``config={...}``,
+``render_mode="rgb_array"``) and, for the radar id, the wrapper's
+``radar={...}`` (``RadarConfig`` fields), ``antenna="phased"``,
+``max_points=...``, ``scatter={...}``, ``stage_times_in_info=True``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+
+HIGHWAY_ID = "rhs-highway-v0"
+HIGHWAY_RADAR_ID = "rhs-highway-radar-v0"
+HIGHWAY_SLAM_ID = "rhs-highway-slam-v0"
+PAPER_ID = "rhs-paper-v0"
+
+#: keyword arguments that belong to :class:`rhs_env.wrappers.RadarObservation`
+RADAR_WRAPPER_KWARGS = ("radar", "antenna", "max_points", "scatter", "stage_times_in_info", "scatterers_in_info")
+
+
+def _split(kwargs: dict[str, Any], names: tuple[str, ...]) -> tuple[dict[str, Any], dict[str, Any]]:
+    mine = {k: kwargs.pop(k) for k in list(kwargs) if k in names}
+    return mine, kwargs
+
+
+def make_highway_radar(**kwargs: Any) -> gym.Env:
+    """``rhs-highway-radar-v0``: :class:`RHSHighwayEnv` under :class:`RadarObservation`.
+
+    Radar-wrapper kwargs (``RADAR_WRAPPER_KWARGS``) go to the wrapper, the rest
+    (``config``, ``render_mode``, config keys) to the env.
+    """
+    from rhs_env.envs import RHSHighwayEnv
+    from rhs_env.wrappers import RadarObservation
+
+    wrapper_kwargs, env_kwargs = _split(dict(kwargs), RADAR_WRAPPER_KWARGS)
+    return RadarObservation(RHSHighwayEnv(**with_cheap_base_observation(env_kwargs)), **wrapper_kwargs)
+
+
+#: highway-env observation that costs nothing: the radar wrapper replaces the
+#: base observation anyway, and the Kinematics table costs ~4 ms per step (pandas).
+NULL_OBSERVATION = {"type": "AttributesObservation", "attributes": []}
+
+
+def with_cheap_base_observation(env_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """``env_kwargs`` with the base observation set to :data:`NULL_OBSERVATION` unless the caller chose one."""
+    chosen = "observation" in env_kwargs or "observation" in (env_kwargs.get("config") or {})
+    return env_kwargs if chosen else {**env_kwargs, "observation": dict(NULL_OBSERVATION)}
+
+
+#: (id, entry point) of the envs registered here
+ENV_SPECS: tuple[tuple[str, str], ...] = (
+    (HIGHWAY_ID, "rhs_env.envs:RHSHighwayEnv"),
+    (HIGHWAY_RADAR_ID, "rhs_env.registration:make_highway_radar"),
+)
+
+#: the SLAM ids: scene -> RadarObservation -> SlamObservation (rhs_env.slam_wrapper)
+SLAM_ENV_SPECS: tuple[tuple[str, str], ...] = (
+    (HIGHWAY_SLAM_ID, "rhs_env.slam_wrapper:make_highway_slam"),
+    (PAPER_ID, "rhs_env.slam_wrapper:make_paper_slam"),
+)
+
+
+def register_envs() -> None:
+    """Register every id once (re-importing or calling again is a no-op)."""
+    for env_id, entry_point in ENV_SPECS + SLAM_ENV_SPECS:
+        if env_id not in gym.registry:
+            gym.register(id=env_id, entry_point=entry_point)

@@ -1,0 +1,514 @@
+"""Static roadside landmarks and the scatterer view of a highway-env scene.
+
+Frames
+------
+highway-env draws its world with the y axis pointing *down* the screen, and its
+lanes are numbered from the top: lane 0 is the leftmost lane (the rewards call
+the highest index the "right lane"). In the physical sense its ``(x, y)`` frame
+is therefore left-handed: x forward along the road, y to the right. This
+package works in right-handed frames only:
+
+* **highway-env frame** (``*_he``): highway-env's own coordinates, used only to
+  talk to highway-env (vehicle positions, lanes, rendering).
+* **world frame**: ``(x, -y_he)``, headings ``-heading_he`` (counter-clockwise
+  positive, y up / to the left of a vehicle driving along +x). The paper
+  scenario's coordinates (``rhs-paper-v0``) live in this frame, and so do
+  the ground-truth poses and landmark maps put into ``info``.
+* **vehicle frame**: origin at the ego vehicle's centre, x forward, y left
+  (docs/INTERFACES.md). Everything handed to the radar is in this frame.
+
+Landmarks are kept as plain arrays on the environment (:class:`Landmarks`),
+not as highway-env ``RoadObject`` s: they then never appear in the Kinematics
+observation, never collide, never end an episode, and cost nothing in
+highway-env's O(vehicles x objects) collision loop.
+
+:func:`scene_scatterers` turns a scene into the radar's input: landmarks as
+point scatterers, other vehicles (and solid highway-env obstacles) as a few
+scattering points on the faces they show to the ego vehicle, the relative
+velocity of every point in the (rotating) vehicle frame, and the box edges of
+those objects as occluding segments. It is vectorized over objects.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, fields
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from rhs_env.validation import check_choice, check_int, check_range
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from rhs_env.scatterers import Occluders, Scatterers
+
+#: object ids: landmarks are ``0 .. L-1``; other vehicles ``VEHICLE_ID_OFFSET + i``
+#: (``i`` = index in ``road.vehicles``); solid road objects ``OBJECT_ID_OFFSET + j``
+#: (``j`` = index in ``road.objects``). Ids are stable within an episode.
+VEHICLE_ID_OFFSET = 1_000_000
+OBJECT_ID_OFFSET = 2_000_000
+
+LANDMARK_SIDES = ("both", "left", "right")
+
+
+# --------------------------------------------------------------------------- configs
+def _from_mapping(cls, value: Any, name: str):
+    """Build a config dataclass from ``None`` / an instance / a mapping of its fields."""
+    if value is None:
+        return cls()
+    if isinstance(value, cls):
+        return value
+    if isinstance(value, Mapping):
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(value) - known)
+        if unknown:
+            raise ValueError(
+                f"{name} has unknown field(s) {', '.join(map(repr, unknown))}; allowed: {', '.join(sorted(known))}"
+            )
+        return cls(**value)
+    raise ValueError(f"{name} must be a {cls.__name__} or a dict of its fields, got {type(value).__name__}")
+
+
+@dataclass(frozen=True)
+class LandmarkConfig:
+    """Static roadside landmarks (posts, signs, barriers) placed along the road.
+
+    Attributes:
+        enabled: place landmarks at all.
+        spacing_m: nominal distance between consecutive landmarks on one side [1, 1000] m.
+            The right side is staggered by half a spacing.
+        lateral_offset_m: distance of the landmarks from the road edge (the outer
+            edge of the outermost lane), [0, 100] m.
+        rcs_m2: radar cross-section of each landmark, (0, 1e4] m^2 (SPEC: 5 m^2).
+        jitter_m: uniform longitudinal jitter +-jitter_m, [0, spacing_m / 2) m,
+            so the landmark pattern is not periodic (periodic maps alias in SLAM).
+        lateral_jitter_m: uniform lateral jitter, outward only, [0, 50] m (landmarks
+            never move onto the road).
+        sides: ``"both"`` | ``"left"`` | ``"right"`` side(s) of the road.
+    """
+
+    enabled: bool = True
+    spacing_m: float = 20.0
+    lateral_offset_m: float = 4.0
+    rcs_m2: float = 5.0
+    jitter_m: float = 4.0
+    lateral_jitter_m: float = 2.0
+    sides: str = "both"
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.enabled, (bool, np.bool_)):
+            raise ValueError(f"enabled must be True or False, got {self.enabled!r}")  # noqa: TRY004
+        check_range("spacing_m", self.spacing_m, 1.0, 1000.0)
+        check_range("lateral_offset_m", self.lateral_offset_m, 0.0, 100.0)
+        check_range("rcs_m2", self.rcs_m2, 0.0, 1e4, low_open=True)
+        check_range("jitter_m", self.jitter_m, 0.0, self.spacing_m / 2, high_open=True)
+        check_range("lateral_jitter_m", self.lateral_jitter_m, 0.0, 50.0)
+        check_choice("sides", self.sides, LANDMARK_SIDES)
+
+    @classmethod
+    def make(cls, value: Any) -> LandmarkConfig:
+        """``None`` (defaults), a ``LandmarkConfig`` or a dict of its fields (validated)."""
+        return _from_mapping(cls, value, "landmarks")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class ScatterConfig:
+    """How a scene becomes scatterers.
+
+    Attributes:
+        max_range_m: only objects within this distance of the ego centre are
+            returned (bounded work), (0, 1000] m. Keep it at or above the radar's range.
+        vehicle_rcs_m2: total RCS of a vehicle, spread over its visible faces in
+            proportion to their apparent (projected) width, (0, 1e4] m^2 (SPEC: about 10).
+        points_per_face: scattering points per visible face, [1, 16].
+        include_obstacles: also treat solid highway-env road objects (``Obstacle``)
+            as extended static scatterers.
+    """
+
+    max_range_m: float = 150.0
+    vehicle_rcs_m2: float = 10.0
+    points_per_face: int = 3
+    include_obstacles: bool = True
+
+    def __post_init__(self) -> None:
+        check_range("max_range_m", self.max_range_m, 0.0, 1000.0, low_open=True)
+        check_range("vehicle_rcs_m2", self.vehicle_rcs_m2, 0.0, 1e4, low_open=True)
+        check_int("points_per_face", self.points_per_face, 1, 16)
+        if not isinstance(self.include_obstacles, (bool, np.bool_)):
+            raise ValueError(f"include_obstacles must be True or False, got {self.include_obstacles!r}")  # noqa: TRY004
+
+    @classmethod
+    def make(cls, value: Any) -> ScatterConfig:
+        """``None`` (defaults), a ``ScatterConfig`` or a dict of its fields (validated)."""
+        return _from_mapping(cls, value, "scatter")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+# --------------------------------------------------------------------------- frames
+def he_to_world_xy(xy_he: np.ndarray) -> np.ndarray:
+    """highway-env coordinates -> world frame (y flipped); works on (..., 2)."""
+    out = np.array(xy_he, dtype=float, copy=True)
+    out[..., 1] *= -1.0
+    return out
+
+
+world_to_he_xy = he_to_world_xy  # the flip is its own inverse
+
+
+def world_pose(vehicle) -> np.ndarray:
+    """(x, y, heading) of a highway-env vehicle in the world frame, heading wrapped to (-pi, pi]."""
+    h = -float(vehicle.heading)
+    h = (h + np.pi) % (2 * np.pi) - np.pi
+    if h == -np.pi:
+        h = np.pi
+    return np.array([float(vehicle.position[0]), -float(vehicle.position[1]), h])
+
+
+def vehicle_to_he_xy(points_xy: np.ndarray, vehicle) -> np.ndarray:
+    """Vehicle-frame points (N, 2) of ``vehicle`` -> highway-env coordinates (N, 2)."""
+    x, y, h = world_pose(vehicle)
+    c, s = np.cos(h), np.sin(h)
+    p = np.asarray(points_xy, dtype=float).reshape(-1, 2)
+    wx = x + c * p[:, 0] - s * p[:, 1]
+    wy = y + s * p[:, 0] + c * p[:, 1]
+    return np.stack([wx, -wy], axis=1)
+
+
+def _motion_arrays(objs: Sequence[Any]) -> dict[str, np.ndarray]:
+    """World-frame state of highway-env objects, vectorized.
+
+    Velocity is the bicycle model's centre velocity ``speed * dir(heading + beta)``
+    with the side-slip ``beta = atan(tan(steering) / 2)`` and the yaw rate
+    ``speed sin(beta) / (length / 2)`` (highway_env.vehicle.kinematics.Vehicle.step);
+    objects without a steering action (obstacles) have ``beta = 0``.
+    """
+    n = len(objs)
+    pos = np.array([o.position for o in objs], dtype=float).reshape(n, 2)
+    heading = np.fromiter((o.heading for o in objs), float, n)
+    speed = np.fromiter((o.speed for o in objs), float, n)
+    steer = np.fromiter((float((getattr(o, "action", None) or {}).get("steering", 0.0)) for o in objs), float, n)
+    length = np.fromiter((o.LENGTH for o in objs), float, n)
+    width = np.fromiter((o.WIDTH for o in objs), float, n)
+    beta = np.arctan(0.5 * np.tan(steer))
+    vel_he = speed[:, None] * np.stack([np.cos(heading + beta), np.sin(heading + beta)], axis=1)
+    yaw_rate_he = speed * np.sin(beta) / (length / 2)
+    # to the world frame (y flipped: headings and rotation rates change sign)
+    pos[:, 1] *= -1.0
+    vel = vel_he * np.array([1.0, -1.0])
+    return {
+        "pos": pos,
+        "heading": -heading,
+        "vel": vel,
+        "yaw_rate": -yaw_rate_he,
+        "length": length,
+        "width": width,
+    }
+
+
+def ego_motion(vehicle) -> tuple[np.ndarray, float]:
+    """World-frame velocity (2,) and yaw rate (rad/s, counter-clockwise) of a vehicle."""
+    m = _motion_arrays([vehicle])
+    return m["vel"][0], float(m["yaw_rate"][0])
+
+
+# --------------------------------------------------------------------------- landmarks
+@dataclass
+class Landmarks:
+    """Static point landmarks of a scene, stored in highway-env coordinates.
+
+    Attributes:
+        xy_he: (L, 2) positions in highway-env coordinates (m).
+        rcs: (L,) radar cross-sections (m^2).
+
+    ``ids`` are the row indices (0..L-1). Lookups by distance use a sort on x, so
+    :meth:`near` costs O(log L + k) for the k landmarks in the x window.
+    """
+
+    xy_he: np.ndarray
+    rcs: np.ndarray
+
+    def __post_init__(self) -> None:
+        self.xy_he = np.asarray(self.xy_he, dtype=float).reshape(-1, 2)
+        self.rcs = np.broadcast_to(np.asarray(self.rcs, dtype=float), (len(self.xy_he),)).copy()
+        if not np.all(np.isfinite(self.xy_he)):
+            raise ValueError("landmark positions must be finite")
+        if np.any(self.rcs <= 0) or not np.all(np.isfinite(self.rcs)):
+            raise ValueError("landmark rcs must be finite and > 0")
+        self._order = np.argsort(self.xy_he[:, 0], kind="stable")
+        self._sorted_x = self.xy_he[self._order, 0]
+
+    def __len__(self) -> int:
+        return len(self.xy_he)
+
+    @property
+    def ids(self) -> np.ndarray:
+        return np.arange(len(self), dtype=np.int64)
+
+    @property
+    def xy_world(self) -> np.ndarray:
+        """(L, 2) positions in the world frame (y up)."""
+        return he_to_world_xy(self.xy_he)
+
+    @classmethod
+    def empty(cls) -> Landmarks:
+        return cls(np.zeros((0, 2)), np.zeros(0))
+
+    @classmethod
+    def from_world(cls, xy_world: np.ndarray, rcs: float | np.ndarray) -> Landmarks:
+        """Landmarks given in the world frame (y up), e.g. the paper's obstacle list."""
+        return cls(world_to_he_xy(np.asarray(xy_world, dtype=float).reshape(-1, 2)), rcs)
+
+    def concat(self, other: Landmarks) -> Landmarks:
+        return Landmarks(np.concatenate([self.xy_he, other.xy_he]), np.concatenate([self.rcs, other.rcs]))
+
+    def near(self, center_he: np.ndarray, radius: float) -> np.ndarray:
+        """Indices (sorted) of the landmarks within ``radius`` of ``center_he``."""
+        if len(self) == 0:
+            return np.zeros(0, dtype=np.int64)
+        lo, hi = np.searchsorted(self._sorted_x, [center_he[0] - radius, center_he[0] + radius])
+        cand = self._order[lo:hi]
+        d2 = np.sum((self.xy_he[cand] - np.asarray(center_he, dtype=float)) ** 2, axis=1)
+        return np.sort(cand[d2 <= radius * radius])
+
+
+def _lane_points(lane, s: np.ndarray, lateral: np.ndarray) -> np.ndarray:
+    """lane.position for arrays; vectorized for straight lanes, a loop otherwise."""
+    from highway_env.road.lane import StraightLane
+
+    if isinstance(lane, StraightLane):
+        return (
+            lane.start[None, :]
+            + s[:, None] * lane.direction[None, :]
+            + lateral[:, None] * lane.direction_lateral[None, :]
+        )
+    return np.array([lane.position(si, li) for si, li in zip(s, lateral)], dtype=float).reshape(-1, 2)
+
+
+def place_roadside_landmarks(network, config: LandmarkConfig, rng: np.random.Generator) -> Landmarks:
+    """Place landmarks along both edges of every road segment of a highway-env network.
+
+    For each edge (from, to) of ``network.graph``, lane 0 is the leftmost lane and
+    the last lane the rightmost (highway-env's convention). Left landmarks sit at
+    longitudinal ``(k + 1/2) spacing``, right ones at ``(k + 1) spacing`` (staggered),
+    each with uniform jitter +-``jitter_m`` along the road and ``[0, lateral_jitter_m]``
+    outward, at ``lateral_offset_m`` beyond the outer lane edge. All draws come from ``rng``.
+    """
+    if not config.enabled:
+        return Landmarks.empty()
+    xy = []
+    for tos in network.graph.values():
+        for lanes in tos.values():
+            if not lanes:
+                continue
+            for side in ("left", "right"):
+                if config.sides not in ("both", side):
+                    continue
+                lane = lanes[0] if side == "left" else lanes[-1]
+                length = float(lane.length)
+                start = 0.5 * config.spacing_m if side == "left" else config.spacing_m
+                s = np.arange(start, length, config.spacing_m)
+                if s.size == 0:
+                    continue
+                s = np.clip(s + rng.uniform(-config.jitter_m, config.jitter_m, s.size), 0.0, length)
+                half_w = float(lane.width_at(0.0)) / 2
+                out = half_w + config.lateral_offset_m + rng.uniform(0.0, config.lateral_jitter_m, s.size)
+                lateral = -out if side == "left" else out
+                xy.append(_lane_points(lane, s, lateral))
+    if not xy:
+        return Landmarks.empty()
+    pts = np.concatenate(xy)
+    return Landmarks(pts, np.full(len(pts), config.rcs_m2))
+
+
+def get_landmarks(env) -> Landmarks:
+    """The landmarks of an env (``env.unwrapped.landmarks``), or none for plain highway-env envs."""
+    lm = getattr(env.unwrapped, "landmarks", None)
+    return lm if isinstance(lm, Landmarks) else Landmarks.empty()
+
+
+# --------------------------------------------------------------------------- scatterers
+# Box faces in the object's own frame (x forward, y left): outward normals, and the
+# tangent (normal turned +90 deg) along which the face's points are spread.
+_FACE_NORMALS = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
+_FACE_TANGENTS = np.array([[0.0, 1.0], [-1.0, 0.0], [0.0, -1.0], [1.0, 0.0]])
+
+
+def _rot(theta: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 2, 2) for angles theta."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+
+
+def _cross_z(omega: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """omega (scalar per row, broadcastable) x r in 2-D: omega * (-r_y, r_x)."""
+    return np.asarray(omega)[..., None] * np.stack([-r[..., 1], r[..., 0]], axis=-1)
+
+
+def scene_scatterers(
+    env,
+    ego=None,
+    config: ScatterConfig | Mapping[str, Any] | None = None,
+) -> tuple[Scatterers, Occluders]:
+    """Scatterers and occluders of a highway-env scene in the ego vehicle frame.
+
+    Args:
+        env: a highway-env env (wrapped or not). Landmarks are taken from
+            ``env.unwrapped.landmarks`` when it is a :class:`Landmarks` (the RHS envs).
+        ego: the observing vehicle; default ``env.unwrapped.vehicle``.
+        config: :class:`ScatterConfig` (or a dict of its fields).
+
+    Returns:
+        ``(Scatterers, Occluders)`` (``rhs_env.scatterers``), everything in the
+        vehicle frame (x forward, y left). Landmarks come first (sorted by id),
+        then the extended objects. Velocities are relative to the ego vehicle as
+        seen in its rotating frame: ``R^T (v_point - v_ego) - w_ego x q``, with
+        ``v_point = v_obj + w_obj x (p - c_obj)``; a static point's is minus the
+        ego velocity (plus the rotation term when the ego turns).
+        Each object within ``max_range_m`` contributes ``points_per_face`` points
+        on each face whose outward normal points toward the ego centre; its
+        ``vehicle_rcs_m2`` is shared among them in proportion to the faces'
+        projected widths. Its four box edges are occluders.
+    """
+    from rhs_env.scatterers import Occluders, Scatterers
+
+    cfg = ScatterConfig.make(config)
+    base = env.unwrapped
+    ego = base.vehicle if ego is None else ego
+    if ego is None:
+        raise ValueError("scene_scatterers needs an ego vehicle (env.unwrapped.vehicle is None)")
+    road = base.road
+    em = _motion_arrays([ego])
+    e_pos, e_head, e_vel, e_rate = em["pos"][0], em["heading"][0], em["vel"][0], em["yaw_rate"][0]
+    r_t = _rot(-e_head)  # world -> vehicle frame
+    radius = cfg.max_range_m
+
+    # ---- static point landmarks
+    lms = get_landmarks(base)
+    idx = lms.near(np.asarray(ego.position, dtype=float), radius)
+    q_lm = (he_to_world_xy(lms.xy_he[idx]) - e_pos) @ r_t.T
+    v_lm = np.broadcast_to(r_t @ (-e_vel), q_lm.shape) - _cross_z(e_rate, q_lm)
+
+    # ---- extended objects: other vehicles and (optionally) solid obstacles
+    objs, ids, static = [], [], []
+    ego_he = np.asarray(ego.position, dtype=float)
+    for i, v in enumerate(road.vehicles if road is not None else ()):
+        if v is ego:
+            continue
+        objs.append(v)
+        ids.append(VEHICLE_ID_OFFSET + i)
+        static.append(False)
+    if cfg.include_obstacles and road is not None:
+        for j, o in enumerate(road.objects):
+            if getattr(o, "solid", False) and getattr(o, "collidable", True):
+                objs.append(o)
+                ids.append(OBJECT_ID_OFFSET + j)
+                static.append(True)
+    if objs:
+        pos_he = np.array([o.position for o in objs], dtype=float).reshape(-1, 2)
+        diag = np.fromiter((np.hypot(o.LENGTH, o.WIDTH) for o in objs), float, len(objs))
+        keep = np.linalg.norm(pos_he - ego_he, axis=1) <= radius + diag / 2
+        objs = [o for o, k in zip(objs, keep) if k]
+        ids = np.asarray(ids, dtype=np.int64)[keep]
+        static = np.asarray(static, dtype=bool)[keep]
+    xy_o = np.zeros((0, 2))
+    v_o = np.zeros((0, 2))
+    rcs_o = np.zeros(0)
+    id_o = np.zeros(0, dtype=np.int64)
+    st_o = np.zeros(0, dtype=bool)
+    segs = np.zeros((0, 2, 2))
+    seg_ids = np.zeros(0, dtype=np.int64)
+    if objs:
+        m = _motion_arrays(objs)
+        n_obj, p = len(objs), cfg.points_per_face
+        c = (m["pos"] - e_pos) @ r_t.T  # (V, 2) centres in the vehicle frame
+        rot = _rot(m["heading"] - e_head)  # (V, 2, 2) object -> vehicle frame
+        half = np.stack([m["length"], m["width"], m["length"], m["width"]], 1) / 2  # (V, 4)
+        face_len = np.stack([m["width"], m["length"], m["width"], m["length"]], 1)  # (V, 4)
+        normals = np.einsum("vij,fj->vfi", rot, _FACE_NORMALS)  # (V, 4, 2)
+        tangents = np.einsum("vij,fj->vfi", rot, _FACE_TANGENTS)
+        mids = c[:, None, :] + normals * half[..., None]  # (V, 4, 2)
+        dist = np.linalg.norm(mids, axis=-1)
+        cos_inc = -np.sum(normals * mids, axis=-1) / np.maximum(dist, 1e-9)  # normal . (ego - mid)/|.|
+        weight = np.where(cos_inc > 1e-9, face_len * cos_inc, 0.0)  # projected width of visible faces
+        total = weight.sum(axis=1)  # (V,)
+        share = np.divide(weight, total[:, None], out=np.zeros_like(weight), where=total[:, None] > 0)
+        frac = (np.arange(p) + 0.5) / p - 0.5  # (P,) positions along a face, in face lengths
+        pts = mids[:, :, None, :] + tangents[:, :, None, :] * (frac[None, None, :, None] * face_len[..., None, None])
+        rcs = np.broadcast_to((cfg.vehicle_rcs_m2 * share / p)[..., None], (n_obj, 4, p))
+        # point velocities: rigid motion of the object, seen from the rotating ego frame
+        v_rel_c = (m["vel"] - e_vel) @ r_t.T  # (V, 2)
+        vel = (
+            v_rel_c[:, None, None, :]
+            + _cross_z(m["yaw_rate"][:, None, None], pts - c[:, None, None, :])
+            - _cross_z(np.asarray(e_rate), pts)
+        )
+        vis = np.broadcast_to((weight > 0)[..., None], (n_obj, 4, p))
+        xy_o = pts[vis]
+        v_o = vel[vis]
+        rcs_o = rcs[vis]
+        id_o = np.broadcast_to(ids[:, None, None], (n_obj, 4, p))[vis]
+        st_o = np.broadcast_to(static[:, None, None], (n_obj, 4, p))[vis]
+        # occluders: the four box edges of every object
+        corners = mids - tangents * (face_len[..., None] / 2)  # start corner of each face
+        ends = mids + tangents * (face_len[..., None] / 2)
+        segs = np.stack([corners, ends], axis=2).reshape(-1, 2, 2)
+        seg_ids = np.repeat(ids, 4)
+
+    scatterers = Scatterers(
+        xy=np.concatenate([q_lm, xy_o]).astype(float),
+        velocity=np.concatenate([v_lm, v_o]).astype(float),
+        rcs=np.concatenate([lms.rcs[idx], rcs_o]).astype(float),
+        object_id=np.concatenate([idx.astype(np.int64), id_o]).astype(np.int64),
+        is_static=np.concatenate([np.ones(len(idx), dtype=bool), st_o]),
+    )
+    occluders = Occluders(segments=segs.astype(float), object_id=seg_ids.astype(np.int64))
+    return scatterers, occluders
+
+
+def scatterers_to_dict(scatterers) -> dict[str, np.ndarray]:
+    """Plain dict of a ``Scatterers``' arrays (for ``info``: picklable, comparable)."""
+    return {
+        "xy": np.array(scatterers.xy, dtype=float),
+        "velocity": np.array(scatterers.velocity, dtype=float),
+        "rcs": np.array(scatterers.rcs, dtype=float),
+        "object_id": np.array(scatterers.object_id, dtype=np.int64),
+        "is_static": np.array(scatterers.is_static, dtype=bool),
+    }
+
+
+# --------------------------------------------------------------------------- drawing
+def world_surface_pixels(env, xy_he: np.ndarray) -> np.ndarray | None:
+    """Pixel (column, row) of highway-env points on the env viewer's last frame; None without a viewer."""
+    viewer = getattr(env.unwrapped, "viewer", None)
+    surface = getattr(viewer, "sim_surface", None)
+    if surface is None:
+        return None
+    xy = np.asarray(xy_he, dtype=float).reshape(-1, 2)
+    return np.floor((xy - np.asarray(surface.origin, dtype=float)) * float(surface.scaling)).astype(np.int64)
+
+
+def draw_disks(frame: np.ndarray, pixels: np.ndarray, color: Sequence[int] | np.ndarray, radius: int = 2) -> np.ndarray:
+    """Draw filled disks in place on an (H, W, 3) uint8 frame; ``pixels`` (N, 2) = (column, row).
+
+    ``color`` is one RGB triple or one per point (N, 3). Off-frame parts are clipped.
+    """
+    pixels = np.asarray(pixels, dtype=np.int64).reshape(-1, 2)
+    if pixels.size == 0:
+        return frame
+    r = int(radius)
+    dy, dx = np.mgrid[-r : r + 1, -r : r + 1]
+    disk = dx**2 + dy**2 <= r * r + r  # slightly fuller than a pure circle for small radii
+    off = np.stack([dx[disk], dy[disk]], axis=1)  # (K, 2)
+    allpx = pixels[:, None, :] + off[None, :, :]  # (N, K, 2)
+    color = np.asarray(color, dtype=np.uint8)
+    colors = np.broadcast_to(color if color.ndim == 2 else color[None, :], (len(pixels), 3))
+    colors = np.broadcast_to(colors[:, None, :], allpx.shape[:2] + (3,))
+    h, w = frame.shape[:2]
+    ok = (allpx[..., 0] >= 0) & (allpx[..., 0] < w) & (allpx[..., 1] >= 0) & (allpx[..., 1] < h)
+    frame[allpx[..., 1][ok], allpx[..., 0][ok]] = colors[ok]
+    return frame

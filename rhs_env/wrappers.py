@@ -1,0 +1,239 @@
+"""Gymnasium wrappers that put the RHS radar on any highway-env environment.
+
+:class:`RadarObservation` replaces the observation with the point cloud of the
+ego vehicle's four RHS radars (SPEC sections 4, 5 and 7):
+
+``Dict(points=Box((N_max, 4), float32), points_mask=MultiBinary(N_max))``
+
+``points`` rows are x, y (vehicle frame, m), radial velocity (m/s, > 0
+receding) and amplitude (linear, over the noise std), zero padded, inside
+finite bounds (x, y: the radars' reach; velocity: the unambiguous radial
+speed; amplitude: [0, 1e9]); when the
+radar returns more than ``N_max`` points the weakest are dropped (the kept
+points stay in the radar's order). ``points_mask`` is 1 on real rows.
+
+The wrapper owns the :class:`rhs_env.radar.RadarSystem`. At every reset its
+random generator is spawned from the env's ``np_random`` (a child seed
+sequence, which leaves the env's own stream untouched), so the same reset seed
+gives the same episode, radar noise included. ``info`` gets
+``scatterers`` (the ground truth handed to the radar, a dict of arrays in the
+vehicle frame), ``radar_points_total`` / ``radar_points_dropped``, and, with
+``stage_times_in_info=True``, ``radar_stage_times`` (seconds per processing
+stage; off by default because timings differ between otherwise identical runs,
+which the determinism checks of ``check_env`` would flag). The last stage
+times are always on ``wrapper.stage_times``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import fields, replace
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from rhs_env.scene import (
+    ScatterConfig,
+    draw_disks,
+    scatterers_to_dict,
+    scene_scatterers,
+    vehicle_to_he_xy,
+    world_surface_pixels,
+)
+from rhs_env.validation import check_int
+
+POINT_FEATURES = ("x", "y", "radial_velocity", "amplitude")
+POINT_COLOR = (255, 40, 40)
+AMPLITUDE_MAX = 1e9  # linear echo amplitude over noise std; far above any physical echo
+
+
+def make_radar_config(radar: Any = None, antenna: str | None = None):
+    """A validated :class:`rhs_env.radar.RadarConfig` from ``None`` / a config / a dict of its fields.
+
+    In a dict, ``rhs`` and ``scan`` may themselves be dicts (of
+    :class:`~rhs_env.antenna.RHSConfig` / :class:`~rhs_env.antenna.ScanConfig`
+    fields), e.g. ``{"scan": {"grid_deg": 5}, "max_range_m": 80}``. ``antenna``
+    (rhs | phased | random | hologram) overrides the antenna kind. Unknown
+    fields raise ``ValueError`` naming them.
+    """
+    from rhs_env.antenna import RHSConfig, ScanConfig
+    from rhs_env.radar import RadarConfig
+
+    if radar is None:
+        radar = {}
+    if isinstance(radar, RadarConfig):
+        return radar if antenna is None else replace(radar, antenna=antenna)
+    if not isinstance(radar, Mapping):
+        raise ValueError(f"radar must be a RadarConfig or a dict of its fields, got {type(radar).__name__}")  # noqa: TRY004
+    kwargs = dict(radar)
+    if antenna is not None:
+        kwargs["antenna"] = antenna
+    known = {f.name for f in fields(RadarConfig)}
+    unknown = sorted(set(kwargs) - known)
+    if unknown:
+        raise ValueError(
+            f"radar has unknown field(s) {', '.join(map(repr, unknown))}; allowed: {', '.join(sorted(known))}"
+        )
+    for name, cls in (("rhs", RHSConfig), ("scan", ScanConfig)):
+        value = kwargs.get(name)
+        if isinstance(value, Mapping):
+            sub_known = {f.name for f in fields(cls)}
+            bad = sorted(set(value) - sub_known)
+            if bad:
+                raise ValueError(
+                    f"radar.{name} has unknown field(s) {', '.join(map(repr, bad))}; "
+                    f"allowed: {', '.join(sorted(sub_known))}"
+                )
+            kwargs[name] = cls(**value)
+    return RadarConfig(**kwargs)
+
+
+def _spawn_rng(env: gym.Env) -> np.random.Generator:
+    """A child generator of the env's ``np_random`` (same env seed -> same child)."""
+    parent = env.unwrapped.np_random
+    try:
+        return parent.spawn(1)[0]
+    except (TypeError, ValueError, AttributeError):
+        # a generator without a seed sequence: draw a seed from its stream instead
+        return np.random.default_rng(int(parent.integers(0, 2**63 - 1)))
+
+
+class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
+    """Point-cloud observation of the ego vehicle's four RHS radars, on any highway-env env.
+
+    Args:
+        env: a highway-env environment (``env.unwrapped.vehicle`` is the ego;
+            ``env.unwrapped.landmarks`` adds static landmarks when present).
+        radar: a ``RadarConfig`` or a dict of its fields (validated).
+        antenna: shortcut overriding the radar's antenna kind.
+        max_points: N_max, rows of the ``points`` observation, [1, 65536].
+        scatter: a :class:`rhs_env.scene.ScatterConfig` or dict (range cut, vehicle RCS, ...).
+        stage_times_in_info: add ``radar_stage_times`` to ``info`` (non-deterministic values).
+        scatterers_in_info: add the ground-truth ``scatterers`` to ``info``.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        radar: Any = None,
+        antenna: str | None = None,
+        max_points: int = 256,
+        scatter: Any = None,
+        stage_times_in_info: bool = False,
+        scatterers_in_info: bool = True,
+    ) -> None:
+        gym.utils.RecordConstructorArgs.__init__(
+            self,
+            radar=radar,
+            antenna=antenna,
+            max_points=max_points,
+            scatter=scatter,
+            stage_times_in_info=stage_times_in_info,
+            scatterers_in_info=scatterers_in_info,
+        )
+        gym.ObservationWrapper.__init__(self, env)
+        check_int("max_points", max_points, 1, 65536)
+        self.max_points = int(max_points)
+        self.radar_config = make_radar_config(radar, antenna)
+        self.scatter_config = ScatterConfig.make(scatter)
+        self.stage_times_in_info = bool(stage_times_in_info)
+        # bounds of a point: x, y within the radars' reach, the unambiguous radial
+        # speed, amplitudes (echo / noise std) up to a physical ceiling
+        cfg = self.radar_config
+        reach = cfg.max_range_m + 0.5 * np.hypot(cfg.vehicle_length_m, cfg.vehicle_width_m)
+        vmax = cfg.max_velocity_mps
+        self._low = np.array([-reach, -reach, -vmax, 0.0], dtype=np.float32)
+        self._high = np.array([reach, reach, vmax, AMPLITUDE_MAX], dtype=np.float32)
+        self.scatterers_in_info = bool(scatterers_in_info)
+        self.observation_space = spaces.Dict(
+            {
+                "points": spaces.Box(
+                    np.broadcast_to(self._low, (self.max_points, 4)),
+                    np.broadcast_to(self._high, (self.max_points, 4)),
+                    dtype=np.float32,
+                ),
+                "points_mask": spaces.MultiBinary(self.max_points),
+            }
+        )
+        self.radar = None
+        self._build_radar(np.random.default_rng(0))  # built now so bad configs fail here; rng replaced at reset
+        self.stage_times: dict[str, float] = {}
+        self.last_cloud = None
+        self._last_info: dict[str, Any] = {}
+        self._points_he = np.zeros((0, 2))
+
+    # ---- gymnasium API
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._build_radar(_spawn_rng(self.env))
+        return self.observation(obs), self._with_info(info)
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        return self.observation(obs), reward, terminated, truncated, self._with_info(info)
+
+    def observation(self, observation: Any) -> dict[str, np.ndarray]:
+        """Scan the current scene and return the padded point cloud (the env's own observation is ignored)."""
+        if self.radar is None:
+            self._build_radar(_spawn_rng(self.env))
+        base = self.env.unwrapped
+        ego = base.vehicle
+        scatterers, occluders = scene_scatterers(base, ego, self.scatter_config)
+        cloud = self.radar.scan(scatterers, occluders)
+        self.last_cloud = cloud
+        self.stage_times = dict(getattr(cloud, "stage_times", {}) or {})
+        points = np.asarray(cloud.points, dtype=float).reshape(-1, 4)
+        n_total = len(points)
+        if n_total > self.max_points:
+            keep = np.sort(np.argpartition(-points[:, 3], self.max_points - 1)[: self.max_points])
+            points = points[keep]
+        n = len(points)
+        out_points = np.zeros((self.max_points, 4), dtype=np.float32)
+        out_points[:n] = np.clip(points, self._low, self._high)
+        mask = np.zeros(self.max_points, dtype=np.int8)
+        mask[:n] = 1
+        self._points_he = vehicle_to_he_xy(points[:, :2], ego) if n else np.zeros((0, 2))
+        self._last_info = {"radar_points_total": n_total, "radar_points_dropped": n_total - n}
+        if self.scatterers_in_info:
+            self._last_info["scatterers"] = scatterers_to_dict(scatterers)
+        if self.stage_times_in_info:
+            self._last_info["radar_stage_times"] = dict(self.stage_times)
+        return {"points": out_points, "points_mask": mask}
+
+    def render(self):
+        """The env's frame with the point cloud drawn over it (rgb_array); other modes pass through."""
+        frame = self.env.render()
+        viewer = getattr(self.env.unwrapped, "viewer", None)
+        if frame is not None and viewer is not None and viewer.offscreen and not getattr(viewer, "enabled", True):
+            # highway-env disables its viewer under SDL_VIDEODRIVER=dummy; offscreen needs no display
+            viewer.enabled = True
+            frame = self.env.render()
+        if not isinstance(frame, np.ndarray) or frame.ndim != 3:
+            return frame
+        frame = np.ascontiguousarray(frame).copy()
+        px = world_surface_pixels(self.env, self._points_he)
+        if px is not None and len(px):
+            draw_disks(frame, px, POINT_COLOR, radius=2)
+        return frame
+
+    # ---- helpers
+    def _build_radar(self, rng: np.random.Generator) -> None:
+        """Give the radar this episode's generator.
+
+        The antennas and OMP dictionaries do not depend on the rng except for the
+        ``random`` antenna, whose patterns are drawn per episode: only then is the
+        radar rebuilt; otherwise the existing one gets the new generator.
+        """
+        from rhs_env.radar import RadarSystem
+
+        if self.radar is None or self.radar_config.antenna == "random":
+            self.radar = RadarSystem(self.radar_config, rng)
+        else:
+            self.radar.rng = rng
+
+    def _with_info(self, info: dict[str, Any]) -> dict[str, Any]:
+        info = dict(info)
+        info.update(self._last_info)
+        return info
