@@ -1,0 +1,141 @@
+"""Speed of every stage of rhs-slam, in one run, as JSON (never in timed tests).
+
+Sections (``--sections``, default all):
+
+* ``envs``: steps per second of ``rhs-highway-v0``, ``rhs-highway-radar-v0`` and
+  ``rhs-highway-slam-v0`` measured back to back on the same seeds and actions,
+  with the radar's time per stage (synthesis, range/CFAR, OMP) and the SLAM's
+  time per stage (registration, association, RBPF) at 100 particles;
+* ``radar``: one 4-radar scan of a typical scene (scripts/benchmark_radar.py);
+* ``patterns``: time to build the dtheta = 1 deg default library with each
+  method (scripts/benchmark_patterns.py; SDR on a subset, extrapolated);
+* ``training``: PPO training steps per second with 1 and 2 subprocess envs.
+
+    python scripts/benchmark.py --out results/benchmark.json
+    python scripts/benchmark.py --sections envs --steps 20
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "scripts"))
+SECTIONS = ("envs", "radar", "patterns", "training")
+
+
+def _mean_times(dicts: list[dict]) -> dict:
+    keys = sorted({k for d in dicts for k in d})
+    return {k: float(np.mean([d.get(k, 0.0) for d in dicts])) * 1e3 for k in keys}
+
+
+def bench_envs(steps: int, seed: int, grid_deg: float) -> dict:
+    """Steps/s of the three highway ids on identical seeds and action sequences."""
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+
+    out = {}
+    radar = {"scan": {"grid_deg": grid_deg}}
+    for env_id, kwargs in (
+        ("rhs-highway-v0", {}),
+        ("rhs-highway-radar-v0", {"radar": radar}),
+        ("rhs-highway-slam-v0", {"radar": radar}),
+    ):
+        env = gym.make(env_id, **kwargs)
+        env.reset(seed=seed)
+        actions = np.random.default_rng(seed).choice([1, 1, 1, 3, 4], size=steps)
+        radar_times, slam_times = [], []
+        t0 = time.perf_counter()
+        n = 0
+        for a in actions:
+            _, _, term, trunc, info = env.step(int(a))
+            n += 1
+            if "slam_stage_times" in info:
+                slam_times.append(info["slam_stage_times"])
+            w = env
+            while w is not None and not hasattr(w, "stage_times"):
+                w = getattr(w, "env", None)
+            if w is not None:
+                radar_times.append(dict(w.stage_times))
+            if term or trunc:
+                env.reset(seed=seed + n)
+        dt = time.perf_counter() - t0
+        env.close()
+        out[env_id] = {
+            "steps": n,
+            "steps_per_s": n / dt,
+            "ms_per_step": 1e3 * dt / n,
+            "radar_stage_ms": _mean_times(radar_times) if radar_times else None,
+            "slam_stage_ms": _mean_times(slam_times) if slam_times else None,
+        }
+    base = out["rhs-highway-v0"]["ms_per_step"]
+    out["radar_added_ms"] = out["rhs-highway-radar-v0"]["ms_per_step"] - base
+    out["radar_slam_added_ms"] = out["rhs-highway-slam-v0"]["ms_per_step"] - base
+    out["radar_added_over_base"] = out["radar_added_ms"] / base
+    out["radar_slam_added_over_base"] = out["radar_slam_added_ms"] / base
+    return out
+
+
+def bench_training(timesteps: int, seed: int) -> dict:
+    """PPO steps/s on rhs-highway-slam-v0 with 1 and 2 subprocess envs."""
+    import tempfile
+
+    from agents.train import train
+
+    out = {}
+    for n_envs in (1, 2):
+        with tempfile.TemporaryDirectory() as tmp:
+            s = train("ppo", "rhs-highway-slam-v0", timesteps, tmp, seed=seed, n_envs=n_envs,
+                      eval_freq=10**9, checkpoint_freq=10**9, progress=False)
+        out[f"n_envs_{n_envs}"] = {"timesteps": s["timesteps"], "steps_per_s": s["steps_per_s"], "wall_s": s["wall_time_s"]}
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sections", nargs="+", choices=SECTIONS, default=list(SECTIONS))
+    ap.add_argument("--steps", type=int, default=40, help="env steps per id (envs section)")
+    ap.add_argument("--grid-deg", type=float, default=1.0)
+    ap.add_argument("--train-steps", type=int, default=256, help="PPO timesteps per setting (training section)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", default=str(ROOT / "results" / "benchmark.json"))
+    args = ap.parse_args(argv)
+
+    result: dict = {
+        "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "platform": platform.platform()},
+        "settings": vars(args),
+    }
+    if "envs" in args.sections:
+        print("benchmark: envs ...", file=sys.stderr)
+        result["envs"] = bench_envs(args.steps, args.seed, args.grid_deg)
+    if "radar" in args.sections:
+        print("benchmark: radar ...", file=sys.stderr)
+        from benchmark_radar import benchmark_radar
+
+        result["radar"] = {a: benchmark_radar(antenna=a, grid_deg=args.grid_deg) for a in ("rhs", "phased")}
+    if "patterns" in args.sections:
+        print("benchmark: patterns ...", file=sys.stderr)
+        from benchmark_patterns import benchmark_patterns
+
+        result["patterns"] = benchmark_patterns(grid_deg=1.0)
+    if "training" in args.sections:
+        print("benchmark: training ...", file=sys.stderr)
+        result["training"] = bench_training(args.train_steps, args.seed)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(result, indent=2, default=float))
+    print(json.dumps(result, indent=2, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
