@@ -17,12 +17,16 @@ Observation (SPEC section 7), adding to the radar's keys:
 ``position_error_m`` and ``heading_error_rad``, the map error against the true
 landmarks that have been within radar range so far (Hungarian matching within
 ``map_gate_m``: ``map_rmse_m``, ``map_matched``, ``map_missed``,
-``map_spurious``), ``true_landmarks`` / ``estimated_landmarks`` (map frame) and
-``slam_stage_times`` (s).
+``map_spurious``), ``true_landmarks`` / ``estimated_landmarks`` (map frame) and,
+with ``stage_times_in_info=True``, ``slam_stage_times`` (s per SLAM stage; off by
+default like the radar's ``radar_stage_times``: timings differ between otherwise
+identical runs, which the determinism checks of ``check_env`` flag). The last
+stage times are always on ``wrapper.stage_times``.
 """
 
 from __future__ import annotations
 
+from dataclasses import fields
 from typing import Any
 
 import gymnasium as gym
@@ -82,6 +86,7 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         registration: ``cnn`` (default), ``icp`` or ``odometry``.
         max_landmarks: L_max, rows of the ``landmarks`` observation, [1, 4096].
         map_gate_m: gate of the Hungarian map metric in ``info`` (m).
+        stage_times_in_info: add ``slam_stage_times`` to ``info`` (non-deterministic values).
     """
 
     def __init__(
@@ -91,9 +96,15 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         registration: str = "cnn",
         max_landmarks: int = 64,
         map_gate_m: float = 2.0,
+        stage_times_in_info: bool = False,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
-            self, slam=slam, registration=registration, max_landmarks=max_landmarks, map_gate_m=map_gate_m
+            self,
+            slam=slam,
+            registration=registration,
+            max_landmarks=max_landmarks,
+            map_gate_m=map_gate_m,
+            stage_times_in_info=stage_times_in_info,
         )
         gym.ObservationWrapper.__init__(self, env)
         space = env.observation_space
@@ -102,6 +113,12 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         check_int("max_landmarks", max_landmarks, 1, 4096)
         check_range("map_gate_m", map_gate_m, 0.0, None, low_open=True)
         if isinstance(slam, dict):
+            known = {f.name for f in fields(SlamConfig)}
+            unknown = sorted(set(slam) - known)
+            if unknown:
+                raise ValueError(
+                    f"slam has unknown field(s) {', '.join(map(repr, unknown))}; allowed: {', '.join(sorted(known))}"
+                )
             slam = SlamConfig(**slam)
         elif slam is not None and not isinstance(slam, SlamConfig):
             raise ValueError(f"slam must be a SlamConfig or a dict of its fields, got {type(slam).__name__}")
@@ -110,6 +127,8 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         self.pipeline = SlamPipeline(make_registration(registration), self.slam_config, np.random.default_rng(0))
         self.max_landmarks = int(max_landmarks)
         self.map_gate_m = float(map_gate_m)
+        self.stage_times_in_info = bool(stage_times_in_info)
+        self.stage_times: dict[str, float] = {}
         big = np.float32(1e5)
         self.observation_space = spaces.Dict(
             {
@@ -191,7 +210,8 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         est_lm, _ = self.pipeline.slam.full_map()
         mm = map_metrics(est_lm, true_lm, self.map_gate_m)
         err = np.asarray(est.pose) - true_pose
-        return {
+        self.stage_times = dict(est.stage_times)
+        out = {
             "true_pose": true_pose,
             "estimated_pose": np.asarray(est.pose, dtype=float),
             "position_error_m": float(np.hypot(err[0], err[1])),
@@ -203,8 +223,10 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             "true_landmarks": true_lm,
             "estimated_landmarks": est_lm,
             "registration_motion": res.motion,
-            "slam_stage_times": dict(est.stage_times),
         }
+        if self.stage_times_in_info:
+            out["slam_stage_times"] = dict(self.stage_times)
+        return out
 
     def render(self):
         """The radar frame plus the true (dark) and estimated (orange) trajectory and estimated map."""
@@ -231,17 +253,21 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
 
 #: keyword arguments that belong to :class:`SlamObservation`
 SLAM_WRAPPER_KWARGS = ("slam", "registration", "max_landmarks", "map_gate_m")
+#: keyword arguments given to both wrappers
+SHARED_WRAPPER_KWARGS = ("stage_times_in_info",)
 
 
 def _make_slam_env(env_cls_path: str, kwargs: dict[str, Any]) -> gym.Env:
-    from rhs_env.registration import RADAR_WRAPPER_KWARGS, _split
+    from rhs_env.registration import RADAR_WRAPPER_KWARGS, _split, with_cheap_base_observation
     from rhs_env.wrappers import RadarObservation
 
     module, name = env_cls_path.split(":")
     env_cls = getattr(__import__(module, fromlist=[name]), name)
     slam_kwargs, rest = _split(dict(kwargs), SLAM_WRAPPER_KWARGS)
+    slam_kwargs.update({k: rest[k] for k in SHARED_WRAPPER_KWARGS if k in rest})
     radar_kwargs, env_kwargs = _split(rest, RADAR_WRAPPER_KWARGS)
-    return SlamObservation(RadarObservation(env_cls(**env_kwargs), **radar_kwargs), **slam_kwargs)
+    base = env_cls(**with_cheap_base_observation(env_kwargs))
+    return SlamObservation(RadarObservation(base, **radar_kwargs), **slam_kwargs)
 
 
 def make_highway_slam(**kwargs: Any) -> gym.Env:

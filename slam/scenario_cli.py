@@ -127,11 +127,19 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"no such file: {args.scenario}") from None
         except json.JSONDecodeError as exc:
             raise ValueError(f"{args.scenario} is not valid JSON: {exc}") from None
+        except OSError as exc:  # a directory, no permission, ...
+            raise ValueError(f"cannot read {args.scenario}: {exc.strerror or exc}") from None
         spec = parse_scenario(doc)
-        result = run_scripted(spec, progress=not args.no_progress)
+        try:
+            result = run_scripted(spec, progress=not args.no_progress)
+        except FileNotFoundError as exc:  # e.g. the CNN registration weights are not there
+            raise ValueError(str(exc)) from None
+        try:
+            Path(args.out).write_text(json.dumps(result, indent=1))
+        except OSError as exc:
+            raise ValueError(f"cannot write {args.out}: {exc.strerror or exc}") from None
     except ValueError as exc:
         print(f"rhs-slam scenario: error: {exc}", file=sys.stderr)
         return 2
-    Path(args.out).write_text(json.dumps(result, indent=1))
     print(json.dumps({k: result[k] for k in ("ate_rmse_m", "map_rmse_m", "map_matched", "map_missed", "map_spurious")}))
     return 0

@@ -1,0 +1,180 @@
+"""The paper-figure scripts (Fig. 5a, 5c) run end to end with ``--quick`` and write their files."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def run_script(name: str, *args: str) -> subprocess.CompletedProcess:
+    env = {
+        **os.environ,
+        "OMP_NUM_THREADS": "1",
+        "MPLBACKEND": "Agg",
+        "SDL_VIDEODRIVER": "dummy",
+    }
+    return subprocess.run(
+        [sys.executable, str(SCRIPTS / name), *args],
+        check=False,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+    )
+
+
+def load_script(name: str):
+    spec = importlib.util.spec_from_file_location(
+        name.removesuffix(".py"), SCRIPTS / name
+    )
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def check_png(path: Path) -> None:
+    data = path.read_bytes()
+    assert data[:8] == PNG_MAGIC and len(data) > 5000
+
+
+def test_fig5a_quick(tmp_path):
+    # phased and random need no pattern library; hologram stands in for a surface antenna
+    proc = run_script(
+        "fig5a_slam_rmse.py",
+        "--quick",
+        "--antennas",
+        "phased",
+        "random",
+        "hologram",
+        "--registration",
+        "icp",
+        "--out-dir",
+        str(tmp_path),
+        "--no-progress",
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    check_png(tmp_path / "fig5a.png")
+    res = json.loads((tmp_path / "fig5a.json").read_text())
+    assert res["figure"] == "5a" and res["paper_ratio"] == pytest.approx(1 / 3)
+    assert "third" in res["paper_claim"] and "tx_power_dbm" in res["snr_sweep"]
+    s = res["settings"]
+    assert (
+        s["antennas"] == ["phased", "random", "hologram"] and s["registration"] == "icp"
+    )
+    assert s["seeds"] == [0] and s["powers_dbm"] == [30.0] and s["cycles"] == 10
+    assert len(res["episodes"]) == 3
+    for ep in res["episodes"]:
+        assert ep["cycles"] == 10
+        assert math.isfinite(ep["vehicle_rmse_m"]) and 0 <= ep["vehicle_rmse_m"] < 20
+        assert ep["map_matched"] + ep["map_missed"] == 5  # the paper's five obstacles
+        assert ep["obstacle_rmse_m"] is None or 0 <= ep["obstacle_rmse_m"] <= 2.0
+        assert {"registration", "propagate", "ekf_update"} <= set(
+            ep["slam_stage_times_ms"]
+        )
+    rows = {r["antenna"]: r for r in res["rows"]}
+    assert set(rows) == {"phased", "random", "hologram"}
+    for r in rows.values():
+        assert r["seeds"] == 1 and r["vehicle_rmse_m"]["n"] == 1
+        ep = next(e for e in res["episodes"] if e["antenna"] == r["antenna"])
+        assert r["vehicle_rmse_m"]["mean"] == pytest.approx(ep["vehicle_rmse_m"])
+    ratios = {q["antenna"]: q for q in res["ratios"]}
+    assert set(ratios) == {
+        "random",
+        "hologram",
+    }  # every antenna against the phased reference
+    for a, q in ratios.items():
+        expect = (
+            rows[a]["vehicle_rmse_m"]["mean"] / rows["phased"]["vehicle_rmse_m"]["mean"]
+        )
+        assert q["vehicle_rmse_ratio"] == pytest.approx(expect)
+    # measured in quick mode: the phased array tracks the 12 m drive to a few cm with ICP
+    assert rows["phased"]["vehicle_rmse_m"]["mean"] < 0.5
+    md = (tmp_path / "fig5a.md").read_text()
+    assert md.count("\n| 30 |") == 3 and "third" in md and "1 (reference)" in md
+
+
+def test_fig5c_quick(tmp_path):
+    proc = run_script(
+        "fig5c_trajectory_map.py",
+        "--quick",
+        "--antenna",
+        "phased",
+        "--registration",
+        "icp",
+        "--out-dir",
+        str(tmp_path),
+        "--no-progress",
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    check_png(tmp_path / "fig5c.png")
+    res = json.loads((tmp_path / "fig5c.json").read_text())
+    assert (
+        res["figure"] == "5c"
+        and res["settings"]["antenna"] == "phased"
+        and res["settings"]["cycles"] == 10
+    )
+    true, est = (
+        np.asarray(res["true_trajectory"]),
+        np.asarray(res["estimated_trajectory"]),
+    )
+    assert true.shape == est.shape == (11, 3)  # reset + 10 cycles
+    np.testing.assert_allclose(
+        true[0], [0.0, 37.5, 0.0], atol=1e-6
+    )  # the paper's start, world frame
+    np.testing.assert_allclose(
+        true[-1], [12.0, 37.5, 0.0], atol=0.05
+    )  # 10 cycles at 6 m/s, 5 Hz
+    np.testing.assert_allclose(est[0], true[0], atol=1e-6)
+    obstacles = np.asarray(res["true_obstacles"])
+    np.testing.assert_allclose(
+        obstacles, [[10, 65], [25, 10], [30, 65], [35, 10], [50, 65]], atol=1e-6
+    )
+    assert len(res["matches"]) == 5 and res["map_matched"] + res["map_missed"] == 5
+    emap = np.asarray(res["estimated_map"]).reshape(-1, 2)
+    for m in res["matches"]:
+        if m["estimated_xy"] is not None:  # matches point into the estimated map
+            assert np.min(np.hypot(*(emap - np.asarray(m["estimated_xy"])).T)) < 1e-3
+            assert m["error_m"] == pytest.approx(
+                np.hypot(*(np.subtract(m["estimated_xy"], m["true_xy"]))), abs=1e-3
+            )
+    pos = np.hypot(est[1:, 0] - true[1:, 0], est[1:, 1] - true[1:, 1])
+    assert res["vehicle_rmse_m"] == pytest.approx(
+        float(np.sqrt(np.mean(pos**2))), abs=1e-3
+    )
+    assert (
+        res["vehicle_rmse_m"] < 0.5 and res["map_matched"] >= 4
+    )  # measured 0.02 m, 5 / 5
+    md = (tmp_path / "fig5c.md").read_text()
+    assert "vehicle RMSE" in md and "(10.0, 65.0)" in md
+
+
+@pytest.mark.parametrize("name", ["fig5a_slam_rmse.py", "fig5c_trajectory_map.py"])
+def test_default_registration_follows_the_weights_file(name):
+    from slam.cnn_registration import DEFAULT_WEIGHTS
+
+    mod = load_script(name)
+    assert mod.parse_args([]).registration == (
+        "cnn" if Path(DEFAULT_WEIGHTS).exists() else "icp"
+    )
+    assert mod.parse_args(["--registration", "odometry"]).registration == "odometry"
+
+
+def test_fig5a_defaults_are_the_paper_schemes():
+    a = load_script("fig5a_slam_rmse.py").parse_args([])
+    assert (
+        a.antennas == ["rhs", "phased", "random"]
+        and a.seeds == 5
+        and a.powers == [10.0, 20.0, 30.0]
+    )
+    assert a.cycles == 50 and a.grid_deg == 1.0 and a.out_dir == "results"
