@@ -1,0 +1,359 @@
+"""Fast exact-convex holographic pattern optimisation (alternating SOCPs).
+
+Per grid i (paper P1, normalised units, see :mod:`rhs_env.patterns.metrics`)::
+
+    max_{psi_T, psi_R >= 0}  delta = |h(s_i)|^2 - max_{l in D} |h(s_l)|^2,
+    |h(s)|^2 = |t(s)|^2 |r(s)|^2 / (||psi_T||^2 ||psi_R||^2)
+
+The Tx power is fixed (``||psi_T||^2 = P``) and the Rx noise is proportional to
+``||psi_R||^2``, so both sides are scale invariant: the box ``psi in [0, 1]``
+reduces to ``psi >= 0`` and every pattern is rescaled to ``max psi = 1`` at the end.
+
+**Half-step (side X, other side Y fixed, ||psi_Y|| = 1).** With
+``o(s) = |y(s)|^2`` and weights ``w_l = o(s_l) / o(s_i)``::
+
+    delta = o(s_i) ( |x_i|^2 - max_l w_l |x_l|^2 ),  x_l = b_l^T psi  (linear in psi)
+
+Fix the main-lobe phase ``phi = angle(x_i(psi_cur))``. Because
+``Re(e^{-j phi} x_i) <= |x_i|`` with equality at ``psi_cur`` (a minorizer), the SOCP::
+
+    G(rho) = max  c^T psi,   c = Re(e^{-j phi} b_i)
+             s.t. ||psi||_2 <= 1,  psi >= 0,
+                  sqrt(w_l) |b_l^T psi| <= rho          for l in D       (sidelobes)
+                  sqrt(w_k) |b_k^T psi| <= c^T psi      for k in K       (main lobe peaks at s_i)
+
+is convex, ``G`` is concave and nondecreasing in ``rho`` with
+``G'(rho) = sum_l z_l`` (the dual of the sidelobe cones' heads), and
+``delta(rho) = G(rho)^2 - rho^2`` is maximised over the scalar rho by a
+safeguarded secant search on ``delta'(rho)/2 = G G' - rho``. Evaluating at the
+current sidelobe level ``rho_cur`` reproduces ``psi_cur``'s delta, so every
+half-step is monotone. The set K (``theta_i +- 0.45 grid``, and points across
+the main lobe) keeps the two-way peak at the grid centre, so the pointing error
+stays below half a grid. Initialisation: the closed-form cosine holograms (plus
+optional random starts). The phase-fixed SOCP is local in ``phi``; in the first
+alternation(s) each half-step tries ``phase_sweep`` equally spaced phases and keeps
+the best, which makes the early steps global in ``phi``.
+
+**Sidelobe cap.** P1's delta is a difference of powers, so on some grids its optimum
+has a high PSLR. With ``max_sidelobe_db`` the rho search is limited to
+``rho <= kappa G(rho)`` (``kappa = 10^(cap/20)``; ``rho / G`` increases with rho since G
+is concave with G(0) >= 0), i.e. two-way sidelobes on D at most ``cap`` dB below the
+main lobe; iterates are ranked by (cap met, delta). Where the cap is unreachable the
+plain delta step is taken.
+
+The SOCPs are solved with Clarabel directly (the problem data change with
+``phi`` and ``w`` every half-step, and only ``b`` changes with ``rho``, which
+Clarabel updates in place without re-factorising the symbolic structure).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import clarabel
+import numpy as np
+import scipy.sparse as sp
+
+from rhs_env.antenna import RHSConfig, ScanConfig, hologram_pattern
+from rhs_env.patterns.metrics import (
+    mainlobe_checks,
+    side_matrix,
+    sidelobe_directions,
+    two_way_power,
+)
+from rhs_env.validation import check_int, check_range
+
+
+@dataclass(frozen=True)
+class FastSettings:
+    """Settings of the alternating-SOCP method (all change the result, all are hashed).
+
+    Attributes:
+        oversample: samples of D per main-lobe half-width ``lambda/(M d)`` (in sin theta), (0, 64].
+        max_iter: maximum Tx+Rx alternations, [1, 1000].
+        tol: stop when delta improves by less than ``tol`` (relative) over one alternation, (0, 1).
+        rho_evals: SOCP solves per half-step in the scalar rho search, [1, 50].
+        pointing: constrain the two-way main lobe to peak at the grid centre (set K).
+        max_sidelobe_db: cap on the two-way sidelobe level on D relative to the main lobe,
+            ``max_l |h(s_l)|^2 / |h(s_i)|^2 <= 10^(cap/10)``, dB in [-80, 0] (0: sidelobes only below the main lobe).
+        phase_sweep: main-lobe phases phi tried per half-step (equally spaced from the
+            current one) during the first ``sweep_iters`` alternations, [1, 64]; the
+            phase-fixed SOCP is local in phi, the sweep makes the first steps global in phi.
+        sweep_iters: alternations that use the phase sweep, [0, 1000].
+        starts: initial points: the cosine holograms plus ``starts - 1`` random amplitude
+            pairs, each screened for ``max(sweep_iters, 1)`` alternations; the best one is
+            continued to convergence, [1, 100].
+        seed: seed of the random starts (the grid angle is mixed in), >= 0.
+    """
+
+    oversample: float = 4.0
+    max_iter: int = 15
+    tol: float = 1e-3
+    rho_evals: int = 4
+    pointing: bool = True
+    max_sidelobe_db: float = -16.5
+    phase_sweep: int = 4
+    sweep_iters: int = 1
+    starts: int = 1
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        check_range("oversample", self.oversample, 0.0, 64.0, low_open=True)
+        check_int("max_iter", self.max_iter, 1, 1000)
+        check_range("tol", self.tol, 0.0, 1.0, low_open=True, high_open=True)
+        check_int("rho_evals", self.rho_evals, 1, 50)
+        check_int("phase_sweep", self.phase_sweep, 1, 64)
+        check_int("sweep_iters", self.sweep_iters, 0, 1000)
+        check_int("starts", self.starts, 1, 100)
+        check_int("seed", self.seed, 0, 2**63 - 1)
+        check_range("max_sidelobe_db", self.max_sidelobe_db, -80.0, 0.0)
+        if not isinstance(self.pointing, bool):
+            raise ValueError(f"pointing must be a bool, got {self.pointing!r}")  # noqa: TRY004 (config contract)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+class _SideSOCP:
+    """The half-step SOCP of one side for fixed phase and weights; ``solve(rho)`` re-uses the solver."""
+
+    def __init__(self, b_i: np.ndarray, b_d: np.ndarray, w_d: np.ndarray, b_k: np.ndarray, w_k: np.ndarray,
+                 phi: float) -> None:
+        m = b_i.size
+        c = np.real(np.exp(-1j * phi) * b_i)
+        L, K = b_d.shape[0], b_k.shape[0]
+        eye = sp.identity(m, format="csr")
+        blocks = [-eye, sp.vstack([sp.csr_matrix((1, m)), -eye])]
+        bvec = [np.zeros(m), np.r_[1.0, np.zeros(m)]]
+        cones: list[Any] = [clarabel.NonnegativeConeT(m), clarabel.SecondOrderConeT(m + 1)]
+        # sidelobe cones: rows (head 0, Re, Im) per l, head row of A is zero, b_head = rho
+        sd = np.sqrt(w_d)[:, None] * b_d
+        a_side = np.zeros((L, 3, m))
+        a_side[:, 1, :] = -sd.real
+        a_side[:, 2, :] = -sd.imag
+        blocks.append(sp.csr_matrix(a_side.reshape(3 * L, m)))
+        bvec.append(np.zeros(3 * L))
+        cones += [clarabel.SecondOrderConeT(3)] * L
+        if K:
+            sk = np.sqrt(w_k)[:, None] * b_k
+            a_main = np.zeros((K, 3, m))
+            a_main[:, 0, :] = -c
+            a_main[:, 1, :] = -sk.real
+            a_main[:, 2, :] = -sk.imag
+            blocks.append(sp.csr_matrix(a_main.reshape(3 * K, m)))
+            bvec.append(np.zeros(3 * K))
+            cones += [clarabel.SecondOrderConeT(3)] * K
+        self.A = sp.vstack(blocks, format="csc")
+        self.b = np.concatenate(bvec)
+        self.head = 2 * m + 1 + 3 * np.arange(L)  # rows of the sidelobe cone heads
+        self.c = c
+        settings = clarabel.DefaultSettings()
+        settings.verbose = False
+        settings.tol_gap_rel = 1e-6
+        settings.tol_gap_abs = 1e-8
+        settings.presolve_enable = False
+        self.settings = settings
+        self.cones = cones
+        self.P = sp.csc_matrix((m, m))
+        self.solver: Any = None
+
+    def solve(self, rho: float) -> tuple[float, float, np.ndarray] | None:
+        """Return (G(rho), G'(rho), psi) or None when the solver fails."""
+        b = self.b.copy()
+        b[self.head] = rho
+        if self.solver is None:
+            self.solver = clarabel.DefaultSolver(self.P, -self.c, self.A, b, self.cones, self.settings)
+        else:
+            self.solver.update(b=b)
+        sol = self.solver.solve()
+        if str(sol.status) not in ("Solved", "AlmostSolved"):
+            return None
+        x = np.maximum(np.asarray(sol.x), 0.0)
+        z = np.asarray(sol.z)
+        return float(self.c @ x), float(np.sum(z[self.head])), x
+
+
+def _half_step(sv: _SideSOCP, rho0: float, evals: int, kappa: float) -> np.ndarray | None:
+    """Maximise delta(rho) = G(rho)^2 - rho^2 subject to the sidelobe cap rho <= kappa G(rho).
+
+    The optimum is the root of ``F(rho) = min(G G' - rho, kappa G - rho)`` (both
+    terms are positive for small rho and negative for large rho: ``delta'/2`` and
+    the cap slack), found by a safeguarded secant search that starts at ``rho0``
+    with a step from the linearised model ``G(rho) ~ G0 + G'(rho - rho0)``.
+    Returns the psi of the best cap-feasible evaluation, else None.
+    """
+    best_d, best_x = -np.inf, None
+    lo, hi = 0.0, np.inf  # bracket on the root of F (F(lo) > 0 > F(hi))
+    pts: list[tuple[float, float]] = []
+    rho = rho0
+    for _ in range(evals):
+        out = sv.solve(rho)
+        if out is None:
+            break
+        g, dg, x = out
+        d = g * g - rho * rho
+        if rho <= kappa * g * (1 + 1e-9) and d > best_d:
+            best_d, best_x = d, x
+        f_opt, f_cap = g * dg - rho, kappa * g - rho
+        f = min(f_opt, f_cap)
+        if f > 0:
+            lo = max(lo, rho)
+        else:
+            hi = min(hi, rho)
+        pts.append((rho, f))
+        if len(pts) == 1:
+            if f_opt <= f_cap:  # stationary point of (G0 + G'(r - rho0))^2 - r^2
+                nxt = dg * (g - dg * rho) / (1 - dg * dg) if dg < 1 else 2 * rho
+            else:  # r = kappa (G0 + G'(r - rho0))
+                nxt = kappa * (g - dg * rho) / (1 - kappa * dg) if kappa * dg < 1 else 2 * rho
+        else:
+            (r1, f1), (r2, f2) = pts[-2], pts[-1]
+            nxt = r2 - f2 * (r2 - r1) / (f2 - f1) if f2 != f1 else 0.5 * (r1 + r2)
+        upper = hi if np.isfinite(hi) else 4.0 * max(rho, 1e-12)
+        if not np.isfinite(nxt) or not (lo < nxt < upper):
+            nxt = 0.5 * (lo + upper)
+        if abs(nxt - rho) <= 1e-4 * max(rho, 1e-12):
+            break
+        rho = nxt
+    return best_x
+
+
+def optimize_grid_fast(
+    config: RHSConfig, angle_deg: float, grid_deg: float, settings: FastSettings | None = None
+) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """Optimise the Tx and Rx amplitudes of one grid; returns (tx_psi, rx_psi, info), psi in [0, 1], max 1.
+
+    ``info``: ``delta`` (P1 objective on D, normalised), ``iterations``, ``history`` (delta per alternation).
+    """
+    settings = settings or FastSettings()
+    si = np.array([np.sin(np.deg2rad(angle_deg))])
+    s_d = sidelobe_directions(config, angle_deg, settings.oversample)
+    s_k = mainlobe_checks(config, angle_deg, grid_deg) if settings.pointing else np.zeros(0)
+    feeds = {"tx": config.tx_feed, "rx": config.rx_feed}
+    mats = {
+        side: (side_matrix(config, si, f)[0], side_matrix(config, s_d, f), side_matrix(config, s_k, f))
+        for side, f in feeds.items()
+    }
+    kappa = 10.0 ** (settings.max_sidelobe_db / 20.0)
+
+    def merit(p: dict[str, np.ndarray]) -> tuple[bool, float]:
+        """(sidelobe cap met on D, delta): candidates are compared lexicographically."""
+        pw = two_way_power(config, p["tx"], p["rx"], np.concatenate([si, s_d]))
+        return bool(pw[1:].max() <= kappa**2 * pw[0] * (1 + 1e-6)), float(pw[0] - pw[1:].max())
+
+    def alternate(psi: dict[str, np.ndarray], first: int, last: int) -> tuple[dict[str, np.ndarray], Any, list, int]:
+        """Alternations ``first..last`` (1-based; the first ``sweep_iters`` sweep phi) from ``psi``."""
+        cur = merit(psi)
+        history = [cur[1]]
+        it = first - 1
+        for it in range(first, last + 1):
+            start = cur
+            for side, other in (("tx", "rx"), ("rx", "tx")):
+                b_i, b_d, b_k = mats[side]
+                o_i_vec, o_d_mat, o_k_mat = mats[other]
+                o_i = abs(o_i_vec @ psi[other]) ** 2
+                if o_i <= 0:
+                    continue
+                w_d = np.abs(o_d_mat @ psi[other]) ** 2 / o_i
+                w_k = np.abs(o_k_mat @ psi[other]) ** 2 / o_i if s_k.size else np.zeros(0)
+                phi0 = float(np.angle(b_i @ psi[side]))
+                rho0 = float(np.sqrt(np.max(w_d * np.abs(b_d @ psi[side]) ** 2)))
+                nphi = settings.phase_sweep if it <= settings.sweep_iters else 1
+                for phi in phi0 + 2 * np.pi * np.arange(nphi) / nphi:
+                    sv = _SideSOCP(b_i, b_d, w_d, b_k, w_k, float(phi))
+                    x = _half_step(sv, rho0, settings.rho_evals, kappa)
+                    if x is None and kappa < 1.0:  # cap unreachable from here: plain delta step
+                        x = _half_step(sv, rho0, settings.rho_evals, np.inf)
+                    if x is None or not np.any(x > 0):
+                        continue
+                    cand = dict(psi)
+                    cand[side] = x / np.linalg.norm(x)
+                    m = merit(cand)
+                    if m >= cur:
+                        psi, cur = cand, m
+            history.append(cur[1])
+            if it > settings.sweep_iters and cur[0] == start[0] and (
+                cur[1] - start[1] <= settings.tol * max(abs(cur[1]), 1e-12)
+            ):
+                break
+        return psi, cur, history, it
+
+    # starts: the cosine holograms, then seeded random amplitudes; screen each with the
+    # phase-sweep alternations and continue the best one to convergence
+    rng = np.random.default_rng([settings.seed, round(angle_deg * 1e6) % (2**32)])
+    inits = [{side: hologram_pattern(config, np.array([angle_deg]), f)[0] for side, f in feeds.items()}]
+    for _ in range(settings.starts - 1):
+        inits.append({side: rng.uniform(0.0, 1.0, config.elements) for side in feeds})
+    screen = max(settings.sweep_iters, 1)
+    runs = []
+    for init in inits:
+        p0 = {k: v / np.linalg.norm(v) for k, v in init.items()}
+        runs.append(alternate(p0, 1, min(screen, settings.max_iter)))
+    psi, cur, history, it = max(runs, key=lambda r: r[1])
+    if it < settings.max_iter:
+        psi, cur, more, it = alternate(psi, it + 1, settings.max_iter)
+        history += more[1:]
+    tx = psi["tx"] / psi["tx"].max()
+    rx = psi["rx"] / psi["rx"].max()
+    return tx, rx, {"delta": cur[1], "capped": cur[0], "iterations": it, "history": history,
+                    "start_deltas": [r[1][1] for r in runs]}
+
+
+def _grid_task(args: tuple[Callable[..., Any], tuple[Any, ...]]) -> Any:
+    func, fargs = args
+    return func(*fargs)
+
+
+def parallel_map(
+    func: Callable[..., Any], arg_list: list[tuple[Any, ...]], workers: int = 2, progress: Any = None
+) -> list[Any]:
+    """``[func(*a) for a in arg_list]`` over ``workers`` processes (in order); ``progress``: a tqdm bar or None.
+
+    Worker processes run with single-threaded BLAS (``OMP_NUM_THREADS=1``) so that
+    ``workers`` is the number of cores used.
+    """
+    check_int("workers", workers, 1, 256)
+    out: list[Any] = [None] * len(arg_list)
+    if workers == 1 or len(arg_list) <= 1:
+        for k, a in enumerate(arg_list):
+            out[k] = func(*a)
+            if progress is not None:
+                progress.update(1)
+        return out
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        futures = {pool.submit(_grid_task, (func, a)): k for k, a in enumerate(arg_list)}
+        from concurrent.futures import as_completed
+
+        for fut in as_completed(futures):
+            out[futures[fut]] = fut.result()
+            if progress is not None:
+                progress.update(1)
+    return out
+
+
+def build_fast(
+    config: RHSConfig,
+    scan: ScanConfig,
+    settings: FastSettings | None = None,
+    workers: int = 2,
+    progress: Any = None,
+    angles_deg: Iterable[float] | None = None,
+) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]]]:
+    """Optimise every grid of ``scan`` (or the given subset ``angles_deg``); returns (tx (I,M), rx (I,M), infos)."""
+    settings = settings or FastSettings()
+    angles = scan.angles_deg if angles_deg is None else np.asarray(list(angles_deg), dtype=float)
+    res = parallel_map(
+        optimize_grid_fast, [(config, float(a), scan.grid_deg, settings) for a in angles], workers, progress
+    )
+    tx = np.stack([r[0] for r in res])
+    rx = np.stack([r[1] for r in res])
+    return tx, rx, [r[2] for r in res]
+
+
+__all__ = ["FastSettings", "build_fast", "optimize_grid_fast", "parallel_map"]

@@ -1,0 +1,67 @@
+#!/usr/bin/env python
+"""Build the shipped pattern libraries (or a small config for tests) with the fast method.
+
+Default: M=60, d=lambda/4, n=sqrt(3), feeds 0 / M-1, sector 90 deg, grids 1, 2, 5 deg, into
+``rhs_env/patterns/data/``. Prints the build time and worst/median PSLR per library and
+writes a JSON summary (``--json``).
+
+    python scripts/build_patterns.py                       # shipped libraries
+    python scripts/build_patterns.py --elements 16 --grids 10 --out-dir /tmp/x   # small
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+from rhs_env.antenna import RHSConfig, ScanConfig
+from rhs_env.patterns.library import DATA_DIR, build_library
+from rhs_env.patterns.metrics import pattern_report
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--elements", type=int, default=60)
+    p.add_argument("--spacing-wl", type=float, default=0.25)
+    p.add_argument("--refractive-index", type=float, default=math.sqrt(3.0))
+    p.add_argument("--sector-deg", type=float, default=90.0)
+    p.add_argument("--grids", type=float, nargs="+", default=[1.0, 2.0, 5.0], help="grid widths in degrees")
+    p.add_argument("--method", choices=("fast", "sdr"), default="fast")
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--out-dir", type=Path, default=DATA_DIR)
+    p.add_argument("--json", type=Path, default=None, help="summary JSON (build times, PSLR)")
+    p.add_argument("--quiet", action="store_true")
+    a = p.parse_args(argv)
+    try:
+        config = RHSConfig(elements=a.elements, spacing_wl=a.spacing_wl, refractive_index=a.refractive_index)
+        scans = [ScanConfig(grid_deg=g, sector_deg=a.sector_deg) for g in a.grids]
+    except ValueError as exc:
+        print(f"build_patterns: error: {exc}", file=sys.stderr)
+        return 2
+    summary = []
+    for scan in scans:
+        t0 = time.perf_counter()
+        lib = build_library(config, scan, a.method, workers=a.workers, progress=not a.quiet)
+        dt = time.perf_counter() - t0
+        name = f"rhs_m{config.elements}_grid{scan.grid_deg:g}deg_{a.method}.npz"
+        path = lib.save(a.out_dir / name)
+        rep = pattern_report(config, lib.tx, lib.rx, lib.angles_deg).summary()
+        row = {"file": str(path), "grid_deg": scan.grid_deg, "build_s": dt, **rep}
+        summary.append(row)
+        print(
+            f"{name}: {dt:.1f} s, worst PSLR {rep['worst_pslr_db']:.2f} dB, median PSLR "
+            f"{rep['median_pslr_db']:.2f} dB, worst pointing {rep['worst_pointing_error_deg']:.3f} deg",
+            flush=True,
+        )
+    if a.json is not None:
+        a.json.parent.mkdir(parents=True, exist_ok=True)
+        a.json.write_text(json.dumps(summary, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,144 @@
+"""Pattern optimisation and libraries: twin suppression, shipped quality, hashing, caching, fast vs SDR."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rhs_env.antenna import RHSConfig, ScanConfig, make_antenna
+from rhs_env.patterns import library as L
+from rhs_env.patterns.fast import FastSettings, optimize_grid_fast
+from rhs_env.patterns.metrics import pattern_report, sidelobe_directions
+from rhs_env.patterns.sdr import optimize_grid_sdr
+
+ROOT = Path(__file__).resolve().parents[1]
+SHIPPED_GRIDS = (1.0, 2.0, 5.0)
+
+
+def _shipped(grid_deg: float) -> L.PatternLibrary:
+    fields = L.library_fields(RHSConfig(), ScanConfig(grid_deg=grid_deg), "fast")
+    path = L.find_shipped(fields)
+    assert path is not None, f"no shipped library for grid {grid_deg} deg in {L.DATA_DIR}"
+    return L.load(path, fields)
+
+
+@pytest.mark.parametrize("grid_deg", SHIPPED_GRIDS)
+def test_shipped_quality_pslr_and_pointing(grid_deg: float) -> None:
+    lib = _shipped(grid_deg)
+    cfg = lib.rhs_config()
+    rep = pattern_report(cfg, lib.tx, lib.rx, lib.angles_deg)
+    assert np.all(rep.pslr_db <= -15.0), rep.angle_deg[rep.pslr_db > -15.0]
+    assert np.all(np.abs(rep.pointing_error_deg) <= grid_deg / 2), rep.pointing_error_deg
+    assert np.all(rep.delta > 0)
+
+
+def test_two_way_suppresses_both_one_way_twins() -> None:
+    lib = _shipped(1.0)
+    cfg = lib.rhs_config()
+    ant = make_antenna("rhs", cfg, ScanConfig(grid_deg=1.0), patterns=(lib.tx, lib.rx))
+    hw = cfg.mainlobe_halfwidth
+    checked = 0
+    for k, a in enumerate(lib.angles_deg):
+        s = np.sin(np.deg2rad(a))
+        twins = np.concatenate([cfg.twin_sin(s, cfg.tx_feed), cfg.twin_sin(s, cfg.rx_feed)])
+        twins = twins[np.isfinite(twins) & (np.abs(twins - s) > hw)]
+        if twins.size == 0:
+            continue
+        h_main = np.abs(ant.two_way_gain(np.deg2rad(np.array([a]))))[k, 0] ** 2
+        h_twin = np.abs(ant.two_way_gain(np.arcsin(twins)))[k] ** 2
+        assert np.all(10 * np.log10(h_twin / h_main) <= -15.0), (a, twins)
+        checked += 1
+    assert checked > 40
+
+
+def _small_library(tmp_path: Path) -> tuple[Path, dict]:
+    cfg, scan = RHSConfig(elements=8), ScanConfig(grid_deg=30.0)
+    lib = L.build_library(cfg, scan, "fast", workers=1, progress=False)
+    path = lib.save(tmp_path / "small.npz")
+    return path, L.library_fields(cfg, scan, "fast")
+
+
+def _rewrite_config(path: Path, blob: dict) -> None:
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in ("angles_deg", "tx", "rx")}
+    np.savez(path, config=np.array(json.dumps(blob)), **arrays)
+
+
+def test_tampered_or_mismatched_library_is_refused(tmp_path: Path) -> None:
+    path, fields = _small_library(tmp_path)
+    assert L.load(path, fields).tx.shape == (3, 8)
+    with np.load(path) as z:
+        blob = json.loads(str(z["config"]))
+    # different expected config
+    other = L.library_fields(RHSConfig(elements=8, refractive_index=1.5), ScanConfig(grid_deg=30.0), "fast")
+    with pytest.raises(ValueError, match=str(path).replace("\\", "\\\\")):
+        L.load(path, other)
+    # tampered config, stale hash
+    bad = json.loads(json.dumps(blob))
+    bad["fields"]["rhs"]["refractive_index"] = 1.5
+    _rewrite_config(path, bad)
+    with pytest.raises(ValueError, match="hash mismatch") as exc:
+        L.load(path)
+    assert str(path) in str(exc.value)
+    # tampered hash
+    bad = json.loads(json.dumps(blob))
+    bad["sha256"] = "0" * 64
+    _rewrite_config(path, bad)
+    with pytest.raises(ValueError) as exc:
+        L.load(path, fields)
+    assert str(path) in str(exc.value)
+
+
+def test_get_library_builds_once_then_uses_cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv(L.CACHE_ENV, str(tmp_path))
+    cfg, scan = RHSConfig(elements=8), ScanConfig(grid_deg=30.0)
+    fields = L.library_fields(cfg, scan, "fast")
+    path = L.cache_path(fields)
+    assert not path.exists()
+    lib1 = L.get_library(cfg, scan, workers=1, progress=False)
+    assert path.exists() and path.parent.parent == tmp_path
+
+    def no_build(*args, **kwargs):  # the second call must not rebuild
+        raise AssertionError("get_library rebuilt a cached library")
+
+    monkeypatch.setattr(L, "build_library", no_build)
+    lib2 = L.get_library(cfg, scan, workers=1, progress=False)
+    np.testing.assert_array_equal(lib1.tx, lib2.tx)
+    assert lib2.path == path
+
+
+def test_build_script_small_config(tmp_path: Path) -> None:
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "build_patterns.py"), "--elements", "8", "--grids", "30",
+         "--workers", "1", "--quiet", "--out-dir", str(tmp_path), "--json", str(tmp_path / "s.json")],
+        check=False, capture_output=True, text=True, timeout=120,
+    )
+    assert out.returncode == 0, out.stderr
+    files = list(tmp_path.glob("*.npz"))
+    assert len(files) == 1
+    lib = L.load(files[0], L.library_fields(RHSConfig(elements=8), ScanConfig(grid_deg=30.0), "fast"))
+    assert lib.tx.shape == (3, 8) and json.loads((tmp_path / "s.json").read_text())[0]["grid_deg"] == 30.0
+
+
+@pytest.mark.parametrize("angle_deg", [-40.0, -30.0, -20.0])
+def test_fast_reaches_sdr_delta_small_config(angle_deg: float) -> None:
+    cfg, scan = RHSConfig(elements=16), ScanConfig(grid_deg=10.0)
+    k = int(np.argmin(np.abs(scan.angles_deg - angle_deg)))
+    _, _, fast = optimize_grid_fast(cfg, angle_deg, scan.grid_deg, FastSettings(starts=4))
+    _, _, sdr = optimize_grid_sdr(cfg, angle_deg, k)
+    assert fast["delta"] >= sdr["delta"] * (1 - 1e-6), (fast["delta"], sdr["delta"])
+
+
+def test_settings_validation_names_field() -> None:
+    with pytest.raises(ValueError, match="oversample"):
+        FastSettings(oversample=0.0)
+    with pytest.raises(ValueError, match="method"):
+        L.library_fields(RHSConfig(), ScanConfig(), "magic")
+    with pytest.raises(ValueError, match="unknown fast settings"):
+        L.library_fields(RHSConfig(), ScanConfig(), "fast", bogus=1)
+    assert sidelobe_directions(RHSConfig(), 0.0).min() >= -1.0
