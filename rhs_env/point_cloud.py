@@ -1,0 +1,678 @@
+"""Point-cloud generation from swept-beam FMCW echoes (paper section VI, SPEC section 5).
+
+Processing chain for one radar with I beam slots and C chirps per slot; the
+dechirped samples ``y[i, c, n]`` (n = 0..N-1 at ``f_s``) are already the sum of
+complex tones, one per scatterer (see :mod:`rhs_env.radar`):
+
+1. **Range (matched filter).** For a linear chirp, correlating the echo with the
+   transmitted chirp equals dechirping and taking the Fourier transform, so the
+   range profile of slot i, chirp c is the windowed, zero-padded FFT
+
+       Y[i, c, k] = sum_n w[n] y[i, c, n] exp(-j 2 pi k n / (Z N)),
+
+   bin k <-> beat frequency ``f = k f_s / (Z N)`` <-> range ``R = c0 f / (2 S)``
+   with the chirp slope ``S = B / T_c`` (bin width ``c0 / (2 B)`` = 0.6 m before
+   the zero padding Z).
+2. **Detection.** The slot-combined profile ``P[k] = sum_{i,c} |Y[i, c, k]|^2``
+   (non-coherent integration over the sweep; pure noise makes each cell a
+   Gamma(L = I C) variable) is compared with a cell-averaging CFAR threshold
+   ``alpha * mean(training cells)``; with a Gamma(L) test cell and N_t
+   independent Gamma(L) training cells, ``P / mean`` is F(2L, 2 N_t L)
+   distributed, so ``alpha = F^{-1}(1 - P_fa; 2L, 2 N_t L)`` exactly (training
+   cells are taken one per unpadded bin, which the window leaves weakly
+   correlated); the ordered-statistic variant (default) uses the rank-th
+   smallest training cell. The noise estimate is clipped between the
+   receiver's calibrated noise floor and ``cap`` above it: the slot sum mixes
+   every direction, so the training cells of a landmark hold the returns of
+   vehicles at other angles, and an unclipped CFAR would mask it. Option
+   ``fixed``: the paper's threshold ``delta_d`` in dB above the noise mean of
+   P. Detections are local maxima above the threshold; peaks that the window's
+   sidelobes under a stronger peak explain are dropped.
+3. **Angle and velocity (OMP over H).** At a detected bin the data over slots
+   and chirps obey ``Y[i, c] = sum_k s_k h_i(theta_k) exp(j omega_k t_ic) + noise``
+   with ``H[i, j] = h_i(theta_j)`` (two-way gain of slot i toward candidate j;
+   candidates finer than dtheta), ``t_ic = i C + c`` the chirp time over the
+   sweep and ``omega = 4 pi v T_c / lambda`` the chirp-to-chirp Doppler phase
+   (|v| < lambda / (4 T_c)). OMP (paper Algorithm 1, loop condition corrected
+   to "l <= L_max AND ||r||^2 >= delta_r", :func:`omp_doppler`): on the
+   residual, a coarse Doppler from the chirp pairs ``arg sum r[i, c+1] r*[i, c]``,
+   the best candidate of ``|h_j^H rho| / ||h_j||`` for the Doppler-compensated
+   slot vector ``rho_i = sum_c r_ic exp(-j omega t_ic)`` (a joint angle x Doppler
+   grid when the Doppler uncertainty matters over the target's dwell), fine
+   Doppler over the whole sweep, angle refinement below the candidate spacing
+   (parabola through the log-correlation, then Newton steps on
+   ``f(theta) = |h(theta)^H rho|^2 / ||h(theta)||^2`` with the analytic
+   derivatives of h), least squares for all amplitudes, cyclic re-refinement
+   of every atom against its own partial residual (as in Newtonized OMP).
+   Stop when ``||r||^2 < delta_r = sigma_Y^2 Gamma^{-1}(1 - p; I C)`` (the
+   residual noise alone leaves with probability p), below a fraction of the
+   data power (the dynamic range of the angle model), when a new atom is
+   weaker than ``min_amplitude``, or after L_max atoms.
+4. **Range per target.** The least-squares amplitude of each atom at the
+   neighbouring range bins gives its own range profile; a parabola through its
+   log-peak refines the range below a bin (two targets in one bin keep their
+   own ranges). The within-chirp Doppler shift ``2 v / lambda`` of the beat
+   frequency is removed: ``R = c0 (f - 2 v / lambda) / (2 S)``.
+5. **Points.** ``(x, y) = radar position + R (cos, sin)(boresight + theta)``,
+   radial velocity ``v = omega lambda / (4 pi T_c)``, amplitude
+   ``|s| ||a|| / sigma_Y`` (the amplitude SNR of the target over the sweep,
+   linear; ``a`` the atom over slots and chirps).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.fft as sfft
+from scipy import stats
+from scipy.signal import get_window
+
+from rhs_env.antenna import ArrayAntenna, steering
+
+WINDOWS = ("hann", "hamming", "blackman", "boxcar", "taylor")
+
+
+# --------------------------------------------------------------------------- output
+@dataclass
+class PointCloud:
+    """Radar detections of one cycle (all four radars).
+
+    Attributes:
+        points: (N, 4) float: x, y (vehicle frame, m), radial velocity (m/s,
+            > 0 receding), amplitude (linear amplitude SNR over the sweep).
+        radar: (N,) int, index of the radar (0 front, 1 left, 2 rear, 3 right).
+        range_m: (N,) range from the radar, m.
+        angle_rad: (N,) angle from the radar's boresight, rad (CCW positive).
+        stage_times: wall time per stage, s: ``synthesis``, ``range_cfar``, ``omp``.
+    """
+
+    points: np.ndarray
+    radar: np.ndarray
+    range_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    angle_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    stage_times: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return self.points.shape[0]
+
+    @property
+    def xy(self) -> np.ndarray:
+        return self.points[:, :2]
+
+
+# --------------------------------------------------------------------------- range
+def make_window(name: str, n: int) -> np.ndarray:
+    """Real taper of length n, float32 (``taylor``: 4 nearly equal sidelobes at -35 dB)."""
+    if name == "taylor":
+        w = get_window(("taylor", 4, 35), n, fftbins=False)
+    else:
+        w = get_window(name, n, fftbins=False)
+    return np.asarray(w, dtype=np.float32)
+
+
+def range_fft(y: np.ndarray, window: np.ndarray, zero_pad: int, bins: slice | None = None) -> np.ndarray:
+    """Windowed, zero-padded FFT over the last axis (the FMCW matched filter).
+
+    ``Y[..., k] = sum_n w[n] y[..., n] exp(-j 2 pi k n / (Z N))``; returns the
+    bins in ``bins`` (default all Z N), complex64.
+    """
+    n = y.shape[-1]
+    out = sfft.fft(y * window, n=zero_pad * n, axis=-1, workers=1)
+    return out if bins is None else out[..., bins]
+
+
+def cfar_alpha(pfa: float, looks: int, train_cells: int) -> float:
+    """CA-CFAR multiplier for Gamma(looks) cells: ``F^{-1}(1 - pfa; 2 looks, 2 train_cells looks)``."""
+    return float(stats.f.isf(pfa, 2 * looks, 2 * train_cells * looks))
+
+
+def ca_cfar_threshold(profile: np.ndarray, guard: int, train: int, stride: int, alpha: float,
+                      floor: float = 0.0, cap: float = np.inf) -> np.ndarray:
+    """Cell-averaging CFAR threshold along the last axis.
+
+    For cell k the training cells are ``k +- (guard + 1 .. guard + train) * stride``
+    (``stride`` = zero-padding factor, so one training cell per unpadded bin);
+    cells beyond the ends are dropped and the mean is over the cells present.
+    Returns ``alpha * clip(mean, floor, cap)``, same shape as ``profile``.
+    """
+    p = np.asarray(profile, dtype=np.float64)
+    n = p.shape[-1]
+    offsets = np.concatenate([-np.arange(guard + 1, guard + train + 1), np.arange(guard + 1, guard + train + 1)])
+    idx = np.arange(n)[:, None] + stride * offsets[None, :]  # (n, 2 train)
+    valid = (idx >= 0) & (idx < n)
+    vals = np.take(p, np.clip(idx, 0, n - 1), axis=-1)  # (..., n, 2 train)
+    mean = (vals * valid).sum(-1) / np.maximum(valid.sum(-1), 1)
+    return alpha * np.clip(mean, floor, cap)
+
+
+def os_cfar_alpha(pfa: float, looks: int, train_cells: int, rank: int) -> float:
+    """OS-CFAR multiplier: threshold ``alpha * Y_(rank)`` (rank-th smallest of the training cells).
+
+    Pure noise: test cell X and training cells Gamma(looks, 1) i.i.d.; the rank-th
+    order statistic is ``F^{-1}(B)`` with ``B ~ Beta(rank, N - rank + 1)``, so
+
+        P_fa(alpha) = int_0^1 S_X(alpha F^{-1}(b)) f_B(b) db,
+
+    solved for alpha (quadrature + root finding; S_X, F the Gamma survival and cdf).
+    """
+    from scipy import integrate, optimize
+
+    g = stats.gamma(looks)
+    b = stats.beta(rank, train_cells - rank + 1)
+
+    def pf(alpha: float) -> float:
+        f = lambda p: g.sf(alpha * g.ppf(b.ppf(p)))
+        val, _ = integrate.quad(f, 0.0, 1.0, limit=200, points=[1e-6, 1e-4, 1e-2])
+        return val
+
+    la = optimize.brentq(lambda x: math.log(max(pf(math.exp(x)), 1e-300)) - math.log(pfa), 0.0, 6.0, xtol=1e-7)
+    return float(math.exp(la))
+
+
+def os_cfar_threshold(profile: np.ndarray, guard: int, train: int, stride: int, alpha: float, rank: int,
+                      floor: float = 0.0, cap: float = np.inf) -> np.ndarray:
+    """Ordered-statistic CFAR threshold along the last axis: ``alpha * clip(Y_(rank), floor, cap)``.
+
+    Training cells as in :func:`ca_cfar_threshold`; near the ends the missing
+    cells are replaced by the floor (the calibrated noise mean), so the rank
+    keeps its meaning. A few strong targets among the training cells do not
+    raise the threshold (no masking of a weak target next to a strong one).
+    """
+    p = np.asarray(profile, dtype=np.float64)
+    n = p.shape[-1]
+    offsets = np.concatenate([-np.arange(guard + 1, guard + train + 1), np.arange(guard + 1, guard + train + 1)])
+    idx = np.arange(n)[:, None] + stride * offsets[None, :]
+    valid = (idx >= 0) & (idx < n)
+    vals = np.where(valid, np.take(p, np.clip(idx, 0, n - 1), axis=-1), floor)
+    kth = np.partition(vals, rank - 1, axis=-1)[..., rank - 1]
+    return alpha * np.clip(kth, floor, cap)
+
+
+def window_leak_envelope(window: np.ndarray, zero_pad: int, span: int) -> np.ndarray:
+    """Monotone envelope of the window's power response, ``max_{|m| >= |k|} |W(m)|^2 / |W(0)|^2``, k = 0..span-1 (padded bins)."""
+    n = window.size
+    resp = np.abs(np.fft.fft(window.astype(float), zero_pad * n)) ** 2
+    resp = resp / resp[0]
+    half = resp[: zero_pad * n // 2]  # one side (the response of a real window is symmetric)
+    env = np.maximum.accumulate(half[::-1])[::-1]
+    return env[:span]
+
+
+def local_maxima(profile: np.ndarray, threshold: np.ndarray) -> np.ndarray:
+    """Mask of cells above threshold that are local maxima (> left, >= right), last axis."""
+    p = profile
+    m = np.zeros(p.shape, bool)
+    m[..., 1:-1] = (p[..., 1:-1] > p[..., :-2]) & (p[..., 1:-1] >= p[..., 2:])
+    return m & (p > threshold)
+
+
+def parabolic_offset(ym: np.ndarray, y0: np.ndarray, yp: np.ndarray) -> np.ndarray:
+    """Vertex offset in [-0.5, 0.5] of the parabola through (-1, ym), (0, y0), (1, yp)."""
+    den = ym - 2.0 * y0 + yp
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = np.where(den < 0, 0.5 * (ym - yp) / den, 0.0)
+    return np.clip(np.nan_to_num(d), -0.5, 0.5)
+
+
+# --------------------------------------------------------------------------- angle
+class AngleDictionary:
+    """The OMP dictionary H of one antenna and its analytic angle derivatives.
+
+    ``h_i(theta) = r_i(theta) t_i(theta)`` with the power-normalised one-way gains
+    ``t_i = sum_m w_T,im a_m / ||w_T,i||``, ``a_m = exp(j 2 pi x_m sin theta)``
+    (x in wavelengths). Derivatives use ``da_m/dtheta = j 2 pi x_m cos(theta) a_m``
+    and ``d2a_m/dtheta2 = [(j 2 pi x_m cos theta)^2 - j 2 pi x_m sin theta] a_m``.
+
+    Candidates: ``theta_j = lo + j * step``, j = 0..I_c-1, covering the scan sector
+    plus ``margin`` candidates each side, ``step = min(grid / oversampling,
+    1 / (8 A))`` with A the aperture in wavelengths (a coarse grid with narrow
+    beams still gets candidates finer than the main lobe).
+    """
+
+    def __init__(self, antenna: ArrayAntenna, grid_deg: float, sector_deg: float, oversampling: int,
+                 margin: int = 2) -> None:
+        self.antenna = antenna
+        # candidate step: grid / oversampling, and at most 1/8 of the main-lobe half-width ~ 1 / aperture
+        pos = antenna.positions_wl
+        aperture = float(pos.max() - pos.min() + (pos[1] - pos[0] if pos.size > 1 else 1.0))
+        step = min(np.deg2rad(grid_deg) / oversampling, 1.0 / (8.0 * aperture))
+        half = np.deg2rad(sector_deg) / 2
+        n = round(2 * half / step)
+        self.step = step
+        self.candidates = -half + (np.arange(-margin, n + margin + 1)) * step  # rad, (I_c,)
+        self._wt = (antenna.tx_weights / np.linalg.norm(antenna.tx_weights, axis=1, keepdims=True)).T  # (M, I)
+        self._wr = (antenna.rx_weights / np.linalg.norm(antenna.rx_weights, axis=1, keepdims=True)).T
+        self._x = 2.0 * np.pi * antenna.positions_wl
+        self.H = self.atoms(self.candidates)[0]  # (I, I_c) complex128
+        self.norms = np.linalg.norm(self.H, axis=0)
+        self.Hn = (self.H / self.norms).astype(np.complex64)  # unit-norm columns
+        self.Hn_conj = np.ascontiguousarray(self.Hn.conj())  # (I, I_c): resid @ Hn_conj = H_n^H r
+
+    @property
+    def slots(self) -> int:
+        return self.H.shape[0]
+
+    def atoms(self, theta: np.ndarray, order: int = 0) -> list[np.ndarray]:
+        """``[h, dh/dtheta, d2h/dtheta2][:order + 1]``, each (I,) + theta.shape, complex128."""
+        th = np.asarray(theta, dtype=float)
+        shp = th.shape
+        th = th.reshape(-1)
+        a = steering(self.antenna.positions_wl, th)  # (T, M)
+        t = a @ self._wt  # (T, I)
+        r = a @ self._wr
+        out = [r * t]
+        if order >= 1:
+            g1 = 1j * self._x[None, :] * np.cos(th)[:, None]  # (T, M)
+            t1, r1 = (a * g1) @ self._wt, (a * g1) @ self._wr
+            out.append(r1 * t + r * t1)
+            if order >= 2:
+                g2 = g1 ** 2 - 1j * self._x[None, :] * np.sin(th)[:, None]
+                t2, r2 = (a * g2) @ self._wt, (a * g2) @ self._wr
+                out.append(r2 * t + 2 * r1 * t1 + r * t2)
+        return [o.T.reshape((-1,) + shp) for o in out]
+
+
+def _newton_refine(dic: AngleDictionary, theta: np.ndarray, resid: np.ndarray, steps: int = 2) -> np.ndarray:
+    """Newton steps maximising ``f = |h^H r|^2 / ||h||^2`` per row; theta (D,), resid (D, I)."""
+    for _ in range(steps):
+        h, h1, h2 = (x.T for x in dic.atoms(theta, order=2))  # (D, I)
+        g = np.einsum("di,di->d", h.conj(), resid)
+        g1 = np.einsum("di,di->d", h1.conj(), resid)
+        g2 = np.einsum("di,di->d", h2.conj(), resid)
+        n = np.einsum("di,di->d", h.conj(), h).real
+        n1 = 2 * np.einsum("di,di->d", h1.conj(), h).real
+        n2 = 2 * np.einsum("di,di->d", h2.conj(), h).real + 2 * np.einsum("di,di->d", h1.conj(), h1).real
+        G = np.abs(g) ** 2
+        G1 = 2 * np.real(np.conj(g) * g1)
+        G2 = 2 * np.abs(g1) ** 2 + 2 * np.real(np.conj(g) * g2)
+        f1 = (G1 * n - G * n1) / n ** 2
+        f2 = (G2 * n ** 2 - G * n * n2 - 2 * G1 * n * n1 + 2 * G * n1 ** 2) / n ** 3
+        with np.errstate(divide="ignore", invalid="ignore"):
+            delta = np.where(f2 < 0, -f1 / f2, 0.0)
+        theta = theta + np.clip(np.nan_to_num(delta), -0.5 * dic.step, 0.5 * dic.step)
+    return theta
+
+
+def _grid_refine(dic: AngleDictionary, resid: np.ndarray, center: np.ndarray | None, reach: int) -> np.ndarray:
+    """Best candidate (within ``reach`` of ``center`` when given) + log-parabola, angles (D,)."""
+    corr = np.abs(resid.astype(np.complex64) @ dic.Hn_conj) ** 2  # (D, I_c)
+    n_c = corr.shape[1]
+    if center is not None:
+        j0 = np.clip(np.round((center - dic.candidates[0]) / dic.step).astype(int), 0, n_c - 1)
+        cols = np.arange(n_c)[None, :]
+        corr = np.where(np.abs(cols - j0[:, None]) <= reach, corr, -1.0)
+    j = np.argmax(corr, axis=1)
+    rows = np.arange(corr.shape[0])
+    jm, jp = np.clip(j - 1, 0, n_c - 1), np.clip(j + 1, 0, n_c - 1)
+    lg = np.log(np.maximum(corr, 1e-30))
+    off = parabolic_offset(lg[rows, jm], lg[rows, j], lg[rows, jp])
+    off = np.where((j == 0) | (j == n_c - 1), 0.0, off)
+    return dic.candidates[j] + off * dic.step
+
+
+def _lstsq(atoms: np.ndarray, iota: np.ndarray) -> np.ndarray:
+    """Batched least squares: atoms (D, I, L), iota (D, I, ...) -> (D, L, ...)."""
+    ah = np.conj(np.swapaxes(atoms, 1, 2))
+    gram = ah @ atoms + 1e-12 * np.eye(atoms.shape[2])[None]
+    return np.linalg.solve(gram, ah @ iota)
+
+
+@dataclass
+class OMPResult:
+    theta: np.ndarray  # (D, L) rad
+    amp: np.ndarray  # (D, L) complex LS amplitude (in units of iota per unit gain)
+    valid: np.ndarray  # (D, L) bool
+    atoms: np.ndarray  # (D, I, L) the refined atoms h(theta)
+    residual: np.ndarray  # (D,) ||r||^2
+
+
+def omp_angles(dic: AngleDictionary, iota: np.ndarray, max_targets: int, residual_threshold: np.ndarray,
+               relative_threshold: float = 0.0, newton_steps: int = 2, min_amplitude: float = 0.0,
+               cycles: int = 3) -> OMPResult:
+    """Orthogonal matching pursuit over H with off-grid refinement, batched over detections.
+
+    Args:
+        dic: the dictionary of the antenna.
+        iota: (D, I) measurement vectors.
+        max_targets: L_max, at most this many targets per range.
+        residual_threshold: (D,) delta_r: stop once ``||r||^2 < delta_r``.
+        relative_threshold: also stop once ``||r||^2 < relative_threshold * ||iota||^2``.
+        newton_steps: Newton iterations of the off-grid refinement.
+        min_amplitude: an atom is accepted only if ``|s| ||h(theta)|| >= min_amplitude``
+            (in units of iota: its matched-filter amplitude); a rejected atom ends the row.
+        cycles: cyclic re-refinement passes over the support after each new atom.
+
+    Loop (per row, "while l <= L_max and ||r||^2 >= delta_r"): select, refine,
+    cyclically re-refine the support, least squares, residual.
+    """
+    iota = np.asarray(iota, dtype=np.complex128)
+    d, i = iota.shape
+    theta = np.zeros((d, max_targets))
+    amp = np.zeros((d, max_targets), complex)
+    valid = np.zeros((d, max_targets), bool)
+    atoms = np.zeros((d, i, max_targets), complex)
+    resid = iota.copy()
+    r2 = np.einsum("di,di->d", resid.conj(), resid).real
+    stop_level = np.maximum(np.asarray(residual_threshold, float), relative_threshold * r2)
+    active = r2 >= stop_level
+    reach = max(1, round(dic.H.shape[1] / max(i, 1)))  # one slot width in candidates
+    for l in range(max_targets):
+        rows = np.flatnonzero(active)
+        if rows.size == 0:
+            break
+        th_r, at_r, io = theta[rows].copy(), atoms[rows].copy(), iota[rows]
+        th = _grid_refine(dic, resid[rows], None, reach)
+        if newton_steps:
+            th = _newton_refine(dic, th, resid[rows], newton_steps)
+        th_r[:, l] = th
+        at_r[:, :, l] = dic.atoms(th)[0].T
+        s = _lstsq(at_r[:, :, : l + 1], io[:, :, None])[..., 0]  # (D', l+1)
+        for _ in range(cycles if l > 0 else 0):
+            for k in range(l + 1):
+                part = io - np.einsum("dil,dl->di", at_r[:, :, : l + 1], s) + at_r[:, :, k] * s[:, k : k + 1]
+                thk = _grid_refine(dic, part, th_r[:, k], reach)
+                if newton_steps:
+                    thk = _newton_refine(dic, thk, part, newton_steps)
+                th_r[:, k] = thk
+                at_r[:, :, k] = dic.atoms(thk)[0].T
+                s = _lstsq(at_r[:, :, : l + 1], io[:, :, None])[..., 0]
+        strength = np.abs(s) * np.linalg.norm(at_r[:, :, : l + 1], axis=1)
+        ok = np.all(strength >= min_amplitude, axis=1)
+        good = rows[ok]
+        theta[good], atoms[good] = th_r[ok], at_r[ok]
+        valid[good, l] = True
+        amp[good, : l + 1] = s[ok]
+        resid[good] = iota[good] - np.einsum("dil,dl->di", atoms[good, :, : l + 1], s[ok])
+        r2[good] = np.einsum("di,di->d", resid[good].conj(), resid[good]).real
+        active[rows[~ok]] = False
+        active[good] = r2[good] >= stop_level[good]
+    return OMPResult(theta, amp, valid, atoms, r2)
+
+
+@functools.lru_cache(maxsize=16)
+def _fftfreq(n: int) -> np.ndarray:
+    return np.fft.fftfreq(n)
+
+
+def _doppler_grid_refine(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: np.ndarray) -> np.ndarray:
+    """Residual chirp-phase rate d_omega (D,) maximising ``|sum_ic conj(h_i) r_ic exp(-j d_omega t_ic)|``.
+
+    h (D, I) atoms, r (D, I, C) Doppler-compensated data, tgrid (I, C) integer
+    chirp times (units of T_c), span (D,) half-width of the search, rad/chirp.
+    The sum is the DTFT of ``q_t = sum_{t_ic = t} conj(h_i) r_ic``, sampled by a
+    zero-padded FFT (>= 4x oversampled) and refined by a parabola through the
+    log-peak; the maximum is taken within ``|d_omega| <= span``.
+    """
+    d = h.shape[0]
+    t = tgrid.reshape(-1).astype(int)
+    n_t = int(t.max()) + 1
+    prod = (h.conj()[:, :, None] * r).reshape(d, -1)
+    if t.size == n_t and np.array_equal(t, np.arange(n_t)):
+        q = prod  # every chirp has its own time (Doppler phase runs across slots)
+    else:
+        q = np.zeros((d, n_t), complex)
+        np.add.at(q, (slice(None), t), prod)
+    nfft = 1 << math.ceil(math.log2(max(4 * n_t, 64)))
+    val = np.abs(sfft.fft(q, n=nfft, axis=1, workers=1)) ** 2  # bin k <-> omega = 2 pi k / nfft
+    w = 2 * np.pi * _fftfreq(nfft)  # rad/chirp
+    masked = np.where(np.abs(w)[None, :] <= span[:, None], val, -1.0)
+    j = np.argmax(masked, axis=1)
+    rows = np.arange(d)
+    lg = np.log(np.maximum(val, 1e-300))
+    off = parabolic_offset(lg[rows, (j - 1) % nfft], lg[rows, j], lg[rows, (j + 1) % nfft])
+    return w[j] + off * 2 * np.pi / nfft
+
+
+def _joint_grid_search(dic: AngleDictionary, r: np.ndarray, w0: np.ndarray, span: np.ndarray, dwell: np.ndarray,
+                       tgrid: np.ndarray, max_hyp: int = 33) -> tuple[np.ndarray, np.ndarray]:
+    """Joint angle x Doppler grid search, ``max |H_n^H rho(omega)|`` over omega in ``w0 +- span``.
+
+    ``rho_i(omega) = sum_c r_ic exp(-j omega t_ic)``; the Doppler hypotheses are
+    spaced ``~0.5 / dwell`` rad/chirp (at most ``max_hyp``), the angle is the best
+    candidate plus a log-parabola. Returns (omega, theta), each (D,).
+    """
+    d = r.shape[0]
+    n_h = int(min(max_hyp, 2 * math.ceil(float(np.max(span * dwell)) / 0.5) + 1))
+    u = np.linspace(-1.0, 1.0, n_h)
+    om = w0[:, None] + span[:, None] * u[None, :]  # (D, H)
+    rho = np.einsum("dic,dhic->dhi", r, np.exp(-1j * om[:, :, None, None] * tgrid[None, None]))
+    corr = np.abs(rho.astype(np.complex64) @ dic.Hn_conj) ** 2  # (D, H, I_c)
+    flat = corr.reshape(d, -1).argmax(axis=1)
+    hbest, j = np.unravel_index(flat, corr.shape[1:])
+    rows = np.arange(d)
+    n_c = corr.shape[2]
+    line = np.log(np.maximum(corr[rows, hbest], 1e-30))
+    jm, jp = np.clip(j - 1, 0, n_c - 1), np.clip(j + 1, 0, n_c - 1)
+    off = parabolic_offset(line[rows, jm], line[rows, j], line[rows, jp])
+    return om[rows, hbest], dic.candidates[j] + off * dic.step
+
+
+def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, theta: np.ndarray,
+                 domega: np.ndarray, valid: np.ndarray, span: np.ndarray, passes: int = 1,
+                 newton_steps: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Cyclic joint (angle, Doppler) refinement of every target on the full slot x chirp data.
+
+    Model: ``data[i, c] = sum_k s_k h_i(theta_k) exp(j d_omega_k t_ic) + noise``
+    (t_ic = chirp time / T_c over the sweep). For each target in turn, on its
+    partial residual: d_omega by :func:`_doppler_grid_refine` (around the
+    current value, half-width ``span``), then theta by Newton steps on the
+    Doppler-compensated slot vector ``rho_i = sum_c r_ic exp(-j d_omega t_ic)``;
+    finally least squares for all amplitudes with atoms ``a_k = h(theta_k)
+    exp(j d_omega_k t)``. Returns theta, d_omega, amplitudes (D, L) and atoms (D, I C, L).
+    """
+    d, i, c = data.shape
+    n_l = theta.shape[1]
+    flat = data.reshape(d, i * c)
+
+    def column(th: np.ndarray, dw: np.ndarray) -> np.ndarray:  # (D',) -> (D', I C)
+        h = dic.atoms(th)[0].T  # (D', I)
+        return (h[:, :, None] * np.exp(1j * dw[:, None, None] * tgrid[None])).reshape(th.size, i * c)
+
+    theta, domega = theta.copy(), domega.copy()
+    a = np.zeros((d, i * c, n_l), complex)
+    for k in range(n_l):
+        rows = np.flatnonzero(valid[:, k])
+        if rows.size:
+            a[rows, :, k] = column(theta[rows, k], domega[rows, k])
+    s = _lstsq(a, flat[..., None])[..., 0]
+    for _ in range(passes):
+        for k in range(n_l):
+            rows = np.flatnonzero(valid[:, k])
+            if rows.size == 0:
+                continue
+            part = flat[rows] - np.einsum("dkl,dl->dk", a[rows], s[rows]) + a[rows, :, k] * s[rows, k : k + 1]
+            part = part.reshape(-1, i, c)
+            h = dic.atoms(theta[rows, k])[0].T  # (D', I)
+            base = np.exp(-1j * domega[rows, k][:, None, None] * tgrid[None])
+            dw = domega[rows, k] + _doppler_grid_refine(h, part * base, tgrid, span[rows])
+            rho = np.sum(part * np.exp(-1j * dw[:, None, None] * tgrid[None]), axis=2)
+            th = _newton_refine(dic, theta[rows, k], rho, newton_steps) if newton_steps else theta[rows, k]
+            theta[rows, k], domega[rows, k] = th, dw
+            a[rows, :, k] = column(th, dw)
+            s[rows] = _lstsq(a[rows], flat[rows, :, None])[..., 0]
+    return theta, domega, s * valid, a
+
+
+@dataclass
+class DopplerOMPResult:
+    theta: np.ndarray  # (D, L) rad
+    omega: np.ndarray  # (D, L) chirp-to-chirp phase, rad per chirp
+    amp: np.ndarray  # (D, L) complex LS amplitude per unit atom
+    valid: np.ndarray  # (D, L) bool
+    atoms: np.ndarray  # (D, I C, L) atoms h_i(theta) exp(j omega t_ic)
+    residual: np.ndarray  # (D,) ||r||^2
+
+
+def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_targets: int,
+                residual_threshold: np.ndarray, noise_var: float, relative_threshold: float = 0.0,
+                min_amplitude: float = 0.0, newton_steps: int = 2, cycles: int = 2) -> DopplerOMPResult:
+    """OMP over the slot x chirp data with a Doppler per atom (the swept-beam OMP of paper Alg. 1).
+
+    Model: ``data[d, i, c] = sum_k s_k h_i(theta_k) exp(j omega_k t_ic) + noise``,
+    t_ic the integer chirp time (units of T_c) of chirp c of slot i over the sweep.
+    Each iteration, on the residual R of a row:
+
+    1. coarse Doppler from the chirp pairs of R, ``omega = arg sum R[i, c+1] R*[i, c]``
+       (unambiguous, one per range but recomputed on every residual, so targets
+       at the same range with different radial speeds are each compensated);
+    2. angle: best candidate of ``|H_n^H rho|`` with ``rho_i = sum_c R_ic exp(-j omega t_ic)``,
+       then fine Doppler over the whole sweep (:func:`_doppler_grid_refine`) and
+       Newton steps on the angle;
+    3. least squares for every amplitude on the support; with several atoms,
+       ``cycles`` passes of :func:`joint_refine` (each atom re-fitted in angle and
+       Doppler against its own partial residual);
+    4. accept the new atom only if every ``|s_k| ||a_k|| >= min_amplitude``;
+       continue while ``l < max_targets`` and ``||R||^2 >= max(delta_r, rel ||data||^2)``.
+    """
+    data = np.asarray(data, complex)
+    d, i, c = data.shape
+    n_l = max_targets
+    theta = np.zeros((d, n_l))
+    omega = np.zeros((d, n_l))
+    amp = np.zeros((d, n_l), complex)
+    valid = np.zeros((d, n_l), bool)
+    atoms = np.zeros((d, i * c, n_l), complex)
+    resid = data.copy()
+    r2 = np.sum(np.abs(resid) ** 2, axis=(1, 2))
+    stop = np.maximum(np.asarray(residual_threshold, float), relative_threshold * r2)
+    active = r2 >= stop
+    reach = max(1, round(dic.H.shape[1] / max(i, 1)))
+    t_span = float(tgrid.max() + 1)
+    fine_span = min(np.pi, 8 * np.pi / t_span)
+    for l in range(n_l):
+        rows = np.flatnonzero(active)
+        if rows.size == 0:
+            break
+        res_r = resid[rows]
+        w0 = np.angle(np.einsum("dic,dic->d", res_r[:, :, 1:], res_r[:, :, :-1].conj()))
+        rc = res_r * np.exp(-1j * w0[:, None, None] * tgrid[None])
+        th = _grid_refine(dic, rc.sum(axis=2), None, reach)
+        snr = np.maximum(np.sum(np.abs(res_r) ** 2, axis=(1, 2)) / noise_var - i * c, 1.0)
+        span = np.clip(5.0 / np.sqrt(snr), fine_span, np.pi)
+        # rows whose Doppler uncertainty turns into > pi/2 of phase ramp over the target's dwell
+        # (long dwell: weak beams such as the random patterns) get a joint angle x Doppler search
+        e_slot = np.maximum(np.sum(np.abs(res_r) ** 2, axis=2) - c * noise_var, 0.0)
+        dwell = e_slot.sum(1) ** 2 / np.maximum(np.sum(e_slot ** 2, axis=1), 1e-300) * c
+        dwell = np.minimum(np.maximum(dwell, c), t_span)
+        wide = 5.0 / np.sqrt(snr) * dwell > 0.5 * np.pi  # 5-sigma coarse-Doppler error -> > pi/2 of ramp
+        if np.any(wide):
+            sub = np.flatnonzero(wide)
+            w_s, th_s = _joint_grid_search(dic, res_r[sub], w0[sub], span[sub], dwell[sub], tgrid)
+            w0 = w0.copy()
+            w0[sub], th[sub] = w_s, th_s
+            rc[sub] = res_r[sub] * np.exp(-1j * w_s[:, None, None] * tgrid[None])
+            span = span.copy()
+            span[sub] = np.minimum(span[sub], np.pi / dwell[sub])
+        w = w0 + _doppler_grid_refine(dic.atoms(th)[0].T, rc, tgrid, span)
+        if newton_steps:
+            rho = np.sum(res_r * np.exp(-1j * w[:, None, None] * tgrid[None]), axis=2)
+            th = _newton_refine(dic, th, rho, newton_steps)
+        th_r, om_r, val_r = theta[rows].copy(), omega[rows].copy(), valid[rows].copy()
+        th_r[:, l], om_r[:, l], val_r[:, l] = th, w, True
+        th_r, om_r, s, a = joint_refine(dic, data[rows], tgrid, th_r, om_r, val_r,
+                                        np.full(rows.size, fine_span), passes=0, newton_steps=newton_steps)
+        strength = np.abs(s) * np.linalg.norm(a, axis=1)
+        ok = np.all((strength >= min_amplitude) | ~val_r, axis=1)
+        if l > 0 and cycles and np.any(ok):  # cyclic joint refinement of the rows that keep the new atom
+            th_c, om_c, s_c, a_c = joint_refine(dic, data[rows[ok]], tgrid, th_r[ok], om_r[ok], val_r[ok],
+                                                np.full(int(ok.sum()), fine_span), passes=cycles,
+                                                newton_steps=newton_steps)
+            th_r[ok], om_r[ok], s[ok], a[ok] = th_c, om_c, s_c, a_c
+            strength = np.abs(s) * np.linalg.norm(a, axis=1)
+            ok &= np.all((strength >= min_amplitude) | ~val_r, axis=1)
+        good = rows[ok]
+        theta[good], omega[good], valid[good], amp[good], atoms[good] = th_r[ok], om_r[ok], val_r[ok], s[ok], a[ok]
+        resid[good] = data[good] - np.einsum("dkl,dl->dk", a[ok], s[ok]).reshape(-1, i, c)
+        r2[good] = np.sum(np.abs(resid[good]) ** 2, axis=(1, 2))
+        active[rows[~ok]] = False
+        active[good] = r2[good] >= stop[good]
+    return DopplerOMPResult(theta, omega, amp, valid, atoms, r2)
+
+
+def residual_threshold(noise_var: float | np.ndarray, slots: int, pfa: float) -> np.ndarray:
+    """delta_r = sigma^2 Gamma^{-1}(1 - pfa; I): ||n||^2 of I complex Gaussian noise cells exceeds it w.p. pfa."""
+    return np.asarray(noise_var) * stats.gamma.isf(pfa, slots)
+
+
+# --------------------------------------------------------------------------- bounds
+def angle_crb(antenna: ArrayAntenna, theta_rad: np.ndarray, snr: np.ndarray | float) -> np.ndarray:
+    """Cramer-Rao bound (rad^2) of the angle from the swept-beam vector iota over the I slots.
+
+    Model ``iota = s h(theta) + n``, ``n ~ CN(0, sigma^2 I)``, unknown theta and
+    complex s. The Fisher information of theta with s a nuisance parameter gives
+
+        CRB(theta) = 1 / (2 SNR ||P_perp dh/dtheta||^2),
+        P_perp = I - h h^H / ||h||^2,  SNR = |s|^2 / sigma^2,
+
+    i.e. SNR is the per-slot SNR at unit two-way gain (``|h_i| = 1``); for the
+    radar, :meth:`rhs_env.radar.RadarConfig.unit_gain_snr`. Velocity is taken
+    as known (compensated). Broadcasts over theta and snr.
+    """
+    th = np.atleast_1d(np.asarray(theta_rad, dtype=float))
+    dic = AngleDictionary.__new__(AngleDictionary)
+    dic.antenna = antenna
+    dic._wt = (antenna.tx_weights / np.linalg.norm(antenna.tx_weights, axis=1, keepdims=True)).T
+    dic._wr = (antenna.rx_weights / np.linalg.norm(antenna.rx_weights, axis=1, keepdims=True)).T
+    dic._x = 2.0 * np.pi * antenna.positions_wl
+    h, h1 = dic.atoms(th, order=1)  # (I, T)
+    nh = np.sum(np.abs(h) ** 2, axis=0)
+    proj = np.sum(np.abs(h1) ** 2, axis=0) - np.abs(np.sum(h.conj() * h1, axis=0)) ** 2 / nh
+    out = 1.0 / (2.0 * np.asarray(snr, float) * proj)
+    return out.reshape(np.broadcast_shapes(np.shape(theta_rad), np.shape(snr))) if np.ndim(out) else out
+
+
+def range_crb(snr_per_sample: np.ndarray | float, samples: int, sample_rate_hz: float, slope_hz_per_s: float,
+              looks: int = 1) -> np.ndarray:
+    """CRB (m^2) of the range from ``looks`` independent N-sample tones (known-amplitude-free model).
+
+    Frequency of a complex tone in white noise: ``var(f) >= 6 f_s^2 / ((2 pi)^2 SNR N (N^2 - 1))``
+    (Rife & Boorstyn), ``R = c0 f / (2 S)``.
+    """
+    c0 = 299_792_458.0
+    n = samples
+    var_f = 6.0 * sample_rate_hz ** 2 / ((2 * np.pi) ** 2 * np.asarray(snr_per_sample) * looks * n * (n * n - 1))
+    return var_f * (c0 / (2 * slope_hz_per_s)) ** 2
+
+
+# --------------------------------------------------------------------------- metrics
+def pointcloud_metrics(points_xy: np.ndarray, truth_xy: np.ndarray, gate_m: float = 1.0,
+                       truth_object: np.ndarray | None = None) -> dict:
+    """Point-cloud metrics of one cycle (SPEC section 9).
+
+    Each true scatterer in view is matched to its nearest point; it is detected
+    when that point lies within ``gate_m``. ``rmse_m`` is over detected
+    scatterers; a point farther than the gate from every true scatterer is a
+    false point. With ``truth_object`` (object id per scatterer), detection is
+    counted per object (an extended vehicle is detected when any of its points is).
+
+    Returns dict: ``n_true``, ``n_detected``, ``detection_rate``, ``rmse_m``,
+    ``sq_errors`` (array), ``false_points``, ``n_points``.
+    """
+    p = np.asarray(points_xy, float).reshape(-1, 2)
+    t = np.asarray(truth_xy, float).reshape(-1, 2)
+    if t.shape[0] == 0:
+        return {"n_true": 0, "n_detected": 0, "detection_rate": float("nan"), "rmse_m": float("nan"),
+                    "sq_errors": np.zeros(0), "false_points": int(p.shape[0]), "n_points": int(p.shape[0])}
+    if p.shape[0] == 0:
+        n = t.shape[0] if truth_object is None else len(np.unique(truth_object))
+        return {"n_true": n, "n_detected": 0, "detection_rate": 0.0, "rmse_m": float("nan"),
+                    "sq_errors": np.zeros(0), "false_points": 0, "n_points": 0}
+    d2 = np.sum((t[:, None, :] - p[None, :, :]) ** 2, axis=-1)  # (T, P)
+    nearest = d2.min(axis=1)
+    hit = nearest <= gate_m ** 2
+    false_points = int(np.sum(d2.min(axis=0) > gate_m ** 2))
+    if truth_object is None:
+        n_true, n_det, sq = t.shape[0], int(hit.sum()), nearest[hit]
+    else:
+        obj = np.asarray(truth_object)
+        uniq, inv = np.unique(obj, return_inverse=True)
+        best = np.full(uniq.size, np.inf)
+        np.minimum.at(best, inv, nearest)
+        det = best <= gate_m ** 2
+        n_true, n_det, sq = uniq.size, int(det.sum()), best[det]
+    return {"n_true": int(n_true), "n_detected": n_det, "detection_rate": n_det / n_true,
+                "rmse_m": float(np.sqrt(np.mean(sq))) if sq.size else float("nan"), "sq_errors": sq,
+                "false_points": false_points, "n_points": int(p.shape[0])}

@@ -1,0 +1,536 @@
+"""Four swept-beam FMCW radars on the ego vehicle: echo synthesis and point clouds.
+
+Waveform (SPEC section 4): a linear chirp over ``B`` = 250 MHz in ``T_c`` = 20 us,
+slope ``S = B / T_c``, complex baseband sampling at ``f_s`` = 20 MHz (``N = f_s T_c``
+= 400 samples, range bin ``c0 / (2 B)`` = 0.6 m, unambiguous range
+``c0 f_s / (2 S)`` = 240 m). Each radar sweeps I beam slots (one grid per slot),
+``C`` chirps per slot, back to back, so chirp c of slot i starts at
+``t_ic = (i C + c) T_c``.
+
+Dechirped echo of slot i, chirp c, sample n (paper eq. 2, as a sum of tones):
+
+    y[i, c, n] = sum_k sqrt(P_t) beta_k h_i(theta_k)
+                 exp(j 2 pi (f_b,k + f_D,k) n / f_s) exp(j omega_k (i C + c)) + eps[i, c, n]
+
+* beat frequency ``f_b,k = 2 S R_k / c0``, Doppler ``f_D,k = 2 v_k / lambda`` and
+  chirp-to-chirp phase ``omega_k = 4 pi v_k T_c / lambda`` (v_k radial velocity,
+  > 0 receding). The geometry is frozen at the scan instant (the range and
+  bearing change over the ~7 ms sweep is neglected; the Doppler phase, which
+  is lambda-sensitive, is kept across chirps and slots; ``slot_doppler=False``
+  restarts it every slot).
+* ``|beta_k|^2 = sigma_k lambda^2 / ((4 pi)^3 R_k^4)`` (radar equation with the
+  antenna gains in h), phase uniform in [0, 2 pi) from the rng.
+* ``h_i = r_i t_i`` with the power-normalised gains of :class:`ArrayAntenna`
+  (``|t|^2`` is the array gain at fixed radiated power ``P_t``, ``|r|^2`` the Rx
+  SNR gain), so the noise of the normalised Rx output is that of one element:
+  complex Gaussian, variance ``sigma_n^2 = k T0 F f_s`` per sample.
+
+As a matrix product per radar: ``y = G @ E`` with ``G[i, k] = sqrt(P_t) beta_k
+h_i(theta_k) exp(j omega_k i C)`` (I x K) and ``E[k, (c, n)] = exp(j 2 pi (f_b,k
++ f_D,k) n / f_s + j omega_k c)`` (K x C N), batched over the four radars.
+
+Mounting: radars at the middle of the front, left, rear and right sides of a
+``vehicle_length`` x ``vehicle_width`` box, boresights 0, +90, 180, -90 deg.
+Field of view: the scan sector (+-45 deg) up to ``max_range_m``; hidden
+scatterers (:func:`rhs_env.scatterers.visible_mask`) return nothing.
+Far-field model: the array apertures (<= 0.3 m) are treated as points.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.fft as sfft
+
+from rhs_env.antenna import (
+    ANTENNA_KINDS,
+    SPEED_OF_LIGHT,
+    ArrayAntenna,
+    RHSConfig,
+    ScanConfig,
+    make_antenna,
+)
+from rhs_env.point_cloud import (
+    WINDOWS,
+    AngleDictionary,
+    PointCloud,
+    _lstsq,
+    angle_crb,
+    ca_cfar_threshold,
+    cfar_alpha,
+    local_maxima,
+    make_window,
+    omp_doppler,
+    os_cfar_alpha,
+    os_cfar_threshold,
+    parabolic_offset,
+    pointcloud_metrics,
+    residual_threshold,
+    window_leak_envelope,
+)
+from rhs_env.scatterers import Occluders, Scatterers, visible_mask
+from rhs_env.validation import check_choice, check_int, check_range
+
+__all__ = ["BOLTZMANN", "RADAR_NAMES", "PointCloud", "RadarConfig", "RadarSystem"]
+
+BOLTZMANN = 1.380649e-23  # J/K
+RADAR_NAMES = ("front", "left", "rear", "right")
+DETECTION_MODES = ("cfar", "fixed")
+CFAR_METHODS = ("os", "ca")
+
+
+@dataclass(frozen=True)
+class RadarConfig:
+    """Waveform, link budget, processing and mounting of the four radars.
+
+    Waveform: ``bandwidth_hz`` B, ``chirp_s`` T_c, ``sample_rate_hz`` f_s (complex),
+    ``chirps_per_slot`` C. Link budget: ``tx_power_dbm``, ``noise_figure_db``,
+    ``temperature_k``; ``add_noise=False`` gives noiseless echoes (thresholds
+    still use the thermal noise level). Field of view: ``min_range_m`` ..
+    ``max_range_m`` inside the scan sector. Antenna: ``antenna`` kind
+    (rhs | phased | random | hologram), ``rhs`` geometry, ``scan`` grid.
+    Detection: ``detection`` "cfar" (``cfar_guard`` / ``cfar_train`` unpadded
+    bins per side, false-alarm probability ``cfar_pfa``; ``cfar_method`` "os",
+    ordered statistic of rank ``cfar_rank`` x cells, or "ca", cell averaging;
+    the noise estimate is clipped to [floor, floor + ``cfar_cap_db``] around
+    the calibrated noise floor: the slot-combined profile mixes every
+    direction, so without the cap a near vehicle in the training cells masks
+    landmarks a few metres behind it) or "fixed" (``fixed_threshold_db``
+    above the noise mean of the slot-combined profile, the paper's delta_d);
+    a peak weaker than ``sidelobe_margin_db`` above the window's sidelobe
+    envelope under a stronger peak is dropped; ``zero_pad`` FFT length
+    factor; ``window`` taper.
+    OMP: ``omp_oversampling`` candidates per grid, ``omp_max_targets`` L_max per
+    range, ``omp_residual_pfa`` (delta_r: the residual noise alone exceeds with
+    this probability), ``omp_residual_rel_db`` (stop below this fraction of
+    ``||iota||^2``, the dynamic range of the angle model), ``omp_newton_steps``,
+    ``omp_min_snr_db`` (an atom whose amplitude SNR over the sweep, 20 log10 of
+    ``|s| ||a|| / sigma_Y``, is lower is rejected and ends the search).
+    Mounting: ``vehicle_length_m``, ``vehicle_width_m``. ``slot_doppler``: the
+    Doppler phase runs on across the slots of the sweep (physical) or restarts.
+    """
+
+    bandwidth_hz: float = 250e6
+    chirp_s: float = 20e-6
+    sample_rate_hz: float = 20e6
+    chirps_per_slot: int = 4
+    tx_power_dbm: float = 30.0
+    noise_figure_db: float = 10.0
+    temperature_k: float = 290.0
+    add_noise: bool = True
+    min_range_m: float = 1.0
+    max_range_m: float = 100.0
+    antenna: str = "rhs"
+    rhs: RHSConfig = field(default_factory=RHSConfig)
+    scan: ScanConfig = field(default_factory=ScanConfig)
+    detection: str = "cfar"
+    cfar_guard: int = 2
+    cfar_train: int = 8
+    cfar_pfa: float = 1e-6
+    cfar_method: str = "os"
+    cfar_rank: float = 0.75
+    sidelobe_margin_db: float = 6.0
+    cfar_cap_db: float = 10.0
+    fixed_threshold_db: float = 15.0
+    zero_pad: int = 2
+    window: str = "hann"
+    omp_oversampling: int = 4
+    omp_max_targets: int = 4
+    omp_residual_pfa: float = 1e-3
+    omp_residual_rel_db: float = -25.0
+    omp_newton_steps: int = 2
+    omp_min_snr_db: float = 15.0
+    slot_doppler: bool = True
+    vehicle_length_m: float = 5.0
+    vehicle_width_m: float = 2.0
+
+    def __post_init__(self) -> None:
+        check_range("bandwidth_hz", self.bandwidth_hz, 1e6, 5e9)
+        check_range("chirp_s", self.chirp_s, 1e-7, 1e-2)
+        check_range("sample_rate_hz", self.sample_rate_hz, 1e5, 1e10)
+        check_int("chirps_per_slot", self.chirps_per_slot, 2, 1024)
+        check_range("tx_power_dbm", self.tx_power_dbm, -100.0, 80.0)
+        check_range("noise_figure_db", self.noise_figure_db, 0.0, 60.0)
+        check_range("temperature_k", self.temperature_k, 0.0, 5000.0, low_open=True)
+        if not isinstance(self.add_noise, bool):
+            raise ValueError(f"add_noise must be True or False, got {self.add_noise!r}")  # noqa: TRY004 (config errors are ValueError)
+        if not isinstance(self.slot_doppler, bool):
+            raise ValueError(f"slot_doppler must be True or False, got {self.slot_doppler!r}")  # noqa: TRY004
+        check_range("max_range_m", self.max_range_m, 1.0, 0.95 * self.unambiguous_range_m)
+        check_range("min_range_m", self.min_range_m, 0.0, self.max_range_m, high_open=True)
+        check_choice("antenna", self.antenna, ANTENNA_KINDS)
+        if not isinstance(self.rhs, RHSConfig):
+            raise ValueError(f"rhs must be an RHSConfig, got {type(self.rhs).__name__}")  # noqa: TRY004
+        if not isinstance(self.scan, ScanConfig):
+            raise ValueError(f"scan must be a ScanConfig, got {type(self.scan).__name__}")  # noqa: TRY004
+        check_choice("detection", self.detection, DETECTION_MODES)
+        check_int("cfar_guard", self.cfar_guard, 0, 64)
+        check_int("cfar_train", self.cfar_train, 1, 256)
+        check_range("cfar_pfa", self.cfar_pfa, 0.0, 0.5, low_open=True)
+        check_choice("cfar_method", self.cfar_method, CFAR_METHODS)
+        check_range("cfar_rank", self.cfar_rank, 0.0, 1.0, low_open=True)
+        check_range("sidelobe_margin_db", self.sidelobe_margin_db, 0.0, 60.0)
+        check_range("cfar_cap_db", self.cfar_cap_db, 0.0, 200.0)
+        check_range("fixed_threshold_db", self.fixed_threshold_db, 0.0, 200.0)
+        check_int("zero_pad", self.zero_pad, 1, 16)
+        check_choice("window", self.window, WINDOWS)
+        check_int("omp_oversampling", self.omp_oversampling, 1, 64)
+        check_int("omp_max_targets", self.omp_max_targets, 1, 32)
+        check_range("omp_residual_pfa", self.omp_residual_pfa, 0.0, 0.5, low_open=True)
+        check_range("omp_residual_rel_db", self.omp_residual_rel_db, -200.0, 0.0)
+        check_int("omp_newton_steps", self.omp_newton_steps, 0, 10)
+        check_range("omp_min_snr_db", self.omp_min_snr_db, -50.0, 100.0)
+        check_range("vehicle_length_m", self.vehicle_length_m, 0.0, 50.0)
+        check_range("vehicle_width_m", self.vehicle_width_m, 0.0, 20.0)
+        n = self.sample_rate_hz * self.chirp_s
+        if abs(n - round(n)) > 1e-6 or round(n) < 16:
+            raise ValueError(
+                f"sample_rate_hz * chirp_s must be a whole number of samples >= 16, got {n:.6g}"
+            )
+
+    # -- derived quantities -------------------------------------------------
+    @property
+    def samples(self) -> int:
+        """N = f_s T_c samples per chirp."""
+        return round(self.sample_rate_hz * self.chirp_s)
+
+    @property
+    def slope(self) -> float:
+        """Chirp slope S = B / T_c, Hz/s."""
+        return self.bandwidth_hz / self.chirp_s
+
+    @property
+    def wavelength(self) -> float:
+        return self.rhs.wavelength
+
+    @property
+    def range_resolution_m(self) -> float:
+        """c0 / (2 B), m."""
+        return SPEED_OF_LIGHT / (2 * self.bandwidth_hz)
+
+    @property
+    def unambiguous_range_m(self) -> float:
+        """c0 f_s / (2 S): complex sampling, beat frequencies in [0, f_s)."""
+        return SPEED_OF_LIGHT * self.sample_rate_hz / (2 * self.bandwidth_hz / self.chirp_s)
+
+    @property
+    def max_velocity_mps(self) -> float:
+        """Unambiguous radial speed lambda / (4 T_c), m/s."""
+        return self.wavelength / (4 * self.chirp_s)
+
+    @property
+    def tx_power_w(self) -> float:
+        return 10 ** ((self.tx_power_dbm - 30) / 10)
+
+    @property
+    def noise_power_w(self) -> float:
+        """sigma_n^2 = k T0 F f_s per complex sample, W."""
+        return BOLTZMANN * self.temperature_k * 10 ** (self.noise_figure_db / 10) * self.sample_rate_hz
+
+    def echo_power_w(self, range_m: np.ndarray, rcs_m2: np.ndarray) -> np.ndarray:
+        """P_t |beta|^2 = P_t sigma lambda^2 / ((4 pi)^3 R^4) at unit two-way gain, W."""
+        r = np.asarray(range_m, float)
+        return self.tx_power_w * np.asarray(rcs_m2, float) * self.wavelength ** 2 / ((4 * np.pi) ** 3 * r ** 4)
+
+    def unit_gain_snr(self, range_m: np.ndarray, rcs_m2: np.ndarray) -> np.ndarray:
+        """|s|^2 / sigma_iota^2 of one slot's iota entry at unit two-way gain (the SNR of :func:`angle_crb`).
+
+        ``s = sqrt(P_t) beta C sum(w)``, ``sigma_iota^2 = C sigma_n^2 sum(w^2)``
+        (window w, C chirps combined coherently).
+        """
+        w = make_window(self.window, self.samples).astype(float)
+        gain = self.chirps_per_slot * w.sum() ** 2 / np.sum(w ** 2)
+        return self.echo_power_w(range_m, rcs_m2) * gain / self.noise_power_w
+
+    def mounts(self) -> tuple[np.ndarray, np.ndarray]:
+        """Radar positions (4, 2) m and boresights (4,) rad in the vehicle frame: front, left, rear, right."""
+        hl, hw = self.vehicle_length_m / 2, self.vehicle_width_m / 2
+        pos = np.array([[hl, 0.0], [0.0, hw], [-hl, 0.0], [0.0, -hw]])
+        return pos, np.deg2rad([0.0, 90.0, 180.0, -90.0])
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+class RadarSystem:
+    """The four radars of the ego vehicle with their antennas and OMP dictionaries.
+
+    Args:
+        config: :class:`RadarConfig`.
+        rng: numpy Generator: the ``random`` antenna's patterns (one per radar,
+            drawn here) and, at every scan, echo phases and noise.
+        patterns: optional ``(tx_psi, rx_psi)`` (I, M) for the ``rhs`` antenna
+            instead of the pattern library.
+        antennas: optional explicit antenna per radar (list of 4 or one shared),
+            overriding ``config.antenna``.
+    """
+
+    def __init__(self, config: RadarConfig | None = None, rng: np.random.Generator | None = None,
+                 patterns: tuple[np.ndarray, np.ndarray] | None = None,
+                 antennas: ArrayAntenna | list[ArrayAntenna] | None = None) -> None:
+        self.config = config = config or RadarConfig()
+        self.rng = rng if rng is not None else np.random.default_rng()
+        self.positions, self.boresights = config.mounts()
+        if antennas is not None:
+            ants = [antennas] * 4 if isinstance(antennas, ArrayAntenna) else list(antennas)
+            if len(ants) != 4:
+                raise ValueError(f"antennas must be one ArrayAntenna or a list of 4, got {len(ants)}")
+        elif config.antenna == "random":
+            ants = [make_antenna("random", config.rhs, config.scan, rng=self.rng) for _ in range(4)]
+        else:
+            shared = make_antenna(config.antenna, config.rhs, config.scan, patterns=patterns)
+            ants = [shared] * 4
+        for a in ants:
+            if a.slots != config.scan.slots:
+                raise ValueError(f"antenna has {a.slots} slots, scan config needs {config.scan.slots}")
+        self.antennas = ants
+        # one dictionary per distinct antenna object
+        self._groups: list[tuple[AngleDictionary, np.ndarray]] = []
+        seen: dict[int, int] = {}
+        radar_group = np.zeros(4, int)
+        for r, a in enumerate(ants):
+            if id(a) not in seen:
+                seen[id(a)] = len(self._groups)
+                dic = AngleDictionary(a, config.scan.grid_deg, config.scan.sector_deg, config.omp_oversampling)
+                self._groups.append((dic, []))
+            radar_group[r] = seen[id(a)]
+        self.dictionaries = [self._groups[radar_group[r]][0] for r in range(4)]
+        self._radar_group = radar_group
+        # processing constants
+        n, z = config.samples, config.zero_pad
+        self._window = make_window(config.window, n)
+        self._buffers: dict[str, np.ndarray] = {}
+        self._n = np.arange(n)
+        self._win_energy = float(np.sum(self._window.astype(float) ** 2))
+        bins_per_m = 2 * config.slope / SPEED_OF_LIGHT * z * n / config.sample_rate_hz
+        margin = (config.cfar_guard + config.cfar_train + 2) * z
+        self._bin_hi = int(min(z * n, math.ceil(config.max_range_m * bins_per_m) + margin))
+        self._bin_range = np.arange(self._bin_hi) / bins_per_m  # range of bin k (zero Doppler), m
+        self._leak = window_leak_envelope(self._window, z, z * n // 2)
+        self._same_angle = 0.25 * np.deg2rad(config.scan.grid_deg)
+        looks = config.scan.slots * config.chirps_per_slot
+        self._p_noise = looks * config.noise_power_w * self._win_energy  # mean of P per cell, pure noise
+        self._rank = max(1, round(config.cfar_rank * 2 * config.cfar_train))
+        if config.detection == "cfar" and config.cfar_method == "os":
+            self._alpha = os_cfar_alpha(config.cfar_pfa, looks, 2 * config.cfar_train, self._rank)
+        elif config.detection == "cfar":
+            self._alpha = cfar_alpha(config.cfar_pfa, looks, 2 * config.cfar_train)
+        else:
+            self._alpha = 10 ** (config.fixed_threshold_db / 10)
+        cells = config.scan.slots * config.chirps_per_slot
+        y_var = config.noise_power_w * self._win_energy
+        self._min_amp = 10 ** (config.omp_min_snr_db / 20) * math.sqrt(y_var)
+        self._delta_r = float(residual_threshold(y_var, cells, config.omp_residual_pfa))
+        i, c = config.scan.slots, config.chirps_per_slot
+        self._chirp_index = (np.arange(i)[:, None] * c * (1 if config.slot_doppler else 0)
+                             + np.arange(c)[None, :]).astype(float)  # (I, C): chirp time / T_c
+
+    # ------------------------------------------------------------------ geometry
+    def radar_frame(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Range (4, K), angle from boresight (4, K) rad and unit vectors (4, K, 2) of points xy (K, 2)."""
+        d = np.asarray(xy, float)[None, :, :] - self.positions[:, None, :]
+        rng_m = np.hypot(d[..., 0], d[..., 1])
+        ang = _wrap(np.arctan2(d[..., 1], d[..., 0]) - self.boresights[:, None])
+        unit = d / np.maximum(rng_m, 1e-12)[..., None]
+        return rng_m, ang, unit
+
+    def visible(self, scatterers: Scatterers, occluders: Occluders | None = None) -> np.ndarray:
+        """(4, K) bool: inside radar r's sector and range interval and in line of sight."""
+        rng_m, ang, _ = self.radar_frame(scatterers.xy)
+        half = np.deg2rad(self.config.scan.sector_deg) / 2
+        fov = (np.abs(ang) <= half) & (rng_m <= self.config.max_range_m) & (rng_m >= self.config.min_range_m)
+        return fov & visible_mask(self.positions, scatterers, occluders)
+
+    def in_view(self, scatterers: Scatterers, occluders: Occluders | None = None) -> np.ndarray:
+        """(K,) bool: seen by at least one radar."""
+        return self.visible(scatterers, occluders).any(axis=0)
+
+    # ------------------------------------------------------------------ synthesis
+    def _buffer(self, name: str, shape: tuple[int, ...], dtype: type) -> np.ndarray:
+        """Persistent work array (large temporaries re-used across scans: no page faults per scan)."""
+        buf = self._buffers.get(name)
+        if buf is None or buf.shape != shape or buf.dtype != dtype:
+            buf = self._buffers[name] = np.empty(shape, dtype)
+        return buf
+
+    def synthesize(self, scatterers: Scatterers, occluders: Occluders | None = None,
+                   out: np.ndarray | None = None) -> np.ndarray:
+        """Dechirped samples y (4, I, C, N) complex64 of one sweep of the four radars.
+
+        ``out``: optional complex64 array of 4 I C N elements to write into (re-used by :meth:`scan`).
+        """
+        cfg = self.config
+        i_slots, c, n = cfg.scan.slots, cfg.chirps_per_slot, cfg.samples
+        lam = cfg.wavelength
+        y = np.empty((4, i_slots, c * n), np.complex64) if out is None else out.reshape(4, i_slots, c * n)
+        y[...] = 0
+        if len(scatterers):
+            mask = self.visible(scatterers, occluders)
+            rr, kk = np.nonzero(mask)
+            if rr.size:
+                rng_m, ang, unit = self.radar_frame(scatterers.xy)
+                r_k, th_k = rng_m[rr, kk], ang[rr, kk]
+                v_k = np.einsum("pd,pd->p", unit[rr, kk], scatterers.velocity[kk])  # radial, m/s
+                phase0 = self.rng.uniform(0.0, 2 * np.pi, rr.size)
+                amp = np.sqrt(cfg.echo_power_w(r_k, scatterers.rcs[kk])) * np.exp(1j * phase0)  # sqrt(Pt) beta
+                h = np.empty((i_slots, rr.size), complex)
+                for g, (dic, _) in enumerate(self._groups):
+                    sel = self._radar_group[rr] == g
+                    if np.any(sel):
+                        h[:, sel] = dic.antenna.two_way_gain(th_k[sel])
+                omega = 4 * np.pi * v_k * cfg.chirp_s / lam  # rad per chirp
+                f_tot = 2 * cfg.slope * r_k / SPEED_OF_LIGHT + 2 * v_k / lam  # Hz
+                slot_t = np.arange(i_slots)[:, None] * (c if cfg.slot_doppler else 0)
+                g_mat = h * amp[None, :] * np.exp(1j * omega[None, :] * slot_t)  # (I, P)
+                e_fast = np.exp(2j * np.pi * f_tot[:, None] * self._n[None, :] / cfg.sample_rate_hz)  # (P, N)
+                e_slow = np.exp(1j * omega[:, None] * np.arange(c)[None, :])  # (P, C)
+                e_mat = (e_slow[:, :, None] * e_fast[:, None, :]).reshape(rr.size, c * n)
+                counts = np.bincount(rr, minlength=4)
+                kmax = counts.max()
+                slot = np.arange(rr.size) - np.concatenate([[0], np.cumsum(counts)[:-1]])[rr]  # rr sorted
+                gp = np.zeros((4, i_slots, kmax), np.complex64)
+                ep = np.zeros((4, kmax, c * n), np.complex64)
+                gp[rr, :, slot] = g_mat.T
+                ep[rr, slot] = e_mat
+                np.matmul(gp, ep, out=y)
+        if cfg.add_noise:
+            # circular complex Gaussian CN(0, sigma_n^2) by the polar method: |eps|^2 ~ Exp(sigma_n^2)
+            # from -ln(1 - u1), phase 2 pi u2 (float32 uniforms: the radius tail is cut at P = 2^-24)
+            u = self.rng.random(dtype=np.float32, out=self._buffer("u", (2,) + y.shape, np.float32))
+            rad = self._buffer("rad", y.shape, np.float32)
+            tmp = self._buffer("tmp", y.shape, np.float32)
+            np.negative(u[0], out=rad)
+            np.log1p(rad, out=rad)
+            np.negative(rad, out=rad)
+            np.sqrt(rad, out=rad)
+            rad *= np.float32(math.sqrt(cfg.noise_power_w))
+            ph = u[1]
+            ph *= np.float32(2 * np.pi)
+            np.cos(ph, out=tmp)
+            tmp *= rad
+            y.real += tmp
+            np.sin(ph, out=tmp)
+            tmp *= rad
+            y.imag += tmp
+        return y.reshape(4, i_slots, c, n)
+
+    # ------------------------------------------------------------------ processing
+    def process(self, y: np.ndarray) -> tuple[PointCloud, dict[str, float]]:
+        """Range FFT, detection and OMP on y (4, I, C, N) -> point cloud (and stage times)."""
+        cfg = self.config
+        z, n = cfg.zero_pad, cfg.samples
+        t0 = time.perf_counter()
+        buf = self._buffer("fft", y.shape[:-1] + (z * n,), np.complex64)
+        np.multiply(y, self._window, out=buf[..., :n])
+        buf[..., n:] = 0
+        # in place (overwrite_x): the padded buffer becomes the spectrum, no fresh 9 MB array per scan
+        spec = sfft.fft(buf, axis=-1, workers=1, overwrite_x=True)[..., : self._bin_hi]  # (4, I, C, Kb)
+        cap = self._p_noise * 10 ** (cfg.cfar_cap_db / 10)
+        prof = np.einsum("ricb,ricb->rb", spec.real, spec.real) + np.einsum("ricb,ricb->rb", spec.imag, spec.imag)
+        if cfg.detection == "cfar" and cfg.cfar_method == "os":
+            thr = os_cfar_threshold(prof, cfg.cfar_guard, cfg.cfar_train, z, self._alpha, self._rank,
+                                    floor=self._p_noise, cap=cap)
+        elif cfg.detection == "cfar":
+            thr = ca_cfar_threshold(prof, cfg.cfar_guard, cfg.cfar_train, z, self._alpha, floor=self._p_noise,
+                                    cap=cap)
+        else:
+            thr = np.full(prof.shape, self._alpha * self._p_noise)
+        det = local_maxima(prof, thr)
+        det &= (self._bin_range >= cfg.min_range_m - self.config.range_resolution_m / 2)[None, :]
+        rd, kd = np.nonzero(det)
+        if rd.size > 1:  # drop peaks explained by the window sidelobes of a stronger peak (same radar)
+            pk = prof[rd, kd].astype(float)
+            dk = np.minimum(np.abs(kd[:, None] - kd[None, :]), self._leak.size - 1)
+            leak = np.where((rd[:, None] == rd[None, :]) & (pk[None, :] > pk[:, None]),
+                            pk[None, :] * self._leak[dk], 0.0).max(axis=1)
+            keep = pk >= 10 ** (cfg.sidelobe_margin_db / 10) * leak
+            rd, kd = rd[keep], kd[keep]
+        yd = spec[rd, :, :, kd].astype(np.complex128)  # (D, I, C)
+        t1 = time.perf_counter()
+
+        lam = cfg.wavelength
+        tgrid = self._chirp_index
+        y_var = cfg.noise_power_w * self._win_energy  # noise variance per cell of Y
+        dmax = cfg.omp_max_targets
+        theta = np.zeros((rd.size, dmax))
+        amp = np.zeros((rd.size, dmax), complex)
+        valid = np.zeros((rd.size, dmax), bool)
+        anorm = np.zeros((rd.size, dmax))
+        omega = np.zeros((rd.size, dmax))
+        tfrac = np.zeros((rd.size, dmax))  # per-target bin offset from kd
+        rel = 10 ** (cfg.omp_residual_rel_db / 10)
+        for g, (dic, _) in enumerate(self._groups):
+            sel = np.flatnonzero(self._radar_group[rd] == g)
+            if sel.size == 0:
+                continue
+            res = omp_doppler(dic, yd[sel], tgrid, dmax, np.full(sel.size, self._delta_r), y_var, rel,
+                              self._min_amp, cfg.omp_newton_steps, cycles=2)
+            theta[sel], amp[sel], valid[sel], omega[sel] = res.theta, res.amp, res.valid, res.omega
+            anorm[sel] = np.linalg.norm(res.atoms, axis=1)
+            # per-target range: LS amplitudes of the fixed atoms at the neighbouring bins, parabola on log|s|^2
+            # (a target merged into the peak of another lies within the window main lobe, +-2 bins)
+            half = 2 * z + 1
+            kk = np.clip(kd[sel][:, None] + np.arange(-half, half + 1)[None, :], 0, spec.shape[-1] - 1)
+            nb = spec[rd[sel][:, None], :, :, kk].reshape(sel.size, 2 * half + 1, -1)  # (D', W, I C)
+            s_nb = _lstsq(res.atoms, np.swapaxes(nb, 1, 2).astype(complex))  # (D', L, W)
+            pw = np.log(np.abs(s_nb) ** 2 + 1e-300)
+            j = 1 + np.argmax(pw[:, :, 1:-1], axis=2)  # interior peak
+            lm = np.take_along_axis(pw, (j - 1)[..., None], 2)[..., 0]
+            l0 = np.take_along_axis(pw, j[..., None], 2)[..., 0]
+            lp = np.take_along_axis(pw, (j + 1)[..., None], 2)[..., 0]
+            tfrac[sel] = (j - half) + parabolic_offset(lm, l0, lp)
+        di, li = np.nonzero(valid)
+        vel = _wrap(omega[di, li]) * lam / (4 * np.pi * cfg.chirp_s)
+        f_beat = (kd[di] + tfrac[di, li]) * cfg.sample_rate_hz / (z * n) - 2 * vel / lam
+        rng_m = SPEED_OF_LIGHT * f_beat / (2 * cfg.slope)
+        th = theta[di, li]
+        radar = rd[di]
+        ang_v = self.boresights[radar] + th
+        xy = self.positions[radar] + rng_m[:, None] * np.stack([np.cos(ang_v), np.sin(ang_v)], -1)
+        a = np.abs(amp[di, li]) * anorm[di, li] / math.sqrt(y_var)
+        keep = (rng_m >= cfg.min_range_m) & (rng_m <= cfg.max_range_m)
+        if radar.size > 1:
+            # target-level range-sidelobe check: a weaker point at the same angle, as strong as the
+            # window's sidelobe of a stronger point at that range offset (+ margin), is that sidelobe
+            bins = rng_m * 2 * cfg.slope / SPEED_OF_LIGHT * z * n / cfg.sample_rate_hz
+            dk = np.minimum(np.abs(np.rint(bins[:, None] - bins[None, :])).astype(int), self._leak.size - 1)
+            same = (radar[:, None] == radar[None, :]) & (np.abs(th[:, None] - th[None, :]) < self._same_angle)
+            a2 = a ** 2
+            leak = np.where(same & (a2[None, :] > a2[:, None]), a2[None, :] * self._leak[dk], 0.0).max(axis=1)
+            keep &= a2 >= 10 ** (cfg.sidelobe_margin_db / 10) * leak
+        pts = np.column_stack([xy, vel, a])[keep]
+        t2 = time.perf_counter()
+        cloud = PointCloud(points=pts, radar=radar[keep], range_m=rng_m[keep], angle_rad=th[keep])
+        return cloud, {"range_cfar": t1 - t0, "omp": t2 - t1}
+
+    def scan(self, scatterers: Scatterers, occluders: Occluders | None = None) -> PointCloud:
+        """One sensing cycle of the four radars -> :class:`PointCloud` with ``stage_times``."""
+        t0 = time.perf_counter()
+        cfg = self.config
+        y = self.synthesize(scatterers, occluders, out=self._buffer(
+            "y", (4, cfg.scan.slots, cfg.chirps_per_slot, cfg.samples), np.complex64))
+        t1 = time.perf_counter()
+        cloud, times = self.process(y)
+        cloud.stage_times = {"synthesis": t1 - t0, **times}
+        cloud.stage_times["total"] = sum(cloud.stage_times.values())
+        return cloud
+
+    # ------------------------------------------------------------------ references
+    def angle_crb(self, theta_rad: np.ndarray, range_m: float, rcs_m2: float, radar: int = 0) -> np.ndarray:
+        """Angle CRB (rad^2) of a single target at (theta, R, sigma) for radar ``radar``."""
+        return angle_crb(self.antennas[radar], theta_rad, self.config.unit_gain_snr(range_m, rcs_m2))
+
+    def metrics(self, cloud: PointCloud, scatterers: Scatterers, occluders: Occluders | None = None,
+                gate_m: float = 1.0, per_object: bool = False) -> dict:
+        """SPEC 9 point-cloud metrics of ``cloud`` against the scatterers in view."""
+        view = self.in_view(scatterers, occluders)
+        return pointcloud_metrics(cloud.xy, scatterers.xy[view], gate_m,
+                                  scatterers.object_id[view] if per_object else None)

@@ -1,0 +1,152 @@
+"""Range processing, CFAR, OMP, CRB and point-cloud metrics (rhs_env.point_cloud)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rhs_env.antenna import RHSConfig, ScanConfig, make_antenna
+from rhs_env.point_cloud import (
+    AngleDictionary,
+    angle_crb,
+    ca_cfar_threshold,
+    cfar_alpha,
+    local_maxima,
+    make_window,
+    omp_angles,
+    pointcloud_metrics,
+    range_fft,
+)
+from rhs_env.radar import RadarConfig, RadarSystem
+from rhs_env.scatterers import Scatterers
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+
+
+def test_range_fft_peak_at_beat_bin():
+    n, z = 400, 2
+    k_true = 123.25  # in zero-padded bins
+    y = np.exp(2j * np.pi * k_true / (z * n) * np.arange(n)).astype(np.complex64)
+    spec = np.abs(range_fft(y, make_window("hann", n), z)) ** 2
+    assert abs(int(np.argmax(spec)) - k_true) <= 0.5
+
+
+def test_cfar_false_alarm_rate_matches_design():
+    rng = np.random.default_rng(0)
+    looks, pfa = 20, 1e-2
+    prof = rng.gamma(looks, 1.0, size=(200, 400))
+    alpha = cfar_alpha(pfa, looks, 16)
+    thr = ca_cfar_threshold(prof, guard=1, train=8, stride=1, alpha=alpha)
+    rate = np.mean(prof[:, 20:-20] > thr[:, 20:-20])
+    assert 0.5 * pfa < rate < 2 * pfa
+    assert local_maxima(prof, thr).sum() > 0
+
+
+def test_omp_resolves_two_off_grid_targets():
+    scan = ScanConfig(grid_deg=2.0)
+    ant = make_antenna("hologram", RHSConfig(), scan)
+    dic = AngleDictionary(ant, scan.grid_deg, scan.sector_deg, 4)
+    th = np.deg2rad([-12.37, 3.81])
+    iota = (dic.atoms(th)[0] @ np.array([1.0, 0.7j]))[None]
+    res = omp_angles(dic, iota, 3, np.array([1e-9 * np.vdot(iota, iota).real]), 1e-8)
+    got = np.sort(res.theta[0, res.valid[0]])
+    assert got.size == 2
+    assert np.allclose(np.rad2deg(got), [-12.37, 3.81], atol=0.02)
+
+
+def test_angle_crb_scales_with_snr_and_elements():
+    scan = ScanConfig(grid_deg=1.0)
+    small = make_antenna("hologram", RHSConfig(elements=30), scan)
+    big = make_antenna("hologram", RHSConfig(elements=90), scan)
+    th = np.deg2rad(10.0)
+    c1, c2 = angle_crb(small, th, 100.0), angle_crb(small, th, 1000.0)
+    assert np.isclose(c1 / c2, 10.0)
+    assert angle_crb(big, th, 100.0) < c1
+    radar = RadarSystem(RadarConfig(antenna="phased"), np.random.default_rng(0))
+    assert radar.angle_crb(th, 30.0, 5.0) < radar.angle_crb(th, 60.0, 5.0)
+
+
+def test_pointcloud_metrics():
+    truth = np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0]])
+    pts = np.array([[0.1, 0.0], [10.0, 0.2], [50.0, 50.0]])
+    m = pointcloud_metrics(pts, truth, gate_m=1.0)
+    assert m["n_true"] == 3 and m["n_detected"] == 2 and m["false_points"] == 1
+    assert np.isclose(m["rmse_m"], np.sqrt((0.01 + 0.04) / 2))
+    m2 = pointcloud_metrics(pts, truth, 1.0, truth_object=[1, 1, 2])
+    assert m2["n_true"] == 2 and m2["n_detected"] == 1
+
+
+def _landmark_scene(rng, n=24):
+    """Static landmarks 10-60 m from the vehicle in every radar's sector, ego moving at 20 m/s."""
+    radar_pos = np.array([[2.5, 0.0], [0.0, 1.0], [-2.5, 0.0], [0.0, -1.0]])
+    bore = np.deg2rad([0.0, 90.0, 180.0, -90.0])
+    r = rng.integers(0, 4, n)
+    rng_m = rng.uniform(10, 60, n)
+    th = bore[r] + np.deg2rad(rng.uniform(-42, 42, n))
+    xy = radar_pos[r] + rng_m[:, None] * np.column_stack([np.cos(th), np.sin(th)])
+    return Scatterers(xy, np.tile([-20.0, 0.0], (n, 1)), np.full(n, 5.0), np.arange(n), np.ones(n, bool))
+
+
+@pytest.mark.parametrize("kind", ["rhs", "phased", "hologram"])
+def test_accuracy_static_landmarks_default_config(kind):
+    cfg = RadarConfig() if kind == "rhs" else RadarConfig(antenna=kind)
+    radar = RadarSystem(cfg, np.random.default_rng(10))
+    scene_rng = np.random.default_rng(11)
+    det, sq, false_pts = [], [], []
+    for _ in range(6):
+        scene = _landmark_scene(scene_rng)
+        cloud = radar.scan(scene)
+        m = radar.metrics(cloud, scene, gate_m=1.0)
+        det.append(m["detection_rate"])
+        sq.extend(m["sq_errors"])
+        false_pts.append(m["false_points"])
+    rate, rmse = float(np.mean(det)), float(np.sqrt(np.mean(sq)))
+    print(f"{kind}: detection rate {rate:.3f}, RMSE {rmse:.3f} m, false points/cycle {np.mean(false_pts):.2f}")
+    if kind == "rhs":
+        assert rate >= 0.95 and rmse < 0.3
+    else:
+        assert rate >= 0.9 and rmse < 0.5
+
+
+def test_typical_scene_benchmark_runs(tmp_path):
+    from benchmark_radar import benchmark_radar
+
+    res = benchmark_radar("hologram", repeats=2, out=tmp_path / "b.json")
+    assert (tmp_path / "b.json").exists()
+    assert set(res["stage_ms_median"]) >= {"synthesis", "range_cfar", "omp"}
+    assert res["detection_rate"] > 0.8
+
+
+def test_os_cfar_false_alarm_rate_matches_design():
+    from rhs_env.point_cloud import os_cfar_alpha, os_cfar_threshold
+
+    rng = np.random.default_rng(1)
+    looks, pfa = 20, 1e-2
+    prof = rng.gamma(looks, 1.0, size=(300, 400))
+    alpha = os_cfar_alpha(pfa, looks, 16, 12)
+    thr = os_cfar_threshold(prof, guard=1, train=8, stride=1, alpha=alpha, rank=12)
+    rate = np.mean(prof[:, 20:-20] > thr[:, 20:-20])
+    assert 0.7 * pfa < rate < 1.4 * pfa
+
+
+def test_crb_is_a_lower_bound_of_the_measured_angle_error():
+    """Single target at moderate SNR: the OMP angle error is within a small factor of the CRB, never below it."""
+    cfg = RadarConfig(antenna="phased", tx_power_dbm=0.0)
+    radar = RadarSystem(cfg, np.random.default_rng(3))
+    th, rng_m = np.deg2rad(8.3), 40.0
+    xy = radar.positions[0] + rng_m * np.array([np.cos(th), np.sin(th)])
+    errs = []
+    for _ in range(25):
+        cloud = radar.scan(Scatterers.static_points([xy]))
+        sel = cloud.radar == 0
+        if sel.any():
+            i = np.argmin(np.abs(cloud.angle_rad[sel] - th))
+            errs.append(cloud.angle_rad[sel][i] - th)
+    rmse = float(np.sqrt(np.mean(np.square(errs))))
+    crb = float(np.sqrt(radar.angle_crb(th, rng_m, 5.0)))
+    print(f"angle RMSE {np.rad2deg(rmse):.4f} deg, CRB {np.rad2deg(crb):.4f} deg")
+    assert len(errs) >= 24
+    assert 0.7 * crb < rmse < 3.0 * crb
