@@ -216,7 +216,7 @@ def train_cnn(
             loss = paper_loss(net(x_all[idx]), y_all[idx])
             loss.backward()
             opt.step()
-            total += float(loss) * len(idx)
+            total += loss.item() * len(idx)
         sched.step()
         history["train_loss"].append(total / len(perm))
         if val_inputs is not None:
