@@ -63,6 +63,14 @@ def compare(config: RHSConfig, scan: ScanConfig, grids: int | None, workers: int
     out["min_delta_ratio"] = float(np.nanmin(ratio))
     out["median_delta_ratio"] = float(np.nanmedian(ratio))
     out["grids_fast_ge_sdr"] = int(np.sum(fd >= sd * (1 - 1e-9)))
+    fp = np.array([r["pslr_db"] for r in out["methods"]["fast"]["grids"]])
+    out["grids_fast_pslr_le_sdr"] = int(np.sum(fp <= sp + 1e-9))
+    out["grids_fast_pslr_le_sdr_or_15db"] = int(np.sum((fp <= sp + 1e-9) | (fp <= -15.0)))
+    out["grids_fast_ge_sdr_and_pslr_ok"] = int(np.sum((fd >= sd * (1 - 1e-9)) & ((fp <= sp + 1e-9) | (fp <= -15.0))))
+    out["grids_fast_lt_sdr"] = [
+        {"angle_deg": float(a), "ratio": float(q), "fast_pslr_db": float(x), "sdr_pslr_db": float(y)}
+        for a, q, x, y, lo in zip(angles, ratio, fp, sp, fd < sd * (1 - 1e-9)) if lo
+    ]
     out["sdr_grids_meeting_cap"] = int(np.sum(cap_ok))
     out["grids_fast_ge_sdr_where_sdr_meets_cap"] = int(np.sum((fd >= sd * (1 - 1e-9)) & cap_ok))
     out["min_delta_ratio_where_sdr_meets_cap"] = float(np.nanmin(ratio[cap_ok])) if cap_ok.any() else None
@@ -89,6 +97,19 @@ def markdown(res: dict) -> str:
     lines += ["", (f"SDR meets the fast method's sidelobe cap on {res['sdr_grids_meeting_cap']}/{n} grids; "
                    f"there fast delta >= sdr delta on {res['grids_fast_ge_sdr_where_sdr_meets_cap']} "
                    f"(min ratio {res['min_delta_ratio_where_sdr_meets_cap']}).")]
+    if "grids_fast_pslr_le_sdr" in res:
+        lines += [
+            "",
+            "Per-grid outcome (requirement: fast delta >= SDR delta and fast PSLR <= SDR PSLR or <= -15 dB):",
+            f"- fast delta >= SDR delta: {res['grids_fast_ge_sdr']}/{n} grids (min ratio {res['min_delta_ratio']:.3f}, "
+            f"median {res['median_delta_ratio']:.4f})",
+            f"- fast PSLR <= SDR PSLR: {res['grids_fast_pslr_le_sdr']}/{n}; <= SDR PSLR or <= -15 dB: "
+            f"{res['grids_fast_pslr_le_sdr_or_15db']}/{n}",
+            f"- both: {res['grids_fast_ge_sdr_and_pslr_ok']}/{n}",
+            "- grids where fast delta < SDR delta (angle: ratio, fast / SDR PSLR dB): "
+            + (", ".join(f"{g['angle_deg']:g}: {g['ratio']:.3f} ({g['fast_pslr_db']:.1f}/{g['sdr_pslr_db']:.1f})"
+                         for g in res["grids_fast_lt_sdr"]) or "none"),
+        ]
     if "load_average_1_5_15" in res:
         lines.append(f"Load average at the end (1/5/15 min): {', '.join(f'{x:.1f}' for x in res['load_average_1_5_15'])}.")
     return "\n".join(lines)

@@ -178,3 +178,22 @@ def test_fig5a_defaults_are_the_paper_schemes():
         and a.powers == [10.0, 20.0, 30.0]
     )
     assert a.cycles == 50 and a.grid_deg == 1.0 and a.out_dir == "results"
+
+
+def test_fig5b_small_run_writes_png_json_md(tmp_path):
+    """Fig. 5b on two tiny configs (library for M=12 built into a private cache)."""
+    out = tmp_path / "fig5b"
+    env_cache = {**os.environ, "RHS_SLAM_CACHE": str(tmp_path / "cache")}
+    res = subprocess.run(
+        [sys.executable, str(SCRIPTS / "fig5b_pointcloud_vs_elements.py"), "--elements", "12", "24",
+         "--grids", "5", "--cycles", "1", "--out", str(out)],
+        capture_output=True, text=True, timeout=600, env={**env_cache, "OMP_NUM_THREADS": "1", "MPLBACKEND": "Agg"},
+    )
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert out.with_suffix(".png").read_bytes()[:8] == PNG_MAGIC
+    rows = json.loads(out.with_suffix(".json").read_text())["rows"]
+    assert [r["elements"] for r in rows] == [12, 24]
+    for r in rows:
+        assert 0.0 <= r["rhs"]["detection_rate"] <= 1.0
+        assert r["rhs"]["crb_cross_range_m"] > 0
+    assert "| 5 | 24 |" in out.with_suffix(".md").read_text()

@@ -125,13 +125,36 @@ def test_build_script_small_config(tmp_path: Path) -> None:
     assert lib.tx.shape == (3, 8) and json.loads((tmp_path / "s.json").read_text())[0]["grid_deg"] == 30.0
 
 
-@pytest.mark.parametrize("angle_deg", [-40.0, -30.0, -20.0])
-def test_fast_reaches_sdr_delta_small_config(angle_deg: float) -> None:
-    cfg, scan = RHSConfig(elements=16), ScanConfig(grid_deg=10.0)
-    k = int(np.argmin(np.abs(scan.angles_deg - angle_deg)))
-    _, _, fast = optimize_grid_fast(cfg, angle_deg, scan.grid_deg, FastSettings(starts=4))
-    _, _, sdr = optimize_grid_sdr(cfg, angle_deg, k)
-    assert fast["delta"] >= sdr["delta"] * (1 - 1e-6), (fast["delta"], sdr["delta"])
+_SMALL_CFG, _SMALL_SCAN = RHSConfig(elements=16), ScanConfig(grid_deg=10.0)
+# Known gaps of the default fast method on this small config (fast delta / SDR delta ~ 0.92 at
+# +-20 deg, 0.997 at 0 deg where the -16.5 dB sidelobe cap is unreachable): strict xfail, so a
+# fix shows up as XPASS and the marks must then be removed.
+# At +-30 / +-40 the theta >= 0 representative solved by build_fast (then mirrored) is the weaker
+# side: a single-grid solve from the -theta hologram reaches SDR there (18.39 vs 18.13 at -40).
+_SMALL_GAPS = {-40.0: "fast/SDR delta ~0.51 (mirror of +40)", -30.0: "fast/SDR delta ~0.88 (mirror of +30)",
+               -20.0: "fast/SDR delta ~0.92", 0.0: "fast/SDR delta ~0.997, cap unreachable",
+               20.0: "fast/SDR delta ~0.91", 30.0: "fast/SDR delta ~0.88", 40.0: "fast/SDR delta ~0.51"}
+
+
+@pytest.fixture(scope="module")
+def _small_fast() -> dict[float, float]:
+    from rhs_env.patterns.fast import build_fast
+
+    tx, rx, _ = build_fast(_SMALL_CFG, _SMALL_SCAN, FastSettings(), workers=1)
+    rep = pattern_report(_SMALL_CFG, tx, rx, _SMALL_SCAN.angles_deg)
+    return dict(zip(_SMALL_SCAN.angles_deg.tolist(), rep.delta.tolist()))
+
+
+@pytest.mark.parametrize(
+    "angle_deg",
+    [pytest.param(a, marks=pytest.mark.xfail(strict=True, reason=_SMALL_GAPS[a])) if a in _SMALL_GAPS else a
+     for a in _SMALL_SCAN.angles_deg.tolist()],
+)
+def test_fast_reaches_sdr_delta_small_config(angle_deg: float, _small_fast: dict[float, float]) -> None:
+    """Default FastSettings (build_fast, all 9 grids of M=16 / 10 deg) vs the SDR baseline on every grid."""
+    k = int(np.argmin(np.abs(_SMALL_SCAN.angles_deg - angle_deg)))
+    _, _, sdr = optimize_grid_sdr(_SMALL_CFG, angle_deg, k)
+    assert _small_fast[angle_deg] >= sdr["delta"] * (1 - 1e-6), (_small_fast[angle_deg], sdr["delta"])
 
 
 def test_settings_validation_names_field() -> None:

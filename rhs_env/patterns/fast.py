@@ -61,6 +61,7 @@ import scipy.sparse as sp
 from rhs_env.antenna import RHSConfig, ScanConfig, hologram_pattern
 from rhs_env.patterns.metrics import (
     mainlobe_checks,
+    pointing_error_deg,
     side_matrix,
     sidelobe_directions,
     two_way_power,
@@ -88,18 +89,26 @@ class FastSettings:
             pairs, each screened for ``max(sweep_iters, 1)`` alternations; the best one is
             continued to convergence, [1, 100].
         seed: seed of the random starts (the grid angle is mixed in), >= 0.
+        pointing_check: the set K holds ``theta_i +- pointing_check * grid`` (plus points across
+            the main lobe), [0.05, 1]. The result is verified on a fine grid to point within
+            half a grid; if it does not, the grid is re-optimised with 0.45 (strict bound).
+        warm_start: :func:`build_fast` runs a second pass in which every grid also starts from
+            its neighbours' first-pass solutions (adjacent grids have similar optima) and keeps
+            the better result.
     """
 
     oversample: float = 4.0
-    max_iter: int = 15
-    tol: float = 1e-3
-    rho_evals: int = 4
+    max_iter: int = 30
+    tol: float = 1e-4
+    rho_evals: int = 6
     pointing: bool = True
     max_sidelobe_db: float = -16.5
     phase_sweep: int = 4
     sweep_iters: int = 1
     starts: int = 1
     seed: int = 0
+    pointing_check: float = 0.9
+    warm_start: bool = False
 
     def __post_init__(self) -> None:
         check_range("oversample", self.oversample, 0.0, 64.0, low_open=True)
@@ -111,8 +120,10 @@ class FastSettings:
         check_int("starts", self.starts, 1, 100)
         check_int("seed", self.seed, 0, 2**63 - 1)
         check_range("max_sidelobe_db", self.max_sidelobe_db, -80.0, 0.0)
-        if not isinstance(self.pointing, bool):
-            raise ValueError(f"pointing must be a bool, got {self.pointing!r}")  # noqa: TRY004 (config contract)
+        check_range("pointing_check", self.pointing_check, 0.05, 1.0)
+        for name in ("pointing", "warm_start"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")  # noqa: TRY004
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -223,16 +234,38 @@ def _half_step(sv: _SideSOCP, rho0: float, evals: int, kappa: float) -> np.ndarr
 
 
 def optimize_grid_fast(
-    config: RHSConfig, angle_deg: float, grid_deg: float, settings: FastSettings | None = None
+    config: RHSConfig,
+    angle_deg: float,
+    grid_deg: float,
+    settings: FastSettings | None = None,
+    inits: list[tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """Optimise the Tx and Rx amplitudes of one grid; returns (tx_psi, rx_psi, info), psi in [0, 1], max 1.
 
-    ``info``: ``delta`` (P1 objective on D, normalised), ``iterations``, ``history`` (delta per alternation).
+    ``inits``: (tx, rx) warm starts used instead of the holograms / random starts (no phase
+    sweep). ``info``: ``delta`` (P1 objective on D, normalised), ``capped`` (sidelobe cap met
+    on D), ``iterations``, ``history`` (delta per alternation), ``pointing_check`` (the one used).
     """
     settings = settings or FastSettings()
+    near = settings.pointing_check
+    out = _optimize(config, angle_deg, grid_deg, settings, inits, near)
+    if settings.pointing and near > 0.45 and abs(pointing_error_deg(config, out[0], out[1], angle_deg)) > grid_deg / 2:
+        strict = _optimize(config, angle_deg, grid_deg, settings, inits, 0.45)
+        out = strict if abs(pointing_error_deg(config, strict[0], strict[1], angle_deg)) <= grid_deg / 2 else out
+    return out
+
+
+def _optimize(
+    config: RHSConfig,
+    angle_deg: float,
+    grid_deg: float,
+    settings: FastSettings,
+    warm: list[tuple[np.ndarray, np.ndarray]] | None,
+    near: float,
+) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     si = np.array([np.sin(np.deg2rad(angle_deg))])
     s_d = sidelobe_directions(config, angle_deg, settings.oversample)
-    s_k = mainlobe_checks(config, angle_deg, grid_deg) if settings.pointing else np.zeros(0)
+    s_k = mainlobe_checks(config, angle_deg, grid_deg, near) if settings.pointing else np.zeros(0)
     feeds = {"tx": config.tx_feed, "rx": config.rx_feed}
     mats = {
         side: (side_matrix(config, si, f)[0], side_matrix(config, s_d, f), side_matrix(config, s_k, f))
@@ -244,6 +277,8 @@ def optimize_grid_fast(
         """(sidelobe cap met on D, delta): candidates are compared lexicographically."""
         pw = two_way_power(config, p["tx"], p["rx"], np.concatenate([si, s_d]))
         return bool(pw[1:].max() <= kappa**2 * pw[0] * (1 + 1e-6)), float(pw[0] - pw[1:].max())
+
+    sweep_iters = 0 if warm else settings.sweep_iters
 
     def alternate(psi: dict[str, np.ndarray], first: int, last: int) -> tuple[dict[str, np.ndarray], Any, list, int]:
         """Alternations ``first..last`` (1-based; the first ``sweep_iters`` sweep phi) from ``psi``."""
@@ -262,7 +297,7 @@ def optimize_grid_fast(
                 w_k = np.abs(o_k_mat @ psi[other]) ** 2 / o_i if s_k.size else np.zeros(0)
                 phi0 = float(np.angle(b_i @ psi[side]))
                 rho0 = float(np.sqrt(np.max(w_d * np.abs(b_d @ psi[side]) ** 2)))
-                nphi = settings.phase_sweep if it <= settings.sweep_iters else 1
+                nphi = settings.phase_sweep if it <= sweep_iters else 1
                 for phi in phi0 + 2 * np.pi * np.arange(nphi) / nphi:
                     sv = _SideSOCP(b_i, b_d, w_d, b_k, w_k, float(phi))
                     x = _half_step(sv, rho0, settings.rho_evals, kappa)
@@ -276,7 +311,7 @@ def optimize_grid_fast(
                     if m >= cur:
                         psi, cur = cand, m
             history.append(cur[1])
-            if it > settings.sweep_iters and cur[0] == start[0] and (
+            if it > sweep_iters and cur[0] == start[0] and (
                 cur[1] - start[1] <= settings.tol * max(abs(cur[1]), 1e-12)
             ):
                 break
@@ -285,10 +320,13 @@ def optimize_grid_fast(
     # starts: the cosine holograms, then seeded random amplitudes; screen each with the
     # phase-sweep alternations and continue the best one to convergence
     rng = np.random.default_rng([settings.seed, round(angle_deg * 1e6) % (2**32)])
-    inits = [{side: hologram_pattern(config, np.array([angle_deg]), f)[0] for side, f in feeds.items()}]
-    for _ in range(settings.starts - 1):
-        inits.append({side: rng.uniform(0.0, 1.0, config.elements) for side in feeds})
-    screen = max(settings.sweep_iters, 1)
+    if warm:
+        inits = [{"tx": np.asarray(t, dtype=float), "rx": np.asarray(r, dtype=float)} for t, r in warm]
+    else:
+        inits = [{side: hologram_pattern(config, np.array([angle_deg]), f)[0] for side, f in feeds.items()}]
+        for _ in range(settings.starts - 1):
+            inits.append({side: rng.uniform(0.0, 1.0, config.elements) for side in feeds})
+    screen = max(sweep_iters, 1)
     runs = []
     for init in inits:
         p0 = {k: v / np.linalg.norm(v) for k, v in init.items()}
@@ -300,7 +338,7 @@ def optimize_grid_fast(
     tx = psi["tx"] / psi["tx"].max()
     rx = psi["rx"] / psi["rx"].max()
     return tx, rx, {"delta": cur[1], "capped": cur[0], "iterations": it, "history": history,
-                    "start_deltas": [r[1][1] for r in runs]}
+                    "start_deltas": [r[1][1] for r in runs], "pointing_check": near}
 
 
 def _grid_task(args: tuple[Callable[..., Any], tuple[Any, ...]]) -> Any:
@@ -337,6 +375,31 @@ def parallel_map(
     return out
 
 
+def _mirror_index(config: RHSConfig, angles: np.ndarray) -> np.ndarray | None:
+    """For mirror-symmetric feeds (``tx_feed + rx_feed = M - 1``): ``idx[k]`` = the grid whose
+    solution grid k mirrors (``-angles[k]``), or None when the feeds or the grid set are not symmetric.
+
+    Reversing the element order swaps the feeds and maps s to -s, so
+    ``(tx, rx)`` optimal at theta gives ``(rx[::-1], tx[::-1])`` optimal at -theta (same delta,
+    PSLR and mirrored pointing error); only the grids with theta >= 0 are optimised.
+    """
+    if config.tx_feed + config.rx_feed != config.elements - 1:
+        return None
+    idx = np.arange(angles.size)
+    for k, a in enumerate(angles):
+        if a < 0:
+            j = np.flatnonzero(np.abs(angles + a) <= 1e-9)
+            if j.size == 0:
+                return None
+            idx[k] = j[0]
+    return idx
+
+
+def _better(a: tuple[np.ndarray, np.ndarray, dict[str, Any]], b: tuple[np.ndarray, np.ndarray, dict[str, Any]]) -> bool:
+    """Is result ``a`` better than ``b`` by (cap met, delta)?"""
+    return (a[2]["capped"], a[2]["delta"]) > (b[2]["capped"], b[2]["delta"])
+
+
 def build_fast(
     config: RHSConfig,
     scan: ScanConfig,
@@ -345,15 +408,45 @@ def build_fast(
     progress: Any = None,
     angles_deg: Iterable[float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]]]:
-    """Optimise every grid of ``scan`` (or the given subset ``angles_deg``); returns (tx (I,M), rx (I,M), infos)."""
+    """Optimise every grid of ``scan`` (or the given subset ``angles_deg``); returns (tx (I,M), rx (I,M), infos).
+
+    With mirror-symmetric feeds only the grids with theta >= 0 are optimised and the others
+    are their mirror images (:func:`_mirror_index`). With ``settings.warm_start`` a second
+    pass restarts every optimised grid from its neighbours' first-pass solutions (in angle
+    order) and keeps the better result.
+    """
     settings = settings or FastSettings()
     angles = scan.angles_deg if angles_deg is None else np.asarray(list(angles_deg), dtype=float)
+    mirror = _mirror_index(config, angles)
+    solve = np.unique(mirror) if mirror is not None else np.arange(angles.size)
+    solve = solve[np.argsort(angles[solve])]
+    bar_total = getattr(progress, "total", None)
+    if progress is not None and bar_total is not None:
+        progress.total = solve.size * (2 if settings.warm_start and solve.size > 1 else 1)
+        progress.refresh()
     res = parallel_map(
-        optimize_grid_fast, [(config, float(a), scan.grid_deg, settings) for a in angles], workers, progress
+        optimize_grid_fast, [(config, float(angles[k]), scan.grid_deg, settings) for k in solve], workers, progress
     )
-    tx = np.stack([r[0] for r in res])
-    rx = np.stack([r[1] for r in res])
-    return tx, rx, [r[2] for r in res]
+    if settings.warm_start and solve.size > 1:
+        args = []
+        for n, k in enumerate(solve):
+            nb = [res[m][:2] for m in (n - 1, n + 1) if 0 <= m < solve.size]
+            args.append((config, float(angles[k]), scan.grid_deg, settings, nb))
+        res2 = parallel_map(optimize_grid_fast, args, workers, progress)
+        for n, r in enumerate(res2):
+            if _better(r, res[n]):
+                res[n] = (r[0], r[1], {**r[2], "warm_started": True})
+    by_grid = {int(k): r for k, r in zip(solve, res)}
+    tx, rx, infos = [], [], []
+    for k in range(angles.size):
+        src = int(mirror[k]) if mirror is not None else k
+        t, r, info = by_grid[src]
+        if src != k:
+            t, r, info = r[::-1].copy(), t[::-1].copy(), {**info, "mirror_of": float(angles[src])}
+        tx.append(t)
+        rx.append(r)
+        infos.append(info)
+    return np.stack(tx), np.stack(rx), infos
 
 
 __all__ = ["FastSettings", "build_fast", "optimize_grid_fast", "parallel_map"]

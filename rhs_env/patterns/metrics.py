@@ -55,16 +55,18 @@ def sidelobe_directions(config: RHSConfig, angle_deg: float, oversample: float =
     return s
 
 
-def mainlobe_checks(config: RHSConfig, angle_deg: float, grid_deg: float) -> np.ndarray:
+def mainlobe_checks(config: RHSConfig, angle_deg: float, grid_deg: float, near: float = 0.45) -> np.ndarray:
     """sin(theta) samples inside the main lobe where the two-way gain must not exceed its centre value.
 
-    ``theta_i +- 0.45 grid_deg`` (with a unimodal main lobe this bounds the pointing
-    error by ``grid_deg / 2``) and ``s_i +- {0.3, 0.6, 0.9} hw`` (no secondary
-    peak inside the main lobe). Samples outside [-1, 1] or the main lobe are dropped.
+    ``theta_i +- near * grid_deg`` (with a unimodal main lobe and ``near = 0.45`` this
+    bounds the pointing error by ``grid_deg / 2``; with a symmetric main lobe
+    ``near = 0.9`` bounds it by about ``0.45 grid_deg`` and costs less gain) and
+    ``s_i +- {0.3, 0.6, 0.9} hw`` (no secondary peak inside the main lobe). Samples
+    outside [-1, 1] or the main lobe are dropped.
     """
     hw = config.mainlobe_halfwidth
     si = np.sin(np.deg2rad(angle_deg))
-    near = np.sin(np.deg2rad(angle_deg + np.array([-0.45, 0.45]) * grid_deg))
+    near = np.sin(np.deg2rad(angle_deg + np.array([-near, near]) * grid_deg))
     far = si + np.array([-0.9, -0.6, -0.3, 0.3, 0.6, 0.9]) * hw
     s = np.concatenate([near, far])
     keep = (np.abs(s) <= 1.0) & (np.abs(s - si) <= hw) & (np.abs(s - si) > 1e-9)
@@ -86,6 +88,19 @@ def two_way_power(config: RHSConfig, tx_psi: np.ndarray, rx_psi: np.ndarray, sin
     nr = np.sum(rx_psi**2, axis=-1)[..., None]
     p = np.abs(t) ** 2 * np.abs(r) ** 2 / (nt * nr)
     return p.reshape(tx_psi.shape[:-1] + np.shape(sin_theta))
+
+
+def pointing_error_deg(config: RHSConfig, tx_psi: np.ndarray, rx_psi: np.ndarray, angle_deg: float,
+                       points: int = 801) -> float:
+    """argmax of the two-way gain inside the main lobe of grid ``angle_deg`` minus ``angle_deg``, degrees.
+
+    ``points`` uniform samples of ``s`` over ``s_i +- hw`` (clipped to [-1, 1]) plus ``s_i``.
+    """
+    hw = config.mainlobe_halfwidth
+    si = float(np.sin(np.deg2rad(angle_deg)))
+    s = np.unique(np.r_[np.clip(np.linspace(si - hw, si + hw, points), -1.0, 1.0), si])
+    p = two_way_power(config, tx_psi, rx_psi, s)
+    return float(np.rad2deg(np.arcsin(s[int(np.argmax(p))])) - angle_deg)
 
 
 def delta_p1(
