@@ -1,8 +1,8 @@
 """Train the CNN registration on point clouds of this simulator and compare it with ICP.
 
 1. Drives ``rhs-highway-radar-v0`` (traffic, roadside landmarks, the default RHS
-   radar) with random lane/speed actions and records consecutive clouds and the
-   true motion between them. As in :class:`slam.pipeline.SlamPipeline`, the ego
+   radar) with random lane/speed actions, and the paper's road with random sparse
+   obstacle layouts, and records consecutive clouds and the true motion between them. As in :class:`slam.pipeline.SlamPipeline`, the ego
    velocity comes from the clouds' Doppler and moving points are removed.
 2. Each pair gets ``priors_per_pair`` motion priors = truth + Gaussian error
    (``prior_std_m``, ``prior_std_rad``): the network learns the residual.
@@ -29,8 +29,27 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def collect_pairs(episodes: int, steps: int, seed: int, env_kwargs: dict, progress: bool = True):
-    """Consecutive static clouds and true motions from ``episodes`` episodes of ``steps`` steps."""
+def paper_like_env(rng: np.random.Generator, radar: dict):
+    """The paper's scene with a random sparse obstacle layout and ego speed (radar observation)."""
+    from rhs_env.envs import RHSPaperEnv
+    from rhs_env.registration import with_cheap_base_observation
+    from rhs_env.wrappers import RadarObservation
+
+    n = int(rng.integers(4, 11))
+    side = rng.choice([10.0, 65.0], n) + rng.uniform(-8, 8, n)
+    obstacles = np.column_stack([rng.uniform(-10, 90, n), side]).tolist()
+    speed = float(rng.uniform(4.0, 9.0))
+    env = RHSPaperEnv(**with_cheap_base_observation({"obstacles": obstacles, "ego_speed": speed}))
+    return RadarObservation(env, radar=radar)
+
+
+def collect_pairs(episodes: int, steps: int, seed: int, env_kwargs: dict, progress: bool = True,
+                  scene: str = "highway"):
+    """Consecutive static clouds and true motions from ``episodes`` episodes of ``steps`` steps.
+
+    ``scene``: ``highway`` (rhs-highway-radar-v0, traffic and roadside landmarks) or
+    ``paper`` (the paper's road with a random sparse obstacle layout per episode).
+    """
     import gymnasium as gym
     from tqdm.auto import tqdm
 
@@ -39,11 +58,13 @@ def collect_pairs(episodes: int, steps: int, seed: int, env_kwargs: dict, progre
     from slam.association import estimate_ego_velocity, static_mask
     from slam.registration import relative_motion
 
-    env = gym.make("rhs-highway-radar-v0", **env_kwargs)
     rng = np.random.default_rng(seed)
     prev_list, cur_list, motions = [], [], []
-    bar = tqdm(total=episodes * steps, desc="collect clouds", unit="step", disable=not progress)
+    bar = tqdm(total=episodes * steps, desc=f"collect clouds ({scene})", unit="step", disable=not progress)
+    env = gym.make("rhs-highway-radar-v0", **env_kwargs) if scene == "highway" else None
     for ep in range(episodes):
+        if scene == "paper":
+            env = paper_like_env(rng, env_kwargs.get("radar"))
         obs, _ = env.reset(seed=seed + ep)
         env.action_space.seed(seed + ep)
         prev_pts, prev_pose = None, world_pose(env.unwrapped.vehicle)
@@ -97,6 +118,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--episodes", type=int, default=12)
     ap.add_argument("--val-episodes", type=int, default=3)
+    ap.add_argument("--paper-episodes", type=int, default=8, help="episodes on random sparse paper-like layouts")
     ap.add_argument("--steps", type=int, default=60)
     ap.add_argument("--priors-per-pair", type=int, default=4)
     ap.add_argument("--prior-std-m", type=float, default=0.5)
@@ -111,6 +133,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.small:
         args.episodes, args.val_episodes, args.steps, args.epochs, args.priors_per_pair = 2, 1, 8, 2, 2
+        args.paper_episodes = 1
 
     from slam.cnn_registration import CNNRegistration, CNNTrainConfig, GridMapConfig, train_cnn
     from slam.registration import ICPRegistration
@@ -118,8 +141,13 @@ def main(argv=None) -> int:
     progress = not args.no_progress
     env_kwargs = {"radar": {"scan": {"grid_deg": args.grid_deg}}, "vehicles_count": 20}
     t0 = time.perf_counter()
-    train_raw = collect_pairs(args.episodes, args.steps, args.seed, env_kwargs, progress)
-    val_raw = collect_pairs(args.val_episodes, args.steps, args.seed + 1000, env_kwargs, progress)
+    def both(episodes: int, paper_episodes: int, seed: int):
+        a = collect_pairs(episodes, args.steps, seed, env_kwargs, progress)
+        b = collect_pairs(paper_episodes, args.steps, seed + 500, env_kwargs, progress, scene="paper")
+        return a[0] + b[0], a[1] + b[1], np.concatenate([a[2].reshape(-1, 3), b[2].reshape(-1, 3)])
+
+    train_raw = both(args.episodes, args.paper_episodes, args.seed)
+    val_raw = both(args.val_episodes, max(1, args.paper_episodes // 4), args.seed + 1000)
     t_collect = time.perf_counter() - t0
     if len(train_raw[2]) == 0 or len(val_raw[2]) == 0:
         print("no usable cloud pairs were collected", file=sys.stderr)

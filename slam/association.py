@@ -101,15 +101,24 @@ def estimate_ego_velocity(
     rng: np.random.Generator | None = None,
     n_hypotheses: int = 64,
     min_inliers: int = 3,
+    *,
+    angular_bins: int = 24,
+    prior: np.ndarray | None = None,
+    max_change: float = np.inf,
 ) -> np.ndarray | None:
     """Ego velocity (2,) in the vehicle frame (m/s) from the Doppler of static points.
 
     Static points obey ``vr_i = -(vx cos b_i + vy sin b_i)`` (sensor at the origin),
     a linear model in ``v``. RANSAC, vectorized over hypotheses: ``n_hypotheses``
-    random point pairs each give ``v`` from a 2x2 solve; the hypothesis with the most
-    points within ``threshold`` (m/s) wins and is refined by least squares on its
-    inliers. Returns ``None`` with fewer than ``min_inliers`` inliers or a degenerate
-    geometry (all points along one line of sight).
+    random point pairs each give ``v`` from a 2x2 solve. A hypothesis is scored
+    first by the number of ``angular_bins`` bearing sectors holding one of its
+    inliers (within ``threshold`` m/s), then by its inlier count: the static
+    world surrounds the vehicle, while a platoon of vehicles moving together,
+    which can outnumber the landmarks' points, occupies a few sectors only.
+    With ``prior`` (2,), hypotheses farther than ``max_change`` (m/s) from it
+    are rejected (bounded acceleration over a cycle). The winner is refined by
+    least squares on its inliers. Returns ``None`` with fewer than
+    ``min_inliers`` inliers or a degenerate geometry (one line of sight).
     """
     pts = np.asarray(points, dtype=float)
     n = pts.shape[0] if pts.ndim == 2 else 0
@@ -132,8 +141,18 @@ def estimate_ego_velocity(
     vy = (a1[:, 0] * r2 - a2[:, 0] * r1) / det
     V = np.stack([vx, vy], axis=1)  # (H, 2)
     res = np.abs(vr[None, :] - V @ A.T)  # (H, N)
-    count = (res <= threshold).sum(axis=1)
-    best = int(np.argmax(count))
+    inliers = res <= threshold
+    count = inliers.sum(axis=1)
+    sector = np.floor((b + np.pi) / (2 * np.pi) * angular_bins).astype(int) % angular_bins
+    onehot = np.zeros((n, angular_bins))
+    onehot[np.arange(n), sector] = 1.0
+    coverage = ((inliers.astype(float) @ onehot) > 0).sum(axis=1)
+    score = coverage * (n + 1) + count
+    if prior is not None:
+        score = np.where(np.hypot(*(V - np.asarray(prior, float)[:2]).T) <= max_change, score, -1)
+        if score.max() < 0:
+            return None
+    best = int(np.argmax(score))
     inl = res[best] <= threshold
     if inl.sum() < min_inliers:
         return None

@@ -7,8 +7,9 @@ This is the single code path shared by the env's SLAM wrapper
 Per cycle, with cloud ``A_z`` (N, 4) in the vehicle frame and cycle length dt (s):
 
 1. ego velocity ``v`` from the Doppler of static points (RANSAC fit of
-   ``vr = -v . u``, :func:`slam.association.estimate_ego_velocity`); when the fit
-   fails, the last registration motion over dt (constant velocity);
+   ``vr = -v . u`` scored by bearing coverage, within ``max_accel * dt`` of the
+   last velocity, else unconstrained, :func:`slam.association.estimate_ego_velocity`);
+   when the fit fails, the last registration motion over dt (constant velocity);
 2. static points: ``|vr + v . u| <= threshold`` (:func:`slam.association.static_mask`);
 3. registration of the static points of ``A_{z-1}`` and ``A_z`` with the prior
    displacement ``v dt`` (rotated by the last yaw increment) -> motion ``(dx, dy, dpsi)``;
@@ -47,8 +48,10 @@ class SlamPipeline:
         config: SlamConfig | None = None,
         rng: np.random.Generator | None = None,
         use_doppler: bool = True,
+        max_accel_mps2: float = 10.0,
     ) -> None:
         self.registration = registration
+        self.max_accel_mps2 = float(max_accel_mps2)
         self.config = config if config is not None else SlamConfig()
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         self.use_doppler = use_doppler
@@ -63,6 +66,8 @@ class SlamPipeline:
             self.slam.reset()
         if hasattr(self.registration, "reset"):
             self.registration.reset()
+        # the Doppler RANSAC draws from its own stream so it never shifts the particle noise
+        self.ransac_rng = np.random.default_rng(np.random.SeedSequence(int(self.rng.integers(2**63))))
         self.cycle = 0
         self.prev_static: np.ndarray | None = None
         self.velocity: np.ndarray | None = None  # (vx, vy, yaw rate), current vehicle frame
@@ -77,7 +82,15 @@ class SlamPipeline:
         """Process cloud ``points`` (N, 4); ``true_motion`` feeds an odometry oracle registration only."""
         pts = np.asarray(points, dtype=float).reshape(-1, 4)
         thr = self.config.dynamic_threshold_mps
-        v_dop = estimate_ego_velocity(pts, 0.5 * thr, self.rng) if self.use_doppler else None
+        v_dop = None
+        if self.use_doppler:
+            # bounded acceleration: the new velocity lies within max_accel * dt of the last one
+            prior_v = None if self.velocity is None else self.velocity[:2]
+            v_dop = estimate_ego_velocity(
+                pts, 0.5 * thr, self.ransac_rng, prior=prior_v, max_change=self.max_accel_mps2 * dt + thr
+            )
+            if v_dop is None and prior_v is not None:  # lost track: re-acquire without the prior
+                v_dop = estimate_ego_velocity(pts, 0.5 * thr, self.ransac_rng)
         if v_dop is not None:
             self.velocity = np.array([v_dop[0], v_dop[1], 0.0 if self.velocity is None else self.velocity[2]])
         reg_time = 0.0

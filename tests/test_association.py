@@ -85,3 +85,28 @@ def test_static_mask_separates_moving_points():
     v_hat = estimate_ego_velocity(pts, 0.5, np.random.default_rng(0))
     np.testing.assert_allclose(v_hat, v, atol=1e-9)
     assert estimate_ego_velocity(pts[:1], 0.5) is None
+
+
+def test_ego_velocity_prefers_the_surrounding_static_world_over_a_platoon():
+    """A platoon ahead (many points, one common velocity, one narrow sector) must not win
+    over fewer static points spread around the vehicle; the prior gate rejects it too."""
+    from slam.association import estimate_ego_velocity
+
+    rng = np.random.default_rng(3)
+    v_ego = np.array([25.0, 0.0])
+    b_static = rng.uniform(-np.pi, np.pi, 12)
+    r_static = rng.uniform(10, 60, 12)
+    static = np.column_stack([r_static * np.cos(b_static), r_static * np.sin(b_static),
+                              -(v_ego[0] * np.cos(b_static) + v_ego[1] * np.sin(b_static)), np.ones(12)])
+    # 30 points of vehicles 20-40 m ahead within +-8 deg, all driving at 21 m/s
+    b_pl = np.deg2rad(rng.uniform(-8, 8, 30))
+    r_pl = rng.uniform(20, 40, 30)
+    rel = np.array([21.0, 0.0]) - v_ego
+    platoon = np.column_stack([r_pl * np.cos(b_pl), r_pl * np.sin(b_pl),
+                               rel[0] * np.cos(b_pl) + rel[1] * np.sin(b_pl), np.ones(30)])
+    pts = np.concatenate([static, platoon])
+    v = estimate_ego_velocity(pts, 0.3, np.random.default_rng(0), n_hypotheses=256)
+    assert v is not None and np.allclose(v, v_ego, atol=0.3)
+    # with only the platoon's sector covered, the prior gate refuses the platoon's 4 m/s
+    v_gated = estimate_ego_velocity(platoon, 0.3, np.random.default_rng(0), prior=v_ego, max_change=3.0)
+    assert v_gated is None
