@@ -35,10 +35,10 @@ IDLE = 1  # DiscreteMetaAction: keep lane and speed
 
 
 def default_registration() -> str:
-    """``cnn`` when the trained weights ship with the package, else the ICP baseline."""
-    from slam.cnn_registration import DEFAULT_WEIGHTS
+    """The SLAM env's default registration (``rhs_env.slam_wrapper.DEFAULT_REGISTRATION``)."""
+    from rhs_env.slam_wrapper import DEFAULT_REGISTRATION
 
-    return "cnn" if Path(DEFAULT_WEIGHTS).exists() else "icp"
+    return DEFAULT_REGISTRATION
 
 
 def run(args: argparse.Namespace) -> dict:
