@@ -2,9 +2,20 @@
 
 Runs ``episodes`` episodes on seeds ``seed, seed + 1, ...`` (so two policies
 evaluated with the same seed meet the same traffic) and reports, as mean and
-standard deviation over episodes: return, collision rate, mean speed, and, on
-envs with the SLAM wrapper, the position RMSE of the estimated trajectory
-(sqrt of the mean squared per-step position error) and the final map RMSE.
+spread (standard deviation, and standard error of the mean) over episodes:
+return, collision rate, mean speed, episode length and, on envs with the SLAM
+wrapper, the position RMSE of the estimated trajectory (sqrt of the mean
+squared per-step position error, no alignment: the map frame is the start
+pose), the heading RMSE and the final map RMSE (Hungarian matching, SPEC 9).
+On ``rhs-highway-v0`` (ground truth) the SLAM fields are ``null``.
+
+Env and env kwargs: a policy zip written by ``rhs-slam train`` has a JSON
+beside it (``model.zip`` -> ``model.json``) naming the env id and ``env_kwargs``
+it was trained on. Without ``--env`` the policy's env is used; with the same
+env, its ``env_kwargs`` are the defaults and ``--env-kwargs`` is merged over
+them (key by key, top level), so the policy always meets the observation it
+was trained on unless asked otherwise. The default policy is the shipped one,
+``agents/data/ppo_rhs_highway_slam.zip`` (with ``ppo_rhs_highway_slam.json``).
 """
 
 from __future__ import annotations
@@ -17,7 +28,10 @@ from typing import Any
 
 import numpy as np
 
-SHIPPED_POLICY = Path(__file__).parent / "data" / "ppo_rhs_highway_slam.zip"
+DATA_DIR = Path(__file__).parent / "data"
+SHIPPED_POLICY = DATA_DIR / "ppo_rhs_highway_slam.zip"
+SHIPPED_TRUTH_POLICY = DATA_DIR / "ppo_rhs_highway_truth.zip"
+DEFAULT_ENV = "rhs-highway-slam-v0"
 
 
 class RandomPolicy:
@@ -31,8 +45,41 @@ class RandomPolicy:
         return self.space.sample(), None
 
 
+def policy_metadata(policy: str | Path) -> dict[str, Any]:
+    """The JSON beside a policy zip (env id, env kwargs, training settings), or ``{}``."""
+    if str(policy) == "random":
+        return {}
+    path = Path(policy).with_suffix(".json")
+    if not path.exists():
+        return {}
+    try:
+        meta = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not valid JSON ({exc})") from None
+    return meta if isinstance(meta, dict) else {}
+
+
+def resolve_env(
+    policy: str | Path, env_id: str | None = None, env_kwargs: dict | None = None
+) -> tuple[str, dict[str, Any]]:
+    """The env id and kwargs to run ``policy`` on (see the module docstring for the rules).
+
+    Raises ``FileNotFoundError`` for a missing policy file (before any env is built).
+    """
+    if str(policy) != "random" and not Path(policy).exists():
+        raise FileNotFoundError(f"policy file not found: {policy}")
+    meta = policy_metadata(policy)
+    meta_env = meta.get("env_id")
+    env_id = env_id or meta_env or DEFAULT_ENV
+    base = dict(meta.get("env_kwargs") or {}) if env_id == meta_env else {}
+    return env_id, {**base, **(env_kwargs or {})}
+
+
 def load_policy(policy: str | Path, env=None, seed: int = 0):
-    """``"random"``, or a stable-baselines3 zip (PPO or DQN, detected from the file)."""
+    """``"random"``, or a stable-baselines3 zip (PPO or DQN: from the JSON beside it, else tried in turn).
+
+    With ``env``, the policy's observation space is checked against the env's.
+    """
     if str(policy) == "random":
         if env is None:
             raise ValueError("a random policy needs the env for its action space")
@@ -42,66 +89,145 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
         raise FileNotFoundError(f"policy file not found: {path}")
     from stable_baselines3 import DQN, PPO
 
+    classes = {"ppo": PPO, "dqn": DQN}
+    algo = str(policy_metadata(path).get("algo", "")).lower()
+    order = [classes[algo]] if algo in classes else [PPO, DQN]
     errors = []
-    for cls in (PPO, DQN):
+    model = None
+    for cls in order:
         try:
-            return cls.load(path, device="cpu")
+            model = cls.load(path, device="cpu")
+            break
         except Exception as exc:  # wrong algorithm class for this zip: try the next one
             errors.append(f"{cls.__name__}: {exc}")
-    raise ValueError(f"{path} is not a PPO or DQN model ({'; '.join(errors)})")
+    if model is None:
+        raise ValueError(f"{path} is not a PPO or DQN model ({'; '.join(errors)})")
+    if env is not None:
+        check_spaces(model, env, path)
+    return model
 
 
-def _stats(values: list[float]) -> dict[str, float | None]:
+def _space_summary(space) -> str:
+    from gymnasium import spaces
+
+    if isinstance(space, spaces.Dict):
+        return "{" + ", ".join(f"{k}: {_space_summary(v)}" for k, v in space.spaces.items()) + "}"
+    return f"{type(space).__name__}{tuple(getattr(space, 'shape', ()) or ())}"
+
+
+def check_spaces(model, env, path: str | Path = "policy") -> None:
+    """Raise ``ValueError`` when the env's observation / action space differ from the policy's."""
+    from gymnasium import spaces
+
+    def layout(space):
+        if isinstance(space, spaces.Dict):
+            return {k: layout(v) for k, v in space.spaces.items()}
+        return (type(space).__name__, tuple(getattr(space, "shape", ()) or ()), getattr(space, "n", None))
+
+    if layout(model.observation_space) != layout(env.observation_space):
+        raise ValueError(
+            f"{path} was trained on observations {_space_summary(model.observation_space)} but the env gives "
+            f"{_space_summary(env.observation_space)}: use the env id and env kwargs it was trained on "
+            f"(see {Path(path).with_suffix('.json').name})"
+        )
+    if layout(model.action_space) != layout(env.action_space):
+        raise ValueError(f"{path} acts in {model.action_space} but the env expects {env.action_space}")
+
+
+def _stats(values: list[float | None]) -> dict[str, float | int | None]:
     v = np.asarray([x for x in values if x is not None and np.isfinite(x)], dtype=float)
     if v.size == 0:
-        return {"mean": None, "std": None}
-    return {"mean": float(v.mean()), "std": float(v.std())}
+        return {"mean": None, "std": None, "sem": None, "min": None, "max": None, "n": 0}
+    return {
+        "mean": float(v.mean()),
+        "std": float(v.std()),
+        "sem": float(v.std(ddof=1) / np.sqrt(v.size)) if v.size > 1 else None,
+        "min": float(v.min()),
+        "max": float(v.max()),
+        "n": int(v.size),
+    }
+
+
+def _action(action) -> Any:
+    """A predicted action as the env takes it (a numpy scalar array -> int)."""
+    a = np.asarray(action)
+    return int(a) if a.ndim == 0 and np.issubdtype(a.dtype, np.integer) else action
 
 
 def run_episode(env, policy, seed: int, deterministic: bool = True, frames: list | None = None) -> dict[str, Any]:
     """One episode; returns its return, crash flag, mean speed, SLAM errors and the trajectories."""
     obs, info = env.reset(seed=seed)
-    total, steps, speeds, pos_err2 = 0.0, 0, [], []
+    if frames is not None:
+        frames.append(env.render())
+    total, steps, speeds, pos_err, head_err2 = 0.0, 0, [], [], []
     true_xy, est_xy = [], []
     crashed, done = False, False
     while not done:
         action, _ = policy.predict(obs, deterministic=deterministic)
-        obs, reward, terminated, truncated, info = env.step(action)
+        obs, reward, terminated, truncated, info = env.step(_action(action))
         total += float(reward)
         steps += 1
         crashed = crashed or bool(info.get("crashed", False))
         speeds.append(float(info.get("speed", np.nan)))
         if "position_error_m" in info:
-            pos_err2.append(float(info["position_error_m"]) ** 2)
+            pos_err.append(float(info["position_error_m"]))
+            head_err2.append(float(info.get("heading_error_rad", np.nan)) ** 2)
             true_xy.append(np.asarray(info["true_pose"][:2], dtype=float).tolist())
             est_xy.append(np.asarray(info["estimated_pose"][:2], dtype=float).tolist())
         if frames is not None:
             frames.append(env.render())
         done = terminated or truncated
+    map_rmse = info.get("map_rmse_m")
     return {
         "seed": seed,
         "return": total,
         "steps": steps,
         "crashed": crashed,
-        "mean_speed": float(np.nanmean(speeds)) if speeds else None,
-        "position_rmse_m": float(np.sqrt(np.mean(pos_err2))) if pos_err2 else None,
-        "map_rmse_m": info.get("map_rmse_m"),
+        "mean_speed": float(np.nanmean(speeds)) if speeds and np.isfinite(speeds).any() else None,
+        "position_rmse_m": float(np.sqrt(np.mean(np.square(pos_err)))) if pos_err else None,
+        "final_position_error_m": pos_err[-1] if pos_err else None,
+        "heading_rmse_rad": float(np.sqrt(np.nanmean(head_err2))) if head_err2 else None,
+        "map_rmse_m": None if map_rmse is None else float(map_rmse),
+        "map_matched": info.get("map_matched"),
+        "map_missed": info.get("map_missed"),
+        "map_spurious": info.get("map_spurious"),
+        "position_error_m": pos_err,
         "true_xy": true_xy,
         "estimated_xy": est_xy,
-        "landmarks_true": np.asarray(info.get("true_landmarks", np.zeros((0, 2)))).tolist(),
-        "landmarks_est": np.asarray(info.get("estimated_landmarks", np.zeros((0, 2)))).tolist(),
+        "landmarks_true": np.asarray(info.get("true_landmarks", np.zeros((0, 2)))).reshape(-1, 2).tolist(),
+        "landmarks_est": np.asarray(info.get("estimated_landmarks", np.zeros((0, 2)))).reshape(-1, 2).tolist(),
+    }
+
+
+def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Mean and spread over episodes of the per-episode results of :func:`run_episode`."""
+    crashes = [bool(r["crashed"]) for r in runs]
+    return {
+        "episodes": len(runs),
+        "return": _stats([r["return"] for r in runs]),
+        "collision_rate": float(np.mean(crashes)) if runs else None,
+        "collisions": int(np.sum(crashes)),
+        "mean_speed_mps": _stats([r["mean_speed"] for r in runs]),
+        "episode_length": _stats([r["steps"] for r in runs]),
+        "position_rmse_m": _stats([r["position_rmse_m"] for r in runs]),
+        "heading_rmse_rad": _stats([r["heading_rmse_rad"] for r in runs]),
+        "map_rmse_m": _stats([r["map_rmse_m"] for r in runs]),
     }
 
 
 def evaluate(
     policy: str | Path,
-    env_id: str,
+    env_id: str | None = None,
     episodes: int = 5,
     seed: int = 0,
     env_kwargs: dict | None = None,
     progress: bool = True,
+    deterministic: bool = True,
 ) -> dict[str, Any]:
-    """Evaluate ``policy`` on ``episodes`` seeded episodes of ``env_id``; returns the JSON-ready summary."""
+    """Evaluate ``policy`` on ``episodes`` seeded episodes; returns the JSON-ready summary.
+
+    ``env_id`` / ``env_kwargs`` default to the ones saved beside the policy (:func:`resolve_env`).
+    """
     import gymnasium as gym
     from tqdm.auto import tqdm
 
@@ -109,80 +235,129 @@ def evaluate(
 
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
-    env = gym.make(env_id, **(env_kwargs or {}))
-    model = load_policy(policy, env, seed)
-    runs = [run_episode(env, model, seed + k) for k in tqdm(range(episodes), desc="evaluate", disable=not progress)]
-    env.close()
-    summary = {
+    env_id, kwargs = resolve_env(policy, env_id, env_kwargs)
+    try:
+        env = gym.make(env_id, **kwargs)
+    except TypeError as exc:
+        raise ValueError(f"bad env kwargs for {env_id}: {exc}") from None
+    try:
+        model = load_policy(policy, env, seed)
+        runs = [
+            run_episode(env, model, seed + k, deterministic=deterministic)
+            for k in tqdm(range(episodes), desc="evaluate", unit="episode", disable=not progress)
+        ]
+    finally:
+        env.close()
+    return {
         "policy": str(policy),
         "env_id": env_id,
-        "episodes": episodes,
+        "env_kwargs": kwargs,
         "seed": seed,
-        "return": _stats([r["return"] for r in runs]),
-        "collision_rate": float(np.mean([r["crashed"] for r in runs])),
-        "mean_speed_mps": _stats([r["mean_speed"] for r in runs]),
-        "position_rmse_m": _stats([r["position_rmse_m"] for r in runs]),
-        "map_rmse_m": _stats([r["map_rmse_m"] for r in runs]),
-        "episode_length": _stats([r["steps"] for r in runs]),
+        "seeds": [seed + k for k in range(episodes)],
+        "deterministic": deterministic,
+        **summarize(runs),
         "runs": runs,
     }
-    return summary
 
 
 def plot_summary(summary: dict[str, Any], path: str | Path) -> None:
-    """Per-episode returns and, when available, the first episode's true vs estimated trajectory and map."""
+    """Per-episode returns, the first episode's true vs estimated trajectory and map, position error over time."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     runs = summary["runs"]
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
-    axes[0].bar(range(len(runs)), [r["return"] for r in runs], color=["C3" if r["crashed"] else "C0" for r in runs])
-    axes[0].set(xlabel="episode", ylabel="return", title=f"{summary['env_id']}: return (red = crashed)")
-    r0 = runs[0]
-    if r0["true_xy"]:
+    slam = bool(runs and runs[0]["true_xy"])
+    fig, axes = plt.subplots(1, 3 if slam else 1, figsize=(16 if slam else 6, 4.2), squeeze=False)
+    axes = axes[0]
+    ax = axes[0]
+    ax.bar(range(len(runs)), [r["return"] for r in runs], color=["C3" if r["crashed"] else "C0" for r in runs])
+    ax.set(xlabel="episode", ylabel="return", title=f"{summary.get('env_id', '')}: return per episode (red = crashed)")
+    if slam:
+        r0 = runs[0]
+        ax = axes[1]
         t, e = np.asarray(r0["true_xy"]), np.asarray(r0["estimated_xy"])
-        axes[1].plot(t[:, 0], t[:, 1], "k-", label="true trajectory")
-        axes[1].plot(e[:, 0], e[:, 1], "C1--", label="estimated trajectory")
+        ax.plot(t[:, 0], t[:, 1], "k-", label="true trajectory")
+        ax.plot(e[:, 0], e[:, 1], "C1--", label="estimated trajectory")
         lt, le = np.asarray(r0["landmarks_true"]), np.asarray(r0["landmarks_est"])
         if lt.size:
-            axes[1].plot(lt[:, 0], lt[:, 1], "ks", ms=4, mfc="none", label="true landmarks")
+            ax.plot(lt[:, 0], lt[:, 1], "ks", ms=4, mfc="none", label="true landmarks (seen)")
         if le.size:
-            axes[1].plot(le[:, 0], le[:, 1], "C1x", ms=4, label="estimated landmarks")
-        axes[1].set(xlabel="x (m)", ylabel="y (m)", title="episode 1: trajectory and map (map frame)")
-        axes[1].legend(fontsize=8)
-    else:
-        axes[1].axis("off")
+            ax.plot(le[:, 0], le[:, 1], "C1x", ms=4, label="estimated landmarks")
+        pos = r0["position_rmse_m"]
+        mp = r0["map_rmse_m"]
+        ax.set(
+            xlabel="x (m)",
+            ylabel="y (m)",
+            title=f"episode 1 (seed {r0['seed']}): position RMSE {pos:.2f} m, map RMSE "
+            + (f"{mp:.2f} m" if mp is not None else "n/a"),
+        )
+        ax.legend(fontsize=8)
+        ax = axes[2]
+        for k, r in enumerate(runs[:10]):
+            ax.plot(np.arange(1, len(r["position_error_m"]) + 1), r["position_error_m"], lw=1, label=f"seed {r['seed']}")
+        ax.set(xlabel="step (SLAM cycle)", ylabel="position error (m)", title="SLAM position error")
+        if len(runs) <= 10:
+            ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def parse_env_kwargs(text: str | None) -> dict[str, Any] | None:
+    """``--env-kwargs`` JSON -> dict (``None`` when not given)."""
+    if text is None:
+        return None
+    value = json.loads(text)
+    if not isinstance(value, dict):
+        raise ValueError("--env-kwargs must be a JSON object")
+    return value
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--policy", default=str(SHIPPED_POLICY), help="SB3 zip, or 'random' (default: shipped policy)")
-    parser.add_argument("--env", default="rhs-highway-slam-v0")
+    parser.add_argument("--env", default=None, help=f"env id (default: the policy's, else {DEFAULT_ENV})")
     parser.add_argument("--episodes", type=int, default=5)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--env-kwargs", default="{}", help="JSON dict passed to gym.make")
+    parser.add_argument("--seed", type=int, default=0, help="first episode seed (episodes use seed, seed + 1, ...)")
+    parser.add_argument(
+        "--env-kwargs", default=None, help="JSON dict passed to gym.make, merged over the policy's saved env kwargs"
+    )
+    parser.add_argument("--stochastic", action="store_true", help="sample actions instead of the greedy action")
     parser.add_argument("--out", required=True, help="output JSON file")
-    parser.add_argument("--figure", default=None, help="output PNG (default: next to --out)")
+    parser.add_argument("--figure", default=None, help="output PNG (default: the --out path with .png)")
     parser.add_argument("--no-progress", action="store_true")
 
 
 def run(args: argparse.Namespace) -> int:
     try:
-        env_kwargs = json.loads(args.env_kwargs)
-        if not isinstance(env_kwargs, dict):
-            raise ValueError("--env-kwargs must be a JSON object")
-        summary = evaluate(args.policy, args.env, args.episodes, args.seed, env_kwargs, not args.no_progress)
+        summary = evaluate(
+            args.policy,
+            args.env,
+            args.episodes,
+            args.seed,
+            parse_env_kwargs(args.env_kwargs),
+            progress=not args.no_progress,
+            deterministic=not args.stochastic,
+        )
     except (ValueError, FileNotFoundError, json.JSONDecodeError) as exc:
         print(f"rhs-slam evaluate: error: {exc}", file=sys.stderr)
         return 2
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(summary, indent=2))
-    plot_summary(summary, args.figure or out.with_suffix(".png"))
+    figure = Path(args.figure) if args.figure else out.with_suffix(".png")
+    figure.parent.mkdir(parents=True, exist_ok=True)
+    summary["figure"] = str(figure)
+    out.write_text(json.dumps(summary, indent=2, default=_json_default))
+    plot_summary(summary, figure)
     brief = {k: v for k, v in summary.items() if k != "runs"}
-    print(json.dumps(brief, indent=2))
+    print(json.dumps(brief, indent=2, default=_json_default))
     return 0
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON serializable: {type(value).__name__}")

@@ -6,6 +6,9 @@ each set key ``K`` with a mask ``K_mask`` goes through a shared per-point MLP an
 a masked max- and mean-pool (permutation invariant, padding ignored); every
 other Box key is flattened. Inputs are scaled to order one first:
 x, y / 50 m, radial velocity / 30 m/s, amplitude -> log10(1 + a) / 3.
+Of the SLAM ``pose`` only the lateral offset y and the heading are used: the
+along-road x grows without bound over an episode (about 1 km in 40 s) and says
+nothing about the traffic around the vehicle.
 """
 
 from __future__ import annotations
@@ -18,7 +21,9 @@ from torch import nn
 
 # per-column scale of known set keys (x, y, radial velocity, amplitude) and (x, y)
 SET_SCALES = {"points": (50.0, 50.0, 30.0, None), "landmarks": (50.0, 50.0)}
-BOX_SCALES = {"pose": (100.0, 100.0, np.pi), "pose_std": (5.0, 5.0, 0.5)}
+BOX_SCALES = {"pose": (100.0, 10.0, np.pi), "pose_std": (5.0, 5.0, 0.5)}
+# columns of a Box key that the extractor uses (default: all)
+BOX_COLUMNS = {"pose": (1, 2)}
 
 
 def _scale_set(key: str, x: torch.Tensor) -> torch.Tensor:
@@ -52,8 +57,14 @@ class PointSetExtractor(BaseFeaturesExtractor):
                 for k in set_keys
             }
         )
-        box_in = sum(int(np.prod(observation_space[k].shape)) for k in box_keys)
+        box_in = sum(self._box_width(k, observation_space[k]) for k in box_keys)
         self.box_net = nn.Sequential(nn.Linear(box_in, box_dim), nn.ReLU()) if box_keys else None
+
+    @staticmethod
+    def _box_width(key: str, space: gym.spaces.Space) -> int:
+        width = int(np.prod(space.shape))
+        cols = BOX_COLUMNS.get(key)
+        return len(cols) if cols is not None and space.shape == (len(BOX_SCALES.get(key, ())),) else width
 
     def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         feats = []
@@ -74,6 +85,9 @@ class PointSetExtractor(BaseFeaturesExtractor):
                 s = BOX_SCALES.get(k)
                 if s is not None and v.shape[1] == len(s):
                     v = v / torch.tensor(s, dtype=v.dtype, device=v.device)
+                    cols = BOX_COLUMNS.get(k)
+                    if cols is not None:
+                        v = v[:, list(cols)]
                 parts.append(v)
             feats.append(self.box_net(torch.cat(parts, dim=1)))
         return torch.cat(feats, dim=1)

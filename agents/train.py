@@ -1,18 +1,35 @@
 """Train driving agents with stable-baselines3 (``rhs-slam train``).
 
 PPO or DQN with the hyperparameters of ``agents/hyperparams/<algo>.yml`` for the
-env id (rl-baselines3-zoo style), ``SubprocVecEnv`` over ``n_envs`` envs each
-wrapped in a ``Monitor`` that logs ``crashed``, TensorBoard logs, an
+env id (rl-baselines3-zoo style: ``policy``, ``n_envs``, ``n_timesteps``,
+``env_kwargs``, ``policy_kwargs``, ``lin_<value>`` learning-rate schedules, and
+the algorithm's own arguments), ``SubprocVecEnv`` over ``n_envs`` envs each
+wrapped in a ``Monitor`` that logs ``crashed`` (``DIR/monitor/*.monitor.csv``;
+TensorBoard also gets ``rollout/crash_rate``), TensorBoard logs, an
 ``EvalCallback`` on a separate env, periodic checkpoints and a progress bar.
-Writes ``DIR/model.zip`` (the final policy), ``DIR/best_model.zip``,
-``DIR/checkpoints/``, ``DIR/tb/`` and ``DIR/train.json`` (settings and timings).
+
+Writes into ``DIR``:
+
+* ``model.zip``: the final policy, and ``model.json`` beside it: the env id and
+  ``env_kwargs`` it was trained on (``rhs-slam evaluate`` / ``demo`` default to
+  them), with the settings and timings of the run;
+* ``best_model.zip`` / ``best_model.json``: the best policy of the periodic evaluations;
+* ``checkpoints/``, ``tb/`` (TensorBoard), ``eval/evaluations.npz``, ``monitor/``;
+* ``train.json``: the same summary as ``model.json``.
+
+Subprocess workers look the env up by name, so the rhs ids are passed to
+stable-baselines3 as ``"rhs_env:<id>"`` (gymnasium imports ``rhs_env``, which
+registers them, in each worker).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import sys
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +37,8 @@ import yaml
 
 ALGOS = ("ppo", "dqn")
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
+#: keys of a hyperparameter entry that are not arguments of the algorithm class
+META_KEYS = ("policy", "n_envs", "n_timesteps", "env_kwargs")
 
 
 def load_hyperparams(algo: str, env_id: str, path: str | Path | None = None) -> dict[str, Any]:
@@ -27,10 +46,40 @@ def load_hyperparams(algo: str, env_id: str, path: str | Path | None = None) -> 
     if algo not in ALGOS:
         raise ValueError(f"algo must be one of {ALGOS}, got {algo!r}")
     path = Path(path) if path else HYPERPARAMS_DIR / f"{algo}.yml"
-    table = yaml.safe_load(path.read_text())
-    if env_id not in table:
-        raise ValueError(f"{path} has no hyperparameters for env {env_id!r} (has: {', '.join(table)})")
-    return dict(table[env_id])
+    if not path.exists():
+        raise ValueError(f"hyperparameter file not found: {path}")
+    table = yaml.safe_load(path.read_text()) or {}
+    key = env_id.split(":", 1)[-1]
+    if key not in table:
+        raise ValueError(f"{path} has no hyperparameters for env {key!r} (has: {', '.join(table)})")
+    hp = dict(table[key])
+    if "policy" not in hp:
+        raise ValueError(f"{path}: entry {key!r} has no 'policy'")
+    return hp
+
+
+def metadata_path(policy: str | Path) -> Path:
+    """The JSON written beside a policy zip (``model.zip`` -> ``model.json``)."""
+    return Path(policy).with_suffix(".json")
+
+
+def _linear_schedule(initial: float):
+    def schedule(progress_remaining: float) -> float:
+        return progress_remaining * initial
+
+    return schedule
+
+
+def _resolve_schedules(hp: dict[str, Any]) -> dict[str, Any]:
+    """zoo-style ``"lin_5e-4"`` values -> linear schedules from that value to 0."""
+    out = dict(hp)
+    for key in ("learning_rate", "clip_range"):
+        value = out.get(key)
+        if isinstance(value, str):
+            if not value.startswith("lin_"):
+                raise ValueError(f"{key} must be a number or 'lin_<number>', got {value!r}")
+            out[key] = _linear_schedule(float(value[4:]))
+    return out
 
 
 def _resolve_policy_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
@@ -45,34 +94,80 @@ def _resolve_policy_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
     return kwargs
 
 
-def make_vec_env(env_id: str, n_envs: int, seed: int, env_kwargs: dict | None = None, subprocess: bool = True):
+def worker_env_id(env_id: str) -> str:
+    """``env_id`` as a fresh worker process can resolve it: the rhs ids get the ``rhs_env:`` prefix."""
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401  (registers the ids in this process)
+
+    if ":" in env_id:
+        return env_id
+    spec = gym.registry.get(env_id)
+    entry = spec.entry_point if spec is not None else None
+    if isinstance(entry, str) and entry.startswith("rhs_env."):
+        return f"rhs_env:{env_id}"
+    return env_id
+
+
+#: imported once by the forkserver, so each worker forked from it starts with them loaded
+#: (highway-env alone imports matplotlib and pygame: seconds per worker otherwise)
+FORKSERVER_PRELOAD = ("rhs_env", "rhs_env.envs", "rhs_env.registration", "rhs_env.slam_wrapper", "rhs_env.wrappers")
+
+
+def _preload_forkserver() -> None:
+    """Ask the forkserver (SB3's default start method on Linux) to import the env modules once.
+
+    No effect when the forkserver is already running or another start method is used;
+    the server only imports, it starts no threads, so forking from it stays safe.
+    """
+    import multiprocessing
+
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        multiprocessing.set_forkserver_preload(["__main__", *FORKSERVER_PRELOAD])
+
+
+def make_vec_env(
+    env_id: str,
+    n_envs: int,
+    seed: int,
+    env_kwargs: dict | None = None,
+    subprocess: bool = True,
+    monitor_dir: str | Path | None = None,
+):
     """``n_envs`` copies of ``env_id`` (``Monitor`` logging ``crashed``), in subprocesses when n_envs > 1."""
     from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-    import rhs_env  # noqa: F401  (registers the ids in this process)
-
+    if n_envs < 1:
+        raise ValueError(f"n_envs must be >= 1, got {n_envs}")
     vec_cls = SubprocVecEnv if (subprocess and n_envs > 1) else DummyVecEnv
+    if vec_cls is SubprocVecEnv:
+        _preload_forkserver()
     return sb3_make_vec_env(
-        env_id,
+        worker_env_id(env_id),
         n_envs=n_envs,
         seed=seed,
         env_kwargs=env_kwargs or {},
         vec_env_cls=vec_cls,
-        vec_env_kwargs={"start_method": "spawn"} if vec_cls is SubprocVecEnv else None,
+        monitor_dir=str(monitor_dir) if monitor_dir else None,
         monitor_kwargs={"info_keywords": ("crashed",)},
     )
 
 
-def _progress_callback(total: int):
+def _callbacks_module():
     from stable_baselines3.common.callbacks import BaseCallback
-    from tqdm.auto import tqdm
 
     class TqdmCallback(BaseCallback):
         """Progress bar over environment steps (SB3's own needs the rich package)."""
 
+        def __init__(self, total: int):
+            super().__init__()
+            self.total = total
+
         def _on_training_start(self) -> None:
-            self.bar = tqdm(total=total, desc="train", unit="step")
+            from tqdm.auto import tqdm
+
+            self.bar = tqdm(total=self.total, desc="train", unit="step")
 
         def _on_step(self) -> bool:
             self.bar.update(self.training_env.num_envs)
@@ -81,13 +176,45 @@ def _progress_callback(total: int):
         def _on_training_end(self) -> None:
             self.bar.close()
 
-    return TqdmCallback()
+    class CrashRateCallback(BaseCallback):
+        """Logs ``rollout/crash_rate``: the fraction of the recent episodes (SB3's episode buffer) that crashed."""
+
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_rollout_end(self) -> None:
+            flags = [float(e["crashed"]) for e in self.model.ep_info_buffer if "crashed" in e]
+            if flags:
+                self.logger.record("rollout/crash_rate", sum(flags) / len(flags))
+
+    return TqdmCallback, CrashRateCallback
+
+
+def _check_env_kwargs(env_id: str, env_kwargs: dict[str, Any]) -> None:
+    """Build and close one env here, so bad ``env_kwargs`` raise a readable error before workers start."""
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+
+    try:
+        env = gym.make(env_id.split(":", 1)[-1] if env_id.startswith("rhs_env:") else env_id, **env_kwargs)
+    except TypeError as exc:
+        raise ValueError(f"bad env_kwargs for {env_id}: {exc}") from None
+    env.close()
+
+
+def _tensorboard_available() -> bool:
+    try:
+        import tensorboard  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 def train(
     algo: str,
     env_id: str,
-    timesteps: int,
+    timesteps: int | None,
     out: str | Path,
     seed: int = 0,
     n_envs: int | None = None,
@@ -97,77 +224,135 @@ def train(
     eval_episodes: int = 3,
     checkpoint_freq: int = 5000,
     progress: bool = True,
+    torch_threads: int | None = 1,
 ) -> dict[str, Any]:
-    """Train ``algo`` on ``env_id`` for ``timesteps`` steps; returns the summary written to ``out/train.json``."""
+    """Train ``algo`` on ``env_id`` for ``timesteps`` steps; returns the summary written to ``out/train.json``.
+
+    ``timesteps=None`` takes ``n_timesteps`` from the YAML. ``env_kwargs`` are
+    merged over the YAML's. ``eval_freq`` / ``checkpoint_freq`` count env steps
+    over all envs (0 disables). ``torch_threads`` sets torch's intra-op
+    threads in this process (1 by default: the envs need the other cores);
+    worker processes get ``OMP_NUM_THREADS=1`` unless it is set already.
+    """
     from stable_baselines3 import DQN, PPO
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
 
-    if timesteps < 1:
-        raise ValueError(f"timesteps must be >= 1, got {timesteps}")
     hp = load_hyperparams(algo, env_id, hyperparams)
     policy = hp.pop("policy")
-    n_envs = int(n_envs or hp.pop("n_envs", 1))
-    hp.pop("n_envs", None)
-    env_kwargs = {**hp.pop("env_kwargs", {}), **(env_kwargs or {})}
+    yaml_steps = hp.pop("n_timesteps", None)
+    timesteps = int(timesteps if timesteps is not None else (yaml_steps or 0))
+    if timesteps < 1:
+        raise ValueError(f"timesteps must be >= 1, got {timesteps}")
+    yaml_envs = hp.pop("n_envs", 1)
+    n_envs = int(n_envs if n_envs is not None else yaml_envs)
+    if n_envs < 1:
+        raise ValueError(f"n_envs must be >= 1, got {n_envs}")
+    env_kwargs = {**(hp.pop("env_kwargs", None) or {}), **(env_kwargs or {})}
     hp["policy_kwargs"] = _resolve_policy_kwargs(hp.get("policy_kwargs", {}))
+    hp_record = {k: v for k, v in load_hyperparams(algo, env_id, hyperparams).items() if k not in META_KEYS}
+    hp = _resolve_schedules(hp)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
 
-    venv = make_vec_env(env_id, n_envs, seed, env_kwargs)
-    eval_env = make_vec_env(env_id, 1, seed + 10_000, env_kwargs, subprocess=False)
-    cls = {"ppo": PPO, "dqn": DQN}[algo]
-    model = cls(policy, venv, seed=seed, verbose=0, tensorboard_log=str(out / "tb"), **hp)
-    callbacks = [
-        EvalCallback(
-            eval_env,
-            n_eval_episodes=eval_episodes,
-            eval_freq=max(1, eval_freq // n_envs),
-            best_model_save_path=str(out),
-            log_path=str(out / "eval"),
-            deterministic=True,
-            verbose=0,
-        ),
-        CheckpointCallback(save_freq=max(1, checkpoint_freq // n_envs), save_path=str(out / "checkpoints")),
-    ]
-    if progress:
-        callbacks.append(_progress_callback(timesteps))
-    t0 = time.perf_counter()
-    model.learn(total_timesteps=timesteps, callback=CallbackList(callbacks), tb_log_name=algo)
-    wall = time.perf_counter() - t0
-    model.save(out / "model.zip")
-    venv.close()
-    eval_env.close()
-    summary = {
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    os.environ.setdefault("MKL_NUM_THREADS", "1")
+    if torch_threads:
+        import torch
+
+        torch.set_num_threads(int(torch_threads))
+
+    bare_id = env_id.split(":", 1)[-1]
+    if n_envs > 1:
+        _check_env_kwargs(env_id, env_kwargs)
+    venv = make_vec_env(env_id, n_envs, seed, env_kwargs, monitor_dir=out / "monitor")
+    eval_env = None
+    try:
+        cls = {"ppo": PPO, "dqn": DQN}[algo]
+        tb = str(out / "tb") if _tensorboard_available() else None
+        if tb is None:
+            print("rhs-slam train: tensorboard is not installed; no TensorBoard logs", file=sys.stderr)
+        model = cls(policy, venv, seed=seed, verbose=0, tensorboard_log=tb, device="cpu", **hp)
+        TqdmCallback, CrashRateCallback = _callbacks_module()
+        callbacks: list = [CrashRateCallback()]
+        eval_cb = None
+        if eval_freq and eval_freq > 0:
+            eval_env = make_vec_env(env_id, 1, seed + 10_000, env_kwargs, subprocess=False)
+            eval_cb = EvalCallback(
+                eval_env,
+                n_eval_episodes=eval_episodes,
+                eval_freq=max(1, eval_freq // n_envs),
+                best_model_save_path=str(out),
+                log_path=str(out / "eval"),
+                deterministic=True,
+                verbose=0,
+            )
+            callbacks.append(eval_cb)
+        if checkpoint_freq and checkpoint_freq > 0:
+            callbacks.append(
+                CheckpointCallback(
+                    save_freq=max(1, checkpoint_freq // n_envs), save_path=str(out / "checkpoints"), name_prefix=algo
+                )
+            )
+        if progress:
+            callbacks.append(TqdmCallback(timesteps))
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            # the eval env is a DummyVecEnv, the training env a SubprocVecEnv: same envs, on purpose
+            warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
+            model.learn(total_timesteps=timesteps, callback=CallbackList(callbacks), tb_log_name=algo)
+        wall = time.perf_counter() - t0
+        model.save(out / "model.zip")
+    finally:
+        venv.close()
+        if eval_env is not None:
+            eval_env.close()
+    recent = list(model.ep_info_buffer)
+    summary: dict[str, Any] = {
         "algo": algo,
-        "env_id": env_id,
+        "env_id": bare_id,
+        "env_kwargs": env_kwargs,
+        "policy": policy,
         "timesteps": int(model.num_timesteps),
         "n_envs": n_envs,
         "seed": seed,
         "wall_time_s": round(wall, 1),
         "steps_per_s": round(model.num_timesteps / wall, 2),
-        "env_kwargs": env_kwargs,
+        "hyperparams": hp_record,
+        "recent_episodes": {
+            "count": len(recent),
+            "mean_return": sum(e["r"] for e in recent) / len(recent) if recent else None,
+            "mean_length": sum(e["l"] for e in recent) / len(recent) if recent else None,
+            "crash_rate": sum(float(e.get("crashed", 0)) for e in recent) / len(recent) if recent else None,
+        },
+        "best_eval_mean_return": float(eval_cb.best_mean_reward) if eval_cb is not None and eval_cb.n_calls else None,
         "model": str(out / "model.zip"),
     }
-    (out / "train.json").write_text(json.dumps(summary, indent=2))
+    if eval_cb is not None and eval_cb.best_mean_reward == float("-inf"):
+        summary["best_eval_mean_return"] = None
+    text = json.dumps(summary, indent=2)
+    (out / "train.json").write_text(text)
+    metadata_path(out / "model.zip").write_text(text)
+    if (out / "best_model.zip").exists():
+        metadata_path(out / "best_model.zip").write_text(json.dumps({**summary, "model": str(out / "best_model.zip")}, indent=2))
     return summary
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--algo", choices=ALGOS, default="ppo")
     parser.add_argument("--env", default="rhs-highway-slam-v0", help="env id (default: rhs-highway-slam-v0)")
-    parser.add_argument("--timesteps", type=int, default=20_000)
+    parser.add_argument("--timesteps", type=int, default=None, help="env steps (default: n_timesteps of the YAML)")
     parser.add_argument("--out", required=True, help="output directory")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--n-envs", type=int, default=None, help="subprocess envs (default: from the YAML)")
     parser.add_argument("--hyperparams", default=None, help="zoo-style YAML (default: agents/hyperparams/ALGO.yml)")
-    parser.add_argument("--env-kwargs", default="{}", help="JSON dict passed to gym.make")
-    parser.add_argument("--eval-freq", type=int, default=2000)
+    parser.add_argument("--env-kwargs", default="{}", help="JSON dict passed to gym.make (merged over the YAML's)")
+    parser.add_argument("--eval-freq", type=int, default=2000, help="env steps between evaluations (0: none)")
+    parser.add_argument("--eval-episodes", type=int, default=3)
+    parser.add_argument("--checkpoint-freq", type=int, default=5000, help="env steps between checkpoints (0: none)")
     parser.add_argument("--no-progress", action="store_true")
 
 
 def run(args: argparse.Namespace) -> int:
-    import sys
-
     try:
         env_kwargs = json.loads(args.env_kwargs)
         if not isinstance(env_kwargs, dict):
@@ -182,6 +367,8 @@ def run(args: argparse.Namespace) -> int:
             hyperparams=args.hyperparams,
             env_kwargs=env_kwargs,
             eval_freq=args.eval_freq,
+            eval_episodes=args.eval_episodes,
+            checkpoint_freq=args.checkpoint_freq,
             progress=not args.no_progress,
         )
     except (ValueError, json.JSONDecodeError) as exc:

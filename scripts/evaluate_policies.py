@@ -1,0 +1,188 @@
+"""Shipped SLAM policy vs a random policy vs the ground-truth policy, on the same seeds.
+
+Rows (every policy meets the same traffic: episode k uses seed ``--seed + k``):
+
+* ``PPO, SLAM observation``: ``agents/data/ppo_rhs_highway_slam.zip`` on
+  ``rhs-highway-slam-v0`` with the env kwargs saved beside it (SLAM in the loop);
+* ``random``: uniformly random actions on the same env and config;
+* ``PPO, ground truth``: ``agents/data/ppo_rhs_highway_truth.zip`` on
+  ``rhs-highway-v0`` (highway-env Kinematics observation of the same scene).
+
+Reward is highway-env's default (normalized to [0, 1] per step, 5 steps per
+second); a collision (``info["crashed"]``) ends the episode. Writes
+``results/policies.json`` (every episode) and ``results/policies.md`` (the
+README table), and checks the aim: SLAM policy >= 80 % of the ground-truth
+policy's mean return with a collision rate <= 1.5x its rate.
+
+    OMP_NUM_THREADS=1 python scripts/evaluate_policies.py [--episodes 30] [--seed 1000] [--workers 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+REWARD_AIM, COLLISION_AIM = 0.8, 1.5
+
+
+def _chunk(policy: str, env_id: str, env_kwargs: dict, seeds: list[int]) -> list[dict]:
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    from agents.evaluate import evaluate
+
+    s = evaluate(policy, env_id, len(seeds), seeds[0], env_kwargs, progress=False)
+    return s["runs"]
+
+
+def run_policy(policy: str, env_id: str, env_kwargs: dict, seeds: list[int], workers: int) -> list[dict]:
+    """Episodes on ``seeds`` (contiguous), split over ``workers`` processes."""
+    if workers <= 1:
+        return _chunk(policy, env_id, env_kwargs, seeds)
+    k = -(-len(seeds) // workers)
+    parts = [seeds[i : i + k] for i in range(0, len(seeds), k)]
+    with ProcessPoolExecutor(max_workers=len(parts)) as pool:
+        results = list(pool.map(_chunk, [policy] * len(parts), [env_id] * len(parts), [env_kwargs] * len(parts), parts))
+    return [run for part in results for run in part]
+
+
+def _fmt(stats: dict, digits: int = 1, spread: bool = True) -> str:
+    if stats.get("mean") is None:
+        return "n/a"
+    text = f"{stats['mean']:.{digits}f}"
+    if spread and stats.get("std") is not None:
+        text += f" ± {stats['std']:.{digits}f}"
+    return text
+
+
+def markdown(result: dict) -> str:
+    rows = result["rows"]
+    lines = [
+        f"Same {result['episodes']} seeds ({result['seeds'][0]}..{result['seeds'][-1]}) for every policy; "
+        "mean ± standard deviation over episodes. Reward: highway-env default, normalized to [0, 1] per step, "
+        f"{result['max_steps']} steps (40 s at 5 Hz) at most; a collision ends the episode.",
+        "",
+        "| policy | observation | return | collision rate | mean speed (m/s) | episode length (steps) "
+        "| SLAM position RMSE (m) | SLAM map RMSE (m) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        s = r["summary"]
+        lines.append(
+            f"| {r['label']} | {r['observation']} | {_fmt(s['return'])} | {s['collision_rate']:.2f} "
+            f"({s['collisions']}/{s['episodes']}) | {_fmt(s['mean_speed_mps'])} | {_fmt(s['episode_length'], 0)} "
+            f"| {_fmt(s['position_rmse_m'], 2)} | {_fmt(s['map_rmse_m'], 2)} |"
+        )
+    slam_row = next(r for r in rows if r["key"] == "ppo_slam")
+    kw = slam_row["env_kwargs"]
+    lines += [
+        "",
+        f"The SLAM and random rows run on `{slam_row['env_id']}` "
+        + (f"with env kwargs `{json.dumps(kw)}` (saved beside the policy, used by `rhs-slam demo` / `evaluate`)" if kw
+           else "with its default configuration")
+        + f"; the ground-truth row on `{next(r for r in rows if r['key'] == 'ppo_truth')['env_id']}`: "
+        "the same scene and traffic, observed through highway-env's Kinematics table.",
+    ]
+    aim = result["aim"]
+    lines += [
+        "",
+        f"SLAM policy / ground-truth policy: mean return ratio **{aim['return_ratio']:.2f}** (aim >= {REWARD_AIM}), "
+        f"collision rate ratio **{aim['collision_ratio_text']}** (aim <= {COLLISION_AIM}): "
+        f"aim {'met' if aim['met'] else 'NOT met'}.",
+        "",
+        f"Training (scripts/train_policy.py): {result['training_text']}",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--episodes", type=int, default=30)
+    ap.add_argument("--seed", type=int, default=1000, help="first seed (training used 0.. and 10000..)")
+    ap.add_argument("--workers", type=int, default=2, help="processes per policy")
+    ap.add_argument("--slam-policy", default=None, help="default: agents/data/ppo_rhs_highway_slam.zip")
+    ap.add_argument("--truth-policy", default=None, help="default: agents/data/ppo_rhs_highway_truth.zip")
+    ap.add_argument("--out-dir", default=str(ROOT / "results"))
+    args = ap.parse_args(argv)
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+    from agents.evaluate import SHIPPED_POLICY, SHIPPED_TRUTH_POLICY, policy_metadata, resolve_env, summarize
+
+    slam_policy = args.slam_policy or str(SHIPPED_POLICY)
+    truth_policy = args.truth_policy or str(SHIPPED_TRUTH_POLICY)
+    slam_env, slam_kwargs = resolve_env(slam_policy)
+    truth_env, truth_kwargs = resolve_env(truth_policy)
+    seeds = list(range(args.seed, args.seed + args.episodes))
+    specs = [
+        ("ppo_slam", "PPO (shipped)", "radar point cloud + SLAM", slam_policy, slam_env, slam_kwargs),
+        ("random", "random", "(none)", "random", slam_env, slam_kwargs),
+        ("ppo_truth", "PPO (ground truth)", "highway-env Kinematics (truth)", truth_policy, truth_env, truth_kwargs),
+    ]
+    rows = []
+    for key, label, obs, policy, env_id, kwargs in specs:
+        print(f"evaluate_policies: {label} on {env_id}, {len(seeds)} episodes ...", file=sys.stderr)
+        t0 = time.perf_counter()
+        runs = run_policy(policy, env_id, kwargs, seeds, args.workers)
+        wall = time.perf_counter() - t0
+        summary = summarize(runs)
+        print(f"  return {_fmt(summary['return'])}, collisions {summary['collision_rate']:.2f} ({wall:.0f} s)", file=sys.stderr)
+        slim = [{k: v for k, v in r.items() if k not in ("true_xy", "estimated_xy", "landmarks_true",
+                                                          "landmarks_est", "position_error_m")} for r in runs]  # fmt: skip
+        rows.append({"key": key, "label": label, "observation": obs, "policy": policy, "env_id": env_id,
+                     "env_kwargs": kwargs, "wall_s": round(wall, 1), "summary": summary, "runs": slim})  # fmt: skip
+    by = {r["key"]: r["summary"] for r in rows}
+    ret_ratio = by["ppo_slam"]["return"]["mean"] / by["ppo_truth"]["return"]["mean"]
+    c_slam, c_truth = by["ppo_slam"]["collision_rate"], by["ppo_truth"]["collision_rate"]
+    if c_truth > 0:
+        c_ratio, c_text, c_ok = c_slam / c_truth, f"{c_slam / c_truth:.2f}", c_slam <= COLLISION_AIM * c_truth
+    else:
+        c_ratio, c_text, c_ok = None, ("0/0" if c_slam == 0 else f"{c_slam:.2f} vs 0"), c_slam == 0
+    training = {}
+    for key, policy in (("ppo_slam", slam_policy), ("ppo_truth", truth_policy)):
+        meta = policy_metadata(policy)
+        training[key] = {k: meta.get(k) for k in ("env_id", "env_kwargs", "timesteps", "n_envs", "wall_time_s", "steps_per_s")}
+    training_text = "; ".join(
+        f"{k}: {v['timesteps']} steps on {v['env_id']} with {v['n_envs']} subprocess envs in {v['wall_time_s']} s "
+        f"({v['steps_per_s']} steps/s)" + (f", env kwargs `{json.dumps(v['env_kwargs'])}`" if v["env_kwargs"] else "")
+        for k, v in training.items()
+    )
+    max_steps = None
+    try:
+        import gymnasium as gym
+
+        import rhs_env  # noqa: F401
+
+        cfg = gym.make(truth_env, **truth_kwargs).unwrapped.config
+        max_steps = int(round(cfg["duration"] * cfg["policy_frequency"]))
+    except Exception:  # noqa: BLE001  (only for the table's caption)
+        pass
+    result = {
+        "episodes": args.episodes,
+        "seeds": seeds,
+        "max_steps": max_steps,
+        "rows": rows,
+        "aim": {
+            "return_ratio": ret_ratio,
+            "collision_ratio": c_ratio,
+            "collision_ratio_text": c_text,
+            "return_ok": ret_ratio >= REWARD_AIM,
+            "collision_ok": bool(c_ok),
+            "met": bool(ret_ratio >= REWARD_AIM and c_ok),
+        },
+        "training": training,
+        "training_text": training_text,
+    }
+    out = Path(args.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "policies.json").write_text(json.dumps(result, indent=2) + "\n")
+    (out / "policies.md").write_text(markdown(result))
+    print(markdown(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

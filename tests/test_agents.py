@@ -1,0 +1,352 @@
+"""Agents: training (PPO with subprocess envs, DQN), policy loading, evaluation JSON,
+``rhs-slam demo`` / ``evaluate`` / ``train`` commands, the point-set extractor, and the
+shipped policies (load, act, and beat the random policy on the same seeds).
+
+Everything runs on a small, fast configuration: a coarse 5-degree scan of a short
+closed-form RHS, few vehicles, short episodes, ICP registration (the CNN
+registration has its own tests). No test measures time.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+import rhs_env  # noqa: F401  (registers the ids)
+from agents.evaluate import (
+    SHIPPED_POLICY,
+    SHIPPED_TRUTH_POLICY,
+    evaluate,
+    load_policy,
+    policy_metadata,
+    resolve_env,
+    run_episode,
+)
+from agents.features import PointSetExtractor
+from agents.train import ALGOS, load_hyperparams, train, worker_env_id
+from rhs_env.cli import main as cli_main
+
+SLAM = "rhs-highway-slam-v0"
+TRUTH = "rhs-highway-v0"
+# small and fast: I = 18 beam slots of a 24-element closed-form RHS, 5 vehicles, 4 s episodes
+SMALL = {
+    "antenna": "hologram",
+    "radar": {"scan": {"grid_deg": 5.0}, "rhs": {"elements": 24}, "max_range_m": 80.0},
+    "max_points": 64,
+    "max_landmarks": 16,
+    "registration": "icp",
+    "vehicles_count": 5,
+    "lanes_count": 3,
+    "duration": 4,
+}
+TINY_PPO = """
+rhs-highway-slam-v0:
+  policy: MultiInputPolicy
+  n_envs: 2
+  n_timesteps: 256
+  n_steps: 64
+  batch_size: 32
+  n_epochs: 2
+  learning_rate: lin_3.0e-4
+  gamma: 0.9
+  policy_kwargs:
+    features_extractor_class: point_set
+    features_extractor_kwargs: {point_dim: 16, box_dim: 8}
+    net_arch: [16]
+"""
+TINY_DQN = """
+rhs-highway-slam-v0:
+  policy: MultiInputPolicy
+  n_envs: 1
+  buffer_size: 500
+  learning_starts: 32
+  batch_size: 16
+  train_freq: 4
+  target_update_interval: 32
+  policy_kwargs:
+    features_extractor_class: point_set
+    features_extractor_kwargs: {point_dim: 16, box_dim: 8}
+    net_arch: [16]
+"""
+POLICY_KEYS = {"points", "points_mask", "pose", "pose_std", "landmarks", "landmarks_mask"}
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory) -> dict:
+    """A tiny PPO policy: 256 steps over 2 subprocess envs, with evaluation and checkpoints."""
+    out = tmp_path_factory.mktemp("ppo")
+    hp = out / "ppo.yml"
+    hp.write_text(TINY_PPO)
+    summary = train(
+        "ppo", SLAM, None, out / "run", hyperparams=hp, env_kwargs=SMALL,
+        eval_freq=128, eval_episodes=1, checkpoint_freq=128, progress=False,
+    )  # fmt: skip
+    return {"dir": out / "run", "summary": summary, "model": out / "run" / "model.zip"}
+
+
+def small_env(**kw) -> gym.Env:
+    return gym.make(SLAM, **{**SMALL, **kw})
+
+
+# ---------------------------------------------------------------- training
+
+
+def test_ppo_training_run_writes_everything(trained):
+    s, d = trained["summary"], trained["dir"]
+    assert s["algo"] == "ppo" and s["env_id"] == SLAM and s["n_envs"] == 2
+    assert s["timesteps"] >= 256  # n_timesteps from the YAML
+    assert s["env_kwargs"] == SMALL and s["steps_per_s"] > 0 and s["wall_time_s"] > 0
+    assert (d / "model.zip").stat().st_size < 1_000_000
+    meta = json.loads((d / "model.json").read_text())
+    assert meta["env_id"] == SLAM and meta["env_kwargs"] == SMALL and meta["algo"] == "ppo"
+    assert json.loads((d / "train.json").read_text())["timesteps"] == s["timesteps"]
+    assert (d / "best_model.zip").exists() and (d / "best_model.json").exists()
+    assert list((d / "checkpoints").glob("ppo_*_steps.zip"))
+    assert (d / "eval" / "evaluations.npz").exists()
+    events = list((d / "tb").rglob("events.out.tfevents.*"))
+    assert events, "no TensorBoard event file"
+    monitors = sorted((d / "monitor").glob("*.monitor.csv"))
+    assert len(monitors) == 2
+    header = monitors[0].read_text().splitlines()[1].split(",")
+    assert header[:3] == ["r", "l", "t"] and "crashed" in header
+    # 4 s episodes at 5 Hz: at least a few finished episodes over 256 steps
+    rows = [line for m in monitors for line in m.read_text().splitlines()[2:]]
+    assert len(rows) >= 2
+
+
+def test_trained_policy_loads_and_acts(trained):
+    env = small_env()
+    model = load_policy(trained["model"], env)
+    assert set(model.observation_space.spaces) == POLICY_KEYS
+    obs, _ = env.reset(seed=3)
+    for _ in range(3):
+        action, _ = model.predict(obs, deterministic=True)
+        assert env.action_space.contains(int(action))
+        obs, reward, terminated, truncated, info = env.step(int(action))
+        assert np.isfinite(reward)
+        if terminated or truncated:
+            break
+    # deterministic: the same observation gives the same action
+    a1, _ = model.predict(obs, deterministic=True)
+    a2, _ = model.predict(obs, deterministic=True)
+    assert int(a1) == int(a2)
+    env.close()
+
+
+def test_dqn_training_run_and_load(tmp_path):
+    hp = tmp_path / "dqn.yml"
+    hp.write_text(TINY_DQN)
+    s = train("dqn", SLAM, 64, tmp_path / "run", hyperparams=hp, env_kwargs=SMALL, eval_freq=0, progress=False)
+    assert s["algo"] == "dqn" and s["n_envs"] == 1 and s["timesteps"] >= 64
+    env = small_env()
+    model = load_policy(tmp_path / "run" / "model.zip", env)
+    assert type(model).__name__ == "DQN"
+    obs, _ = env.reset(seed=0)
+    assert env.action_space.contains(int(model.predict(obs, deterministic=True)[0]))
+    env.close()
+
+
+def test_train_rejects_bad_arguments(tmp_path):
+    with pytest.raises(ValueError, match="algo"):
+        train("a2c", SLAM, 10, tmp_path)
+    with pytest.raises(ValueError, match="timesteps"):
+        train("ppo", SLAM, 0, tmp_path)
+    with pytest.raises(ValueError, match="no hyperparameters"):
+        train("ppo", "CartPole-v1", 10, tmp_path)
+    assert cli_main(["train", "--out", str(tmp_path), "--env-kwargs", "[1]"]) == 2
+
+
+def test_hyperparams_and_worker_ids():
+    for algo in ALGOS:
+        for env_id in (SLAM, TRUTH, "rhs-paper-v0", "rhs-highway-radar-v0"):
+            hp = load_hyperparams(algo, env_id)
+            assert hp["policy"] in ("MultiInputPolicy", "MlpPolicy")
+            assert hp["n_envs"] >= 1
+    assert load_hyperparams("ppo", SLAM)["policy_kwargs"]["features_extractor_class"] == "point_set"
+    # subprocess workers import rhs_env through the id's module prefix
+    assert worker_env_id(SLAM) == f"rhs_env:{SLAM}"
+    assert worker_env_id(TRUTH) == f"rhs_env:{TRUTH}"
+    assert worker_env_id(f"rhs_env:{SLAM}") == f"rhs_env:{SLAM}"
+    assert worker_env_id("CartPole-v1") == "CartPole-v1"
+
+
+# ---------------------------------------------------------------- feature extractor
+
+
+def test_point_set_extractor_ignores_order_and_padding():
+    env = small_env()
+    space = env.observation_space
+    env.close()
+    torch.manual_seed(0)
+    ext = PointSetExtractor(space, point_dim=16, box_dim=8)
+    sample = {k: torch.as_tensor(np.asarray(v)[None]).float() for k, v in space.sample().items()}
+    n = 10
+    for key in ("points", "landmarks"):
+        mask = torch.zeros_like(sample[f"{key}_mask"])
+        mask[0, :n] = 1
+        sample[f"{key}_mask"] = mask
+    f0 = ext(sample)
+    assert f0.shape == (1, ext.features_dim) and torch.isfinite(f0).all()
+    # permuting the real points changes nothing
+    perm = dict(sample)
+    idx = torch.cat([torch.randperm(n), torch.arange(n, sample["points"].shape[1])])
+    perm["points"] = sample["points"][:, idx]
+    assert torch.allclose(ext(perm), f0, atol=1e-5)
+    # padding rows are ignored, whatever they contain
+    pad = dict(sample)
+    pad["points"] = sample["points"].clone()
+    pad["points"][0, n:] = 123.0
+    assert torch.allclose(ext(pad), f0, atol=1e-5)
+    # the along-road position x is not a feature
+    moved = dict(sample)
+    moved["pose"] = sample["pose"].clone()
+    moved["pose"][0, 0] += 500.0
+    assert torch.allclose(ext(moved), f0, atol=1e-5)
+    # an empty set gives finite features
+    empty = dict(sample)
+    empty["points_mask"] = torch.zeros_like(sample["points_mask"])
+    assert torch.isfinite(ext(empty)).all()
+
+
+# ---------------------------------------------------------------- evaluation
+
+
+def _check_stats(stats: dict, low: float, high: float) -> None:
+    assert set(stats) >= {"mean", "std", "sem", "min", "max", "n"}
+    assert stats["n"] >= 1
+    assert low <= stats["min"] <= stats["mean"] <= stats["max"] <= high
+    assert stats["std"] >= 0
+
+
+def test_evaluate_cli_json_has_every_field(trained, tmp_path):
+    out = tmp_path / "eval.json"
+    # env id and env kwargs come from the JSON beside the policy
+    rc = cli_main(["evaluate", "--policy", str(trained["model"]), "--episodes", "2", "--seed", "5",
+                   "--out", str(out), "--no-progress"])  # fmt: skip
+    assert rc == 0
+    s = json.loads(out.read_text())
+    assert s["env_id"] == SLAM and s["env_kwargs"] == SMALL and s["episodes"] == 2 and s["seeds"] == [5, 6]
+    assert Path(s["figure"]).exists() and Path(s["figure"]).stat().st_size > 1000
+    max_return = SMALL["duration"] * 5  # normalized reward <= 1 per step, 5 steps per second
+    _check_stats(s["return"], 0.0, max_return)
+    assert 0.0 <= s["collision_rate"] <= 1.0 and s["collisions"] == round(2 * s["collision_rate"])
+    _check_stats(s["mean_speed_mps"], 0.0, 45.0)
+    _check_stats(s["episode_length"], 1, max_return)
+    _check_stats(s["position_rmse_m"], 0.0, 50.0)
+    _check_stats(s["heading_rmse_rad"], 0.0, np.pi)
+    if s["map_rmse_m"]["n"]:
+        _check_stats(s["map_rmse_m"], 0.0, 2.0)  # within the 2 m matching gate
+    for run in s["runs"]:
+        assert len(run["true_xy"]) == len(run["estimated_xy"]) == run["steps"]
+        assert isinstance(run["crashed"], bool)
+
+
+def test_evaluate_same_seeds_same_episodes(trained):
+    a = evaluate(trained["model"], episodes=1, seed=11, progress=False)
+    b = evaluate(trained["model"], episodes=1, seed=11, progress=False)
+    assert a["runs"][0]["return"] == b["runs"][0]["return"]
+    assert a["runs"][0]["estimated_xy"] == b["runs"][0]["estimated_xy"]
+
+
+def test_evaluate_ground_truth_env_has_no_slam_fields():
+    s = evaluate("random", TRUTH, episodes=2, seed=0, env_kwargs={"vehicles_count": 5, "duration": 4}, progress=False)
+    assert s["env_id"] == TRUTH
+    assert 0.0 <= s["collision_rate"] <= 1.0
+    _check_stats(s["mean_speed_mps"], 0.0, 45.0)
+    assert s["position_rmse_m"]["mean"] is None and s["map_rmse_m"]["mean"] is None
+
+
+def test_evaluate_rejects_mismatched_observations(trained):
+    with pytest.raises(ValueError, match="trained on observations"):
+        evaluate(trained["model"], episodes=1, env_kwargs={"max_points": 32}, progress=False)
+    with pytest.raises(FileNotFoundError):
+        evaluate("no_such_policy.zip", SLAM, episodes=1, progress=False)
+    assert cli_main(["evaluate", "--policy", "missing.zip", "--out", "x.json"]) == 2
+
+
+def test_resolve_env_rules(trained):
+    assert resolve_env(trained["model"]) == (SLAM, SMALL)
+    env_id, kw = resolve_env(trained["model"], env_kwargs={"vehicles_count": 2})
+    assert env_id == SLAM and kw == {**SMALL, "vehicles_count": 2}
+    # another env id does not inherit the policy's env kwargs
+    assert resolve_env(trained["model"], TRUTH) == (TRUTH, {})
+    assert resolve_env("random") == (SLAM, {})
+
+
+# ---------------------------------------------------------------- demo
+
+
+def test_demo_command_exits_0_and_writes_figure(trained, tmp_path, capsys):
+    # in-process (the console script is rhs_env.cli:main): saves a fresh interpreter's imports
+    out = tmp_path / "demo"
+    rc = cli_main(["demo", "--policy", str(trained["model"]), "--seed", "2", "--out", str(out),
+                   "--env-kwargs", json.dumps({"duration": 2}), "--animation"])  # fmt: skip
+    assert rc == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["env_id"] == SLAM and 1 <= s["steps"] <= 10 and isinstance(s["crashed"], bool)
+    assert s["env_kwargs"]["duration"] == 2 and s["env_kwargs"]["antenna"] == "hologram"
+    for key in ("return", "mean_speed_mps", "position_rmse_m", "heading_rmse_rad"):
+        assert np.isfinite(s[key]), key
+    fig = out / "trajectory_map.png"
+    assert fig.exists() and fig.stat().st_size > 1000
+    gif = out / "episode.gif"
+    assert gif.exists() and gif.read_bytes()[:3] == b"GIF"
+    assert json.loads((out / "demo.json").read_text())["figure"] == str(fig)
+
+
+def test_console_script_demo_help():
+    exe = shutil.which("rhs-slam") or str(Path(sys.executable).parent / "rhs-slam")
+    proc = subprocess.run([exe, "demo", "--help"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "--animation" in proc.stdout and "--policy" in proc.stdout
+
+
+def test_demo_rejects_bad_input(tmp_path):
+    assert cli_main(["demo", "--policy", "missing.zip", "--out", str(tmp_path)]) == 2
+    assert cli_main(["demo", "--policy", "random", "--env-kwargs", "{bad", "--out", str(tmp_path)]) == 2
+
+
+# ---------------------------------------------------------------- shipped policies
+
+
+def test_shipped_policies_are_small_and_described():
+    for path, env_id in ((SHIPPED_POLICY, SLAM), (SHIPPED_TRUTH_POLICY, TRUTH)):
+        assert path.exists(), f"{path} missing: run scripts/train_policy.py"
+        assert path.stat().st_size < 1_000_000
+        meta = policy_metadata(path)
+        assert meta["env_id"] == env_id and meta["algo"] == "ppo"
+        assert meta["timesteps"] > 0 and meta["wall_time_s"] > 0
+
+
+def test_shipped_slam_policy_loads_acts_and_beats_random():
+    """On the shipped env config (cheap scene: few vehicles, short episodes), same seeds:
+    the shipped policy's mean return beats the random policy's and it crashes less often."""
+    env_id, kwargs = resolve_env(SHIPPED_POLICY)
+    assert env_id == SLAM
+    quick = {**kwargs, "registration": "icp", "vehicles_count": 10, "duration": 10}
+    env = gym.make(env_id, **quick)
+    shipped = load_policy(SHIPPED_POLICY, env)
+    rand = load_policy("random", env, seed=0)
+    seeds = range(100, 103)
+    ours = [run_episode(env, shipped, s) for s in seeds]
+    base = [run_episode(env, rand, s) for s in seeds]
+    env.close()
+    assert np.mean([r["return"] for r in ours]) > np.mean([r["return"] for r in base])
+    assert sum(r["crashed"] for r in ours) <= sum(r["crashed"] for r in base)
+
+
+def test_shipped_truth_policy_loads_and_acts():
+    env = gym.make(TRUTH, vehicles_count=10, duration=4)
+    model = load_policy(SHIPPED_TRUTH_POLICY, env)
+    result = run_episode(env, model, seed=7)
+    env.close()
+    assert 1 <= result["steps"] <= 20 and np.isfinite(result["return"])
+    assert result["position_rmse_m"] is None  # no SLAM on the ground-truth env
