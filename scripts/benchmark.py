@@ -11,7 +11,7 @@ Sections (``--sections``, default all):
   method (scripts/benchmark_patterns.py; SDR on a subset, extrapolated);
 * ``training``: PPO training steps per second with 1 and 2 subprocess envs.
 
-    python scripts/benchmark.py --out results/benchmark.json
+    python scripts/benchmark.py --out results/benchmark.json      # also writes results/benchmark.md
     python scripts/benchmark.py --sections envs --steps 20
 """
 
@@ -97,6 +97,48 @@ def bench_training(timesteps: int, seed: int) -> dict:
     return out
 
 
+def _fmt(d: dict | None) -> str:
+    return ", ".join(f"{k} {v:.1f}" for k, v in (d or {}).items()) or "-"
+
+
+def markdown(result: dict) -> str:
+    """The README table of a benchmark result."""
+    lines = [f"Measured by `python scripts/benchmark.py` on {result['machine']['cpus']} CPU cores "
+             f"(load average at start {result['machine']['load_average']}).", ""]
+    if "envs" in result:
+        e = result["envs"]
+        lines += ["| env (default radar, dtheta = %g deg) | steps/s | ms/step | radar stages (ms) | SLAM stages (ms) |"
+                  % result["settings"]["grid_deg"], "|---|---:|---:|---|---|"]
+        for env_id in ("rhs-highway-v0", "rhs-highway-radar-v0", "rhs-highway-slam-v0"):
+            r = e[env_id]
+            lines.append(f"| `{env_id}` | {r['steps_per_s']:.1f} | {r['ms_per_step']:.1f} | "
+                         f"{_fmt(r['radar_stage_ms'])} | {_fmt(r['slam_stage_ms'])} |")
+        lines += ["", f"The radar adds {e['radar_added_ms']:.1f} ms per step ({e['radar_added_over_base']:.2f} x the "
+                  f"base step), radar + SLAM {e['radar_slam_added_ms']:.1f} ms ({e['radar_slam_added_over_base']:.2f} x).", ""]
+    if "radar" in result:
+        lines += ["| one 4-radar scan, typical scene | synthesis (ms) | range/CFAR (ms) | OMP (ms) | total (ms) |",
+                  "|---|---:|---:|---:|---:|"]
+        for ant, r in result["radar"].items():
+            st = r["stage_ms_median"]
+            lines.append(f"| {ant} | {st.get('synthesis', float('nan')):.1f} | {st.get('range_cfar', float('nan')):.1f} "
+                         f"| {st.get('omp', float('nan')):.1f} | {st.get('total', float('nan')):.1f} |")
+        lines.append("")
+    if "patterns" in result:
+        p = result["patterns"]
+        lines += ["| pattern library (M = 60, dtheta = 1 deg, 2 workers) | build time (s) |", "|---|---:|"]
+        for m in ("fast", "sdr"):
+            if m in p:
+                note = f" ({p[m]['note']})" if p[m].get("extrapolated") else ""
+                lines.append(f"| {m}{note} | {p[m]['build_s']:.1f} |")
+        lines.append("")
+    if "training" in result:
+        lines += ["| PPO on `rhs-highway-slam-v0` | steps/s |", "|---|---:|"]
+        for k, r in result["training"].items():
+            lines.append(f"| {k.replace('n_envs_', '')} subprocess env(s) | {r['steps_per_s']:.1f} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sections", nargs="+", choices=SECTIONS, default=list(SECTIONS))
@@ -108,7 +150,12 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
 
     result: dict = {
-        "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "platform": platform.platform()},
+        "machine": {
+            "python": platform.python_version(),
+            "cpus": os.cpu_count(),
+            "platform": platform.platform(),
+            "load_average": [round(x, 2) for x in os.getloadavg()],
+        },
         "settings": vars(args),
     }
     if "envs" in args.sections:
@@ -130,6 +177,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2, default=float))
+    out.with_suffix(".md").write_text(markdown(result) + "\n")
     print(json.dumps(result, indent=2, default=float))
     return 0
 
