@@ -91,6 +91,13 @@ class ICPRegistration:
     Initial guess: ``prior`` if given, else the last estimate (constant-velocity
     model), else zero. With fewer than ``min_pairs`` pairs the initial guess is
     returned. ``last_pairs`` / ``last_rmse`` report the final fit.
+
+    Heading search: ICP converges only within a few degrees of the truth, while a
+    highway lane change turns the vehicle by up to ~10 deg within one 0.2 s cycle
+    and the Doppler prior carries no yaw. ICP is therefore also started from the
+    guess turned by ``yaw_search_steps`` offsets spanning +-``yaw_search_rad``;
+    the fit with the most points within ``min_gate_m`` of a previous point wins
+    (ties: the lower RMS distance). ``yaw_search_rad=0`` disables it.
     """
 
     def __init__(
@@ -104,8 +111,17 @@ class ICPRegistration:
         min_pairs: int = 3,
         amplitude_weights: bool = False,
         constant_velocity: bool = True,
+        yaw_search_rad: float = 0.2,
+        yaw_search_steps: int = 8,
     ) -> None:
         check_int("max_iterations", max_iterations, 1, 10_000)
+        check_range("yaw_search_rad", yaw_search_rad, 0.0, math.pi)
+        check_int("yaw_search_steps", yaw_search_steps, 0, 360)
+        self.yaw_offsets = (
+            np.linspace(-yaw_search_rad, yaw_search_rad, yaw_search_steps + 1)
+            if yaw_search_rad > 0 and yaw_search_steps > 0
+            else np.zeros(0)
+        )
         check_range("max_gate_m", max_gate_m, 0.0, None, low_open=True)
         check_range("min_gate_m", min_gate_m, 0.0, None, low_open=True)
         check_range("outlier_factor", outlier_factor, 0.0, None, low_open=True)
@@ -153,6 +169,26 @@ class ICPRegistration:
             amp_c = np.maximum(cur[:, 3], 1e-12)
         else:
             amp_p = amp_c = None
+        best = None
+        for offset in np.concatenate([[0.0], self.yaw_offsets[self.yaw_offsets != 0.0]]):
+            start = guess + np.array([0.0, 0.0, offset])
+            est, pairs, rmse = self._fit(tree, src, prev, start, amp_p, amp_c)
+            if pairs:
+                d, _ = tree.query(apply_motion(src, est), k=1, distance_upper_bound=self.max_gate_m)
+                score = (int(np.sum(d <= self.min_gate_m)), -rmse)
+                if best is None or score > best[0]:
+                    best = (score, est, pairs, rmse)
+        if best is None:
+            est, self.last_pairs, self.last_rmse = guess.copy(), 0, float("nan")
+        else:
+            _, est, self.last_pairs, self.last_rmse = best
+        est[2] = (est[2] + math.pi) % (2 * math.pi) - math.pi
+        self.last_estimate = est.copy()
+        return est
+
+    def _fit(self, tree, src, prev, guess, amp_p, amp_c) -> tuple[np.ndarray, int, float]:
+        """ICP iterations from ``guess``; returns (estimate, pairs, RMS distance of the final fit)."""
+        last_pairs, last_rmse = 0, float("nan")
         est = guess.copy()
         for _ in range(self.max_iterations):
             moved = apply_motion(src, est)
@@ -168,18 +204,14 @@ class ICPRegistration:
             new = _procrustes_2d(src[ok], prev[j[ok], :2], w)
             step = np.abs(new - est)
             est = new
-            self.last_pairs = int(ok.sum())
-            self.last_rmse = float(np.sqrt(np.mean(d[ok] ** 2)))
+            last_pairs = int(ok.sum())
             if step[0] < self.tol_m and step[1] < self.tol_m and step[2] < self.tol_rad:
                 break
-        if self.last_pairs:
-            moved = apply_motion(src, est)
-            d, _ = tree.query(moved, k=1, distance_upper_bound=self.max_gate_m)
+        if last_pairs:
+            d, _ = tree.query(apply_motion(src, est), k=1, distance_upper_bound=self.max_gate_m)
             ok = np.isfinite(d)
-            self.last_rmse = float(np.sqrt(np.mean(d[ok] ** 2))) if ok.any() else float("nan")
-        est[2] = (est[2] + math.pi) % (2 * math.pi) - math.pi
-        self.last_estimate = est.copy()
-        return est
+            last_rmse = float(np.sqrt(np.mean(d[ok] ** 2))) if ok.any() else float("nan")
+        return est, last_pairs, last_rmse
 
 
 class OdometryRegistration:

@@ -67,3 +67,22 @@ def test_odometry_registration_noise():
     exact = OdometryRegistration()
     exact.set_true_motion(truth)
     np.testing.assert_array_equal(exact.estimate(None, None), truth)
+
+
+def test_icp_heading_search_recovers_a_lane_change_turn():
+    """A 10 deg turn within one cycle with a yaw-free prior: plain ICP stalls, the search finds it."""
+    from slam.registration import ICPRegistration, apply_motion
+
+    rng = np.random.default_rng(4)
+    prev = np.column_stack([rng.uniform(5, 80, 30) * rng.choice([-1, 1], 30), rng.uniform(-40, 40, 30)])
+    truth = np.array([4.9, 0.8, np.deg2rad(10.0)])
+    # current points: prev expressed in the moved frame (inverse of apply_motion)
+    c, s = np.cos(truth[2]), np.sin(truth[2])
+    q = prev - truth[:2]
+    cur = np.column_stack([c * q[:, 0] + s * q[:, 1], -s * q[:, 0] + c * q[:, 1]])
+    assert np.allclose(apply_motion(cur, truth), prev)
+    prior = np.array([5.0, 0.0, 0.0])
+    plain = ICPRegistration(yaw_search_rad=0.0).estimate(prev, cur, prior=prior)
+    searched = ICPRegistration().estimate(prev, cur, prior=prior)
+    assert abs(plain[2] - truth[2]) > np.deg2rad(3.0)
+    assert np.allclose(searched, truth, atol=1e-3)
