@@ -2,7 +2,7 @@
 
 Drives the default env (``rhs-highway-slam-v0``) with the policy shipped in
 ``agents/data`` (``--policy FILE`` for another zip, ``--policy random`` for a
-uniformly random policy), on the env kwargs saved beside the policy
+uniformly random policy, ``--policy constant:4`` for one action at every step), on the env kwargs saved beside the policy
 (``--env-kwargs`` is merged over them, see :mod:`agents.evaluate`). Prints the
 return, collision, mean speed and SLAM errors (position and heading RMSE over
 the episode, final map RMSE) as JSON, and writes ``OUT/trajectory_map.png``
@@ -32,7 +32,9 @@ from agents.evaluate import (
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env", default=None, help=f"env id (default: the policy's, else {DEFAULT_ENV})")
-    parser.add_argument("--policy", default=str(SHIPPED_POLICY), help="SB3 zip or 'random' (default: shipped)")
+    parser.add_argument(
+        "--policy", default=str(SHIPPED_POLICY), help="SB3 zip, 'random' or 'constant:ACTION' (default: shipped)"
+    )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
         "--env-kwargs", default=None, help="JSON dict passed to gym.make, merged over the policy's saved env kwargs"
@@ -99,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
         if frames:
             gif = out / "episode.gif"
             images = [Image.fromarray(np.asarray(f, dtype=np.uint8)) for f in frames]
-            duration = max(20, int(round(1000.0 / max(args.fps, 0.1))))
+            duration = max(20, round(1000.0 / max(args.fps, 0.1)))
             images[0].save(gif, save_all=True, append_images=images[1:], duration=duration, loop=0)
             summary["animation"] = str(gif)
     (out / "demo.json").write_text(json.dumps(summary, indent=2, default=_json_default))

@@ -34,6 +34,23 @@ SHIPPED_TRUTH_POLICY = DATA_DIR / "ppo_rhs_highway_truth.zip"
 DEFAULT_ENV = "rhs-highway-slam-v0"
 
 
+def is_scripted(policy: str | Path) -> bool:
+    """``"random"`` or ``"constant:<action>"``: policies that need no file."""
+    return str(policy) == "random" or str(policy).startswith("constant:")
+
+
+class ConstantPolicy:
+    """The same action at every step (``"constant:4"``: SLOWER with highway-env's DiscreteMetaAction)."""
+
+    def __init__(self, action_space, action: int):
+        if not action_space.contains(action):
+            raise ValueError(f"constant action {action} is not in the action space {action_space}")
+        self.action = action
+
+    def predict(self, obs, deterministic: bool = True):
+        return self.action, None
+
+
 class RandomPolicy:
     """Uniformly random actions from the env's action space (seeded)."""
 
@@ -47,7 +64,7 @@ class RandomPolicy:
 
 def policy_metadata(policy: str | Path) -> dict[str, Any]:
     """The JSON beside a policy zip (env id, env kwargs, training settings), or ``{}``."""
-    if str(policy) == "random":
+    if is_scripted(policy):
         return {}
     path = Path(policy).with_suffix(".json")
     if not path.exists():
@@ -66,7 +83,7 @@ def resolve_env(
 
     Raises ``FileNotFoundError`` for a missing policy file (before any env is built).
     """
-    if str(policy) != "random" and not Path(policy).exists():
+    if not is_scripted(policy) and not Path(policy).exists():
         raise FileNotFoundError(f"policy file not found: {policy}")
     meta = policy_metadata(policy)
     meta_env = meta.get("env_id")
@@ -76,14 +93,21 @@ def resolve_env(
 
 
 def load_policy(policy: str | Path, env=None, seed: int = 0):
-    """``"random"``, or a stable-baselines3 zip (PPO or DQN: from the JSON beside it, else tried in turn).
+    """``"random"``, ``"constant:<action>"``, or a stable-baselines3 zip (PPO or DQN: from the JSON
+    beside it, else tried in turn).
 
     With ``env``, the policy's observation space is checked against the env's.
     """
-    if str(policy) == "random":
+    if is_scripted(policy):
         if env is None:
-            raise ValueError("a random policy needs the env for its action space")
-        return RandomPolicy(env.action_space, seed)
+            raise ValueError(f"policy {policy!r} needs the env for its action space")
+        if str(policy) == "random":
+            return RandomPolicy(env.action_space, seed)
+        try:
+            action = int(str(policy).split(":", 1)[1])
+        except ValueError:
+            raise ValueError(f"constant policy must be 'constant:<int action>', got {policy!r}") from None
+        return ConstantPolicy(env.action_space, action)
     path = Path(policy)
     if not path.exists():
         raise FileNotFoundError(f"policy file not found: {path}")
@@ -98,7 +122,7 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
         try:
             model = cls.load(path, device="cpu")
             break
-        except Exception as exc:  # wrong algorithm class for this zip: try the next one
+        except Exception as exc:  # noqa: BLE001  (wrong algorithm class for this zip: try the next one)
             errors.append(f"{cls.__name__}: {exc}")
     if model is None:
         raise ValueError(f"{path} is not a PPO or DQN model ({'; '.join(errors)})")
@@ -296,7 +320,9 @@ def plot_summary(summary: dict[str, Any], path: str | Path) -> None:
         ax.legend(fontsize=8)
         ax = axes[2]
         for k, r in enumerate(runs[:10]):
-            ax.plot(np.arange(1, len(r["position_error_m"]) + 1), r["position_error_m"], lw=1, label=f"seed {r['seed']}")
+            ax.plot(
+                np.arange(1, len(r["position_error_m"]) + 1), r["position_error_m"], lw=1, label=f"seed {r['seed']}"
+            )
         ax.set(xlabel="step (SLAM cycle)", ylabel="position error (m)", title="SLAM position error")
         if len(runs) <= 10:
             ax.legend(fontsize=7)
@@ -311,12 +337,14 @@ def parse_env_kwargs(text: str | None) -> dict[str, Any] | None:
         return None
     value = json.loads(text)
     if not isinstance(value, dict):
-        raise ValueError("--env-kwargs must be a JSON object")
+        raise ValueError("--env-kwargs must be a JSON object")  # noqa: TRY004  (reported as a usage error)
     return value
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--policy", default=str(SHIPPED_POLICY), help="SB3 zip, or 'random' (default: shipped policy)")
+    parser.add_argument(
+        "--policy", default=str(SHIPPED_POLICY), help="SB3 zip, 'random' or 'constant:ACTION' (default: shipped policy)"
+    )
     parser.add_argument("--env", default=None, help=f"env id (default: the policy's, else {DEFAULT_ENV})")
     parser.add_argument("--episodes", type=int, default=5)
     parser.add_argument("--seed", type=int, default=0, help="first episode seed (episodes use seed, seed + 1, ...)")

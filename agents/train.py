@@ -333,7 +333,9 @@ def train(
     (out / "train.json").write_text(text)
     metadata_path(out / "model.zip").write_text(text)
     if (out / "best_model.zip").exists():
-        metadata_path(out / "best_model.zip").write_text(json.dumps({**summary, "model": str(out / "best_model.zip")}, indent=2))
+        metadata_path(out / "best_model.zip").write_text(
+            json.dumps({**summary, "model": str(out / "best_model.zip")}, indent=2)
+        )
     return summary
 
 
@@ -356,7 +358,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         env_kwargs = json.loads(args.env_kwargs)
         if not isinstance(env_kwargs, dict):
-            raise ValueError("--env-kwargs must be a JSON object")
+            raise ValueError("--env-kwargs must be a JSON object")  # noqa: TRY004  (reported as a usage error)
         summary = train(
             args.algo,
             args.env,

@@ -65,10 +65,14 @@ def train_one(name: str, args: argparse.Namespace, env_kwargs: dict) -> dict:
     from agents.train import metadata_path, train
 
     env_id, target = TARGETS[name]
+    target = Path(args.data_dir) / target.name
     work = Path(args.work_dir) / name
     if work.exists():
         shutil.rmtree(work)
-    print(f"train_policy: {name}: PPO on {env_id}, {args.timesteps} steps, {args.n_envs} envs -> {target}", file=sys.stderr)
+    print(
+        f"train_policy: {name}: PPO on {env_id}, {args.timesteps} steps, {args.n_envs} envs -> {target}",
+        file=sys.stderr,
+    )
     t0 = time.perf_counter()
     summary = train(
         "ppo",
@@ -93,20 +97,32 @@ def train_one(name: str, args: argparse.Namespace, env_kwargs: dict) -> dict:
     meta = {
         **summary,
         "shipped": args.ship if source.name != "model.zip" else "final",
-        "model": str(target.relative_to(ROOT)),
+        "model": _display(target),
         "total_wall_time_s": round(total, 1),
         "trained_by": "scripts/train_policy.py",
         "zip_bytes": size,
     }
     metadata_path(target).write_text(json.dumps(meta, indent=2) + "\n")
-    print(json.dumps({k: meta[k] for k in ("env_id", "timesteps", "wall_time_s", "steps_per_s", "zip_bytes")}), file=sys.stderr)
+    print(
+        json.dumps({k: meta[k] for k in ("env_id", "timesteps", "wall_time_s", "steps_per_s", "zip_bytes")}),
+        file=sys.stderr,
+    )
     return meta
+
+
+def _display(path: Path) -> str:
+    try:
+        return str(path.resolve().relative_to(ROOT))
+    except ValueError:
+        return str(path)
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--only", choices=tuple(TARGETS), default=None, help="train one policy only")
-    ap.add_argument("--timesteps", type=int, default=None, help="env steps per policy (default: n_timesteps of ppo.yml)")
+    ap.add_argument(
+        "--timesteps", type=int, default=None, help="env steps per policy (default: n_timesteps of ppo.yml)"
+    )
     ap.add_argument("--n-envs", type=int, default=2, help="subprocess envs (default 2)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--slam-env-kwargs", default="{}", help="JSON env kwargs of the SLAM policy's env (saved with it)")
@@ -115,6 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--checkpoint-freq", type=int, default=5000)
     ap.add_argument("--ship", choices=("final", "best"), default="final", help="which model to ship")
     ap.add_argument("--work-dir", default=str(ROOT / "runs" / "policies"))
+    ap.add_argument("--data-dir", default=str(DATA), help="where the policy zips go (default: agents/data)")
     ap.add_argument("--record", default=str(ROOT / "results" / "train_policy.json"))
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)

@@ -130,7 +130,7 @@ def test_trained_policy_loads_and_acts(trained):
     for _ in range(3):
         action, _ = model.predict(obs, deterministic=True)
         assert env.action_space.contains(int(action))
-        obs, reward, terminated, truncated, info = env.step(int(action))
+        obs, reward, terminated, truncated, _ = env.step(int(action))
         assert np.isfinite(reward)
         if terminated or truncated:
             break
@@ -304,7 +304,7 @@ def test_demo_command_exits_0_and_writes_figure(trained, tmp_path, capsys):
 
 def test_console_script_demo_help():
     exe = shutil.which("rhs-slam") or str(Path(sys.executable).parent / "rhs-slam")
-    proc = subprocess.run([exe, "demo", "--help"], capture_output=True, text=True, timeout=120)
+    proc = subprocess.run([exe, "demo", "--help"], capture_output=True, text=True, timeout=120, check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "--animation" in proc.stdout and "--policy" in proc.stdout
 
@@ -327,20 +327,21 @@ def test_shipped_policies_are_small_and_described():
 
 
 def test_shipped_slam_policy_loads_acts_and_beats_random():
-    """On the shipped env config (cheap scene: few vehicles, short episodes), same seeds:
-    the shipped policy's mean return beats the random policy's and it crashes less often."""
+    """On the shipped env config (SLAM in the loop), 20 s episodes, the same 3 seeds: the shipped
+    policy's mean return is over 1.5x the random policy's and it crashes no more often.
+    (Measured when shipped: 79.9 vs 33.6, 0 vs 3 crashes; deterministic given the seeds.)"""
     env_id, kwargs = resolve_env(SHIPPED_POLICY)
     assert env_id == SLAM
-    quick = {**kwargs, "registration": "icp", "vehicles_count": 10, "duration": 10}
-    env = gym.make(env_id, **quick)
+    env = gym.make(env_id, **{**kwargs, "duration": 20})
     shipped = load_policy(SHIPPED_POLICY, env)
     rand = load_policy("random", env, seed=0)
     seeds = range(100, 103)
     ours = [run_episode(env, shipped, s) for s in seeds]
     base = [run_episode(env, rand, s) for s in seeds]
     env.close()
-    assert np.mean([r["return"] for r in ours]) > np.mean([r["return"] for r in base])
+    assert np.mean([r["return"] for r in ours]) > 1.5 * np.mean([r["return"] for r in base])
     assert sum(r["crashed"] for r in ours) <= sum(r["crashed"] for r in base)
+    assert all(r["position_rmse_m"] is not None and np.isfinite(r["position_rmse_m"]) for r in ours)
 
 
 def test_shipped_truth_policy_loads_and_acts():
