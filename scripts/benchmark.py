@@ -144,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sections", nargs="+", choices=SECTIONS, default=list(SECTIONS))
     ap.add_argument("--steps", type=int, default=40, help="env steps per id (envs section)")
     ap.add_argument("--grid-deg", type=float, default=1.0)
-    ap.add_argument("--train-steps", type=int, default=256, help="PPO timesteps per setting (training section)")
+    ap.add_argument("--train-steps", type=int, default=1024, help="PPO timesteps per setting (training section)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmark.json"))
     args = ap.parse_args(argv)
