@@ -46,13 +46,6 @@ POLICY_HZ = 5  # rhs-paper-v0: one SLAM cycle per 0.2 s
 IDLE = 1  # DiscreteMetaAction: keep lane and speed
 
 
-def default_registration() -> str:
-    """The SLAM env's default registration (``rhs_env.slam_wrapper.DEFAULT_REGISTRATION``)."""
-    from rhs_env.slam_wrapper import DEFAULT_REGISTRATION
-
-    return DEFAULT_REGISTRATION
-
-
 def run_episode(
     antenna: str, seed: int, tx_power_dbm: float, args: argparse.Namespace
 ) -> dict:
@@ -374,8 +367,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         a.seeds, a.powers, a.grid_deg, a.cycles = 1, [30.0], 5.0, 10
     if a.seeds < 1 or a.cycles < 1:
         p.error("--seeds and --cycles must be at least 1")
-    if a.registration is None:
-        a.registration = default_registration()
+    if a.registration is None:  # the SLAM env's default
+        from rhs_env.slam_wrapper import DEFAULT_REGISTRATION
+
+        a.registration = DEFAULT_REGISTRATION
     return a
 
 

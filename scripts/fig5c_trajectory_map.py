@@ -34,13 +34,6 @@ POLICY_HZ = 5
 IDLE = 1  # DiscreteMetaAction: keep lane and speed
 
 
-def default_registration() -> str:
-    """The SLAM env's default registration (``rhs_env.slam_wrapper.DEFAULT_REGISTRATION``)."""
-    from rhs_env.slam_wrapper import DEFAULT_REGISTRATION
-
-    return DEFAULT_REGISTRATION
-
-
 def run(args: argparse.Namespace) -> dict:
     import gymnasium as gym
     from tqdm import tqdm
@@ -313,8 +306,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         a.grid_deg, a.cycles = 5.0, 10
     if a.cycles < 1 or a.seed < 0:
         p.error("--cycles must be at least 1 and --seed non-negative")
-    if a.registration is None:
-        a.registration = default_registration()
+    if a.registration is None:  # the SLAM env's default
+        from rhs_env.slam_wrapper import DEFAULT_REGISTRATION
+
+        a.registration = DEFAULT_REGISTRATION
     return a
 
 
