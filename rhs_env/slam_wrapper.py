@@ -38,7 +38,13 @@ from rhs_env.validation import check_choice, check_int, check_range
 from slam.metrics import map_metrics
 from slam.pipeline import SlamPipeline
 from slam.rbpf import SlamConfig, wrap_angle
-from slam.registration import ICPRegistration, OdometryRegistration, relative_motion
+from slam.registration import (
+    ICPRegistration,
+    OdometryRegistration,
+    apply_motion,
+    points_in_frame,
+    relative_motion,
+)
 
 REGISTRATIONS = ("cnn", "icp", "odometry")
 #: Default registration, chosen by measurement (README, "Registration"): on held-out
@@ -59,26 +65,6 @@ def make_registration(kind: str, rng: np.random.Generator | None = None, weights
     if kind == "icp":
         return ICPRegistration()
     return OdometryRegistration(rng=rng)
-
-
-def to_frame(pose_world: np.ndarray, origin_world: np.ndarray) -> np.ndarray:
-    """Pose(s) (..., 3) of the world frame expressed in the frame of ``origin_world``."""
-    p = np.asarray(pose_world, dtype=float)
-    c, s = np.cos(origin_world[2]), np.sin(origin_world[2])
-    d = p[..., :2] - origin_world[:2]
-    out = np.empty(p.shape)
-    out[..., 0] = c * d[..., 0] + s * d[..., 1]
-    out[..., 1] = -s * d[..., 0] + c * d[..., 1]
-    if p.shape[-1] > 2:
-        out[..., 2] = wrap_angle(p[..., 2] - origin_world[2])
-    return out[..., : p.shape[-1]]
-
-
-def from_frame(xy: np.ndarray, origin_world: np.ndarray) -> np.ndarray:
-    """Points (N, 2) of the frame of ``origin_world`` expressed in the world frame."""
-    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
-    c, s = np.cos(origin_world[2]), np.sin(origin_world[2])
-    return np.stack([origin_world[0] + c * xy[:, 0] - s * xy[:, 1], origin_world[1] + s * xy[:, 0] + c * xy[:, 1]], 1)
 
 
 class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
@@ -182,7 +168,7 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         res = self.pipeline.step(points, self.dt, true_motion=true_motion)
         self.prev_world = pose_w
         est = self.estimate = res.estimate
-        true_pose = to_frame(pose_w, self.origin)
+        true_pose = relative_motion(self.origin, pose_w)
         self.true_traj.append(true_pose)
         self.est_traj.append(np.asarray(est.pose, dtype=float))
 
@@ -210,7 +196,7 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             center_he = np.array([pose_w[0], -pose_w[1]])
             self.seen_ids.update(int(i) for i in lms.near(center_he, reach))
         ids = np.array(sorted(self.seen_ids), dtype=int)
-        true_lm = to_frame(lms.xy_world[ids], self.origin) if len(ids) else np.zeros((0, 2))
+        true_lm = points_in_frame(lms.xy_world[ids], self.origin)
         est_lm, _ = self.pipeline.slam.full_map()
         mm = map_metrics(est_lm, true_lm, self.map_gate_m)
         err = np.asarray(est.pose) - true_pose
@@ -240,7 +226,7 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         frame = np.ascontiguousarray(frame).copy()
 
         def he(xy_map: np.ndarray) -> np.ndarray:
-            return he_to_world_xy(from_frame(xy_map, self.origin))  # the y flip is its own inverse
+            return he_to_world_xy(apply_motion(xy_map, self.origin))  # the y flip is its own inverse
 
         layers = [
             (np.asarray(self.true_traj)[:, :2], TRUE_COLOR, 1),

@@ -39,7 +39,8 @@ def run(args: argparse.Namespace) -> dict:
     from tqdm import tqdm
 
     import rhs_env  # noqa: F401  (registers the ids)
-    from rhs_env.slam_wrapper import SlamObservation, from_frame
+    from rhs_env.slam_wrapper import SlamObservation
+    from slam.registration import apply_motion
     from slam.metrics import map_metrics
 
     radar = {
@@ -71,7 +72,7 @@ def run(args: argparse.Namespace) -> dict:
     def add_cloud(o, world_pose):
         pts = o["points"][o["points_mask"] > 0, :2].astype(float)
         if len(pts):
-            clouds.append(from_frame(pts, np.asarray(world_pose, dtype=float)))
+            clouds.append(apply_motion(pts, np.asarray(world_pose, dtype=float)))
 
     add_cloud(obs, info["world_pose"])
     bar = tqdm(
@@ -97,7 +98,7 @@ def run(args: argparse.Namespace) -> dict:
         np.asarray(est, float),
         np.asarray(std, float),
     )
-    to_world = lambda xy: from_frame(np.asarray(xy, float).reshape(-1, 2), origin)
+    to_world = lambda xy: apply_motion(np.asarray(xy, float).reshape(-1, 2), origin)
     true_lm = np.asarray(info["true_landmarks"], float).reshape(-1, 2)
     est_lm = np.asarray(info["estimated_landmarks"], float).reshape(-1, 2)
     mm = map_metrics(est_lm, true_lm, float(args.map_gate))

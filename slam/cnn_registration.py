@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from rhs_env.validation import check_int, check_range
+from slam.registration import compose, points_in_frame
 
 DEFAULT_WEIGHTS = Path(__file__).parent / "data" / "registration_cnn.pt"
 
@@ -41,24 +42,6 @@ class GridMapConfig:
     @property
     def half_extent_m(self) -> float:
         return 0.5 * self.cells * self.cell_m
-
-
-def transform_points(xy: np.ndarray, motion: np.ndarray) -> np.ndarray:
-    """Express points of the previous vehicle frame in the current one.
-
-    With motion ``(dx, dy, dpsi)`` of the current frame in the previous frame,
-    ``p_cur = R(-dpsi) (p_prev - (dx, dy))``.
-    """
-    dx, dy, dpsi = np.asarray(motion, dtype=float)
-    c, s = np.cos(dpsi), np.sin(dpsi)
-    q = np.asarray(xy, dtype=float) - (dx, dy)
-    return np.stack([c * q[:, 0] + s * q[:, 1], -s * q[:, 0] + c * q[:, 1]], axis=1)
-
-
-def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Motion ``a`` followed by motion ``b`` (b expressed in the frame reached by a)."""
-    c, s = np.cos(a[2]), np.sin(a[2])
-    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], a[2] + b[2]])
 
 
 def grid_map(points: np.ndarray, cfg: GridMapConfig) -> np.ndarray:
@@ -85,7 +68,7 @@ def grid_map(points: np.ndarray, cfg: GridMapConfig) -> np.ndarray:
 
 def pair_input(prev_points: np.ndarray, points: np.ndarray, prior: np.ndarray, cfg: GridMapConfig) -> np.ndarray:
     """The CNN input (2, cells, cells): previous cloud moved by the prior, current cloud."""
-    prev_xy = transform_points(np.asarray(prev_points)[:, :2], prior) if len(prev_points) else np.zeros((0, 2))
+    prev_xy = points_in_frame(np.asarray(prev_points)[:, :2], prior) if len(prev_points) else np.zeros((0, 2))
     return np.stack([grid_map(prev_xy, cfg), grid_map(np.asarray(points)[:, :2], cfg)])
 
 

@@ -24,7 +24,15 @@ from scipy.spatial import cKDTree
 
 from rhs_env.validation import check_int, check_range
 
-__all__ = ["Registration", "ICPRegistration", "OdometryRegistration", "apply_motion", "relative_motion"]
+__all__ = [
+    "Registration",
+    "ICPRegistration",
+    "OdometryRegistration",
+    "apply_motion",
+    "compose",
+    "points_in_frame",
+    "relative_motion",
+]
 
 
 @runtime_checkable
@@ -43,6 +51,26 @@ def apply_motion(xy: np.ndarray, motion: np.ndarray) -> np.ndarray:
     c, s = math.cos(dth), math.sin(dth)
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     return np.stack([c * xy[:, 0] - s * xy[:, 1] + dx, s * xy[:, 0] + c * xy[:, 1] + dy], axis=1)
+
+
+def points_in_frame(xy: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """Points (N, 2) expressed in the frame of ``pose`` (3,): ``R(th)^T (x - [px, py])``.
+
+    The inverse of :func:`apply_motion`; with a motion ``(dx, dy, dth)`` it moves
+    points of the previous vehicle frame into the current one.
+    """
+    px, py, th = np.asarray(pose, dtype=float).reshape(3)
+    c, s = math.cos(th), math.sin(th)
+    d = np.asarray(xy, dtype=float).reshape(-1, 2) - (px, py)
+    return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], axis=1)
+
+
+def compose(pose: np.ndarray, motion: np.ndarray) -> np.ndarray:
+    """``pose (+) motion``: ``[x, y] += R(th) [dx, dy]``, ``th += dth`` (wrapped); inverse of :func:`relative_motion`."""
+    x, y, th = np.asarray(pose, dtype=float).reshape(3)
+    dx, dy, dth = np.asarray(motion, dtype=float).reshape(3)
+    c, s = math.cos(th), math.sin(th)
+    return np.array([x + c * dx - s * dy, y + s * dx + c * dy, (th + dth + math.pi) % (2 * math.pi) - math.pi])
 
 
 def relative_motion(pose_prev: np.ndarray, pose: np.ndarray) -> np.ndarray:

@@ -22,29 +22,15 @@ from rhs_env.validation import check_int, check_range
 from slam.metrics import heading_rmse, map_metrics, position_rmse
 from slam.pipeline import SlamPipeline
 from slam.rbpf import SlamConfig
-from slam.registration import Registration, relative_motion
+from slam.registration import Registration, compose, points_in_frame, relative_motion
 
 __all__ = ["run_scenario", "SyntheticCloud", "RadarCloud", "compose", "poses_in_frame"]
-
-
-def compose(pose: np.ndarray, motion: np.ndarray) -> np.ndarray:
-    """``pose (+) motion``: ``[x, y] += R(th) [dx, dy]``, ``th += dth`` (wrapped)."""
-    x, y, th = pose
-    dx, dy, dth = motion
-    c, s = math.cos(th), math.sin(th)
-    return np.array([x + c * dx - s * dy, y + s * dx + c * dy, (th + dth + math.pi) % (2 * math.pi) - math.pi])
 
 
 def poses_in_frame(poses: np.ndarray, origin: np.ndarray) -> np.ndarray:
     """Express world poses (T, 3) in the frame of ``origin`` (3,)."""
     poses = np.asarray(poses, dtype=float).reshape(-1, 3)
     return np.stack([relative_motion(origin, p) for p in poses]) if len(poses) else np.zeros((0, 3))
-
-
-def _points_in_frame(xy: np.ndarray, origin: np.ndarray) -> np.ndarray:
-    c, s = math.cos(origin[2]), math.sin(origin[2])
-    d = np.asarray(xy, dtype=float).reshape(-1, 2) - origin[:2]
-    return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], axis=1)
 
 
 class SyntheticCloud:
@@ -106,11 +92,11 @@ class SyntheticCloud:
             dw = (pose[:2] - self._prev_pose[:2]) / self.dt
             v = np.array([c * dw[0] + s * dw[1], -s * dw[0] + c * dw[1]])
         self._prev_pose = pose.copy()
-        xy = _points_in_frame(self.landmarks, pose)
+        xy = points_in_frame(self.landmarks, pose)
         rel_v = np.broadcast_to(-v, xy.shape)
         if self.movers is not None and len(self.movers):
             mw = self.movers[:, :2] + self.movers[:, 2:] * (t * self.dt)
-            mxy = _points_in_frame(mw, pose)
+            mxy = points_in_frame(mw, pose)
             mv = self.movers[:, 2:]
             mv_veh = np.stack([c * mv[:, 0] + s * mv[:, 1], -s * mv[:, 0] + c * mv[:, 1]], axis=1)
             xy = np.concatenate([xy, mxy])
@@ -172,7 +158,7 @@ class RadarCloud:
             w = m[2] / ((hi - lo) * self.dt)
         else:
             v, w = np.zeros(2), 0.0
-        xy = _points_in_frame(self.landmarks, pose)
+        xy = points_in_frame(self.landmarks, pose)
         rel_v = -(v[None, :] + w * np.stack([-xy[:, 1], xy[:, 0]], axis=1))
         k = len(xy)
         sc = Scatterers(xy, rel_v, np.full(k, self.rcs_m2), np.arange(k), np.ones(k, bool))
@@ -230,7 +216,7 @@ def run_scenario(
     slam = pipe.slam
     origin = poses[0]
     true_map = poses_in_frame(poses, origin)
-    true_lm = _points_in_frame(np.asarray(landmarks, dtype=float).reshape(-1, 2), origin)
+    true_lm = points_in_frame(np.asarray(landmarks, dtype=float).reshape(-1, 2), origin)
 
     est_poses = np.zeros((T, 3))
     pose_std = np.zeros((T, 3))

@@ -12,11 +12,9 @@ from slam.cnn_registration import (
     DEFAULT_WEIGHTS,
     CNNRegistration,
     GridMapConfig,
-    compose,
     grid_map,
-    transform_points,
 )
-from slam.registration import relative_motion
+from slam.registration import compose, points_in_frame, relative_motion
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
@@ -42,7 +40,7 @@ def test_transform_and_compose_are_consistent():
     a, b = np.array([1.5, -0.4, 0.1]), np.array([0.7, 0.2, -0.05])
     xy = rng.uniform(-20, 20, (10, 2))
     # moving by a then b equals moving by compose(a, b)
-    assert np.allclose(transform_points(transform_points(xy, a), b), transform_points(xy, compose(a, b)))
+    assert np.allclose(points_in_frame(points_in_frame(xy, a), b), points_in_frame(xy, compose(a, b)))
     # relative_motion inverts compose
     assert np.allclose(relative_motion(a, compose(a, b)), b)
 

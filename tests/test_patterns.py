@@ -12,7 +12,7 @@ import pytest
 
 from rhs_env.antenna import RHSConfig, ScanConfig, make_antenna
 from rhs_env.patterns import library as L
-from rhs_env.patterns.fast import FastSettings, optimize_grid_fast
+from rhs_env.patterns.fast import FastSettings
 from rhs_env.patterns.metrics import pattern_report, sidelobe_directions
 from rhs_env.patterns.sdr import optimize_grid_sdr
 
