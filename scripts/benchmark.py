@@ -12,7 +12,7 @@ Sections (``--sections``, default all):
 * ``training``: PPO training steps per second with 1 and 2 subprocess envs.
 
     python scripts/benchmark.py --out results/benchmark.json      # also writes results/benchmark.md
-    python scripts/benchmark.py --sections envs --steps 20
+    python scripts/benchmark.py --sections envs --steps 20   # keeps the other sections of --out
 """
 
 from __future__ import annotations
@@ -103,8 +103,11 @@ def _fmt(d: dict | None) -> str:
 
 def markdown(result: dict) -> str:
     """The README table of a benchmark result."""
+    runs = result.get("section_runs", {})
+    when = "; ".join(f"{k} {v['date']}, load {v['load_average'][0]:.1f}" for k, v in runs.items())
     lines = [f"Measured by `python scripts/benchmark.py` on {result['machine']['cpus']} CPU cores "
-             f"(load average at start {result['machine']['load_average']}).", ""]
+             + (f"(per section: {when})." if when else f"(load average at start {result['machine']['load_average']})."),
+             ""]
     if "envs" in result:
         e = result["envs"]
         lines += ["| env (default radar, dtheta = %g deg) | steps/s | ms/step | radar stages (ms) | SLAM stages (ms) |"
@@ -175,6 +178,15 @@ def main(argv: list[str] | None = None) -> int:
         print("benchmark: training ...", file=sys.stderr)
         result["training"] = bench_training(args.train_steps, args.seed)
     out = Path(args.out)
+    # sections not run now are kept from an existing file, with when and under what load they ran
+    previous = json.loads(out.read_text()) if out.exists() else {}
+    runs = previous.get("section_runs", {})
+    for sec in SECTIONS:
+        if sec in args.sections:
+            runs[sec] = {"date": time.strftime("%Y-%m-%d %H:%M"), "load_average": result["machine"]["load_average"]}
+        elif sec in previous:
+            result[sec] = previous[sec]
+    result["section_runs"] = {k: runs[k] for k in SECTIONS if k in runs}
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2, default=float))
     out.with_suffix(".md").write_text(markdown(result) + "\n")

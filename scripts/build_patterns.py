@@ -60,7 +60,21 @@ def main(argv: list[str] | None = None) -> int:
     if a.json is not None:
         a.json.parent.mkdir(parents=True, exist_ok=True)
         a.json.write_text(json.dumps(summary, indent=2))
+        a.json.with_suffix(".md").write_text(markdown(summary, config, a.method, a.workers) + "\n")
     return 0
+
+
+def markdown(summary: list[dict], config: RHSConfig, method: str, workers: int) -> str:
+    """Table of the built libraries (written next to ``--json`` as ``.md``)."""
+    lines = [f"Libraries built by `python scripts/build_patterns.py` ({method} method, M={config.elements}, "
+             f"{workers} workers); two-way PSLR and pointing over every grid of each library.", "",
+             "| dtheta deg | grids | build s | worst PSLR dB | median PSLR dB | median main-lobe gain dB | "
+             "worst pointing deg |", "|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in summary:
+        lines.append(f"| {r['grid_deg']:g} | {r['grids']} | {r['build_s']:.1f} | {r['worst_pslr_db']:.2f} | "
+                     f"{r['median_pslr_db']:.2f} | {r['median_mainlobe_gain_db']:.2f} | "
+                     f"{r['worst_pointing_error_deg']:.2f} |")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

@@ -165,3 +165,66 @@ def test_settings_validation_names_field() -> None:
     with pytest.raises(ValueError, match="unknown fast settings"):
         L.library_fields(RHSConfig(), ScanConfig(), "fast", bogus=1)
     assert sidelobe_directions(RHSConfig(), 0.0).min() >= -1.0
+
+
+def _side_problem(angle_deg: float = 20.0) -> tuple:
+    """Tx half-step data of the default radar at ``angle_deg`` with the Rx hologram fixed."""
+    from rhs_env.antenna import hologram_pattern
+    from rhs_env.patterns.metrics import side_matrix
+
+    cfg = RHSConfig()
+    si = np.array([np.sin(np.deg2rad(angle_deg))])
+    s_d = sidelobe_directions(cfg, angle_deg)
+    rx = hologram_pattern(cfg, np.array([angle_deg]), cfg.rx_feed)[0]
+    tx = hologram_pattern(cfg, np.array([angle_deg]), cfg.tx_feed)[0]
+    o_i = abs(side_matrix(cfg, si, cfg.rx_feed)[0] @ rx) ** 2
+    w_d = np.abs(side_matrix(cfg, s_d, cfg.rx_feed) @ rx) ** 2 / o_i
+    b_i, b_d = side_matrix(cfg, si, cfg.tx_feed)[0], side_matrix(cfg, s_d, cfg.tx_feed)
+    return b_i, b_d, w_d, float(np.angle(b_i @ tx)), tx / np.linalg.norm(tx)
+
+
+@pytest.mark.parametrize("scale", [0.5, 1.0, 2.0])
+def test_active_set_socp_keeps_the_optimum_and_every_constraint(scale: float) -> None:
+    """Half-step SOCP started with a handful of sidelobe directions = the SOCP with all of D."""
+    from rhs_env.patterns.fast import _SideSOCP
+
+    b_i, b_d, w_d, phi, tx = _side_problem()
+    level = np.sqrt(w_d) * np.abs(b_d @ tx)
+    rho = scale * level.max()
+    empty = np.zeros(b_d.shape[0], bool)
+    empty[np.argmax(level)] = True
+    full = _SideSOCP(b_i, b_d, w_d, b_d[:0], w_d[:0], phi).solve(rho)
+    small = _SideSOCP(b_i, b_d, w_d, b_d[:0], w_d[:0], phi, active=empty)
+    part = small.solve(rho)
+    assert full is not None and part is not None
+    assert part[0] == pytest.approx(full[0], rel=1e-5)  # G(rho)
+    assert part[1] == pytest.approx(full[1], rel=1e-3, abs=1e-6)  # G'(rho) from the duals
+    assert np.all(np.sqrt(w_d) * np.abs(b_d @ part[2]) <= rho * (1 + 1e-4))
+    assert 1 < small.active.sum() < b_d.shape[0]  # violated directions were added, not all of D
+
+
+def test_both_orders_are_screened() -> None:
+    from rhs_env.patterns.fast import optimize_grid_fast
+
+    cfg = RHSConfig(elements=16)
+    settings = FastSettings(max_iter=5, starts=2)
+    _, _, info = optimize_grid_fast(cfg, 10.0, 10.0, settings)
+    assert len(info["start_deltas"]) == 4 and info["order"] in ("tx", "rx")
+    assert info["delta"] >= max(info["start_deltas"]) - 1e-9  # the best candidate continued, monotone
+    _, _, one = optimize_grid_fast(cfg, 10.0, 10.0, FastSettings(max_iter=5, starts=2, both_orders=False))
+    assert len(one["start_deltas"]) == 2 and one["order"] == "tx"
+
+
+def _blas_threads() -> int:
+    from threadpoolctl import threadpool_info
+
+    return max((p["num_threads"] for p in threadpool_info()), default=1)
+
+
+def test_parallel_map_workers_are_single_threaded() -> None:
+    """Forked workers would inherit the parent's BLAS pools and oversubscribe the cores."""
+    from rhs_env.patterns.parallel import parallel_map
+
+    assert parallel_map(_blas_threads, [(), (), ()], workers=2) == [1, 1, 1]
+    with pytest.raises(ValueError, match="workers"):
+        parallel_map(_blas_threads, [()], workers=0)

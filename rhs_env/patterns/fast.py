@@ -27,12 +27,20 @@ is convex, ``G`` is concave and nondecreasing in ``rho`` with
 ``delta(rho) = G(rho)^2 - rho^2`` is maximised over the scalar rho by a
 safeguarded secant search on ``delta'(rho)/2 = G G' - rho``. Evaluating at the
 current sidelobe level ``rho_cur`` reproduces ``psi_cur``'s delta, so every
-half-step is monotone. The set K (``theta_i +- 0.45 grid``, and points across
-the main lobe) keeps the two-way peak at the grid centre, so the pointing error
-stays below half a grid. Initialisation: the closed-form cosine holograms (plus
-optional random starts). The phase-fixed SOCP is local in ``phi``; in the first
-alternation(s) each half-step tries ``phase_sweep`` equally spaced phases and keeps
-the best, which makes the early steps global in ``phi``.
+half-step is monotone. The set K (``theta_i +- 0.9 grid``, and points across
+the main lobe) keeps the two-way peak at the grid centre; the result is checked on
+a fine grid and re-solved with ``+- 0.45 grid`` if it points more than half a grid off.
+
+**Global search.** The alternation is a local method: the phase-fixed SOCP is local
+in ``phi``, and which side moves first decides which local optimum it reaches. So the
+first ``sweep_iters`` alternations try ``phase_sweep`` equally spaced phases per
+half-step (keeping the best), every start (the closed-form cosine holograms, plus
+optional random amplitudes) is run with the Tx and with the Rx half-step first, and
+only the best of these candidates after the sweep continues to convergence.
+
+**Active set.** Most sidelobe directions are far below rho, so each SOCP starts with the
+directions within ``active_db`` of the current peak and adds any direction its solution
+violates (re-solving), which keeps the cones few without changing the optimum.
 
 **Sidelobe cap.** P1's delta is a difference of powers, so on some grids its optimum
 has a high PSLR. With ``max_sidelobe_db`` the rho search is limited to
@@ -48,9 +56,7 @@ Clarabel updates in place without re-factorising the symbolic structure).
 
 from __future__ import annotations
 
-import os
-from collections.abc import Callable, Iterable
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -66,6 +72,7 @@ from rhs_env.patterns.metrics import (
     sidelobe_directions,
     two_way_power,
 )
+from rhs_env.patterns.parallel import parallel_map
 from rhs_env.validation import check_int, check_range
 
 
@@ -95,20 +102,28 @@ class FastSettings:
         warm_start: :func:`build_fast` runs a second pass in which every grid also starts from
             its neighbours' first-pass solutions (adjacent grids have similar optima) and keeps
             the better result.
+        both_orders: run every start twice, with the Tx and with the Rx half-step first, and
+            keep the better result (the two orders converge to different local optima).
+        active_db: sidelobe directions whose weighted level is within ``active_db`` dB of the
+            current peak start in each half-step SOCP; directions that the solution violates
+            are added and the SOCP re-solved, so every constraint on D holds (the active set
+            only makes the SOCPs smaller), dB in [-80, 0].
     """
 
     oversample: float = 4.0
-    max_iter: int = 30
-    tol: float = 1e-4
-    rho_evals: int = 6
+    max_iter: int = 100
+    tol: float = 1e-6
+    rho_evals: int = 8
     pointing: bool = True
     max_sidelobe_db: float = -16.5
-    phase_sweep: int = 4
-    sweep_iters: int = 1
+    phase_sweep: int = 8
+    sweep_iters: int = 2
     starts: int = 1
     seed: int = 0
     pointing_check: float = 0.9
     warm_start: bool = False
+    both_orders: bool = True
+    active_db: float = -6.0
 
     def __post_init__(self) -> None:
         check_range("oversample", self.oversample, 0.0, 64.0, low_open=True)
@@ -121,7 +136,8 @@ class FastSettings:
         check_int("seed", self.seed, 0, 2**63 - 1)
         check_range("max_sidelobe_db", self.max_sidelobe_db, -80.0, 0.0)
         check_range("pointing_check", self.pointing_check, 0.05, 1.0)
-        for name in ("pointing", "warm_start"):
+        check_range("active_db", self.active_db, -80.0, 0.0)
+        for name in ("pointing", "warm_start", "both_orders"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")  # noqa: TRY004
 
@@ -130,60 +146,80 @@ class FastSettings:
 
 
 class _SideSOCP:
-    """The half-step SOCP of one side for fixed phase and weights; ``solve(rho)`` re-uses the solver."""
+    """The half-step SOCP of one side for fixed phase and weights; ``solve(rho)`` re-uses the solver.
+
+    Active set: only the sidelobe directions in ``active`` enter the SOCP; after each solve
+    the full set D is checked and violated directions are added (and the SOCP re-solved),
+    so the returned optimum satisfies every constraint on D.
+    """
 
     def __init__(self, b_i: np.ndarray, b_d: np.ndarray, w_d: np.ndarray, b_k: np.ndarray, w_k: np.ndarray,
-                 phi: float) -> None:
-        m = b_i.size
-        c = np.real(np.exp(-1j * phi) * b_i)
-        L, K = b_d.shape[0], b_k.shape[0]
-        eye = sp.identity(m, format="csr")
-        blocks = [-eye, sp.vstack([sp.csr_matrix((1, m)), -eye])]
-        bvec = [np.zeros(m), np.r_[1.0, np.zeros(m)]]
-        cones: list[Any] = [clarabel.NonnegativeConeT(m), clarabel.SecondOrderConeT(m + 1)]
-        # sidelobe cones: rows (head 0, Re, Im) per l, head row of A is zero, b_head = rho
-        sd = np.sqrt(w_d)[:, None] * b_d
-        a_side = np.zeros((L, 3, m))
-        a_side[:, 1, :] = -sd.real
-        a_side[:, 2, :] = -sd.imag
-        blocks.append(sp.csr_matrix(a_side.reshape(3 * L, m)))
-        bvec.append(np.zeros(3 * L))
-        cones += [clarabel.SecondOrderConeT(3)] * L
-        if K:
-            sk = np.sqrt(w_k)[:, None] * b_k
-            a_main = np.zeros((K, 3, m))
-            a_main[:, 0, :] = -c
-            a_main[:, 1, :] = -sk.real
-            a_main[:, 2, :] = -sk.imag
-            blocks.append(sp.csr_matrix(a_main.reshape(3 * K, m)))
-            bvec.append(np.zeros(3 * K))
-            cones += [clarabel.SecondOrderConeT(3)] * K
-        self.A = sp.vstack(blocks, format="csc")
-        self.b = np.concatenate(bvec)
-        self.head = 2 * m + 1 + 3 * np.arange(L)  # rows of the sidelobe cone heads
-        self.c = c
+                 phi: float, active: np.ndarray | None = None) -> None:
+        self.c = np.real(np.exp(-1j * phi) * b_i)
+        self.sd = np.sqrt(w_d)[:, None] * b_d
+        self.sk = np.sqrt(w_k)[:, None] * b_k
+        self.active = np.ones(b_d.shape[0], bool) if active is None else active.copy()
         settings = clarabel.DefaultSettings()
         settings.verbose = False
         settings.tol_gap_rel = 1e-6
         settings.tol_gap_abs = 1e-8
         settings.presolve_enable = False
         self.settings = settings
-        self.cones = cones
-        self.P = sp.csc_matrix((m, m))
         self.solver: Any = None
 
-    def solve(self, rho: float) -> tuple[float, float, np.ndarray] | None:
-        """Return (G(rho), G'(rho), psi) or None when the solver fails."""
+    def _build(self, rho: float) -> None:
+        """Set up the SOCP over the active sidelobe directions (and a fresh solver) at ``rho``."""
+        m = self.c.size
+        sd = self.sd[self.active]
+        L, K = sd.shape[0], self.sk.shape[0]
+        eye = sp.identity(m, format="csr")
+        blocks = [-eye, sp.vstack([sp.csr_matrix((1, m)), -eye])]  # psi >= 0, ||psi|| <= 1
+        bvec = [np.zeros(m), np.r_[1.0, np.zeros(m)]]
+        cones: list[Any] = [clarabel.NonnegativeConeT(m), clarabel.SecondOrderConeT(m + 1)]
+        # sidelobe cones: rows (head, Re, Im) per direction; the head row of A is zero, b_head = rho
+        a_side = np.zeros((L, 3, m))
+        a_side[:, 1, :] = -sd.real
+        a_side[:, 2, :] = -sd.imag
+        blocks.append(sp.csr_matrix(a_side.reshape(3 * L, m)))
+        bvec.append(np.zeros(3 * L))
+        cones += [clarabel.SecondOrderConeT(3)] * L
+        if K:  # main-lobe cones: sqrt(w_k) |b_k^T psi| <= c^T psi
+            a_main = np.zeros((K, 3, m))
+            a_main[:, 0, :] = -self.c
+            a_main[:, 1, :] = -self.sk.real
+            a_main[:, 2, :] = -self.sk.imag
+            blocks.append(sp.csr_matrix(a_main.reshape(3 * K, m)))
+            bvec.append(np.zeros(3 * K))
+            cones += [clarabel.SecondOrderConeT(3)] * K
+        self.b = np.concatenate(bvec)
+        self.head = 2 * m + 1 + 3 * np.arange(L)
         b = self.b.copy()
         b[self.head] = rho
-        if self.solver is None:
-            self.solver = clarabel.DefaultSolver(self.P, -self.c, self.A, b, self.cones, self.settings)
-        else:
-            self.solver.update(b=b)
-        sol = self.solver.solve()
-        if str(sol.status) not in ("Solved", "AlmostSolved"):
-            return None
-        x = np.maximum(np.asarray(sol.x), 0.0)
+        self.solver = clarabel.DefaultSolver(sp.csc_matrix((m, m)), -self.c, sp.vstack(blocks, format="csc"), b,
+                                             cones, self.settings)
+
+    def solve(self, rho: float) -> tuple[float, float, np.ndarray] | None:
+        """Return (G(rho), G'(rho), psi) or None when the solver fails.
+
+        Only ``b`` depends on rho, so a solver is updated in place; a direction added to the
+        active set rebuilds it.
+        """
+        while True:
+            if self.solver is None:
+                self._build(rho)
+            else:
+                b = self.b.copy()
+                b[self.head] = rho
+                self.solver.update(b=b)
+            sol = self.solver.solve()
+            if str(sol.status) not in ("Solved", "AlmostSolved"):
+                return None
+            x = np.maximum(np.asarray(sol.x), 0.0)
+            viol = (np.abs(self.sd @ x) > rho * (1 + 1e-5)) & ~self.active
+            if not viol.any():
+                break
+            self.active |= viol
+            self.solver = None
         z = np.asarray(sol.z)
         return float(self.c @ x), float(np.sum(z[self.head])), x
 
@@ -280,14 +316,16 @@ def _optimize(
 
     sweep_iters = 0 if warm else settings.sweep_iters
 
-    def alternate(psi: dict[str, np.ndarray], first: int, last: int) -> tuple[dict[str, np.ndarray], Any, list, int]:
-        """Alternations ``first..last`` (1-based; the first ``sweep_iters`` sweep phi) from ``psi``."""
+    def alternate(psi: dict[str, np.ndarray], first: int, last: int, order: tuple[str, str]
+                  ) -> tuple[dict[str, np.ndarray], Any, list, int]:
+        """Alternations ``first..last`` (1-based; the first ``sweep_iters`` sweep phi) from ``psi``,
+        each a half-step of ``order[0]`` then of ``order[1]``."""
         cur = merit(psi)
         history = [cur[1]]
         it = first - 1
         for it in range(first, last + 1):
             start = cur
-            for side, other in (("tx", "rx"), ("rx", "tx")):
+            for side, other in (order, order[::-1]):
                 b_i, b_d, b_k = mats[side]
                 o_i_vec, o_d_mat, o_k_mat = mats[other]
                 o_i = abs(o_i_vec @ psi[other]) ** 2
@@ -298,8 +336,10 @@ def _optimize(
                 phi0 = float(np.angle(b_i @ psi[side]))
                 rho0 = float(np.sqrt(np.max(w_d * np.abs(b_d @ psi[side]) ** 2)))
                 nphi = settings.phase_sweep if it <= sweep_iters else 1
+                level = w_d * np.abs(b_d @ psi[side]) ** 2
+                active = level >= level.max() * 10.0 ** (settings.active_db / 10.0)
                 for phi in phi0 + 2 * np.pi * np.arange(nphi) / nphi:
-                    sv = _SideSOCP(b_i, b_d, w_d, b_k, w_k, float(phi))
+                    sv = _SideSOCP(b_i, b_d, w_d, b_k, w_k, float(phi), active)
                     x = _half_step(sv, rho0, settings.rho_evals, kappa)
                     if x is None and kappa < 1.0:  # cap unreachable from here: plain delta step
                         x = _half_step(sv, rho0, settings.rho_evals, np.inf)
@@ -326,53 +366,22 @@ def _optimize(
         inits = [{side: hologram_pattern(config, np.array([angle_deg]), f)[0] for side, f in feeds.items()}]
         for _ in range(settings.starts - 1):
             inits.append({side: rng.uniform(0.0, 1.0, config.elements) for side in feeds})
-    screen = max(sweep_iters, 1)
+    # candidates: every start with each half-step order, screened for the phase-sweep
+    # alternations; the best one continues to convergence
+    orders = [("tx", "rx"), ("rx", "tx")] if settings.both_orders else [("tx", "rx")]
+    screen = min(max(sweep_iters, 1), settings.max_iter)
     runs = []
     for init in inits:
         p0 = {k: v / np.linalg.norm(v) for k, v in init.items()}
-        runs.append(alternate(p0, 1, min(screen, settings.max_iter)))
-    psi, cur, history, it = max(runs, key=lambda r: r[1])
+        runs += [(*alternate(p0, 1, screen, order), order) for order in orders]
+    psi, cur, history, it, order = max(runs, key=lambda r: r[1])
     if it < settings.max_iter:
-        psi, cur, more, it = alternate(psi, it + 1, settings.max_iter)
-        history += more[1:]
+        psi, cur, more, it = alternate(psi, it + 1, settings.max_iter, order)
+        history = history + more[1:]
     tx = psi["tx"] / psi["tx"].max()
     rx = psi["rx"] / psi["rx"].max()
     return tx, rx, {"delta": cur[1], "capped": cur[0], "iterations": it, "history": history,
-                    "start_deltas": [r[1][1] for r in runs], "pointing_check": near}
-
-
-def _grid_task(args: tuple[Callable[..., Any], tuple[Any, ...]]) -> Any:
-    func, fargs = args
-    return func(*fargs)
-
-
-def parallel_map(
-    func: Callable[..., Any], arg_list: list[tuple[Any, ...]], workers: int = 2, progress: Any = None
-) -> list[Any]:
-    """``[func(*a) for a in arg_list]`` over ``workers`` processes (in order); ``progress``: a tqdm bar or None.
-
-    Worker processes run with single-threaded BLAS (``OMP_NUM_THREADS=1``) so that
-    ``workers`` is the number of cores used.
-    """
-    check_int("workers", workers, 1, 256)
-    out: list[Any] = [None] * len(arg_list)
-    if workers == 1 or len(arg_list) <= 1:
-        for k, a in enumerate(arg_list):
-            out[k] = func(*a)
-            if progress is not None:
-                progress.update(1)
-        return out
-    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ.setdefault(var, "1")
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(_grid_task, (func, a)): k for k, a in enumerate(arg_list)}
-        from concurrent.futures import as_completed
-
-        for fut in as_completed(futures):
-            out[futures[fut]] = fut.result()
-            if progress is not None:
-                progress.update(1)
-    return out
+                    "start_deltas": [r[1][1] for r in runs], "pointing_check": near, "order": order[0]}
 
 
 def _mirror_index(config: RHSConfig, angles: np.ndarray) -> np.ndarray | None:
@@ -449,4 +458,4 @@ def build_fast(
     return np.stack(tx), np.stack(rx), infos
 
 
-__all__ = ["FastSettings", "build_fast", "optimize_grid_fast", "parallel_map"]
+__all__ = ["FastSettings", "build_fast", "optimize_grid_fast"]
