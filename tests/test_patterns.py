@@ -126,35 +126,37 @@ def test_build_script_small_config(tmp_path: Path) -> None:
 
 
 _SMALL_CFG, _SMALL_SCAN = RHSConfig(elements=16), ScanConfig(grid_deg=10.0)
-# Known gaps of the default fast method on this small config (fast delta / SDR delta ~ 0.92 at
-# +-20 deg, 0.997 at 0 deg where the -16.5 dB sidelobe cap is unreachable): strict xfail, so a
-# fix shows up as XPASS and the marks must then be removed.
-# At +-30 / +-40 the theta >= 0 representative solved by build_fast (then mirrored) is the weaker
-# side: a single-grid solve from the -theta hologram reaches SDR there (18.39 vs 18.13 at -40).
-_SMALL_GAPS = {-40.0: "fast/SDR delta ~0.51 (mirror of +40)", -30.0: "fast/SDR delta ~0.88 (mirror of +30)",
-               -20.0: "fast/SDR delta ~0.92", 0.0: "fast/SDR delta ~0.997, cap unreachable",
-               20.0: "fast/SDR delta ~0.91", 30.0: "fast/SDR delta ~0.88", 40.0: "fast/SDR delta ~0.51"}
 
 
 @pytest.fixture(scope="module")
-def _small_fast() -> dict[float, float]:
+def _small_p1() -> dict[float, float]:
+    """Fast method on P1 as SDR solves it (sidelobe cap off; pointing stays on), all 9 grids of M=16 / 10 deg."""
     from rhs_env.patterns.fast import build_fast
 
-    tx, rx, _ = build_fast(_SMALL_CFG, _SMALL_SCAN, FastSettings(), workers=1)
+    tx, rx, _ = build_fast(_SMALL_CFG, _SMALL_SCAN, FastSettings(max_sidelobe_db=0.0), workers=1)
     rep = pattern_report(_SMALL_CFG, tx, rx, _SMALL_SCAN.angles_deg)
     return dict(zip(_SMALL_SCAN.angles_deg.tolist(), rep.delta.tolist()))
 
 
-@pytest.mark.parametrize(
-    "angle_deg",
-    [pytest.param(a, marks=pytest.mark.xfail(strict=True, reason=_SMALL_GAPS[a])) if a in _SMALL_GAPS else a
-     for a in _SMALL_SCAN.angles_deg.tolist()],
-)
-def test_fast_reaches_sdr_delta_small_config(angle_deg: float, _small_fast: dict[float, float]) -> None:
-    """Default FastSettings (build_fast, all 9 grids of M=16 / 10 deg) vs the SDR baseline on every grid."""
+@pytest.mark.parametrize("angle_deg", _SMALL_SCAN.angles_deg.tolist())
+def test_fast_reaches_sdr_delta_small_config(angle_deg: float, _small_p1: dict[float, float]) -> None:
+    """build_fast (mirrored grids included) >= the SDR baseline's delta on every grid.
+
+    The full default comparison (M=60, 1 deg, with the sidelobe cap) is
+    scripts/compare_pattern_methods.py; here the cap is off so both solve the same P1.
+    """
     k = int(np.argmin(np.abs(_SMALL_SCAN.angles_deg - angle_deg)))
     _, _, sdr = optimize_grid_sdr(_SMALL_CFG, angle_deg, k)
-    assert _small_fast[angle_deg] >= sdr["delta"] * (1 - 1e-6), (_small_fast[angle_deg], sdr["delta"])
+    assert _small_p1[angle_deg] >= sdr["delta"] * (1 - 1e-6), (_small_p1[angle_deg], sdr["delta"])
+
+
+def test_unreachable_cap_does_not_keep_a_weak_pattern(_small_p1: dict[float, float]) -> None:
+    """M=16 at 0 deg cannot meet the -16.5 dB cap with a useful main lobe; a pattern that meets it by
+    being weak everywhere (delta ~6e-5 once) must lose to the uncapped optimum."""
+    from rhs_env.patterns.fast import optimize_grid_fast
+
+    _, _, info = optimize_grid_fast(_SMALL_CFG, 0.0, 10.0)
+    assert info["delta"] >= 0.9 * _small_p1[0.0]
 
 
 def test_settings_validation_names_field() -> None:
@@ -200,7 +202,9 @@ def test_active_set_socp_keeps_the_optimum_and_every_constraint(scale: float) ->
     assert part[0] == pytest.approx(full[0], rel=1e-5)  # G(rho)
     assert part[1] == pytest.approx(full[1], rel=1e-3, abs=1e-6)  # G'(rho) from the duals
     assert np.all(np.sqrt(w_d) * np.abs(b_d @ part[2]) <= rho * (1 + 1e-4))
-    assert 1 < small.active.sum() < b_d.shape[0]  # violated directions were added, not all of D
+    assert small.active.sum() < b_d.shape[0] // 2  # the SOCP stayed small
+    if scale < 1:  # below the current peak other directions bind: they were added
+        assert small.active.sum() > 1
 
 
 def test_both_orders_are_screened() -> None:
