@@ -186,6 +186,8 @@ def main(argv: list[str] | None = None) -> int:
             runs[sec] = {"date": time.strftime("%Y-%m-%d %H:%M"), "load_average": result["machine"]["load_average"]}
         elif sec in previous:
             result[sec] = previous[sec]
+            runs.setdefault(sec, {"date": "an earlier run",
+                                  "load_average": previous.get("machine", {}).get("load_average", [float("nan")])})
     result["section_runs"] = {k: runs[k] for k in SECTIONS if k in runs}
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2, default=float))
