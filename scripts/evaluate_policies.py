@@ -50,7 +50,9 @@ def run_policy(policy: str, env_id: str, env_kwargs: dict, seeds: list[int], wor
         return _chunk(policy, env_id, env_kwargs, seeds)
     k = -(-len(seeds) // workers)
     parts = [seeds[i : i + k] for i in range(0, len(seeds), k)]
-    with ProcessPoolExecutor(max_workers=len(parts)) as pool:
+    from rhs_env.parallel import single_threaded_worker
+
+    with ProcessPoolExecutor(max_workers=len(parts), initializer=single_threaded_worker) as pool:
         results = list(pool.map(_chunk, [policy] * len(parts), [env_id] * len(parts), [env_kwargs] * len(parts), parts))
     return [run for part in results for run in part]
 

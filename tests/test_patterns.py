@@ -227,7 +227,7 @@ def _blas_threads() -> int:
 
 def test_parallel_map_workers_are_single_threaded() -> None:
     """Forked workers would inherit the parent's BLAS pools and oversubscribe the cores."""
-    from rhs_env.patterns.parallel import parallel_map
+    from rhs_env.parallel import parallel_map
 
     assert parallel_map(_blas_threads, [(), (), ()], workers=2) == [1, 1, 1]
     with pytest.raises(ValueError, match="workers"):

@@ -65,6 +65,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from rhs_env.antenna import RHSConfig, ScanConfig, hologram_pattern
+from rhs_env.parallel import parallel_map
 from rhs_env.patterns.metrics import (
     mainlobe_checks,
     pointing_error_deg,
@@ -72,7 +73,6 @@ from rhs_env.patterns.metrics import (
     sidelobe_directions,
     two_way_power,
 )
-from rhs_env.patterns.parallel import parallel_map
 from rhs_env.validation import check_int, check_range
 
 

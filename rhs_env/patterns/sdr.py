@@ -37,8 +37,8 @@ from typing import Any
 import numpy as np
 
 from rhs_env.antenna import RHSConfig, ScanConfig
+from rhs_env.parallel import parallel_map
 from rhs_env.patterns.metrics import side_matrix, sidelobe_directions
-from rhs_env.patterns.parallel import parallel_map
 from rhs_env.validation import check_choice, check_int, check_range
 
 SDR_SOLVERS = ("CLARABEL", "SCS")

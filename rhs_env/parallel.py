@@ -1,4 +1,4 @@
-"""Process-parallel map over pattern grids, one single-threaded worker per core."""
+"""Process-parallel map (pattern grids, policy evaluation): one single-threaded worker per core."""
 
 from __future__ import annotations
 
