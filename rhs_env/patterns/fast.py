@@ -294,7 +294,9 @@ def optimize_grid_fast(
 
     ``inits``: (tx, rx) warm starts used instead of the holograms / random starts (no phase
     sweep). ``info``: ``delta`` (P1 objective on D, normalised), ``capped`` (sidelobe cap met
-    on D), ``iterations``, ``history`` (delta per alternation), ``pointing_check`` (the one used).
+    on D), ``iterations``, ``history`` (delta per alternation), ``start_deltas`` (delta of every
+    screened candidate, start-major, Tx-first then Rx-first), ``order`` (``"tx"`` or ``"rx"``: the
+    side that moves first in the kept candidate), ``pointing_check`` (the one used).
     """
     settings = settings or FastSettings()
     near = settings.pointing_check
