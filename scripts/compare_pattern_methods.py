@@ -91,6 +91,10 @@ def compare(config: RHSConfig, scan: ScanConfig, grids: int | None, workers: int
     return out
 
 
+def _num(x: float | None) -> str:
+    return "n/a" if x is None else f"{x:.4f}"
+
+
 def markdown(res: dict) -> str:
     n = len(res["angles_deg"])
     note = (f"{n} evenly spaced grids of the {res['scan']['grid_deg']:g}-degree library (subset)"
@@ -113,7 +117,7 @@ def markdown(res: dict) -> str:
         "",
         f"- fast delta >= SDR delta on {res['grids_fast_ge_sdr_where_sdr_pointing_ok']}/"
         f"{res['grids_sdr_pointing_ok']} grids where the SDR pattern points within half a grid "
-        f"(min ratio {res['min_delta_ratio_where_sdr_pointing_ok']:.4f}); on all {n} grids: "
+        f"(min ratio {_num(res['min_delta_ratio_where_sdr_pointing_ok'])}); on all {n} grids: "
         f"{res['grids_fast_ge_sdr']}/{n} (min ratio {res['min_delta_ratio']:.4f}, median {res['median_delta_ratio']:.4f}).",
         "- grids where the SDR pattern points more than half a grid off (not a valid library pattern): "
         + (", ".join(f"{g['angle_deg']:g} deg (SDR off by {g['sdr_pointing_error_deg']:+.2f} deg; fast/SDR delta "

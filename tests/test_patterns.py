@@ -232,3 +232,20 @@ def test_parallel_map_workers_are_single_threaded() -> None:
     assert parallel_map(_blas_threads, [(), (), ()], workers=2) == [1, 1, 1]
     with pytest.raises(ValueError, match="workers"):
         parallel_map(_blas_threads, [()], workers=0)
+
+
+def test_compare_script_small_config(tmp_path: Path) -> None:
+    """scripts/compare_pattern_methods.py runs end to end and reports both methods per grid."""
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "compare_pattern_methods.py"), "--elements", "8", "--grid-deg", "30",
+         "--workers", "1", "--out", str(tmp_path / "c.json")],
+        check=False, capture_output=True, text=True, timeout=300,
+    )
+    assert out.returncode == 0, out.stderr
+    res = json.loads((tmp_path / "c.json").read_text())
+    assert set(res["methods"]) == {"fast", "sdr"} and len(res["delta_ratio_fast_over_sdr"]) == 3
+    assert res["grids_sdr_pointing_ok"] + len(res["sdr_pointing_missed"]) == 3
+    assert "| fast |" in (tmp_path / "c.md").read_text()
+    bad = subprocess.run([sys.executable, str(ROOT / "scripts" / "compare_pattern_methods.py"), "--elements", "1"],
+                         check=False, capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "elements" in bad.stderr
