@@ -39,36 +39,18 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from paper_episode import ANTENNAS, IDLE, add_episode_args, make_paper_env
+
 PAPER_RATIO = 1.0 / 3.0  # "RHS about a third of the phased array's error"
 PAPER_CLAIM = "RHS about a third of the phased array's error (ratio ~0.33)"
-ANTENNAS = ("rhs", "phased", "random", "hologram")
-POLICY_HZ = 5  # rhs-paper-v0: one SLAM cycle per 0.2 s
-IDLE = 1  # DiscreteMetaAction: keep lane and speed
 
 
 def run_episode(
     antenna: str, seed: int, tx_power_dbm: float, args: argparse.Namespace
 ) -> dict:
     """One ``rhs-paper-v0`` episode; returns its errors (map frame) and mean SLAM stage times."""
-    import gymnasium as gym
-
-    import rhs_env  # noqa: F401  (registers the ids)
-
-    radar = {
-        "tx_power_dbm": float(tx_power_dbm),
-        "noise_figure_db": float(args.noise_figure),
-        "scan": {"grid_deg": float(args.grid_deg)},
-        "rhs": {"elements": int(args.elements)},
-    }
-    env = gym.make(
-        "rhs-paper-v0",
-        antenna=antenna,
-        radar=radar,
-        registration=args.registration,
-        map_gate_m=float(args.map_gate),
-        duration=args.cycles / POLICY_HZ,
-        stage_times_in_info=True,
-    )
+    env = make_paper_env(args, antenna, tx_power_dbm, stage_times_in_info=True)
     t0 = time.perf_counter()
     _, info = env.reset(seed=int(seed))
     true, est, stages = [], [], {}
@@ -328,49 +310,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         default=[10.0, 20.0, 30.0],
         help="Tx power sweep (dBm)",
     )
-    p.add_argument(
-        "--noise-figure",
-        type=float,
-        default=10.0,
-        help="receiver noise figure (dB), held fixed",
-    )
-    p.add_argument(
-        "--registration",
-        choices=("cnn", "icp", "odometry"),
-        default=None,
-        help="default: cnn when its trained weights exist, else icp",
-    )
-    p.add_argument(
-        "--grid-deg", type=float, default=1.0, help="beam grid (deg), default 1"
-    )
-    p.add_argument(
-        "--elements", type=int, default=60, help="RHS elements M, default 60"
-    )
-    p.add_argument(
-        "--cycles", type=int, default=50, help="SLAM cycles per episode (paper: 50)"
-    )
-    p.add_argument(
-        "--map-gate",
-        type=float,
-        default=2.0,
-        help="Hungarian matching gate of the map RMSE (m)",
-    )
-    p.add_argument("--out-dir", default="results")
-    p.add_argument(
-        "--quick",
-        action="store_true",
-        help="tiny run for tests: 1 seed, 30 dBm, 5-degree grid, 10 cycles",
-    )
-    p.add_argument("--no-progress", action="store_true")
+    add_episode_args(p, "tiny run for tests: 1 seed, 30 dBm, 5-degree grid, 10 cycles")
     a = p.parse_args(argv)
     if a.quick:
         a.seeds, a.powers, a.grid_deg, a.cycles = 1, [30.0], 5.0, 10
     if a.seeds < 1 or a.cycles < 1:
         p.error("--seeds and --cycles must be at least 1")
-    if a.registration is None:  # the SLAM env's default
-        from rhs_env.slam_wrapper import DEFAULT_REGISTRATION
-
-        a.registration = DEFAULT_REGISTRATION
     return a
 
 

@@ -29,34 +29,18 @@ from pathlib import Path
 
 import numpy as np
 
-ANTENNAS = ("rhs", "phased", "random", "hologram")
-POLICY_HZ = 5
-IDLE = 1  # DiscreteMetaAction: keep lane and speed
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from paper_episode import ANTENNAS, IDLE, add_episode_args, make_paper_env
 
 
 def run(args: argparse.Namespace) -> dict:
-    import gymnasium as gym
     from tqdm import tqdm
 
-    import rhs_env  # noqa: F401  (registers the ids)
     from rhs_env.slam_wrapper import SlamObservation
     from slam.registration import apply_motion
     from slam.metrics import map_metrics
 
-    radar = {
-        "tx_power_dbm": float(args.tx_power),
-        "noise_figure_db": float(args.noise_figure),
-        "scan": {"grid_deg": float(args.grid_deg)},
-        "rhs": {"elements": int(args.elements)},
-    }
-    env = gym.make(
-        "rhs-paper-v0",
-        antenna=args.antenna,
-        radar=radar,
-        registration=args.registration,
-        map_gate_m=float(args.map_gate),
-        duration=args.cycles / POLICY_HZ,
-    )
+    env = make_paper_env(args, args.antenna, args.tx_power)
     slam = env
     while not isinstance(slam, SlamObservation):
         slam = slam.env
@@ -283,34 +267,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--antenna", choices=ANTENNAS, default="rhs")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument(
-        "--registration",
-        choices=("cnn", "icp", "odometry"),
-        default=None,
-        help="default: cnn when its trained weights exist, else icp",
-    )
     p.add_argument("--tx-power", type=float, default=30.0, help="Tx power (dBm)")
-    p.add_argument("--noise-figure", type=float, default=10.0, help="noise figure (dB)")
-    p.add_argument("--grid-deg", type=float, default=1.0)
-    p.add_argument("--elements", type=int, default=60)
-    p.add_argument("--cycles", type=int, default=50)
-    p.add_argument("--map-gate", type=float, default=2.0)
-    p.add_argument("--out-dir", default="results")
-    p.add_argument(
-        "--quick",
-        action="store_true",
-        help="tiny run for tests: 5-degree grid, 10 cycles",
-    )
-    p.add_argument("--no-progress", action="store_true")
+    add_episode_args(p, "tiny run for tests: 5-degree grid, 10 cycles")
     a = p.parse_args(argv)
     if a.quick:
         a.grid_deg, a.cycles = 5.0, 10
     if a.cycles < 1 or a.seed < 0:
         p.error("--cycles must be at least 1 and --seed non-negative")
-    if a.registration is None:  # the SLAM env's default
-        from rhs_env.slam_wrapper import DEFAULT_REGISTRATION
-
-        a.registration = DEFAULT_REGISTRATION
     return a
 
 
