@@ -73,7 +73,7 @@ from rhs_env.point_cloud import (
     window_leak_envelope,
 )
 from rhs_env.scatterers import Occluders, Scatterers, visible_mask
-from rhs_env.validation import check_choice, check_int, check_range
+from rhs_env.validation import check_bool, check_choice, check_int, check_range
 
 __all__ = ["BOLTZMANN", "RADAR_NAMES", "PointCloud", "RadarConfig", "RadarSystem"]
 
@@ -156,10 +156,8 @@ class RadarConfig:
         check_range("tx_power_dbm", self.tx_power_dbm, -100.0, 80.0)
         check_range("noise_figure_db", self.noise_figure_db, 0.0, 60.0)
         check_range("temperature_k", self.temperature_k, 0.0, 5000.0, low_open=True)
-        if not isinstance(self.add_noise, bool):
-            raise ValueError(f"add_noise must be True or False, got {self.add_noise!r}")  # noqa: TRY004 (config errors are ValueError)
-        if not isinstance(self.slot_doppler, bool):
-            raise ValueError(f"slot_doppler must be True or False, got {self.slot_doppler!r}")  # noqa: TRY004
+        check_bool("add_noise", self.add_noise)
+        check_bool("slot_doppler", self.slot_doppler)
         check_range("max_range_m", self.max_range_m, 1.0, 0.95 * self.unambiguous_range_m)
         check_range("min_range_m", self.min_range_m, 0.0, self.max_range_m, high_open=True)
         check_choice("antenna", self.antenna, ANTENNA_KINDS)

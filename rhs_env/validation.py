@@ -46,6 +46,12 @@ def check_int(field: str, value: Any, low: int | None = None, high: int | None =
     check_range(field, int(value), low, high)
 
 
+def check_bool(field: str, value: Any) -> None:
+    """Raise ``ValueError`` unless ``value`` is ``True`` or ``False`` (not 0 / 1 or a string)."""
+    if not isinstance(value, bool):
+        raise ValueError(f"{field} must be True or False, got {value!r}")  # noqa: TRY004 (config errors are ValueError)
+
+
 def check_choice(field: str, value: Any, choices: tuple[str, ...]) -> None:
     """Raise ``ValueError`` unless ``value`` is one of ``choices``."""
     if value not in choices:

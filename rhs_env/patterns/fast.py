@@ -73,7 +73,7 @@ from rhs_env.patterns.metrics import (
     sidelobe_directions,
     two_way_power,
 )
-from rhs_env.validation import check_int, check_range
+from rhs_env.validation import check_bool, check_int, check_range
 
 
 @dataclass(frozen=True)
@@ -139,8 +139,7 @@ class FastSettings:
         check_range("pointing_check", self.pointing_check, 0.05, 1.0)
         check_range("active_db", self.active_db, -80.0, 0.0)
         for name in ("pointing", "warm_start", "both_orders"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")  # noqa: TRY004
+            check_bool(name, getattr(self, name))
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
