@@ -350,9 +350,9 @@ def _optimize(
                 w_d = np.abs(o_d_mat @ psi[other]) ** 2 / o_i
                 w_k = np.abs(o_k_mat @ psi[other]) ** 2 / o_i if s_k.size else np.zeros(0)
                 phi0 = float(np.angle(b_i @ psi[side]))
-                rho0 = float(np.sqrt(np.max(w_d * np.abs(b_d @ psi[side]) ** 2)))
                 nphi = settings.phase_sweep if it <= sweep_iters else 1
-                level = w_d * np.abs(b_d @ psi[side]) ** 2
+                level = w_d * np.abs(b_d @ psi[side]) ** 2  # weighted sidelobe power on D
+                rho0 = float(np.sqrt(level.max()))
                 active = level >= level.max() * 10.0 ** (settings.active_db / 10.0)
                 for phi in phi0 + 2 * np.pi * np.arange(nphi) / nphi:
                     sv = _SideSOCP(b_i, b_d, w_d, b_k, w_k, float(phi), active)
