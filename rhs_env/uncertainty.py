@@ -33,7 +33,7 @@ plus a floor for what the bound does not model:
 A point's Cartesian covariance in the vehicle frame follows by linearising
 ``x = s + R (cos phi, sin phi)``, ``phi = boresight + theta``:
 ``Sigma = J diag(sigma_R^2, sigma_theta^2) J^T``, ``J = [u, R u_perp]``
-(:func:`cartesian_covariance`).
+(:func:`slam.association.point_covariance`, from the rows of :func:`point_rows`).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ import numpy as np
 
 from rhs_env.point_cloud import AngleDictionary, range_crb
 
-__all__ = ["RANGE_CRB_FACTOR", "angle_information", "point_std", "cartesian_covariance", "attach_uncertainty"]
+__all__ = ["RANGE_CRB_FACTOR", "angle_information", "point_std", "attach_uncertainty", "point_rows", "POINT_COLUMNS"]
 
 #: variance of the sub-bin range estimate over its CRB (parabolic interpolation, Hann window, measured)
 RANGE_CRB_FACTOR = 2.0
@@ -85,26 +85,6 @@ def point_std(
     return np.sqrt(var_r + range_floor_m**2), np.sqrt(var_t + angle_floor_rad**2)
 
 
-def cartesian_covariance(
-    xy: np.ndarray, sensor_xy: np.ndarray, range_std: np.ndarray, angle_std: np.ndarray
-) -> np.ndarray:
-    """Vehicle-frame covariance (N, 2, 2) (m^2) of points ``xy`` (N, 2) seen from ``sensor_xy`` (N, 2).
-
-    ``Sigma = sigma_R^2 u u^T + (R sigma_theta)^2 u_perp u_perp^T``, ``u`` the unit line of sight
-    from the sensor, ``R`` the range from the sensor.
-    """
-    d = np.asarray(xy, dtype=float).reshape(-1, 2) - np.asarray(sensor_xy, dtype=float).reshape(-1, 2)
-    r = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
-    u = d / r[:, None]
-    var_r = np.asarray(range_std, float) ** 2
-    var_c = (r * np.asarray(angle_std, float)) ** 2
-    cov = np.empty((len(r), 2, 2))
-    cov[:, 0, 0] = var_r * u[:, 0] ** 2 + var_c * u[:, 1] ** 2
-    cov[:, 1, 1] = var_r * u[:, 1] ** 2 + var_c * u[:, 0] ** 2
-    cov[:, 0, 1] = cov[:, 1, 0] = (var_r - var_c) * u[:, 0] * u[:, 1]
-    return cov
-
-
 def attach_uncertainty(system, cloud) -> None:
     """Fill ``cloud.range_std_m`` and ``cloud.angle_std_rad`` (N,) for a cloud of ``system``.
 
@@ -127,3 +107,21 @@ def attach_uncertainty(system, cloud) -> None:
         range_floor_m=cfg.range_std_floor_m,
         angle_floor_rad=np.deg2rad(cfg.angle_std_floor_deg),
     )
+
+
+#: columns of a point row (:func:`point_rows`, the ``points`` observation)
+POINT_COLUMNS = ("x", "y", "radial_velocity", "amplitude", "range_std", "angle_std", "radar")
+
+
+def point_rows(cloud) -> np.ndarray:
+    """(N, 7) rows ``x, y, radial velocity, amplitude, range std (m), angle std (rad), radar index``.
+
+    A cloud without uncertainty (empty ``range_std_m``) gets infinite stds.
+    """
+    n = len(cloud)
+    pts = np.asarray(cloud.points, dtype=float).reshape(-1, 4)
+    rs = np.asarray(cloud.range_std_m, dtype=float)
+    ast = np.asarray(cloud.angle_std_rad, dtype=float)
+    if rs.shape != (n,) or ast.shape != (n,):
+        rs, ast = np.full(n, np.inf), np.full(n, np.inf)
+    return np.column_stack([pts, rs, ast, np.asarray(cloud.radar, dtype=float).reshape(n)])
