@@ -114,7 +114,11 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             raise ValueError(f"slam must be a SlamConfig or a dict of its fields, got {type(slam).__name__}")
         self.slam_config = slam or SlamConfig()
         self.registration_kind = registration
-        self.pipeline = SlamPipeline(make_registration(registration), self.slam_config, np.random.default_rng(0))
+        radar_cfg = getattr(env, "radar_config", None)
+        sensor_xy = radar_cfg.mounts()[0] if radar_cfg is not None else None
+        self.pipeline = SlamPipeline(
+            make_registration(registration), self.slam_config, np.random.default_rng(0), sensor_xy=sensor_xy
+        )
         self.max_landmarks = int(max_landmarks)
         self.map_gate_m = float(map_gate_m)
         self.stage_times_in_info = bool(stage_times_in_info)

@@ -4,7 +4,10 @@ This is the single code path shared by the env's SLAM wrapper
 (:class:`rhs_env.slam_wrapper.SlamObservation`) and the scripted runs of
 :func:`slam.scenario.run_scenario` (``rhs-slam scenario``).
 
-Per cycle, with cloud ``A_z`` (N, 4) in the vehicle frame and cycle length dt (s):
+Per cycle, with cloud ``A_z`` (N, 4) in the vehicle frame and cycle length dt (s)
+(or (N, 7) rows that add each point's range std (m), angle std (rad) and radar
+index: their vehicle-frame covariance, :func:`slam.association.point_covariance`
+with the radars at ``sensor_xy``, goes to the RBPF):
 
 1. ego velocity ``v`` from the Doppler of static points (RANSAC fit of
    ``vr = -v . u`` scored by bearing coverage, within ``max_accel * dt`` of the
@@ -24,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from slam.association import estimate_ego_velocity, static_mask
+from slam.association import estimate_ego_velocity, point_covariance, static_mask
 from slam.rbpf import RBPFSlam, SlamConfig, SlamEstimate
 from slam.registration import Registration
 
@@ -49,8 +52,12 @@ class SlamPipeline:
         rng: np.random.Generator | None = None,
         use_doppler: bool = True,
         max_accel_mps2: float = 10.0,
+        sensor_xy: np.ndarray | None = None,
     ) -> None:
+        """``sensor_xy`` (S, 2): radar positions in the vehicle frame (m) indexed by column 6 of
+        (N, 7) clouds; ``None`` puts every sensor at the vehicle origin."""
         self.registration = registration
+        self.sensor_xy = None if sensor_xy is None else np.asarray(sensor_xy, dtype=float).reshape(-1, 2)
         self.max_accel_mps2 = float(max_accel_mps2)
         self.config = config if config is not None else SlamConfig()
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
@@ -79,8 +86,11 @@ class SlamPipeline:
         return pts
 
     def step(self, points: np.ndarray, dt: float, true_motion: np.ndarray | None = None) -> CycleResult:
-        """Process cloud ``points`` (N, 4); ``true_motion`` feeds an odometry oracle registration only."""
-        pts = np.asarray(points, dtype=float).reshape(-1, 4)
+        """Process cloud ``points`` (N, 4) or (N, 7); ``true_motion`` feeds an odometry oracle registration only."""
+        rows = np.asarray(points, dtype=float)
+        rows = rows.reshape(-1, rows.shape[-1] if rows.ndim == 2 and rows.shape[-1] >= 7 else 4)
+        cov = point_covariance(rows, self.sensor_xy) if rows.shape[1] >= 7 else None
+        pts = rows[:, :4]
         thr = self.config.dynamic_threshold_mps
         v_dop = None
         if self.use_doppler:
@@ -121,7 +131,7 @@ class SlamPipeline:
                 )
             else:
                 self.velocity[2] = motion[2] / dt
-        est = self.slam.update(pts, motion, dt, ego_velocity=self.velocity if self.use_doppler else None)
+        est = self.slam.update(pts, motion, dt, ego_velocity=self.velocity if self.use_doppler else None, cov=cov)
         est.stage_times["registration"] = reg_time
         self.prev_static = self._static(pts)
         self.cycle += 1

@@ -114,7 +114,7 @@ def test_observation_keys_shapes_dtypes(env_id):
     for _ in rollout(env, seed=3, steps=4):
         obs = _[0]
         assert set(obs) == SLAM_KEYS
-        assert obs["points"].shape == (64, 4) and obs["points"].dtype == np.float32
+        assert obs["points"].shape == (64, 7) and obs["points"].dtype == np.float32
         assert obs["points_mask"].shape == (64,) and obs["points_mask"].dtype == np.int8
         assert obs["pose"].shape == (3,) and obs["pose"].dtype == np.float32
         assert obs["pose_std"].shape == (3,) and obs["pose_std"].dtype == np.float32
