@@ -37,6 +37,9 @@ One cycle (:meth:`RBPFSlam.update`): predict, associate, update, weight, resampl
    (:func:`slam.association.mahalanobis_associate`); an observation within
    ``new_gate_mahalanobis`` of a landmark it did not get is dropped, not made a new
    landmark. ``association="nearest"`` is the paper's nearest landmark within ``delta_m``.
+   Recovery (FastSLAM 2.0): when the particles match fewer than
+   ``recovery_match_fraction`` of 3 or more observations, ``Sigma_p`` is inflated by
+   ``recovery_std_factor^2`` and the association repeated.
 3. **Update.**
    *FastSLAM 2.0* (Montemerlo et al. 2003), all matched observations k of particle c
    at once (they are independent given the pose): with ``nu_k = z_k - h(mu_c, e_k)``,
@@ -161,6 +164,10 @@ class SlamConfig:
     landmark within delta_m). gate_mahalanobis: match gate (Mahalanobis distance).
     new_gate_mahalanobis: an unmatched observation this close to a landmark is dropped
     instead of starting a new one. association_rounds: mutual-nearest rounds.
+    recovery_std_factor, recovery_match_fraction: FastSLAM 2.0 recovery: when the particles
+    match fewer than this fraction of >= 3 observations (the registration motion is likely
+    wrong, e.g. a collision), the motion std is multiplied by the factor and the association
+    repeated (1 disables).
     joint_compatibility: drop matches inconsistent with the pose they jointly imply
     (FastSLAM 2.0). measurement_noise: "per_point" (each point's own covariance) |
     "fixed" (range_std_m, bearing_std_rad for every point). measurement_floor_m:
@@ -186,6 +193,8 @@ class SlamConfig:
     new_gate_mahalanobis: float = 6.0
     association_rounds: int = 3
     joint_compatibility: bool = True
+    recovery_std_factor: float = 10.0
+    recovery_match_fraction: float = 0.2
     measurement_noise: str = "per_point"
     measurement_floor_m: float = 0.03
     delta_m: float = 2.0
@@ -218,6 +227,8 @@ class SlamConfig:
         check_range("new_gate_mahalanobis", self.new_gate_mahalanobis, self.gate_mahalanobis, None)
         check_int("association_rounds", self.association_rounds, 1, 100)
         check_bool("joint_compatibility", self.joint_compatibility)
+        check_range("recovery_std_factor", self.recovery_std_factor, 1.0, None)
+        check_range("recovery_match_fraction", self.recovery_match_fraction, 0.0, 1.0)
         check_choice("measurement_noise", self.measurement_noise, NOISE_MODELS)
         check_range("measurement_floor_m", self.measurement_floor_m, 0.0, None)
         check_range("delta_m", self.delta_m, 0.0, None, low_open=True)
@@ -362,6 +373,9 @@ class RBPFSlam:
             self._predict(motion, dt)
         with timer("associate"):
             idx = self._associate(obs)
+            if self._lost(idx):
+                self.pose_var = self.pose_var * self.config.recovery_std_factor**2
+                idx = self._associate(obs)
         with timer("update"):
             loglik, idx = self._update(idx, obs)
         with timer("new_landmarks"):
@@ -432,6 +446,17 @@ class RBPFSlam:
             self.pose += np.sqrt(self.pose_var) * self.rng.standard_normal(self.pose.shape)
             self.pose_var = np.zeros(3)
         self.pose[:, 2] = wrap_angle(self.pose[:, 2])
+
+    def _lost(self, idx: np.ndarray) -> bool:
+        """FastSLAM 2.0 recovery test: the map is non-empty, at least 3 observations, and the particles
+        match fewer than ``recovery_match_fraction`` of them (the motion prior is likely wrong)."""
+        c = self.config
+        M = idx.shape[1]
+        if c.variant != "fastslam2" or c.recovery_std_factor <= 1 or self.cycle == 0 or M < 3:
+            return False
+        if not self.slot_used.any():
+            return False
+        return float(np.mean(np.sum(idx >= 0, axis=1))) < c.recovery_match_fraction * M
 
     def _observation_with_pose(self, obs: Observations):
         """Vehicle-frame ``Q + H_p Sigma_p H_p^T`` per observation (``H_p`` at z): components (M,)."""
