@@ -36,8 +36,13 @@ from highway_env.envs.highway_env import HighwayEnv
 from highway_env.road.lane import LineType, StraightLane
 from highway_env.road.road import Road, RoadNetwork
 
-from rhs_env.scene import LandmarkConfig, Landmarks, place_roadside_landmarks, world_pose
-from rhs_env.validation import check_int, check_range
+from rhs_common.validation import check_int, check_range
+from rhs_env.scene import (
+    LandmarkConfig,
+    Landmarks,
+    place_roadside_landmarks,
+    world_pose,
+)
 
 #: the paper's obstacles (world frame, m) and start pose (SPEC section 7)
 PAPER_OBSTACLES = ((10.0, 65.0), (25.0, 10.0), (30.0, 65.0), (35.0, 10.0), (50.0, 65.0))
