@@ -127,7 +127,7 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
     model = None
     for cls in order:
         try:
-            model = cls.load(path, device="cpu")
+            model = cls.load(path, device="cpu")  # type: ignore[attr-defined]  # PPO / DQN classmethod
             break
         except Exception as exc:
             errors.append(f"{cls.__name__}: {exc}")

@@ -44,7 +44,6 @@ Example:
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 import numbers
 import types
@@ -113,20 +112,23 @@ def check_choice(field: str, value: Any, choices: tuple[str, ...]) -> None:
 
 
 # --------------------------------------------------------------------------- type hints
-@functools.cache
+_HINTS: dict[type, dict[str, Any]] = {}
+
+
 def _hints(cls: type) -> dict[str, Any]:
-    """Resolved type hints of a dataclass; names the module cannot resolve (a class defined
-    in a function or a doctest) are looked up among the classes of the fields' defaults."""
-    try:
-        return typing.get_type_hints(cls)
-    except NameError:
-        local: dict[str, Any] = {}
-        for f in dataclasses.fields(cls):
-            if f.default is not dataclasses.MISSING:
-                local[type(f.default).__name__] = type(f.default)
-            elif f.default_factory is not dataclasses.MISSING:
-                local[type(f.default_factory()).__name__] = type(f.default_factory())
-        return typing.get_type_hints(cls, localns=local)
+    """Resolved type hints of a dataclass (cached); names the module cannot resolve (a class
+    defined in a function or a doctest) are looked up among the classes of the fields' defaults."""
+    if cls not in _HINTS:
+        try:
+            _HINTS[cls] = typing.get_type_hints(cls)
+        except NameError:
+            local: dict[str, Any] = {}
+            for f in dataclasses.fields(cls):
+                default = f.default if f.default is not dataclasses.MISSING else (
+                    f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
+                local[type(default).__name__] = type(default)
+            _HINTS[cls] = typing.get_type_hints(cls, localns=local)
+    return _HINTS[cls]
 
 
 def _union_args(hint: Any) -> tuple[Any, ...] | None:

@@ -47,7 +47,7 @@ def route_kwargs(kwargs: dict[str, Any], *wrappers: type) -> tuple[list[dict[str
     whatever no wrapper accepts is returned last: the env's own kwargs (highway-env
     config keys, ``config``, ``render_mode``).
     """
-    params = [set(inspect.signature(w.__init__).parameters) - {"self", "env"} for w in wrappers]
+    params = [set(inspect.signature(w).parameters) - {"env"} for w in wrappers]
     rest = {k: v for k, v in kwargs.items() if not any(k in p for p in params)}
     return [{k: v for k, v in kwargs.items() if k in p} for p in params], rest
 

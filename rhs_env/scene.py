@@ -247,7 +247,8 @@ class Landmarks:
     @classmethod
     def from_world(cls, xy_world: np.ndarray, rcs: float | np.ndarray) -> Landmarks:
         """Landmarks given in the world frame (y up), e.g. the paper's obstacle list."""
-        return cls(world_to_he_xy(np.asarray(xy_world, dtype=float).reshape(-1, 2)), rcs)
+        xy = world_to_he_xy(np.asarray(xy_world, dtype=float).reshape(-1, 2))
+        return cls(xy, np.broadcast_to(np.asarray(rcs, dtype=float), (len(xy),)).copy())
 
     def concat(self, other: Landmarks) -> Landmarks:
         return Landmarks(np.concatenate([self.xy_he, other.xy_he]), np.concatenate([self.rcs, other.rcs]))

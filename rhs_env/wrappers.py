@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -45,6 +45,11 @@ from rhs_env.scene import (
     vehicle_to_he_xy,
     world_surface_pixels,
 )
+
+if TYPE_CHECKING:  # pragma: no cover - annotations only (the radar is imported when built)
+    from rhs_env.point_cloud import PointCloud
+    from rhs_env.radar import RadarSystem
+    from rhs_env.scatterers import Scatterers
 
 POINT_FEATURES = ("x", "y", "radial_velocity", "amplitude")
 POINT_COLOR = (255, 40, 40)
@@ -147,12 +152,17 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
                 "points_mask": spaces.MultiBinary(self.max_points),
             }
         )
-        self.radar = None
+        self.radar: RadarSystem | None = None
         self._build_radar(np.random.default_rng(0))  # built now so bad configs fail here; rng replaced at reset
         self.stage_times: dict[str, float] = {}
-        self.last_cloud = None
-        self.last_scatterers = None
+        self.last_cloud: PointCloud | None = None
+        self.last_scatterers: Scatterers | None = None
         self._points_he = np.zeros((0, 2))
+
+    @property
+    def _base(self) -> Any:
+        """The highway-env env underneath (its ``vehicle``, ``road``, ``config``: not in gymnasium's Env type)."""
+        return self.env.unwrapped
 
     # ---- gymnasium API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -172,7 +182,8 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         """
         if self.radar is None:
             self._build_radar(_spawn_rng(self.env))
-        base = self.env.unwrapped
+        assert self.radar is not None
+        base = self._base
         ego = base.vehicle
         scatterers, occluders = scene_scatterers(base, ego, self.scatter_config)
         cloud = self.radar.scan(scatterers, occluders)
@@ -192,7 +203,7 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     def render(self):
         """The env's frame with the point cloud drawn over it (rgb_array); other modes pass through."""
         frame = self.env.render()
-        viewer = getattr(self.env.unwrapped, "viewer", None)
+        viewer = getattr(self._base, "viewer", None)
         if frame is not None and viewer is not None and viewer.offscreen and not getattr(viewer, "enabled", True):
             # highway-env disables its viewer under SDL_VIDEODRIVER=dummy; offscreen needs no display
             viewer.enabled = True

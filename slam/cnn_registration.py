@@ -189,7 +189,7 @@ def train_cnn(
         err = (pred - y) * scale_t  # back to metres / radians
         return ((err**2) * w).sum(dim=1).mean()
 
-    history = {"train_loss": [], "val_loss": []}
+    history: dict[str, list[float]] = {"train_loss": [], "val_loss": []}
     bar = tqdm(range(cfg.epochs), desc="train CNN", disable=not progress)
     for _ in bar:
         net.train()

@@ -55,6 +55,11 @@ class SlamMetricsInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.landmarks_in_info = bool(landmarks_in_info)
         self.seen_ids: set[int] = set()
 
+    @property
+    def _base(self) -> Any:
+        """The highway-env env underneath (its ``vehicle``, ``road``, ``config``: not in gymnasium's Env type)."""
+        return self.env.unwrapped
+
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         obs, info = self.env.reset(seed=seed, options=options)
         self.seen_ids = set()
@@ -93,7 +98,7 @@ class SlamMetricsInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def _seen_landmarks(self, origin: np.ndarray) -> np.ndarray:
         """True landmarks that have been within radar range so far, map frame (K, 2)."""
-        base = self.env.unwrapped
+        base = self._base
         lms = get_landmarks(base)
         radar_cfg = self.env.get_wrapper_attr("radar_config")
         reach = float(getattr(radar_cfg, "max_range_m", 100.0))

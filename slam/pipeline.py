@@ -123,9 +123,8 @@ class SlamPipeline:
             elif self.last_motion is not None:
                 prior = self.last_motion.copy()
             t0 = time.perf_counter()
-            motion = np.asarray(
-                self.registration.estimate(self.prev_static, self._static(pts), prior=prior), dtype=float
-            ).reshape(3)
+            prev = self.prev_static if self.prev_static is not None else np.zeros((0, 4))
+            motion = np.asarray(self.registration.estimate(prev, self._static(pts), prior=prior), dtype=np.float64).reshape(3)
             reg_time = time.perf_counter() - t0
             if not np.all(np.isfinite(motion)):
                 motion = np.zeros(3)
@@ -136,7 +135,7 @@ class SlamPipeline:
                     [(c * motion[0] + s * motion[1]) / dt, (-s * motion[0] + c * motion[1]) / dt, motion[2] / dt]
                 )
             else:
-                self.velocity[2] = motion[2] / dt
+                self.velocity = np.array([v_dop[0], v_dop[1], motion[2] / dt])
         est = self.slam.update(pts, motion, dt, ego_velocity=self.velocity if self.use_doppler else None)
         est.stage_times["registration"] = reg_time
         self.prev_static = self._static(pts)

@@ -56,7 +56,7 @@ def parse_scenario(doc: Any) -> dict[str, Any]:
     unknown = sorted(set(doc) - OPTIONAL - {"landmarks", "poses"})
     if unknown:
         raise ValueError(f"unknown key(s) {', '.join(map(repr, unknown))}")
-    out = {"landmarks": _array(doc, "landmarks", 2, 0), "poses": _array(doc, "poses", 3, 2)}
+    out: dict[str, Any] = {"landmarks": _array(doc, "landmarks", 2, 0), "poses": _array(doc, "poses", 3, 2)}
     out["antenna"] = doc.get("antenna", "rhs")
     out["registration"] = doc.get("registration", "icp")
     seed = doc.get("seed", 0)

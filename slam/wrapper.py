@@ -121,16 +121,21 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         self.estimate: SlamEstimate | None = None
         self.last_motion = np.zeros(3)
 
+    @property
+    def _base(self) -> Any:
+        """The highway-env env underneath (its ``vehicle``, ``road``, ``config``: not in gymnasium's Env type)."""
+        return self.env.unwrapped
+
     # ---- gymnasium API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         obs, info = self.env.reset(seed=seed, options=options)
         self._reset_state()
-        parent = self.env.unwrapped.np_random
+        parent = self._base.np_random
         rng = np.random.default_rng(int(parent.integers(0, 2**63 - 1)))
         if self.registration_kind == "odometry":
             self.pipeline.registration = make_registration("odometry", rng, truth=self.true_motion)
         self.pipeline.reset(rng)
-        self.origin = world_pose(self.env.unwrapped.vehicle)
+        self.origin = world_pose(self._base.vehicle)
         return self._observe(obs), self._with_info(info)
 
     def step(self, action):
@@ -140,20 +145,20 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     @property
     def dt(self) -> float:
         """The SLAM cycle: one policy step, s."""
-        return 1.0 / float(self.env.unwrapped.config["policy_frequency"])
+        return 1.0 / float(self._base.config["policy_frequency"])
 
     def true_pose(self) -> np.ndarray:
         """The ego's true pose in the map frame (the episode's start pose is the origin)."""
-        return relative_motion(self.origin, world_pose(self.env.unwrapped.vehicle))
+        return relative_motion(self.origin, world_pose(self._base.vehicle))
 
     def true_motion(self) -> np.ndarray:
         """True motion since the previous cycle, in the previous vehicle frame (the oracle's input)."""
-        pose_w = world_pose(self.env.unwrapped.vehicle)
+        pose_w = world_pose(self._base.vehicle)
         return np.zeros(3) if self.prev_world is None else relative_motion(self.prev_world, pose_w)
 
     def _observe(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         obs = self.observation(observation)
-        self.prev_world = world_pose(self.env.unwrapped.vehicle)
+        self.prev_world = world_pose(self._base.vehicle)
         self.true_traj.append(self.true_pose())
         self.est_traj.append(obs["pose"].astype(float))
         return obs
