@@ -136,7 +136,7 @@ def run_highway(args, slam: dict) -> dict[str, Any]:
 
     import rhs_env  # noqa: F401
 
-    kw = {"duration": args.cycles / POLICY_HZ}
+    kw: dict[str, Any] = {"duration": args.cycles / POLICY_HZ, "landmarks_in_info": True}
     if slam:
         kw["slam"] = slam
     env = gym.make("rhs-highway-slam-v0", **kw)
@@ -194,7 +194,7 @@ def dense_scene(seed: int, cycles: int, dt: float = 0.2, speed: float = 10.0):
 
 def run_dense(args, slam: dict) -> dict[str, Any]:
     from rhs_env.radar import RadarConfig, RadarSystem
-    from rhs_env.slam_wrapper import make_registration
+    from slam.registration import make_registration
     from slam.rbpf import SlamConfig
     from slam.scenario import RadarCloud, run_scenario
 

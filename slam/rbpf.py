@@ -87,14 +87,14 @@ Stage times (s) per cycle are in :attr:`SlamEstimate.stage_times`.
 from __future__ import annotations
 
 import math
-import time
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.special import logsumexp
 
-from rhs_env.validation import check_bool, check_choice, check_int, check_range
+from rhs_common.geometry import circular_mean, wrap_angle
+from rhs_common.timing import StageTimer
+from rhs_common.validation import check_bool, check_choice, check_int, check_range, check_types
 from slam.association import (
     DROPPED,
     NEW,
@@ -116,33 +116,6 @@ ASSOCIATIONS = ("mahalanobis", "nearest")
 NOISE_MODELS = ("per_point", "fixed")
 
 
-def wrap_angle(a):
-    """Wrap angles (rad) to [-pi, pi)."""
-    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
-
-
-def circular_mean(angles: np.ndarray, weights: np.ndarray | None = None) -> float:
-    """Weighted mean on the circle: ``atan2(sum w sin a, sum w cos a)`` (rad)."""
-    a = np.asarray(angles, dtype=float)
-    w = np.ones_like(a) if weights is None else np.asarray(weights, dtype=float)
-    return float(np.arctan2(np.sum(w * np.sin(a)), np.sum(w * np.cos(a))))
-
-
-class StageTimer:
-    """Wall time per named stage: ``with timer("predict"): ...``; ``timer.times`` (s)."""
-
-    def __init__(self) -> None:
-        self.times: dict[str, float] = {}
-
-    @contextmanager
-    def __call__(self, name: str):
-        t0 = time.perf_counter()
-        try:
-            yield
-        finally:
-            self.times[name] = self.times.get(name, 0.0) + time.perf_counter() - t0
-
-
 def rotate_sym2(c, s, b00, b01, b11):
     """Components of ``R B R^T`` for symmetric B, ``R = [[c, -s], [s, c]]`` (broadcasting)."""
     cc, ss, cs = c * c, s * s, c * s
@@ -153,7 +126,7 @@ def rotate_sym2(c, s, b00, b01, b11):
     )
 
 
-@dataclass
+@dataclass(frozen=True)
 class SlamConfig:
     """RBPF SLAM settings (SI units). Validated at construction.
 
@@ -219,6 +192,7 @@ class SlamConfig:
     retire_min_hits: int = 3
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_int("n_particles", self.n_particles, 1, 100_000)
         check_int("max_landmarks", self.max_landmarks, 1, 100_000)
         check_choice("variant", self.variant, VARIANTS)

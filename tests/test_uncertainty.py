@@ -126,7 +126,7 @@ def _landmark_nees(seed: int) -> np.ndarray:
     landmark estimate is the Kalman fusion of its observations with their own covariances:
     its NEES is chi-square(2) exactly when those covariances are right.
     """
-    from slam.pipeline import SlamPipeline
+    from slam.pipeline import PipelineConfig, SlamPipeline
     from slam.registration import points_in_frame
 
     lm, poses = _road(40)
@@ -135,11 +135,13 @@ def _landmark_nees(seed: int) -> np.ndarray:
     cfg = SlamConfig(n_particles=5, trans_std_m=0.0, trans_frac=0.0, rot_std_rad=0.0, accel_std_mps2=0.0,
                      yaw_accel_std_radps2=0.0, measurement_floor_m=0.0)
     odo = OdometryRegistration(400 + seed, trans_std_m=0.0, rot_std_rad=0.0)  # the pose is known
-    pipe = SlamPipeline(odo, cfg, np.random.default_rng(seed), use_doppler=False)
+    pipe = SlamPipeline(odo, cfg, np.random.default_rng(seed), PipelineConfig(use_doppler=False))
     from slam.registration import relative_motion
 
     for t in range(len(poses)):
-        res = pipe.step(cloud(t, poses[t]), 0.2, true_motion=relative_motion(poses[t - 1], poses[t]) if t else None)
+        if t:
+            odo.set_true_motion(relative_motion(poses[t - 1], poses[t]))
+        res = pipe.step(cloud(t, poses[t]), 0.2)
     est = res.estimate
     truth = points_in_frame(lm, poses[0])
     d = est.landmarks[:, None] - truth[None]
