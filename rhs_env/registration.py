@@ -22,7 +22,9 @@ Keyword arguments of ``gym.make`` go to the entry point: env config keys
 (``lanes_count=3``, ``landmarks={"spacing_m": 10}``, ``config={...}``,
 ``render_mode="rgb_array"``) and, for the radar id, the wrapper's
 ``radar={...}`` (``RadarConfig`` fields), ``antenna="phased"``,
-``max_points=...``, ``scatter={...}``, ``stage_times_in_info=True``.
+``max_points=...``, ``scatter={...}``, ``stage_times_in_info=True``,
+``blas_threads=1`` (BLAS / OpenMP threads inside each step, restored after it;
+``None`` opts into the process's own thread pools, see :mod:`rhs_env.threads`).
 """
 
 from __future__ import annotations
@@ -37,7 +39,8 @@ HIGHWAY_SLAM_ID = "rhs-highway-slam-v0"
 PAPER_ID = "rhs-paper-v0"
 
 #: keyword arguments that belong to :class:`rhs_env.wrappers.RadarObservation`
-RADAR_WRAPPER_KWARGS = ("radar", "antenna", "max_points", "scatter", "stage_times_in_info", "scatterers_in_info")
+RADAR_WRAPPER_KWARGS = ("radar", "antenna", "max_points", "scatter", "stage_times_in_info", "scatterers_in_info",
+                        "blas_threads")
 
 
 def _split(kwargs: dict[str, Any], names: tuple[str, ...]) -> tuple[dict[str, Any], dict[str, Any]]:

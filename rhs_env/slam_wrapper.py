@@ -34,6 +34,7 @@ import numpy as np
 from gymnasium import spaces
 
 from rhs_env.scene import draw_disks, get_landmarks, he_to_world_xy, world_pose, world_surface_pixels
+from rhs_env.threads import blas_threads_limit, check_blas_threads
 from rhs_env.validation import check_choice, check_int, check_range
 from slam.metrics import map_metrics
 from slam.pipeline import SlamPipeline
@@ -77,6 +78,8 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         max_landmarks: L_max, rows of the ``landmarks`` observation, [1, 4096].
         map_gate_m: gate of the Hungarian map metric in ``info`` (m).
         stage_times_in_info: add ``slam_stage_times`` to ``info`` (non-deterministic values).
+        blas_threads: BLAS / OpenMP threads inside ``step`` / ``reset``, restored after
+            each call (:mod:`rhs_env.threads`); default 1, ``None`` leaves them alone.
     """
 
     def __init__(
@@ -87,6 +90,7 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         max_landmarks: int = 64,
         map_gate_m: float = 2.0,
         stage_times_in_info: bool = False,
+        blas_threads: int | None = 1,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self,
@@ -95,8 +99,10 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             max_landmarks=max_landmarks,
             map_gate_m=map_gate_m,
             stage_times_in_info=stage_times_in_info,
+            blas_threads=blas_threads,
         )
         gym.ObservationWrapper.__init__(self, env)
+        self.blas_threads = check_blas_threads(blas_threads)
         space = env.observation_space
         if not isinstance(space, spaces.Dict) or "points" not in space.spaces or "points_mask" not in space.spaces:
             raise ValueError("SlamObservation needs an env with 'points' and 'points_mask' observations")
@@ -142,6 +148,10 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
 
     # ---- gymnasium API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        with blas_threads_limit(self.blas_threads):
+            return self._reset(seed, options)
+
+    def _reset(self, seed: int | None, options: dict[str, Any] | None):
         obs, info = self.env.reset(seed=seed, options=options)
         self._reset_state()
         parent = self.env.unwrapped.np_random
@@ -153,8 +163,9 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         return self.observation(obs), {**info, **self._info}
 
     def step(self, action):
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        return self.observation(obs), reward, terminated, truncated, {**info, **self._info}
+        with blas_threads_limit(self.blas_threads):
+            obs, reward, terminated, truncated, info = self.env.step(action)
+            return self.observation(obs), reward, terminated, truncated, {**info, **self._info}
 
     @property
     def dt(self) -> float:
@@ -244,7 +255,7 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
 #: keyword arguments that belong to :class:`SlamObservation`
 SLAM_WRAPPER_KWARGS = ("slam", "registration", "max_landmarks", "map_gate_m")
 #: keyword arguments given to both wrappers
-SHARED_WRAPPER_KWARGS = ("stage_times_in_info",)
+SHARED_WRAPPER_KWARGS = ("stage_times_in_info", "blas_threads")
 
 
 def _make_slam_env(env_cls_path: str, kwargs: dict[str, Any]) -> gym.Env:
