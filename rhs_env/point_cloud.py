@@ -567,8 +567,8 @@ def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, thet
     for _ in range(passes):
         fit = np.einsum("dkl,dl->dk", a, s)
         part = (flat[dd] - fit[dd] + a[dd, :, kk] * s[dd, kk][:, None]).reshape(-1, i, c)
-        h = dic.atoms(theta[dd, kk])[0].T  # (P, I)
         base = np.exp(-1j * domega[dd, kk][:, None, None] * tgrid[None])
+        h = (a[dd, :, kk].reshape(-1, i, c) * base)[:, :, 0]  # h(theta) of the current atom, (P, I)
         dw = domega[dd, kk] + _doppler_grid_refine(h, part * base, tgrid, span[dd])
         th = theta[dd, kk]
         if newton_steps:
