@@ -77,8 +77,8 @@ from rhs_env.point_cloud import (
     parabolic_offset,
     pointcloud_metrics,
     residual_threshold,
-    window_leak_envelope,
     tone_spectra,
+    window_leak_envelope,
 )
 from rhs_env.scatterers import Occluders, Scatterers, visible_mask
 

@@ -27,8 +27,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
 
-from rhs_env.antenna import ScanConfig  # noqa: E402
-from rhs_env.radar import RadarConfig, RadarSystem  # noqa: E402
+from rhs_env.antenna import ScanConfig
+from rhs_env.radar import RadarConfig, RadarSystem
 
 Z95 = 1.959963984540054
 
