@@ -93,10 +93,24 @@ def resolve_env(
     meta_env = meta.get("env_id")
     env_id = env_id or meta_env or DEFAULT_ENV
     base = dict(meta.get("env_kwargs") or {}) if env_id == meta_env else {}
-    kwargs = {**base, **(env_kwargs or {})}
-    if env_id.split(":")[-1] in SLAM_ENV_IDS:  # the episode record keeps the true and estimated maps
-        kwargs.setdefault("landmarks_in_info", True)
-    return env_id, kwargs
+    return env_id, {**base, **(env_kwargs or {})}
+
+
+def make_env(env_id: str, kwargs: dict[str, Any], **extra: Any):
+    """``gym.make(env_id, **kwargs)``; on the SLAM ids the info keeps the true and estimated maps
+    (``landmarks_in_info``) for the episode record. Bad kwargs raise ``ValueError``."""
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401  (registers the ids)
+
+    if env_id.split(":")[-1] in SLAM_ENV_IDS:
+        extra.setdefault("landmarks_in_info", True)
+    try:
+        return gym.make(env_id, **{**kwargs, **extra})
+    except TypeError as exc:
+        if "must be" in str(exc):  # a config field of the wrong type: the message names it
+            raise
+        raise ValueError(f"bad env kwargs for {env_id}: {exc}") from None
 
 
 def load_policy(policy: str | Path, env=None, seed: int = 0):
@@ -295,7 +309,6 @@ def evaluate(
 
     ``env_id`` / ``env_kwargs`` default to the ones saved beside the policy (:func:`resolve_env`).
     """
-    import gymnasium as gym
     from tqdm.auto import tqdm
 
     import rhs_env  # noqa: F401
@@ -303,10 +316,7 @@ def evaluate(
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
     env_id, kwargs = resolve_env(policy, env_id, env_kwargs)
-    try:
-        env = gym.make(env_id, **kwargs)
-    except TypeError as exc:
-        raise ValueError(f"bad env kwargs for {env_id}: {exc}") from None
+    env = make_env(env_id, kwargs)
     try:
         model = load_policy(policy, env, seed)
         runs = [

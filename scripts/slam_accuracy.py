@@ -197,8 +197,8 @@ def dense_scene(seed: int, cycles: int, dt: float = 0.2, speed: float = 10.0):
 
 def run_dense(args, slam: dict) -> dict[str, Any]:
     from rhs_env.radar import RadarConfig, RadarSystem
-    from slam.registration import make_registration
     from slam.rbpf import SlamConfig
+    from slam.registration import make_registration
     from slam.scenario import RadarCloud, run_scenario
 
     cfg = SlamConfig(**slam) if slam else SlamConfig()
