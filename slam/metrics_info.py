@@ -8,8 +8,9 @@
 * ``true_pose``, ``estimated_pose`` (3,): map frame (the start pose is the origin);
 * ``position_error_m`` = ``||p_hat - p||``, ``heading_error_rad`` = ``|wrap(th_hat - th)|``;
 * the map error against the true landmarks that have been within radar range
-  so far (Hungarian matching within ``map_gate_m``): ``map_rmse_m`` (None when
-  nothing matched), ``map_matched``, ``map_missed``, ``map_spurious``;
+  so far (Hungarian matching within ``map_gate_m``): ``map_rmse_m`` (a float
+  always, NaN while nothing has matched: a value that is sometimes None and
+  sometimes a float cannot be stacked by gymnasium's vector envs), ``map_matched``, ``map_missed``, ``map_spurious``;
 * ``registration_motion`` (3,): the registration's motion estimate of the cycle.
 
 With ``landmarks_in_info=True`` (off by default: their number changes from
@@ -85,7 +86,7 @@ class SlamMetricsInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
             "estimated_pose": np.asarray(est.pose, dtype=float),
             "position_error_m": float(np.hypot(err[0], err[1])),
             "heading_error_rad": float(abs(wrap_angle(err[2]))),
-            "map_rmse_m": None if rmse is None or not np.isfinite(rmse) else float(rmse),
+            "map_rmse_m": float("nan") if rmse is None or not np.isfinite(rmse) else float(rmse),
             "map_matched": int(mm["matched"]),
             "map_missed": int(mm["missed"]),
             "map_spurious": int(mm["spurious"]),
