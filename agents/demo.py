@@ -50,8 +50,15 @@ def run(args: argparse.Namespace) -> int:
 
     import rhs_env  # noqa: F401
 
+    from rhs_common.validation import check_output_path
+
     env = None
     try:
+        check_output_path("--out", args.out, directory=True)
+        if not 0 <= args.seed < 2**63:
+            raise ValueError(f"--seed must be an integer in [0, 2**63), got {args.seed}")
+        if not 0.1 <= args.fps <= 100:
+            raise ValueError(f"--fps must be in [0.1, 100], got {args.fps}")
         env_id, env_kwargs = resolve_env(args.policy, args.env, parse_env_kwargs(args.env_kwargs))
         if args.animation:
             env_kwargs.setdefault("render_mode", "rgb_array")

@@ -365,7 +365,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rhs_common.validation import check_output_path
+
     try:
+        check_output_path("--out", args.out)
+        check_output_path("--figure", args.figure or Path(args.out).with_suffix(".png"))
+        if args.episodes < 1 or args.episodes > 100_000:
+            raise ValueError(f"--episodes must be in [1, 100000], got {args.episodes}")
+        if not 0 <= args.seed < 2**63:
+            raise ValueError(f"--seed must be an integer in [0, 2**63), got {args.seed}")
         summary = evaluate(
             args.policy,
             args.env,
