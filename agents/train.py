@@ -94,6 +94,19 @@ def _resolve_policy_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
     return kwargs
 
 
+def check_train_args(timesteps: int, n_envs: int, seed: int, eval_freq: int, eval_episodes: int,
+                     checkpoint_freq: int) -> None:
+    """Bounds that keep a training run finite (``ValueError`` / ``TypeError`` naming the argument)."""
+    from rhs_common.validation import check_int
+
+    check_int("timesteps", timesteps, 1, 10**9)
+    check_int("n_envs", n_envs, 1, 256)
+    check_int("seed", seed, 0, 2**32 - 1)  # numpy's legacy seeding inside stable-baselines3
+    check_int("eval_freq", eval_freq, 0, 10**9)
+    check_int("eval_episodes", eval_episodes, 1, 10_000)
+    check_int("checkpoint_freq", checkpoint_freq, 0, 10**9)
+
+
 def worker_env_id(env_id: str) -> str:
     """``env_id`` as a fresh worker process can resolve it: the rhs ids get the ``rhs_env:`` prefix."""
     import gymnasium as gym
@@ -256,6 +269,7 @@ def train(
     n_envs = int(n_envs if n_envs is not None else yaml_envs)
     if n_envs < 1:
         raise ValueError(f"n_envs must be >= 1, got {n_envs}")
+    check_train_args(timesteps, n_envs, seed, eval_freq, eval_episodes, checkpoint_freq)
     env_kwargs = {**(hp.pop("env_kwargs", None) or {}), **(env_kwargs or {})}
     hp["policy_kwargs"] = _resolve_policy_kwargs(hp.get("policy_kwargs", {}))
     hp_record = {k: v for k, v in load_hyperparams(algo, env_id, hyperparams).items() if k not in META_KEYS}
@@ -408,7 +422,7 @@ def run(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
             resume=args.resume,
         )
-    except (ValueError, json.JSONDecodeError) as exc:
+    except (ValueError, TypeError, json.JSONDecodeError) as exc:
         print(f"rhs-slam train: error: {exc}", file=sys.stderr)
         return 2
     print(json.dumps(summary, indent=2))

@@ -65,7 +65,7 @@ def check_config_types(config: Mapping[str, Any], defaults: Mapping[str, Any]) -
         if isinstance(default, bool):
             check_bool(key, value)
         elif isinstance(default, (int, float)):
-            check_range(key, value, -1e9, 1e9)
+            check_range(key, value)  # a finite number; the ranges of the keys we use follow
 
 
 def check_action(space: gym.spaces.Space, action: Any) -> Any:
