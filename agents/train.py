@@ -82,9 +82,32 @@ def _resolve_schedules(hp: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _resolve_policy_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
+def eval_policy_kwargs(text: str) -> dict[str, Any]:
+    """A zoo-style ``policy_kwargs`` string -> dict, evaluated with the names rl-baselines3-zoo offers.
+
+    rl-baselines3-zoo ``eval``s such strings in its own module (``importlib``, ``nn``, ``th``
+    in scope); the same string works here, with nothing else in scope (no builtins but ``dict``).
+    """
+    import importlib
+
+    import torch
+    from torch import nn
+
+    names = {"dict": dict, "importlib": importlib, "nn": nn, "th": torch}
+    try:
+        value = eval(text, {"__builtins__": {}}, names)  # noqa: S307  (the user's own hyperparameter file)
+    except Exception as exc:
+        raise ValueError(f"policy_kwargs: cannot evaluate {text!r}: {exc}") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"policy_kwargs must evaluate to a dict, got {type(value).__name__}")  # noqa: TRY004
+    return value
+
+
+def _resolve_policy_kwargs(kwargs: dict[str, Any] | str) -> dict[str, Any]:
     from agents.features import FEATURE_EXTRACTORS
 
+    if isinstance(kwargs, str):
+        kwargs = eval_policy_kwargs(kwargs)
     kwargs = dict(kwargs or {})
     name = kwargs.get("features_extractor_class")
     if isinstance(name, str):
