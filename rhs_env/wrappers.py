@@ -35,6 +35,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from rhs_common.threads import blas_threads_limit, check_blas_threads
 from rhs_common.validation import build, check_bool, check_choice, check_int
 from rhs_env.antenna import ANTENNA_KINDS
 from rhs_env.scene import (
@@ -97,6 +98,9 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         stage_times_in_info: add ``radar_stage_times`` to ``info`` (non-deterministic values).
         scatterers_in_info: add the ground-truth ``scatterers`` to ``info`` (variable length:
             off by default so vector envs can stack ``info``).
+        blas_threads: BLAS / OpenMP threads inside ``step`` / ``reset`` (the radar's
+            work and the env's), restored after each call (:mod:`rhs_common.threads`);
+            default 1, ``None`` leaves the user's thread pools alone (opt into threads).
 
     Example:
         >>> import gymnasium as gym
@@ -116,6 +120,7 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         scatter: Any = None,
         stage_times_in_info: bool = False,
         scatterers_in_info: bool = False,
+        blas_threads: int | None = 1,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self,
@@ -125,11 +130,13 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             scatter=scatter,
             stage_times_in_info=stage_times_in_info,
             scatterers_in_info=scatterers_in_info,
+            blas_threads=blas_threads,
         )
         gym.ObservationWrapper.__init__(self, env)
         check_int("max_points", max_points, 1, 65536)
         check_bool("stage_times_in_info", stage_times_in_info)
         check_bool("scatterers_in_info", scatterers_in_info)
+        self.blas_threads = check_blas_threads(blas_threads)
         self.max_points = int(max_points)
         self.radar_config = make_radar_config(radar, antenna)
         self.scatter_config = ScatterConfig.make(scatter)
@@ -166,13 +173,15 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
 
     # ---- gymnasium API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        obs, info = self.env.reset(seed=seed, options=options)
-        self._build_radar(_spawn_rng(self.env))
-        return self.observation(obs), self._with_info(info)
+        with blas_threads_limit(self.blas_threads):
+            obs, info = self.env.reset(seed=seed, options=options)
+            self._build_radar(_spawn_rng(self.env))
+            return self.observation(obs), self._with_info(info)
 
     def step(self, action):
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        return self.observation(obs), reward, terminated, truncated, self._with_info(info)
+        with blas_threads_limit(self.blas_threads):
+            obs, reward, terminated, truncated, info = self.env.step(action)
+            return self.observation(obs), reward, terminated, truncated, self._with_info(info)
 
     def observation(self, observation: Any) -> dict[str, np.ndarray]:
         """Scan the current scene -> the padded point cloud (the env's own observation is ignored).

@@ -111,6 +111,8 @@ def test_same_seed_same_episode(maker):
         ("rhs-highway-radar-v0", {"radar": {"scan": {"grid_deg": 7.0}}}, "grid_deg"),
         ("rhs-highway-radar-v0", {"radar": {"bogus": 1}}, "bogus"),
         ("rhs-highway-radar-v0", {"scatter": {"vehicle_rcs_m2": -2}}, "vehicle_rcs_m2"),
+        ("rhs-highway-radar-v0", {"blas_threads": 0}, "blas_threads"),
+        ("rhs-highway-slam-v0", {"blas_threads": "many"}, "blas_threads"),
     ],
 )
 def test_bad_kwargs_raise_value_error_naming_the_field(env_id, kwargs, field):
@@ -204,3 +206,40 @@ def test_radar_on_the_paper_scene_sees_the_obstacles():
     pts = obs["points"][obs["points_mask"] == 1]
     assert len(pts) > 0
     env.close()
+
+
+def _blas_threads() -> int:
+    from threadpoolctl import threadpool_info
+
+    return max(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas")
+
+
+@pytest.mark.parametrize("env_id", ["rhs-highway-radar-v0", "rhs-highway-slam-v0"])
+def test_step_runs_single_threaded_blas_and_restores_the_callers_limit(env_id):
+    """The radar (and SLAM) work sees 1 BLAS thread inside reset/step; the caller's 2 threads come back after."""
+    from threadpoolctl import threadpool_limits
+
+    seen = []
+    with threadpool_limits(2, user_api="blas"):
+        if _blas_threads() != 2:
+            pytest.skip("the BLAS in use does not allow 2 threads here")
+        for blas_threads, want in ((1, 1), (None, 2)):
+            env = gym.make(env_id, **{**SMALL_ENV, **SMALL_RADAR}, blas_threads=blas_threads)
+            radar = env
+            while not isinstance(radar, RadarObservation):
+                radar = radar.env
+            env.reset(seed=0)
+            scan = radar.radar.scan
+            radar.radar.scan = lambda *a, _f=scan, **k: (seen.append(_blas_threads()), _f(*a, **k))[1]
+            slam = env
+            while slam is not radar and not hasattr(slam, "pipeline"):
+                slam = slam.env
+            if slam is not radar:  # the SLAM pipeline's step too
+                step = slam.pipeline.step
+                slam.pipeline.step = lambda *a, _f=step, **k: (seen.append(_blas_threads()), _f(*a, **k))[1]
+            env.step(1)
+            env.reset(seed=1)
+            assert seen and set(seen) == {want}, (blas_threads, seen)
+            assert _blas_threads() == 2  # restored after the step
+            seen.clear()
+            env.close()
