@@ -235,7 +235,7 @@ def run_episode(
         if bar is not None:
             bar.update(1)
         done = terminated or truncated
-    map_rmse = info.get("map_rmse_m")  # NaN until a landmark is matched
+    map_rmse = info.get("map_rmse_m")  # absent until a landmark is matched
     return {
         "seed": seed,
         "return": total,
@@ -245,7 +245,7 @@ def run_episode(
         "position_rmse_m": float(np.sqrt(np.mean(np.square(pos_err)))) if pos_err else None,
         "final_position_error_m": pos_err[-1] if pos_err else None,
         "heading_rmse_rad": float(np.sqrt(np.nanmean(head_err2))) if head_err2 else None,
-        "map_rmse_m": None if map_rmse is None or not np.isfinite(map_rmse) else float(map_rmse),
+        "map_rmse_m": None if map_rmse is None else float(map_rmse),
         "map_matched": info.get("map_matched"),
         "map_missed": info.get("map_missed"),
         "map_spurious": info.get("map_spurious"),
