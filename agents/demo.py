@@ -28,6 +28,7 @@ from agents.evaluate import (
     _json_default,
     episode_steps,
     load_policy,
+    make_env,
     parse_env_kwargs,
     plot_summary,
     resolve_env,
@@ -59,7 +60,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import gymnasium as gym
     import numpy as np
 
     import rhs_env  # noqa: F401
@@ -76,10 +76,7 @@ def run(args: argparse.Namespace) -> int:
         env_id, env_kwargs = resolve_env(args.policy, args.env, parse_env_kwargs(args.env_kwargs))
         if args.animation:
             env_kwargs.setdefault("render_mode", "rgb_array")
-        try:
-            env = gym.make(env_id, **env_kwargs)
-        except TypeError as exc:
-            raise ValueError(f"bad env kwargs for {env_id}: {exc}") from None
+        env = make_env(env_id, env_kwargs)
         policy = load_policy(args.policy, env, args.seed)
     except (ValueError, FileNotFoundError, json.JSONDecodeError) as exc:
         print(f"rhs-slam demo: error: {exc}", file=sys.stderr)

@@ -140,7 +140,7 @@ def worker_env_id(env_id: str) -> str:
         return env_id
     spec = gym.registry.get(env_id)
     entry = spec.entry_point if spec is not None else None
-    if isinstance(entry, str) and entry.startswith("rhs_env."):
+    if isinstance(entry, str) and entry.startswith(("rhs_env.", "slam.")):  # the ids rhs_env registers
         return f"rhs_env:{env_id}"
     return env_id
 

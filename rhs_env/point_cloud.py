@@ -86,6 +86,9 @@ class PointCloud:
         radar: (N,) int, index of the radar (0 front, 1 left, 2 rear, 3 right).
         range_m: (N,) range from the radar, m.
         angle_rad: (N,) angle from the radar's boresight, rad (CCW positive).
+        range_std_m: (N,) range standard deviation, m (CRB at the point's SNR + floor,
+            :mod:`rhs_env.uncertainty`).
+        angle_std_rad: (N,) angle standard deviation, rad (idem).
         stage_times: wall time per stage, s: ``synthesis``, ``range_cfar``, ``omp``.
     """
 
@@ -93,6 +96,8 @@ class PointCloud:
     radar: np.ndarray
     range_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
     angle_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    range_std_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    angle_std_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
     stage_times: dict = field(default_factory=dict)
 
     def __len__(self) -> int:

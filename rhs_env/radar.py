@@ -81,6 +81,7 @@ from rhs_env.point_cloud import (
     window_leak_envelope,
 )
 from rhs_env.scatterers import Occluders, Scatterers, visible_mask
+from rhs_env.uncertainty import attach_uncertainty
 
 __all__ = ["BOLTZMANN", "RADAR_NAMES", "PointCloud", "RadarConfig", "RadarSystem"]
 
@@ -118,6 +119,9 @@ class RadarConfig:
     ``||iota||^2``, the dynamic range of the angle model), ``omp_newton_steps``,
     ``omp_min_snr_db`` (an atom whose amplitude SNR over the sweep, 20 log10 of
     ``|s| ||a|| / sigma_Y``, is lower is rejected and ends the search).
+    Uncertainty: every point's range / angle std is its Cramer-Rao bound at its
+    SNR plus the floors ``range_std_floor_m`` / ``angle_std_floor_deg`` (model
+    error; :mod:`rhs_env.uncertainty`).
     Mounting: ``vehicle_length_m``, ``vehicle_width_m``. ``slot_doppler``: the
     Doppler phase runs on across the slots of the sweep (physical) or restarts.
     Synthesis ``fidelity``: "iq" builds the dechirped samples and takes their
@@ -157,6 +161,8 @@ class RadarConfig:
     omp_residual_rel_db: float = -25.0
     omp_newton_steps: int = 2
     omp_min_snr_db: float = 15.0
+    range_std_floor_m: float = 0.003
+    angle_std_floor_deg: float = 0.003
     slot_doppler: bool = True
     vehicle_length_m: float = 5.0
     vehicle_width_m: float = 2.0
@@ -197,6 +203,8 @@ class RadarConfig:
         check_range("omp_residual_rel_db", self.omp_residual_rel_db, -200.0, 0.0)
         check_int("omp_newton_steps", self.omp_newton_steps, 0, 10)
         check_range("omp_min_snr_db", self.omp_min_snr_db, -50.0, 100.0)
+        check_range("range_std_floor_m", self.range_std_floor_m, 0.0, 10.0)
+        check_range("angle_std_floor_deg", self.angle_std_floor_deg, 0.0, 10.0)
         check_range("vehicle_length_m", self.vehicle_length_m, 0.0, 50.0)
         check_range("vehicle_width_m", self.vehicle_width_m, 0.0, 20.0)
         check_choice("fidelity", self.fidelity, FIDELITIES)
@@ -664,7 +672,9 @@ class RadarSystem:
         a = np.abs(est.amp[di, li]) * est.anorm[di, li] / math.sqrt(cfg.noise_power_w * self._win_energy)
         keep = (rng_m >= cfg.min_range_m) & (rng_m <= cfg.max_range_m) & ~self._sidelobe_points(radar, rng_m, th, a)
         pts = np.column_stack([xy, vel, a])[keep]
-        return PointCloud(points=pts, radar=radar[keep], range_m=rng_m[keep], angle_rad=th[keep])
+        cloud = PointCloud(points=pts, radar=radar[keep], range_m=rng_m[keep], angle_rad=th[keep])
+        attach_uncertainty(self, cloud)  # per-point range / angle std (rhs_env.uncertainty)
+        return cloud
 
     def _sidelobe_points(self, radar: np.ndarray, rng_m: np.ndarray, th: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Target-level range-sidelobe check (bool per point).

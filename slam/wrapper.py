@@ -102,7 +102,11 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         reg = make_registration(registration, truth=self.true_motion)
         if isinstance(reg, ICPRegistration):
             reg = ICPRegistration(self.icp_config)
-        self.pipeline = SlamPipeline(reg, self.slam_config, np.random.default_rng(0), self.pipeline_config)
+        radar_cfg = getattr(env, "radar_config", None)  # the radars' mounts place each point's line of sight
+        sensor_xy = radar_cfg.mounts()[0] if radar_cfg is not None else None
+        self.pipeline = SlamPipeline(
+            reg, self.slam_config, np.random.default_rng(0), self.pipeline_config, sensor_xy=sensor_xy
+        )
         self.max_landmarks = int(max_landmarks)
         self.stage_times_in_info = bool(stage_times_in_info)
         self.stage_times: dict[str, float] = {}

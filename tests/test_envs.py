@@ -53,7 +53,7 @@ def test_radar_observation_space_and_info():
     env = make_radar(scatterers_in_info=True)
     obs, info = env.reset(seed=0)
     assert set(obs) == {"points", "points_mask"}
-    assert obs["points"].shape == (64, 4) and obs["points"].dtype == np.float32
+    assert obs["points"].shape == (64, 7) and obs["points"].dtype == np.float32
     assert obs["points_mask"].shape == (64,) and obs["points_mask"].dtype == np.int8
     n = int(obs["points_mask"].sum())
     assert n > 0 and np.all(obs["points"][n:] == 0) and np.all(obs["points_mask"][:n] == 1)
@@ -156,7 +156,7 @@ def test_subproc_vec_env_steps():
         env_kwargs={**SMALL_ENV, **SMALL_RADAR},
     )
     obs = venv.reset()
-    assert obs["points"].shape == (2, 64, 4)
+    assert obs["points"].shape == (2, 64, 7)
     obs, rewards, _dones, infos = venv.step(np.array([1, 1]))
     assert rewards.shape == (2,) and len(infos) == 2 and "radar_points_total" in infos[0]
     venv.close()
@@ -243,3 +243,26 @@ def test_step_runs_single_threaded_blas_and_restores_the_callers_limit(env_id):
             assert _blas_threads() == 2  # restored after the step
             seen.clear()
             env.close()
+
+
+def test_points_carry_their_uncertainty_and_radar():
+    env = make_radar()
+    obs, _ = env.reset(seed=1)
+    wrapper = env
+    while not isinstance(wrapper, RadarObservation):
+        wrapper = wrapper.env
+    cloud = wrapper.last_cloud
+    n = int(obs["points_mask"].sum())
+    assert n == len(cloud) > 0
+    rows = obs["points"][:n]
+    np.testing.assert_allclose(rows[:, 4], cloud.range_std_m, rtol=1e-6)
+    np.testing.assert_allclose(rows[:, 5], cloud.angle_std_rad, rtol=1e-6)
+    np.testing.assert_array_equal(rows[:, 6], cloud.radar)
+    # stds are positive, at least the floors, and shrink with the SNR (amplitude)
+    cfg = wrapper.radar_config
+    assert np.all(rows[:, 4] >= cfg.range_std_floor_m * (1 - 1e-6))
+    assert np.all(rows[:, 5] >= np.radians(cfg.angle_std_floor_deg) * (1 - 1e-6))
+    order = np.argsort(rows[:, 3])
+    assert rows[order[0], 5] > rows[order[-1], 5]
+    assert env.observation_space.contains(obs)
+    env.close()
