@@ -235,11 +235,34 @@ def _action(action) -> Any:
     return int(a) if a.ndim == 0 and np.issubdtype(a.dtype, np.integer) else action
 
 
-def run_episode(env, policy, seed: int, deterministic: bool = True, frames: list | None = None) -> dict[str, Any]:
-    """One episode; returns its return, crash flag, mean speed, SLAM errors and the trajectories."""
+def episode_steps(env) -> int | None:
+    """Steps of a full episode (``duration * policy_frequency``), or None when the env does not say."""
+    try:
+        cfg = env.unwrapped.config
+        return int(round(float(cfg["duration"]) * float(cfg["policy_frequency"])))
+    except (AttributeError, KeyError, TypeError, ValueError):
+        return None
+
+
+def run_episode(
+    env,
+    policy,
+    seed: int,
+    deterministic: bool = True,
+    frames: list | None = None,
+    trace: list | None = None,
+    bar: Any = None,
+) -> dict[str, Any]:
+    """One episode; returns its return, crash flag, mean speed, SLAM errors and the trajectories.
+
+    ``frames`` collects ``env.render()`` per step; ``trace`` the ``(obs, info)`` of the reset and of
+    every step; ``bar`` (a tqdm bar) is advanced by one per step.
+    """
     obs, info = env.reset(seed=seed)
     if frames is not None:
         frames.append(env.render())
+    if trace is not None:
+        trace.append((obs, info))
     total, steps, speeds, pos_err, head_err2 = 0.0, 0, [], [], []
     true_xy, est_xy = [], []
     crashed, done = False, False
@@ -257,8 +280,12 @@ def run_episode(env, policy, seed: int, deterministic: bool = True, frames: list
             est_xy.append(np.asarray(info["estimated_pose"][:2], dtype=float).tolist())
         if frames is not None:
             frames.append(env.render())
+        if trace is not None:
+            trace.append((obs, info))
+        if bar is not None:
+            bar.update(1)
         done = terminated or truncated
-    map_rmse = info.get("map_rmse_m")  # None until a landmark is matched
+    map_rmse = info.get("map_rmse_m")  # absent until a landmark is matched
     return {
         "seed": seed,
         "return": total,
@@ -319,10 +346,13 @@ def evaluate(
     env = make_env(env_id, kwargs)
     try:
         model = load_policy(policy, env, seed)
-        runs = [
-            run_episode(env, model, seed + k, deterministic=deterministic)
-            for k in tqdm(range(episodes), desc="evaluate", unit="episode", disable=not progress)
-        ]
+        per_episode = episode_steps(env)
+        with tqdm(total=episodes * per_episode if per_episode else None, desc="evaluate", unit="step",
+                  disable=not progress) as bar:
+            runs = []
+            for k in range(episodes):
+                bar.set_postfix(episode=f"{k + 1}/{episodes}")
+                runs.append(run_episode(env, model, seed + k, deterministic=deterministic, bar=bar))
     finally:
         env.close()
     return {
@@ -411,7 +441,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rhs_common.validation import check_output_path
+
     try:
+        check_output_path("--out", args.out)
+        check_output_path("--figure", args.figure or Path(args.out).with_suffix(".png"))
+        if args.episodes < 1 or args.episodes > 100_000:
+            raise ValueError(f"--episodes must be in [1, 100000], got {args.episodes}")
+        if not 0 <= args.seed < 2**63:
+            raise ValueError(f"--seed must be an integer in [0, 2**63), got {args.seed}")
         summary = evaluate(
             args.policy,
             args.env,

@@ -197,6 +197,7 @@ def ca_cfar_threshold(profile: np.ndarray, guard: int, train: int, stride: int, 
     return alpha * np.clip(mean, floor, cap)
 
 
+@functools.lru_cache(maxsize=64)  # a pure function of its scalars; ~5 s of quadrature per call
 def os_cfar_alpha(pfa: float, looks: int, train_cells: int, rank: int) -> float:
     """OS-CFAR multiplier: threshold ``alpha * Y_(rank)`` (rank-th smallest of the training cells).
 

@@ -48,7 +48,12 @@ def run(args: argparse.Namespace) -> int:
     from rhs_env.patterns.library import build_library, get_library, load
     from rhs_env.patterns.metrics import pattern_report
 
+    from rhs_common.validation import check_output_path
+
     try:
+        for name, path in (("--out", args.out), ("--json", args.json)):
+            if path is not None:
+                check_output_path(name, path)
         if args.load is not None:
             lib = load(args.load)
             config = lib.rhs_config()
