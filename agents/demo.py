@@ -63,7 +63,6 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     import rhs_env  # noqa: F401
-
     from rhs_common.validation import check_output_path
 
     env = None

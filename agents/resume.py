@@ -80,7 +80,7 @@ class StopOnSignal(BaseCallback):
         self._first_step = False
         self._previous: dict[int, Any] = {}
 
-    def _handler(self, signum, frame) -> None:  # noqa: ARG002
+    def _handler(self, signum, frame) -> None:
         self.requested = signum
 
     def _on_training_start(self) -> None:

@@ -95,7 +95,7 @@ def eval_policy_kwargs(text: str) -> dict[str, Any]:
 
     names = {"dict": dict, "importlib": importlib, "nn": nn, "th": torch}
     try:
-        value = eval(text, {"__builtins__": {}}, names)  # noqa: S307  (the user's own hyperparameter file)
+        value = eval(text, {"__builtins__": {}}, names)
     except Exception as exc:
         raise ValueError(f"policy_kwargs: cannot evaluate {text!r}: {exc}") from None
     if not isinstance(value, dict):
@@ -274,13 +274,13 @@ def train(
     worker processes get ``OMP_NUM_THREADS=1`` unless it is set already.
     """
     from stable_baselines3 import DQN, PPO
-
-    from agents.resume import StopOnSignal, latest_checkpoint, load_checkpoint, save_checkpoint
     from stable_baselines3.common.callbacks import (
         CallbackList,
         CheckpointCallback,
         EvalCallback,
     )
+
+    from agents.resume import StopOnSignal, latest_checkpoint, load_checkpoint, save_checkpoint
 
     hp = load_hyperparams(algo, env_id, hyperparams)
     policy = hp.pop("policy")

@@ -14,7 +14,7 @@ from slam.pipeline import PipelineConfig, SlamPipeline
 from slam.registration import OdometryRegistration
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
-import slam_accuracy  # noqa: E402
+import slam_accuracy
 
 
 def test_quick_run_records_provenance_and_targets(tmp_path):

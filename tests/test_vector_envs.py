@@ -59,7 +59,7 @@ def _with_deadline(fn, seconds: float) -> None:
     def target():
         try:
             fn()
-        except BaseException as exc:  # noqa: BLE001  (re-raised below)
+        except BaseException as exc:
             errors.append(exc)
 
     t = threading.Thread(target=target, daemon=True)

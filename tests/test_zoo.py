@@ -33,10 +33,10 @@ def zoo_argv(env_id: str, log: Path) -> list[str]:
 
 @pytest.mark.parametrize("env_id", IDS)
 def test_zoo_trains_with_the_shipped_yaml(env_id, tmp_path, monkeypatch):
+    from rl_zoo3.train import train
     from stable_baselines3 import PPO
 
     from agents.features import PointSetExtractor
-    from rl_zoo3.train import train
 
     monkeypatch.setattr(sys, "argv", zoo_argv(env_id, tmp_path))
     train()
