@@ -101,7 +101,7 @@ def _episode(kw: dict) -> None:
 def test_fuzz_env_kwargs():
     rng = np.random.default_rng(20261123)
     outcomes = {"ok": 0, "refused": 0}
-    for path, value, kw in _mutations(rng, 40):
+    for path, _value, kw in _mutations(rng, 40):
         ok = _check_outcome(lambda kw=kw: _episode(kw) or True, path[-1])
         outcomes["ok" if ok else "refused"] += 1
     assert outcomes["refused"] > 20  # most mutations are bad on purpose
