@@ -77,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
             env_kwargs.setdefault("render_mode", "rgb_array")
         env = make_env(env_id, env_kwargs)
         policy = load_policy(args.policy, env, args.seed)
-    except (ValueError, FileNotFoundError, json.JSONDecodeError) as exc:
+    except (ValueError, TypeError, FileNotFoundError, json.JSONDecodeError) as exc:
         print(f"rhs-slam demo: error: {exc}", file=sys.stderr)
         if env is not None:
             env.close()

@@ -459,7 +459,7 @@ def run(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
             deterministic=not args.stochastic,
         )
-    except (ValueError, FileNotFoundError, json.JSONDecodeError) as exc:
+    except (ValueError, TypeError, FileNotFoundError, json.JSONDecodeError) as exc:
         print(f"rhs-slam evaluate: error: {exc}", file=sys.stderr)
         return 2
     out = Path(args.out)
