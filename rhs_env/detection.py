@@ -278,8 +278,8 @@ class FootprintDetector:
         peak[:, :, 1:-1] = (t > stat[:, :, :-2]) & (t >= stat[:, :, 2:]) & (t > lo)
         peak &= in_range[None, None, :]
         r, j, k = np.nonzero(peak)
+        val = stat[r, j, k].astype(float)
         if r.size:
-            val = stat[r, j, k].astype(float)
             keep = val > self.threshold(stat, r, j, k)
             r, j, k, val = r[keep], j[keep], k[keep], val[keep]
         if r.size > 1:  # window sidelobe of a stronger peak of the same radar and hypothesis

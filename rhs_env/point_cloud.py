@@ -508,7 +508,8 @@ class DopplerOMPResult:
 
 def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_targets: int,
                 residual_threshold: np.ndarray, noise_var: float, relative_threshold: float = 0.0,
-                min_amplitude: float = 0.0, newton_steps: int = 2, cycles: int = 2) -> DopplerOMPResult:
+                min_amplitude: float = 0.0, newton_steps: int = 2, cycles: int = 2,
+                detected: bool = False) -> DopplerOMPResult:
     """OMP over the slot x chirp data with a Doppler per atom (the swept-beam OMP of paper Alg. 1).
 
     Model: ``data[d, i, c] = sum_k s_k h_i(theta_k) exp(j omega_k t_ic) + noise``,
@@ -526,6 +527,10 @@ def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_t
        Doppler against its own partial residual);
     4. accept the new atom only if every ``|s_k| ||a_k|| >= min_amplitude``;
        continue while ``l < max_targets`` and ``||R||^2 >= max(delta_r, rel ||data||^2)``.
+
+    ``detected``: the rows passed a detector matched to the beam (:mod:`rhs_env.detection`),
+    so the first atom is taken without the residual and amplitude tests (both are
+    slot-summed statistics, weaker than that detector); the later atoms keep them.
     """
     data = np.asarray(data, complex)
     d, i, c = data.shape
@@ -538,7 +543,7 @@ def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_t
     resid = data.copy()
     r2 = np.sum(np.abs(resid) ** 2, axis=(1, 2))
     stop = np.maximum(np.asarray(residual_threshold, float), relative_threshold * r2)
-    active = r2 >= stop
+    active = np.ones(d, bool) if detected else r2 >= stop
     reach = max(1, round(dic.H.shape[1] / max(i, 1)))
     t_span = float(tgrid.max() + 1)
     fine_span = min(np.pi, 8 * np.pi / t_span)
@@ -575,7 +580,7 @@ def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_t
         th_r, om_r, s, a = joint_refine(dic, data[rows], tgrid, th_r, om_r, val_r,
                                         np.full(rows.size, fine_span), passes=0, newton_steps=newton_steps)
         strength = np.abs(s) * np.linalg.norm(a, axis=1)
-        ok = np.all((strength >= min_amplitude) | ~val_r, axis=1)
+        ok = np.all((strength >= min_amplitude) | ~val_r, axis=1) | (detected and l == 0)
         if l > 0 and cycles and np.any(ok):  # cyclic joint refinement of the rows that keep the new atom
             th_c, om_c, s_c, a_c = joint_refine(dic, data[rows[ok]], tgrid, th_r[ok], om_r[ok], val_r[ok],
                                                 np.full(int(ok.sum()), fine_span), passes=cycles,

@@ -72,6 +72,7 @@ from rhs_env.point_cloud import (
     residual_threshold,
     window_leak_envelope,
 )
+from rhs_env.detection import DETECTORS, FootprintDetector
 from rhs_env.scatterers import Occluders, Scatterers, visible_mask
 from rhs_env.validation import check_bool, check_choice, check_int, check_range
 
@@ -103,7 +104,11 @@ class RadarConfig:
     above the noise mean of the slot-combined profile, the paper's delta_d);
     a peak weaker than ``sidelobe_margin_db`` above the window's sidelobe
     envelope under a stronger peak is dropped; ``zero_pad`` FFT length
-    factor; ``window`` taper.
+    factor; ``window`` taper. ``detector``: the statistic CFAR runs on,
+    "summed" (the range profile summed over all slots and chirps, the paper's) or
+    "footprint" (per angle hypothesis, the energy over that beam's footprint of
+    slots, :mod:`rhs_env.detection`; its first OMP atom per detected bin is taken
+    without the residual and amplitude tests, which the detection replaces).
     OMP: ``omp_oversampling`` candidates per grid, ``omp_max_targets`` L_max per
     range, ``omp_residual_pfa`` (delta_r: the residual noise alone exceeds with
     this probability), ``omp_residual_rel_db`` (stop below this fraction of
@@ -128,6 +133,7 @@ class RadarConfig:
     rhs: RHSConfig = field(default_factory=RHSConfig)
     scan: ScanConfig = field(default_factory=ScanConfig)
     detection: str = "cfar"
+    detector: str = "summed"
     cfar_guard: int = 2
     cfar_train: int = 8
     cfar_pfa: float = 1e-6
@@ -166,6 +172,7 @@ class RadarConfig:
         if not isinstance(self.scan, ScanConfig):
             raise ValueError(f"scan must be a ScanConfig, got {type(self.scan).__name__}")  # noqa: TRY004
         check_choice("detection", self.detection, DETECTION_MODES)
+        check_choice("detector", self.detector, DETECTORS)
         check_int("cfar_guard", self.cfar_guard, 0, 64)
         check_int("cfar_train", self.cfar_train, 1, 256)
         check_range("cfar_pfa", self.cfar_pfa, 0.0, 0.5, low_open=True)
@@ -325,6 +332,8 @@ class RadarSystem:
             self._alpha = 10 ** (config.fixed_threshold_db / 10)
         cells = config.scan.slots * config.chirps_per_slot
         y_var = config.noise_power_w * self._win_energy
+        self._detectors = ([FootprintDetector(dic, config, y_var, self._leak) for dic, _ in self._groups]
+                           if config.detector == "footprint" else [])
         self._min_amp = 10 ** (config.omp_min_snr_db / 20) * math.sqrt(y_var)
         self._delta_r = float(residual_threshold(y_var, cells, config.omp_residual_pfa))
         i, c = config.scan.slots, config.chirps_per_slot
@@ -421,16 +430,25 @@ class RadarSystem:
         return y.reshape(4, i_slots, c, n)
 
     # ------------------------------------------------------------------ processing
-    def process(self, y: np.ndarray) -> tuple[PointCloud, dict[str, float]]:
-        """Range FFT, detection and OMP on y (4, I, C, N) -> point cloud (and stage times)."""
+    def _detect(self, spec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Detected (radar, bin) pairs of the spectra (4, I, C, Kb): ``config.detector`` chooses the statistic.
+
+        "footprint": :class:`rhs_env.detection.FootprintDetector` per antenna (CFAR per
+        beam footprint of slots); "summed": CFAR on the slot-summed profile (the paper's).
+        """
         cfg = self.config
-        z, n = cfg.zero_pad, cfg.samples
-        t0 = time.perf_counter()
-        buf = self._buffer("fft", y.shape[:-1] + (z * n,), np.complex64)
-        np.multiply(y, self._window, out=buf[..., :n])
-        buf[..., n:] = 0
-        # in place (overwrite_x): the padded buffer becomes the spectrum, no fresh 9 MB array per scan
-        spec = sfft.fft(buf, axis=-1, workers=1, overwrite_x=True)[..., : self._bin_hi]  # (4, I, C, Kb)
+        in_range = self._bin_range >= cfg.min_range_m - cfg.range_resolution_m / 2
+        if cfg.detector == "footprint":
+            rds, kds = [], []
+            for g, det in enumerate(self._detectors):
+                radars = np.flatnonzero(self._radar_group == g)
+                r, k, _ = det.detect(spec[radars], in_range)
+                rds.append(radars[r])
+                kds.append(k)
+            rd, kd = np.concatenate(rds), np.concatenate(kds)
+            o = np.lexsort((kd, rd))
+            return rd[o], kd[o]
+        z = cfg.zero_pad
         cap = self._p_noise * 10 ** (cfg.cfar_cap_db / 10)
         prof = np.einsum("ricb,ricb->rb", spec.real, spec.real) + np.einsum("ricb,ricb->rb", spec.imag, spec.imag)
         if cfg.detection == "cfar" and cfg.cfar_method == "os":
@@ -442,7 +460,7 @@ class RadarSystem:
         else:
             thr = np.full(prof.shape, self._alpha * self._p_noise)
         det = local_maxima(prof, thr)
-        det &= (self._bin_range >= cfg.min_range_m - self.config.range_resolution_m / 2)[None, :]
+        det &= in_range[None, :]
         rd, kd = np.nonzero(det)
         if rd.size > 1:  # drop peaks explained by the window sidelobes of a stronger peak (same radar)
             pk = prof[rd, kd].astype(float)
@@ -451,6 +469,19 @@ class RadarSystem:
                             pk[None, :] * self._leak[dk], 0.0).max(axis=1)
             keep = pk >= 10 ** (cfg.sidelobe_margin_db / 10) * leak
             rd, kd = rd[keep], kd[keep]
+        return rd, kd
+
+    def process(self, y: np.ndarray) -> tuple[PointCloud, dict[str, float]]:
+        """Range FFT, detection and OMP on y (4, I, C, N) -> point cloud (and stage times)."""
+        cfg = self.config
+        z, n = cfg.zero_pad, cfg.samples
+        t0 = time.perf_counter()
+        buf = self._buffer("fft", y.shape[:-1] + (z * n,), np.complex64)
+        np.multiply(y, self._window, out=buf[..., :n])
+        buf[..., n:] = 0
+        # in place (overwrite_x): the padded buffer becomes the spectrum, no fresh 9 MB array per scan
+        spec = sfft.fft(buf, axis=-1, workers=1, overwrite_x=True)[..., : self._bin_hi]  # (4, I, C, Kb)
+        rd, kd = self._detect(spec)
         yd = spec[rd, :, :, kd].astype(np.complex128)  # (D, I, C)
         t1 = time.perf_counter()
 
@@ -470,7 +501,7 @@ class RadarSystem:
             if sel.size == 0:
                 continue
             res = omp_doppler(dic, yd[sel], tgrid, dmax, np.full(sel.size, self._delta_r), y_var, rel,
-                              self._min_amp, cfg.omp_newton_steps, cycles=2)
+                              self._min_amp, cfg.omp_newton_steps, cycles=2, detected=bool(self._detectors))
             theta[sel], amp[sel], valid[sel], omega[sel] = res.theta, res.amp, res.valid, res.omega
             anorm[sel] = np.linalg.norm(res.atoms, axis=1)
             # per-target range: LS amplitudes of the fixed atoms at the neighbouring bins, parabola on log|s|^2
