@@ -50,8 +50,11 @@ slots of F_j and F_{j+1} (Gamma(s C)), X, Y the others (Gamma(a C), Gamma(b C)),
 
 ``tau_j = Gamma^{-1}(1 - p_1; L_j)``, by quadrature; p_1 solves ``N_eff(p_1) p_1 = P_fa``
 (fixed point). CFAR per hypothesis along range (as the summed detector:
-ordered statistic of rank ``cfar_rank`` x 2 ``cfar_train`` training cells one per
-unpadded bin, or the cell average), multiplier from
+ordered statistic of rank ``cfar_rank`` x 2 ``cfar_train`` training cells, or the
+cell average; the training cells are :func:`training_step` unpadded bins apart (2
+for the Hann window, whose adjacent bins are correlated: spaced one bin the
+measured P_fa was 1.3x the design for the RHS); at the ends of the profile the window is
+one-sided, always 2 ``cfar_train`` cells), multiplier from
 :func:`os_alpha_fast` (= :func:`rhs_env.point_cloud.os_cfar_alpha`) / :func:`cfar_alpha` for Gamma(L_j) cells
 at p_1; the noise estimate is clipped to [floor_j, floor_j 10^(cap/10)] with
 ``floor_j = L_j sigma_Y^2`` the calibrated noise mean. Per hypothesis, the
@@ -76,7 +79,7 @@ from scipy import stats
 
 from rhs_env.point_cloud import AngleDictionary, cfar_alpha
 
-__all__ = ["DETECTORS", "FootprintDetector", "beam_footprints", "os_alpha_fast", "union_false_alarm"]
+__all__ = ["DETECTORS", "FootprintDetector", "beam_footprints", "os_alpha_fast", "training_step", "union_false_alarm"]
 
 DETECTORS = ("footprint", "summed")
 
@@ -165,13 +168,16 @@ def _per_hypothesis_pfa(looks: tuple[int, ...], shared: tuple[int, ...], pfa: fl
     return p1, n_eff
 
 
-def os_alpha_fast(pfa: float, looks: int, train_cells: int, rank: int, nodes: int = 801) -> float:
+def os_alpha_fast(pfa: float, looks: int, train_cells: int, rank: int, floor: float = 0.0,
+                  nodes: int = 801) -> float:
     """OS-CFAR multiplier as :func:`rhs_env.point_cloud.os_cfar_alpha`, by a fixed quadrature (milliseconds).
 
-    Test cell X and N = ``train_cells`` training cells Gamma(looks) i.i.d.; the
-    rank-th smallest training cell is ``F^{-1}(B)``, ``B ~ Beta(rank, N - rank + 1)``:
+    Test cell X and N = ``train_cells`` training cells Gamma(looks) i.i.d. (unit
+    scale); the rank-th smallest training cell is ``F^{-1}(B)``, ``B ~ Beta(rank,
+    N - rank + 1)``, clipped from below at ``floor`` (noise units, as the detector
+    clips its estimate at the calibrated noise mean):
 
-        P_fa(alpha) = int_0^1 S_X(alpha F^{-1}(b)) f_B(b) db,
+        P_fa(alpha) = int_0^1 S_X(alpha max(F^{-1}(b), floor)) f_B(b) db,
 
     on a grid uniform in ``t = logit(b)``, ``t in [-40, 40]`` (``db = b (1 - b) dt``:
     the low tail of B, where the noise estimate is small, is resolved); alpha by
@@ -183,6 +189,7 @@ def os_alpha_fast(pfa: float, looks: int, train_cells: int, rank: int, nodes: in
     y = g.isf(1.0 - b)
     small = b < 0.5
     y[small] = g.ppf(b[small])
+    y = np.maximum(y, floor)
     with np.errstate(divide="ignore"):
         w = np.exp(stats.beta.logpdf(b, rank, train_cells - rank + 1) + np.log(b) + np.log1p(-b))
     w /= np.trapezoid(w, t)
@@ -196,11 +203,25 @@ def os_alpha_fast(pfa: float, looks: int, train_cells: int, rank: int, nodes: in
 
 @functools.lru_cache(maxsize=256)
 def _alpha(method: str, p1: float, looks: int, train_cells: int, rank: int, fixed_db: float) -> float:
-    if method == "os":
-        return os_alpha_fast(p1, looks, train_cells, rank)
+    if method == "os":  # the estimate is clipped at the noise mean, ``looks`` in noise units
+        return os_alpha_fast(p1, looks, train_cells, rank, floor=float(looks))
     if method == "ca":
         return cfar_alpha(p1, looks, train_cells)
     return 10 ** (fixed_db / 10)
+
+
+def training_step(window: np.ndarray, max_corr: float = 0.05) -> int:
+    """Smallest spacing m (unpadded bins) at which the window leaves noise powers nearly independent.
+
+    For white noise, the FFT cells k and k + m (unpadded) of the windowed data have
+    correlation ``rho(m) = sum_n w_n^2 exp(-j 2 pi m n / N) / sum_n w_n^2``, and their
+    powers ``|rho(m)|^2``: 0.44 at m = 1 and 0.028 at m = 2 for the Hann window, 0 at
+    m = 1 for the boxcar. Returns the first m with ``|rho(m)|^2 < max_corr``: the CFAR
+    training cells are taken that far apart, so the design's i.i.d. assumption holds.
+    """
+    w2 = np.asarray(window, float) ** 2
+    rho2 = np.abs(np.fft.fft(w2)) ** 2 / np.sum(w2) ** 2
+    return int(np.argmax(rho2[1:] < max_corr) + 1)
 
 
 class FootprintDetector:
@@ -211,9 +232,11 @@ class FootprintDetector:
         config: a :class:`rhs_env.radar.RadarConfig` (detection fields, chirps, scan sector, zero padding).
         noise_cell_var: sigma_Y^2, noise variance of one cell Y[i, c, k] of the windowed FFT (W).
         leak: the window's power-leak envelope over padded bins (:func:`window_leak_envelope`).
+        window: the range window w (N,).
     """
 
-    def __init__(self, dic: AngleDictionary, config, noise_cell_var: float, leak: np.ndarray) -> None:
+    def __init__(self, dic: AngleDictionary, config, noise_cell_var: float, leak: np.ndarray,
+                 window: np.ndarray) -> None:
         cfg = config
         self.footprints, self.centres = beam_footprints(dic, cfg.scan.sector_deg)  # (I, J), (J,)
         c = cfg.chirps_per_slot
@@ -230,7 +253,11 @@ class FootprintDetector:
         self.cap = self.floor * 10 ** (cfg.cfar_cap_db / 10)
         self._f = np.ascontiguousarray(self.footprints.T, dtype=np.float32)  # (J, I)
         g, t = cfg.cfar_guard, cfg.cfar_train
-        self._offsets = cfg.zero_pad * np.concatenate([-np.arange(g + 1, g + t + 1), np.arange(g + 1, g + t + 1)])
+        self.train_step = training_step(window)
+        near, far = np.arange(g + 1, g + t + 1), np.arange(g + t + 1, g + 2 * t + 1)
+        # training offsets in order of preference: both sides, then further out (used at the ends of the profile)
+        self._offsets = cfg.zero_pad * self.train_step * np.concatenate([-near, near, -far, far])
+        self._train = 2 * t
         self._leak = np.asarray(leak, float)
         self._margin = 10 ** (cfg.sidelobe_margin_db / 10)
 
@@ -252,11 +279,14 @@ class FootprintDetector:
         n = stat.shape[-1]
         idx = k[:, None] + self._offsets[None, :]
         valid = (idx >= 0) & (idx < n)
+        # the first 2 train valid offsets: a symmetric window inside the profile, one-sided at its ends
+        pick = np.argsort(~valid, axis=1, kind="stable")[:, : self._train]
+        idx = np.take_along_axis(idx, pick, 1)
         vals = stat[r[:, None], j[:, None], np.clip(idx, 0, n - 1)].astype(float)
-        if self.method == "os":  # missing cells at the ends count as the floor, as os_cfar_threshold
-            z = np.partition(np.where(valid, vals, lo[:, None]), self.rank - 1, axis=1)[:, self.rank - 1]
+        if self.method == "os":
+            z = np.partition(vals, self.rank - 1, axis=1)[:, self.rank - 1]
         else:
-            z = (vals * valid).sum(1) / np.maximum(valid.sum(1), 1)
+            z = vals.mean(1)
         return a * np.clip(z, lo, self.cap[j])
 
     def exceedance(self, stat: np.ndarray) -> np.ndarray:

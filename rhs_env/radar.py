@@ -332,7 +332,7 @@ class RadarSystem:
             self._alpha = 10 ** (config.fixed_threshold_db / 10)
         cells = config.scan.slots * config.chirps_per_slot
         y_var = config.noise_power_w * self._win_energy
-        self._detectors = ([FootprintDetector(dic, config, y_var, self._leak) for dic, _ in self._groups]
+        self._detectors = ([FootprintDetector(dic, config, y_var, self._leak, self._window) for dic, _ in self._groups]
                            if config.detector == "footprint" else [])
         self._min_amp = 10 ** (config.omp_min_snr_db / 20) * math.sqrt(y_var)
         self._delta_r = float(residual_threshold(y_var, cells, config.omp_residual_pfa))
