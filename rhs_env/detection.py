@@ -258,8 +258,22 @@ class FootprintDetector:
         # training offsets in order of preference: both sides, then further out (used at the ends of the profile)
         self._offsets = cfg.zero_pad * self.train_step * np.concatenate([-near, near, -far, far])
         self._train = 2 * t
+        self._tables: dict[int, np.ndarray] = {}
         self._leak = np.asarray(leak, float)
         self._margin = 10 ** (cfg.sidelobe_margin_db / 10)
+
+    def _training_cells(self, n: int) -> np.ndarray:
+        """(n, 2 train) training-cell indices of each of n cells (cached per profile length).
+
+        The first 2 ``cfar_train`` offsets inside the profile, in the order both sides
+        then further out: a symmetric window inside, one-sided at the ends.
+        """
+        tab = self._tables.get(n)
+        if tab is None:
+            idx = np.arange(n)[:, None] + self._offsets[None, :]
+            pick = np.argsort((idx < 0) | (idx >= n), axis=1, kind="stable")[:, : self._train]
+            tab = self._tables[n] = np.clip(np.take_along_axis(idx, pick, 1), 0, n - 1)
+        return tab
 
     @property
     def hypotheses(self) -> int:
@@ -276,13 +290,8 @@ class FootprintDetector:
         a, lo = self.alpha[j], self.floor[j]
         if self.method == "fixed":
             return a * lo
-        n = stat.shape[-1]
-        idx = k[:, None] + self._offsets[None, :]
-        valid = (idx >= 0) & (idx < n)
-        # the first 2 train valid offsets: a symmetric window inside the profile, one-sided at its ends
-        pick = np.argsort(~valid, axis=1, kind="stable")[:, : self._train]
-        idx = np.take_along_axis(idx, pick, 1)
-        vals = stat[r[:, None], j[:, None], np.clip(idx, 0, n - 1)].astype(float)
+        idx = self._training_cells(stat.shape[-1])[k]
+        vals = stat[r[:, None], j[:, None], idx].astype(float)
         if self.method == "os":
             z = np.partition(vals, self.rank - 1, axis=1)[:, self.rank - 1]
         else:
@@ -309,13 +318,19 @@ class FootprintDetector:
         peak &= in_range[None, None, :]
         r, j, k = np.nonzero(peak)
         val = stat[r, j, k].astype(float)
-        if r.size:
-            keep = val > self.threshold(stat, r, j, k)
-            r, j, k, val = r[keep], j[keep], k[keep], val[keep]
+        # the peaks of each line (radar, hypothesis) as a padded table: the sources of window sidelobes
+        line, start, count = np.unique(r * self.hypotheses + j, return_index=True, return_counts=True)
+        line_of = np.repeat(np.arange(line.size), count)
+        tab_k = np.zeros((line.size, max(int(count.max(initial=0)), 1)), int)
+        tab_v = np.zeros(tab_k.shape)
+        col = np.arange(r.size) - np.repeat(start, count)
+        tab_k[line_of, col], tab_v[line_of, col] = k, val
+        keep = val > self.threshold(stat, r, j, k)
+        r, j, k, val, line_of = r[keep], j[keep], k[keep], val[keep], line_of[keep]
         if r.size > 1:  # window sidelobe of a stronger peak of the same radar and hypothesis
-            rows = np.where(peak, stat, 0.0)[r, j].astype(float)  # (D, K) candidate peaks on that line
-            dk = np.minimum(np.abs(k[:, None] - np.arange(stat.shape[-1])[None, :]), self._leak.size - 1)
-            leak = np.where(rows > val[:, None], rows * self._leak[dk], 0.0).max(axis=1)
+            src = tab_v[line_of]
+            dk = np.minimum(np.abs(k[:, None] - tab_k[line_of]), self._leak.size - 1)
+            leak = np.where(src > val[:, None], src * self._leak[dk], 0.0).max(axis=1)
             keep = val >= self._margin * leak
             r, j, k, val = r[keep], j[keep], k[keep], val[keep]
         n = stat.shape[-1]

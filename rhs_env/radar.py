@@ -442,7 +442,7 @@ class RadarSystem:
             rds, kds = [], []
             for g, det in enumerate(self._detectors):
                 radars = np.flatnonzero(self._radar_group == g)
-                r, k, _ = det.detect(spec[radars], in_range)
+                r, k, _ = det.detect(spec if radars.size == 4 else spec[radars], in_range)
                 rds.append(radars[r])
                 kds.append(k)
             rd, kd = np.concatenate(rds), np.concatenate(kds)
