@@ -172,7 +172,7 @@ def snr_at(pd: list[float], snr_db: np.ndarray, level: float) -> float | None:
     return float(np.interp(level, [p[k - 1], p[k]], [snr_db[k - 1], snr_db[k]]))
 
 
-def provenance(argv: list[str]) -> dict:
+def provenance(argv: list[str], script: str = "scripts/detection_curves.py") -> dict:
     """Commit (and whether the tree had changes) and the command line."""
     root = Path(__file__).resolve().parents[1]
     try:
@@ -181,7 +181,7 @@ def provenance(argv: list[str]) -> dict:
                                     capture_output=True, text=True).stdout.strip())
     except OSError:
         commit, dirty = "unknown", None
-    return {"commit": commit, "dirty": dirty, "command": " ".join(["python", "scripts/detection_curves.py", *argv])}
+    return {"commit": commit, "dirty": dirty, "command": " ".join(["python", script, *argv])}
 
 
 def write_outputs(res: dict, out_dir: Path) -> None:
