@@ -65,8 +65,11 @@ no longer raises a landmark's threshold. ``detection="fixed"``: ``tau_j =
 Peaks: local maxima along range of T_j above the threshold (only these cells
 need the CFAR statistic: the threshold is never below ``alpha_j floor_j``); a
 peak weaker than ``sidelobe_margin_db`` above the window sidelobe of a stronger
-peak of the same radar and hypothesis is dropped; the detected (radar, bin)
-pairs are the union over hypotheses.
+detected bin of the same radar, read on the peak's own hypothesis, is dropped; the detected (radar, bin)
+pairs are the union over hypotheses, less those inside the window main lobe of a
+stronger pair (any hypothesis) and weaker than its leak plus the margin: the
+same target peaks one bin apart in different hypotheses, and the OMP at the
+stronger bin fits every target within the main lobe (as with the summed profile).
 """
 
 from __future__ import annotations
@@ -260,6 +263,8 @@ class FootprintDetector:
         self._train = 2 * t
         self._tables: dict[int, np.ndarray] = {}
         self._leak = np.asarray(leak, float)
+        resp = np.abs(np.fft.fft(np.asarray(window, float), cfg.zero_pad * window.size)) ** 2
+        self._null = int(np.argmax(np.diff(resp[: resp.size // 2]) > 0))  # first null of the main lobe, padded bins
         self._margin = 10 ** (cfg.sidelobe_margin_db / 10)
 
     def _training_cells(self, n: int) -> np.ndarray:
@@ -318,23 +323,29 @@ class FootprintDetector:
         peak &= in_range[None, None, :]
         r, j, k = np.nonzero(peak)
         val = stat[r, j, k].astype(float)
-        # the peaks of each line (radar, hypothesis) as a padded table: the sources of window sidelobes
-        line, start, count = np.unique(r * self.hypotheses + j, return_index=True, return_counts=True)
-        line_of = np.repeat(np.arange(line.size), count)
-        tab_k = np.zeros((line.size, max(int(count.max(initial=0)), 1)), int)
-        tab_v = np.zeros(tab_k.shape)
-        col = np.arange(r.size) - np.repeat(start, count)
-        tab_k[line_of, col], tab_v[line_of, col] = k, val
         keep = val > self.threshold(stat, r, j, k)
-        r, j, k, val, line_of = r[keep], j[keep], k[keep], val[keep], line_of[keep]
-        if r.size > 1:  # window sidelobe of a stronger peak of the same radar and hypothesis
-            src = tab_v[line_of]
-            dk = np.minimum(np.abs(k[:, None] - tab_k[line_of]), self._leak.size - 1)
-            leak = np.where(src > val[:, None], src * self._leak[dk], 0.0).max(axis=1)
+        r, j, k, val = r[keep], j[keep], k[keep], val[keep]
+        if r.size > 1:  # window sidelobe, on this hypothesis' line, of a stronger detected bin of the same radar
+            n_r = stat.shape[0]
+            bins = [np.unique(k[r == q]) for q in range(n_r)]
+            src = np.full((n_r, max(b.size for b in bins)), -1)
+            for q, b in enumerate(bins):
+                src[q, : b.size] = b
+            sk = src[r]  # (D, m) the detected bins of each detection's radar (-1: none)
+            sv = np.where(sk >= 0, stat[r[:, None], j[:, None], np.maximum(sk, 0)], 0.0).astype(float)
+            dk = np.minimum(np.abs(k[:, None] - sk), self._leak.size - 1)
+            leak = np.where(sv > val[:, None], sv * self._leak[dk], 0.0).max(axis=1)
             keep = val >= self._margin * leak
             r, j, k, val = r[keep], j[keep], k[keep], val[keep]
         n = stat.shape[-1]
         key, inv = np.unique(r * n + k, return_inverse=True)
         strength = np.zeros(key.size)
         np.maximum.at(strength, inv.reshape(-1), val / self.floor[j])
-        return key // n, key % n, strength
+        rd, kd = key // n, key % n
+        if rd.size > 1:  # inside the window main lobe of a stronger bin (any hypothesis): its OMP takes both
+            dk = np.abs(kd[:, None] - kd[None, :])
+            near = (rd[:, None] == rd[None, :]) & (dk < self._null) & (strength[None, :] > strength[:, None])
+            leak = np.where(near, strength[None, :] * self._leak[np.minimum(dk, self._leak.size - 1)], 0.0)
+            keep = strength >= self._margin * leak.max(axis=1)
+            rd, kd, strength = rd[keep], kd[keep], strength[keep]
+        return rd, kd, strength
