@@ -111,6 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--detectors", nargs="+", default=list(DETECTORS), choices=DETECTORS)
     p.add_argument("--out-dir", default="results")
     a = p.parse_args(argv)
+    prov = provenance(argv, "scripts/low_snr_slam.py")  # at the start: the code that runs
     rows = []
     for seed in a.seeds:
         for d in a.detectors:
@@ -119,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
                 rows.append(r)
                 print(f"seed {seed} {d:9s} {ant:6s} ATE {r['ate_m']:.3f} m, final {r['final_error_m']:.2f} m, "
                       f"matched {r['map_matched']}, {r['points_per_cycle']:.1f} pts, {r['wall_s']:.0f} s", flush=True)
-    res = {"provenance": provenance(argv, "scripts/low_snr_slam.py"), "config": vars(a), "episodes": rows, "summary": summary(rows)}
+    res = {"provenance": prov, "config": vars(a), "episodes": rows, "summary": summary(rows)}
     out = Path(a.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "low_snr_slam.json").write_text(json.dumps(res, indent=1))
