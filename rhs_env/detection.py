@@ -78,7 +78,7 @@ import functools
 import math
 
 import numpy as np
-from scipy import stats
+from scipy import special, stats
 
 from rhs_env.point_cloud import AngleDictionary, cfar_alpha
 
@@ -111,7 +111,7 @@ def beam_footprints(dic: AngleDictionary, sector_deg: float) -> tuple[np.ndarray
 
 
 def _pair_exceedance(s: np.ndarray, a: np.ndarray, b: np.ndarray, t1: np.ndarray, t2: np.ndarray,
-                     points: int = 1001) -> np.ndarray:
+                     points: int = 501) -> np.ndarray:
     """``P(S + X > t1, S + Y > t2)`` for S ~ Gamma(s), X ~ Gamma(a), Y ~ Gamma(b) independent (shape 0: zero).
 
     ``= int_lo^m f_S(u) S_X(t1 - u) S_Y(t2 - u) du + S_S(m)``, ``m = max(t1, t2)``
@@ -125,10 +125,11 @@ def _pair_exceedance(s: np.ndarray, a: np.ndarray, b: np.ndarray, t1: np.ndarray
 
     def sf(shape: np.ndarray, x: np.ndarray) -> np.ndarray:
         pos = np.maximum(shape, 1e-12)[:, None]
-        return np.where(x < 0, 1.0, np.where(shape[:, None] > 0, stats.gamma.sf(np.maximum(x, 0.0), pos), 0.0))
+        return np.where(x < 0, 1.0, np.where(shape[:, None] > 0, special.gammaincc(pos, np.maximum(x, 0.0)), 0.0))
 
     with np.errstate(divide="ignore", invalid="ignore"):
-        f = stats.gamma.pdf(u, np.maximum(s, 1e-12)[:, None])
+        a_s = np.maximum(s, 1e-12)[:, None]
+        f = np.exp(special.xlogy(a_s - 1.0, u) - u - special.gammaln(a_s))
         inner = np.trapezoid(f * sf(a, t1[:, None] - u) * sf(b, t2[:, None] - u), u, axis=1)
     shared = np.where(hi > lo, inner, 0.0) + stats.gamma.sf(np.maximum(hi, lo), np.maximum(s, 1e-12))
     indep = stats.gamma.sf(t1, np.maximum(a, 1e-12)) * stats.gamma.sf(t2, np.maximum(b, 1e-12))
@@ -171,8 +172,8 @@ def _per_hypothesis_pfa(looks: tuple[int, ...], shared: tuple[int, ...], pfa: fl
     return p1, n_eff
 
 
-def os_alpha_fast(pfa: float, looks: int, train_cells: int, rank: int, floor: float = 0.0,
-                  nodes: int = 801) -> float:
+def os_alpha_fast(pfa: float, looks: int | np.ndarray, train_cells: int, rank: int,
+                  floor: float | np.ndarray = 0.0, nodes: int = 401) -> float | np.ndarray:
     """OS-CFAR multiplier as :func:`rhs_env.point_cloud.os_cfar_alpha`, by a fixed quadrature (milliseconds).
 
     Test cell X and N = ``train_cells`` training cells Gamma(looks) i.i.d. (unit
@@ -184,33 +185,47 @@ def os_alpha_fast(pfa: float, looks: int, train_cells: int, rank: int, floor: fl
 
     on a grid uniform in ``t = logit(b)``, ``t in [-40, 40]`` (``db = b (1 - b) dt``:
     the low tail of B, where the noise estimate is small, is resolved); alpha by
-    bisection on log alpha (P_fa decreases with alpha).
+    bisection on log alpha (P_fa decreases with alpha). Vectorised over ``looks``
+    (and ``floor``): returns an array of the broadcast shape, a float for scalars.
     """
-    g = stats.gamma(looks)
+    lk, fl = np.broadcast_arrays(np.asarray(looks, float), np.asarray(floor, float))
+    shape = lk.shape
+    lk, fl = lk.reshape(-1, 1), fl.reshape(-1, 1)
     t = np.linspace(-40.0, 40.0, nodes)
     b = 1.0 / (1.0 + np.exp(-t))
-    y = g.isf(1.0 - b)
     small = b < 0.5
-    y[small] = g.ppf(b[small])
-    y = np.maximum(y, floor)
+    y = np.where(small, special.gammaincinv(lk, np.where(small, b, 0.5)),
+                 special.gammainccinv(lk, np.where(small, 0.5, 1.0 - b)))
+    y = np.maximum(y, fl)  # (L, nodes)
     with np.errstate(divide="ignore"):
         w = np.exp(stats.beta.logpdf(b, rank, train_cells - rank + 1) + np.log(b) + np.log1p(-b))
     w /= np.trapezoid(w, t)
-    lo, hi = -2.0, 8.0  # log alpha, bisected to 1e-11
+    lo, hi = np.full((lk.size, 1), -2.0), np.full((lk.size, 1), 8.0)  # log alpha, bisected to 1e-11
     for _ in range(40):
         mid = 0.5 * (lo + hi)
-        pf = np.trapezoid(g.sf(math.exp(mid) * y) * w, t)
-        lo, hi = (mid, hi) if pf > pfa else (lo, mid)
-    return float(math.exp(0.5 * (lo + hi)))
+        pf = np.trapezoid(special.gammaincc(lk, np.exp(mid) * y) * w, t, axis=1)[:, None]
+        above = pf > pfa
+        lo, hi = np.where(above, mid, lo), np.where(above, hi, mid)
+    alpha = np.exp(0.5 * (lo + hi)).reshape(shape)
+    return float(alpha) if alpha.ndim == 0 else alpha
 
 
-@functools.lru_cache(maxsize=256)
-def _alpha(method: str, p1: float, looks: int, train_cells: int, rank: int, fixed_db: float) -> float:
+@functools.lru_cache(maxsize=64)
+def _alphas_unique(method: str, p1: float, looks: tuple[int, ...], train_cells: int, rank: int,
+                   fixed_db: float) -> tuple[float, ...]:
     if method == "os":  # the estimate is clipped at the noise mean, ``looks`` in noise units
-        return os_alpha_fast(p1, looks, train_cells, rank, floor=float(looks))
+        return tuple(np.atleast_1d(os_alpha_fast(p1, np.array(looks), train_cells, rank, floor=np.array(looks))))
     if method == "ca":
-        return cfar_alpha(p1, looks, train_cells)
-    return 10 ** (fixed_db / 10)
+        return tuple(cfar_alpha(p1, v, train_cells) for v in looks)
+    return (10 ** (fixed_db / 10),) * len(looks)
+
+
+def _alphas(method: str, p1: float, looks: tuple[int, ...], train_cells: int, rank: int,
+            fixed_db: float) -> np.ndarray:
+    """CFAR multiplier per hypothesis (os / ca at the per-hypothesis P_fa p1, or the fixed factor)."""
+    uniq, inv = np.unique(np.array(looks), return_inverse=True)
+    vals = _alphas_unique(method, p1, tuple(int(v) for v in uniq), train_cells, rank, fixed_db)
+    return np.asarray(vals)[inv.reshape(-1)]
 
 
 def training_step(window: np.ndarray, max_corr: float = 0.05) -> int:
@@ -250,8 +265,8 @@ class FootprintDetector:
                                                   tuple(int(v) for v in shared), float(cfg.cfar_pfa))
         self.method = cfg.cfar_method if cfg.detection == "cfar" else "fixed"
         self.rank = max(1, round(cfg.cfar_rank * 2 * cfg.cfar_train))
-        self.alpha = np.array([_alpha(self.method, self.p1, int(v), 2 * cfg.cfar_train, self.rank,
-                                      float(cfg.fixed_threshold_db)) for v in self.looks])
+        self.alpha = _alphas(self.method, self.p1, tuple(int(v) for v in self.looks), 2 * cfg.cfar_train,
+                             self.rank, float(cfg.fixed_threshold_db))
         self.floor = self.looks * float(noise_cell_var)  # noise mean of T_j, W
         self.cap = self.floor * 10 ** (cfg.cfar_cap_db / 10)
         self._f = np.ascontiguousarray(self.footprints.T, dtype=np.float32)  # (J, I)

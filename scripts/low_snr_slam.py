@@ -81,7 +81,7 @@ def markdown(res: dict) -> str:
     c = res["config"]
     lines = [f"Low-SNR SLAM on `rhs-paper-v0`: obstacle RCS {c['rcs']:g} m^2 (30 dB below 5 m^2), "
              f"{c['power']:g} dBm, {c['registration']} registration, {c['cycles']} cycles, seeds "
-             f"{', '.join(map(str, c['seeds']))} (`{res['provenance']['command']}`, commit "
+             f"{', '.join(map(str, c['seeds_done']))} (`{res['provenance']['command']}`, commit "
              f"{res['provenance']['commit'][:10]}).", "",
              "| detector | antenna | vehicle ATE (m), mean ± std | median | obstacles matched (of 5) | points / cycle |",
              "|---|---|---:|---:|---:|---:|"]
@@ -120,13 +120,20 @@ def main(argv: list[str] | None = None) -> int:
                 rows.append(r)
                 print(f"seed {seed} {d:9s} {ant:6s} ATE {r['ate_m']:.3f} m, final {r['final_error_m']:.2f} m, "
                       f"matched {r['map_matched']}, {r['points_per_cycle']:.1f} pts, {r['wall_s']:.0f} s", flush=True)
-    res = {"provenance": prov, "config": vars(a), "episodes": rows, "summary": summary(rows)}
+        write(prov, a, rows)  # after every seed: an interrupted run keeps the seeds it finished
+    print(markdown(write(prov, a, rows)))
+    return 0
+
+
+def write(prov: dict, a: argparse.Namespace, rows: list[dict]) -> dict:
+    """JSON and markdown of the episodes so far (``config.seeds_done`` lists the finished seeds)."""
+    done = sorted({r["seed"] for r in rows})
+    res = {"provenance": prov, "config": {**vars(a), "seeds_done": done}, "episodes": rows, "summary": summary(rows)}
     out = Path(a.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "low_snr_slam.json").write_text(json.dumps(res, indent=1))
     (out / "low_snr_slam.md").write_text(markdown(res))
-    print(markdown(res))
-    return 0
+    return res
 
 
 if __name__ == "__main__":
