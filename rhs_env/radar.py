@@ -111,10 +111,11 @@ class RadarConfig:
     a peak weaker than ``sidelobe_margin_db`` above the window's sidelobe
     envelope under a stronger peak is dropped; ``zero_pad`` FFT length
     factor; ``window`` taper. ``detector``: the statistic CFAR runs on,
-    "summed" (the range profile summed over all slots and chirps, the paper's) or
-    "footprint" (per angle hypothesis, the energy over that beam's footprint of
-    slots, :mod:`rhs_env.detection`; its first OMP atom per detected bin is taken
-    without the residual and amplitude tests, which the detection replaces).
+    "footprint" (default: per angle hypothesis, the energy over that beam's
+    footprint of slots, :mod:`rhs_env.detection`; its first OMP atom per detected
+    bin is taken without the residual and amplitude tests, which the detection
+    replaces) or "summed" (the range profile summed over all slots and chirps, the
+    paper's variant).
     OMP: ``omp_oversampling`` candidates per grid, ``omp_max_targets`` L_max per
     range, ``omp_residual_pfa`` (delta_r: the residual noise alone exceeds with
     this probability), ``omp_residual_rel_db`` (stop below this fraction of
@@ -139,7 +140,7 @@ class RadarConfig:
     rhs: RHSConfig = field(default_factory=RHSConfig)
     scan: ScanConfig = field(default_factory=ScanConfig)
     detection: str = "cfar"
-    detector: str = "summed"
+    detector: str = "footprint"
     cfar_guard: int = 2
     cfar_train: int = 8
     cfar_pfa: float = 1e-6
