@@ -75,7 +75,6 @@ stronger bin fits every target within the main lobe (as with the summed profile)
 from __future__ import annotations
 
 import functools
-import math
 
 import numpy as np
 from scipy import special, stats

@@ -61,6 +61,7 @@ from rhs_env.antenna import (
     ScanConfig,
 )
 from rhs_env.antennas import make_antenna
+from rhs_env.detection import DETECTORS, FootprintDetector
 from rhs_env.point_cloud import (
     WINDOWS,
     AngleDictionary,
@@ -80,7 +81,6 @@ from rhs_env.point_cloud import (
     tone_spectra,
     window_leak_envelope,
 )
-from rhs_env.detection import DETECTORS, FootprintDetector
 from rhs_env.scatterers import Occluders, Scatterers, visible_mask
 from rhs_env.uncertainty import attach_uncertainty
 

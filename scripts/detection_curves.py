@@ -43,9 +43,9 @@ from scipy import stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from rhs_env.point_cloud import os_cfar_threshold  # noqa: E402
-from rhs_env.radar import RadarConfig, RadarSystem  # noqa: E402
-from rhs_env.scatterers import Scatterers  # noqa: E402
+from rhs_env.point_cloud import os_cfar_threshold
+from rhs_env.radar import RadarConfig, RadarSystem
+from rhs_env.scatterers import Scatterers
 
 DETECTORS = ("summed", "footprint")
 ANTENNAS = ("rhs", "phased")
@@ -75,7 +75,7 @@ def simulate_pd(radars: dict[str, RadarSystem], snr_db: np.ndarray, trials: int,
     pd = {d: [] for d in radars}
     for x in snr_db:
         rcs = 10 ** (x / 10) / cfg.unit_gain_snr(range_m, 1.0)
-        hits = {d: 0 for d in radars}
+        hits = dict.fromkeys(radars, 0)
         for _ in range(sweeps):
             th = np.deg2rad(rng.uniform(-40, 40, 4)) + synth.boresights
             xy = synth.positions + range_m * np.column_stack([np.cos(th), np.sin(th)])
@@ -118,7 +118,7 @@ def measure_pfa(radars: dict[str, RadarSystem], scans: int) -> dict[str, dict]:
     cfg = synth.config
     fp = radars["footprint"]._detectors[0]
     cap = synth._p_noise * 10 ** (cfg.cfar_cap_db / 10)
-    hits = {d: 0 for d in radars}
+    hits = dict.fromkeys(radars, 0)
     cells = 0
     for _ in range(scans):
         spec = spectra(synth, Scatterers.empty())

@@ -23,7 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from detection_curves import provenance  # noqa: E402
+from detection_curves import provenance
 
 POLICY_HZ = 5
 IDLE = 1

@@ -93,7 +93,7 @@ def test_footprint_detects_weak_rhs_targets_the_summed_profile_misses():
     base = dict(antenna="rhs", tx_power_dbm=0.0, scan=ScanConfig(grid_deg=2.0), max_range_m=60.0)
     radars = {d: RadarSystem(RadarConfig(detector=d, **base), np.random.default_rng(11)) for d in ("summed", "footprint")}
     rng = np.random.default_rng(12)
-    found = {d: 0 for d in radars}
+    found = dict.fromkeys(radars, 0)
     trials, r_m = 30, 45.0
     bins_per_m = radars["summed"]._bin_range.size / radars["summed"]._bin_range[-1]
     for _ in range(trials):
