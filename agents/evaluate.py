@@ -180,7 +180,8 @@ def _points_width(space) -> int | None:
     from gymnasium import spaces
 
     if isinstance(space, spaces.Dict) and "points" in space.spaces:
-        return int(space.spaces["points"].shape[-1])
+        shape = space.spaces["points"].shape
+        return int(shape[-1]) if shape else None
     return None
 
 

@@ -42,7 +42,7 @@ def _scale_set(key: str, x: torch.Tensor) -> torch.Tensor:
         elif s == "log":
             cols.append(torch.log10(col.clamp(min=1e-6)) / 6.0)
         else:
-            cols.append(col / s)
+            cols.append(col / float(s))
     return torch.stack(cols, dim=-1)
 
 

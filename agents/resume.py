@@ -54,7 +54,7 @@ def save_checkpoint(model: Any, out: str | Path, algo: str) -> Path:
     return path
 
 
-def load_checkpoint(cls: type, path: Path, env: Any, custom_objects: dict[str, Any] | None = None, **kwargs: Any):
+def load_checkpoint(cls: Any, path: Path, env: Any, custom_objects: dict[str, Any] | None = None, **kwargs: Any):
     """``cls.load`` of a checkpoint onto ``env`` (CPU), with its DQN replay buffer when saved."""
     model = cls.load(path, env=env, device="cpu", custom_objects=custom_objects, **kwargs)
     m = _STEPS.match(path.name)

@@ -219,7 +219,7 @@ def _callbacks_module():
             return True
 
         def _on_rollout_end(self) -> None:
-            flags = [float(e["crashed"]) for e in self.model.ep_info_buffer if "crashed" in e]
+            flags = [float(e["crashed"]) for e in self.model.ep_info_buffer or () if "crashed" in e]
             if flags:
                 self.logger.record("rollout/crash_rate", sum(flags) / len(flags))
 

@@ -321,7 +321,7 @@ class FootprintDetector:
         """(R, K) bool: some hypothesis exceeds its threshold (no peak picking): the cells the design P_fa counts."""
         r, j, k = np.indices(stat.shape).reshape(3, -1)
         hit = stat.reshape(-1) > self.threshold(stat, r, j, k)
-        return hit.reshape(stat.shape).any(axis=1)
+        return np.asarray(hit.reshape(stat.shape).any(axis=1), dtype=bool)
 
     def detect(self, spec: np.ndarray, in_range: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Detected (radar, bin) pairs of spectra (R, I, C, K); ``in_range`` (K,) bool bins allowed.

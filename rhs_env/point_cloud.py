@@ -490,7 +490,7 @@ def _doppler_grid_refine(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: 
         q = prod  # every chirp has its own time (Doppler phase runs across slots)
     else:
         q = np.zeros((d, n_t), complex)
-        np.add.at(q, (slice(None), t), prod)
+        np.add.at(q.T, t, prod.T)  # q[:, t] += prod, repeated t accumulated
     nfft = 1 << math.ceil(math.log2(max(4 * n_t, 64)))
     half = 1 << math.ceil(math.log2(math.ceil(float(np.max(span)) * nfft / (2 * np.pi)) + 1))  # few kernels
     if 2 * half + 1 < nfft // 8:

@@ -261,12 +261,12 @@ class RadarConfig:
         """sigma_n^2 = k T0 F f_s per complex sample, W."""
         return BOLTZMANN * self.temperature_k * 10 ** (self.noise_figure_db / 10) * self.sample_rate_hz
 
-    def echo_power_w(self, range_m: np.ndarray, rcs_m2: np.ndarray) -> np.ndarray:
+    def echo_power_w(self, range_m: np.ndarray | float, rcs_m2: np.ndarray | float) -> np.ndarray:
         """P_t |beta|^2 = P_t sigma lambda^2 / ((4 pi)^3 R^4) at unit two-way gain, W."""
         r = np.asarray(range_m, float)
         return self.tx_power_w * np.asarray(rcs_m2, float) * self.wavelength ** 2 / ((4 * np.pi) ** 3 * r ** 4)
 
-    def unit_gain_snr(self, range_m: np.ndarray, rcs_m2: np.ndarray) -> np.ndarray:
+    def unit_gain_snr(self, range_m: np.ndarray | float, rcs_m2: np.ndarray | float) -> np.ndarray:
         """|s|^2 / sigma_iota^2 of one slot's iota entry at unit two-way gain (the SNR of :func:`angle_crb`).
 
         ``s = sqrt(P_t) beta C sum(w)``, ``sigma_iota^2 = C sigma_n^2 sum(w^2)``
@@ -340,7 +340,7 @@ class RadarSystem:
                 raise ValueError(f"antenna has {a.slots} slots, scan config needs {config.scan.slots}")
         self.antennas = ants
         # one dictionary per distinct antenna object
-        self._groups: list[tuple[AngleDictionary, np.ndarray]] = []
+        self._groups: list[tuple[AngleDictionary, list[int]]] = []
         seen: dict[int, int] = {}
         radar_group = np.zeros(4, int)
         for r, a in enumerate(ants):
@@ -396,11 +396,11 @@ class RadarSystem:
         rng_m, ang, _ = self.radar_frame(scatterers.xy)
         half = np.deg2rad(self.config.scan.sector_deg) / 2
         fov = (np.abs(ang) <= half) & (rng_m <= self.config.max_range_m) & (rng_m >= self.config.min_range_m)
-        return fov & visible_mask(self.positions, scatterers, occluders)
+        return np.asarray(fov & visible_mask(self.positions, scatterers, occluders), dtype=bool)
 
     def in_view(self, scatterers: Scatterers, occluders: Occluders | None = None) -> np.ndarray:
         """(K,) bool: seen by at least one radar."""
-        return self.visible(scatterers, occluders).any(axis=0)
+        return np.asarray(self.visible(scatterers, occluders).any(axis=0), dtype=bool)
 
     # ------------------------------------------------------------------ synthesis
     def _buffer(self, name: str, shape: tuple[int, ...], dtype: type) -> np.ndarray:
