@@ -75,7 +75,7 @@ from scipy import stats
 from scipy.optimize import linear_sum_assignment
 
 from rhs_common.validation import check_int, check_range
-from rhs_env.antenna import ANTENNA_KINDS, PHASED_ARRAY_COST_RATIO, ArrayAntenna
+from rhs_env.antenna import ANTENNA_KINDS, ArrayAntenna
 from rhs_env.point_cloud import angle_crb, pointcloud_metrics
 from rhs_env.radar import RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers
@@ -425,6 +425,7 @@ def summarize_pointcloud(res: dict[str, Any]) -> dict[str, Any]:
         "rmse_over_crb": rmse / res["crb_group_deg"] if res["crb_group_deg"] > 0 else float("nan"),
         "detection_rate": [d, dlo, dhi],
         "false_points": [f, flo, fhi],
+        "points_in_cell": float(np.mean([t["points_in_cell"] for t in tr])),
         "rcs_m2": res["rcs_m2"],
         "wall_s": res["wall_s"],
     }
@@ -529,25 +530,26 @@ def plan_units(cfg: StudyConfig, levels: tuple[str, ...]) -> list[dict[str, Any]
         key = json.dumps({"level": level, **cell, "radar": _fingerprint(rc), **extra}, sort_keys=True, default=str)
         units.append({"level": level, "system": system, "key": key, **cell})
 
+    # antennas innermost (and SLAM seeds outermost): a partial run already holds complete comparisons
     if "pointcloud" in levels:
-        for a in cfg.antennas:
-            for k in cfg.group_sizes:
+        for k in cfg.group_sizes:
+            for snr in sorted(cfg.snr_db, reverse=True):
                 for s in cfg.separations_deg:
-                    for snr in cfg.snr_db:
+                    for a in cfg.antennas:
                         add("pointcloud", (a, None, cfg.grid_deg), antenna=a, k=k, sep_deg=s, snr_db=snr)
     if "elements" in levels:
         for m in cfg.elements:
-            for a in cfg.antennas:
-                for s in cfg.elements_separations_deg:
-                    for snr in cfg.elements_snr_db:
+            for s in cfg.elements_separations_deg:
+                for snr in cfg.elements_snr_db:
+                    for a in cfg.antennas:
                         add("elements", (a, m, cfg.elements_grid_deg), antenna=a, elements=m, k=cfg.group_sizes[0],
                             sep_deg=s, snr_db=snr)
     if "slam" in levels:
-        cells = [(a, g) for a in cfg.slam_antennas for g in cfg.slam_groups]
-        cells += [(a, g) for a in cfg.slam_extra_antennas for g in cfg.slam_extra_groups]
-        for a, (k, s) in cells:
+        cells = [(g, a) for g in cfg.slam_groups for a in cfg.slam_antennas]
+        cells += [(g, a) for g in cfg.slam_extra_groups for a in cfg.slam_extra_antennas]
+        for seed in range(cfg.slam_seeds):
             for snr in cfg.slam_snr_db:
-                for seed in range(cfg.slam_seeds):
+                for (k, s), a in cells:
                     add("slam", (a, None, cfg.slam_grid_deg), antenna=a, k=k, sep_deg=s, snr_db=snr, seed=seed)
     return units
 

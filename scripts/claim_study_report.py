@@ -8,7 +8,6 @@ accuracy curves against the CRB, the SLAM bars and the element sweep.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Any
 
@@ -110,13 +109,62 @@ def _verdict_pointcloud(data: dict) -> list[str]:
     return md
 
 
+def classify(data: dict, k: int, antenna: str = "rhs") -> dict[str, dict[str, int]]:
+    """Why each cell of the regime map went the way it did, counted for the wins (<= 1/3) and losses (>= 1).
+
+    win reasons: ``phased_merged`` (phased resolution probability < 0.5 while the antenna's >= 0.5),
+    ``accuracy`` (both resolve, the antenna's angle error lower). loss reasons: ``detection`` (the
+    antenna detects fewer targets, by > 0.1), ``ghosts`` (more points in the range cell than the
+    phased array, by > 0.5 per group), ``both_fail`` (both at >= 80 % of the OSPA cut-off),
+    ``other``.
+    """
+    cut = data["config"]["study"]["ospa_cutoff_deg"]
+    out: dict[str, dict[str, int]] = {"win": {}, "loss": {}}
+    for r in data["pointcloud"]["ratios"]:
+        if r["k"] != k or r["antenna"] != antenna or r["ospa_ratio"][0] is None:
+            continue
+        a = _cell(data, "pointcloud", antenna=antenna, k=k, sep_deg=r["sep_deg"], snr_db=r["snr_db"])
+        b = _cell(data, "pointcloud", antenna="phased", k=k, sep_deg=r["sep_deg"], snr_db=r["snr_db"])
+        ratio = r["ospa_ratio"][0]
+        if ratio <= PAPER_RATIO:
+            why = "phased_merged" if _v(b["resolution_prob"]) < 0.5 <= _v(a["resolution_prob"]) else "accuracy"
+            out["win"][why] = out["win"].get(why, 0) + 1
+        elif ratio >= 1.0:
+            if _v(a["ospa_deg"]) >= 0.8 * cut and _v(b["ospa_deg"]) >= 0.8 * cut:
+                why = "both_fail"
+            elif _v(a["detection_rate"]) < _v(b["detection_rate"]) - 0.1:
+                why = "detection"
+            elif a.get("points_in_cell", 0) > b.get("points_in_cell", 0) + 0.5:
+                why = "ghosts"
+            else:
+                why = "other"
+            out["loss"][why] = out["loss"].get(why, 0) + 1
+    return out
+
+
+def _reason_lines(data: dict) -> list[str]:
+    words = {"phased_merged": "the phased array merged the group (P(resolved) < 0.5) and the RHS did not",
+             "accuracy": "both resolved; the RHS located the targets more precisely",
+             "detection": "the RHS detected fewer targets (summed-slot CFAR, SPEC 11)",
+             "ghosts": "the RHS put more (ghost) points in the range cell",
+             "both_fail": "both at the OSPA cut-off (neither resolves nor detects)", "other": "other"}
+    md = []
+    for k in sorted({r["k"] for r in data["pointcloud"]["ratios"]}):
+        c = classify(data, k)
+        for side, name in (("win", "wins by >= 3x"), ("loss", "is no better")):
+            if c[side]:
+                md.append(f"  * K={k}, where the RHS {name}: " + "; ".join(
+                    f"{words[w]}: {n}" for w, n in sorted(c[side].items(), key=lambda x: -x[1])))
+    return ["* **Why, cell by cell:**"] + md if md else []
+
+
 def _accuracy_lines(data: dict) -> list[str]:
     pc = data["pointcloud"]
     k = min(c["k"] for c in pc["cells"])
     seps = sorted({c["sep_deg"] for c in pc["cells"]})
     snrs = sorted({c["snr_db"] for c in pc["cells"]})
     md = [f"* **Accuracy against the CRB** (pairs {seps[-1]:g} deg apart, where every antenna can resolve them):"]
-    for s in (snrs[-1], snrs[len(snrs) // 2]):
+    for s in dict.fromkeys((snrs[-1], snrs[len(snrs) // 2])):
         parts = []
         for a in data["antenna_properties"]["default"]:
             c = _cell(data, "pointcloud", antenna=a, k=k, sep_deg=seps[-1], snr_db=s)
@@ -128,7 +176,7 @@ def _accuracy_lines(data: dict) -> list[str]:
               "(lowest SNR with detection rate >= 0.9, at the largest separation):")
     for a in data["antenna_properties"]["default"]:
         res = []
-        for s in (snrs[-1], snrs[len(snrs) // 2]):
+        for s in dict.fromkeys((snrs[-1], snrs[len(snrs) // 2])):
             ok = [c["sep_deg"] for c in pc["cells"] if c["antenna"] == a and c["k"] == k and c["snr_db"] == s
                   and _v(c["resolution_prob"]) >= 0.9]
             res.append(f"{min(ok):g} deg at {s:g} dB" if ok else f"none at {s:g} dB")
@@ -189,7 +237,8 @@ def write_markdown(data: dict, path: Path) -> None:
           "range cell: accuracy, merged targets, misses and ghosts in one number. 95 % intervals: t (ddof=1) for "
           "means, Wilson for probabilities, bootstrap for ratios.", ""]
     if "pointcloud" in data:
-        md += ["**Verdict (point cloud):**", ""] + _verdict_pointcloud(data) + _accuracy_lines(data)
+        md += (["**Verdict (point cloud):**", ""] + _verdict_pointcloud(data) + _reason_lines(data)
+               + _accuracy_lines(data))
         md += ["", "![regime map](results/claim_study_regime.png)", ""]
     md += _antenna_section(data) + why_lines(data)
     if "slam" in data:
@@ -274,7 +323,7 @@ def _resolution_figure(plt: Any, data: dict, path: Path) -> None:
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 4.5))
     colors = dict(zip(ants, plt.cm.tab10(np.arange(len(ants)))))
     for a in ants:
-        for s, ls in ((snrs[-1], "-"), (snrs[len(snrs) // 2], "--")):
+        for s, ls in zip(dict.fromkeys((snrs[-1], snrs[len(snrs) // 2])), ("-", "--")):
             cs = sorted([c for c in pc["cells"] if c["antenna"] == a and c["k"] == k and c["snr_db"] == s],
                         key=lambda c: c["sep_deg"])
             a1.plot([c["sep_deg"] for c in cs], [_v(c["resolution_prob"]) for c in cs], ls, marker="o",
@@ -283,9 +332,10 @@ def _resolution_figure(plt: Any, data: dict, path: Path) -> None:
                     key=lambda c: c["snr_db"])
         a2.plot([c["snr_db"] for c in cs], [_v(c["angle_rmse_deg"]) for c in cs], "o-", color=colors[a],
                 label=f"{a} RMSE")
-        a2.plot([c["snr_db"] for c in cs], [c["crb_group_deg"] for c in cs], ":", color=colors[a],
+        a2.plot([c["snr_db"] for c in cs], [c["crb_group_deg"] for c in cs], ":", marker="x", color=colors[a],
                 label=f"{a} CRB")
     a1.set_xscale("log")
+    a1.xaxis.set_major_formatter(matplotlib_ticker().ScalarFormatter())
     a1.set_xlabel("separation (deg)")
     a1.set_ylabel("P(all K resolved)")
     a1.set_title(f"resolution, K={k}")
@@ -300,6 +350,12 @@ def _resolution_figure(plt: Any, data: dict, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=140)
     plt.close(fig)
+
+
+def matplotlib_ticker() -> Any:
+    import matplotlib.ticker
+
+    return matplotlib.ticker
 
 
 def _slam_figure(plt: Any, data: dict, path: Path) -> None:

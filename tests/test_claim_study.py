@@ -12,10 +12,10 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
 
-import claim_study as cs  # noqa: E402
+import claim_study as cs
 
-from rhs_env.antennas import make_antenna  # noqa: E402
-from rhs_env.point_cloud import angle_crb  # noqa: E402
+from rhs_env.antennas import make_antenna
+from rhs_env.point_cloud import angle_crb
 
 
 def test_group_crb_reduces_to_the_single_target_crb_and_grows_as_targets_close_in():
