@@ -658,7 +658,8 @@ def aggregate_pc(units: list[dict[str, Any]], cache: dict[str, Any], cfg: StudyC
     if not cells:
         return None
     return {"cells": cells, "ratios": _ratio_rows(cells, raw, cfg, keys),
-            "wall_s_per_cell": float(np.mean([c["wall_s"] for c in cells])), "n_cells": len(cells)}
+            "wall_s_per_cell": float(np.mean([c["wall_s"] for c in cells])),
+            "cpu_s_per_cell": _mean_of(list(raw.values()), "cpu_s"), "n_cells": len(cells)}
 
 
 def aggregate_slam(units: list[dict[str, Any]], cache: dict[str, Any], cfg: StudyConfig) -> dict | None:
@@ -684,7 +685,8 @@ def aggregate_slam(units: list[dict[str, Any]], cache: dict[str, Any], cfg: Stud
         ratios.append(row)
     units_done = [x for v in by_cell.values() for x in v]
     return {"cells": cells, "ratios": ratios, "wall_s_per_seed": float(np.mean([x["wall_s"] for x in units_done])),
-            "radar_s_per_seed": float(np.mean([x["radar_s"] for x in units_done])), "n_units": len(units_done)}
+            "radar_s_per_seed": float(np.mean([x["radar_s"] for x in units_done])),
+            "cpu_s_per_seed": _mean_of(units_done, "cpu_s"), "n_units": len(units_done)}
 
 
 def antenna_table(cfg: StudyConfig, systems: Systems, levels: tuple[str, ...]) -> dict[str, Any]:
@@ -704,14 +706,24 @@ def antenna_table(cfg: StudyConfig, systems: Systems, levels: tuple[str, ...]) -
 
 # --------------------------------------------------------------------------- driver
 def run_unit(u: dict[str, Any], cfg: StudyConfig, systems: Systems) -> dict[str, Any]:
+    """One unit; ``cpu_s`` (process CPU seconds) beside the wall time: on a shared machine only it plans."""
     radar = systems.get(u["system"])
+    c0 = time.process_time()
     if u["level"] == "slam":
-        return run_slam_unit(radar, u["k"], u["sep_deg"], u["snr_db"], u["seed"], cfg, u["key"])
-    return run_pointcloud_cell(radar, u["k"], u["sep_deg"], u["snr_db"], cfg, u["key"])
+        res = run_slam_unit(radar, u["k"], u["sep_deg"], u["snr_db"], u["seed"], cfg, u["key"])
+    else:
+        res = run_pointcloud_cell(radar, u["k"], u["sep_deg"], u["snr_db"], cfg, u["key"])
+    res["cpu_s"] = time.process_time() - c0
+    return res
+
+
+def _mean_of(rows: list[dict[str, Any]], key: str) -> float | None:
+    v = [r[key] for r in rows if key in r]
+    return float(np.mean(v)) if v else None
 
 
 def compute(pending: list[dict[str, Any]], cfg: StudyConfig, systems: Systems, cache_dir: Path, stem: str,
-            progress: bool) -> None:
+            progress: bool, shard: str = "") -> None:
     """Run the pending units in order, appending each result to its level's cache file as it finishes."""
     from tqdm import tqdm
 
@@ -726,20 +738,26 @@ def compute(pending: list[dict[str, Any]], cfg: StudyConfig, systems: Systems, c
     for u, c in zip(pending, costs):
         bar.set_description(f"{u['level']} {u['antenna']} K={u['k']} {u['sep_deg']:g}deg {u['snr_db']:g}dB")
         res = run_unit(u, cfg, systems)
-        with cache_file(cache_dir, stem, u["level"]).open("a") as fh:  # one file per level: levels run in parallel
+        with cache_file(cache_dir, stem, u["level"], shard).open("a") as fh:  # one writer per file
             fh.write(json.dumps({"key": u["key"], "result": res}) + "\n")
         bar.update(round(c))
     bar.close()
 
 
-def cache_file(cache_dir: Path, stem: str, level: str) -> Path:
-    return cache_dir / f"{stem}_cache_{level}.jsonl"
+def cache_file(cache_dir: Path, stem: str, level: str, shard: str = "") -> Path:
+    """The cache of one level (and shard): levels and shards run in parallel processes, one writer per file."""
+    return cache_dir / f"{stem}_cache_{level}{shard}.jsonl"
+
+
+def cache_files(cache_dir: Path, stem: str, level: str) -> list[Path]:
+    return sorted(cache_dir.glob(f"{stem}_cache_{level}*.jsonl"))
 
 
 def load_caches(cache_dir: Path, stem: str) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for lv in LEVELS:
-        out.update(load_cache(cache_file(cache_dir, stem, lv)))
+        for f in cache_files(cache_dir, stem, lv):
+            out.update(load_cache(f))
     return out
 
 
@@ -783,8 +801,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cache-dir", help="cache folder (default OUT_DIR; files claim_study[_small]_cache_LEVEL.jsonl)")
     p.add_argument("--fresh", action="store_true", help="ignore (and replace) the cache")
     p.add_argument("--report-only", action="store_true", help="write the outputs from the cache, compute nothing")
+    p.add_argument("--shard", default="0/1", help="I/N: run every N-th unit of the plan from the I-th (parallel processes)")
     p.add_argument("--no-progress", action="store_true")
     a = p.parse_args(argv)
+    try:
+        si, sn = (int(x) for x in a.shard.split("/"))
+    except ValueError:
+        p.error(f"--shard must be I/N, got {a.shard!r}")
+    if not 0 <= si < sn:
+        p.error(f"--shard I/N needs 0 <= I < N, got {a.shard!r}")
     cfg = SMALL if a.small else StudyConfig()
     if a.seeds is not None or a.slam_seeds is not None:
         cfg = dataclasses.replace(cfg, seeds=a.seeds or cfg.seeds, slam_seeds=a.slam_seeds or cfg.slam_seeds)
@@ -794,16 +819,18 @@ def main(argv: list[str] | None = None) -> int:
     levels = (a.only,) if a.only else LEVELS
     if a.fresh:
         for lv in levels:
-            cache_file(cache_dir, stem, lv).unlink(missing_ok=True)
+            for f in cache_files(cache_dir, stem, lv):
+                f.unlink()
     units = plan_units(cfg, LEVELS)
     cache = load_caches(cache_dir, stem)
-    pending = [u for u in units if u["level"] in levels and u["key"] not in cache]
-    print(f"{len(units)} units in the study, {len(units) - len(pending) - sum(u['level'] not in levels for u in units)}"
-          f" of the requested levels cached, {len(pending)} to run", flush=True)
+    selected = [u for u in units if u["level"] in levels][si::sn]  # a shard is fixed by the plan, not the cache
+    pending = [u for u in selected if u["key"] not in cache]
+    print(f"{len(units)} units in the study, {len(selected) - len(pending)} of the requested ones cached, "
+          f"{len(pending)} to run", flush=True)
     systems = Systems()
     t0 = time.perf_counter()
     if pending and not a.report_only:
-        compute(pending, cfg, systems, cache_dir, stem, not a.no_progress)
+        compute(pending, cfg, systems, cache_dir, stem, not a.no_progress, "" if sn == 1 else f"_shard{si}of{sn}")
     cache = load_caches(cache_dir, stem)
     data = build_results(cfg, units, cache, systems, argv, time.perf_counter() - t0)
     out.mkdir(parents=True, exist_ok=True)

@@ -260,9 +260,11 @@ def write_markdown(data: dict, path: Path) -> None:
         md += _elements_section(data)
     tm = data["timing"]
     cost = []
-    for lv, key in (("pointcloud", "wall_s_per_cell"), ("elements", "wall_s_per_cell"), ("slam", "wall_s_per_seed")):
+    for lv, unit in (("pointcloud", "cell"), ("elements", "cell"), ("slam", "seed")):
         if lv in data:
-            cost.append(f"{lv} {data[lv][key]:.2f} s per {'cell' if 'cell' in key else 'seed'}")
+            cpu = data[lv].get(f"cpu_s_per_{unit}")
+            cost.append(f"{lv} {data[lv][f'wall_s_per_{unit}']:.2f} s wall"
+                        + (f", {cpu:.2f} s CPU" if cpu is not None else "") + f" per {unit}")
     md += ["", f"Cost: {'; '.join(cost)} (load average {tm['load_average'][0]:.1f} on {tm['cpu_count']} cores "
            "when written: shared-machine timings)."]
     path.write_text("\n".join(md) + "\n")
@@ -294,7 +296,7 @@ def make_figures(data: dict, out: Path, stem: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    if "pointcloud" in data:
+    if "pointcloud" in data and data["pointcloud"]["ratios"]:
         _regime_figure(plt, data, out / f"{stem}_regime.png")
         _resolution_figure(plt, data, out / f"{stem}_resolution.png")
     if "slam" in data:

@@ -132,3 +132,17 @@ def test_small_study_resumes_from_its_cache(small_run, capsys):
     assert cs.main(["--small", "--out-dir", str(small_run), "--no-progress", "--only", "pointcloud"]) == 0
     assert "0 to run" in capsys.readouterr().out
     assert {p.name: p.read_text() for p in small_run.glob("*_cache_*.jsonl")} == before
+
+
+def test_shards_split_the_pending_units_into_their_own_cache_files(tmp_path):
+    assert cs.main(["--small", "--out-dir", str(tmp_path), "--no-progress", "--only", "pointcloud",
+                    "--shard", "1/2"]) == 0
+    n_cells = 2 * len(cs.SMALL.separations_deg) * len(cs.SMALL.snr_db)
+    shard = tmp_path / "claim_study_small_cache_pointcloud_shard1of2.jsonl"
+    assert len(shard.read_text().splitlines()) == n_cells // 2
+    assert cs.main(["--small", "--out-dir", str(tmp_path), "--no-progress", "--only", "pointcloud",
+                    "--shard", "0/2"]) == 0
+    data = json.loads((tmp_path / "claim_study_small.json").read_text())
+    assert len(data["pointcloud"]["cells"]) == n_cells and data["pointcloud"]["ratios"]
+    with pytest.raises(SystemExit):
+        cs.main(["--small", "--shard", "2/2"])
