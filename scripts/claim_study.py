@@ -475,7 +475,7 @@ def run_slam_unit(radar: RadarSystem, k: int, sep_deg: float, snr_db: float, see
         kind = DEFAULT_REGISTRATION if reg == "default" else reg
         registration = make_registration(kind, rng=np.random.default_rng(s + 1))
         res = run_scenario(landmarks, poses, lambda t, _p: clouds[t], registration, None,
-                           np.random.default_rng(s + 2), dt=cfg.slam_dt_s)
+                           np.random.default_rng(s + 2), dt=cfg.slam_dt_s, sensor_xy=radar.config.mounts()[0])
         out[reg] = {
             "registration": kind,
             "ate_m": float(res["ate_rmse_m"]),
