@@ -264,6 +264,37 @@ def test_evaluate_ground_truth_env_has_no_slam_fields():
     assert s["position_rmse_m"]["mean"] is None and s["map_rmse_m"]["mean"] is None
 
 
+def test_idm_mobil_policy_drives_the_ego_with_highway_envs_idm_vehicle():
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    kw = {"vehicles_count": 8, "duration": 6, "lanes_count": 3}
+    env = gym.make(TRUTH, **kw)
+    policy = load_policy("idm", env)
+    for seed in (3, 4):  # a fresh ego at every reset gets swapped again
+        env.reset(seed=seed)
+        old = env.unwrapped.vehicle
+        action, _ = policy.predict(None)
+        env.step(action)
+        ego = env.unwrapped.vehicle
+        assert isinstance(ego, IDMVehicle) and ego is not old and ego.target_speed == 30.0
+        assert ego in env.unwrapped.road.vehicles and old not in env.unwrapped.road.vehicles
+        assert sum(v is ego for v in env.unwrapped.road.vehicles) == 1
+    env.close()
+    # same seeds, same episodes; IDM (desired 30 m/s) drives faster than always-SLOWER (20 m/s)
+    a = evaluate("idm", TRUTH, episodes=2, seed=5, env_kwargs=kw, progress=False)
+    b = evaluate("idm", TRUTH, episodes=2, seed=5, env_kwargs=kw, progress=False)
+    slow = evaluate("constant:4", TRUTH, episodes=2, seed=5, env_kwargs=kw, progress=False)
+    assert [r["return"] for r in a["runs"]] == [r["return"] for r in b["runs"]]
+    assert a["mean_speed_mps"]["mean"] > slow["mean_speed_mps"]["mean"] + 1.0
+    assert evaluate("idm:20", TRUTH, episodes=1, seed=5, env_kwargs=kw, progress=False)["mean_speed_mps"]["mean"] < (
+        a["mean_speed_mps"]["mean"]
+    )
+    with pytest.raises(ValueError, match="idm"):
+        load_policy("idm:fast", gym.make(TRUTH, **kw))
+    with pytest.raises(ValueError, match="target speed"):
+        load_policy("idm:-3", gym.make(TRUTH, **kw))
+
+
 def test_evaluate_rejects_mismatched_observations(trained):
     with pytest.raises(ValueError, match="trained on observations"):
         evaluate(trained["model"], episodes=1, env_kwargs={"max_points": 32}, progress=False)
