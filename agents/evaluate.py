@@ -176,6 +176,8 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
     path = Path(policy)
     if not path.exists():
         raise FileNotFoundError(f"policy file not found: {path}")
+    if path.is_dir():
+        return _load_rllib(path, env)
     from stable_baselines3 import DQN, PPO
 
     classes = {"ppo": PPO, "dqn": DQN}
@@ -191,6 +193,18 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
             errors.append(f"{cls.__name__}: {exc}")
     if model is None:
         raise ValueError(f"{path} is not a PPO or DQN model ({'; '.join(errors)})")
+    if env is not None:
+        check_spaces(model, env, path)
+    return model
+
+
+def _load_rllib(path: Path, env=None):
+    """The RLModule of an RLlib checkpoint directory (``rhs-slam train --backend rllib``)."""
+    from agents.rllib import MODULE_SUBDIR, RLlibPolicy, is_rllib_checkpoint
+
+    if not is_rllib_checkpoint(path):
+        raise ValueError(f"{path} is a directory but not an RLlib checkpoint (no {'/'.join(MODULE_SUBDIR)})")
+    model = RLlibPolicy(path)
     if env is not None:
         check_spaces(model, env, path)
     return model
