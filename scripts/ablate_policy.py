@@ -48,6 +48,9 @@ VARIANTS: dict[str, tuple[str, dict, dict]] = {
     "no_norm_ent01_truth": (TRUTH, NO_NORM, {"ent_coef": 0.01}),
     "base_slam": (SLAM, FIVE_DEG, {}),
     "no_norm_slam": (SLAM, {**FIVE_DEG, **NO_NORM}, {}),
+    "grid_slam": (SLAM, FIVE_DEG, {"policy_kwargs": {"features_extractor_class": "grid", "net_arch": [64, 64]}}),
+    "grid_no_norm_slam": (SLAM, {**FIVE_DEG, **NO_NORM},
+                          {"policy_kwargs": {"features_extractor_class": "grid", "net_arch": [64, 64]}}),
 }
 
 

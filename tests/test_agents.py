@@ -30,7 +30,7 @@ from agents.evaluate import (
     resolve_env,
     run_episode,
 )
-from agents.features import PointSetExtractor
+from agents.features import GridExtractor, PointSetExtractor
 from agents.train import ALGOS, load_hyperparams, train, worker_env_id
 from rhs_env.cli import main as cli_main
 
@@ -214,6 +214,37 @@ def test_point_set_extractor_ignores_order_and_padding():
     empty = dict(sample)
     empty["points_mask"] = torch.zeros_like(sample["points_mask"])
     assert torch.isfinite(ext(empty)).all()
+
+
+def test_grid_extractor_rasterises_points_doppler_and_landmarks():
+    env = small_env()
+    space = env.observation_space
+    env.close()
+    torch.manual_seed(0)
+    ext = GridExtractor(space, cell_m=2.0, x_min_m=-30.0, x_max_m=70.0, half_width_m=12.0, cnn_dim=16, box_dim=8)
+    assert (ext.nx, ext.ny) == (50, 12)
+    obs = {k: torch.zeros((1, *np.asarray(v).shape)) for k, v in space.sample().items()}
+    # two points in the cell of (10.5, 0.5) m (column (10.5 + 30) / 2 = 20, row (0.5 + 12) / 2 = 6)
+    # closing at -20 and -10 m/s, one point outside the grid, padding slots full of junk
+    obs["points"][0, :3] = torch.tensor([[10.5, 0.5, -20.0, 5.0], [11.0, 1.0, -10.0, 5.0], [200.0, 0.0, 3.0, 5.0]])
+    obs["points_mask"][0, :3] = 1
+    obs["points"][0, 3:] = 7.0
+    obs["landmarks"][0, :2] = torch.tensor([[-29.0, -11.0], [-29.5, -11.5]])
+    obs["landmarks_mask"][0, :2] = 1
+    g = ext.grid(obs)
+    assert g.shape == (1, 3, 12, 50)
+    assert torch.isclose(g[0, 0, 6, 20], torch.log1p(torch.tensor(2.0)))
+    assert torch.isclose(g[0, 1, 6, 20], torch.tensor(-15.0 / 30.0))
+    assert torch.isclose(g[0, 2, 0, 0], torch.log1p(torch.tensor(2.0)))
+    assert g[0, 0].sum() == g[0, 0, 6, 20] and g[0, 2].sum() == g[0, 2, 0, 0]  # nothing else lit
+    # slot order does not matter, the feature vector is finite and sized as announced
+    swapped = dict(obs)
+    swapped["points"] = obs["points"][:, [1, 0, 2, *range(3, obs["points"].shape[1])]]
+    assert torch.equal(ext.grid(swapped), g)
+    f = ext(obs)
+    assert f.shape == (1, ext.features_dim) and torch.isfinite(f).all()
+    with pytest.raises(ValueError, match="cell_m"):
+        GridExtractor(space, cell_m=0.0)
 
 
 # ---------------------------------------------------------------- evaluation
