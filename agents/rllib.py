@@ -56,14 +56,12 @@ MODULE_SUBDIR = ("learner_group", "learner", "rl_module", "default_policy")
 def require_ray():
     """Import ray, or raise ``ValueError`` telling how to install the extra."""
     try:
-        import ray  # noqa: F401
+        import ray
         from ray.rllib.algorithms.ppo import PPOConfig  # noqa: F401
     except ImportError as exc:
         raise ValueError(
             f"the rllib backend needs Ray RLlib ({exc}): pip install torch==2.13.0 && pip install -e '.[rllib]'"
         ) from None
-    import ray
-
     return ray
 
 
@@ -155,7 +153,7 @@ def ppo_settings(hp: dict[str, Any], n_envs: int, timesteps: int) -> dict[str, A
             raise ValueError(f"learning_rate must be a number or 'lin_<number>', got {lr!r}")
         lr = [[0, float(lr[4:])], [int(timesteps), 0.0]]
     if isinstance(hp.get("clip_range"), str):
-        raise ValueError("the rllib backend takes a constant clip_range")
+        raise ValueError("the rllib backend takes a constant clip_range")  # noqa: TRY004  (a usage error)
     train_batch = int(hp.get("n_steps", 2048)) * int(n_envs)
     return {
         "train_batch_size_per_learner": train_batch,

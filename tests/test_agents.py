@@ -413,3 +413,29 @@ def test_shipped_truth_policy_loads_and_acts():
     env.close()
     assert 1 <= result["steps"] <= 20 and np.isfinite(result["return"])
     assert result["position_rmse_m"] is None  # no SLAM on the ground-truth env
+
+
+# ---------------------------------------------------------------- rllib backend (the parts that need no Ray)
+
+
+def test_rllib_settings_map_the_sb3_yaml():
+    from agents.rllib import ppo_settings
+
+    hp = load_hyperparams("ppo", SLAM)
+    for key in ("policy", "n_envs", "n_timesteps", "env_kwargs", "policy_kwargs"):
+        hp.pop(key, None)
+    s = ppo_settings({**hp, "learning_rate": "lin_1e-3"}, n_envs=2, timesteps=1000)
+    assert s["train_batch_size_per_learner"] == 2 * hp["n_steps"] and s["minibatch_size"] == hp["batch_size"]
+    assert (s["num_epochs"], s["gamma"], s["lambda_"]) == (hp["n_epochs"], hp["gamma"], hp["gae_lambda"])
+    assert s["lr"] == [[0, 1e-3], [1000, 0.0]]
+    with pytest.raises(ValueError, match="not supported"):
+        ppo_settings({"use_sde": True}, 1, 10)
+
+
+def test_rllib_backend_without_ray_says_how_to_install(tmp_path, capsys):
+    import importlib.util
+
+    if importlib.util.find_spec("ray") is not None:
+        pytest.skip("ray is installed here (tests/test_rllib.py covers the backend)")
+    assert cli_main(["train", "--backend", "rllib", "--out", str(tmp_path / "r"), "--timesteps", "8"]) == 2
+    assert "pip install" in capsys.readouterr().err
