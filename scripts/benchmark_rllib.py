@@ -43,12 +43,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default=str(ROOT / "results" / "rllib_scaling.json"))
     args = ap.parse_args(argv)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    from agents.rllib import init_ray
     from agents.train import load_hyperparams, train_rllib_backend
 
     env_kwargs = json.loads(args.env_kwargs)
     hp = load_hyperparams("ppo", args.env)
     batch = int(hp["n_steps"]) * int(hp.get("n_envs", 1))
     rows = []
+    # one Ray instance for every row (sized for the largest): a restart per row costs start-up time
+    os.environ.setdefault("RAY_raylet_start_wait_time_s", "300")
+    init_ray(None, max(args.runners))
     for n in args.runners:
         with tempfile.TemporaryDirectory() as tmp:
             t0 = time.perf_counter()
@@ -60,8 +64,11 @@ def main(argv: list[str] | None = None) -> int:
         steps = later[-1]["env_steps"] - (it[0]["env_steps"] if len(it) > 1 else 0)
         rate = steps / sum(r["wall_s"] for r in later)
         rows.append({"num_env_runners": n, "env_steps_per_s": round(rate, 2), "iterations": it,
-                     "total_wall_s_incl_ray_start": round(total, 1)})  # fmt: skip
+                     "total_wall_s_incl_actor_start": round(total, 1)})  # fmt: skip
         print(f"runners={n}: {rate:.1f} env steps/s (iterations 2..{len(it)}), {total:.0f} s in all", file=sys.stderr)
+    import ray
+
+    ray.shutdown()
     result = {
         "commit": _commit(),
         "command": " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])]),
