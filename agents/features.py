@@ -49,7 +49,7 @@ class PointSetExtractor(BaseFeaturesExtractor):
         self.point_nets = nn.ModuleDict(
             {
                 k: nn.Sequential(
-                    nn.Linear(observation_space[k].shape[-1], point_dim),
+                    nn.Linear(_shape(observation_space[k])[-1], point_dim),
                     nn.ReLU(),
                     nn.Linear(point_dim, point_dim),
                     nn.ReLU(),
@@ -62,7 +62,7 @@ class PointSetExtractor(BaseFeaturesExtractor):
 
     @staticmethod
     def _box_width(key: str, space: gym.spaces.Space) -> int:
-        width = int(np.prod(space.shape))
+        width = int(np.prod(_shape(space)))
         cols = BOX_COLUMNS.get(key)
         return len(cols) if cols is not None and space.shape == (len(BOX_SCALES.get(key, ())),) else width
 
@@ -191,6 +191,13 @@ class GridExtractor(BaseFeaturesExtractor):
         if self.box_net is not None:
             feats.append(self.box_net(_box_features(obs, self.box_keys)))
         return torch.cat(feats, dim=1)
+
+
+def _shape(space: gym.spaces.Space) -> tuple[int, ...]:
+    """The shape of a Box / MultiBinary space (every space this extractor reads has one)."""
+    if space.shape is None:
+        raise ValueError(f"space {space} has no shape")
+    return space.shape
 
 
 FEATURE_EXTRACTORS = {"point_set": PointSetExtractor, "grid": GridExtractor}

@@ -81,7 +81,7 @@ def _encoder(observation_space: gym.spaces.Space, model_config: dict[str, Any]):
     if isinstance(observation_space, gym.spaces.Dict):
         enc = PointSetExtractor(observation_space, **dict(model_config.get("features_extractor_kwargs") or {}))
         return enc, enc.features_dim
-    return nn.Flatten(), int(np.prod(observation_space.shape))
+    return nn.Flatten(), int(np.prod(observation_space.shape or ()))
 
 
 def _mlp(width: int, hidden: list[int], out: int, gain: float):

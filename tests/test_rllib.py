@@ -23,7 +23,7 @@ torch = pytest.importorskip("torch")
 import rhs_env  # noqa: E402, F401  (registers the ids)
 from agents.evaluate import evaluate, load_policy, resolve_env  # noqa: E402
 from agents.rllib import CHECKPOINT_DIR, RLlibPolicy, is_rllib_checkpoint  # noqa: E402
-from rhs_env.cli import main as cli_main  # noqa: E402
+from rhs_slam.cli import main as cli_main  # noqa: E402
 
 SLAM = "rhs-highway-slam-v0"
 SMALL = {
