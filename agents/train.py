@@ -95,16 +95,13 @@ def _resolve_policy_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
 
 
 def worker_env_id(env_id: str) -> str:
-    """``env_id`` as a fresh worker process can resolve it: the rhs ids get the ``rhs_env:`` prefix."""
-    import gymnasium as gym
-
-    import rhs_env  # noqa: F401  (registers the ids in this process)
+    """``env_id`` as a fresh worker process can resolve it: the ids ``import rhs_env`` registers
+    (whatever module their entry point lives in) get the ``rhs_env:`` prefix."""
+    from rhs_env.registration import ENV_SPECS, SLAM_ENV_SPECS
 
     if ":" in env_id:
         return env_id
-    spec = gym.registry.get(env_id)
-    entry = spec.entry_point if spec is not None else None
-    if isinstance(entry, str) and entry.startswith("rhs_env."):
+    if env_id in {i for i, _ in ENV_SPECS + SLAM_ENV_SPECS}:  # registered by ``import rhs_env``
         return f"rhs_env:{env_id}"
     return env_id
 
