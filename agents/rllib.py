@@ -256,10 +256,23 @@ def init_ray(address: str | None, num_env_runners: int):
     runtime_env = {"env_vars": env_vars}
     if address:
         ray.init(address=address, runtime_env=runtime_env, log_to_driver=False)
-    else:
-        ray.init(num_cpus=int(num_env_runners) + 1, include_dashboard=False, runtime_env=runtime_env,
-                 log_to_driver=False)  # fmt: skip
+        return True
+    # Ray gives a new local node 30 s (hard-coded) to register; on an overloaded machine it
+    # can miss that: try again from scratch a few times before giving up
+    for attempt in range(LOCAL_START_ATTEMPTS):
+        try:
+            ray.init(num_cpus=int(num_env_runners) + 1, include_dashboard=False, runtime_env=runtime_env,
+                     log_to_driver=False)  # fmt: skip
+            return True
+        except Exception as exc:  # Ray raises a bare Exception for this time-out
+            ray.shutdown()
+            if "timed out during startup" not in str(exc) or attempt == LOCAL_START_ATTEMPTS - 1:
+                raise
     return True
+
+
+#: attempts at starting a local Ray instance (see :func:`init_ray`)
+LOCAL_START_ATTEMPTS = 3
 
 
 def train_rllib(

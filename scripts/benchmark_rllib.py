@@ -51,7 +51,6 @@ def main(argv: list[str] | None = None) -> int:
     batch = int(hp["n_steps"]) * int(hp.get("n_envs", 1))
     rows = []
     # one Ray instance for every row (sized for the largest): a restart per row costs start-up time
-    os.environ.setdefault("RAY_raylet_start_wait_time_s", "300")
     init_ray(None, max(args.runners))
     for n in args.runners:
         with tempfile.TemporaryDirectory() as tmp:
