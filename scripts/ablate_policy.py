@@ -171,13 +171,14 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     command = " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])])
+    commit = _commit()  # the code this process runs (the worktree may move on during a long run)
     for name in args.variants:
         if name in REFERENCES:
             rec, key = run_reference(name, args.episodes, args.eval_seed), f"{name}/{args.episodes}"
         else:
             rec = run_variant(name, args.timesteps, args.seed, args.episodes, args.eval_seed, args.n_envs)
             key = f"{name}/seed{args.seed}/{args.timesteps}"
-        rec.update(commit=_commit(), command=command)
+        rec.update(commit=commit, command=command)
         _merge(Path(args.out), key, rec)
         e = rec["eval"]
         print(f"{name}: return {e['return']['mean']:.1f}, collisions {e['collision_rate']:.2f}, speed "
