@@ -235,7 +235,7 @@ def test_grid_extractor_rasterises_points_doppler_and_landmarks():
     obs = {k: torch.zeros((1, *np.asarray(v).shape)) for k, v in space.sample().items()}
     # two points in the cell of (10.5, 0.5) m (column (10.5 + 30) / 2 = 20, row (0.5 + 12) / 2 = 6)
     # closing at -20 and -10 m/s, one point outside the grid, padding slots full of junk
-    obs["points"][0, :3] = torch.tensor([[10.5, 0.5, -20.0, 5.0], [11.0, 1.0, -10.0, 5.0], [200.0, 0.0, 3.0, 5.0]])
+    obs["points"][0, :3, :4] = torch.tensor([[10.5, 0.5, -20.0, 5.0], [11.0, 1.0, -10.0, 5.0], [200.0, 0.0, 3.0, 5.0]])
     obs["points_mask"][0, :3] = 1
     obs["points"][0, 3:] = 7.0
     obs["landmarks"][0, :2] = torch.tensor([[-29.0, -11.0], [-29.5, -11.5]])
