@@ -35,8 +35,9 @@ DEFAULT_ENV = "rhs-highway-slam-v0"
 
 
 def is_scripted(policy: str | Path) -> bool:
-    """``"random"`` or ``"constant:<action>"``: policies that need no file."""
-    return str(policy) == "random" or str(policy).startswith("constant:")
+    """``"random"``, ``"constant:<action>"``, ``"idm"`` or ``"idm:<m/s>"``: policies that need no file."""
+    text = str(policy)
+    return text in ("random", "idm") or text.startswith(("constant:", "idm:"))
 
 
 class ConstantPolicy:
@@ -49,6 +50,62 @@ class ConstantPolicy:
 
     def predict(self, obs, deterministic: bool = True):
         return self.action, None
+
+
+class IDMMobilPolicy:
+    """highway-env's own IDM + MOBIL driver in the ego's seat (a scripted reference).
+
+    At the first ``predict`` after each reset the ego (an ``MDPVehicle`` that
+    follows meta-actions) is replaced, in ``road.vehicles``, ``controlled_vehicles``
+    and the action type, by a ``highway_env.vehicle.behavior.IDMVehicle`` at the
+    same dynamical state (``IDMVehicle.create_from``) with desired speed
+    ``target_speed``. From then on the env's ``road.act()`` lets it decide at the
+    simulation rate like the traffic does: IDM longitudinal control,
+
+        a = a_max [1 - (v / v0)^delta - (d*(v, dv) / d)^2],
+        d* = d0 + v T + v dv / (2 sqrt(a_max b)),
+
+    and MOBIL lane changes (a change is taken when the ego's acceleration gain
+    exceeds the imposed braking on the new follower by ``LANE_CHANGE_MIN_ACC_GAIN``
+    and that braking stays under ``LANE_CHANGE_MAX_BRAKING_IMPOSED``). The
+    meta-action it returns (IDLE) is ignored by ``IDMVehicle.act``. Rewards,
+    collisions, radar and SLAM see the swapped vehicle (they read
+    ``env.unwrapped.vehicle`` / ``road.vehicles`` each step). ``target_speed``
+    defaults to the highest target speed of the env's ``DiscreteMetaAction``
+    (30 m/s on the highway ids: the top of the reward's speed range).
+    """
+
+    def __init__(self, env, target_speed: float | None = None):
+        base = env.unwrapped
+        if not hasattr(base, "road") or not hasattr(base, "action_type"):
+            raise ValueError("the idm policy needs a highway-env env (env.unwrapped.road)")
+        if target_speed is None:
+            speeds = getattr(base.action_type, "target_speeds", None)
+            target_speed = float(np.max(speeds)) if speeds is not None else 30.0
+        if not 0.0 < float(target_speed) <= 60.0:
+            raise ValueError(f"idm target speed must be in (0, 60] m/s, got {target_speed}")
+        self.env = env
+        self.target_speed = float(target_speed)
+        self.idle = 1  # DiscreteMetaAction IDLE; IDMVehicle.act ignores it
+
+    def _swap_ego(self) -> None:
+        from highway_env.vehicle.behavior import IDMVehicle
+
+        base = self.env.unwrapped
+        ego = base.vehicle
+        if ego is None or isinstance(ego, IDMVehicle):
+            return
+        idm = IDMVehicle.create_from(ego)
+        idm.target_speed = self.target_speed
+        idm.crashed = ego.crashed
+        vehicles = base.road.vehicles
+        vehicles[next(i for i, v in enumerate(vehicles) if v is ego)] = idm
+        base.controlled_vehicles = [idm if v is ego else v for v in base.controlled_vehicles]
+        base.action_type.controlled_vehicle = idm
+
+    def predict(self, obs, deterministic: bool = True):
+        self._swap_ego()
+        return self.idle, None
 
 
 class RandomPolicy:
@@ -114,7 +171,7 @@ def make_env(env_id: str, kwargs: dict[str, Any], **extra: Any):
 
 
 def load_policy(policy: str | Path, env=None, seed: int = 0):
-    """``"random"``, ``"constant:<action>"``, or a stable-baselines3 zip (PPO or DQN: from the JSON
+    """``"random"``, ``"constant:<action>"``, ``"idm[:<m/s>]"``, or a stable-baselines3 zip (PPO or DQN: from the JSON
     beside it, else tried in turn).
 
     With ``env``, the policy's observation space is checked against the env's.
@@ -124,6 +181,14 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
             raise ValueError(f"policy {policy!r} needs the env for its action space")
         if str(policy) == "random":
             return RandomPolicy(env.action_space, seed)
+        if str(policy).split(":", 1)[0] == "idm":
+            speed = None
+            if ":" in str(policy):
+                try:
+                    speed = float(str(policy).split(":", 1)[1])
+                except ValueError:
+                    raise ValueError(f"idm policy must be 'idm' or 'idm:<target speed m/s>', got {policy!r}") from None
+            return IDMMobilPolicy(env, speed)
         try:
             action = int(str(policy).split(":", 1)[1])
         except ValueError:
@@ -132,6 +197,8 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
     path = Path(policy)
     if not path.exists():
         raise FileNotFoundError(f"policy file not found: {path}")
+    if path.is_dir():
+        return _load_rllib(path, env)
     from stable_baselines3 import DQN, PPO
 
     classes = {"ppo": PPO, "dqn": DQN}
@@ -150,6 +217,18 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
     if env is not None:
         check_spaces(model, env, path)
         model = PointColumnAdapter.wrap(model, env)
+    return model
+
+
+def _load_rllib(path: Path, env=None):
+    """The RLModule of an RLlib checkpoint directory (``rhs-slam train --backend rllib``)."""
+    from agents.rllib import MODULE_SUBDIR, RLlibPolicy, is_rllib_checkpoint
+
+    if not is_rllib_checkpoint(path):
+        raise ValueError(f"{path} is a directory but not an RLlib checkpoint (no {'/'.join(MODULE_SUBDIR)})")
+    model = RLlibPolicy(path)
+    if env is not None:
+        check_spaces(model, env, path)
     return model
 
 
@@ -427,7 +506,10 @@ def parse_env_kwargs(text: str | None) -> dict[str, Any] | None:
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--policy", default=str(SHIPPED_POLICY), help="SB3 zip, 'random' or 'constant:ACTION' (default: shipped policy)"
+        "--policy",
+        default=str(SHIPPED_POLICY),
+        help="SB3 zip, RLlib checkpoint dir, 'random', 'constant:ACTION' or 'idm[:M/S]' (IDM + MOBIL driver; "
+        "default: shipped policy)",
     )
     parser.add_argument("--env", default=None, help=f"env id (default: the policy's, else {DEFAULT_ENV})")
     parser.add_argument("--episodes", type=int, default=5)

@@ -405,7 +405,54 @@ def train(
     return summary
 
 
+BACKENDS = ("sb3", "rllib")
+
+
+def train_rllib_backend(
+    env_id: str,
+    timesteps: int | None,
+    out: str | Path,
+    seed: int = 0,
+    hyperparams: str | Path | None = None,
+    env_kwargs: dict | None = None,
+    num_env_runners: int | None = None,
+    address: str | None = None,
+    eval_freq: int = 0,
+    eval_episodes: int = 3,
+    checkpoint_freq: int = 5000,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """PPO with Ray RLlib (:mod:`agents.rllib`) from the same YAML entry as the SB3 backend.
+
+    ``num_env_runners`` defaults to the YAML's ``n_envs`` (one Ray actor per env);
+    the train batch stays ``n_steps * n_envs`` whatever the number of runners.
+    """
+    from agents.rllib import require_ray, train_rllib
+
+    if num_env_runners is not None and int(num_env_runners) < 0:
+        raise ValueError(f"num_env_runners must be >= 0, got {num_env_runners}")
+    require_ray()
+    hp = load_hyperparams("ppo", env_id, hyperparams)
+    hp.pop("policy")
+    yaml_steps = hp.pop("n_timesteps", None)
+    timesteps = int(timesteps if timesteps is not None else (yaml_steps or 0))
+    if timesteps < 1:
+        raise ValueError(f"timesteps must be >= 1, got {timesteps}")
+    n_envs = int(hp.pop("n_envs", 1))
+    env_kwargs = {**(hp.pop("env_kwargs", None) or {}), **(env_kwargs or {})}
+    runners = n_envs if num_env_runners is None else int(num_env_runners)
+    bare_id = env_id.split(":", 1)[-1]
+    _check_env_kwargs(bare_id, env_kwargs)
+    return train_rllib(bare_id, timesteps, out, hp, env_kwargs, n_envs, runners, address=address, seed=seed,
+                       eval_freq=eval_freq, eval_episodes=eval_episodes, checkpoint_freq=checkpoint_freq,
+                       progress=progress)  # fmt: skip
+
+
 def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--backend", choices=BACKENDS, default="sb3",
+        help="sb3: stable-baselines3 on this machine; rllib: Ray RLlib PPO (pip install -e '.[rllib]')",
+    )  # fmt: skip
     parser.add_argument("--algo", choices=ALGOS, default="ppo")
     parser.add_argument("--env", default="rhs-highway-slam-v0", help="env id (default: rhs-highway-slam-v0)")
     parser.add_argument("--timesteps", type=int, default=None, help="env steps (default: n_timesteps of the YAML)")
@@ -418,6 +465,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--eval-episodes", type=int, default=3)
     parser.add_argument("--checkpoint-freq", type=int, default=5000, help="env steps between checkpoints (0: none)")
     parser.add_argument("--no-progress", action="store_true")
+    parser.add_argument(
+        "--num-env-runners", type=int, default=None,
+        help="rllib: Ray actors sampling the env (default: n_envs of the YAML; 0: sample in the driver)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--address", default=None,
+        help="rllib: join an existing Ray cluster ('auto', 'HOST:6379' or 'ray://HOST:10001'; default: a local one)",
+    )  # fmt: skip
     parser.add_argument("--resume", action="store_true",
                         help="continue from the latest checkpoint in OUT/checkpoints (after SIGTERM / SIGINT / a crash)")
 
@@ -430,6 +485,23 @@ def run(args: argparse.Namespace) -> int:
         env_kwargs = json.loads(args.env_kwargs)
         if not isinstance(env_kwargs, dict):
             raise ValueError("--env-kwargs must be a JSON object")  # noqa: TRY004  (reported as a usage error)
+        if args.backend == "rllib":
+            if args.algo != "ppo":
+                raise ValueError(f"the rllib backend trains PPO only, got --algo {args.algo}")
+            if args.n_envs is not None:
+                raise ValueError("--n-envs is for the sb3 backend; the rllib backend takes --num-env-runners")
+            if args.resume:
+                raise ValueError("--resume is for the sb3 backend (the rllib backend saves OUT/checkpoints/step_N)")
+            summary = train_rllib_backend(
+                args.env, args.timesteps, args.out, seed=args.seed, hyperparams=args.hyperparams,
+                env_kwargs=env_kwargs, num_env_runners=args.num_env_runners, address=args.address,
+                eval_freq=args.eval_freq, eval_episodes=args.eval_episodes, checkpoint_freq=args.checkpoint_freq,
+                progress=not args.no_progress,
+            )  # fmt: skip
+            print(json.dumps({k: v for k, v in summary.items() if k != "iterations"}, indent=2))
+            return 0
+        if args.num_env_runners is not None or args.address is not None:
+            raise ValueError("--num-env-runners / --address need --backend rllib")
         summary = train(
             args.algo,
             args.env,
