@@ -30,6 +30,7 @@ import os
 import sys
 import time
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -190,42 +191,6 @@ def make_vec_env(
     )
 
 
-def _callbacks_module():
-    from stable_baselines3.common.callbacks import BaseCallback
-
-    class TqdmCallback(BaseCallback):
-        """Progress bar over environment steps (SB3's own needs the rich package)."""
-
-        def __init__(self, total: int):
-            super().__init__()
-            self.total = total
-
-        def _on_training_start(self) -> None:
-            from tqdm.auto import tqdm
-
-            self.bar = tqdm(total=self.total, desc="train", unit="step")
-
-        def _on_step(self) -> bool:
-            self.bar.update(self.training_env.num_envs)
-            return True
-
-        def _on_training_end(self) -> None:
-            self.bar.close()
-
-    class CrashRateCallback(BaseCallback):
-        """Logs ``rollout/crash_rate``: the fraction of the recent episodes (SB3's episode buffer) that crashed."""
-
-        def _on_step(self) -> bool:
-            return True
-
-        def _on_rollout_end(self) -> None:
-            flags = [float(e["crashed"]) for e in self.model.ep_info_buffer or () if "crashed" in e]
-            if flags:
-                self.logger.record("rollout/crash_rate", sum(flags) / len(flags))
-
-    return TqdmCallback, CrashRateCallback
-
-
 def _check_env_kwargs(env_id: str, env_kwargs: dict[str, Any]) -> None:
     """Build and close one env here, so bad ``env_kwargs`` raise a readable error before workers start."""
     import gymnasium as gym
@@ -274,43 +239,23 @@ def train(
     worker processes get ``OMP_NUM_THREADS=1`` unless it is set already.
     """
     from stable_baselines3 import DQN, PPO
-    from stable_baselines3.common.callbacks import (
-        CallbackList,
-        CheckpointCallback,
-        EvalCallback,
-    )
+    from stable_baselines3.common.callbacks import CallbackList
 
     from agents.resume import StopOnSignal, latest_checkpoint, load_checkpoint, save_checkpoint
 
-    hp = load_hyperparams(algo, env_id, hyperparams)
-    policy = hp.pop("policy")
-    yaml_steps = hp.pop("n_timesteps", None)
-    timesteps = int(timesteps if timesteps is not None else (yaml_steps or 0))
-    if timesteps < 1:
-        raise ValueError(f"timesteps must be >= 1, got {timesteps}")
-    yaml_envs = hp.pop("n_envs", 1)
-    n_envs = int(n_envs if n_envs is not None else yaml_envs)
-    if n_envs < 1:
-        raise ValueError(f"n_envs must be >= 1, got {n_envs}")
-    check_train_args(timesteps, n_envs, seed, eval_freq, eval_episodes, checkpoint_freq)
-    env_kwargs = {**(hp.pop("env_kwargs", None) or {}), **(env_kwargs or {})}
-    hp["policy_kwargs"] = _resolve_policy_kwargs(hp.get("policy_kwargs", {}))
-    hp_record = {k: v for k, v in load_hyperparams(algo, env_id, hyperparams).items() if k not in META_KEYS}
-    hp = _resolve_schedules(hp)
+    run = _run_settings(algo, env_id, timesteps, n_envs, hyperparams, env_kwargs)
+    check_train_args(run.timesteps, run.n_envs, seed, eval_freq, eval_episodes, checkpoint_freq)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     os.environ.setdefault("MKL_NUM_THREADS", "1")
     if torch_threads:
         import torch
 
         torch.set_num_threads(int(torch_threads))
-
-    bare_id = env_id.split(":", 1)[-1]
-    if n_envs > 1:
-        _check_env_kwargs(env_id, env_kwargs)
-    venv = make_vec_env(env_id, n_envs, seed, env_kwargs, monitor_dir=out / "monitor")
+    if run.n_envs > 1:
+        _check_env_kwargs(env_id, run.env_kwargs)
+    venv = make_vec_env(env_id, run.n_envs, seed, run.env_kwargs, monitor_dir=out / "monitor")
     eval_env = None
     try:
         cls = {"ppo": PPO, "dqn": DQN}[algo]
@@ -319,44 +264,22 @@ def train(
             print("rhs-slam train: tensorboard is not installed; no TensorBoard logs", file=sys.stderr)
         found = latest_checkpoint(out, algo) if resume else None
         if found is not None:
-            schedules = {k: v for k, v in hp.items() if k in ("learning_rate", "clip_range")}
+            schedules = {k: v for k, v in run.hp.items() if k in ("learning_rate", "clip_range")}
             model = load_checkpoint(cls, found[0], venv, custom_objects=schedules, tensorboard_log=tb)
             print(f"rhs-slam train: resuming from {found[0]} ({model.num_timesteps} steps)", file=sys.stderr)
         else:
-            model = cls(policy, venv, seed=seed, verbose=0, tensorboard_log=tb, device="cpu", **hp)
+            model = cls(run.policy, venv, seed=seed, verbose=0, tensorboard_log=tb, device="cpu", **run.hp)
         done = int(model.num_timesteps)
-        TqdmCallback, CrashRateCallback = _callbacks_module()
-        callbacks: list = [CrashRateCallback()]
-        eval_cb = None
-        if eval_freq and eval_freq > 0:
-            eval_env = make_vec_env(env_id, 1, seed + 10_000, env_kwargs, subprocess=False)
-            eval_cb = EvalCallback(
-                eval_env,
-                n_eval_episodes=eval_episodes,
-                eval_freq=max(1, eval_freq // n_envs),
-                best_model_save_path=str(out),
-                log_path=str(out / "eval"),
-                deterministic=True,
-                verbose=0,
-            )
-            callbacks.append(eval_cb)
-        if checkpoint_freq and checkpoint_freq > 0:
-            callbacks.append(
-                CheckpointCallback(
-                    save_freq=max(1, checkpoint_freq // n_envs), save_path=str(out / "checkpoints"), name_prefix=algo
-                )
-            )
-        if progress:
-            callbacks.append(TqdmCallback(max(0, timesteps - done)))
         stopper = StopOnSignal()
-        callbacks.append(stopper)
+        callbacks, eval_cb, eval_env = _callbacks(algo, env_id, run, seed, out, eval_freq, eval_episodes,
+                                                  checkpoint_freq, max(0, run.timesteps - done) if progress else None)
         t0 = time.perf_counter()
         with warnings.catch_warnings():
             # the eval env is a DummyVecEnv, the training env a SubprocVecEnv: same envs, on purpose
             warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
-            if timesteps > done:
-                model.learn(total_timesteps=timesteps - done, callback=CallbackList(callbacks), tb_log_name=algo,
-                            reset_num_timesteps=done == 0)
+            if run.timesteps > done:
+                model.learn(total_timesteps=run.timesteps - done, callback=CallbackList([*callbacks, stopper]),
+                            tb_log_name=algo, reset_num_timesteps=done == 0)
         wall = max(time.perf_counter() - t0, 1e-9)
         if stopper.stopped:
             path = save_checkpoint(model, out, algo)
@@ -368,41 +291,99 @@ def train(
         venv.close()
         if eval_env is not None:
             eval_env.close()
+    summary = _summary(algo, env_id, run, seed, model, eval_cb, out, wall, done, stopper.stopped)
+    if not stopper.stopped:
+        _write_summary(out, summary)
+    return summary
+
+
+@dataclass(frozen=True)
+class _RunSettings:
+    """What a training run uses, from the YAML merged with the caller's arguments."""
+
+    policy: str
+    timesteps: int
+    n_envs: int
+    env_kwargs: dict[str, Any]
+    hp: dict[str, Any]  # constructor kwargs of the algorithm (schedules and policy_kwargs resolved)
+    hp_record: dict[str, Any]  # the YAML as written, for the summary
+
+
+def _run_settings(algo: str, env_id: str, timesteps: int | None, n_envs: int | None,
+                  hyperparams: str | Path | None, env_kwargs: dict | None) -> _RunSettings:
+    hp = load_hyperparams(algo, env_id, hyperparams)
+    policy = hp.pop("policy")
+    yaml_steps = hp.pop("n_timesteps", None)
+    steps = int(timesteps if timesteps is not None else (yaml_steps or 0))
+    if steps < 1:
+        raise ValueError(f"timesteps must be >= 1, got {steps}")
+    yaml_envs = hp.pop("n_envs", 1)
+    envs = int(n_envs if n_envs is not None else yaml_envs)
+    if envs < 1:
+        raise ValueError(f"n_envs must be >= 1, got {envs}")
+    kwargs = {**(hp.pop("env_kwargs", None) or {}), **(env_kwargs or {})}
+    hp["policy_kwargs"] = _resolve_policy_kwargs(hp.get("policy_kwargs", {}))
+    record = {k: v for k, v in load_hyperparams(algo, env_id, hyperparams).items() if k not in META_KEYS}
+    return _RunSettings(policy, steps, envs, kwargs, _resolve_schedules(hp), record)
+
+
+def _callbacks(algo: str, env_id: str, run: _RunSettings, seed: int, out: Path, eval_freq: int,
+               eval_episodes: int, checkpoint_freq: int, progress_total: int | None):
+    """Crash-rate logging, evaluation (its env returned to be closed), checkpoints, progress bar."""
+    from stable_baselines3.common.callbacks import CheckpointCallback, EvalCallback
+
+    from agents.callbacks import CrashRateCallback, TqdmCallback
+
+    callbacks: list = [CrashRateCallback()]
+    eval_cb = eval_env = None
+    if eval_freq and eval_freq > 0:
+        eval_env = make_vec_env(env_id, 1, seed + 10_000, run.env_kwargs, subprocess=False)
+        eval_cb = EvalCallback(eval_env, n_eval_episodes=eval_episodes, eval_freq=max(1, eval_freq // run.n_envs),
+                               best_model_save_path=str(out), log_path=str(out / "eval"), deterministic=True, verbose=0)
+        callbacks.append(eval_cb)
+    if checkpoint_freq and checkpoint_freq > 0:
+        callbacks.append(CheckpointCallback(save_freq=max(1, checkpoint_freq // run.n_envs),
+                                            save_path=str(out / "checkpoints"), name_prefix=algo))
+    if progress_total is not None:
+        callbacks.append(TqdmCallback(progress_total))
+    return callbacks, eval_cb, eval_env
+
+
+def _summary(algo: str, env_id: str, run: _RunSettings, seed: int, model, eval_cb, out: Path, wall: float,
+             done: int, interrupted: bool) -> dict[str, Any]:
     recent = list(model.ep_info_buffer)
-    summary: dict[str, Any] = {
+    best = float(eval_cb.best_mean_reward) if eval_cb is not None and eval_cb.n_calls else None
+    return {
         "algo": algo,
-        "env_id": bare_id,
-        "env_kwargs": env_kwargs,
-        "policy": policy,
+        "env_id": env_id.split(":", 1)[-1],
+        "env_kwargs": run.env_kwargs,
+        "policy": run.policy,
         "timesteps": int(model.num_timesteps),
-        "n_envs": n_envs,
+        "n_envs": run.n_envs,
         "seed": seed,
         "wall_time_s": round(wall, 1),
         "steps_per_s": round(model.num_timesteps / wall, 2),
-        "hyperparams": hp_record,
+        "hyperparams": run.hp_record,
         "recent_episodes": {
             "count": len(recent),
             "mean_return": sum(e["r"] for e in recent) / len(recent) if recent else None,
             "mean_length": sum(e["l"] for e in recent) / len(recent) if recent else None,
             "crash_rate": sum(float(e.get("crashed", 0)) for e in recent) / len(recent) if recent else None,
         },
-        "best_eval_mean_return": float(eval_cb.best_mean_reward) if eval_cb is not None and eval_cb.n_calls else None,
+        "best_eval_mean_return": None if best is None or best == float("-inf") else best,
         "model": str(out / "model.zip"),
         "resumed_from_steps": done,
-        "interrupted": stopper.stopped,
+        "interrupted": interrupted,
     }
-    if stopper.stopped:
-        return summary
-    if eval_cb is not None and eval_cb.best_mean_reward == float("-inf"):
-        summary["best_eval_mean_return"] = None
+
+
+def _write_summary(out: Path, summary: dict[str, Any]) -> None:
+    """``out/train.json`` and the metadata JSON beside ``model.zip`` (and ``best_model.zip``)."""
     text = json.dumps(summary, indent=2)
     (out / "train.json").write_text(text)
     metadata_path(out / "model.zip").write_text(text)
     if (out / "best_model.zip").exists():
-        metadata_path(out / "best_model.zip").write_text(
-            json.dumps({**summary, "model": str(out / "best_model.zip")}, indent=2)
-        )
-    return summary
+        metadata_path(out / "best_model.zip").write_text(json.dumps({**summary, "model": str(out / "best_model.zip")}, indent=2))
 
 
 BACKENDS = ("sb3", "rllib")
