@@ -3,7 +3,7 @@
 Every script that writes ``results/*.json`` imports this module (``from _provenance import ...``).
 
 **Provenance.** :func:`write_json` adds a ``"provenance"`` block to the result:
-``commit`` (``git rev-parse HEAD`` at run time; once the results file is committed,
+``commit`` (``git rev-parse HEAD`` when the script started; once the results file is committed,
 that commit is an ancestor of the commit adding it), ``dirty`` and ``dirty_files``
 (tracked files modified at start, outside ``results/`` and ``README.md``, so a run on
 uncommitted code says so), ``command`` (the script and its arguments), ``config``
@@ -79,6 +79,11 @@ def git_state() -> dict[str, Any]:
     return {"commit": head.strip() if head else None, "dirty": bool(files), "dirty_files": files[:20]}
 
 
+#: the git state when this module was first imported, i.e. when the script started: later edits
+#: to the work tree (while a long run goes on) do not change what the run recorded
+STATE_AT_START = git_state()
+
+
 def is_ancestor(commit: str, of: str = "HEAD") -> bool | None:
     """Whether ``commit`` is an ancestor of (or equal to) ``of``; None when git cannot tell."""
     try:
@@ -119,7 +124,7 @@ def provenance(script: str | Path, config: Any, started: float, argv: list[str] 
 
     args = sys.argv[1:] if argv is None else list(argv)
     return {
-        **git_state(),
+        **STATE_AT_START,
         "command": ["python", f"scripts/{Path(script).name}", *map(str, args)],
         "config": jsonable(config),
         "python": platform.python_version(),
@@ -154,7 +159,7 @@ def record_fingerprint(name: str, fp: dict[str, Any], results: list[str], note: 
                        path: Path = FINGERPRINTS) -> None:
     """Store ``fp`` as the current fingerprint of script ``name`` in ``fingerprints.json``."""
     data = load_fingerprints(path)
-    data[name] = {**fp, "results": sorted(results), "note": note, **git_state()}
+    data[name] = {**fp, "results": sorted(results), "note": note, **STATE_AT_START}
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(dict(sorted(data.items())), indent=1) + "\n")
 
