@@ -29,6 +29,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
+from _provenance import write_json
+
 SECTIONS = ("envs", "radar", "patterns", "training")
 
 
@@ -41,7 +43,7 @@ def bench_envs(steps: int, seed: int, grid_deg: float) -> dict:
     """Steps/s of the three highway ids on identical seeds and action sequences."""
     import gymnasium as gym
 
-    import rhs_env  # noqa: F401
+    import rhs_env
 
     out = {}
     radar = {"scan": {"grid_deg": grid_deg}}
@@ -151,6 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmark.json"))
     args = ap.parse_args(argv)
+    started = time.time()
 
     result: dict = {
         "machine": {
@@ -190,7 +193,7 @@ def main(argv: list[str] | None = None) -> int:
                                   "load_average": previous.get("machine", {}).get("load_average", [float("nan")])})
     result["section_runs"] = {k: runs[k] for k in SECTIONS if k in runs}
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2, default=float))
+    write_json(out, result, __file__, args, started, argv=argv)  # timings: provenance, no fingerprint
     out.with_suffix(".md").write_text(markdown(result) + "\n")
     print(json.dumps(result, indent=2, default=float))
     return 0

@@ -33,6 +33,9 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "scripts"))
+from _provenance import write_json
+
 REWARD_AIM, COLLISION_AIM = 0.8, 1.5
 
 
@@ -55,6 +58,18 @@ def run_policy(policy: str, env_id: str, env_kwargs: dict, seeds: list[int], wor
     with ProcessPoolExecutor(max_workers=len(parts), initializer=single_threaded_worker) as pool:
         results = list(pool.map(_chunk, [policy] * len(parts), [env_id] * len(parts), [env_kwargs] * len(parts), parts))
     return [run for part in results for run in part]
+
+
+def fingerprint() -> list[float]:
+    """The shipped SLAM and ground-truth policies, one 2-second episode (10 steps) each, seed 1000: seconds."""
+    from agents.evaluate import SHIPPED_POLICY, SHIPPED_TRUTH_POLICY, resolve_env
+
+    out = []
+    for policy in (SHIPPED_POLICY, SHIPPED_TRUTH_POLICY):
+        env_id, kwargs = resolve_env(str(policy))
+        run = _chunk(str(policy), env_id, {**kwargs, "duration": 2}, [1000])[0]
+        out += [run[k] for k in sorted(run) if isinstance(run[k], (int, float)) and not k.endswith("_s")]
+    return out
 
 
 def _fmt(stats: dict, digits: int = 1, spread: bool = True) -> str:
@@ -134,6 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out-dir", default=str(ROOT / "results"))
     ap.add_argument("--render-only", action="store_true", help="rewrite policies.md from policies.json, no runs")
     args = ap.parse_args(argv)
+    started = time.time()
     if args.render_only:
         result = json.loads((Path(args.out_dir) / "policies.json").read_text())
         (Path(args.out_dir) / "policies.md").write_text(markdown(result))
@@ -141,7 +157,13 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-    from agents.evaluate import SHIPPED_POLICY, SHIPPED_TRUTH_POLICY, policy_metadata, resolve_env, summarize
+    from agents.evaluate import (
+        SHIPPED_POLICY,
+        SHIPPED_TRUTH_POLICY,
+        policy_metadata,
+        resolve_env,
+        summarize,
+    )
 
     slam_policy = args.slam_policy or str(SHIPPED_POLICY)
     truth_policy = args.truth_policy or str(SHIPPED_TRUTH_POLICY)
@@ -191,11 +213,11 @@ def main(argv: list[str] | None = None) -> int:
     try:
         import gymnasium as gym
 
-        import rhs_env  # noqa: F401
+        import rhs_env
 
         cfg = gym.make(truth_env, **truth_kwargs).unwrapped.config
         max_steps = round(cfg["duration"] * cfg["policy_frequency"])
-    except Exception:  # noqa: BLE001, S110  (only for the table's caption)
+    except Exception:
         pass
     result = {
         "episodes": args.episodes,
@@ -215,7 +237,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "policies.json").write_text(json.dumps(result, indent=2) + "\n")
+    write_json(out / "policies.json", result, __file__, args, started, fingerprint, argv)
     (out / "policies.md").write_text(markdown(result))
     print(markdown(result))
     return 0

@@ -21,7 +21,6 @@ fingerprint of :func:`fingerprint` (see ``scripts/_provenance.py``).
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -29,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _provenance import write_json  # noqa: E402
+from _provenance import write_json
 
 from rhs_env.antenna import RHSConfig, ScanConfig
 from rhs_env.radar import RadarConfig, RadarSystem

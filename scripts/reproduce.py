@@ -31,8 +31,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _provenance import (RESULTS, ROOT, compute_fingerprint, load_fingerprints, record_fingerprint, script_name,
-                         verification)
+from _provenance import (
+    RESULTS,
+    ROOT,
+    compute_fingerprint,
+    load_fingerprints,
+    record_fingerprint,
+    script_name,
+    verification,
+)
 
 SCRIPTS = ROOT / "scripts"
 
@@ -48,6 +55,8 @@ class Step:
     guess_s: float = 600.0  # estimate when no results file recorded a run time
     note: str = ""
     env: dict = field(default_factory=dict)
+    #: why the script has no ``fingerprint()`` (timings, or a training run that takes minutes even when tiny)
+    no_fingerprint: str = ""
 
 
 #: every results file and the step that writes it, in dependency order (libraries and weights first)
@@ -57,17 +66,21 @@ STEPS: tuple[Step, ...] = (
     Step("patterns_sdr_vs_fast", "compare_pattern_methods.py", (), ("patterns_sdr_vs_fast.json",), 300),
     Step("registration", "train_registration.py", ("--no-progress",), ("registration.json",), 400,
          "retrains the shipped CNN weights"),
-    Step("fig5a", "fig5a_slam_rmse.py", ("--seeds", "20", "--powers", "30", "20", "10", "0", "-10", "--no-progress"),
+    Step("fig5a", "fig5a_slam_rmse.py", ("--seeds", "20", "--powers", "30", "20", "10", "0", "-10", "--workers", "2",
+                                   "--no-progress"),
          ("fig5a.json",), 7200),
     Step("fig5b", "fig5b_pointcloud_vs_elements.py", ("--elements", "20", "40", "60", "80", "--grids", "1", "2", "5"),
          ("fig5b.json",), 900),
     Step("fig5c", "fig5c_trajectory_map.py", ("--no-progress",), ("fig5c.json",), 120),
     Step("registration_in_loop", "registration_in_loop.py", ("--no-progress",), ("registration_in_loop.json",), 900),
     Step("train_policy", "train_policy.py", ("--no-progress",), ("train_policy.json",), 4 * 3600,
-         "retrains the shipped policies"),
+         "retrains the shipped policies", no_fingerprint="a record of training runs (timesteps, wall time); "
+         "what the policies do is fingerprinted by the policies step"),
     Step("policies", "evaluate_policies.py", (), ("policies.json",), 1800),
-    Step("benchmark_radar", "benchmark_radar.py", (), ("benchmark_radar.json",), 60, "timings"),
-    Step("benchmark", "benchmark.py", ("--out", "results/benchmark.json"), ("benchmark.json",), 900, "timings"),
+    Step("benchmark_radar", "benchmark_radar.py", (), ("benchmark_radar.json",), 60, "timings",
+         no_fingerprint="timings"),
+    Step("benchmark", "benchmark.py", ("--out", "results/benchmark.json"), ("benchmark.json",), 900, "timings",
+         no_fingerprint="timings"),
 )
 BY_NAME = {s.name: s for s in STEPS}
 
