@@ -16,6 +16,7 @@ id                         entry point                                     obser
 ``rhs-highway-radar-v0``   ``rhs_env.registration:make_highway_radar``     radar point cloud
 ``rhs-highway-slam-v0``    ``rhs_env.slam_wrapper:make_highway_slam``      cloud + SLAM
 ``rhs-paper-v0``           ``rhs_env.slam_wrapper:make_paper_slam``        cloud + SLAM
+``rhs-dense-v0``           ``rhs_env.slam_wrapper:make_dense_slam``        cloud + SLAM
 =========================  ==============================================  =====================
 
 Keyword arguments of ``gym.make`` go to the entry point: env config keys
@@ -35,6 +36,7 @@ HIGHWAY_ID = "rhs-highway-v0"
 HIGHWAY_RADAR_ID = "rhs-highway-radar-v0"
 HIGHWAY_SLAM_ID = "rhs-highway-slam-v0"
 PAPER_ID = "rhs-paper-v0"
+DENSE_ID = "rhs-dense-v0"  # the highway with DENSE_LANDMARKS (guard-rail posts, paired poles, gantries)
 
 #: keyword arguments that belong to :class:`rhs_env.wrappers.RadarObservation`
 RADAR_WRAPPER_KWARGS = ("radar", "antenna", "max_points", "scatter", "stage_times_in_info", "scatterers_in_info")
@@ -79,6 +81,7 @@ ENV_SPECS: tuple[tuple[str, str], ...] = (
 SLAM_ENV_SPECS: tuple[tuple[str, str], ...] = (
     (HIGHWAY_SLAM_ID, "rhs_env.slam_wrapper:make_highway_slam"),
     (PAPER_ID, "rhs_env.slam_wrapper:make_paper_slam"),
+    (DENSE_ID, "rhs_env.slam_wrapper:make_dense_slam"),
 )
 
 

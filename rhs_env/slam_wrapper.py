@@ -265,6 +265,11 @@ def make_highway_slam(**kwargs: Any) -> gym.Env:
     return _make_slam_env("rhs_env.envs:RHSHighwayEnv", kwargs)
 
 
+def make_dense_slam(**kwargs: Any) -> gym.Env:
+    """``rhs-dense-v0``: RHSDenseEnv (dense roadside) -> RadarObservation -> SlamObservation."""
+    return _make_slam_env("rhs_env.envs:RHSDenseEnv", kwargs)
+
+
 def make_paper_slam(**kwargs: Any) -> gym.Env:
     """``rhs-paper-v0``: the paper's Fig. 5c scene (50 cycles) -> RadarObservation -> SlamObservation."""
     return _make_slam_env("rhs_env.envs:RHSPaperEnv", kwargs)
