@@ -61,7 +61,8 @@ def test_every_results_file_has_a_step_and_provenance_or_is_flagged():
             continue
         step = reproduce.step_for_result(f.name)
         assert step is not None, f"results/{f.name} is written by no step of scripts/reproduce.py"
-        p = json.loads(f.read_text()).get("provenance")
+        data = json.loads(f.read_text())
+        p = data.get("provenance") if isinstance(data, dict) else None
         if p is None:
             flagged.append(f.name)
             continue
