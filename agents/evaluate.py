@@ -76,6 +76,10 @@ def policy_metadata(policy: str | Path) -> dict[str, Any]:
     return meta if isinstance(meta, dict) else {}
 
 
+#: ids whose info carries the SLAM metrics (slam.metrics_info.SlamMetricsInfo)
+SLAM_ENV_IDS = ("rhs-highway-slam-v0", "rhs-paper-v0")
+
+
 def resolve_env(
     policy: str | Path, env_id: str | None = None, env_kwargs: dict | None = None
 ) -> tuple[str, dict[str, Any]]:
@@ -89,7 +93,10 @@ def resolve_env(
     meta_env = meta.get("env_id")
     env_id = env_id or meta_env or DEFAULT_ENV
     base = dict(meta.get("env_kwargs") or {}) if env_id == meta_env else {}
-    return env_id, {**base, **(env_kwargs or {})}
+    kwargs = {**base, **(env_kwargs or {})}
+    if env_id.split(":")[-1] in SLAM_ENV_IDS:  # the episode record keeps the true and estimated maps
+        kwargs.setdefault("landmarks_in_info", True)
+    return env_id, kwargs
 
 
 def load_policy(policy: str | Path, env=None, seed: int = 0):
@@ -120,9 +127,9 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
     model = None
     for cls in order:
         try:
-            model = cls.load(path, device="cpu")
+            model = cls.load(path, device="cpu")  # type: ignore[attr-defined]  # PPO / DQN classmethod
             break
-        except Exception as exc:  # noqa: BLE001  (wrong algorithm class for this zip: try the next one)
+        except Exception as exc:
             errors.append(f"{cls.__name__}: {exc}")
     if model is None:
         raise ValueError(f"{path} is not a PPO or DQN model ({'; '.join(errors)})")
@@ -201,7 +208,7 @@ def run_episode(env, policy, seed: int, deterministic: bool = True, frames: list
         if frames is not None:
             frames.append(env.render())
         done = terminated or truncated
-    map_rmse = info.get("map_rmse_m")
+    map_rmse = info.get("map_rmse_m")  # None until a landmark is matched
     return {
         "seed": seed,
         "return": total,
@@ -319,7 +326,7 @@ def plot_summary(summary: dict[str, Any], path: str | Path) -> None:
         )
         ax.legend(fontsize=8)
         ax = axes[2]
-        for k, r in enumerate(runs[:10]):
+        for _k, r in enumerate(runs[:10]):
             ax.plot(
                 np.arange(1, len(r["position_error_m"]) + 1), r["position_error_m"], lw=1, label=f"seed {r['seed']}"
             )

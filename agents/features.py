@@ -49,7 +49,7 @@ class PointSetExtractor(BaseFeaturesExtractor):
         self.point_nets = nn.ModuleDict(
             {
                 k: nn.Sequential(
-                    nn.Linear(observation_space[k].shape[-1], point_dim),
+                    nn.Linear(_shape(observation_space[k])[-1], point_dim),
                     nn.ReLU(),
                     nn.Linear(point_dim, point_dim),
                     nn.ReLU(),
@@ -62,7 +62,7 @@ class PointSetExtractor(BaseFeaturesExtractor):
 
     @staticmethod
     def _box_width(key: str, space: gym.spaces.Space) -> int:
-        width = int(np.prod(space.shape))
+        width = int(np.prod(_shape(space)))
         cols = BOX_COLUMNS.get(key)
         return len(cols) if cols is not None and space.shape == (len(BOX_SCALES.get(key, ())),) else width
 
@@ -94,3 +94,10 @@ class PointSetExtractor(BaseFeaturesExtractor):
 
 
 FEATURE_EXTRACTORS = {"point_set": PointSetExtractor}
+
+
+def _shape(space: gym.spaces.Space) -> tuple[int, ...]:
+    """The shape of a Box / MultiBinary space (every space this extractor reads has one)."""
+    if space.shape is None:
+        raise ValueError(f"space {space} has no shape")
+    return space.shape

@@ -111,7 +111,7 @@ def worker_env_id(env_id: str) -> str:
 
 #: imported once by the forkserver, so each worker forked from it starts with them loaded
 #: (highway-env alone imports matplotlib and pygame: seconds per worker otherwise)
-FORKSERVER_PRELOAD = ("rhs_env", "rhs_env.envs", "rhs_env.registration", "rhs_env.slam_wrapper", "rhs_env.wrappers")
+FORKSERVER_PRELOAD = ("rhs_env", "rhs_env.envs", "rhs_env.registration", "rhs_env.wrappers", "slam.envs")
 
 
 def _preload_forkserver() -> None:
@@ -235,7 +235,11 @@ def train(
     worker processes get ``OMP_NUM_THREADS=1`` unless it is set already.
     """
     from stable_baselines3 import DQN, PPO
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
+    from stable_baselines3.common.callbacks import (
+        CallbackList,
+        CheckpointCallback,
+        EvalCallback,
+    )
 
     hp = load_hyperparams(algo, env_id, hyperparams)
     policy = hp.pop("policy")

@@ -36,8 +36,14 @@ from highway_env.envs.highway_env import HighwayEnv
 from highway_env.road.lane import LineType, StraightLane
 from highway_env.road.road import Road, RoadNetwork
 
-from rhs_env.scene import DENSE_LANDMARKS, LandmarkConfig, Landmarks, place_roadside_landmarks, world_pose
-from rhs_env.validation import check_int, check_range
+from rhs_common.validation import check_int, check_range
+from rhs_env.scene import (
+    DENSE_LANDMARKS,
+    LandmarkConfig,
+    Landmarks,
+    place_roadside_landmarks,
+    world_pose,
+)
 
 #: the paper's obstacles (world frame, m) and start pose (SPEC section 7)
 PAPER_OBSTACLES = ((10.0, 65.0), (25.0, 10.0), (30.0, 65.0), (35.0, 10.0), (50.0, 65.0))
@@ -142,23 +148,24 @@ class RHSHighwayEnv(HighwayEnv):
             return super().render()
         from highway_env.envs.common.graphics import EnvViewer
 
-        if self.viewer is None:
-            self.viewer = EnvViewer(self)
-            if self.viewer.offscreen:
+        viewer: Any = self.viewer  # type: ignore[has-type]  # highway-env's EnvViewer, made on the first render
+        if viewer is None:
+            viewer = self.viewer = EnvViewer(self)
+            if viewer.offscreen:
                 # highway-env disables its viewer under SDL_VIDEODRIVER=dummy, but
                 # offscreen drawing needs no display: keep rgb_array working headless.
-                self.viewer.enabled = True
+                viewer.enabled = True
         self.enable_auto_render = True
-        self.viewer.display()
+        viewer.display()
         self._draw_landmarks()
-        if not self.viewer.offscreen:
+        if not viewer.offscreen:
             import pygame
 
-            self.viewer.screen.blit(self.viewer.sim_surface, (0, 0))
+            viewer.screen.blit(viewer.sim_surface, (0, 0))
             pygame.display.flip()
-            self.viewer.handle_events()
+            viewer.handle_events()
         if self.render_mode == "rgb_array":
-            return self.viewer.get_image()
+            return viewer.get_image()
         return None
 
     def _draw_landmarks(self) -> None:

@@ -46,14 +46,21 @@ from typing import Any
 import numpy as np
 import scipy.fft as sfft
 
+from rhs_common.validation import (
+    check_bool,
+    check_choice,
+    check_int,
+    check_range,
+    check_types,
+)
 from rhs_env.antenna import (
     ANTENNA_KINDS,
     SPEED_OF_LIGHT,
     ArrayAntenna,
     RHSConfig,
     ScanConfig,
-    make_antenna,
 )
+from rhs_env.antennas import make_antenna
 from rhs_env.point_cloud import (
     WINDOWS,
     AngleDictionary,
@@ -73,7 +80,6 @@ from rhs_env.point_cloud import (
     window_leak_envelope,
 )
 from rhs_env.scatterers import Occluders, Scatterers, visible_mask
-from rhs_env.validation import check_bool, check_choice, check_int, check_range
 
 __all__ = ["BOLTZMANN", "RADAR_NAMES", "PointCloud", "RadarConfig", "RadarSystem"]
 
@@ -149,6 +155,7 @@ class RadarConfig:
     vehicle_width_m: float = 2.0
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_range("bandwidth_hz", self.bandwidth_hz, 1e6, 5e9)
         check_range("chirp_s", self.chirp_s, 1e-7, 1e-2)
         check_range("sample_rate_hz", self.sample_rate_hz, 1e5, 1e10)

@@ -111,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = RadarConfig(antenna=antenna, scan=ScanConfig(grid_deg=args.grid_deg))
         rng = np.random.default_rng(seed)
         radar = RadarSystem(cfg, rng)
-    except ValueError as exc:
+    except (TypeError, ValueError) as exc:
         return _fail(str(exc))
     t = scene["targets"]
     k = t.shape[0]

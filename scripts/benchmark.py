@@ -112,8 +112,9 @@ def markdown(result: dict) -> str:
              ""]
     if "envs" in result:
         e = result["envs"]
-        lines += ["| env (default radar, dtheta = %g deg) | steps/s | ms/step | radar stages (ms) | SLAM stages (ms) |"
-                  % result["settings"]["grid_deg"], "|---|---:|---:|---|---|"]
+        grid = result["settings"]["grid_deg"]
+        lines += [f"| env (default radar, dtheta = {grid:g} deg) | steps/s | ms/step | radar stages (ms) | SLAM stages (ms) |",
+                  "|---|---:|---:|---|---|"]
         for env_id in ("rhs-highway-v0", "rhs-highway-radar-v0", "rhs-highway-slam-v0"):
             r = e[env_id]
             lines.append(f"| `{env_id}` | {r['steps_per_s']:.1f} | {r['ms_per_step']:.1f} | "

@@ -43,13 +43,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from rhs_common.geometry import wrap_angle
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _provenance import jsonable, write_json
@@ -78,7 +79,7 @@ def run_episode(
     env.close()
     true, est = np.asarray(true), np.asarray(est)
     pos_err = np.hypot(est[:, 0] - true[:, 0], est[:, 1] - true[:, 1])
-    head_err = (est[:, 2] - true[:, 2] + math.pi) % (2 * math.pi) - math.pi
+    head_err = wrap_angle(est[:, 2] - true[:, 2])
     n = len(true)
     return {
         "antenna": antenna,

@@ -33,7 +33,7 @@ from _provenance import write_json
 from fig5a_slam_rmse import _fmt, _stats, run_episode
 from paper_episode import ANTENNAS, add_episode_args
 
-from rhs_env.slam_wrapper import REGISTRATIONS
+from slam.registration import REGISTRATIONS
 
 METRICS = ("vehicle_rmse_m", "final_position_error_m", "heading_rmse_rad", "obstacle_rmse_m")
 

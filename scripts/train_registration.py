@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rhs_common.geometry import wrap_angle
+
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
 from _provenance import write_json
@@ -107,7 +109,7 @@ def make_dataset(prev_list, cur_list, motions, priors_per_pair, prior_std, grid,
 
 def motion_errors(est: np.ndarray, truth: np.ndarray) -> dict:
     d = est - truth
-    rot = (d[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    rot = wrap_angle(d[:, 2])
     return {
         "translation_rmse_m": float(np.sqrt(np.mean(d[:, 0] ** 2 + d[:, 1] ** 2))),
         "rotation_rmse_deg": float(np.degrees(np.sqrt(np.mean(rot**2)))),

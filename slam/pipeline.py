@@ -1,7 +1,7 @@
 """One SLAM cycle from a raw point cloud: ego velocity, moving-point filter, registration, RBPF.
 
 This is the single code path shared by the env's SLAM wrapper
-(:class:`rhs_env.slam_wrapper.SlamObservation`) and the scripted runs of
+(:class:`slam.wrapper.SlamObservation`) and the scripted runs of
 :func:`slam.scenario.run_scenario` (``rhs-slam scenario``).
 
 Per cycle, with cloud ``A_z`` (N, 4) in the vehicle frame and cycle length dt (s):
@@ -24,9 +24,27 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rhs_common.validation import check_range, check_types
 from slam.association import estimate_ego_velocity, static_mask
 from slam.rbpf import RBPFSlam, SlamConfig, SlamEstimate
 from slam.registration import Registration
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """What the cycle does before the filter.
+
+    ``use_doppler``: estimate the ego velocity from the Doppler of static points and drop
+    moving points (else every point is static and the prior is constant velocity);
+    ``max_accel_mps2`` [0, 100]: the velocity changes by at most this times dt per cycle.
+    """
+
+    use_doppler: bool = True
+    max_accel_mps2: float = 10.0
+
+    def __post_init__(self) -> None:
+        check_types(self)
+        check_range("max_accel_mps2", self.max_accel_mps2, 0.0, 100.0)
 
 
 @dataclass
@@ -47,14 +65,14 @@ class SlamPipeline:
         registration: Registration,
         config: SlamConfig | None = None,
         rng: np.random.Generator | None = None,
-        use_doppler: bool = True,
-        max_accel_mps2: float = 10.0,
+        options: PipelineConfig | None = None,
     ) -> None:
         self.registration = registration
-        self.max_accel_mps2 = float(max_accel_mps2)
+        self.options = options if options is not None else PipelineConfig()
+        self.max_accel_mps2 = self.options.max_accel_mps2
         self.config = config if config is not None else SlamConfig()
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
-        self.use_doppler = use_doppler
+        self.use_doppler = self.options.use_doppler
         self.slam = RBPFSlam(self.config, self.rng)
         self.reset()
 
@@ -78,8 +96,8 @@ class SlamPipeline:
             return pts[static_mask(pts, self.velocity[:2], self.config.dynamic_threshold_mps)]
         return pts
 
-    def step(self, points: np.ndarray, dt: float, true_motion: np.ndarray | None = None) -> CycleResult:
-        """Process cloud ``points`` (N, 4); ``true_motion`` feeds an odometry oracle registration only."""
+    def step(self, points: np.ndarray, dt: float) -> CycleResult:
+        """Process cloud ``points`` (N, 4) of a cycle of length ``dt`` (s)."""
         pts = np.asarray(points, dtype=float).reshape(-1, 4)
         thr = self.config.dynamic_threshold_mps
         v_dop = None
@@ -97,8 +115,6 @@ class SlamPipeline:
         if self.cycle == 0:
             motion = np.zeros(3)
         else:
-            if true_motion is not None and hasattr(self.registration, "set_true_motion"):
-                self.registration.set_true_motion(np.asarray(true_motion, dtype=float))
             prior = None
             if v_dop is not None:  # displacement over the cycle from the Doppler velocity
                 dth = 0.0 if self.last_motion is None else self.last_motion[2]
@@ -107,9 +123,8 @@ class SlamPipeline:
             elif self.last_motion is not None:
                 prior = self.last_motion.copy()
             t0 = time.perf_counter()
-            motion = np.asarray(
-                self.registration.estimate(self.prev_static, self._static(pts), prior=prior), dtype=float
-            ).reshape(3)
+            prev = self.prev_static if self.prev_static is not None else np.zeros((0, 4))
+            motion = np.asarray(self.registration.estimate(prev, self._static(pts), prior=prior), dtype=np.float64).reshape(3)
             reg_time = time.perf_counter() - t0
             if not np.all(np.isfinite(motion)):
                 motion = np.zeros(3)
@@ -120,7 +135,7 @@ class SlamPipeline:
                     [(c * motion[0] + s * motion[1]) / dt, (-s * motion[0] + c * motion[1]) / dt, motion[2] / dt]
                 )
             else:
-                self.velocity[2] = motion[2] / dt
+                self.velocity = np.array([v_dop[0], v_dop[1], motion[2] / dt])
         est = self.slam.update(pts, motion, dt, ego_velocity=self.velocity if self.use_doppler else None)
         est.stage_times["registration"] = reg_time
         self.prev_static = self._static(pts)

@@ -78,7 +78,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import logsumexp
 
-from rhs_env.validation import check_choice, check_int, check_range
+from rhs_common.geometry import circular_mean, wrap_angle
+from rhs_common.validation import check_choice, check_int, check_range, check_types
 from slam.association import NEW, associate, cluster_points, static_mask, to_map_frame
 
 __all__ = ["SlamConfig", "SlamEstimate", "RBPFSlam", "wrap_angle", "circular_mean"]
@@ -86,19 +87,7 @@ __all__ = ["SlamConfig", "SlamEstimate", "RBPFSlam", "wrap_angle", "circular_mea
 _LOG2PI = math.log(2.0 * math.pi)
 
 
-def wrap_angle(a):
-    """Wrap angles (rad) to [-pi, pi)."""
-    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
-
-
-def circular_mean(angles: np.ndarray, weights: np.ndarray | None = None) -> float:
-    """Weighted mean on the circle: ``atan2(sum w sin a, sum w cos a)`` (rad)."""
-    a = np.asarray(angles, dtype=float)
-    w = np.ones_like(a) if weights is None else np.asarray(weights, dtype=float)
-    return float(np.arctan2(np.sum(w * np.sin(a)), np.sum(w * np.cos(a))))
-
-
-@dataclass
+@dataclass(frozen=True)
 class SlamConfig:
     """RBPF SLAM settings (SI units). Validated at construction.
 
@@ -141,6 +130,7 @@ class SlamConfig:
     retire_min_hits: int = 3
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_int("n_particles", self.n_particles, 1, 100_000)
         check_int("max_landmarks", self.max_landmarks, 1, 100_000)
         check_range("delta_m", self.delta_m, 0.0, None, low_open=True)

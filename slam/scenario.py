@@ -14,15 +14,16 @@ uniform false points, Doppler of a static scene (optionally moving targets).
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
-from rhs_env.validation import check_int, check_range
+from rhs_common.geometry import compose, points_in_frame, relative_motion
+from rhs_common.validation import check_int, check_range
 from slam.metrics import heading_rmse, map_metrics, position_rmse
-from slam.pipeline import SlamPipeline
+from slam.pipeline import PipelineConfig, SlamPipeline
 from slam.rbpf import SlamConfig
-from slam.registration import Registration, compose, points_in_frame, relative_motion
+from slam.registration import Registration
 
 __all__ = ["run_scenario", "SyntheticCloud", "RadarCloud", "compose", "poses_in_frame"]
 
@@ -118,7 +119,8 @@ class SyntheticCloud:
         if nf:
             rr = self.max_range_m * np.sqrt(self.rng.random(nf))
             bb = self.rng.uniform(-math.pi, math.pi, nf)
-            fp = np.stack([rr * np.cos(bb), rr * np.sin(bb), -(v[0] * np.cos(bb) + v[1] * np.sin(bb)), np.full(nf, self.amplitude * 0.05)], axis=1)
+            vr_false = -(v[0] * np.cos(bb) + v[1] * np.sin(bb))
+            fp = np.stack([rr * np.cos(bb), rr * np.sin(bb), vr_false, np.full(nf, self.amplitude * 0.05)], axis=1)
             pts = np.concatenate([pts, fp])
         return pts
 
@@ -212,19 +214,8 @@ def run_scenario(
     check_int("len(poses)", T, 1, None)
     rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
     cfg = slam_config if slam_config is not None else SlamConfig()
-    pipe = SlamPipeline(registration, cfg, rng, use_doppler=use_doppler)
-    slam = pipe.slam
-    origin = poses[0]
-    true_map = poses_in_frame(poses, origin)
-    true_lm = points_in_frame(np.asarray(landmarks, dtype=float).reshape(-1, 2), origin)
-
-    est_poses = np.zeros((T, 3))
-    pose_std = np.zeros((T, 3))
-    dr = np.zeros((T, 3))
-    motions = np.zeros((T, 3))
-    stage_sum: dict[str, float] = {}
-    max_slots = 0
-    finite = True
+    pipe = SlamPipeline(registration, cfg, rng, PipelineConfig(use_doppler=use_doppler))
+    log = _RunLog(T)
     it = range(T)
     if progress:
         from tqdm import tqdm
@@ -232,37 +223,58 @@ def run_scenario(
         it = tqdm(it, desc="SLAM", unit="cycle")
     for t in it:
         pts = np.asarray(cloud_fn(t, poses[t]), dtype=float).reshape(-1, 4)
-        true_motion = relative_motion(poses[t - 1], poses[t]) if t > 0 else None
-        res = pipe.step(pts, dt, true_motion=true_motion)
+        if t > 0 and hasattr(registration, "set_true_motion"):  # the odometry oracle gets the truth
+            registration.set_true_motion(relative_motion(poses[t - 1], poses[t]))
+        log.record(t, pipe.step(pts, dt), pipe.slam.n_landmark_slots)
+    return log.result(pipe.slam, poses, landmarks, map_gate_m)
+
+
+class _RunLog:
+    """Per-cycle estimates of a scripted run and the summary dict of :func:`run_scenario`."""
+
+    def __init__(self, cycles: int) -> None:
+        self.est_poses = np.zeros((cycles, 3))
+        self.pose_std = np.zeros((cycles, 3))
+        self.dead_reckoning = np.zeros((cycles, 3))
+        self.motions = np.zeros((cycles, 3))
+        self.stage_sum: dict[str, float] = {}
+        self.max_slots = 0
+        self.finite = True
+
+    def record(self, t: int, res, slots: int) -> None:
         est, motion = res.estimate, res.motion
         for k, v in est.stage_times.items():
-            stage_sum[k] = stage_sum.get(k, 0.0) + v
-        motions[t] = motion
-        est_poses[t] = est.pose
-        pose_std[t] = est.pose_std
-        dr[t] = motion if t == 0 else compose(dr[t - 1], motion)
-        max_slots = max(max_slots, slam.n_landmark_slots)
-        finite &= bool(np.all(np.isfinite(est.pose)) and np.all(np.isfinite(est.landmarks)))
+            self.stage_sum[k] = self.stage_sum.get(k, 0.0) + v
+        self.motions[t] = motion
+        self.est_poses[t] = est.pose
+        self.pose_std[t] = est.pose_std
+        self.dead_reckoning[t] = motion if t == 0 else compose(self.dead_reckoning[t - 1], motion)
+        self.max_slots = max(self.max_slots, slots)
+        self.finite &= bool(np.all(np.isfinite(est.pose)) and np.all(np.isfinite(est.landmarks)))
 
-    lm, ids = slam.full_map()
-    mm = map_metrics(lm, true_lm, map_gate_m)
-    return dict(
-        estimated_poses=est_poses,
-        true_poses=true_map,
-        pose_std=pose_std,
-        landmarks=lm,
-        landmark_ids=ids,
-        true_landmarks=true_lm,
-        ate_rmse_m=position_rmse(est_poses, true_map),
-        heading_rmse_rad=heading_rmse(est_poses, true_map),
-        map_rmse_m=mm["rmse"],
-        map_matched=mm["matched"],
-        map_missed=mm["missed"],
-        map_spurious=mm["spurious"],
-        dead_reckoning_poses=dr,
-        dead_reckoning_rmse_m=position_rmse(dr, true_map),
-        motions=motions,
-        max_landmark_slots=max_slots,
-        finite=finite,
-        stage_times_s={k: v / T for k, v in stage_sum.items()},
-    )
+    def result(self, slam, poses: np.ndarray, landmarks: np.ndarray, map_gate_m: float) -> dict:
+        origin = poses[0]
+        true_map = poses_in_frame(poses, origin)
+        true_lm = points_in_frame(np.asarray(landmarks, dtype=float).reshape(-1, 2), origin)
+        lm, ids = slam.full_map()
+        mm = map_metrics(lm, true_lm, map_gate_m)
+        return dict(
+            estimated_poses=self.est_poses,
+            true_poses=true_map,
+            pose_std=self.pose_std,
+            landmarks=lm,
+            landmark_ids=ids,
+            true_landmarks=true_lm,
+            ate_rmse_m=position_rmse(self.est_poses, true_map),
+            heading_rmse_rad=heading_rmse(self.est_poses, true_map),
+            map_rmse_m=mm["rmse"],
+            map_matched=mm["matched"],
+            map_missed=mm["missed"],
+            map_spurious=mm["spurious"],
+            dead_reckoning_poses=self.dead_reckoning,
+            dead_reckoning_rmse_m=position_rmse(self.dead_reckoning, true_map),
+            motions=self.motions,
+            max_landmark_slots=self.max_slots,
+            finite=self.finite,
+            stage_times_s={k: v / len(poses) for k, v in self.stage_sum.items()},
+        )

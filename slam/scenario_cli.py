@@ -52,11 +52,11 @@ def _array(doc: dict, key: str, cols: int, min_rows: int) -> np.ndarray:
 def parse_scenario(doc: Any) -> dict[str, Any]:
     """Validate a scenario document; returns the arrays and options (ValueError with a clear message)."""
     if not isinstance(doc, dict):
-        raise ValueError("the scenario must be a JSON object with 'landmarks' and 'poses'")
+        raise TypeError("the scenario must be a JSON object with 'landmarks' and 'poses'")
     unknown = sorted(set(doc) - OPTIONAL - {"landmarks", "poses"})
     if unknown:
         raise ValueError(f"unknown key(s) {', '.join(map(repr, unknown))}")
-    out = {"landmarks": _array(doc, "landmarks", 2, 0), "poses": _array(doc, "poses", 3, 2)}
+    out: dict[str, Any] = {"landmarks": _array(doc, "landmarks", 2, 0), "poses": _array(doc, "poses", 3, 2)}
     out["antenna"] = doc.get("antenna", "rhs")
     out["registration"] = doc.get("registration", "icp")
     seed = doc.get("seed", 0)
@@ -79,8 +79,8 @@ def run_scripted(spec: dict[str, Any], progress: bool = False) -> dict[str, Any]
     """Run the radar + SLAM on a parsed scenario; returns the JSON-ready result."""
     from rhs_env.antenna import ScanConfig
     from rhs_env.radar import RadarConfig, RadarSystem
-    from rhs_env.slam_wrapper import make_registration
     from slam.rbpf import SlamConfig
+    from slam.registration import make_registration
     from slam.scenario import RadarCloud, run_scenario
 
     rng = np.random.default_rng(spec["seed"])
@@ -96,7 +96,7 @@ def run_scripted(spec: dict[str, Any], progress: bool = False) -> dict[str, Any]
         dt=spec["dt"],
         progress=progress,
     )
-    nan_to_none = lambda v: None if v is None or not np.isfinite(v) else float(v)  # noqa: E731
+    nan_to_none = lambda v: None if v is None or not np.isfinite(v) else float(v)
     return {
         "estimated_poses": np.round(res["estimated_poses"], 4).tolist(),
         "true_poses": np.round(res["true_poses"], 4).tolist(),
@@ -138,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
             Path(args.out).write_text(json.dumps(result, indent=1))
         except OSError as exc:
             raise ValueError(f"cannot write {args.out}: {exc.strerror or exc}") from None
-    except ValueError as exc:
+    except (TypeError, ValueError) as exc:
         print(f"rhs-slam scenario: error: {exc}", file=sys.stderr)
         return 2
     print(json.dumps({k: result[k] for k in ("ate_rmse_m", "map_rmse_m", "map_matched", "map_missed", "map_spurious")}))

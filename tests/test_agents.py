@@ -32,7 +32,7 @@ from agents.evaluate import (
 )
 from agents.features import PointSetExtractor
 from agents.train import ALGOS, load_hyperparams, train, worker_env_id
-from rhs_env.cli import main as cli_main
+from rhs_slam.cli import main as cli_main
 
 SLAM = "rhs-highway-slam-v0"
 TRUTH = "rhs-highway-v0"
@@ -285,7 +285,7 @@ def test_resolve_env_rules(trained):
 
 
 def test_demo_command_exits_0_and_writes_figure(trained, tmp_path, capsys):
-    # in-process (the console script is rhs_env.cli:main): saves a fresh interpreter's imports
+    # in-process (the console script is rhs_slam.cli:main): saves a fresh interpreter's imports
     out = tmp_path / "demo"
     rc = cli_main(["demo", "--policy", str(trained["model"]), "--seed", "2", "--out", str(out),
                    "--env-kwargs", json.dumps({"duration": 2}), "--animation"])  # fmt: skip

@@ -50,7 +50,7 @@ def test_gymnasium_and_sb3_check_env(maker):
 
 
 def test_radar_observation_space_and_info():
-    env = make_radar()
+    env = make_radar(scatterers_in_info=True)
     obs, info = env.reset(seed=0)
     assert set(obs) == {"points", "points_mask"}
     assert obs["points"].shape == (64, 4) and obs["points"].dtype == np.float32
@@ -156,7 +156,7 @@ def test_subproc_vec_env_steps():
     obs = venv.reset()
     assert obs["points"].shape == (2, 64, 4)
     obs, rewards, _dones, infos = venv.step(np.array([1, 1]))
-    assert rewards.shape == (2,) and len(infos) == 2 and "scatterers" in infos[0]
+    assert rewards.shape == (2,) and len(infos) == 2 and "radar_points_total" in infos[0]
     venv.close()
 
 
@@ -196,7 +196,8 @@ def test_radar_wrapper_on_plain_highway_env(env_id):
 def test_radar_on_the_paper_scene_sees_the_obstacles():
     from rhs_env.envs import RHSPaperEnv
 
-    env = RadarObservation(RHSPaperEnv(), antenna="hologram", radar={"scan": {"grid_deg": 5.0}}, max_points=64)
+    env = RadarObservation(RHSPaperEnv(), antenna="hologram", radar={"scan": {"grid_deg": 5.0}}, max_points=64,
+                           scatterers_in_info=True)
     obs, info = env.reset(seed=0)
     sc = info["scatterers"]
     assert sc["is_static"].all() and len(sc["xy"]) == 5  # no traffic: the five obstacles

@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rhs_env.antenna import RHSConfig, ScanConfig, make_antenna
+from rhs_env.antenna import RHSConfig, ScanConfig
+from rhs_env.antennas import make_antenna
 from rhs_env.patterns import library as L
 from rhs_env.patterns.fast import FastSettings
 from rhs_env.patterns.metrics import pattern_report, sidelobe_directions

@@ -158,7 +158,7 @@ def test_capacity_eviction_keeps_bound():
     cfg = SlamConfig(n_particles=5, max_landmarks=6, cluster_radius_m=0.0, **NOISELESS)
     slam = RBPFSlam(cfg, 0)
     rng = np.random.default_rng(0)
-    for t in range(20):
+    for _t in range(20):
         pts = np.column_stack([rng.uniform(-40, 40, (10, 2)), np.zeros(10), np.ones(10)])
         est = slam.update(pts, np.zeros(3), 0.1)
         assert slam.n_landmark_slots <= 6 and len(est.landmarks) <= 6

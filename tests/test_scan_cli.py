@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from rhs_env.cli import main
+from rhs_slam.cli import main
 
 
 def _run(tmp_path, scene, capsys, extra=()):

@@ -11,8 +11,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
 import rhs_env  # noqa: F401  (registers the ids)
-from rhs_env.slam_wrapper import SlamObservation
 from rhs_env.wrappers import RadarObservation
+from slam.wrapper import SlamObservation
 
 HIGHWAY_SLAM = "rhs-highway-slam-v0"
 PAPER = "rhs-paper-v0"
@@ -224,6 +224,7 @@ def test_paper_env_slam_errors_small_with_odometry(antenna):
         antenna=antenna,
         registration="odometry",
         radar={"scan": {"grid_deg": 5.0}},
+        landmarks_in_info=True,
     )
     _, info = env.reset(seed=0)
     errs, heading = (
@@ -279,12 +280,10 @@ def test_rgb_render_draws_slam_over_radar_frame():
     [
         ({"registration": "magic"}, "registration"),
         ({"max_landmarks": 0}, "max_landmarks"),
-        ({"max_landmarks": 2.5}, "max_landmarks"),
         ({"map_gate_m": -1.0}, "map_gate_m"),
         ({"slam": {"n_particles": 0}}, "n_particles"),
         ({"slam": {"delta_m": float("nan")}}, "delta_m"),
         ({"slam": {"no_such_field": 1}}, "no_such_field"),
-        ({"slam": "fast"}, "slam"),
         ({"radar": {"tx_power_dbm": 1e3}}, "tx_power_dbm"),
         ({"antenna": "laser"}, "antenna"),
         ({"max_points": 0}, "max_points"),
@@ -296,3 +295,35 @@ def test_rgb_render_draws_slam_over_radar_frame():
 def test_bad_kwargs_raise_value_error_naming_the_field(env_id, kwargs, field):
     with pytest.raises(ValueError, match=field):
         make(env_id, **kwargs)
+
+
+@pytest.mark.parametrize(
+    "kwargs, path",
+    [
+        ({"max_landmarks": 2.5}, "max_landmarks must be an integer"),
+        ({"slam": "fast"}, "slam must be a SlamConfig or a dict"),
+        ({"slam": {"n_particles": "100"}}, "slam.n_particles must be an integer"),
+        ({"radar": {"tx_power_dbm": "20"}}, "radar.tx_power_dbm must be a number"),
+        ({"radar": {"scan": {"grid_deg": "5"}}}, "radar.scan.grid_deg must be a number"),
+        ({"icp": {"max_iterations": 3.0}}, "icp.max_iterations must be an integer"),
+        ({"pipeline": {"use_doppler": "yes"}}, "pipeline.use_doppler must be True or False"),
+        ({"stage_times_in_info": "yes"}, "stage_times_in_info must be True or False"),
+    ],
+)
+def test_wrong_types_raise_type_error_naming_the_field_path(kwargs, path):
+    with pytest.raises(TypeError, match=path):
+        make(HIGHWAY_SLAM, **kwargs)
+
+
+def test_nested_range_errors_name_the_full_path():
+    with pytest.raises(ValueError, match=r"radar\.scan\.grid_deg must be in"):
+        make(HIGHWAY_SLAM, radar={"scan": {"grid_deg": 0.0}})
+    with pytest.raises(ValueError, match=r"icp\.yaw_search_rad must be in"):
+        make(HIGHWAY_SLAM, icp={"yaw_search_rad": 4.0})
+
+
+def test_icp_and_pipeline_settings_reach_the_slam_through_gym_make():
+    env = make(HIGHWAY_SLAM, icp={"max_iterations": 7}, pipeline={"use_doppler": False, "max_accel_mps2": 3.0})
+    pipe = env.get_wrapper_attr("pipeline")
+    assert pipe.registration.max_iterations == 7 and pipe.use_doppler is False and pipe.max_accel_mps2 == 3.0
+    env.close()
