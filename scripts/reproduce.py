@@ -52,7 +52,7 @@ class Step:
     script: str
     args: tuple[str, ...] = ()
     results: tuple[str, ...] = ()
-    guess_s: float = 600.0  # estimate when no results file recorded a run time
+    guess_s: float = 600.0  # estimate (s, quiet 2-core machine) when no results file recorded a run time
     note: str = ""
     env: dict = field(default_factory=dict)
     #: why the script has no ``fingerprint()`` (timings, or a training run that takes minutes even when tiny)
@@ -63,20 +63,20 @@ class Step:
 STEPS: tuple[Step, ...] = (
     Step("patterns_build", "build_patterns.py", ("--json", "results/patterns_build.json"),
          ("patterns_build.json",), 200, "rebuilds the shipped pattern libraries"),
-    Step("patterns_sdr_vs_fast", "compare_pattern_methods.py", (), ("patterns_sdr_vs_fast.json",), 300),
+    Step("patterns_sdr_vs_fast", "compare_pattern_methods.py", (), ("patterns_sdr_vs_fast.json",), 260),
     Step("registration", "train_registration.py", ("--no-progress",), ("registration.json",), 400,
          "retrains the shipped CNN weights"),
     Step("fig5a", "fig5a_slam_rmse.py", ("--seeds", "20", "--powers", "30", "20", "10", "0", "-10", "--workers", "2",
                                    "--no-progress"),
-         ("fig5a.json",), 7200),
+         ("fig5a.json",), 900),
     Step("fig5b", "fig5b_pointcloud_vs_elements.py", ("--elements", "20", "40", "60", "80", "--grids", "1", "2", "5"),
-         ("fig5b.json",), 900),
-    Step("fig5c", "fig5c_trajectory_map.py", ("--no-progress",), ("fig5c.json",), 120),
+         ("fig5b.json",), 1800),
+    Step("fig5c", "fig5c_trajectory_map.py", ("--no-progress",), ("fig5c.json",), 60),
     Step("registration_in_loop", "registration_in_loop.py", ("--no-progress",), ("registration_in_loop.json",), 900),
-    Step("train_policy", "train_policy.py", ("--no-progress",), ("train_policy.json",), 4 * 3600,
+    Step("train_policy", "train_policy.py", ("--no-progress",), ("train_policy.json",), 1600,
          "retrains the shipped policies", no_fingerprint="a record of training runs (timesteps, wall time); "
          "what the policies do is fingerprinted by the policies step"),
-    Step("policies", "evaluate_policies.py", (), ("policies.json",), 1800),
+    Step("policies", "evaluate_policies.py", (), ("policies.json",), 220),
     Step("benchmark_radar", "benchmark_radar.py", (), ("benchmark_radar.json",), 60, "timings",
          no_fingerprint="timings"),
     Step("benchmark", "benchmark.py", ("--out", "results/benchmark.json"), ("benchmark.json",), 900, "timings",
@@ -109,9 +109,10 @@ def recorded_seconds(step: Step) -> float | None:
     """Run time recorded by the step's last run (``provenance.wall_s``), or None."""
     for r in step.results:
         try:
-            prov = json.loads((RESULTS / r).read_text()).get("provenance") or {}
+            data = json.loads((RESULTS / r).read_text())
         except (OSError, ValueError):
             continue
+        prov = (data.get("provenance") if isinstance(data, dict) else None) or {}
         if prov.get("wall_s") is not None:
             return float(prov["wall_s"])
     return None
