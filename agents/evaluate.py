@@ -135,7 +135,39 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
         raise ValueError(f"{path} is not a PPO or DQN model ({'; '.join(errors)})")
     if env is not None:
         check_spaces(model, env, path)
+        model = PointColumnAdapter.wrap(model, env)
     return model
+
+
+class PointColumnAdapter:
+    """A policy trained on fewer ``points`` columns (the first round's x, y, vr, amplitude) run on the
+    wider observation: ``predict`` gets the first columns it was trained on; everything else passes."""
+
+    def __init__(self, model, width: int) -> None:
+        self.model, self.width = model, int(width)
+        self.observation_space = model.observation_space
+        self.action_space = model.action_space
+
+    @classmethod
+    def wrap(cls, model, env):
+        """``model`` itself when its ``points`` width equals the env's, else the adapter."""
+        width = _points_width(model.observation_space)
+        return model if width is None or width == _points_width(env.observation_space) else cls(model, width)
+
+    def predict(self, obs, *args, **kwargs):
+        obs = {**obs, "points": obs["points"][..., : self.width]}
+        return self.model.predict(obs, *args, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self.model, name)
+
+
+def _points_width(space) -> int | None:
+    from gymnasium import spaces
+
+    if isinstance(space, spaces.Dict) and "points" in space.spaces:
+        return int(space.spaces["points"].shape[-1])
+    return None
 
 
 def _space_summary(space) -> str:
@@ -150,12 +182,16 @@ def check_spaces(model, env, path: str | Path = "policy") -> None:
     """Raise ``ValueError`` when the env's observation / action space differ from the policy's."""
     from gymnasium import spaces
 
-    def layout(space):
+    def layout(space, points_width: int | None = None):
         if isinstance(space, spaces.Dict):
-            return {k: layout(v) for k, v in space.spaces.items()}
-        return (type(space).__name__, tuple(getattr(space, "shape", ()) or ()), getattr(space, "n", None))
+            return {k: layout(v, points_width if k == "points" else None) for k, v in space.spaces.items()}
+        shape = tuple(getattr(space, "shape", ()) or ())
+        if points_width is not None and shape:  # fewer point columns than the env: fed by PointColumnAdapter
+            shape = shape[:-1] + (min(shape[-1], points_width),)
+        return (type(space).__name__, shape, getattr(space, "n", None))
 
-    if layout(model.observation_space) != layout(env.observation_space):
+    width = _points_width(model.observation_space)
+    if layout(model.observation_space) != layout(env.observation_space, width):
         raise ValueError(
             f"{path} was trained on observations {_space_summary(model.observation_space)} but the env gives "
             f"{_space_summary(env.observation_space)}: use the env id and env kwargs it was trained on "

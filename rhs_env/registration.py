@@ -26,7 +26,9 @@ signatures (:func:`route_kwargs`): ``radar={...}`` (``RadarConfig`` fields),
 ``antenna="phased"``, ``max_points=...``, ``scatter={...}`` for the radar;
 ``slam={...}``, ``registration=...``, ``icp={...}``, ``pipeline={...}`` for the
 SLAM; ``map_gate_m``, ``landmarks_in_info`` for the SLAM metrics in ``info``;
-``stage_times_in_info=True`` for both wrappers.
+``stage_times_in_info=True`` and ``blas_threads=1`` (BLAS / OpenMP threads
+inside each step, restored after it; ``None`` opts into the process's own thread
+pools, see :mod:`rhs_common.threads`) for both wrappers.
 """
 
 from __future__ import annotations

@@ -3,12 +3,17 @@
 :class:`RadarObservation` replaces the observation with the point cloud of the
 ego vehicle's four RHS radars (SPEC sections 4, 5 and 7):
 
-``Dict(points=Box((N_max, 4), float32), points_mask=MultiBinary(N_max))``
+``Dict(points=Box((N_max, 7), float32), points_mask=MultiBinary(N_max))``
 
-``points`` rows are x, y (vehicle frame, m), radial velocity (m/s, > 0
-receding) and amplitude (linear, over the noise std), zero padded, inside
-finite bounds (x, y: the radars' reach; velocity: the unambiguous radial
-speed; amplitude: [0, 1e9]); when the
+``points`` rows (:data:`POINT_FEATURES`) are x, y (vehicle frame, m), radial
+velocity (m/s, > 0 receding), amplitude (linear, over the noise std), range
+std (m) and angle std (rad) of the point (its Cramer-Rao bounds at its SNR plus
+a floor, :mod:`rhs_env.uncertainty`; the angle is measured from the boresight
+of the radar that saw it) and that radar's index (0 front, 1 left, 2 rear,
+3 right, mounts from :meth:`rhs_env.radar.RadarConfig.mounts`), zero padded,
+inside finite bounds (x, y: the radars' reach; velocity: the unambiguous
+radial speed; amplitude: [0, 1e9]; range std: [0, 1e3] m; angle std:
+[0, pi] rad; radar: [0, 3]); when the
 radar returns more than ``N_max`` points the weakest are dropped (the kept
 points stay in the radar's order). ``points_mask`` is 1 on real rows.
 
@@ -35,6 +40,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from rhs_common.threads import blas_threads_limit, check_blas_threads
 from rhs_common.validation import build, check_bool, check_choice, check_int
 from rhs_env.antenna import ANTENNA_KINDS
 from rhs_env.scene import (
@@ -45,13 +51,15 @@ from rhs_env.scene import (
     vehicle_to_he_xy,
     world_surface_pixels,
 )
+from rhs_env.uncertainty import POINT_COLUMNS, point_rows
 
 if TYPE_CHECKING:  # pragma: no cover - annotations only (the radar is imported when built)
     from rhs_env.point_cloud import PointCloud
     from rhs_env.radar import RadarSystem
     from rhs_env.scatterers import Scatterers
 
-POINT_FEATURES = ("x", "y", "radial_velocity", "amplitude")
+POINT_FEATURES = POINT_COLUMNS  # x, y, radial_velocity, amplitude, range_std, angle_std, radar
+RANGE_STD_MAX = 1e3  # m; a point without a usable SNR is clipped to this
 POINT_COLOR = (255, 40, 40)
 AMPLITUDE_MAX = 1e9  # linear echo amplitude over noise std; far above any physical echo
 
@@ -97,6 +105,9 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         stage_times_in_info: add ``radar_stage_times`` to ``info`` (non-deterministic values).
         scatterers_in_info: add the ground-truth ``scatterers`` to ``info`` (variable length:
             off by default so vector envs can stack ``info``).
+        blas_threads: BLAS / OpenMP threads inside ``step`` / ``reset`` (the radar's
+            work and the env's), restored after each call (:mod:`rhs_common.threads`);
+            default 1, ``None`` leaves the user's thread pools alone (opt into threads).
 
     Example:
         >>> import gymnasium as gym
@@ -104,7 +115,7 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         >>> env = RadarObservation(RHSPaperEnv(), radar={"scan": {"grid_deg": 5}}, max_points=32)
         >>> obs, info = env.reset(seed=0)
         >>> obs["points"].shape, int(obs["points_mask"].sum()) > 0
-        ((32, 4), True)
+        ((32, 7), True)
     """
 
     def __init__(
@@ -116,6 +127,7 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         scatter: Any = None,
         stage_times_in_info: bool = False,
         scatterers_in_info: bool = False,
+        blas_threads: int | None = 1,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self,
@@ -125,11 +137,13 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             scatter=scatter,
             stage_times_in_info=stage_times_in_info,
             scatterers_in_info=scatterers_in_info,
+            blas_threads=blas_threads,
         )
         gym.ObservationWrapper.__init__(self, env)
         check_int("max_points", max_points, 1, 65536)
         check_bool("stage_times_in_info", stage_times_in_info)
         check_bool("scatterers_in_info", scatterers_in_info)
+        self.blas_threads = check_blas_threads(blas_threads)
         self.max_points = int(max_points)
         self.radar_config = make_radar_config(radar, antenna)
         self.scatter_config = ScatterConfig.make(scatter)
@@ -139,14 +153,15 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         cfg = self.radar_config
         reach = cfg.max_range_m + 0.5 * np.hypot(cfg.vehicle_length_m, cfg.vehicle_width_m)
         vmax = cfg.max_velocity_mps
-        self._low = np.array([-reach, -reach, -vmax, 0.0], dtype=np.float32)
-        self._high = np.array([reach, reach, vmax, AMPLITUDE_MAX], dtype=np.float32)
+        self._low = np.array([-reach, -reach, -vmax, 0.0, 0.0, 0.0, 0.0], dtype=np.float32)
+        self._high = np.array([reach, reach, vmax, AMPLITUDE_MAX, RANGE_STD_MAX, np.pi, 3.0], dtype=np.float32)
+        width = len(POINT_FEATURES)
         self.scatterers_in_info = bool(scatterers_in_info)
         self.observation_space = spaces.Dict(
             {
                 "points": spaces.Box(
-                    np.broadcast_to(self._low, (self.max_points, 4)),
-                    np.broadcast_to(self._high, (self.max_points, 4)),
+                    np.broadcast_to(self._low, (self.max_points, width)),
+                    np.broadcast_to(self._high, (self.max_points, width)),
                     dtype=np.float32,
                 ),
                 "points_mask": spaces.MultiBinary(self.max_points),
@@ -166,13 +181,15 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
 
     # ---- gymnasium API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        obs, info = self.env.reset(seed=seed, options=options)
-        self._build_radar(_spawn_rng(self.env))
-        return self.observation(obs), self._with_info(info)
+        with blas_threads_limit(self.blas_threads):
+            obs, info = self.env.reset(seed=seed, options=options)
+            self._build_radar(_spawn_rng(self.env))
+            return self.observation(obs), self._with_info(info)
 
     def step(self, action):
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        return self.observation(obs), reward, terminated, truncated, self._with_info(info)
+        with blas_threads_limit(self.blas_threads):
+            obs, reward, terminated, truncated, info = self.env.step(action)
+            return self.observation(obs), reward, terminated, truncated, self._with_info(info)
 
     def observation(self, observation: Any) -> dict[str, np.ndarray]:
         """Scan the current scene -> the padded point cloud (the env's own observation is ignored).
@@ -189,11 +206,11 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         cloud = self.radar.scan(scatterers, occluders)
         self.last_cloud, self.last_scatterers = cloud, scatterers
         self.stage_times = dict(getattr(cloud, "stage_times", {}) or {})
-        points = np.asarray(cloud.points, dtype=float).reshape(-1, 4)
+        points = point_rows(cloud)
         if len(points) > self.max_points:  # keep the strongest, in the radar's order
             points = points[np.sort(np.argpartition(-points[:, 3], self.max_points - 1)[: self.max_points])]
         n = len(points)
-        out_points = np.zeros((self.max_points, 4), dtype=np.float32)
+        out_points = np.zeros((self.max_points, len(POINT_FEATURES)), dtype=np.float32)
         out_points[:n] = np.clip(points, self._low, self._high)
         mask = np.zeros(self.max_points, dtype=np.int8)
         mask[:n] = 1

@@ -4,7 +4,10 @@ This is the single code path shared by the env's SLAM wrapper
 (:class:`slam.wrapper.SlamObservation`) and the scripted runs of
 :func:`slam.scenario.run_scenario` (``rhs-slam scenario``).
 
-Per cycle, with cloud ``A_z`` (N, 4) in the vehicle frame and cycle length dt (s):
+Per cycle, with cloud ``A_z`` (N, 4) in the vehicle frame and cycle length dt (s)
+(or (N, 7) rows that add each point's range std (m), angle std (rad) and radar
+index: their vehicle-frame covariance, :func:`slam.association.point_covariance`
+with the radars at ``sensor_xy``, goes to the RBPF):
 
 1. ego velocity ``v`` from the Doppler of static points (RANSAC fit of
    ``vr = -v . u`` scored by bearing coverage, within ``max_accel * dt`` of the
@@ -25,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rhs_common.validation import check_range, check_types
-from slam.association import estimate_ego_velocity, static_mask
+from slam.association import estimate_ego_velocity, point_covariance, static_mask
 from slam.rbpf import RBPFSlam, SlamConfig, SlamEstimate
 from slam.registration import Registration
 
@@ -66,8 +69,12 @@ class SlamPipeline:
         config: SlamConfig | None = None,
         rng: np.random.Generator | None = None,
         options: PipelineConfig | None = None,
+        sensor_xy: np.ndarray | None = None,
     ) -> None:
+        """``sensor_xy`` (S, 2): radar positions in the vehicle frame (m) indexed by column 6 of
+        (N, 7) clouds; ``None`` puts every sensor at the vehicle origin."""
         self.registration = registration
+        self.sensor_xy = None if sensor_xy is None else np.asarray(sensor_xy, dtype=float).reshape(-1, 2)
         self.options = options if options is not None else PipelineConfig()
         self.max_accel_mps2 = self.options.max_accel_mps2
         self.config = config if config is not None else SlamConfig()
@@ -97,8 +104,11 @@ class SlamPipeline:
         return pts
 
     def step(self, points: np.ndarray, dt: float) -> CycleResult:
-        """Process cloud ``points`` (N, 4) of a cycle of length ``dt`` (s)."""
-        pts = np.asarray(points, dtype=float).reshape(-1, 4)
+        """Process cloud ``points`` (N, 4) or (N, 7) (with stds and radar) of a cycle of length ``dt`` (s)."""
+        rows = np.asarray(points, dtype=float)
+        rows = rows.reshape(-1, rows.shape[-1] if rows.ndim == 2 and rows.shape[-1] >= 7 else 4)
+        cov = point_covariance(rows, self.sensor_xy) if rows.shape[1] >= 7 else None
+        pts = rows[:, :4]
         thr = self.config.dynamic_threshold_mps
         v_dop = None
         if self.use_doppler:
@@ -136,7 +146,7 @@ class SlamPipeline:
                 )
             else:
                 self.velocity = np.array([v_dop[0], v_dop[1], motion[2] / dt])
-        est = self.slam.update(pts, motion, dt, ego_velocity=self.velocity if self.use_doppler else None)
+        est = self.slam.update(pts, motion, dt, ego_velocity=self.velocity if self.use_doppler else None, cov=cov)
         est.stage_times["registration"] = reg_time
         self.prev_static = self._static(pts)
         self.cycle += 1

@@ -33,6 +33,7 @@ import numpy as np
 from gymnasium import spaces
 
 from rhs_common.geometry import apply_motion, relative_motion
+from rhs_common.threads import blas_threads_limit, check_blas_threads
 from rhs_common.validation import build, check_bool, check_int
 from rhs_env.scene import draw_disks, he_to_world_xy, world_pose, world_surface_pixels
 from slam.pipeline import PipelineConfig, SlamPipeline
@@ -59,6 +60,8 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         pipeline: a :class:`slam.pipeline.PipelineConfig` or a dict (Doppler use, acceleration bound).
         max_landmarks: L_max, rows of the ``landmarks`` observation, [1, 4096].
         stage_times_in_info: add ``slam_stage_times`` to ``info`` (non-deterministic values).
+        blas_threads: BLAS / OpenMP threads inside ``step`` / ``reset``, restored after
+            each call (:mod:`rhs_common.threads`); default 1, ``None`` leaves them alone.
 
     Example:
         >>> import gymnasium as gym, rhs_env
@@ -79,10 +82,11 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         pipeline: Any = None,
         max_landmarks: int = 64,
         stage_times_in_info: bool = False,
+        blas_threads: int | None = 1,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self, slam=slam, registration=registration, icp=icp, pipeline=pipeline,
-            max_landmarks=max_landmarks, stage_times_in_info=stage_times_in_info,
+            max_landmarks=max_landmarks, stage_times_in_info=stage_times_in_info, blas_threads=blas_threads,
         )
         gym.ObservationWrapper.__init__(self, env)
         space = env.observation_space
@@ -90,6 +94,7 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             raise ValueError("SlamObservation needs an env with 'points' and 'points_mask' observations")
         check_int("max_landmarks", max_landmarks, 1, 4096)
         check_bool("stage_times_in_info", stage_times_in_info)
+        self.blas_threads = check_blas_threads(blas_threads)
         self.slam_config = build(SlamConfig, slam, "slam")
         self.icp_config = build(ICPConfig, icp, "icp")
         self.pipeline_config = build(PipelineConfig, pipeline, "pipeline")
@@ -97,7 +102,11 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         reg = make_registration(registration, truth=self.true_motion)
         if isinstance(reg, ICPRegistration):
             reg = ICPRegistration(self.icp_config)
-        self.pipeline = SlamPipeline(reg, self.slam_config, np.random.default_rng(0), self.pipeline_config)
+        radar_cfg = getattr(env, "radar_config", None)  # the radars' mounts place each point's line of sight
+        sensor_xy = radar_cfg.mounts()[0] if radar_cfg is not None else None
+        self.pipeline = SlamPipeline(
+            reg, self.slam_config, np.random.default_rng(0), self.pipeline_config, sensor_xy=sensor_xy
+        )
         self.max_landmarks = int(max_landmarks)
         self.stage_times_in_info = bool(stage_times_in_info)
         self.stage_times: dict[str, float] = {}
@@ -128,6 +137,10 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
 
     # ---- gymnasium API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        with blas_threads_limit(self.blas_threads):
+            return self._reset(seed, options)
+
+    def _reset(self, seed: int | None, options: dict[str, Any] | None):
         obs, info = self.env.reset(seed=seed, options=options)
         self._reset_state()
         parent = self._base.np_random
@@ -139,8 +152,9 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         return self._observe(obs), self._with_info(info)
 
     def step(self, action):
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        return self._observe(obs), reward, terminated, truncated, self._with_info(info)
+        with blas_threads_limit(self.blas_threads):
+            obs, reward, terminated, truncated, info = self.env.step(action)
+            return self._observe(obs), reward, terminated, truncated, self._with_info(info)
 
     @property
     def dt(self) -> float:

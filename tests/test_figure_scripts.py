@@ -79,7 +79,7 @@ def test_fig5a_quick(tmp_path):
         assert math.isfinite(ep["vehicle_rmse_m"]) and 0 <= ep["vehicle_rmse_m"] < 20
         assert ep["map_matched"] + ep["map_missed"] == 5  # the paper's five obstacles
         assert ep["obstacle_rmse_m"] is None or 0 <= ep["obstacle_rmse_m"] <= 2.0
-        assert {"registration", "propagate", "ekf_update"} <= set(
+        assert {"registration", "predict", "update"} <= set(
             ep["slam_stage_times_ms"]
         )
     rows = {r["antenna"]: r for r in res["rows"]}

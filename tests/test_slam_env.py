@@ -114,7 +114,7 @@ def test_observation_keys_shapes_dtypes(env_id):
     for _ in rollout(env, seed=3, steps=4):
         obs = _[0]
         assert set(obs) == SLAM_KEYS
-        assert obs["points"].shape == (64, 4) and obs["points"].dtype == np.float32
+        assert obs["points"].shape == (64, 7) and obs["points"].dtype == np.float32
         assert obs["points_mask"].shape == (64,) and obs["points_mask"].dtype == np.int8
         assert obs["pose"].shape == (3,) and obs["pose"].dtype == np.float32
         assert obs["pose_std"].shape == (3,) and obs["pose_std"].dtype == np.float32
@@ -187,7 +187,7 @@ def test_stage_times_on_request():
     env.reset(seed=0)
     _, _, _, _, info = env.step(IDLE)
     times = info["slam_stage_times"]
-    assert {"registration", "propagate", "ekf_update", "resample"} <= set(times)
+    assert {"registration", "predict", "associate", "update", "weight", "resample"} <= set(times)
     assert all(isinstance(v, float) and v >= 0 for v in times.values())
     assert "radar_stage_times" in info  # the flag reaches the radar wrapper too
     assert layer(env, SlamObservation).stage_times.keys() == times.keys()
