@@ -145,6 +145,19 @@ def digest(values: Iterable[float], significant: int = SIGNIFICANT) -> tuple[str
     return hashlib.sha256(text.encode()).hexdigest()[:16], rounded
 
 
+def numbers(obj: Any) -> list[float]:
+    """Every number in a nested result (dict keys sorted; bools as 0/1; None kept): a fingerprint's values."""
+    if isinstance(obj, dict):
+        return [v for k in sorted(obj, key=str) for v in numbers(obj[k])]
+    if isinstance(obj, (list, tuple)):
+        return [v for x in obj for v in numbers(x)]
+    if hasattr(obj, "tolist") and not isinstance(obj, (str, bytes)):
+        return numbers(obj.tolist())
+    if obj is None or isinstance(obj, (bool, int, float)):
+        return [None if obj is None else float(obj)]
+    return []
+
+
 def compute_fingerprint(fn) -> dict[str, Any]:
     """Run a script's ``fingerprint()`` and return ``{hash, values, seconds}``."""
     t0 = time.perf_counter()

@@ -73,6 +73,17 @@ STEPS: tuple[Step, ...] = (
          ("fig5b.json",), 1800),
     Step("fig5c", "fig5c_trajectory_map.py", ("--no-progress",), ("fig5c.json",), 60),
     Step("registration_in_loop", "registration_in_loop.py", ("--no-progress",), ("registration_in_loop.json",), 900),
+    Step("radar_quality", "radar_quality.py", ("--out", "results/radar_quality_after.json"),
+         ("radar_quality_after.json",), 300),
+    Step("radar_quality_before", "radar_quality.py", ("--fidelity", "iq", "--out", "results/radar_quality_before.json"),
+         ("radar_quality_before.json",), 600, no_fingerprint="the 'before' record of the radar change (issue 9), kept "
+         "for comparison: measured on the code before it; the command is its closest equivalent at HEAD"),
+    Step("slam_accuracy", "slam_accuracy.py", ("--no-progress",), ("slam_accuracy.json",), 1800),
+    Step("slam_accuracy_before", "slam_accuracy.py",
+         ("--slam", '{"variant": "fastslam1", "association": "nearest", "measurement_noise": "fixed"}',
+          "--out", "results/slam_accuracy_before", "--no-progress"),
+         ("slam_accuracy_before.json",), 1800, no_fingerprint="the 'before' record of the SLAM change (issue 10), "
+         "kept for comparison: measured on the code before it; the command is the first-round model at HEAD"),
     Step("train_policy", "train_policy.py", ("--no-progress",), ("train_policy.json",), 1600,
          "retrains the shipped policies", no_fingerprint="a record of training runs (timesteps, wall time); "
          "what the policies do is fingerprinted by the policies step"),
@@ -168,7 +179,7 @@ def refresh_fingerprints(steps: list[Step], reason: str | None) -> int:
     fps = load_fingerprints()
     changed = []
     for s in steps:
-        fn = fingerprint_fn(s)
+        fn = None if s.no_fingerprint else fingerprint_fn(s)
         if fn is None:
             continue
         fp = compute_fingerprint(fn)
