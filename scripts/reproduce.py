@@ -9,6 +9,7 @@ advances in estimated seconds.
     python scripts/reproduce.py --list                     # steps, their state and estimated time
     python scripts/reproduce.py                            # everything (hours: trains the CNN and the policies)
     python scripts/reproduce.py --only fig5b fig5c         # some steps
+    python scripts/reproduce.py --only slam_accuracy_before   # 'before' records run only when named
     python scripts/reproduce.py --fingerprints-only --only fig5a --reason "SLAM proposal changed; full rerun at the end"
 
 ``--fingerprints-only`` reruns only the small-config fingerprints (seconds each) and,
@@ -57,6 +58,8 @@ class Step:
     env: dict = field(default_factory=dict)
     #: why the script has no ``fingerprint()`` (timings, or a training run that takes minutes even when tiny)
     no_fingerprint: str = ""
+    #: run only when named with ``--only`` (historical 'before' records of a change)
+    on_request: bool = False
 
 
 #: every results file and the step that writes it, in dependency order (libraries and weights first)
@@ -76,13 +79,13 @@ STEPS: tuple[Step, ...] = (
     Step("radar_quality", "radar_quality.py", ("--out", "results/radar_quality_after.json"),
          ("radar_quality_after.json",), 300),
     Step("radar_quality_before", "radar_quality.py", ("--fidelity", "iq", "--out", "results/radar_quality_before.json"),
-         ("radar_quality_before.json",), 600, no_fingerprint="the 'before' record of the radar change (issue 9), kept "
+         ("radar_quality_before.json",), 600, on_request=True, no_fingerprint="the 'before' record of the radar change (issue 9), kept "
          "for comparison: measured on the code before it; the command is its closest equivalent at HEAD"),
     Step("slam_accuracy", "slam_accuracy.py", ("--no-progress",), ("slam_accuracy.json",), 1800),
     Step("slam_accuracy_before", "slam_accuracy.py",
          ("--slam", '{"variant": "fastslam1", "association": "nearest", "measurement_noise": "fixed"}',
           "--out", "results/slam_accuracy_before", "--no-progress"),
-         ("slam_accuracy_before.json",), 1800, no_fingerprint="the 'before' record of the SLAM change (issue 10), "
+         ("slam_accuracy_before.json",), 1800, on_request=True, no_fingerprint="the 'before' record of the SLAM change (issue 10), "
          "kept for comparison: measured on the code before it; the command is the first-round model at HEAD"),
     Step("train_policy", "train_policy.py", ("--no-progress",), ("train_policy.json",), 1600,
          "retrains the shipped policies", no_fingerprint="a record of training runs (timesteps, wall time); "
@@ -209,7 +212,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--reason", default=None, help="with --fingerprints-only: record changed fingerprints, why")
     ap.add_argument("--no-progress", action="store_true")
     a = ap.parse_args(argv)
-    steps = [s for s in STEPS if (not a.only or s.name in a.only) and s.name not in a.skip]
+    steps = [s for s in STEPS if (s.name in a.only if a.only else not s.on_request) and s.name not in a.skip]
     if a.list:
         list_steps(steps)
         return 0
