@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import json
 import math
 import os
 import sys
@@ -87,8 +88,8 @@ def markdown(result: dict) -> str:
         head = _scaled(r["heading_rmse_rad"], math.degrees(1.0))
         ratio = r["vehicle_rmse_ratio_to_icp"]
         lines.append(
-            f"| {r['registration']} | {_fmt(r['vehicle_rmse_m'])} | {_fmt(r['final_position_error_m'])} "
-            f"| {_fmt(head)} | {_fmt(r['obstacle_rmse_m'])} | {r['map_matched_mean']:.1f} / "
+            f"| {r['registration']} | {_fmt(r['vehicle_rmse_m'], 3)} | {_fmt(r['final_position_error_m'], 3)} "
+            f"| {_fmt(head, 3)} | {_fmt(r['obstacle_rmse_m'], 3)} | {r['map_matched_mean']:.1f} / "
             f"{r['map_spurious_mean']:.1f} | {'n/a' if ratio is None else f'{ratio:.1f}'} |"
         )
     return "\n".join(lines) + "\n"
@@ -101,6 +102,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--antenna", choices=ANTENNAS, default="rhs")
     p.add_argument("--tx-power", type=float, default=30.0, help="Tx power (dBm), default 30 (the default radar)")
     add_episode_args(p, "tiny run for tests: 1 seed, 5-degree grid, 8 cycles")
+    p.add_argument("--render-only", action="store_true", help="rewrite the .md from the existing .json (no runs)")
     a = p.parse_args(argv)
     if a.quick:
         a.seeds, a.grid_deg, a.cycles = 1, 5.0, 8
@@ -123,6 +125,11 @@ def main(argv: list[str] | None = None) -> int:
     started = time.time()
     out = Path(a.out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    if a.render_only:
+        md = markdown(json.loads((out / "registration_in_loop.json").read_text()))
+        (out / "registration_in_loop.md").write_text(md)
+        print(md)
+        return 0
     episodes = run(a)
     result = {
         "env": "rhs-paper-v0",
