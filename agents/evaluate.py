@@ -35,8 +35,9 @@ DEFAULT_ENV = "rhs-highway-slam-v0"
 
 
 def is_scripted(policy: str | Path) -> bool:
-    """``"random"`` or ``"constant:<action>"``: policies that need no file."""
-    return str(policy) == "random" or str(policy).startswith("constant:")
+    """``"random"``, ``"constant:<action>"``, ``"idm"`` or ``"idm:<m/s>"``: policies that need no file."""
+    text = str(policy)
+    return text in ("random", "idm") or text.startswith(("constant:", "idm:"))
 
 
 class ConstantPolicy:
@@ -49,6 +50,62 @@ class ConstantPolicy:
 
     def predict(self, obs, deterministic: bool = True):
         return self.action, None
+
+
+class IDMMobilPolicy:
+    """highway-env's own IDM + MOBIL driver in the ego's seat (a scripted reference).
+
+    At the first ``predict`` after each reset the ego (an ``MDPVehicle`` that
+    follows meta-actions) is replaced, in ``road.vehicles``, ``controlled_vehicles``
+    and the action type, by a ``highway_env.vehicle.behavior.IDMVehicle`` at the
+    same dynamical state (``IDMVehicle.create_from``) with desired speed
+    ``target_speed``. From then on the env's ``road.act()`` lets it decide at the
+    simulation rate like the traffic does: IDM longitudinal control,
+
+        a = a_max [1 - (v / v0)^delta - (d*(v, dv) / d)^2],
+        d* = d0 + v T + v dv / (2 sqrt(a_max b)),
+
+    and MOBIL lane changes (a change is taken when the ego's acceleration gain
+    exceeds the imposed braking on the new follower by ``LANE_CHANGE_MIN_ACC_GAIN``
+    and that braking stays under ``LANE_CHANGE_MAX_BRAKING_IMPOSED``). The
+    meta-action it returns (IDLE) is ignored by ``IDMVehicle.act``. Rewards,
+    collisions, radar and SLAM see the swapped vehicle (they read
+    ``env.unwrapped.vehicle`` / ``road.vehicles`` each step). ``target_speed``
+    defaults to the highest target speed of the env's ``DiscreteMetaAction``
+    (30 m/s on the highway ids: the top of the reward's speed range).
+    """
+
+    def __init__(self, env, target_speed: float | None = None):
+        base = env.unwrapped
+        if not hasattr(base, "road") or not hasattr(base, "action_type"):
+            raise ValueError("the idm policy needs a highway-env env (env.unwrapped.road)")
+        if target_speed is None:
+            speeds = getattr(base.action_type, "target_speeds", None)
+            target_speed = float(np.max(speeds)) if speeds is not None else 30.0
+        if not 0.0 < float(target_speed) <= 60.0:
+            raise ValueError(f"idm target speed must be in (0, 60] m/s, got {target_speed}")
+        self.env = env
+        self.target_speed = float(target_speed)
+        self.idle = 1  # DiscreteMetaAction IDLE; IDMVehicle.act ignores it
+
+    def _swap_ego(self) -> None:
+        from highway_env.vehicle.behavior import IDMVehicle
+
+        base = self.env.unwrapped
+        ego = base.vehicle
+        if ego is None or isinstance(ego, IDMVehicle):
+            return
+        idm = IDMVehicle.create_from(ego)
+        idm.target_speed = self.target_speed
+        idm.crashed = ego.crashed
+        vehicles = base.road.vehicles
+        vehicles[next(i for i, v in enumerate(vehicles) if v is ego)] = idm
+        base.controlled_vehicles = [idm if v is ego else v for v in base.controlled_vehicles]
+        base.action_type.controlled_vehicle = idm
+
+    def predict(self, obs, deterministic: bool = True):
+        self._swap_ego()
+        return self.idle, None
 
 
 class RandomPolicy:
@@ -93,14 +150,28 @@ def resolve_env(
     meta_env = meta.get("env_id")
     env_id = env_id or meta_env or DEFAULT_ENV
     base = dict(meta.get("env_kwargs") or {}) if env_id == meta_env else {}
-    kwargs = {**base, **(env_kwargs or {})}
-    if env_id.split(":")[-1] in SLAM_ENV_IDS:  # the episode record keeps the true and estimated maps
-        kwargs.setdefault("landmarks_in_info", True)
-    return env_id, kwargs
+    return env_id, {**base, **(env_kwargs or {})}
+
+
+def make_env(env_id: str, kwargs: dict[str, Any], **extra: Any):
+    """``gym.make(env_id, **kwargs)``; on the SLAM ids the info keeps the true and estimated maps
+    (``landmarks_in_info``) for the episode record. Bad kwargs raise ``ValueError``."""
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401  (registers the ids)
+
+    if env_id.split(":")[-1] in SLAM_ENV_IDS:
+        extra.setdefault("landmarks_in_info", True)
+    try:
+        return gym.make(env_id, **{**kwargs, **extra})
+    except TypeError as exc:
+        if "must be" in str(exc):  # a config field of the wrong type: the message names it
+            raise
+        raise ValueError(f"bad env kwargs for {env_id}: {exc}") from None
 
 
 def load_policy(policy: str | Path, env=None, seed: int = 0):
-    """``"random"``, ``"constant:<action>"``, or a stable-baselines3 zip (PPO or DQN: from the JSON
+    """``"random"``, ``"constant:<action>"``, ``"idm[:<m/s>]"``, or a stable-baselines3 zip (PPO or DQN: from the JSON
     beside it, else tried in turn).
 
     With ``env``, the policy's observation space is checked against the env's.
@@ -110,6 +181,14 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
             raise ValueError(f"policy {policy!r} needs the env for its action space")
         if str(policy) == "random":
             return RandomPolicy(env.action_space, seed)
+        if str(policy).split(":", 1)[0] == "idm":
+            speed = None
+            if ":" in str(policy):
+                try:
+                    speed = float(str(policy).split(":", 1)[1])
+                except ValueError:
+                    raise ValueError(f"idm policy must be 'idm' or 'idm:<target speed m/s>', got {policy!r}") from None
+            return IDMMobilPolicy(env, speed)
         try:
             action = int(str(policy).split(":", 1)[1])
         except ValueError:
@@ -118,6 +197,8 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
     path = Path(policy)
     if not path.exists():
         raise FileNotFoundError(f"policy file not found: {path}")
+    if path.is_dir():
+        return _load_rllib(path, env)
     from stable_baselines3 import DQN, PPO
 
     classes = {"ppo": PPO, "dqn": DQN}
@@ -136,6 +217,18 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
     if env is not None:
         check_spaces(model, env, path)
         model = PointColumnAdapter.wrap(model, env)
+    return model
+
+
+def _load_rllib(path: Path, env=None):
+    """The RLModule of an RLlib checkpoint directory (``rhs-slam train --backend rllib``)."""
+    from agents.rllib import MODULE_SUBDIR, RLlibPolicy, is_rllib_checkpoint
+
+    if not is_rllib_checkpoint(path):
+        raise ValueError(f"{path} is a directory but not an RLlib checkpoint (no {'/'.join(MODULE_SUBDIR)})")
+    model = RLlibPolicy(path)
+    if env is not None:
+        check_spaces(model, env, path)
     return model
 
 
@@ -166,7 +259,8 @@ def _points_width(space) -> int | None:
     from gymnasium import spaces
 
     if isinstance(space, spaces.Dict) and "points" in space.spaces:
-        return int(space.spaces["points"].shape[-1])
+        shape = space.spaces["points"].shape
+        return int(shape[-1]) if shape else None
     return None
 
 
@@ -221,11 +315,34 @@ def _action(action) -> Any:
     return int(a) if a.ndim == 0 and np.issubdtype(a.dtype, np.integer) else action
 
 
-def run_episode(env, policy, seed: int, deterministic: bool = True, frames: list | None = None) -> dict[str, Any]:
-    """One episode; returns its return, crash flag, mean speed, SLAM errors and the trajectories."""
+def episode_steps(env) -> int | None:
+    """Steps of a full episode (``duration * policy_frequency``), or None when the env does not say."""
+    try:
+        cfg = env.unwrapped.config
+        return int(round(float(cfg["duration"]) * float(cfg["policy_frequency"])))
+    except (AttributeError, KeyError, TypeError, ValueError):
+        return None
+
+
+def run_episode(
+    env,
+    policy,
+    seed: int,
+    deterministic: bool = True,
+    frames: list | None = None,
+    trace: list | None = None,
+    bar: Any = None,
+) -> dict[str, Any]:
+    """One episode; returns its return, crash flag, mean speed, SLAM errors and the trajectories.
+
+    ``frames`` collects ``env.render()`` per step; ``trace`` the ``(obs, info)`` of the reset and of
+    every step; ``bar`` (a tqdm bar) is advanced by one per step.
+    """
     obs, info = env.reset(seed=seed)
     if frames is not None:
         frames.append(env.render())
+    if trace is not None:
+        trace.append((obs, info))
     total, steps, speeds, pos_err, head_err2 = 0.0, 0, [], [], []
     true_xy, est_xy = [], []
     crashed, done = False, False
@@ -243,8 +360,12 @@ def run_episode(env, policy, seed: int, deterministic: bool = True, frames: list
             est_xy.append(np.asarray(info["estimated_pose"][:2], dtype=float).tolist())
         if frames is not None:
             frames.append(env.render())
+        if trace is not None:
+            trace.append((obs, info))
+        if bar is not None:
+            bar.update(1)
         done = terminated or truncated
-    map_rmse = info.get("map_rmse_m")  # None until a landmark is matched
+    map_rmse = info.get("map_rmse_m")  # absent until a landmark is matched
     return {
         "seed": seed,
         "return": total,
@@ -295,7 +416,6 @@ def evaluate(
 
     ``env_id`` / ``env_kwargs`` default to the ones saved beside the policy (:func:`resolve_env`).
     """
-    import gymnasium as gym
     from tqdm.auto import tqdm
 
     import rhs_env  # noqa: F401
@@ -303,16 +423,16 @@ def evaluate(
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
     env_id, kwargs = resolve_env(policy, env_id, env_kwargs)
-    try:
-        env = gym.make(env_id, **kwargs)
-    except TypeError as exc:
-        raise ValueError(f"bad env kwargs for {env_id}: {exc}") from None
+    env = make_env(env_id, kwargs)
     try:
         model = load_policy(policy, env, seed)
-        runs = [
-            run_episode(env, model, seed + k, deterministic=deterministic)
-            for k in tqdm(range(episodes), desc="evaluate", unit="episode", disable=not progress)
-        ]
+        per_episode = episode_steps(env)
+        with tqdm(total=episodes * per_episode if per_episode else None, desc="evaluate", unit="step",
+                  disable=not progress) as bar:
+            runs = []
+            for k in range(episodes):
+                bar.set_postfix(episode=f"{k + 1}/{episodes}")
+                runs.append(run_episode(env, model, seed + k, deterministic=deterministic, bar=bar))
     finally:
         env.close()
     return {
@@ -386,7 +506,10 @@ def parse_env_kwargs(text: str | None) -> dict[str, Any] | None:
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--policy", default=str(SHIPPED_POLICY), help="SB3 zip, 'random' or 'constant:ACTION' (default: shipped policy)"
+        "--policy",
+        default=str(SHIPPED_POLICY),
+        help="SB3 zip, RLlib checkpoint dir, 'random', 'constant:ACTION' or 'idm[:M/S]' (IDM + MOBIL driver; "
+        "default: shipped policy)",
     )
     parser.add_argument("--env", default=None, help=f"env id (default: the policy's, else {DEFAULT_ENV})")
     parser.add_argument("--episodes", type=int, default=5)
@@ -401,7 +524,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rhs_common.validation import check_output_path
+
     try:
+        check_output_path("--out", args.out)
+        check_output_path("--figure", args.figure or Path(args.out).with_suffix(".png"))
+        if args.episodes < 1 or args.episodes > 100_000:
+            raise ValueError(f"--episodes must be in [1, 100000], got {args.episodes}")
+        if not 0 <= args.seed < 2**63:
+            raise ValueError(f"--seed must be an integer in [0, 2**63), got {args.seed}")
         summary = evaluate(
             args.policy,
             args.env,
@@ -411,7 +542,7 @@ def run(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
             deterministic=not args.stochastic,
         )
-    except (ValueError, FileNotFoundError, json.JSONDecodeError) as exc:
+    except (ValueError, TypeError, FileNotFoundError, json.JSONDecodeError) as exc:
         print(f"rhs-slam evaluate: error: {exc}", file=sys.stderr)
         return 2
     out = Path(args.out)

@@ -42,7 +42,7 @@ def _scale_set(key: str, x: torch.Tensor) -> torch.Tensor:
         elif s == "log":
             cols.append(torch.log10(col.clamp(min=1e-6)) / 6.0)
         else:
-            cols.append(col / s)
+            cols.append(col / float(s))
     return torch.stack(cols, dim=-1)
 
 
@@ -102,7 +102,104 @@ class PointSetExtractor(BaseFeaturesExtractor):
         return torch.cat(feats, dim=1)
 
 
-FEATURE_EXTRACTORS = {"point_set": PointSetExtractor}
+def _box_features(obs: dict[str, torch.Tensor], keys: list[str]) -> torch.Tensor:
+    """The flattened, scaled Box keys (``BOX_SCALES`` / ``BOX_COLUMNS``), concatenated."""
+    parts = []
+    for k in keys:
+        v = obs[k].float().flatten(1)
+        s = BOX_SCALES.get(k)
+        if s is not None and v.shape[1] == len(s):
+            v = v / torch.tensor(s, dtype=v.dtype, device=v.device)
+            cols = BOX_COLUMNS.get(k)
+            if cols is not None:
+                v = v[:, list(cols)]
+        parts.append(v)
+    return torch.cat(parts, dim=1)
+
+
+class GridExtractor(BaseFeaturesExtractor):
+    """Ego-centred bird's-eye grid of the point cloud and the SLAM map, then a small CNN.
+
+    Cells of ``cell_m`` x ``cell_m`` over x in [``x_min_m``, ``x_max_m``) (forward)
+    and y in [-``half_width_m``, ``half_width_m``) (vehicle frame, m). Channels per cell:
+
+    * points: log(1 + n) with n the number of radar points in the cell;
+    * mean radial velocity of those points / 30 m/s (0 where empty): Doppler tells
+      a vehicle keeping pace (~0) from a static landmark (~ -ego speed) or a closing one;
+    * landmarks (when the observation has them): log(1 + n) of SLAM map landmarks.
+
+    Points outside the grid and padded slots (mask 0) are dropped, so the grid
+    is invariant to slot order and padding. Rasterised with ``index_add_`` (no
+    loop over points). Box keys (SLAM lateral offset and heading, pose std) are
+    scaled as in :class:`PointSetExtractor` and concatenated after the CNN.
+    """
+
+    def __init__(
+        self,
+        observation_space: gym.spaces.Dict,
+        cell_m: float = 2.0,
+        x_min_m: float = -30.0,
+        x_max_m: float = 70.0,
+        half_width_m: float = 12.0,
+        cnn_dim: int = 128,
+        box_dim: int = 32,
+    ):
+        if not (cell_m > 0 and x_max_m > x_min_m and half_width_m > 0):
+            raise ValueError("GridExtractor needs cell_m > 0, x_max_m > x_min_m and half_width_m > 0")
+        spaces = observation_space.spaces
+        if "points" not in spaces or "points_mask" not in spaces:
+            raise ValueError("GridExtractor needs 'points' and 'points_mask' observations")
+        box_keys = [k for k in spaces if k not in ("points", "landmarks") and not k.endswith("_mask")]
+        super().__init__(observation_space, features_dim=cnn_dim + (box_dim if box_keys else 0))
+        self.cell, self.x0, self.y0 = float(cell_m), float(x_min_m), -float(half_width_m)
+        self.nx = int(np.ceil((x_max_m - x_min_m) / cell_m))
+        self.ny = int(np.ceil(2 * half_width_m / cell_m))
+        self.use_landmarks = "landmarks" in spaces and "landmarks_mask" in spaces
+        self.box_keys = box_keys
+        channels = 3 if self.use_landmarks else 2
+        self.cnn = nn.Sequential(
+            nn.Conv2d(channels, 16, 3, padding=1), nn.ReLU(),
+            nn.Conv2d(16, 32, 3, stride=2, padding=1), nn.ReLU(),
+            nn.Conv2d(32, 32, 3, stride=2, padding=1), nn.ReLU(),
+            nn.Flatten(),
+        )  # fmt: skip
+        with torch.no_grad():
+            width = self.cnn(torch.zeros(1, channels, self.ny, self.nx)).shape[1]
+        self.head = nn.Sequential(nn.Linear(width, cnn_dim), nn.ReLU())
+        box_in = sum(PointSetExtractor._box_width(k, spaces[k]) for k in box_keys)
+        self.box_net = nn.Sequential(nn.Linear(box_in, box_dim), nn.ReLU()) if box_keys else None
+
+    def _scatter(self, xy: torch.Tensor, mask: torch.Tensor, values: torch.Tensor | None):
+        """Per-cell count (and sum of ``values``) of the masked points (B, N, 2) -> (B, ny, nx)."""
+        b = xy.shape[0]
+        ix = torch.floor((xy[..., 0] - self.x0) / self.cell).long()
+        iy = torch.floor((xy[..., 1] - self.y0) / self.cell).long()
+        ok = (mask > 0) & (ix >= 0) & (ix < self.nx) & (iy >= 0) & (iy < self.ny)
+        batch = torch.arange(b, device=xy.device).unsqueeze(1).expand_as(ix)
+        flat = (batch * self.ny + iy) * self.nx + ix
+        flat, w = flat[ok], ok[ok].float()
+        count = torch.zeros(b * self.ny * self.nx, device=xy.device).index_add_(0, flat, w)
+        total = None
+        if values is not None:
+            total = torch.zeros_like(count).index_add_(0, flat, values.float()[ok])
+            total = total.view(b, self.ny, self.nx)
+        return count.view(b, self.ny, self.nx), total
+
+    def grid(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        """The (B, C, ny, nx) grid of an observation batch (rows: y from -half_width up; columns: x)."""
+        pts = obs["points"].float()
+        count, vsum = self._scatter(pts[..., :2], obs["points_mask"], pts[..., 2])
+        chans = [torch.log1p(count), torch.where(count > 0, vsum / count.clamp(min=1.0), 0.0) / 30.0]
+        if self.use_landmarks:
+            lm, _ = self._scatter(obs["landmarks"].float(), obs["landmarks_mask"], None)
+            chans.append(torch.log1p(lm))
+        return torch.stack(chans, dim=1)
+
+    def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        feats = [self.head(self.cnn(self.grid(obs)))]
+        if self.box_net is not None:
+            feats.append(self.box_net(_box_features(obs, self.box_keys)))
+        return torch.cat(feats, dim=1)
 
 
 def _shape(space: gym.spaces.Space) -> tuple[int, ...]:
@@ -110,3 +207,6 @@ def _shape(space: gym.spaces.Space) -> tuple[int, ...]:
     if space.shape is None:
         raise ValueError(f"space {space} has no shape")
     return space.shape
+
+
+FEATURE_EXTRACTORS = {"point_set": PointSetExtractor, "grid": GridExtractor}

@@ -74,15 +74,15 @@ def check_range(
     low_open: bool = False,
     high_open: bool = False,
 ) -> None:
-    """``TypeError`` unless ``value`` is a real number; ``ValueError`` unless ``low <= value <= high``."""
+    """``TypeError`` unless ``value`` is a real number; ``ValueError`` unless finite and ``low <= value <= high``."""
     lo_br = "(" if low_open else "["
     hi_br = ")" if high_open else "]"
     allowed = f"{lo_br}{'-inf' if low is None else low}, {'inf' if high is None else high}{hi_br}"
     if not _is_real(value):
         raise TypeError(f"{field} must be a number in {allowed}, got {value!r} ({type(value).__name__})")
     v = float(value)
-    if math.isnan(v):
-        raise ValueError(f"{field} must be a number in {allowed}, got NaN")
+    if not math.isfinite(v):  # NaN and +-inf: every bound keeps the work finite
+        raise ValueError(f"{field} must be a finite number in {allowed}, got {value!r}")
     bad = (low is not None and (v <= low if low_open else v < low)) or (
         high is not None and (v >= high if high_open else v > high)
     )
@@ -231,3 +231,41 @@ def build(cls: type[T], value: Any = None, path: str = "") -> T:
         if not path or str(err).startswith(path):
             raise
         raise type(err)(_join(path, str(err))) from None
+
+
+# --------------------------------------------------------------------------- output paths
+def check_output_path(field: str, path: Any, directory: bool = False) -> None:
+    """``ValueError`` naming ``field`` unless ``path`` can be written; call it before any work starts.
+
+    Tried, not guessed (permissions lie for root and on read-only mounts): the
+    missing parent directories are created (the writer would create them anyway);
+    a file path is opened for appending, or created and removed again; a
+    directory (``directory=True``) is created. An existing directory where a
+    file is expected, or the reverse, is refused.
+    """
+    import os
+    from pathlib import Path
+
+    if not isinstance(path, (str, os.PathLike)) or not str(path):
+        raise TypeError(f"{field} must be a path, got {path!r} ({type(path).__name__})")
+    p = Path(path)
+    try:
+        if directory:
+            if p.exists() and not p.is_dir():
+                raise ValueError(f"{field}: {p} exists and is not a directory")
+            p.mkdir(parents=True, exist_ok=True)
+            probe = p / f".rhs-slam-write-test-{os.getpid()}"
+            probe.touch()
+            probe.unlink()
+            return
+        if p.is_dir():
+            raise ValueError(f"{field}: {p} is a directory, expected a file path")
+        p.parent.mkdir(parents=True, exist_ok=True)
+        if p.exists():
+            with p.open("a"):
+                pass
+        else:
+            p.touch()
+            p.unlink()
+    except OSError as exc:
+        raise ValueError(f"{field}: cannot write {p}: {exc.strerror or exc}") from None

@@ -118,6 +118,10 @@ class RHSConfig:
         return asdict(self)
 
 
+#: most beam slots I per sweep (bounds ``ScanConfig.grid_deg`` below by ``sector_deg / MAX_SLOTS``)
+MAX_SLOTS = 360
+
+
 @dataclass(frozen=True)
 class ScanConfig:
     """The beam sweep of one radar: I slots of width ``grid_deg`` covering ``sector_deg``.
@@ -131,7 +135,9 @@ class ScanConfig:
     def __post_init__(self) -> None:
         check_types(self)
         check_range("sector_deg", self.sector_deg, 0.0, 180.0, low_open=True, high_open=True)
-        check_range("grid_deg", self.grid_deg, 0.0, self.sector_deg, low_open=True)
+        # at most MAX_SLOTS beams per sweep (0.25 deg over 90 deg): the pattern library
+        # build and every scan cost grow with I; 0.01 deg would be a 20-40 h build
+        check_range("grid_deg", self.grid_deg, self.sector_deg / MAX_SLOTS, self.sector_deg)
         ratio = self.sector_deg / self.grid_deg
         if abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio):
             raise ValueError(

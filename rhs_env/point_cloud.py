@@ -197,6 +197,7 @@ def ca_cfar_threshold(profile: np.ndarray, guard: int, train: int, stride: int, 
     return alpha * np.clip(mean, floor, cap)
 
 
+@functools.lru_cache(maxsize=64)  # a pure function of its scalars; ~5 s of quadrature per call
 def os_cfar_alpha(pfa: float, looks: int, train_cells: int, rank: int) -> float:
     """OS-CFAR multiplier: threshold ``alpha * Y_(rank)`` (rank-th smallest of the training cells).
 
@@ -489,7 +490,7 @@ def _doppler_grid_refine(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: 
         q = prod  # every chirp has its own time (Doppler phase runs across slots)
     else:
         q = np.zeros((d, n_t), complex)
-        np.add.at(q, (slice(None), t), prod)
+        np.add.at(q.T, t, prod.T)  # q[:, t] += prod, repeated t accumulated
     nfft = 1 << math.ceil(math.log2(max(4 * n_t, 64)))
     half = 1 << math.ceil(math.log2(math.ceil(float(np.max(span)) * nfft / (2 * np.pi)) + 1))  # few kernels
     if 2 * half + 1 < nfft // 8:
@@ -634,7 +635,8 @@ def _new_atom(dic: AngleDictionary, res: np.ndarray, tgrid: np.ndarray, noise_va
 
 def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_targets: int,
                 residual_threshold: np.ndarray, noise_var: float, relative_threshold: float = 0.0,
-                min_amplitude: float = 0.0, newton_steps: int = 2, cycles: int = 2) -> DopplerOMPResult:
+                min_amplitude: float = 0.0, newton_steps: int = 2, cycles: int = 2,
+                detected: bool = False) -> DopplerOMPResult:
     """OMP over the slot x chirp data with a Doppler per atom (the swept-beam OMP of paper Alg. 1).
 
     Model: ``data[d, i, c] = sum_k s_k h_i(theta_k) exp(j omega_k t_ic) + noise``,
@@ -653,6 +655,10 @@ def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_t
        Doppler against its own partial residual);
     4. accept the new atom only if every ``|s_k| ||a_k|| >= min_amplitude``;
        continue while ``l < max_targets`` and ``||R||^2 >= max(delta_r, rel ||data||^2)``.
+
+    ``detected``: the rows passed a detector matched to the beam (:mod:`rhs_env.detection`),
+    so the first atom is taken without the residual and amplitude tests (both are
+    slot-summed statistics, weaker than that detector); the later atoms keep them.
     """
     data = np.asarray(data, complex)
     d, i, c = data.shape
@@ -664,7 +670,7 @@ def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_t
     resid = data.copy()
     r2 = np.sum(np.abs(resid) ** 2, axis=(1, 2))
     stop = np.maximum(np.asarray(residual_threshold, float), relative_threshold * r2)
-    active = r2 >= stop
+    active = np.ones(d, bool) if detected else r2 >= stop
     fine_span = min(np.pi, 8 * np.pi / float(tgrid.max() + 1))
     for l in range(n_l):
         rows = np.flatnonzero(active)
@@ -675,7 +681,7 @@ def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_t
         th_r[:, l], om_r[:, l], val_r[:, l] = th, w, True
         a[:, :, l] = _doppler_atoms(dic, th, w, tgrid)
         s = _lstsq(a, data[rows].reshape(rows.size, -1, 1))[..., 0] * val_r
-        ok = np.all((np.abs(s) * np.linalg.norm(a, axis=1) >= min_amplitude) | ~val_r, axis=1)
+        ok = np.all((np.abs(s) * np.linalg.norm(a, axis=1) >= min_amplitude) | ~val_r, axis=1) | (detected and l == 0)
         if l > 0 and cycles and np.any(ok):  # joint refinement of the rows that keep the new atom
             k = np.flatnonzero(ok)
             th_r[k], om_r[k], s[k], a[k] = joint_refine(dic, data[rows[k]], tgrid, th_r[k], om_r[k], val_r[k],

@@ -61,6 +61,7 @@ from rhs_env.antenna import (
     ScanConfig,
 )
 from rhs_env.antennas import make_antenna
+from rhs_env.detection import DETECTORS, FootprintDetector
 from rhs_env.point_cloud import (
     WINDOWS,
     AngleDictionary,
@@ -112,7 +113,12 @@ class RadarConfig:
     above the noise mean of the slot-combined profile, the paper's delta_d);
     a peak weaker than ``sidelobe_margin_db`` above the window's sidelobe
     envelope under a stronger peak is dropped; ``zero_pad`` FFT length
-    factor; ``window`` taper.
+    factor; ``window`` taper. ``detector``: the statistic CFAR runs on,
+    "footprint" (default: per angle hypothesis, the energy over that beam's
+    footprint of slots, :mod:`rhs_env.detection`; its first OMP atom per detected
+    bin is taken without the residual and amplitude tests, which the detection
+    replaces) or "summed" (the range profile summed over all slots and chirps, the
+    paper's variant).
     OMP: ``omp_oversampling`` candidates per grid, ``omp_max_targets`` L_max per
     range, ``omp_residual_pfa`` (delta_r: the residual noise alone exceeds with
     this probability), ``omp_residual_rel_db`` (stop below this fraction of
@@ -145,6 +151,7 @@ class RadarConfig:
     rhs: RHSConfig = field(default_factory=RHSConfig)
     scan: ScanConfig = field(default_factory=ScanConfig)
     detection: str = "cfar"
+    detector: str = "footprint"
     cfar_guard: int = 2
     cfar_train: int = 8
     cfar_pfa: float = 1e-6
@@ -187,6 +194,7 @@ class RadarConfig:
         if not isinstance(self.scan, ScanConfig):
             raise ValueError(f"scan must be a ScanConfig, got {type(self.scan).__name__}")  # noqa: TRY004
         check_choice("detection", self.detection, DETECTION_MODES)
+        check_choice("detector", self.detector, DETECTORS)
         check_int("cfar_guard", self.cfar_guard, 0, 64)
         check_int("cfar_train", self.cfar_train, 1, 256)
         check_range("cfar_pfa", self.cfar_pfa, 0.0, 0.5, low_open=True)
@@ -253,12 +261,12 @@ class RadarConfig:
         """sigma_n^2 = k T0 F f_s per complex sample, W."""
         return BOLTZMANN * self.temperature_k * 10 ** (self.noise_figure_db / 10) * self.sample_rate_hz
 
-    def echo_power_w(self, range_m: np.ndarray, rcs_m2: np.ndarray) -> np.ndarray:
+    def echo_power_w(self, range_m: np.ndarray | float, rcs_m2: np.ndarray | float) -> np.ndarray:
         """P_t |beta|^2 = P_t sigma lambda^2 / ((4 pi)^3 R^4) at unit two-way gain, W."""
         r = np.asarray(range_m, float)
         return self.tx_power_w * np.asarray(rcs_m2, float) * self.wavelength ** 2 / ((4 * np.pi) ** 3 * r ** 4)
 
-    def unit_gain_snr(self, range_m: np.ndarray, rcs_m2: np.ndarray) -> np.ndarray:
+    def unit_gain_snr(self, range_m: np.ndarray | float, rcs_m2: np.ndarray | float) -> np.ndarray:
         """|s|^2 / sigma_iota^2 of one slot's iota entry at unit two-way gain (the SNR of :func:`angle_crb`).
 
         ``s = sqrt(P_t) beta C sum(w)``, ``sigma_iota^2 = C sigma_n^2 sum(w^2)``
@@ -332,7 +340,7 @@ class RadarSystem:
                 raise ValueError(f"antenna has {a.slots} slots, scan config needs {config.scan.slots}")
         self.antennas = ants
         # one dictionary per distinct antenna object
-        self._groups: list[tuple[AngleDictionary, np.ndarray]] = []
+        self._groups: list[tuple[AngleDictionary, list[int]]] = []
         seen: dict[int, int] = {}
         radar_group = np.zeros(4, int)
         for r, a in enumerate(ants):
@@ -366,6 +374,8 @@ class RadarSystem:
             self._alpha = 10 ** (config.fixed_threshold_db / 10)
         cells = config.scan.slots * config.chirps_per_slot
         y_var = config.noise_power_w * self._win_energy
+        self._detectors = ([FootprintDetector(dic, config, y_var, self._leak, self._window) for dic, _ in self._groups]
+                           if config.detector == "footprint" else [])
         self._min_amp = 10 ** (config.omp_min_snr_db / 20) * math.sqrt(y_var)
         self._delta_r = float(residual_threshold(y_var, cells, config.omp_residual_pfa))
         i, c = config.scan.slots, config.chirps_per_slot
@@ -386,11 +396,11 @@ class RadarSystem:
         rng_m, ang, _ = self.radar_frame(scatterers.xy)
         half = np.deg2rad(self.config.scan.sector_deg) / 2
         fov = (np.abs(ang) <= half) & (rng_m <= self.config.max_range_m) & (rng_m >= self.config.min_range_m)
-        return fov & visible_mask(self.positions, scatterers, occluders)
+        return np.asarray(fov & visible_mask(self.positions, scatterers, occluders), dtype=bool)
 
     def in_view(self, scatterers: Scatterers, occluders: Occluders | None = None) -> np.ndarray:
         """(K,) bool: seen by at least one radar."""
-        return self.visible(scatterers, occluders).any(axis=0)
+        return np.asarray(self.visible(scatterers, occluders).any(axis=0), dtype=bool)
 
     # ------------------------------------------------------------------ synthesis
     def _buffer(self, name: str, shape: tuple[int, ...], dtype: type) -> np.ndarray:
@@ -596,8 +606,14 @@ class RadarSystem:
         return np.full(prof.shape, self._alpha * self._p_noise)
 
     def _detect(self, spec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Detected range cells (radar rd, bin kd): CFAR peaks beyond ``min_range_m``, window sidelobes dropped."""
+        """Detected range cells (radar rd, bin kd): CFAR peaks beyond ``min_range_m``, window sidelobes dropped.
+
+        ``config.detector`` chooses the statistic: "footprint", :class:`rhs_env.detection.FootprintDetector`
+        per antenna (CFAR per beam footprint of slots); "summed", CFAR on the slot-summed profile (the paper's).
+        """
         cfg = self.config
+        if cfg.detector == "footprint":
+            return self._detect_footprint(spec)
         prof = self._profile(spec)
         det = local_maxima(prof, self._threshold(prof))
         det &= (self._bin_range >= cfg.min_range_m - cfg.range_resolution_m / 2)[None, :]
@@ -610,6 +626,20 @@ class RadarSystem:
             keep = pk >= 10 ** (cfg.sidelobe_margin_db / 10) * leak
             rd, kd = rd[keep], kd[keep]
         return rd, kd
+
+    def _detect_footprint(self, spec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(rd, kd) of the footprint detectors, one per distinct antenna, sorted by radar then bin."""
+        cfg = self.config
+        in_range = self._bin_range >= cfg.min_range_m - cfg.range_resolution_m / 2
+        rds, kds = [], []
+        for g, det in enumerate(self._detectors):
+            radars = np.flatnonzero(self._radar_group == g)
+            r, k, _ = det.detect(spec if radars.size == 4 else spec[radars], in_range)
+            rds.append(radars[r])
+            kds.append(k)
+        rd, kd = np.concatenate(rds), np.concatenate(kds)
+        o = np.lexsort((kd, rd))
+        return rd[o], kd[o]
 
     def _estimate_angles(self, spec: np.ndarray, rd: np.ndarray, kd: np.ndarray) -> _Targets:
         """OMP (angle, Doppler, amplitude; up to ``omp_max_targets`` per cell) and per-target range offsets.
@@ -627,7 +657,8 @@ class RadarSystem:
             if sel.size == 0:
                 continue
             res = omp_doppler(dic, yd[sel], self._chirp_index, cfg.omp_max_targets, np.full(sel.size, self._delta_r),
-                              y_var, rel, self._min_amp, cfg.omp_newton_steps, cycles=2)
+                              y_var, rel, self._min_amp, cfg.omp_newton_steps, cycles=2,
+                              detected=bool(self._detectors))
             est.theta[sel], est.amp[sel], est.valid[sel], est.omega[sel] = res.theta, res.amp, res.valid, res.omega
             est.anorm[sel] = np.linalg.norm(res.atoms, axis=1)
             est.tfrac[sel] = self._target_bins(spec, rd[sel], kd[sel], res.atoms)

@@ -122,7 +122,10 @@ class LandmarkConfig:
         check_range("spacing_m", self.spacing_m, 1.0, 1000.0)
         check_range("lateral_offset_m", self.lateral_offset_m, 0.0, 100.0)
         check_range("rcs_m2", self.rcs_m2, 0.0, 1e4, low_open=True)
-        check_range("jitter_m", self.jitter_m, 0.0, self.spacing_m / 2, high_open=True)
+        check_range("jitter_m", self.jitter_m, 0.0, None)
+        if self.jitter_m >= self.spacing_m / 2:  # a bound set by another field: name both
+            raise ValueError(f"jitter_m must be below spacing_m / 2 = {self.spacing_m / 2:g} "
+                             f"(spacing_m={self.spacing_m:g}), got {self.jitter_m!r}")
         check_range("lateral_jitter_m", self.lateral_jitter_m, 0.0, 50.0)
         check_choice("sides", self.sides, LANDMARK_SIDES)
         _check_off_or_range("pair_gap_m", self.pair_gap_m, 0.5, 50.0)

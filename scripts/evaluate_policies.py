@@ -8,7 +8,10 @@ Rows (every policy meets the same traffic: episode k uses seed ``--seed + k``):
 * ``PPO, ground truth``: ``agents/data/ppo_rhs_highway_truth.zip`` on
   ``rhs-highway-v0`` (highway-env Kinematics observation of the same scene);
 * ``always SLOWER``: a scripted reference, action 4 (SLOWER) at every step, i.e.
-  the lowest target speed (20 m/s) in the current lane, on ``rhs-highway-v0``.
+  the lowest target speed (20 m/s) in the current lane, on ``rhs-highway-v0``;
+* ``IDM + MOBIL``: a strong scripted reference, highway-env's own ``IDMVehicle``
+  (IDM car following, MOBIL lane changes, desired speed 30 m/s) in the ego's
+  seat (``agents.evaluate.IDMMobilPolicy``), on ``rhs-highway-v0``.
 
 Same seed and same actions give the same traffic and reward on both env ids (the
 radar and SLAM wrappers draw their noise from child streams).
@@ -17,9 +20,12 @@ Reward is highway-env's default (normalized to [0, 1] per step, 5 steps per
 second); a collision (``info["crashed"]``) ends the episode. Writes
 ``results/policies.json`` (every episode) and ``results/policies.md`` (the
 README table), and checks the aim: SLAM policy >= 80 % of the ground-truth
-policy's mean return with a collision rate <= 1.5x its rate.
+policy's mean return with a collision rate <= 1.5x its rate, and the goal of
+issue 12: SLAM policy >= 1.1x the always-SLOWER return, collision rate <= 4 %,
+a higher mean speed than always-SLOWER, and within 10 % of the ground-truth
+policy's return.
 
-    OMP_NUM_THREADS=1 python scripts/evaluate_policies.py [--episodes 30] [--seed 1000] [--workers 2]
+    OMP_NUM_THREADS=1 python scripts/evaluate_policies.py [--episodes 50] [--seed 1000] [--workers 2]
 """
 
 from __future__ import annotations
@@ -37,6 +43,8 @@ sys.path.insert(0, str(ROOT / "scripts"))
 from _provenance import write_json
 
 REWARD_AIM, COLLISION_AIM = 0.8, 1.5
+#: issue 12, goal 1: return vs always-SLOWER, collision rate, return vs the ground-truth policy
+GOAL_VS_SLOWER, GOAL_COLLISIONS, GOAL_VS_TRUTH = 1.1, 0.04, 0.9
 
 
 def _chunk(policy: str, env_id: str, env_kwargs: dict, seeds: list[int]) -> list[dict]:
@@ -116,7 +124,8 @@ def markdown(result: dict) -> str:
         + f"; the ground-truth and scripted rows on `{next(r for r in rows if r['key'] == 'ppo_truth')['env_id']}`: "
         "the same scene and traffic (same seed and actions give the same episode on both ids), observed through "
         'highway-env\'s Kinematics table. "Always SLOWER" (lowest target speed, 20 m/s, never changing lane) is '
-        "a scripted reference for the learned policies.",
+        "a scripted reference for the learned policies; \"IDM + MOBIL\" is highway-env's own driver model "
+        "(the traffic's) in the ego's seat with a desired speed of 30 m/s: a strong scripted reference.",
     ]
     aim = result["aim"]
     ref = next((r for r in rows if r["key"] == "slower"), None)
@@ -133,6 +142,20 @@ def markdown(result: dict) -> str:
             f"(aim >= {REWARD_AIM}), collision rate ratio **{aim['collision_ratio_text']}** "
             f"(aim <= {COLLISION_AIM}): aim {'met' if aim['met'] else 'NOT met'}."
         ),
+    ]
+    goal = result.get("goal")
+    if goal:
+        lines += [
+            "",
+            (
+                f"Issue 12 goal (SLAM policy): return / always-SLOWER **{goal['return_vs_slower']:.2f}** "
+                f"(aim >= {GOAL_VS_SLOWER}), collision rate **{goal['collision_rate']:.2f}** (aim <= {GOAL_COLLISIONS}), "
+                f"mean speed {goal['speed_gain_mps']:+.2f} m/s vs always-SLOWER (aim > 0), return / ground-truth "
+                f"policy **{goal['return_vs_truth']:.2f}** (aim >= {GOAL_VS_TRUTH}): goal "
+                f"{'met' if goal['met'] else 'NOT met'}."
+            ),
+        ]
+    lines += [
         "",
         f"Training (scripts/train_policy.py): {result['training_text']}",
     ]
@@ -141,7 +164,7 @@ def markdown(result: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--episodes", type=int, default=30)
+    ap.add_argument("--episodes", type=int, default=50)
     ap.add_argument("--seed", type=int, default=1000, help="first seed (training used 0.. and 10000..)")
     ap.add_argument("--workers", type=int, default=2, help="processes per policy")
     ap.add_argument("--slam-policy", default=None, help="default: agents/data/ppo_rhs_highway_slam.zip")
@@ -175,6 +198,7 @@ def main(argv: list[str] | None = None) -> int:
         ("random", "random", "(none)", "random", slam_env, slam_kwargs),
         ("ppo_truth", "PPO (ground truth)", "highway-env Kinematics (truth)", truth_policy, truth_env, truth_kwargs),
         ("slower", "always SLOWER (scripted)", "(none)", "constant:4", truth_env, truth_kwargs),
+        ("idm", "IDM + MOBIL (highway-env, scripted)", "(simulator state)", "idm", truth_env, truth_kwargs),
     ]
     rows = []
     for key, label, obs, policy, env_id, kwargs in specs:
@@ -198,6 +222,19 @@ def main(argv: list[str] | None = None) -> int:
         c_ratio, c_text, c_ok = c_slam / c_truth, f"{c_slam / c_truth:.2f}", c_slam <= COLLISION_AIM * c_truth
     else:
         c_ratio, c_text, c_ok = None, ("0/0" if c_slam == 0 else f"{c_slam:.2f} vs 0"), c_slam == 0
+    slower = by["slower"]
+    goal = {
+        "return_vs_slower": by["ppo_slam"]["return"]["mean"] / slower["return"]["mean"],
+        "collision_rate": c_slam,
+        "speed_gain_mps": by["ppo_slam"]["mean_speed_mps"]["mean"] - slower["mean_speed_mps"]["mean"],
+        "return_vs_truth": ret_ratio,
+    }
+    goal["met"] = bool(
+        goal["return_vs_slower"] >= GOAL_VS_SLOWER
+        and c_slam <= GOAL_COLLISIONS
+        and goal["speed_gain_mps"] > 0
+        and ret_ratio >= GOAL_VS_TRUTH
+    )
     training = {}
     for key, policy in (("ppo_slam", slam_policy), ("ppo_truth", truth_policy)):
         meta = policy_metadata(policy)
@@ -232,6 +269,7 @@ def main(argv: list[str] | None = None) -> int:
             "collision_ok": bool(c_ok),
             "met": bool(ret_ratio >= REWARD_AIM and c_ok),
         },
+        "goal": goal,
         "training": training,
         "training_text": training_text,
     }

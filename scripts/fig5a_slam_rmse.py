@@ -91,9 +91,7 @@ def run_episode(
         "vehicle_max_error_m": float(np.max(pos_err)),
         "final_position_error_m": float(pos_err[-1]),
         "heading_rmse_rad": float(np.sqrt(np.mean(head_err**2))),
-        "obstacle_rmse_m": info[
-            "map_rmse_m"
-        ],  # None when nothing matched within the gate
+        "obstacle_rmse_m": info.get("map_rmse_m"),  # None when nothing matched within the gate
         "map_matched": int(info["map_matched"]),
         "map_missed": int(info["map_missed"]),
         "map_spurious": int(info["map_spurious"]),

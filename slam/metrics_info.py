@@ -8,8 +8,11 @@
 * ``true_pose``, ``estimated_pose`` (3,): map frame (the start pose is the origin);
 * ``position_error_m`` = ``||p_hat - p||``, ``heading_error_rad`` = ``|wrap(th_hat - th)|``;
 * the map error against the true landmarks that have been within radar range
-  so far (Hungarian matching within ``map_gate_m``): ``map_rmse_m`` (None when
-  nothing matched), ``map_matched``, ``map_missed``, ``map_spurious``;
+  so far (Hungarian matching within ``map_gate_m``): ``map_rmse_m`` (a float,
+  and absent while nothing has matched: a value that is sometimes None and
+  sometimes a float cannot be stacked by gymnasium's vector envs, and a NaN
+  fails gymnasium's ``check_env`` determinism check, NaN != NaN; a vector env's
+  ``info["_map_rmse_m"]`` mask says where it is defined), ``map_matched``, ``map_missed``, ``map_spurious``;
 * ``registration_motion`` (3,): the registration's motion estimate of the cycle.
 
 With ``landmarks_in_info=True`` (off by default: their number changes from
@@ -85,12 +88,13 @@ class SlamMetricsInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
             "estimated_pose": np.asarray(est.pose, dtype=float),
             "position_error_m": float(np.hypot(err[0], err[1])),
             "heading_error_rad": float(abs(wrap_angle(err[2]))),
-            "map_rmse_m": None if rmse is None or not np.isfinite(rmse) else float(rmse),
             "map_matched": int(mm["matched"]),
             "map_missed": int(mm["missed"]),
             "map_spurious": int(mm["spurious"]),
             "registration_motion": np.asarray(self.env.get_wrapper_attr("last_motion"), dtype=float),
         }
+        if rmse is not None and np.isfinite(rmse):  # absent, not None or NaN, until a landmark matches
+            out["map_rmse_m"] = float(rmse)
         if self.landmarks_in_info:
             out["true_landmarks"] = true_lm
             out["estimated_landmarks"] = est_lm

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rhs_common.validation import check_range, check_types
+from rhs_common.validation import check_int, check_range, check_types
 from slam.association import estimate_ego_velocity, point_covariance, static_mask
 from slam.rbpf import RBPFSlam, SlamConfig, SlamEstimate
 from slam.registration import Registration
@@ -39,15 +39,21 @@ class PipelineConfig:
 
     ``use_doppler``: estimate the ego velocity from the Doppler of static points and drop
     moving points (else every point is static and the prior is constant velocity);
-    ``max_accel_mps2`` [0, 100]: the velocity changes by at most this times dt per cycle.
+    ``max_accel_mps2`` [0, 100]: the velocity changes by at most this times dt per cycle;
+    ``reacquire_after_cycles`` [0, 1000]: once the velocity is tracked (3 fits within that
+    bound), after this many consecutive cycles without such a fit the fit is re-acquired
+    without the bound; until then the last velocity holds (an unconstrained fit in dense
+    traffic can lock onto a platoon of vehicles). Without a track it re-acquires at once.
     """
 
     use_doppler: bool = True
     max_accel_mps2: float = 10.0
+    reacquire_after_cycles: int = 5
 
     def __post_init__(self) -> None:
         check_types(self)
         check_range("max_accel_mps2", self.max_accel_mps2, 0.0, 100.0)
+        check_int("reacquire_after_cycles", self.reacquire_after_cycles, 0, 1000)
 
 
 @dataclass
@@ -94,6 +100,8 @@ class SlamPipeline:
         # the Doppler RANSAC draws from its own stream so it never shifts the particle noise
         self.ransac_rng = np.random.default_rng(np.random.SeedSequence(int(self.rng.integers(2**63))))
         self.cycle = 0
+        self.velocity_misses = 0  # consecutive cycles without a Doppler fit near the last velocity
+        self.velocity_track = 0  # Doppler fits near the last velocity since the last re-acquisition
         self.prev_static: np.ndarray | None = None
         self.velocity: np.ndarray | None = None  # (vx, vy, yaw rate), current vehicle frame
         self.last_motion: np.ndarray | None = None
@@ -117,8 +125,14 @@ class SlamPipeline:
             v_dop = estimate_ego_velocity(
                 pts, 0.5 * thr, self.ransac_rng, prior=prior_v, max_change=self.max_accel_mps2 * dt + thr
             )
-            if v_dop is None and prior_v is not None:  # lost track: re-acquire without the prior
+            self.velocity_misses = 0 if v_dop is not None else self.velocity_misses + 1
+            self.velocity_track = self.velocity_track + 1 if v_dop is not None else self.velocity_track
+            established = self.velocity_track >= 3 and self.velocity_misses <= self.options.reacquire_after_cycles
+            if v_dop is None and prior_v is not None and not established:
+                # no track yet, or lost for a while: re-acquire without the prior (an established track
+                # holds its velocity first: an unconstrained fit in traffic can lock onto a platoon)
                 v_dop = estimate_ego_velocity(pts, 0.5 * thr, self.ransac_rng)
+                self.velocity_track = 0
         if v_dop is not None:
             self.velocity = np.array([v_dop[0], v_dop[1], 0.0 if self.velocity is None else self.velocity[2]])
         reg_time = 0.0

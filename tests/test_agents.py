@@ -30,7 +30,7 @@ from agents.evaluate import (
     resolve_env,
     run_episode,
 )
-from agents.features import PointSetExtractor
+from agents.features import GridExtractor, PointSetExtractor
 from agents.train import ALGOS, load_hyperparams, train, worker_env_id
 from rhs_slam.cli import main as cli_main
 
@@ -170,7 +170,16 @@ def test_hyperparams_and_worker_ids():
             hp = load_hyperparams(algo, env_id)
             assert hp["policy"] in ("MultiInputPolicy", "MlpPolicy")
             assert hp["n_envs"] >= 1
-    assert load_hyperparams("ppo", SLAM)["policy_kwargs"]["features_extractor_class"] == "point_set"
+    # the shipped YAML writes policy_kwargs as the Python expression rl-baselines3-zoo evals
+    from agents.train import _resolve_policy_kwargs
+
+    pk = _resolve_policy_kwargs(load_hyperparams("ppo", SLAM)["policy_kwargs"])
+    assert pk["features_extractor_class"] is PointSetExtractor
+    assert pk["features_extractor_kwargs"] == {"point_dim": 64, "box_dim": 32} and pk["net_arch"] == [64, 64]
+    assert _resolve_policy_kwargs({"features_extractor_class": "point_set"})["features_extractor_class"] is (
+        PointSetExtractor)  # the short name still works in hand-written YAML
+    with pytest.raises(ValueError, match="policy_kwargs"):
+        _resolve_policy_kwargs("__import__('os').system('true')")  # no builtins in scope
     # subprocess workers import rhs_env through the id's module prefix
     assert worker_env_id(SLAM) == f"rhs_env:{SLAM}"
     assert worker_env_id(TRUTH) == f"rhs_env:{TRUTH}"
@@ -214,6 +223,37 @@ def test_point_set_extractor_ignores_order_and_padding():
     empty = dict(sample)
     empty["points_mask"] = torch.zeros_like(sample["points_mask"])
     assert torch.isfinite(ext(empty)).all()
+
+
+def test_grid_extractor_rasterises_points_doppler_and_landmarks():
+    env = small_env()
+    space = env.observation_space
+    env.close()
+    torch.manual_seed(0)
+    ext = GridExtractor(space, cell_m=2.0, x_min_m=-30.0, x_max_m=70.0, half_width_m=12.0, cnn_dim=16, box_dim=8)
+    assert (ext.nx, ext.ny) == (50, 12)
+    obs = {k: torch.zeros((1, *np.asarray(v).shape)) for k, v in space.sample().items()}
+    # two points in the cell of (10.5, 0.5) m (column (10.5 + 30) / 2 = 20, row (0.5 + 12) / 2 = 6)
+    # closing at -20 and -10 m/s, one point outside the grid, padding slots full of junk
+    obs["points"][0, :3, :4] = torch.tensor([[10.5, 0.5, -20.0, 5.0], [11.0, 1.0, -10.0, 5.0], [200.0, 0.0, 3.0, 5.0]])
+    obs["points_mask"][0, :3] = 1
+    obs["points"][0, 3:] = 7.0
+    obs["landmarks"][0, :2] = torch.tensor([[-29.0, -11.0], [-29.5, -11.5]])
+    obs["landmarks_mask"][0, :2] = 1
+    g = ext.grid(obs)
+    assert g.shape == (1, 3, 12, 50)
+    assert torch.isclose(g[0, 0, 6, 20], torch.log1p(torch.tensor(2.0)))
+    assert torch.isclose(g[0, 1, 6, 20], torch.tensor(-15.0 / 30.0))
+    assert torch.isclose(g[0, 2, 0, 0], torch.log1p(torch.tensor(2.0)))
+    assert g[0, 0].sum() == g[0, 0, 6, 20] and g[0, 2].sum() == g[0, 2, 0, 0]  # nothing else lit
+    # slot order does not matter, the feature vector is finite and sized as announced
+    swapped = dict(obs)
+    swapped["points"] = obs["points"][:, [1, 0, 2, *range(3, obs["points"].shape[1])]]
+    assert torch.equal(ext.grid(swapped), g)
+    f = ext(obs)
+    assert f.shape == (1, ext.features_dim) and torch.isfinite(f).all()
+    with pytest.raises(ValueError, match="cell_m"):
+        GridExtractor(space, cell_m=0.0)
 
 
 # ---------------------------------------------------------------- evaluation
@@ -262,6 +302,37 @@ def test_evaluate_ground_truth_env_has_no_slam_fields():
     assert 0.0 <= s["collision_rate"] <= 1.0
     _check_stats(s["mean_speed_mps"], 0.0, 45.0)
     assert s["position_rmse_m"]["mean"] is None and s["map_rmse_m"]["mean"] is None
+
+
+def test_idm_mobil_policy_drives_the_ego_with_highway_envs_idm_vehicle():
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    kw = {"vehicles_count": 8, "duration": 6, "lanes_count": 3}
+    env = gym.make(TRUTH, **kw)
+    policy = load_policy("idm", env)
+    for seed in (3, 4):  # a fresh ego at every reset gets swapped again
+        env.reset(seed=seed)
+        old = env.unwrapped.vehicle
+        action, _ = policy.predict(None)
+        env.step(action)
+        ego = env.unwrapped.vehicle
+        assert isinstance(ego, IDMVehicle) and ego is not old and ego.target_speed == 30.0
+        assert ego in env.unwrapped.road.vehicles and old not in env.unwrapped.road.vehicles
+        assert sum(v is ego for v in env.unwrapped.road.vehicles) == 1
+    env.close()
+    # same seeds, same episodes; IDM (desired 30 m/s) drives faster than always-SLOWER (20 m/s)
+    a = evaluate("idm", TRUTH, episodes=2, seed=5, env_kwargs=kw, progress=False)
+    b = evaluate("idm", TRUTH, episodes=2, seed=5, env_kwargs=kw, progress=False)
+    slow = evaluate("constant:4", TRUTH, episodes=2, seed=5, env_kwargs=kw, progress=False)
+    assert [r["return"] for r in a["runs"]] == [r["return"] for r in b["runs"]]
+    assert a["mean_speed_mps"]["mean"] > slow["mean_speed_mps"]["mean"] + 1.0
+    assert evaluate("idm:20", TRUTH, episodes=1, seed=5, env_kwargs=kw, progress=False)["mean_speed_mps"]["mean"] < (
+        a["mean_speed_mps"]["mean"]
+    )
+    with pytest.raises(ValueError, match="idm"):
+        load_policy("idm:fast", gym.make(TRUTH, **kw))
+    with pytest.raises(ValueError, match="target speed"):
+        load_policy("idm:-3", gym.make(TRUTH, **kw))
 
 
 def test_evaluate_rejects_mismatched_observations(trained):
@@ -351,3 +422,29 @@ def test_shipped_truth_policy_loads_and_acts():
     env.close()
     assert 1 <= result["steps"] <= 20 and np.isfinite(result["return"])
     assert result["position_rmse_m"] is None  # no SLAM on the ground-truth env
+
+
+# ---------------------------------------------------------------- rllib backend (the parts that need no Ray)
+
+
+def test_rllib_settings_map_the_sb3_yaml():
+    from agents.rllib import ppo_settings
+
+    hp = load_hyperparams("ppo", SLAM)
+    for key in ("policy", "n_envs", "n_timesteps", "env_kwargs", "policy_kwargs"):
+        hp.pop(key, None)
+    s = ppo_settings({**hp, "learning_rate": "lin_1e-3"}, n_envs=2, timesteps=1000)
+    assert s["train_batch_size_per_learner"] == 2 * hp["n_steps"] and s["minibatch_size"] == hp["batch_size"]
+    assert (s["num_epochs"], s["gamma"], s["lambda_"]) == (hp["n_epochs"], hp["gamma"], hp["gae_lambda"])
+    assert s["lr"] == [[0, 1e-3], [1000, 0.0]]
+    with pytest.raises(ValueError, match="not supported"):
+        ppo_settings({"use_sde": True}, 1, 10)
+
+
+def test_rllib_backend_without_ray_says_how_to_install(tmp_path, capsys):
+    import importlib.util
+
+    if importlib.util.find_spec("ray") is not None:
+        pytest.skip("ray is installed here (tests/test_rllib.py covers the backend)")
+    assert cli_main(["train", "--backend", "rllib", "--out", str(tmp_path / "r"), "--timesteps", "8"]) == 2
+    assert "pip install" in capsys.readouterr().err

@@ -122,3 +122,23 @@ def test_slam_core_imports_without_gymnasium():
     code = f"import sys, {core}; bad = [m for m in ('gymnasium', 'highway_env', 'rhs_env') if m in sys.modules]; print(bad)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
     assert out.stdout.strip() == "[]"
+
+
+def _long_functions(path: Path, limit: int) -> list[str]:
+    tree = ast.parse(path.read_text())
+    return [
+        f"{path.relative_to(ROOT)}:{n.name} ({n.end_lineno - n.lineno + 1} lines)"
+        for n in ast.walk(tree)
+        if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and n.end_lineno - n.lineno + 1 > limit
+    ]
+
+
+def test_the_length_check_sees_a_long_function(tmp_path):
+    src = tmp_path / "long.py"
+    src.write_text("def f():\n" + "    x = 1\n" * 81)
+    assert len(_long_functions(src, 80)) == 1 and _long_functions(src, 82) == []
+
+
+def test_no_function_over_80_lines():
+    long = [f for pkg in LAYERS for path in sorted((ROOT / pkg).rglob("*.py")) for f in _long_functions(path, 80)]
+    assert long == []

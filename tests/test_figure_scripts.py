@@ -243,3 +243,22 @@ def test_fig5b_small_run_writes_png_json_md(tmp_path):
     assert "| 5 | 24 |" in md and "phased CRB (m)" in md and "CRB ratio" in md
     res = json.loads(out.with_suffix(".json").read_text())
     assert res["provenance"]["config"]["elements"] == [12, 24] and res["provenance"]["fingerprint"]["hash"]
+
+
+def test_detection_curves_quick_writes_json_md_png(tmp_path):
+    """scripts/detection_curves.py --quick: files, provenance, and the theory curves ordered as physics says."""
+    res = run_script("detection_curves.py", "--quick", "--snr-min", "-16", "--snr-max", "-6",
+                     "--max-range", "45", "--out-dir", str(tmp_path))
+    assert res.returncode == 0, res.stderr[-2000:]
+    out = json.loads((tmp_path / "detection_curves.json").read_text())
+    assert len(out["provenance"]["commit"]) == 40 and "detection_curves.py" in out["provenance"]["command"]
+    check_png(tmp_path / "detection_curves.png")
+    assert "footprint" in (tmp_path / "detection_curves.md").read_text()
+    for ant in ("rhs", "phased"):
+        th = out["theory"][ant]
+        # the coherent matched filter bounds the footprint energy detector, which beats the slot sum
+        assert np.all(np.array(th["matched_filter"]) >= np.array(th["footprint_known_noise"]) - 1e-9)
+        assert np.all(np.array(th["footprint_known_noise"]) >= np.array(th["summed_known_noise"]) - 1e-9)
+        for d in ("summed", "footprint"):
+            assert all(0.0 <= p <= 1.0 for p in out["measured"][ant][d])
+    assert out["timing"]["detect_ratio_footprint_over_summed"] > 0

@@ -165,7 +165,7 @@ def test_unreachable_cap_does_not_keep_a_weak_pattern(_small_p1: dict[float, flo
 def test_settings_validation_names_field() -> None:
     with pytest.raises(ValueError, match="oversample"):
         FastSettings(oversample=0.0)
-    with pytest.raises(ValueError, match="both_orders"):
+    with pytest.raises(TypeError, match="both_orders"):
         FastSettings(both_orders=1)
     with pytest.raises(ValueError, match="active_db"):
         FastSettings(active_db=3.0)

@@ -156,12 +156,13 @@ def test_missing_file_and_unwritable_output(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert code != 0 and len(err.splitlines()) == 1 and "cannot read" in err
     scen = write(tmp_path, GOOD)
+    (tmp_path / "a_file").write_text("")
     code = main(
         [
             "scenario",
             str(scen),
             "--out",
-            str(tmp_path / "no_dir" / "r.json"),
+            str(tmp_path / "a_file" / "r.json"),  # a file where the parent directory should be
             "--no-progress",
         ]
     )

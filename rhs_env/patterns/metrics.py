@@ -66,9 +66,9 @@ def mainlobe_checks(config: RHSConfig, angle_deg: float, grid_deg: float, near: 
     """
     hw = config.mainlobe_halfwidth
     si = np.sin(np.deg2rad(angle_deg))
-    near = np.sin(np.deg2rad(angle_deg + np.array([-near, near]) * grid_deg))
-    far = si + np.array([-0.9, -0.6, -0.3, 0.3, 0.6, 0.9]) * hw
-    s = np.concatenate([near, far])
+    near_s = np.sin(np.deg2rad(angle_deg + np.array([-near, near]) * grid_deg))
+    far_s = si + np.array([-0.9, -0.6, -0.3, 0.3, 0.6, 0.9]) * hw
+    s = np.concatenate([near_s, far_s])
     keep = (np.abs(s) <= 1.0) & (np.abs(s - si) <= hw) & (np.abs(s - si) > 1e-9)
     return np.unique(s[keep])
 

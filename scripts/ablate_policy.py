@@ -1,0 +1,191 @@
+"""Short, measured ablations of what limits learning to drive (issue 12, goal 1).
+
+Each named variant trains PPO (stable-baselines3 backend, ``agents/hyperparams/ppo.yml``
+with the variant's overrides) for ``--timesteps`` steps on its env and training
+env kwargs, then evaluates the final policy **greedily on the default reward**
+(whatever reward the variant trained on) on the same seeds as
+``scripts/evaluate_policies.py`` (``--seed``, ``--seed + 1``, ...), next to the
+scripted always-SLOWER driver on the same seeds. Results are merged into
+``--out`` (default ``results/ablations.json``) under the variant's name, with
+the commit, command line and full config.
+
+    OMP_NUM_THREADS=1 nice -n 10 python scripts/ablate_policy.py base_truth no_norm_truth --timesteps 15000
+
+Variants (``VARIANTS``): reward terms and normalisation (highway-env's
+``collision_reward``, ``high_speed_reward``, ``normalize_reward``), discount,
+entropy bonus, and the observation (ground-truth Kinematics on ``rhs-highway-v0``
+vs radar point cloud + SLAM on ``rhs-highway-slam-v0`` with the 5-degree grid).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parent.parent
+TRUTH, SLAM = "rhs-highway-v0", "rhs-highway-slam-v0"
+FIVE_DEG = {"radar": {"scan": {"grid_deg": 5}}}
+#: the default reward of the envs (highway-env's), restored for evaluation
+DEFAULT_REWARD = {"collision_reward": -1, "high_speed_reward": 0.4, "right_lane_reward": 0.1,
+                  "reward_speed_range": [20, 30], "normalize_reward": True}  # fmt: skip
+NO_NORM = {"normalize_reward": False}
+SPEED = {"normalize_reward": False, "high_speed_reward": 1.0, "right_lane_reward": 0.0, "collision_reward": -5}
+#: name -> (env id, training env kwargs, hyperparameter overrides)
+VARIANTS: dict[str, tuple[str, dict, dict]] = {
+    "base_truth": (TRUTH, {}, {}),
+    "no_norm_truth": (TRUTH, NO_NORM, {}),
+    "speed_truth": (TRUTH, SPEED, {}),
+    "gamma99_truth": (TRUTH, {}, {"gamma": 0.99}),
+    "ent01_truth": (TRUTH, {}, {"ent_coef": 0.01}),
+    "no_norm_ent01_truth": (TRUTH, NO_NORM, {"ent_coef": 0.01}),
+    "base_slam": (SLAM, FIVE_DEG, {}),
+    "no_norm_slam": (SLAM, {**FIVE_DEG, **NO_NORM}, {}),
+    "grid_slam": (SLAM, FIVE_DEG, {"policy_kwargs": {"features_extractor_class": "grid", "net_arch": [64, 64]}}),
+    "grid_no_norm_slam": (SLAM, {**FIVE_DEG, **NO_NORM},
+                          {"policy_kwargs": {"features_extractor_class": "grid", "net_arch": [64, 64]}}),
+}
+
+
+def _commit() -> str:
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True, check=True)
+        dirty = subprocess.run(["git", "status", "--porcelain"], cwd=ROOT, capture_output=True, text=True).stdout
+        return out.stdout.strip() + ("-dirty" if dirty.strip() else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def run_variant(name: str, timesteps: int, seed: int, episodes: int, eval_seed: int, n_envs: int | None) -> dict:
+    """Train the variant, evaluate it on the default reward; returns its record."""
+    from agents.evaluate import evaluate, summarize
+    from agents.train import HYPERPARAMS_DIR, train
+
+    env_id, env_kwargs, overrides = VARIANTS[name]
+    table = yaml.safe_load((HYPERPARAMS_DIR / "ppo.yml").read_text())
+    entry = {**table[env_id], **overrides}
+    with tempfile.TemporaryDirectory() as tmp:
+        hp_path = Path(tmp) / "ppo.yml"
+        hp_path.write_text(yaml.safe_dump({env_id: entry}))
+        out = ROOT / "runs" / "ablations" / f"{name}_s{seed}"
+        t0 = time.perf_counter()
+        s = train("ppo", env_id, timesteps, out, seed=seed, n_envs=n_envs, hyperparams=hp_path, env_kwargs=env_kwargs,
+                  eval_freq=0, checkpoint_freq=0, progress=False)  # fmt: skip
+        train_wall = time.perf_counter() - t0
+    eval_kwargs = {**env_kwargs, **DEFAULT_REWARD}
+    t0 = time.perf_counter()
+    ev = evaluate(out / "model.zip", env_id, episodes, eval_seed, eval_kwargs, progress=False)
+    eval_wall = time.perf_counter() - t0
+    runs = [{k: r[k] for k in ("seed", "return", "steps", "crashed", "mean_speed")} for r in ev["runs"]]
+    actions = _action_histogram(out / "model.zip", env_id, eval_kwargs, eval_seed)
+    return {
+        "env_id": env_id,
+        "train_env_kwargs": env_kwargs,
+        "eval_env_kwargs": eval_kwargs,
+        "hyperparams": entry,
+        "timesteps": s["timesteps"],
+        "seed": seed,
+        "train_wall_s": round(train_wall, 1),
+        "train_recent_episodes": s["recent_episodes"],
+        "eval": {k: v for k, v in summarize(ev["runs"]).items() if k in ("episodes", "return", "collision_rate",
+                                                                         "mean_speed_mps", "episode_length")},  # fmt: skip
+        "eval_seeds": ev["seeds"],
+        "eval_wall_s": round(eval_wall, 1),
+        "greedy_action_histogram_first_episode": actions,
+        "runs": runs,
+    }
+
+
+def _action_histogram(policy: Path, env_id: str, kwargs: dict, seed: int) -> dict[str, int]:
+    """How often each meta-action is chosen greedily in the first evaluation episode."""
+    import gymnasium as gym
+    import numpy as np
+
+    import rhs_env  # noqa: F401
+    from agents.evaluate import load_policy
+
+    env = gym.make(env_id, **kwargs)
+    model = load_policy(policy, env)
+    obs, _ = env.reset(seed=seed)
+    names = env.unwrapped.action_type.actions
+    counts: dict[str, int] = {}
+    done = False
+    while not done:
+        a, _ = model.predict(obs, deterministic=True)
+        a = int(np.asarray(a))
+        counts[names[a]] = counts.get(names[a], 0) + 1
+        obs, _, term, trunc, _ = env.step(a)
+        done = term or trunc
+    env.close()
+    return counts
+
+
+#: scripted references on the same seeds (no training): name -> policy
+REFERENCES = {"ref_slower": "constant:4", "ref_idm": "idm"}
+
+
+def run_reference(name: str, episodes: int, eval_seed: int) -> dict:
+    from agents.evaluate import evaluate, summarize
+
+    ev = evaluate(REFERENCES[name], TRUTH, episodes, eval_seed, DEFAULT_REWARD, progress=False)
+    return {
+        "env_id": TRUTH,
+        "policy": REFERENCES[name],
+        "eval_env_kwargs": DEFAULT_REWARD,
+        "eval": {k: v for k, v in summarize(ev["runs"]).items() if k in ("episodes", "return", "collision_rate",
+                                                                         "mean_speed_mps", "episode_length")},  # fmt: skip
+        "eval_seeds": ev["seeds"],
+        "greedy_action_histogram_first_episode": {},
+        "runs": [{k: r[k] for k in ("seed", "return", "steps", "crashed", "mean_speed")} for r in ev["runs"]],
+    }
+
+
+def _merge(out: Path, key: str, rec: dict) -> None:
+    """Add ``rec`` under ``key`` to the JSON table at ``out`` (locked: variants run in parallel processes)."""
+    import fcntl
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with open(out.with_suffix(".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        table = json.loads(out.read_text()) if out.exists() else {}
+        table[key] = rec
+        out.write_text(json.dumps(table, indent=2) + "\n")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("variants", nargs="+", choices=[*VARIANTS, *REFERENCES])
+    ap.add_argument("--timesteps", type=int, default=15000)
+    ap.add_argument("--seed", type=int, default=0, help="training seed")
+    ap.add_argument("--episodes", type=int, default=20)
+    ap.add_argument("--eval-seed", type=int, default=1000)
+    ap.add_argument("--n-envs", type=int, default=None)
+    ap.add_argument("--out", default=str(ROOT / "results" / "ablations.json"))
+    args = ap.parse_args(argv)
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    command = " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])])
+    commit = _commit()  # the code this process runs (the worktree may move on during a long run)
+    for name in args.variants:
+        if name in REFERENCES:
+            rec, key = run_reference(name, args.episodes, args.eval_seed), f"{name}/{args.episodes}"
+        else:
+            rec = run_variant(name, args.timesteps, args.seed, args.episodes, args.eval_seed, args.n_envs)
+            key = f"{name}/seed{args.seed}/{args.timesteps}"
+        rec.update(commit=commit, command=command)
+        _merge(Path(args.out), key, rec)
+        e = rec["eval"]
+        print(f"{name}: return {e['return']['mean']:.1f}, collisions {e['collision_rate']:.2f}, speed "
+              f"{e['mean_speed_mps']['mean']:.1f} m/s, actions {rec['greedy_action_histogram_first_episode']}",
+              file=sys.stderr)  # fmt: skip
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
