@@ -134,7 +134,7 @@ def policy_metadata(policy: str | Path) -> dict[str, Any]:
 
 
 #: ids whose info carries the SLAM metrics (slam.metrics_info.SlamMetricsInfo)
-SLAM_ENV_IDS = ("rhs-highway-slam-v0", "rhs-paper-v0")
+SLAM_ENV_IDS = ("rhs-highway-slam-v0", "rhs-paper-v0", "rhs-dense-v0")
 
 
 def resolve_env(

@@ -39,6 +39,7 @@ from highway_env.road.road import Road, RoadNetwork
 
 from rhs_common.validation import check_bool, check_choice, check_int, check_range
 from rhs_env.scene import (
+    DENSE_LANDMARKS,
     LandmarkConfig,
     Landmarks,
     place_roadside_landmarks,
@@ -243,6 +244,22 @@ class RHSHighwayEnv(HighwayEnv):
         radius = max(3, surface.pix(0.6))
         for i in lms.near(center, view_m):
             pygame.draw.circle(surface, LANDMARK_COLOR, surface.vec2pix(lms.xy_he[i]), radius)
+
+
+class RHSDenseEnv(RHSHighwayEnv):
+    """The highway with a dense roadside (``rhs-dense-v0``): :data:`rhs_env.scene.DENSE_LANDMARKS`.
+
+    Guard-rail posts every 2.5 m, paired poles (2 m apart) every 20 m and sign gantries
+    every 150 m: many scatterers a few degrees apart, where the antenna's angular
+    resolution matters. A ``landmarks`` dict given by the caller is merged onto this
+    preset (``landmarks={"post_spacing_m": 3.0}`` keeps the rest).
+    """
+
+    @classmethod
+    def default_config(cls) -> dict:
+        config = super().default_config()
+        config["landmarks"] = DENSE_LANDMARKS.to_dict()
+        return config
 
 
 class RHSPaperEnv(RHSHighwayEnv):

@@ -16,6 +16,7 @@ id                         entry point                                     obser
 ``rhs-highway-radar-v0``   ``rhs_env.registration:make_highway_radar``     radar point cloud
 ``rhs-highway-slam-v0``    ``slam.envs:make_highway_slam``                 cloud + SLAM
 ``rhs-paper-v0``           ``slam.envs:make_paper_slam``                   cloud + SLAM
+``rhs-dense-v0``           ``slam.envs:make_dense_slam``                   cloud + SLAM
 =========================  ==============================================  =====================
 
 Keyword arguments of ``gym.make`` go to the entry point: env config keys
@@ -41,6 +42,7 @@ HIGHWAY_ID = "rhs-highway-v0"
 HIGHWAY_RADAR_ID = "rhs-highway-radar-v0"
 HIGHWAY_SLAM_ID = "rhs-highway-slam-v0"
 PAPER_ID = "rhs-paper-v0"
+DENSE_ID = "rhs-dense-v0"  # the highway with DENSE_LANDMARKS (guard-rail posts, paired poles, gantries)
 
 def route_kwargs(kwargs: dict[str, Any], *wrappers: type) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Split ``gym.make`` kwargs among wrapper classes by their ``__init__`` signatures.
@@ -89,6 +91,7 @@ ENV_SPECS: tuple[tuple[str, str], ...] = (
 SLAM_ENV_SPECS: tuple[tuple[str, str], ...] = (
     (HIGHWAY_SLAM_ID, "slam.envs:make_highway_slam"),
     (PAPER_ID, "slam.envs:make_paper_slam"),
+    (DENSE_ID, "slam.envs:make_dense_slam"),
 )
 
 

@@ -57,6 +57,16 @@ LANDMARK_SIDES = ("both", "left", "right")
 
 
 # --------------------------------------------------------------------------- configs
+def _check_off_or_range(name: str, value: Any, low: float, high: float) -> None:
+    """``value`` is 0 (feature off) or in [low, high]."""
+    if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and value == 0:
+        return
+    try:
+        check_range(name, value, low, high)
+    except ValueError:
+        raise ValueError(f"{name} must be 0 (off) or in [{low:g}, {high:g}], got {value!r}") from None
+
+
 @dataclass(frozen=True)
 class LandmarkConfig:
     """Static roadside landmarks (posts, signs, barriers) placed along the road.
@@ -73,6 +83,24 @@ class LandmarkConfig:
         lateral_jitter_m: uniform lateral jitter, outward only, [0, 50] m (landmarks
             never move onto the road).
         sides: ``"both"`` | ``"left"`` | ``"right"`` side(s) of the road.
+        pair_gap_m: 0 (single poles) or the along-road distance [0.5, 50] m between
+            the two poles of a *pair*: every landmark gets a twin that far ahead, same
+            offset, same RCS. Two poles g m apart seen from lateral distance d at
+            longitudinal distance x subtend about ``g d / (x^2 + d^2)`` rad: 2 m pairs
+            at 8 m lateral are 2-5 deg apart at 15-25 m, between one RHS beamwidth and
+            one phased-array beamwidth (SPEC 11).
+        post_spacing_m: 0 (none) or the spacing [1, 100] m of guard-rail posts along
+            the chosen side(s), with +-10 % uniform jitter of the spacing.
+        post_offset_m: distance of the posts from the road edge, [0, 100] m.
+        post_rcs_m2: radar cross-section of one post, (0, 1e4] m^2.
+        gantry_spacing_m: 0 (none) or the spacing [10, 10000] m of sign gantries: two
+            legs, one on each road edge at the same longitudinal position (both sides
+            whatever ``sides`` says), ``lateral_offset_m`` from the edge.
+        gantry_rcs_m2: radar cross-section of one gantry leg, (0, 1e4] m^2.
+
+    The extra structures are placed after the poles, from the same ``rng``, so with
+    their defaults (all off) a scene is identical to one without these fields.
+    :data:`DENSE_LANDMARKS` is the preset of ``rhs-dense-v0``.
     """
 
     enabled: bool = True
@@ -82,6 +110,12 @@ class LandmarkConfig:
     jitter_m: float = 4.0
     lateral_jitter_m: float = 2.0
     sides: str = "both"
+    pair_gap_m: float = 0.0
+    post_spacing_m: float = 0.0
+    post_offset_m: float = 1.0
+    post_rcs_m2: float = 0.5
+    gantry_spacing_m: float = 0.0
+    gantry_rcs_m2: float = 20.0
 
     def __post_init__(self) -> None:
         check_types(self)
@@ -94,6 +128,12 @@ class LandmarkConfig:
                              f"(spacing_m={self.spacing_m:g}), got {self.jitter_m!r}")
         check_range("lateral_jitter_m", self.lateral_jitter_m, 0.0, 50.0)
         check_choice("sides", self.sides, LANDMARK_SIDES)
+        _check_off_or_range("pair_gap_m", self.pair_gap_m, 0.5, 50.0)
+        _check_off_or_range("post_spacing_m", self.post_spacing_m, 1.0, 100.0)
+        check_range("post_offset_m", self.post_offset_m, 0.0, 100.0)
+        check_range("post_rcs_m2", self.post_rcs_m2, 0.0, 1e4, low_open=True)
+        _check_off_or_range("gantry_spacing_m", self.gantry_spacing_m, 10.0, 10000.0)
+        check_range("gantry_rcs_m2", self.gantry_rcs_m2, 0.0, 1e4, low_open=True)
 
     @classmethod
     def make(cls, value: Any) -> LandmarkConfig:
@@ -286,33 +326,69 @@ def place_roadside_landmarks(network, config: LandmarkConfig, rng: np.random.Gen
     the last lane the rightmost (highway-env's convention). Left landmarks sit at
     longitudinal ``(k + 1/2) spacing``, right ones at ``(k + 1) spacing`` (staggered),
     each with uniform jitter +-``jitter_m`` along the road and ``[0, lateral_jitter_m]``
-    outward, at ``lateral_offset_m`` beyond the outer lane edge. All draws come from ``rng``.
+    outward, at ``lateral_offset_m`` beyond the outer lane edge; with ``pair_gap_m``
+    each gets a twin ``pair_gap_m`` further along the road. Then (after all poles, so
+    the poles' draws do not depend on them) the guard-rail posts and the sign gantries
+    of :class:`LandmarkConfig`. All draws come from ``rng``.
     """
     if not config.enabled:
         return Landmarks.empty()
-    xy = []
-    for tos in network.graph.values():
-        for lanes in tos.values():
-            if not lanes:
+    edges = [lanes for tos in network.graph.values() for lanes in tos.values() if lanes]
+    sides = [side for side in ("left", "right") if config.sides in ("both", side)]
+    xy, rcs = [], []
+
+    def add(lane, s, out, side, value):
+        xy.append(_lane_points(lane, s, -out if side == "left" else out))
+        rcs.append(np.full(len(s), float(value)))
+
+    for lanes in edges:
+        for side in sides:
+            lane = lanes[0] if side == "left" else lanes[-1]
+            length = float(lane.length)
+            start = 0.5 * config.spacing_m if side == "left" else config.spacing_m
+            s = np.arange(start, length, config.spacing_m)
+            if s.size == 0:
                 continue
-            for side in ("left", "right"):
-                if config.sides not in ("both", side):
-                    continue
+            s = np.clip(s + rng.uniform(-config.jitter_m, config.jitter_m, s.size), 0.0, length)
+            out = _half_width(lane) + config.lateral_offset_m + rng.uniform(0.0, config.lateral_jitter_m, s.size)
+            add(lane, s, out, side, config.rcs_m2)
+            if config.pair_gap_m > 0:
+                add(lane, np.clip(s + config.pair_gap_m, 0.0, length), out, side, config.rcs_m2)
+    for lanes in edges:
+        if config.post_spacing_m > 0:
+            for side in sides:
                 lane = lanes[0] if side == "left" else lanes[-1]
-                length = float(lane.length)
-                start = 0.5 * config.spacing_m if side == "left" else config.spacing_m
-                s = np.arange(start, length, config.spacing_m)
-                if s.size == 0:
-                    continue
-                s = np.clip(s + rng.uniform(-config.jitter_m, config.jitter_m, s.size), 0.0, length)
-                half_w = float(lane.width_at(0.0)) / 2
-                out = half_w + config.lateral_offset_m + rng.uniform(0.0, config.lateral_jitter_m, s.size)
-                lateral = -out if side == "left" else out
-                xy.append(_lane_points(lane, s, lateral))
+                s = np.arange(0.5 * config.post_spacing_m, float(lane.length), config.post_spacing_m)
+                s = np.clip(s + config.post_spacing_m * rng.uniform(-0.1, 0.1, s.size), 0.0, float(lane.length))
+                add(lane, s, np.full(s.size, _half_width(lane) + config.post_offset_m), side, config.post_rcs_m2)
+        if config.gantry_spacing_m > 0:
+            for side, lane in (("left", lanes[0]), ("right", lanes[-1])):
+                s = np.arange(0.5 * config.gantry_spacing_m, float(lane.length), config.gantry_spacing_m)
+                add(lane, s, np.full(s.size, _half_width(lane) + config.lateral_offset_m), side, config.gantry_rcs_m2)
     if not xy:
         return Landmarks.empty()
-    pts = np.concatenate(xy)
-    return Landmarks(pts, np.full(len(pts), config.rcs_m2))
+    return Landmarks(np.concatenate(xy), np.concatenate(rcs))
+
+
+def _half_width(lane) -> float:
+    return float(lane.width_at(0.0)) / 2
+
+
+#: ``rhs-dense-v0``'s scene (SPEC 11: where the antenna matters): paired poles every
+#: 20 m (2 m apart, RCS 5 m^2), guard-rail posts every 2.5 m on both sides 1 m off the
+#: road edge (RCS 0.5 m^2 each: small steel posts), sign gantries every 150 m (legs of
+#: 20 m^2). Within the radar's 100 m reach that is ~160 posts, ~20 poles and a gantry or
+#: two; consecutive posts seen from the car are 1-5 deg apart at 10-30 m.
+DENSE_LANDMARKS = LandmarkConfig(
+    spacing_m=20.0,
+    jitter_m=3.0,
+    pair_gap_m=2.0,
+    post_spacing_m=2.5,
+    post_offset_m=1.0,
+    post_rcs_m2=0.5,
+    gantry_spacing_m=150.0,
+    gantry_rcs_m2=20.0,
+)
 
 
 def get_landmarks(env) -> Landmarks:

@@ -41,6 +41,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
+from _provenance import write_json
+
 SECTIONS = ("envs", "load", "vec", "radar", "patterns", "training")
 GOALS = {"radar_env_over_base": 0.75, "slam_env_over_base": 0.67, "loaded_over_quiet": 0.85,
          "two_workers_over_one": 1.8, "ppo_slam_over_base": 0.7}
@@ -55,7 +57,7 @@ def bench_envs(steps: int, seed: int, grid_deg: float) -> dict:
     """Steps/s of the three highway ids on identical seeds and action sequences."""
     import gymnasium as gym
 
-    import rhs_env  # noqa: F401
+    import rhs_env
 
     out = {}
     radar = {"scan": {"grid_deg": grid_deg}}
@@ -289,6 +291,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmark.json"))
     args = ap.parse_args(argv)
+    started = time.time()
     commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
     result: dict = {
         "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "platform": platform.platform(),
@@ -312,7 +315,7 @@ def main(argv: list[str] | None = None) -> int:
     result["section_runs"] = {k: runs[k] for k in SECTIONS if k in runs}
     result["goals"] = _goals(result)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2, default=float))
+    write_json(out, result, __file__, args, started, argv=argv)  # timings: provenance, no fingerprint
     out.with_suffix(".md").write_text(markdown(result) + "\n")
     print(json.dumps(result, indent=2, default=float))
     for k, g in result["goals"].items():

@@ -20,6 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _provenance import write_json
+
 from rhs_env.antenna import ScanConfig
 from rhs_env.radar import RadarConfig, RadarSystem
 from rhs_env.scatterers import Occluders, Scatterers
@@ -115,7 +118,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--fidelity", default=None, choices=["iq", "range"])
     p.add_argument("--out", default="results/benchmark_radar.json")
     a = p.parse_args(argv)
-    res = benchmark_radar(a.antenna, a.grid_deg, a.repeats, out=a.out, fidelity=a.fidelity)
+    started = time.time()
+    res = benchmark_radar(a.antenna, a.grid_deg, a.repeats, fidelity=a.fidelity)
+    write_json(a.out, res, __file__, a, started, argv=argv)  # timings: provenance, no fingerprint
     print(json.dumps(res, indent=1))
     return 0
 

@@ -12,11 +12,13 @@ writes a JSON summary (``--json``).
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _provenance import write_json
 
 from rhs_env.antenna import RHSConfig, ScanConfig
 from rhs_env.patterns.library import DATA_DIR, build_library
@@ -36,6 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", type=Path, default=None, help="summary JSON (build times, PSLR)")
     p.add_argument("--quiet", action="store_true")
     a = p.parse_args(argv)
+    started = time.time()
     try:
         config = RHSConfig(elements=a.elements, spacing_wl=a.spacing_wl, refractive_index=a.refractive_index)
         scans = [ScanConfig(grid_deg=g, sector_deg=a.sector_deg) for g in a.grids]
@@ -59,9 +62,23 @@ def main(argv: list[str] | None = None) -> int:
         )
     if a.json is not None:
         a.json.parent.mkdir(parents=True, exist_ok=True)
-        a.json.write_text(json.dumps(summary, indent=2))
+        write_json(a.json, {"libraries": summary, "method": a.method, "rhs": config.to_dict()}, __file__, a, started,
+                   fingerprint, argv)
         a.json.with_suffix(".md").write_text(markdown(summary, config, a.method, a.workers) + "\n")
     return 0
+
+
+def fingerprint() -> list[float]:
+    """The fast method on two grids of a 12-element RHS (15-degree grid): patterns and their report, seconds."""
+    import numpy as np
+
+    from rhs_env.patterns.fast import FastSettings, build_fast
+
+    config, scan = RHSConfig(elements=12), ScanConfig(grid_deg=15.0)
+    angles = scan.angles_deg[[0, scan.slots // 2]]
+    tx, rx, _ = build_fast(config, scan, FastSettings(), workers=1, angles_deg=angles)
+    rep = pattern_report(config, tx, rx, angles).summary()
+    return [*np.ravel(tx), *np.ravel(rx), *(rep[k] for k in sorted(rep))]
 
 
 def markdown(summary: list[dict], config: RHSConfig, method: str, workers: int) -> str:

@@ -19,7 +19,6 @@ to show what the constraint costs there.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -33,6 +32,8 @@ from rhs_env.patterns.metrics import pattern_report
 from rhs_env.patterns.sdr import SDRSettings, build_sdr
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "scripts"))
+from _provenance import write_json
 
 
 def subset(angles: np.ndarray, n: int | None) -> np.ndarray:
@@ -91,6 +92,12 @@ def compare(config: RHSConfig, scan: ScanConfig, grids: int | None, workers: int
     return out
 
 
+def fingerprint() -> list[float]:
+    """:func:`compare` on 2 grids of a 12-element RHS (15-degree grid): deltas and PSLRs, seconds."""
+    res = compare(RHSConfig(elements=12), ScanConfig(grid_deg=15.0), 2, 1)
+    return [r[k] for m in ("fast", "sdr") for r in res["methods"][m]["grids"] for k in ("delta", "pslr_db")]
+
+
 def _num(x: float | None) -> str:
     return "n/a" if x is None else f"{x:.4f}"
 
@@ -143,6 +150,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, default=ROOT / "results" / "patterns_sdr_vs_fast.json")
     p.add_argument("--md", type=Path, default=None, help="markdown table (default: --out with .md)")
     a = p.parse_args(argv)
+    started = time.time()
     try:
         config = RHSConfig(elements=a.elements)
         scan = ScanConfig(grid_deg=a.grid_deg)
@@ -153,7 +161,7 @@ def main(argv: list[str] | None = None) -> int:
     md = markdown(res)
     print(md)
     a.out.parent.mkdir(parents=True, exist_ok=True)
-    a.out.write_text(json.dumps(res, indent=1))
+    write_json(a.out, res, __file__, a, started, fingerprint, argv)
     (a.md or a.out.with_suffix(".md")).write_text(md + "\n")
     return 0
 

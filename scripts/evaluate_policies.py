@@ -39,6 +39,9 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "scripts"))
+from _provenance import write_json
+
 REWARD_AIM, COLLISION_AIM = 0.8, 1.5
 #: issue 12, goal 1: return vs always-SLOWER, collision rate, return vs the ground-truth policy
 GOAL_VS_SLOWER, GOAL_COLLISIONS, GOAL_VS_TRUTH = 1.1, 0.04, 0.9
@@ -63,6 +66,18 @@ def run_policy(policy: str, env_id: str, env_kwargs: dict, seeds: list[int], wor
     with ProcessPoolExecutor(max_workers=len(parts), initializer=single_threaded_worker) as pool:
         results = list(pool.map(_chunk, [policy] * len(parts), [env_id] * len(parts), [env_kwargs] * len(parts), parts))
     return [run for part in results for run in part]
+
+
+def fingerprint() -> list[float]:
+    """The shipped SLAM and ground-truth policies, one 2-second episode (10 steps) each, seed 1000: seconds."""
+    from agents.evaluate import SHIPPED_POLICY, SHIPPED_TRUTH_POLICY, resolve_env
+
+    out = []
+    for policy in (SHIPPED_POLICY, SHIPPED_TRUTH_POLICY):
+        env_id, kwargs = resolve_env(str(policy))
+        run = _chunk(str(policy), env_id, {**kwargs, "duration": 2}, [1000])[0]
+        out += [run[k] for k in sorted(run) if isinstance(run[k], (int, float)) and not k.endswith("_s")]
+    return out
 
 
 def _fmt(stats: dict, digits: int = 1, spread: bool = True) -> str:
@@ -157,6 +172,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out-dir", default=str(ROOT / "results"))
     ap.add_argument("--render-only", action="store_true", help="rewrite policies.md from policies.json, no runs")
     args = ap.parse_args(argv)
+    started = time.time()
     if args.render_only:
         result = json.loads((Path(args.out_dir) / "policies.json").read_text())
         (Path(args.out_dir) / "policies.md").write_text(markdown(result))
@@ -234,7 +250,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         import gymnasium as gym
 
-        import rhs_env  # noqa: F401
+        import rhs_env
 
         cfg = gym.make(truth_env, **truth_kwargs).unwrapped.config
         max_steps = round(cfg["duration"] * cfg["policy_frequency"])
@@ -259,7 +275,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "policies.json").write_text(json.dumps(result, indent=2) + "\n")
+    write_json(out / "policies.json", result, __file__, args, started, fingerprint, argv)
     (out / "policies.md").write_text(markdown(result))
     print(markdown(result))
     return 0

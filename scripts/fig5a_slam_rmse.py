@@ -10,10 +10,21 @@ obstacles, the vehicle drives 60 m straight ahead in 50 cycles at 5 Hz):
 * obstacle RMSE: the final map against the five obstacles, Hungarian one-to-one
   matching within ``--map-gate`` m (SPEC 9), plus the matched / missed / spurious counts.
 
-**SNR sweep**: ``tx_power_dbm`` in ``--powers`` (default 10, 20, 30 dBm; 30 dBm is
-the default radar) with the noise figure held at ``--noise-figure`` (default 10 dB):
-the echo SNR moves 1:1 with the transmit power in dB. Everything else is the default
-radar (60-element RHS, 1-degree beam grid, CA-CFAR, OMP).
+**SNR sweep**: ``tx_power_dbm`` in ``--powers`` (default 30, 20, 10, 0, -10 dBm; 30 dBm
+is the default radar) with the noise figure held at ``--noise-figure`` (default 10 dB):
+the echo SNR moves 1:1 with the transmit power in dB, down to where detection fails
+(the map misses obstacles, the pose is lost). Everything else is the default radar
+(60-element RHS, 1-degree beam grid).
+
+**Statistics**: ``--seeds`` episodes (default 20) per antenna and power; each cell
+reports the mean, the sample standard deviation (ddof = 1) and the 95 % confidence
+interval of the mean from Student's t with n - 1 degrees of freedom,
+``mean +- t_{0.975, n-1} s / sqrt(n)`` (none for a single seed). Episodes whose map
+matched nothing have no obstacle RMSE and are counted as unmatched.
+
+**Long runs**: every finished episode is appended to ``<out-dir>/fig5a.partial.json``;
+``--resume`` skips the episodes already there (same settings), so an interrupted
+sweep continues where it stopped. ``--workers N`` runs episodes in N processes.
 
 The paper's claim, "RHS about a third of the phased array's error", is written beside
 the measured ratio ``RMSE(antenna) / RMSE(phased)`` (means over seeds) for every power.
@@ -21,8 +32,9 @@ the measured ratio ``RMSE(antenna) / RMSE(phased)`` (means over seeds) for every
 Outputs (``--out-dir``, default ``results/``): ``fig5a.png``, ``fig5a.json`` (every
 episode and the aggregates), ``fig5a.md`` (the README table).
 
-    OMP_NUM_THREADS=1 python scripts/fig5a_slam_rmse.py [--seeds 5] [--antennas rhs phased random]
-        [--powers 10 20 30] [--registration cnn|icp|odometry] [--out-dir results] [--quick]
+    OMP_NUM_THREADS=1 python scripts/fig5a_slam_rmse.py [--seeds 20] [--antennas rhs phased random]
+        [--powers 30 20 10 0 -10] [--registration cnn|icp|odometry] [--out-dir results] [--quick]
+        [--workers 2] [--resume]
 
 ``--quick`` is a smoke run for tests: 1 seed, 30 dBm, the 5-degree grid, 10 cycles.
 """
@@ -31,6 +43,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -41,6 +54,7 @@ import numpy as np
 from rhs_common.geometry import wrap_angle
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _provenance import jsonable, write_json
 from paper_episode import ANTENNAS, IDLE, add_episode_args, make_paper_env
 
 PAPER_RATIO = 1.0 / 3.0  # "RHS about a third of the phased array's error"
@@ -87,13 +101,22 @@ def run_episode(
 
 
 def _stats(values: list) -> dict:
+    """Mean, sample std (ddof=1) and the t-distribution 95 % CI of the mean over the finite values."""
+    from scipy.stats import t as student_t
+
     v = np.array([np.nan if x is None else x for x in values], dtype=float)
     ok = v[np.isfinite(v)]
+    n = int(ok.size)
+    mean = float(ok.mean()) if n else None
+    std = float(ok.std(ddof=1)) if n > 1 else None
+    half = float(student_t.ppf(0.975, n - 1) * std / math.sqrt(n)) if n > 1 else None
     return {
-        "mean": float(ok.mean()) if ok.size else None,
-        "std": float(ok.std()) if ok.size else None,
-        "n": int(ok.size),
-        "n_failed": int(v.size - ok.size),
+        "mean": mean,
+        "std": std,
+        "ci95": None if half is None else [mean - half, mean + half],
+        "ci95_half_width": half,
+        "n": n,
+        "n_failed": int(v.size - n),
     }
 
 
@@ -151,9 +174,12 @@ def ratios(rows: list[dict]) -> list[dict]:
 
 
 def _fmt(s: dict, digits: int = 2) -> str:
+    """``mean [lo, hi]`` (95 % CI), or the mean alone for one seed."""
     if s["mean"] is None:
         return "n/a"
-    txt = f"{s['mean']:.{digits}f} ± {s['std']:.{digits}f}"
+    txt = f"{s['mean']:.{digits}f}"
+    if s["ci95"] is not None:
+        txt += f" [{s['ci95'][0]:.{digits}f}, {s['ci95'][1]:.{digits}f}]"
     return txt + (f" ({s['n_failed']} unmatched)" if s["n_failed"] else "")
 
 
@@ -167,7 +193,8 @@ def markdown(result: dict) -> str:
         (
             f"SLAM on `rhs-paper-v0` (paper Fig. 5c scene, {s['cycles']} cycles), {s['registration']} registration, "
             f"{s['elements']}-element RHS, {s['grid_deg']:g}-degree beam grid, noise figure {s['noise_figure_db']:g} dB; "
-            f"mean ± std over {len(s['seeds'])} seed(s). Vehicle RMSE: position RMSE over the cycles; obstacle RMSE: "
+            f"mean and 95 % confidence interval of the mean (Student's t, ddof=1) over {len(s['seeds'])} seed(s). "
+            f"Vehicle RMSE: position RMSE over the cycles; obstacle RMSE: "
             f"final map, Hungarian matching within {s['map_gate_m']:g} m. Ratio: mean RMSE / mean RMSE of the "
             f"same-cost phased array (paper: {PAPER_CLAIM})."
         ),
@@ -250,7 +277,7 @@ def plot(result: dict, path: Path) -> None:
                 )
                 st = r[key] if r else {"mean": None, "std": None}
                 m.append(np.nan if st["mean"] is None else st["mean"])
-                s.append(0.0 if st["std"] is None else st["std"])
+                s.append(0.0 if st.get("ci95_half_width") is None else st["ci95_half_width"])
             xs = x + (k - (len(antennas) - 1) / 2) * width
             ax.bar(xs, m, width, yerr=s, capsize=3, label=a, color=colors.get(a))
             for xi, mi in zip(xs, m):
@@ -286,7 +313,7 @@ def plot(result: dict, path: Path) -> None:
     )
     fig.suptitle(
         f"Fig. 5a: SLAM on rhs-paper-v0 ({result['settings']['registration']} registration, "
-        f"{len(result['settings']['seeds'])} seeds). Paper: RHS/phased ≈ 0.33; measured vehicle ratio: {meas}",
+        f"{len(result['settings']['seeds'])} seeds, 95% CI). Paper: RHS/phased ≈ 0.33; measured vehicle ratio: {meas}",
         fontsize=9,
     )
     fig.tight_layout()
@@ -297,7 +324,7 @@ def plot(result: dict, path: Path) -> None:
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument(
-        "--seeds", type=int, default=5, help="number of seeds (0 .. N-1), default 5"
+        "--seeds", type=int, default=20, help="number of seeds (0 .. N-1), default 20"
     )
     p.add_argument(
         "--antennas", nargs="+", default=["rhs", "phased", "random"], choices=ANTENNAS
@@ -306,9 +333,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--powers",
         type=float,
         nargs="+",
-        default=[10.0, 20.0, 30.0],
-        help="Tx power sweep (dBm)",
+        default=[30.0, 20.0, 10.0, 0.0, -10.0],
+        help="Tx power sweep (dBm), default 30 20 10 0 -10",
     )
+    p.add_argument("--workers", type=int, default=1, help="episodes run in this many processes")
+    p.add_argument("--resume", action="store_true", help="skip episodes already in <out-dir>/fig5a.partial.json")
     add_episode_args(p, "tiny run for tests: 1 seed, 30 dBm, 5-degree grid, 10 cycles")
     a = p.parse_args(argv)
     if a.quick:
@@ -318,61 +347,107 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return a
 
 
+def episode_settings(a: argparse.Namespace) -> dict:
+    """What every episode of a run shares (a partial file is resumed only under the same settings)."""
+    return {"noise_figure_db": a.noise_figure, "registration": a.registration, "grid_deg": a.grid_deg,
+            "elements": a.elements, "cycles": a.cycles, "map_gate_m": a.map_gate}
+
+
+def run_jobs(jobs: list[tuple], a: argparse.Namespace, partial: Path, done: list[dict]) -> list[dict]:
+    """Run the (antenna, power, seed) ``jobs`` (in ``a.workers`` processes), saving each episode to ``partial``."""
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    from tqdm import tqdm
+
+    from rhs_env.parallel import single_threaded_worker
+
+    episodes = list(done)
+
+    def save(ep: dict) -> None:
+        episodes.append(ep)
+        partial.write_text(json.dumps({"settings": episode_settings(a), "episodes": episodes}, default=jsonable))
+
+    bar = tqdm(total=len(jobs), desc="fig5a episodes", unit="ep", disable=a.no_progress)
+    if a.workers <= 1:
+        for ant, p, s in jobs:
+            save(run_episode(ant, s, p, a))
+            bar.update(1)
+    else:
+        with ProcessPoolExecutor(a.workers, initializer=single_threaded_worker) as pool:
+            futs = [pool.submit(run_episode, ant, s, p, a) for ant, p, s in jobs]
+            for f in as_completed(futs):
+                save(f.result())
+                bar.update(1)
+    bar.close()
+    return episodes
+
+
+def fingerprint() -> list[float]:
+    """RHS and phased episodes of the quick config (5-degree grid, 30 dBm, seed 0), 6 cycles: seconds."""
+    a = parse_args(["--quick", "--cycles", "6", "--no-progress"])
+    a.cycles = 6
+    out = []
+    for ant in ("rhs", "phased"):
+        ep = run_episode(ant, 0, 30.0, a)
+        out += [ep[k] for k in ("vehicle_rmse_m", "final_position_error_m", "heading_rmse_rad", "obstacle_rmse_m",
+                                "map_matched", "map_spurious")]
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     a = parse_args(argv)
-    from tqdm import tqdm
-
+    started = time.time()
     out = Path(a.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     antennas = list(dict.fromkeys(a.antennas))
     powers = list(dict.fromkeys(a.powers))
     jobs = [(ant, p, s) for p in powers for ant in antennas for s in range(a.seeds)]
-    episodes = []
+    partial = out / "fig5a.partial.json"
+    done = []
+    if a.resume and partial.exists():
+        prev = json.loads(partial.read_text())
+        if prev.get("settings") == jsonable(episode_settings(a)):
+            want = set(jobs)
+            done = [e for e in prev["episodes"] if (e["antenna"], e["tx_power_dbm"], e["seed"]) in want]
+            have = {(e["antenna"], e["tx_power_dbm"], e["seed"]) for e in done}
+            jobs = [j for j in jobs if j not in have]
+            print(f"fig5a: resuming, {len(done)} episode(s) done, {len(jobs)} to run", file=sys.stderr)
+        else:
+            print("fig5a: partial file has other settings; starting afresh", file=sys.stderr)
     t0 = time.perf_counter()
     try:
-        for ant, p, s in tqdm(
-            jobs, desc="fig5a episodes", unit="ep", disable=a.no_progress
-        ):
-            episodes.append(run_episode(ant, s, p, a))
+        episodes = run_jobs(jobs, a, partial, done)
     except ValueError as exc:  # bad radar settings, a refused pattern library, ...
         print(f"fig5a: error: {exc}", file=sys.stderr)
         return 2
+    order = {j: k for k, j in enumerate((ant, p, s) for p in powers for ant in antennas for s in range(a.seeds))}
+    episodes.sort(key=lambda e: order[(e["antenna"], e["tx_power_dbm"], e["seed"])])
     rows = aggregate(episodes, antennas, powers)
     stage = {}
     for ant in antennas:
         eps = [e for e in episodes if e["antenna"] == ant]
-        keys = eps[0]["slam_stage_times_ms"].keys()
-        stage[ant] = {
-            k: float(np.mean([e["slam_stage_times_ms"][k] for e in eps])) for k in keys
-        }
+        stage[ant] = {k: float(np.mean([e["slam_stage_times_ms"][k] for e in eps]))
+                      for k in eps[0]["slam_stage_times_ms"]}
     result = {
         "figure": "5a",
         "env": "rhs-paper-v0",
         "paper_claim": PAPER_CLAIM,
         "paper_ratio": PAPER_RATIO,
         "snr_sweep": f"tx_power_dbm in {powers} with noise_figure_db = {a.noise_figure:g} (SNR moves 1:1 with Tx power in dB)",
-        "settings": {
-            "antennas": antennas,
-            "powers_dbm": powers,
-            "noise_figure_db": a.noise_figure,
-            "seeds": list(range(a.seeds)),
-            "registration": a.registration,
-            "grid_deg": a.grid_deg,
-            "elements": a.elements,
-            "cycles": a.cycles,
-            "map_gate_m": a.map_gate,
-            "quick": bool(a.quick),
-        },
+        "settings": {"antennas": antennas, "powers_dbm": powers, "seeds": list(range(a.seeds)),
+                     "quick": bool(a.quick), **episode_settings(a)},
         "rows": rows,
         "ratios": ratios(rows),
         "slam_stage_times_ms": stage,
         "episodes": episodes,
         "wall_s": time.perf_counter() - t0,
+        "episode_s_mean": float(np.mean([e["wall_s"] for e in episodes])),
     }
-    (out / "fig5a.json").write_text(json.dumps(result, indent=1))
     (out / "fig5a.md").write_text(markdown(result))
     plot(result, out / "fig5a.png")
+    write_json(out / "fig5a.json", result, __file__, a, started, fingerprint, argv)
+    partial.unlink(missing_ok=True)
     print(markdown(result))
     print(f"wrote {out / 'fig5a.png'}, {out / 'fig5a.json'}, {out / 'fig5a.md'}")
     return 0

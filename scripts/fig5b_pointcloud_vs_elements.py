@@ -7,9 +7,12 @@ scenes (10-60 m, RCS 5 m^2, ego at 20 m/s); the SPEC 9 metrics give the RMSE
 of matched points (gate 1 m), also over the isolated targets only (no other
 target within 2 m in range for the same radar), whose error is the
 estimator's and reads against the CRB. Beside it: the same-cost phased array (round(M / 6)
-elements) and the Cramer-Rao bound of the cross-range error, ``sqrt(mean R^2
-CRB(theta))`` over the same targets (:func:`rhs_env.point_cloud.angle_crb`).
-Writes ``results/fig5b.{png,json,md}``.
+elements) and, for both antennas, the Cramer-Rao bound of the cross-range error,
+``sqrt(mean R^2 CRB(theta))`` over the same targets (:func:`rhs_env.point_cloud.angle_crb`
+of each radar: the swept-beam Fisher information of the angle over the I slots).
+The ratio CRB(phased) / CRB(RHS) is the angular advantage the larger aperture buys.
+Writes ``results/fig5b.{png,json,md}``; the JSON carries provenance and the
+fingerprint of :func:`fingerprint` (see ``scripts/_provenance.py``).
 
     OMP_NUM_THREADS=1 python scripts/fig5b_pointcloud_vs_elements.py [--elements 20 40 60 80 100]
         [--grids 1 2 3 4 5] [--cycles 5] [--out results/fig5b]
@@ -24,6 +27,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _provenance import write_json
 
 from rhs_env.antenna import RHSConfig, ScanConfig
 from rhs_env.radar import RadarConfig, RadarSystem
@@ -88,39 +94,30 @@ def evaluate(cfg: RadarConfig, cycles: int, seed: int) -> dict:
     }
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--elements", type=int, nargs="+", default=[20, 40, 60, 80, 100])
-    p.add_argument("--grids", type=float, nargs="+", default=[1.0, 2.0, 3.0, 4.0, 5.0])
-    p.add_argument("--cycles", type=int, default=5)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", default="results/fig5b")
-    a = p.parse_args(argv)
-    out = Path(a.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    rows = []
-    total = len(a.elements) * len(a.grids)
-    t_start = time.perf_counter()
-    for n, (m, g) in enumerate([(m, g) for g in a.grids for m in a.elements]):
-        rhs, scan = RHSConfig(elements=m), ScanConfig(grid_deg=g)
-        t0 = time.perf_counter()
-        res_rhs = evaluate(RadarConfig(antenna="rhs", rhs=rhs, scan=scan), a.cycles, a.seed)
-        res_pa = evaluate(RadarConfig(antenna="phased", rhs=rhs, scan=scan), a.cycles, a.seed)
-        rows.append({"elements": m, "grid_deg": g, "rhs": res_rhs, "phased": res_pa})
-        print(f"[{n + 1}/{total}] M={m:3d} dtheta={g:g} deg: RHS RMSE {res_rhs['rmse_m']:.3f} m "
-              f"(isolated {res_rhs['rmse_isolated_m']:.3f}, det {res_rhs['detection_rate']:.2f}, "
-              f"CRB {res_rhs['crb_cross_range_m']:.4f} m), phased RMSE {res_pa['rmse_m']:.3f} m "
-              f"(isolated {res_pa['rmse_isolated_m']:.3f})  ({time.perf_counter() - t0:.0f} s)", flush=True)
-        out.with_suffix(".json").write_text(json.dumps({"rows": rows, "cycles": a.cycles, "seed": a.seed}, indent=1))
+def run_config(elements: int, grid_deg: float, cycles: int, seed: int) -> dict:
+    """One (M, dtheta) point: the RHS and the same-cost phased array on the same scenes."""
+    rhs, scan = RHSConfig(elements=int(elements)), ScanConfig(grid_deg=float(grid_deg))
+    res_rhs = evaluate(RadarConfig(antenna="rhs", rhs=rhs, scan=scan), cycles, seed)
+    res_pa = evaluate(RadarConfig(antenna="phased", rhs=rhs, scan=scan), cycles, seed)
+    return {"elements": int(elements), "grid_deg": float(grid_deg), "phased_elements": max(2, round(elements / 6)),
+            "rhs": res_rhs, "phased": res_pa}
 
+
+def fingerprint() -> list[float]:
+    """The numbers of one cycle at M=60, dtheta=5 deg (shipped library), seed 0: seconds."""
+    row = run_config(60, 5.0, 1, 0)
+    return [row[a][k] for a in ("rhs", "phased") for k in sorted(row[a])]
+
+
+def plot(rows: list[dict], grids: list[float], path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    colors = plt.cm.viridis(np.linspace(0, 0.9, len(a.grids)))
-    for g, col in zip(a.grids, colors):
+    fig, ax = plt.subplots(figsize=(7.5, 5))
+    colors = plt.cm.viridis(np.linspace(0, 0.9, len(grids)))
+    for g, col in zip(grids, colors):
         r = [x for x in rows if x["grid_deg"] == g]
         ms = [x["elements"] for x in r]
         ax.plot(ms, [x["rhs"]["rmse_m"] for x in r], "o-", color=col, label=f"RHS, d$\\theta$={g:g}°")
@@ -128,35 +125,80 @@ def main(argv: list[str] | None = None) -> int:
                 label=f"RHS isolated targets, d$\\theta$={g:g}°")
         ax.plot(ms, [x["phased"]["rmse_m"] for x in r], "s--", color=col, alpha=0.6,
                 label=f"phased (M/6), d$\\theta$={g:g}°")
-        ax.plot(ms, [x["rhs"]["crb_cross_range_m"] for x in r], ":", color=col, alpha=0.8,
+        ax.plot(ms, [x["rhs"]["crb_cross_range_m"] for x in r], ":", color=col, lw=2, alpha=0.9,
                 label=f"CRB (RHS), d$\\theta$={g:g}°")
+        ax.plot(ms, [x["phased"]["crb_cross_range_m"] for x in r], "x:", color=col, alpha=0.6,
+                label=f"CRB (phased), d$\\theta$={g:g}°")
     ax.set_yscale("log")
-    ax.set_xlabel("number of RHS elements M")
+    ax.set_xlabel("number of RHS elements M (phased array: M/6)")
     ax.set_ylabel("point-cloud RMSE (m)")
     ax.set_title("Point-cloud error vs RHS elements (landmarks 10-60 m)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=6, ncol=3)
     fig.tight_layout()
-    fig.savefig(out.with_suffix(".png"), dpi=150)
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+
+
+def markdown(rows: list[dict], cycles: int, seed: int) -> str:
     md = [
-        f"Random static-landmark scenes 10-60 m, RCS 5 m^2, {a.cycles} cycles per point, seed {a.seed}; "
+        f"Random static-landmark scenes 10-60 m, RCS 5 m^2, {cycles} cycles per point, seed {seed}; "
         "RMSE of points matched within 1 m; *isolated*: no other target within 2 m in range; "
-        "CRB: cross-range Cramer-Rao bound over the same targets.",
+        "CRB: cross-range Cramer-Rao bound of each antenna over the same targets; CRB ratio: phased / RHS.",
         "",
-        "| dtheta (deg) | M | RHS RMSE (m) | RHS isolated (m) | CRB (m) | RHS detection | RHS false pts/cycle "
-        "| phased elements | phased RMSE (m) | phased detection | phased false pts/cycle |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| dtheta (deg) | M | RHS RMSE (m) | RHS isolated (m) | RHS CRB (m) | RHS detection | RHS false pts/cycle "
+        "| phased elements | phased RMSE (m) | phased isolated (m) | phased CRB (m) | phased detection "
+        "| phased false pts/cycle | CRB ratio |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for x in rows:
         r, q = x["rhs"], x["phased"]
         md.append(
             f"| {x['grid_deg']:g} | {x['elements']} | {r['rmse_m']:.3f} | {r['rmse_isolated_m']:.3f} "
             f"| {r['crb_cross_range_m']:.4f} | {r['detection_rate']:.3f} | {r['false_points_per_cycle']:.2f} "
-            f"| {max(2, round(x['elements'] / 6))} | {q['rmse_m']:.3f} | {q['detection_rate']:.3f} "
-            f"| {q['false_points_per_cycle']:.2f} |"
+            f"| {x['phased_elements']} | {q['rmse_m']:.3f} | {q['rmse_isolated_m']:.3f} "
+            f"| {q['crb_cross_range_m']:.4f} | {q['detection_rate']:.3f} | {q['false_points_per_cycle']:.2f} "
+            f"| {q['crb_cross_range_m'] / r['crb_cross_range_m']:.2f} |"
         )
-    out.with_suffix(".md").write_text("\n".join(md) + "\n")
-    print(f"wrote {out.with_suffix('.png')} and {out.with_suffix('.json')} in {time.perf_counter() - t_start:.0f} s")
+    return "\n".join(md) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--elements", type=int, nargs="+", default=[20, 40, 60, 80, 100])
+    p.add_argument("--grids", type=float, nargs="+", default=[1.0, 2.0, 3.0, 4.0, 5.0])
+    p.add_argument("--cycles", type=int, default=5)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default="results/fig5b")
+    p.add_argument("--render-only", action="store_true",
+                   help="redraw the PNG and the table from the existing JSON (no scans; the JSON is unchanged)")
+    a = p.parse_args(argv)
+    out = Path(a.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if a.render_only:
+        res = json.loads(out.with_suffix(".json").read_text())
+        for r in res["rows"]:  # files from before the phased element count was stored
+            r.setdefault("phased_elements", max(2, round(r["elements"] / 6)))
+        plot(res["rows"], sorted({r["grid_deg"] for r in res["rows"]}), out.with_suffix(".png"))
+        out.with_suffix(".md").write_text(markdown(res["rows"], res["cycles"], res["seed"]))
+        print(f"redrew {out.with_suffix('.png')} and {out.with_suffix('.md')} from {out.with_suffix('.json')}")
+        return 0
+    started = time.time()
+    rows = []
+    todo = [(m, g) for g in a.grids for m in a.elements]
+    for n, (m, g) in enumerate(todo):
+        t0 = time.perf_counter()
+        rows.append(run_config(m, g, a.cycles, a.seed))
+        r, q = rows[-1]["rhs"], rows[-1]["phased"]
+        print(f"[{n + 1}/{len(todo)}] M={m:3d} dtheta={g:g} deg: RHS RMSE {r['rmse_m']:.3f} m "
+              f"(isolated {r['rmse_isolated_m']:.3f}, det {r['detection_rate']:.2f}, CRB {r['crb_cross_range_m']:.4f} m), "
+              f"phased RMSE {q['rmse_m']:.3f} m (isolated {q['rmse_isolated_m']:.3f}, CRB {q['crb_cross_range_m']:.4f} m)"
+              f"  ({time.perf_counter() - t0:.0f} s)", flush=True)
+    plot(rows, a.grids, out.with_suffix(".png"))
+    out.with_suffix(".md").write_text(markdown(rows, a.cycles, a.seed))
+    write_json(out.with_suffix(".json"), {"figure": "5b", "rows": rows, "cycles": a.cycles, "seed": a.seed},
+               __file__, a, started, fingerprint, argv)
+    print(f"wrote {out.with_suffix('.png')} and {out.with_suffix('.json')} in {time.time() - started:.0f} s")
     return 0
 
 

@@ -20,7 +20,6 @@ Outputs (``--out-dir``, default ``results/``): ``fig5c.png``, ``fig5c.json``
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import sys
@@ -32,6 +31,7 @@ import numpy as np
 from rhs_common.geometry import wrap_angle
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _provenance import write_json
 from paper_episode import ANTENNAS, IDLE, add_episode_args, make_paper_env
 
 
@@ -279,9 +279,19 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return a
 
 
+def fingerprint() -> list[float]:
+    """The quick config (RHS, seed 0, 5-degree grid), 6 cycles: both trajectories and the map errors."""
+    a = parse_args(["--quick", "--no-progress"])
+    a.cycles = 6
+    r = run(a)
+    errs = [m["error_m"] for m in r["matches"]]
+    return [*np.ravel(r["estimated_trajectory"]), *np.ravel(r["true_trajectory"]), *errs, r["map_spurious"]]
+
+
 def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     a = parse_args(argv)
+    started = time.time()
     out = Path(a.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     try:
@@ -291,8 +301,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     plot(result, out / "fig5c.png")
     result.pop("_cloud")
-    (out / "fig5c.json").write_text(json.dumps(result, indent=1))
     (out / "fig5c.md").write_text(markdown(result))
+    write_json(out / "fig5c.json", result, __file__, a, started, fingerprint, argv)
     print(markdown(result))
     print(f"wrote {out / 'fig5c.png'}, {out / 'fig5c.json'}, {out / 'fig5c.md'}")
     return 0

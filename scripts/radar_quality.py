@@ -19,6 +19,7 @@ import argparse
 import json
 import subprocess
 import sys
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -26,6 +27,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
+from _provenance import numbers, write_json
 
 from rhs_env.antenna import ScanConfig
 from rhs_env.radar import RadarConfig, RadarSystem
@@ -76,6 +78,11 @@ def evaluate(cfg: RadarConfig, scenes: int, seed: int) -> dict:
     }
 
 
+def fingerprint() -> list[float]:
+    """:func:`evaluate` on one scene of the default RHS radar on the 5-degree grid, seed 0: seconds."""
+    return numbers(evaluate(RadarConfig(antenna="rhs", scan=ScanConfig(grid_deg=5.0)), 1, 0))
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--scenes", type=int, default=100)
@@ -85,6 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--fidelity", default=None, help="RadarConfig.fidelity (default: the config's default)")
     p.add_argument("--out", default=None)
     a = p.parse_args(argv)
+    started = time.time()
     cfg = RadarConfig(antenna=a.antenna, scan=ScanConfig(grid_deg=a.grid_deg))
     if a.fidelity is not None:
         cfg = replace(cfg, fidelity=a.fidelity)
@@ -92,10 +100,8 @@ def main(argv: list[str] | None = None) -> int:
            "command": " ".join(sys.argv), "config": cfg.to_dict(),
            "commit": subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True,
                                     text=True).stdout.strip()}
-    text = json.dumps(res, indent=1, default=float)
     if a.out:
-        Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(a.out).write_text(text)
+        write_json(a.out, res, __file__, {**vars(a), "radar": cfg.to_dict()}, started, fingerprint, argv)
     print(json.dumps(res["metrics"], indent=1))
     return 0
 

@@ -40,6 +40,9 @@ from typing import Any
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _provenance import numbers, write_json
+
 IDLE = 1
 POLICY_HZ = 5
 TARGETS = {
@@ -250,7 +253,8 @@ def markdown(doc: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, dict]:
+    """The options and the SlamConfig overrides (``--quick`` applied)."""
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--parts", nargs="+", choices=("highway", "paper", "dense"), default=["highway", "paper", "dense"])
     p.add_argument("--seeds", type=int, nargs="+", default=[100, 101, 102, 103, 104])
@@ -267,6 +271,18 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         args.seeds, args.cycles, args.paper_cycles, args.dense_cycles = args.seeds[:1], 10, 6, 8
         slam = {"n_particles": 10, **slam}
+    return args, slam
+
+
+def fingerprint() -> list[float]:
+    """The paper and dense parts of the quick config (seed 100, 10 particles): seconds."""
+    args, slam = parse_args(["--quick", "--no-progress"])
+    return numbers([run_paper(args, slam)["summary"], run_dense(args, slam)["summary"]])
+
+
+def main(argv: list[str] | None = None) -> int:
+    started = time.time()
+    args, slam = parse_args(argv)
     runners = {"highway": run_highway, "paper": run_paper, "dense": run_dense}
     doc = {"command": " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])]),
            "commit": _commit(), "seeds": args.seeds, "slam_overrides": slam, "parts": {}}
@@ -274,7 +290,8 @@ def main(argv: list[str] | None = None) -> int:
         doc["parts"][part] = runners[part](args, slam)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.with_suffix(".json").write_text(json.dumps(doc, indent=1, default=float))
+    write_json(out.with_suffix(".json"), doc, __file__, {**vars(args), "slam_overrides": slam}, started,
+               fingerprint, argv)
     out.with_suffix(".md").write_text(markdown(doc))
     print(markdown(doc))
     return 0

@@ -34,6 +34,9 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "scripts"))
+from _provenance import write_json
+
 DATA = ROOT / "agents" / "data"
 SLAM_ID, TRUTH_ID = "rhs-highway-slam-v0", "rhs-highway-v0"
 TARGETS = {
@@ -135,6 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--record", default=str(ROOT / "results" / "train_policy.json"))
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
+    started = time.time()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
     slam_kwargs = json.loads(args.slam_env_kwargs)
@@ -158,8 +162,8 @@ def main(argv: list[str] | None = None) -> int:
                       "steps_per_s", "hyperparams", "recent_episodes", "best_eval_mean_return", "shipped",
                       "model", "zip_bytes")
         }  # fmt: skip
-        record_path.parent.mkdir(parents=True, exist_ok=True)
-        record_path.write_text(json.dumps(record, indent=2) + "\n")
+        record.pop("provenance", None)  # the record of this run's (training itself: no fingerprint, minutes long)
+        write_json(record_path, record, __file__, args, started, argv=argv)
     print(json.dumps(record, indent=2))
     return 0
 

@@ -19,7 +19,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -29,6 +28,8 @@ import numpy as np
 from rhs_common.geometry import wrap_angle
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "scripts"))
+from _provenance import write_json
 
 
 def paper_like_env(rng: np.random.Generator, radar: dict):
@@ -55,7 +56,7 @@ def collect_pairs(episodes: int, steps: int, seed: int, env_kwargs: dict, progre
     import gymnasium as gym
     from tqdm.auto import tqdm
 
-    import rhs_env  # noqa: F401
+    import rhs_env
     from rhs_env.scene import world_pose
     from slam.association import estimate_ego_velocity, static_mask
     from slam.registration import relative_motion
@@ -116,6 +117,35 @@ def motion_errors(est: np.ndarray, truth: np.ndarray) -> dict:
     }
 
 
+def fingerprint() -> list[float]:
+    """The pipeline on a tiny config, seconds: 1 highway episode of 5 steps (5-degree grid), its
+    dataset, one training epoch into a temporary file, and the held-out comparison (shipped CNN,
+    freshly trained CNN, ICP) on the same pairs."""
+    import tempfile
+
+    from slam.cnn_registration import (
+        CNNRegistration,
+        CNNTrainConfig,
+        GridMapConfig,
+        train_cnn,
+    )
+    from slam.registration import ICPRegistration
+
+    raw = collect_pairs(1, 5, 0, {"radar": {"scan": {"grid_deg": 5.0}}, "vehicles_count": 5}, progress=False)
+    grid, rng = GridMapConfig(), np.random.default_rng(0)
+    x, y, priors, idx = make_dataset(*raw, 1, np.array([0.5, 0.5, 0.02]), grid, rng)
+    prev, cur = [raw[0][k] for k in idx], [raw[1][k] for k in idx]
+    out = [*np.ravel(priors)]
+    with tempfile.TemporaryDirectory() as tmp:
+        weights = str(Path(tmp) / "cnn.pt")
+        train_cnn(x, y, grid, CNNTrainConfig(epochs=1, seed=0), x, y, out=weights, progress=False)
+        out += [*np.ravel(CNNRegistration(weights).estimate_batch(prev, cur, priors))]
+    out += [*np.ravel(CNNRegistration().estimate_batch(prev, cur, priors))]
+    icp = ICPRegistration(constant_velocity=False)
+    out += [*np.ravel([icp.estimate(p, c, prior=pr) for p, c, pr in zip(prev, cur, priors)])]
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--episodes", type=int, default=12)
@@ -133,6 +163,7 @@ def main(argv=None) -> int:
     ap.add_argument("--results", default=str(ROOT / "results"), help="directory for registration.json/.md")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
+    started = time.time()
     if args.small:
         args.episodes, args.val_episodes, args.steps, args.epochs, args.priors_per_pair = 2, 1, 8, 2, 2
         args.paper_episodes = 1
@@ -193,7 +224,7 @@ def main(argv=None) -> int:
     }
     res_dir = Path(args.results)
     res_dir.mkdir(parents=True, exist_ok=True)
-    (res_dir / "registration.json").write_text(json.dumps(report, indent=2))
+    write_json(res_dir / "registration.json", report, __file__, args, started, fingerprint, argv)
     rows = [("prior alone (truth + noise)", report["prior_only"]), ("CNN (paper)", report["cnn"]), ("ICP", report["icp"])]
     md = [
         f"Held-out pairs: {report['pairs_heldout']} (separate episodes); training samples: {report['samples_train']} "

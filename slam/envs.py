@@ -12,7 +12,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from rhs_env.envs import RHSHighwayEnv, RHSPaperEnv
+from rhs_env.envs import RHSDenseEnv, RHSHighwayEnv, RHSPaperEnv
 from rhs_env.registration import route_kwargs, with_cheap_base_observation
 from rhs_env.wrappers import RadarObservation
 from slam.metrics_info import SlamMetricsInfo
@@ -29,6 +29,11 @@ def make_slam_env(env_cls: type[gym.Env], kwargs: dict[str, Any]) -> gym.Env:
 def make_highway_slam(**kwargs: Any) -> gym.Env:
     """``rhs-highway-slam-v0``: the highway scene with traffic and roadside landmarks."""
     return make_slam_env(RHSHighwayEnv, kwargs)
+
+
+def make_dense_slam(**kwargs: Any) -> gym.Env:
+    """``rhs-dense-v0``: the highway with a dense roadside (:data:`rhs_env.scene.DENSE_LANDMARKS`)."""
+    return make_slam_env(RHSDenseEnv, kwargs)
 
 
 def make_paper_slam(**kwargs: Any) -> gym.Env:

@@ -166,7 +166,7 @@ def test_train_rejects_bad_arguments(tmp_path):
 
 def test_hyperparams_and_worker_ids():
     for algo in ALGOS:
-        for env_id in (SLAM, TRUTH, "rhs-paper-v0", "rhs-highway-radar-v0"):
+        for env_id in (SLAM, TRUTH, "rhs-paper-v0", "rhs-dense-v0", "rhs-highway-radar-v0"):
             hp = load_hyperparams(algo, env_id)
             assert hp["policy"] in ("MultiInputPolicy", "MlpPolicy")
             assert hp["n_envs"] >= 1

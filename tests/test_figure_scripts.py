@@ -170,12 +170,56 @@ def test_default_registration_is_the_envs_default(name):
 
 def test_fig5a_defaults_are_the_paper_schemes():
     a = load_script("fig5a_slam_rmse.py").parse_args([])
-    assert (
-        a.antennas == ["rhs", "phased", "random"]
-        and a.seeds == 5
-        and a.powers == [10.0, 20.0, 30.0]
-    )
+    assert a.antennas == ["rhs", "phased", "random"] and a.seeds == 20
+    assert a.powers == [30.0, 20.0, 10.0, 0.0, -10.0]  # down to where detection fails
     assert a.cycles == 50 and a.grid_deg == 1.0 and a.out_dir == "results"
+
+
+def test_fig5a_stats_t_interval_ddof1():
+    from scipy.stats import t
+
+    st = load_script("fig5a_slam_rmse.py")._stats([1.0, 2.0, 4.0, None])
+    assert st["n"] == 3 and st["n_failed"] == 1 and st["mean"] == pytest.approx(7 / 3)
+    sd = float(np.std([1.0, 2.0, 4.0], ddof=1))
+    half = t.ppf(0.975, 2) * sd / math.sqrt(3)  # 4.30 s / sqrt(3): wider than the normal 1.96
+    assert st["std"] == pytest.approx(sd) and st["ci95_half_width"] == pytest.approx(half)
+    assert st["ci95"] == pytest.approx([7 / 3 - half, 7 / 3 + half])
+    one = load_script("fig5a_slam_rmse.py")._stats([0.5])
+    assert one["mean"] == 0.5 and one["std"] is None and one["ci95"] is None  # no interval from one seed
+
+
+def test_fig5a_resume_skips_done_episodes(tmp_path):
+    args = ["--quick", "--antennas", "phased", "--registration", "icp", "--out-dir", str(tmp_path), "--no-progress"]
+    mod = load_script("fig5a_slam_rmse.py")
+    a = mod.parse_args(args)
+    fake = {"antenna": "phased", "seed": 0, "tx_power_dbm": 30.0, "cycles": 10, "vehicle_rmse_m": 123.0,
+            "vehicle_max_error_m": 1.0, "final_position_error_m": 1.0, "heading_rmse_rad": 0.0,
+            "obstacle_rmse_m": None, "map_matched": 0, "map_missed": 5, "map_spurious": 0,
+            "slam_stage_times_ms": {"registration": 1.0}, "wall_s": 0.0}
+    (tmp_path / "fig5a.partial.json").write_text(json.dumps({"settings": mod.episode_settings(a), "episodes": [fake]}))
+    proc = run_script("fig5a_slam_rmse.py", *args, "--resume")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    res = json.loads((tmp_path / "fig5a.json").read_text())
+    assert [e["vehicle_rmse_m"] for e in res["episodes"]] == [123.0]  # taken from the partial file, not rerun
+    assert not (tmp_path / "fig5a.partial.json").exists()
+    assert res["provenance"]["command"][1] == "scripts/fig5a_slam_rmse.py" and res["provenance"]["config"]["resume"]
+
+
+def test_registration_in_loop_quick(tmp_path):
+    proc = run_script("registration_in_loop.py", "--quick", "--registrations", "icp", "odometry", "--antenna",
+                      "phased", "--out-dir", str(tmp_path), "--no-progress")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    res = json.loads((tmp_path / "registration_in_loop.json").read_text())
+    rows = {r["registration"]: r for r in res["rows"]}
+    assert set(rows) == {"icp", "odometry"} and len(res["episodes"]) == 2
+    assert rows["icp"]["vehicle_rmse_ratio_to_icp"] == pytest.approx(1.0)
+    assert rows["icp"]["vehicle_rmse_m"]["mean"] < 0.5  # ICP tracks the 9.6 m quick drive (measured a few cm)
+    ep = {e["registration"]: e for e in res["episodes"]}
+    assert rows["odometry"]["vehicle_rmse_ratio_to_icp"] == pytest.approx(
+        ep["odometry"]["vehicle_rmse_m"] / ep["icp"]["vehicle_rmse_m"])
+    assert res["provenance"]["fingerprint"]["name"] == "registration_in_loop"
+    md = (tmp_path / "registration_in_loop.md").read_text()
+    assert "| icp |" in md and "| odometry |" in md
 
 
 def test_fig5b_small_run_writes_png_json_md(tmp_path):
@@ -193,8 +237,12 @@ def test_fig5b_small_run_writes_png_json_md(tmp_path):
     assert [r["elements"] for r in rows] == [12, 24]
     for r in rows:
         assert 0.0 <= r["rhs"]["detection_rate"] <= 1.0
-        assert r["rhs"]["crb_cross_range_m"] > 0
-    assert "| 5 | 24 |" in out.with_suffix(".md").read_text()
+        assert r["rhs"]["crb_cross_range_m"] > 0 and r["phased"]["crb_cross_range_m"] > 0
+        assert r["phased_elements"] == max(2, round(r["elements"] / 6))
+    md = out.with_suffix(".md").read_text()
+    assert "| 5 | 24 |" in md and "phased CRB (m)" in md and "CRB ratio" in md
+    res = json.loads(out.with_suffix(".json").read_text())
+    assert res["provenance"]["config"]["elements"] == [12, 24] and res["provenance"]["fingerprint"]["hash"]
 
 
 def test_detection_curves_quick_writes_json_md_png(tmp_path):

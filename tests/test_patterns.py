@@ -123,7 +123,9 @@ def test_build_script_small_config(tmp_path: Path) -> None:
     files = list(tmp_path.glob("*.npz"))
     assert len(files) == 1
     lib = L.load(files[0], L.library_fields(RHSConfig(elements=8), ScanConfig(grid_deg=30.0), "fast"))
-    assert lib.tx.shape == (3, 8) and json.loads((tmp_path / "s.json").read_text())[0]["grid_deg"] == 30.0
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert lib.tx.shape == (3, 8) and summary["libraries"][0]["grid_deg"] == 30.0
+    assert summary["provenance"]["command"][1] == "scripts/build_patterns.py"  # results record how they were made
 
 
 _SMALL_CFG, _SMALL_SCAN = RHSConfig(elements=16), ScanConfig(grid_deg=10.0)

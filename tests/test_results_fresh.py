@@ -1,0 +1,132 @@
+"""Results cannot silently disagree with the code (``scripts/_provenance.py`` explains the design).
+
+* every script's small-config ``fingerprint()`` still gives the hash recorded in
+  ``results/fingerprints.json``; if not, the results it guards are stale;
+* every ``results/*.json`` is written by a step of ``scripts/reproduce.py`` and carries
+  provenance (commit: an ancestor of HEAD, command line, full config) or is shown as
+  unverified in the README, as is every result whose fingerprint no longer matches;
+* the mechanism itself: rounding, hashing, verification and the README warning.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
+sys.path.insert(0, str(SCRIPTS))
+
+import _provenance as prov  # noqa: E402
+import reproduce  # noqa: E402
+import update_readme  # noqa: E402
+
+RESULTS = prov.RESULTS
+OUTPUTS = ("fingerprints.json",)
+
+
+def _fingerprinted() -> list[reproduce.Step]:
+    return [s for s in reproduce.STEPS if not s.no_fingerprint]
+
+
+def test_every_step_has_a_fingerprint_or_says_why_not():
+    for s in reproduce.STEPS:
+        has = reproduce.fingerprint_fn(s) is not None
+        assert has or s.no_fingerprint, f"scripts/{s.script}: define fingerprint() or say why not (Step.no_fingerprint)"
+    names = [prov.script_name(s.script) for s in _fingerprinted()]
+    assert len(names) == len(set(names)), "one fingerprinted step per script (the others: Step.no_fingerprint)"
+
+
+@pytest.mark.parametrize("step", _fingerprinted(), ids=lambda s: s.name)
+def test_fingerprint_matches_the_code(step):
+    recorded = prov.load_fingerprints().get(prov.script_name(step.script))
+    files = ", ".join(f"results/{r}" for r in step.results)
+    assert recorded is not None, f"{files}: no fingerprint recorded: rerun scripts/{step.script}"
+    now = prov.compute_fingerprint(reproduce.fingerprint_fn(step))
+    if now["hash"] != recorded["hash"]:
+        diff = [(k, a, b) for k, (a, b) in enumerate(zip(recorded["values"], now["values"])) if a != b][:5]
+        pytest.fail(
+            f"{files} is stale: rerun scripts/{step.script} (python scripts/reproduce.py --only {step.name}); "
+            f"the code's output on the fingerprint config changed (first differences, index/recorded/now: {diff}; "
+            f"{len(recorded['values'])} -> {len(now['values'])} values). If the full rerun must wait, record it: "
+            f"python scripts/reproduce.py --fingerprints-only --only {step.name} --reason '...' "
+            "(the README then marks these results unverified)."
+        )
+
+
+def test_every_results_file_has_a_step_and_provenance_or_is_flagged():
+    flagged = []
+    for f in sorted(RESULTS.glob("*.json")):
+        if f.name in OUTPUTS or f.name.endswith(".partial.json"):
+            continue
+        step = reproduce.step_for_result(f.name)
+        assert step is not None, f"results/{f.name} is written by no step of scripts/reproduce.py"
+        data = json.loads(f.read_text())
+        p = data.get("provenance") if isinstance(data, dict) else None
+        if p is None:
+            flagged.append(f.name)
+            continue
+        assert {"commit", "dirty", "command", "config", "wall_s"} <= set(p), f"results/{f.name}: incomplete provenance"
+        assert p["command"][1] == f"scripts/{step.script}", f"results/{f.name} written by {p['command'][1]}"
+        if p["commit"] is not None and prov.git_state()["commit"] is not None:
+            assert prov.is_ancestor(p["commit"]) is not False, (
+                f"results/{f.name} records commit {p['commit'][:10]}, not an ancestor of HEAD: rerun scripts/{step.script}"
+            )
+        if not step.no_fingerprint:
+            assert p.get("fingerprint"), f"results/{f.name}: no fingerprint in its provenance"
+    # files without provenance are legal only while the README shows them as unverified
+    readme = (prov.ROOT / "README.md").read_text()
+    for name in flagged:
+        stem = Path(name).stem
+        if f"<!-- results:{stem} -->" in readme:
+            block = readme.split(f"<!-- results:{stem} -->")[1].split(f"<!-- /results:{stem} -->")[0]
+            assert "**Unverified:**" in block, f"README shows results/{name} (no provenance) without a warning"
+
+
+def test_readme_is_up_to_date_with_results_and_their_verification():
+    readme = (prov.ROOT / "README.md").read_text()
+    assert update_readme.render(readme, RESULTS) == readme, (
+        "README.md is out of date with results/ (or an unverified result lacks its warning): "
+        "run python scripts/update_readme.py"
+    )
+
+
+# --------------------------------------------------------------------------- the mechanism
+def test_digest_rounds_to_significant_digits_and_detects_changes():
+    h1, v1 = prov.digest([1.0, 0.123456789, None, float("nan"), 3])
+    assert v1 == [1.0, 0.123457, None, None, 3.0]
+    assert prov.digest([1.0 + 1e-12, 0.1234567891, None, None, 3])[0] == h1  # last-bit noise: same hash
+    assert prov.digest([1.0, 0.12346, None, None, 3])[0] != h1  # a real change: another hash
+    assert prov.digest([1.0, 0.123456789, None, None])[0] != h1  # a value fewer
+
+
+def test_verification_and_readme_warning(tmp_path):
+    res = tmp_path / "fig5c.json"
+    fps = {"fig5c_trajectory_map": {"hash": "aaaa", "values": [], "note": "full run", "commit": "c0ffee"}}
+    res.write_text(json.dumps({"x": 1}))
+    ok, why = prov.verification(res, fps)
+    assert not ok and "before results recorded their provenance" in why
+    res.write_text(json.dumps({"x": 1, "provenance": {"fingerprint": {"name": "fig5c_trajectory_map", "hash": "aaaa"}}}))
+    assert prov.verification(res, fps) == (True, "fingerprint matches the code")
+    fps["fig5c_trajectory_map"].update(hash="bbbb", note="refreshed without rerun: SLAM changed")
+    ok, why = prov.verification(res, fps)
+    assert not ok and "SLAM changed" in why
+    (tmp_path / "fingerprints.json").write_text(json.dumps(fps))
+    (tmp_path / "fig5c.md").write_text("| table |\n")
+    out = update_readme.render("a\n<!-- results:fig5c -->\nold\n<!-- /results:fig5c -->\n", tmp_path)
+    assert "| table |" in out and "**Unverified:**" in out and "SLAM changed" in out
+    assert "reproduce.py --only fig5c" in out
+
+
+def test_write_json_records_provenance_outside_results(tmp_path):
+    out = tmp_path / "x.json"
+    p = prov.write_json(out, {"v": 1}, SCRIPTS / "fig5c_trajectory_map.py", {"seed": 3, "path": tmp_path}, 0.0,
+                        fingerprint_fn=lambda: [1.0, 2.0], argv=["--seed", "3"])
+    data = json.loads(out.read_text())
+    assert data["v"] == 1 and data["provenance"] == json.loads(json.dumps(p))
+    assert p["command"] == ["python", "scripts/fig5c_trajectory_map.py", "--seed", "3"]
+    assert p["config"] == {"seed": 3, "path": str(tmp_path)}
+    assert p["fingerprint"]["hash"] == prov.digest([1.0, 2.0])[0]
+    assert set(p) >= {"commit", "dirty", "dirty_files", "started_utc", "wall_s", "python", "numpy"}
