@@ -57,7 +57,6 @@ def bench_envs(steps: int, seed: int, grid_deg: float) -> dict:
     """Steps/s of the three highway ids on identical seeds and action sequences."""
     import gymnasium as gym
 
-    import rhs_env
 
     out = {}
     radar = {"scan": {"grid_deg": grid_deg}}

@@ -250,7 +250,6 @@ def main(argv: list[str] | None = None) -> int:
     try:
         import gymnasium as gym
 
-        import rhs_env
 
         cfg = gym.make(truth_env, **truth_kwargs).unwrapped.config
         max_steps = round(cfg["duration"] * cfg["policy_frequency"])
