@@ -790,6 +790,18 @@ def finite_json(obj: Any) -> Any:
     return obj
 
 
+def fingerprint() -> list[float]:
+    """Small config: one point-cloud cell per antenna kind (pairs 6 deg apart at 10 dB): the raw trial metrics."""
+    systems = Systems()
+    out: list[float] = []
+    for antenna in SMALL.antennas:
+        cell = run_pointcloud_cell(systems.get((antenna, None, None)), 2, 6.0, 10.0, SMALL, f"fingerprint/{antenna}")
+        for t in cell["trials"]:
+            out += [float(t["resolved"]), t["ospa_deg"], t["detection_rate"], t["false_points"], *t["sq_err_deg2"]]
+        out.append(cell["crb_group_deg"])
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])

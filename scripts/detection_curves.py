@@ -234,6 +234,13 @@ def write_outputs(res: dict, out_dir: Path) -> None:
     fig.savefig(out_dir / "detection_curves.png", dpi=120)
 
 
+def fingerprint() -> list[float]:
+    """Small config: RHS, Pfa 1e-3, 30 m, Pd of both detectors at three SNRs over 4 trials (fixed seeds)."""
+    radars = make_radars("rhs", 1e-3, 40.0, 0)
+    pd = simulate_pd(radars, np.array([-14.0, -8.0, -2.0]), 4, 30.0, np.random.default_rng(1))
+    return [float(v) for d in sorted(pd) for v in pd[d]]
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])

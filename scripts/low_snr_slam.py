@@ -99,6 +99,16 @@ def markdown(res: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def fingerprint() -> list[float]:
+    """Small config: one 8-cycle RHS episode per detector at the low RCS (seed 0): vehicle errors and map counts."""
+    a = argparse.Namespace(rcs=0.005, power=30.0, cycles=8, registration="icp")
+    out: list[float] = []
+    for d in DETECTORS:
+        r = run_episode("rhs", d, 0, a)
+        out += [r["ate_m"], r["final_error_m"], r["map_matched"], r["map_spurious"], r["points_per_cycle"]]
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -91,6 +91,14 @@ STEPS: tuple[Step, ...] = (
          "retrains the shipped policies", no_fingerprint="a record of training runs (timesteps, wall time); "
          "what the policies do is fingerprinted by the policies step"),
     Step("policies", "evaluate_policies.py", (), ("policies.json",), 220),
+    Step("detection_curves", "detection_curves.py", (), ("detection_curves.json",), 600),
+    Step("low_snr_slam", "low_snr_slam.py", ("--seeds", "100", "101", "102", "103", "104", "105", "106", "107"),
+         ("low_snr_slam.json",), 900),
+    Step("claim_study", "claim_study.py", (), ("claim_study.json",), 3600,
+         "point-cloud, element and SLAM levels; resumes from results/claim_study_cache_*.jsonl"),
+    Step("ablations", "ablate_policy.py", ("speed_truth", "base_truth", "grid_slam", "no_norm_slam"), ("ablations.json",),
+         3600, "short PPO ablations", no_fingerprint="a record of training runs (minutes each even when tiny); "
+         "the policies they make are evaluated on the same seeds as the policies step"),
     Step("benchmark_radar", "benchmark_radar.py", (), ("benchmark_radar.json",), 60, "timings",
          no_fingerprint="timings"),
     Step("benchmark", "benchmark.py", ("--out", "results/benchmark.json"), ("benchmark.json",), 900, "timings",
