@@ -38,6 +38,9 @@ half-step (keeping the best), every start (the closed-form cosine holograms, plu
 optional random amplitudes) is run with the Tx and with the Rx half-step first, and
 only the best of these candidates after the sweep continues to convergence.
 
+The phase sweep screens each phase with ``sweep_evals`` SOCPs (a short rho search from
+the current sidelobe level) and runs the full search only on the best screened phase.
+
 **Active set.** Most sidelobe directions are far below rho, so each SOCP starts with the
 directions within ``active_db`` of the current peak and adds any direction its solution
 violates (re-solving), which keeps the cones few without changing the optimum.
@@ -48,6 +51,10 @@ has a high PSLR. With ``max_sidelobe_db`` the rho search is limited to
 is concave with G(0) >= 0), i.e. two-way sidelobes on D at most ``cap`` dB below the
 main lobe; iterates are ranked by delta, halved when the cap is missed
 (:func:`_score`). Where the cap is unreachable the plain delta step is taken.
+D samples the sidelobe region at ``hw / oversample``; with ``cap_refine`` the converged
+pattern is checked on the report's fine grid, the sidelobe peaks that break the cap are
+added to D (an exchange method for the semi-infinite constraint) and the alternation
+continues, so the cap holds on the fine grid where it is reachable.
 
 The SOCPs are solved with Clarabel directly (the problem data change with
 ``phi`` and ``w`` every half-step, and only ``b`` changes with ``rho``, which
@@ -110,6 +117,14 @@ class FastSettings:
             current peak start in each half-step SOCP; directions that the solution violates
             are added and the SOCP re-solved, so every constraint on D holds (the active set
             only makes the SOCPs smaller), dB in [-80, 0].
+        sweep_evals: rho evaluations per phase in the phase-sweep half-steps, [1, 50]; when below
+            ``rho_evals`` every phase is screened with ``sweep_evals`` SOCPs and only the best
+            screened phase gets the full ``rho_evals`` search.
+        cap_refine: rounds of the fine-grid cap check, [0, 20]: after convergence the two-way
+            pattern is evaluated on the fine grid of the PSLR report
+            (``metrics.FINE_GRID_POINTS``); its sidelobe peaks above the cap join D and the
+            alternation continues. With 0 the cap holds on D only (sampled at ``hw / oversample``,
+            between whose samples a two-way sidelobe can rise about 1 dB above it).
     """
 
     oversample: float = 4.0
@@ -442,6 +457,27 @@ def _fine_violations(g: _Grid, psi: Psi) -> np.ndarray:
     return s[peak & (p > g.kappa**2 * p0 * (1 + 1e-9))]
 
 
+def _refine_cap(g: _Grid, psi: Psi, history: list[float], order: tuple[str, str]
+                ) -> tuple[Psi, Merit, list[float], int]:
+    """Up to ``cap_refine`` rounds: add the fine-grid sidelobe peaks that break the cap to D and continue
+    the alternation. Returns the kept iterate (meeting the cap on the fine grid first, then by score on
+    the final D, which holds every earlier D), its merit, the history and the number of added directions."""
+    kept = [psi]
+    refined = 0
+    for _ in range(g.settings.cap_refine if g.kappa < 1.0 else 0):
+        extra = _fine_violations(g, psi)
+        if extra.size == 0:
+            break
+        refined += extra.size
+        g.set_directions(np.unique(np.r_[g.s_d, extra]))
+        psi, _, more, _ = _alternate(g, psi, 1, g.settings.max_iter, order, 0)
+        history = history + more[1:]
+        kept.append(psi)
+    ranked = [((_fine_violations(g, p).size == 0) if refined else True, g.merit(p), p) for p in kept]
+    met, cur, psi = max(ranked, key=lambda r: (r[0], r[1]))
+    return psi, cur, history, refined
+
+
 def _optimize(
     config: RHSConfig,
     angle_deg: float,
@@ -462,15 +498,7 @@ def _optimize(
     if it < settings.max_iter:
         psi, cur, more, it = _alternate(g, psi, it + 1, settings.max_iter, order, sweep_iters)
         history = history + more[1:]
-    refined = 0
-    for _ in range(settings.cap_refine if g.kappa < 1.0 else 0):
-        extra = _fine_violations(g, psi)
-        if extra.size == 0:
-            break
-        refined += extra.size
-        g.set_directions(np.unique(np.r_[g.s_d, extra]))
-        psi, cur, more, _ = _alternate(g, psi, 1, settings.max_iter, order, 0)
-        history = history + more[1:]
+    psi, cur, history, refined = _refine_cap(g, psi, history, order)
     tx = psi["tx"] / psi["tx"].max()
     rx = psi["rx"] / psi["rx"].max()
     return tx, rx, {"delta": cur[1], "capped": cur[2], "iterations": it, "history": history,
