@@ -14,6 +14,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -21,6 +23,8 @@ from pathlib import Path
 from rhs_env.antenna import RHSConfig, ScanConfig
 from rhs_env.patterns.library import DATA_DIR, build_library
 from rhs_env.patterns.metrics import pattern_report
+
+CAP_TOL_DB = 0.01  # a grid counts as over the sidelobe cap when its fine-grid PSLR exceeds it by more
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -49,8 +53,12 @@ def main(argv: list[str] | None = None) -> int:
         dt = time.perf_counter() - t0
         name = f"rhs_m{config.elements}_grid{scan.grid_deg:g}deg_{a.method}.npz"
         path = lib.save(a.out_dir / name)
-        rep = pattern_report(config, lib.tx, lib.rx, lib.angles_deg).summary()
-        row = {"file": str(path), "grid_deg": scan.grid_deg, "build_s": dt, **rep}
+        full = pattern_report(config, lib.tx, lib.rx, lib.angles_deg)
+        rep = full.summary()
+        cap = lib.config["settings"].get("max_sidelobe_db")
+        over = [] if cap is None else [float(x) for x in full.angle_deg[full.pslr_db > cap + CAP_TOL_DB]]
+        row = {"file": path.name, "grid_deg": scan.grid_deg, "build_s": dt, **rep, "cap_db": cap,
+               "grids_over_cap": over, "load_average_1_5_15": list(os.getloadavg())}
         summary.append(row)
         print(
             f"{name}: {dt:.1f} s, worst PSLR {rep['worst_pslr_db']:.2f} dB, median PSLR "
@@ -59,7 +67,14 @@ def main(argv: list[str] | None = None) -> int:
         )
     if a.json is not None:
         a.json.parent.mkdir(parents=True, exist_ok=True)
-        a.json.write_text(json.dumps(summary, indent=2))
+        try:
+            commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).resolve().parents[1],
+                                    capture_output=True, text=True, check=True).stdout.strip()
+        except (OSError, subprocess.CalledProcessError):
+            commit = "unknown"
+        cmd = " ".join(["python scripts/build_patterns.py", *(sys.argv[1:] if argv is None else argv)])
+        a.json.write_text(json.dumps({"commit": commit, "command": cmd, "config": config.to_dict(),
+                                      "method": a.method, "libraries": summary}, indent=2))
         a.json.with_suffix(".md").write_text(markdown(summary, config, a.method, a.workers) + "\n")
     return 0
 
@@ -69,11 +84,18 @@ def markdown(summary: list[dict], config: RHSConfig, method: str, workers: int) 
     lines = [f"Libraries built by `python scripts/build_patterns.py` ({method} method, M={config.elements}, "
              f"{workers} workers); two-way PSLR and pointing over every grid of each library.", "",
              "| dtheta deg | grids | build s | worst PSLR dB | median PSLR dB | median main-lobe gain dB | "
-             "worst pointing deg |", "|---:|---:|---:|---:|---:|---:|---:|"]
+             "worst pointing deg | grids over the sidelobe cap |", "|---:|---:|---:|---:|---:|---:|---:|---|"]
     for r in summary:
+        over = ", ".join(f"{x:g}" for x in r["grids_over_cap"]) or "none"
         lines.append(f"| {r['grid_deg']:g} | {r['grids']} | {r['build_s']:.1f} | {r['worst_pslr_db']:.2f} | "
                      f"{r['median_pslr_db']:.2f} | {r['median_mainlobe_gain_db']:.2f} | "
-                     f"{r['worst_pointing_error_deg']:.2f} |")
+                     f"{r['worst_pointing_error_deg']:.2f} | {len(r['grids_over_cap'])}/{r['grids']} ({over}) |")
+    caps = sorted({r["cap_db"] for r in summary if r["cap_db"] is not None})
+    if caps:
+        lines += ["", f"Sidelobe cap {', '.join(f'{c:g}' for c in caps)} dB (FastSettings.max_sidelobe_db), "
+                  "checked on the PSLR report's fine grid (cap_refine); a grid is over it when its PSLR exceeds "
+                  f"it by more than {CAP_TOL_DB} dB. Build times are wall clock on a shared 2-core machine "
+                  f"(load average at the end: {', '.join(f'{x:.1f}' for x in summary[-1]['load_average_1_5_15'])})."]
     return "\n".join(lines)
 
 

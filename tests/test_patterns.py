@@ -122,7 +122,7 @@ def test_build_script_small_config(tmp_path: Path) -> None:
     files = list(tmp_path.glob("*.npz"))
     assert len(files) == 1
     lib = L.load(files[0], L.library_fields(RHSConfig(elements=8), ScanConfig(grid_deg=30.0), "fast"))
-    assert lib.tx.shape == (3, 8) and json.loads((tmp_path / "s.json").read_text())[0]["grid_deg"] == 30.0
+    assert lib.tx.shape == (3, 8) and json.loads((tmp_path / "s.json").read_text())["libraries"][0]["grid_deg"] == 30.0
 
 
 _SMALL_CFG, _SMALL_SCAN = RHSConfig(elements=16), ScanConfig(grid_deg=10.0)
@@ -261,7 +261,7 @@ def test_cap_refine_enforces_the_cap_on_the_fine_grid() -> None:
     from rhs_env.patterns.fast import optimize_grid_fast
 
     cfg, cap, angle = RHSConfig(elements=16), -15.0, 25.0
-    coarse = FastSettings(max_sidelobe_db=cap, oversample=1.0, max_iter=20)
+    coarse = FastSettings(max_sidelobe_db=cap, oversample=1.0, max_iter=20, cap_refine=0)
     t0, r0, i0 = optimize_grid_fast(cfg, angle, 10.0, coarse)
     t1, r1, i1 = optimize_grid_fast(cfg, angle, 10.0, FastSettings(**{**coarse.to_dict(), "cap_refine": 5}))
     before = pattern_report(cfg, t0[None], r0[None], np.array([angle])).pslr_db[0]

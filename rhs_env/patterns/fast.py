@@ -125,24 +125,27 @@ class FastSettings:
             (``metrics.FINE_GRID_POINTS``); its sidelobe peaks above the cap join D and the
             alternation continues. With 0 the cap holds on D only (sampled at ``hw / oversample``,
             between whose samples a two-way sidelobe can rise about 1 dB above it).
+        socp_tol: relative duality-gap tolerance of the half-step SOCPs (Clarabel ``tol_gap_rel``;
+            ``tol_gap_abs`` is ``socp_tol / 100``), [1e-10, 1e-3].
     """
 
     oversample: float = 4.0
     max_iter: int = 100
-    tol: float = 1e-6
+    tol: float = 1e-5
     rho_evals: int = 8
     pointing: bool = True
     max_sidelobe_db: float = -16.5
     phase_sweep: int = 8
-    sweep_iters: int = 2
+    sweep_iters: int = 1
     starts: int = 1
     seed: int = 0
     pointing_check: float = 0.9
     warm_start: bool = False
     both_orders: bool = True
     active_db: float = -6.0
-    sweep_evals: int = 8
-    cap_refine: int = 0
+    sweep_evals: int = 2
+    cap_refine: int = 3
+    socp_tol: float = 1e-5
 
     def __post_init__(self) -> None:
         check_range("oversample", self.oversample, 0.0, 64.0, low_open=True)
@@ -158,6 +161,7 @@ class FastSettings:
         check_range("active_db", self.active_db, -80.0, 0.0)
         check_int("sweep_evals", self.sweep_evals, 1, 50)
         check_int("cap_refine", self.cap_refine, 0, 20)
+        check_range("socp_tol", self.socp_tol, 1e-10, 1e-3)
         for name in ("pointing", "warm_start", "both_orders"):
             check_bool(name, getattr(self, name))
 
@@ -174,15 +178,15 @@ class _SideSOCP:
     """
 
     def __init__(self, b_i: np.ndarray, b_d: np.ndarray, w_d: np.ndarray, b_k: np.ndarray, w_k: np.ndarray,
-                 phi: float, active: np.ndarray | None = None) -> None:
+                 phi: float, active: np.ndarray | None = None, tol: float = 1e-6) -> None:
         self.c = np.real(np.exp(-1j * phi) * b_i)
         self.sd = np.sqrt(w_d)[:, None] * b_d
         self.sk = np.sqrt(w_k)[:, None] * b_k
         self.active = np.ones(b_d.shape[0], bool) if active is None else active.copy()
         settings = clarabel.DefaultSettings()
         settings.verbose = False
-        settings.tol_gap_rel = 1e-6
-        settings.tol_gap_abs = 1e-8
+        settings.tol_gap_rel = tol
+        settings.tol_gap_abs = tol / 100.0
         settings.presolve_enable = False
         self.settings = settings
         self.solver: Any = None
@@ -392,7 +396,7 @@ def _side_step(g: _Grid, psi: Psi, cur: Merit, side: str, other: str, nphi: int)
     evals = st.rho_evals if nphi == 1 else min(st.sweep_evals, st.rho_evals)
     screened: list[tuple[Merit, _SideSOCP]] = []
     for phi in phi0 + 2 * np.pi * np.arange(nphi) / nphi:
-        sv = _SideSOCP(b_i, b_d, w_d, b_k, w_k, float(phi), active)
+        sv = _SideSOCP(b_i, b_d, w_d, b_k, w_k, float(phi), active, st.socp_tol)
         x = _search(g, sv, rho0, evals)
         if x is None:
             continue
@@ -446,22 +450,37 @@ def _initial_points(g: _Grid, warm: list[tuple[np.ndarray, np.ndarray]] | None) 
     return [{k: v / np.linalg.norm(v) for k, v in p.items()} for p in inits]
 
 
-def _fine_violations(g: _Grid, psi: Psi) -> np.ndarray:
-    """sin(theta) of the local maxima of the two-way pattern outside the main lobe, on the fine grid of
-    :func:`pattern_report` (``FINE_GRID_POINTS``), that exceed the cap relative to ``|h(s_i)|^2``."""
+def _fine_sidelobes(g: _Grid, psi: Psi) -> tuple[np.ndarray, np.ndarray, float]:
+    """Two-way power on the fine grid of :func:`pattern_report` (``FINE_GRID_POINTS`` in sin theta)
+    outside the main lobe: (s, |h(s)|^2, |h(s_i)|^2)."""
     s = np.linspace(-1.0, 1.0, FINE_GRID_POINTS)
     s = s[np.abs(s - g.si[0]) > g.config.mainlobe_halfwidth]
     p = two_way_power(g.config, psi["tx"], psi["rx"], np.concatenate([g.si, s]))
-    p0, p = p[0], p[1:]
+    return s, p[1:], float(p[0])
+
+
+def _fine_violations(g: _Grid, psi: Psi) -> np.ndarray:
+    """sin(theta) of the local maxima of the fine-grid sidelobes that exceed the cap relative to ``|h(s_i)|^2``."""
+    s, p, p0 = _fine_sidelobes(g, psi)
     peak = np.r_[True, p[1:] >= p[:-1]] & np.r_[p[:-1] >= p[1:], True]
     return s[peak & (p > g.kappa**2 * p0 * (1 + 1e-9))]
+
+
+def _fine_key(g: _Grid, psi: Psi) -> tuple[bool, float]:
+    """Rank of a cap-refinement iterate on the fine grid: meeting the cap first; among those that
+    meet it the larger delta, among those that miss it the lower peak sidelobe (so a round never
+    makes the reported PSLR worse)."""
+    _, p, p0 = _fine_sidelobes(g, psi)
+    met = bool(p.max() <= g.kappa**2 * p0 * (1 + 1e-9))
+    return met, (p0 - float(p.max())) if met else -float(p.max()) / p0
 
 
 def _refine_cap(g: _Grid, psi: Psi, history: list[float], order: tuple[str, str]
                 ) -> tuple[Psi, Merit, list[float], int]:
     """Up to ``cap_refine`` rounds: add the fine-grid sidelobe peaks that break the cap to D and continue
-    the alternation. Returns the kept iterate (meeting the cap on the fine grid first, then by score on
-    the final D, which holds every earlier D), its merit, the history and the number of added directions."""
+    the alternation. Returns the kept iterate (best :func:`_fine_key`: the cap, delta and PSLR on the
+    fine grid), its merit on the final D, the history and
+    the number of added directions."""
     kept = [psi]
     refined = 0
     for _ in range(g.settings.cap_refine if g.kappa < 1.0 else 0):
@@ -473,9 +492,8 @@ def _refine_cap(g: _Grid, psi: Psi, history: list[float], order: tuple[str, str]
         psi, _, more, _ = _alternate(g, psi, 1, g.settings.max_iter, order, 0)
         history = history + more[1:]
         kept.append(psi)
-    ranked = [((_fine_violations(g, p).size == 0) if refined else True, g.merit(p), p) for p in kept]
-    met, cur, psi = max(ranked, key=lambda r: (r[0], r[1]))
-    return psi, cur, history, refined
+    psi = max(kept, key=lambda p: _fine_key(g, p)) if len(kept) > 1 else psi
+    return psi, g.merit(psi), history, refined
 
 
 def _optimize(
