@@ -81,10 +81,10 @@ def main(argv: list[str] | None = None) -> int:
 
 def markdown(summary: list[dict], config: RHSConfig, method: str, workers: int) -> str:
     """Table of the built libraries (written next to ``--json`` as ``.md``)."""
-    lines = [f"Libraries built by `python scripts/build_patterns.py` ({method} method, M={config.elements}, "
-             f"{workers} workers); two-way PSLR and pointing over every grid of each library.", "",
-             "| dtheta deg | grids | build s | worst PSLR dB | median PSLR dB | median main-lobe gain dB | "
-             "worst pointing deg | grids over the sidelobe cap |", "|---:|---:|---:|---:|---:|---:|---:|---|"]
+    lines = [(f"Libraries built by `python scripts/build_patterns.py` ({method} method, M={config.elements}, "
+              f"{workers} workers); two-way PSLR and pointing over every grid of each library."), "",
+             ("| dtheta deg | grids | build s | worst PSLR dB | median PSLR dB | median main-lobe gain dB | "
+              "worst pointing deg | grids over the sidelobe cap |"), "|---:|---:|---:|---:|---:|---:|---:|---|"]
     for r in summary:
         over = ", ".join(f"{x:g}" for x in r["grids_over_cap"]) or "none"
         lines.append(f"| {r['grid_deg']:g} | {r['grids']} | {r['build_s']:.1f} | {r['worst_pslr_db']:.2f} | "
@@ -92,10 +92,11 @@ def markdown(summary: list[dict], config: RHSConfig, method: str, workers: int) 
                      f"{r['worst_pointing_error_deg']:.2f} | {len(r['grids_over_cap'])}/{r['grids']} ({over}) |")
     caps = sorted({r["cap_db"] for r in summary if r["cap_db"] is not None})
     if caps:
-        lines += ["", f"Sidelobe cap {', '.join(f'{c:g}' for c in caps)} dB (FastSettings.max_sidelobe_db), "
-                  "checked on the PSLR report's fine grid (cap_refine); a grid is over it when its PSLR exceeds "
-                  f"it by more than {CAP_TOL_DB} dB. Build times are wall clock on a shared 2-core machine "
-                  f"(load average at the end: {', '.join(f'{x:.1f}' for x in summary[-1]['load_average_1_5_15'])})."]
+        load = ", ".join(f"{x:.1f}" for x in summary[-1]["load_average_1_5_15"])
+        lines += ["", (f"Sidelobe cap {', '.join(f'{c:g}' for c in caps)} dB (FastSettings.max_sidelobe_db), "
+                       "checked on the PSLR report's fine grid (cap_refine); a grid is over it when its PSLR "
+                       f"exceeds it by more than {CAP_TOL_DB} dB. Build times are wall clock on a shared 2-core "
+                       f"machine (load average at the end: {load}).")]
     return "\n".join(lines)
 
 

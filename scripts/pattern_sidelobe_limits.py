@@ -122,21 +122,22 @@ def _best(rows: list[dict], caps: list[float]) -> dict:
 
 def markdown(res: dict) -> str:
     c = res["config"]
-    lines = [f"Two-way sidelobe caps, fast method, M={c['elements']}, n={c['refractive_index']:.4g}, "
-             f"{res['scan']['grid_deg']:g}-degree grids (theta >= 0; theta < 0 mirrors them), "
-             f"`{res['command']}`.", "",
-             "| cap dB | grids meeting it | worst PSLR dB | median PSLR dB | median gain dB | min gain dB | "
-             "grids missing it (deg) |", "|---:|---:|---:|---:|---:|---:|---|"]
+    lines = [(f"Two-way sidelobe caps, fast method, M={c['elements']}, n={c['refractive_index']:.4g}, "
+              f"{res['scan']['grid_deg']:g}-degree grids (theta >= 0; theta < 0 mirrors them), "
+              f"`{res['command']}`."), "",
+             ("| cap dB | grids meeting it | worst PSLR dB | median PSLR dB | median gain dB | min gain dB | "
+              "grids missing it (deg) |"), "|---:|---:|---:|---:|---:|---:|---|"]
     for p in res["per_cap"]:
         miss = ", ".join(f"{a:g}" for a in p["missed_angles_deg"]) or "none"
         lines.append(f"| {p['cap_db']:g} | {p['grids_cap_met']}/{p['grids']} | {p['worst_pslr_db']:.2f} | "
                      f"{p['median_pslr_db']:.2f} | {p['median_mainlobe_gain_db']:.2f} | "
                      f"{p['min_mainlobe_gain_db']:.2f} | {miss} |")
     hard = sorted(res["best_per_grid"], key=lambda r: -r["best_pslr_db"])[:6]
-    lines += ["", f"Lowest PSLR reached on every grid over all caps: worst grid "
-              f"{res['best_achievable_worst_angle_deg']:g} deg at {res['best_achievable_worst_pslr_db']:.2f} dB. "
-              "Hardest grids (best PSLR dB over the caps, main-lobe gain it costs against the loosest cap, "
-              "nearest Rx / Tx twin from the grid centre and nearest twin past endfire, in main-lobe half-widths):", ""]
+    lines += ["", (f"Lowest PSLR reached on every grid over all caps: worst grid "
+                   f"{res['best_achievable_worst_angle_deg']:g} deg at {res['best_achievable_worst_pslr_db']:.2f} dB. "
+                   "Hardest grids (best PSLR dB over the caps, main-lobe gain it costs against the loosest cap, "
+                   "nearest Rx / Tx twin from the grid centre and nearest twin past endfire, in main-lobe "
+                   "half-widths):"), ""]
     for r in hard:
         past = min(r["tx_twin_past_endfire_hw"], r["rx_twin_past_endfire_hw"])
         lines.append(f"- {r['angle_deg']:g} deg: {r['best_pslr_db']:.2f} dB (cap {r['at_cap_db']:g}, "
