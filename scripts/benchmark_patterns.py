@@ -25,6 +25,7 @@ import resource
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -40,8 +41,8 @@ def _cpu() -> float:
     return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
 
 
-PREVIOUS_FAST = {"sweep_iters": 2, "sweep_evals": 8, "tol": 1e-6, "socp_tol": 1e-6, "cap_refine": 0,
-                 "max_sidelobe_db": -16.5}
+PREVIOUS_FAST: dict[str, Any] = {"sweep_iters": 2, "sweep_evals": 8, "tol": 1e-6, "socp_tol": 1e-6, "cap_refine": 0,
+                                  "max_sidelobe_db": -16.5}
 
 
 def _time(fn, config: RHSConfig, scan: ScanConfig, settings, workers: int, angles: np.ndarray) -> dict:
