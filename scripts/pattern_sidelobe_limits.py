@@ -71,9 +71,10 @@ def _commit() -> str:
 
 
 def sweep(config: RHSConfig, scan: ScanConfig, caps: list[float], workers: int,
-          settings: FastSettings) -> dict:
-    """Optimise the theta >= 0 grids once per cap; per-grid rows and per-cap summaries."""
-    angles = scan.angles_deg[scan.angles_deg >= 0]
+          settings: FastSettings, angles: np.ndarray | None = None) -> dict:
+    """Optimise the theta >= 0 grids (or ``angles``) once per cap; per-grid rows and per-cap summaries."""
+    if angles is None:
+        angles = scan.angles_deg[scan.angles_deg >= 0]
     geo = twin_offsets_hw(config, angles)
     rows, per_cap = [], []
     for cap in caps:
@@ -123,7 +124,8 @@ def _best(rows: list[dict], caps: list[float]) -> dict:
 def markdown(res: dict) -> str:
     c = res["config"]
     lines = [(f"Two-way sidelobe caps, fast method, M={c['elements']}, n={c['refractive_index']:.4g}, "
-              f"{res['scan']['grid_deg']:g}-degree grids (theta >= 0; theta < 0 mirrors them), "
+              f"{res['scan']['grid_deg']:g}-degree grids "
+              f"({'the listed subset' if res.get('subset') else 'theta >= 0'}; theta < 0 mirrors them), "
               f"`{res['command']}`."), "",
              ("| cap dB | grids meeting it | worst PSLR dB | median PSLR dB | median gain dB | min gain dB | "
               "grids missing it (deg) |"), "|---:|---:|---:|---:|---:|---:|---|"]
@@ -153,6 +155,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--grid-deg", type=float, default=1.0)
     p.add_argument("--caps", type=float, nargs="+", default=[-16.5, -18.0, -20.0, -22.0],
                    help="sidelobe caps in dB, loosest first (the gain cost is against the first)")
+    p.add_argument("--angles", type=float, nargs="+", default=None,
+                   help="only these grid centres (deg; default every theta >= 0 grid)")
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--out", type=Path, default=ROOT / "results" / "patterns_sidelobe_limits.json")
     a = p.parse_args(argv)
@@ -162,13 +166,16 @@ def main(argv: list[str] | None = None) -> int:
         settings = FastSettings()
         for cap in a.caps:
             FastSettings(max_sidelobe_db=cap)
+        angles = None if a.angles is None else np.asarray(a.angles, dtype=float)
+        if angles is not None and not np.all(np.isin(np.round(angles, 9), np.round(scan.angles_deg, 9))):
+            raise ValueError(f"angles must be grid centres of the {scan.grid_deg:g}-degree scan, got {a.angles}")
     except ValueError as exc:
         print(f"pattern_sidelobe_limits: error: {exc}", file=sys.stderr)
         return 2
     res = {"commit": _commit(), "command": " ".join(["python scripts/pattern_sidelobe_limits.py", *sys.argv[1:]]
                                                     if argv is None else ["python", *argv]),
            "config": config.to_dict(), "scan": scan.to_dict(), "settings": settings.to_dict(), "caps_db": a.caps,
-           **sweep(config, scan, a.caps, a.workers, settings), "load_average_1_5_15": list(os.getloadavg())}
+           "subset": a.angles is not None, **sweep(config, scan, a.caps, a.workers, settings, angles), "load_average_1_5_15": list(os.getloadavg())}
     md = markdown(res)
     print(md)
     a.out.parent.mkdir(parents=True, exist_ok=True)
