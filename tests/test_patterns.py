@@ -32,9 +32,13 @@ def test_shipped_quality_pslr_and_pointing(grid_deg: float) -> None:
     lib = _shipped(grid_deg)
     cfg = lib.rhs_config()
     rep = pattern_report(cfg, lib.tx, lib.rx, lib.angles_deg)
-    assert np.all(rep.pslr_db <= -15.0), rep.angle_deg[rep.pslr_db > -15.0]
+    # no grid worse than the libraries shipped before the fine-grid cap check (worst -15.55 dB)
+    assert np.all(rep.pslr_db <= -15.55), rep.angle_deg[rep.pslr_db > -15.55]
     assert np.all(np.abs(rep.pointing_error_deg) <= grid_deg / 2), rep.pointing_error_deg
     assert np.all(rep.delta > 0)
+    # the sidelobe cap holds on the fine grid except where it is out of reach (edge grids)
+    cap = lib.config["settings"]["max_sidelobe_db"]
+    assert np.mean(rep.pslr_db <= cap + 0.05) >= 0.85, rep.angle_deg[rep.pslr_db > cap + 0.05]
 
 
 def test_two_way_suppresses_both_one_way_twins() -> None:
