@@ -143,7 +143,7 @@ def markdown(res: dict) -> str:
     for r in hard:
         past = min(r["tx_twin_past_endfire_hw"], r["rx_twin_past_endfire_hw"])
         lines.append(f"- {r['angle_deg']:g} deg: {r['best_pslr_db']:.2f} dB (cap {r['at_cap_db']:g}, "
-                     f"gain -{r['gain_cost_db']:.2f} dB); Rx twin {r['rx_twin_offset_hw']:.1f} hw, "
+                     f"gain {-r['gain_cost_db']:+.2f} dB); Rx twin {r['rx_twin_offset_hw']:.1f} hw, "
                      f"Tx twin {r['tx_twin_offset_hw']:.1f} hw, a twin {past:.2f} hw past endfire")
     return "\n".join(lines)
 
