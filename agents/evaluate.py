@@ -76,6 +76,10 @@ def policy_metadata(policy: str | Path) -> dict[str, Any]:
     return meta if isinstance(meta, dict) else {}
 
 
+#: ids whose info carries the SLAM metrics (slam.metrics_info.SlamMetricsInfo)
+SLAM_ENV_IDS = ("rhs-highway-slam-v0", "rhs-paper-v0")
+
+
 def resolve_env(
     policy: str | Path, env_id: str | None = None, env_kwargs: dict | None = None
 ) -> tuple[str, dict[str, Any]]:
@@ -90,6 +94,23 @@ def resolve_env(
     env_id = env_id or meta_env or DEFAULT_ENV
     base = dict(meta.get("env_kwargs") or {}) if env_id == meta_env else {}
     return env_id, {**base, **(env_kwargs or {})}
+
+
+def make_env(env_id: str, kwargs: dict[str, Any], **extra: Any):
+    """``gym.make(env_id, **kwargs)``; on the SLAM ids the info keeps the true and estimated maps
+    (``landmarks_in_info``) for the episode record. Bad kwargs raise ``ValueError``."""
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401  (registers the ids)
+
+    if env_id.split(":")[-1] in SLAM_ENV_IDS:
+        extra.setdefault("landmarks_in_info", True)
+    try:
+        return gym.make(env_id, **{**kwargs, **extra})
+    except TypeError as exc:
+        if "must be" in str(exc):  # a config field of the wrong type: the message names it
+            raise
+        raise ValueError(f"bad env kwargs for {env_id}: {exc}") from None
 
 
 def load_policy(policy: str | Path, env=None, seed: int = 0):
@@ -120,15 +141,47 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
     model = None
     for cls in order:
         try:
-            model = cls.load(path, device="cpu")
+            model = cls.load(path, device="cpu")  # type: ignore[attr-defined]  # PPO / DQN classmethod
             break
-        except Exception as exc:  # noqa: BLE001  (wrong algorithm class for this zip: try the next one)
+        except Exception as exc:
             errors.append(f"{cls.__name__}: {exc}")
     if model is None:
         raise ValueError(f"{path} is not a PPO or DQN model ({'; '.join(errors)})")
     if env is not None:
         check_spaces(model, env, path)
+        model = PointColumnAdapter.wrap(model, env)
     return model
+
+
+class PointColumnAdapter:
+    """A policy trained on fewer ``points`` columns (the first round's x, y, vr, amplitude) run on the
+    wider observation: ``predict`` gets the first columns it was trained on; everything else passes."""
+
+    def __init__(self, model, width: int) -> None:
+        self.model, self.width = model, int(width)
+        self.observation_space = model.observation_space
+        self.action_space = model.action_space
+
+    @classmethod
+    def wrap(cls, model, env):
+        """``model`` itself when its ``points`` width equals the env's, else the adapter."""
+        width = _points_width(model.observation_space)
+        return model if width is None or width == _points_width(env.observation_space) else cls(model, width)
+
+    def predict(self, obs, *args, **kwargs):
+        obs = {**obs, "points": obs["points"][..., : self.width]}
+        return self.model.predict(obs, *args, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self.model, name)
+
+
+def _points_width(space) -> int | None:
+    from gymnasium import spaces
+
+    if isinstance(space, spaces.Dict) and "points" in space.spaces:
+        return int(space.spaces["points"].shape[-1])
+    return None
 
 
 def _space_summary(space) -> str:
@@ -143,12 +196,16 @@ def check_spaces(model, env, path: str | Path = "policy") -> None:
     """Raise ``ValueError`` when the env's observation / action space differ from the policy's."""
     from gymnasium import spaces
 
-    def layout(space):
+    def layout(space, points_width: int | None = None):
         if isinstance(space, spaces.Dict):
-            return {k: layout(v) for k, v in space.spaces.items()}
-        return (type(space).__name__, tuple(getattr(space, "shape", ()) or ()), getattr(space, "n", None))
+            return {k: layout(v, points_width if k == "points" else None) for k, v in space.spaces.items()}
+        shape = tuple(getattr(space, "shape", ()) or ())
+        if points_width is not None and shape:  # fewer point columns than the env: fed by PointColumnAdapter
+            shape = shape[:-1] + (min(shape[-1], points_width),)
+        return (type(space).__name__, shape, getattr(space, "n", None))
 
-    if layout(model.observation_space) != layout(env.observation_space):
+    width = _points_width(model.observation_space)
+    if layout(model.observation_space) != layout(env.observation_space, width):
         raise ValueError(
             f"{path} was trained on observations {_space_summary(model.observation_space)} but the env gives "
             f"{_space_summary(env.observation_space)}: use the env id and env kwargs it was trained on "
@@ -178,11 +235,34 @@ def _action(action) -> Any:
     return int(a) if a.ndim == 0 and np.issubdtype(a.dtype, np.integer) else action
 
 
-def run_episode(env, policy, seed: int, deterministic: bool = True, frames: list | None = None) -> dict[str, Any]:
-    """One episode; returns its return, crash flag, mean speed, SLAM errors and the trajectories."""
+def episode_steps(env) -> int | None:
+    """Steps of a full episode (``duration * policy_frequency``), or None when the env does not say."""
+    try:
+        cfg = env.unwrapped.config
+        return int(round(float(cfg["duration"]) * float(cfg["policy_frequency"])))
+    except (AttributeError, KeyError, TypeError, ValueError):
+        return None
+
+
+def run_episode(
+    env,
+    policy,
+    seed: int,
+    deterministic: bool = True,
+    frames: list | None = None,
+    trace: list | None = None,
+    bar: Any = None,
+) -> dict[str, Any]:
+    """One episode; returns its return, crash flag, mean speed, SLAM errors and the trajectories.
+
+    ``frames`` collects ``env.render()`` per step; ``trace`` the ``(obs, info)`` of the reset and of
+    every step; ``bar`` (a tqdm bar) is advanced by one per step.
+    """
     obs, info = env.reset(seed=seed)
     if frames is not None:
         frames.append(env.render())
+    if trace is not None:
+        trace.append((obs, info))
     total, steps, speeds, pos_err, head_err2 = 0.0, 0, [], [], []
     true_xy, est_xy = [], []
     crashed, done = False, False
@@ -200,8 +280,12 @@ def run_episode(env, policy, seed: int, deterministic: bool = True, frames: list
             est_xy.append(np.asarray(info["estimated_pose"][:2], dtype=float).tolist())
         if frames is not None:
             frames.append(env.render())
+        if trace is not None:
+            trace.append((obs, info))
+        if bar is not None:
+            bar.update(1)
         done = terminated or truncated
-    map_rmse = info.get("map_rmse_m")
+    map_rmse = info.get("map_rmse_m")  # absent until a landmark is matched
     return {
         "seed": seed,
         "return": total,
@@ -252,7 +336,6 @@ def evaluate(
 
     ``env_id`` / ``env_kwargs`` default to the ones saved beside the policy (:func:`resolve_env`).
     """
-    import gymnasium as gym
     from tqdm.auto import tqdm
 
     import rhs_env  # noqa: F401
@@ -260,16 +343,16 @@ def evaluate(
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
     env_id, kwargs = resolve_env(policy, env_id, env_kwargs)
-    try:
-        env = gym.make(env_id, **kwargs)
-    except TypeError as exc:
-        raise ValueError(f"bad env kwargs for {env_id}: {exc}") from None
+    env = make_env(env_id, kwargs)
     try:
         model = load_policy(policy, env, seed)
-        runs = [
-            run_episode(env, model, seed + k, deterministic=deterministic)
-            for k in tqdm(range(episodes), desc="evaluate", unit="episode", disable=not progress)
-        ]
+        per_episode = episode_steps(env)
+        with tqdm(total=episodes * per_episode if per_episode else None, desc="evaluate", unit="step",
+                  disable=not progress) as bar:
+            runs = []
+            for k in range(episodes):
+                bar.set_postfix(episode=f"{k + 1}/{episodes}")
+                runs.append(run_episode(env, model, seed + k, deterministic=deterministic, bar=bar))
     finally:
         env.close()
     return {
@@ -319,7 +402,7 @@ def plot_summary(summary: dict[str, Any], path: str | Path) -> None:
         )
         ax.legend(fontsize=8)
         ax = axes[2]
-        for k, r in enumerate(runs[:10]):
+        for _k, r in enumerate(runs[:10]):
             ax.plot(
                 np.arange(1, len(r["position_error_m"]) + 1), r["position_error_m"], lw=1, label=f"seed {r['seed']}"
             )
@@ -358,7 +441,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rhs_common.validation import check_output_path
+
     try:
+        check_output_path("--out", args.out)
+        check_output_path("--figure", args.figure or Path(args.out).with_suffix(".png"))
+        if args.episodes < 1 or args.episodes > 100_000:
+            raise ValueError(f"--episodes must be in [1, 100000], got {args.episodes}")
+        if not 0 <= args.seed < 2**63:
+            raise ValueError(f"--seed must be an integer in [0, 2**63), got {args.seed}")
         summary = evaluate(
             args.policy,
             args.env,
@@ -368,7 +459,7 @@ def run(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
             deterministic=not args.stochastic,
         )
-    except (ValueError, FileNotFoundError, json.JSONDecodeError) as exc:
+    except (ValueError, TypeError, FileNotFoundError, json.JSONDecodeError) as exc:
         print(f"rhs-slam evaluate: error: {exc}", file=sys.stderr)
         return 2
     out = Path(args.out)

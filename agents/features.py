@@ -1,11 +1,14 @@
 """Feature extractor for padded point sets with masks (a small PointNet).
 
-SB3's default ``CombinedExtractor`` flattens ``points`` (N_max, 4): the policy
+SB3's default ``CombinedExtractor`` flattens ``points`` (N_max, 7): the policy
 then sees slot order, which is arbitrary, and zero padding as real points. Here
 each set key ``K`` with a mask ``K_mask`` goes through a shared per-point MLP and
 a masked max- and mean-pool (permutation invariant, padding ignored); every
 other Box key is flattened. Inputs are scaled to order one first:
-x, y / 50 m, radial velocity / 30 m/s, amplitude -> log10(1 + a) / 3.
+x, y / 50 m, radial velocity / 30 m/s, amplitude -> log10(1 + a) / 3, range and
+angle std -> log10(std) / 6 (std floored at 1e-6), radar index / 3. A point set
+with fewer columns (policies trained on x, y, radial velocity, amplitude) uses the
+first scales only.
 Of the SLAM ``pose`` only the lateral offset y and the heading are used: the
 along-road x grows without bound over an episode (about 1 km in 40 s) and says
 nothing about the traffic around the vehicle.
@@ -19,8 +22,9 @@ import torch
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
-# per-column scale of known set keys (x, y, radial velocity, amplitude) and (x, y)
-SET_SCALES = {"points": (50.0, 50.0, 30.0, None), "landmarks": (50.0, 50.0)}
+# per-column scale of known set keys (x, y, radial velocity, amplitude, range std, angle std, radar)
+# and (x, y): a number divides, None is log10(1 + a) / 3, "log" is log10(max(x, 1e-6)) / 6
+SET_SCALES = {"points": (50.0, 50.0, 30.0, None, "log", "log", 3.0), "landmarks": (50.0, 50.0)}
 BOX_SCALES = {"pose": (100.0, 10.0, np.pi), "pose_std": (5.0, 5.0, 0.5)}
 # columns of a Box key that the extractor uses (default: all)
 BOX_COLUMNS = {"pose": (1, 2)}
@@ -33,7 +37,12 @@ def _scale_set(key: str, x: torch.Tensor) -> torch.Tensor:
     cols = []
     for j, s in enumerate(scales[: x.shape[-1]]):
         col = x[..., j]
-        cols.append(torch.log10(1.0 + col.clamp(min=0.0)) / 3.0 if s is None else col / s)
+        if s is None:
+            cols.append(torch.log10(1.0 + col.clamp(min=0.0)) / 3.0)
+        elif s == "log":
+            cols.append(torch.log10(col.clamp(min=1e-6)) / 6.0)
+        else:
+            cols.append(col / s)
     return torch.stack(cols, dim=-1)
 
 
@@ -49,7 +58,7 @@ class PointSetExtractor(BaseFeaturesExtractor):
         self.point_nets = nn.ModuleDict(
             {
                 k: nn.Sequential(
-                    nn.Linear(observation_space[k].shape[-1], point_dim),
+                    nn.Linear(_shape(observation_space[k])[-1], point_dim),
                     nn.ReLU(),
                     nn.Linear(point_dim, point_dim),
                     nn.ReLU(),
@@ -62,7 +71,7 @@ class PointSetExtractor(BaseFeaturesExtractor):
 
     @staticmethod
     def _box_width(key: str, space: gym.spaces.Space) -> int:
-        width = int(np.prod(space.shape))
+        width = int(np.prod(_shape(space)))
         cols = BOX_COLUMNS.get(key)
         return len(cols) if cols is not None and space.shape == (len(BOX_SCALES.get(key, ())),) else width
 
@@ -94,3 +103,10 @@ class PointSetExtractor(BaseFeaturesExtractor):
 
 
 FEATURE_EXTRACTORS = {"point_set": PointSetExtractor}
+
+
+def _shape(space: gym.spaces.Space) -> tuple[int, ...]:
+    """The shape of a Box / MultiBinary space (every space this extractor reads has one)."""
+    if space.shape is None:
+        raise ValueError(f"space {space} has no shape")
+    return space.shape

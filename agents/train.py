@@ -82,9 +82,32 @@ def _resolve_schedules(hp: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _resolve_policy_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
+def eval_policy_kwargs(text: str) -> dict[str, Any]:
+    """A zoo-style ``policy_kwargs`` string -> dict, evaluated with the names rl-baselines3-zoo offers.
+
+    rl-baselines3-zoo ``eval``s such strings in its own module (``importlib``, ``nn``, ``th``
+    in scope); the same string works here, with nothing else in scope (no builtins but ``dict``).
+    """
+    import importlib
+
+    import torch
+    from torch import nn
+
+    names = {"dict": dict, "importlib": importlib, "nn": nn, "th": torch}
+    try:
+        value = eval(text, {"__builtins__": {}}, names)
+    except Exception as exc:
+        raise ValueError(f"policy_kwargs: cannot evaluate {text!r}: {exc}") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"policy_kwargs must evaluate to a dict, got {type(value).__name__}")  # noqa: TRY004
+    return value
+
+
+def _resolve_policy_kwargs(kwargs: dict[str, Any] | str) -> dict[str, Any]:
     from agents.features import FEATURE_EXTRACTORS
 
+    if isinstance(kwargs, str):
+        kwargs = eval_policy_kwargs(kwargs)
     kwargs = dict(kwargs or {})
     name = kwargs.get("features_extractor_class")
     if isinstance(name, str):
@@ -92,6 +115,19 @@ def _resolve_policy_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
             raise ValueError(f"features_extractor_class must be one of {list(FEATURE_EXTRACTORS)}, got {name!r}")
         kwargs["features_extractor_class"] = FEATURE_EXTRACTORS[name]
     return kwargs
+
+
+def check_train_args(timesteps: int, n_envs: int, seed: int, eval_freq: int, eval_episodes: int,
+                     checkpoint_freq: int) -> None:
+    """Bounds that keep a training run finite (``ValueError`` / ``TypeError`` naming the argument)."""
+    from rhs_common.validation import check_int
+
+    check_int("timesteps", timesteps, 1, 10**9)
+    check_int("n_envs", n_envs, 1, 256)
+    check_int("seed", seed, 0, 2**32 - 1)  # numpy's legacy seeding inside stable-baselines3
+    check_int("eval_freq", eval_freq, 0, 10**9)
+    check_int("eval_episodes", eval_episodes, 1, 10_000)
+    check_int("checkpoint_freq", checkpoint_freq, 0, 10**9)
 
 
 def worker_env_id(env_id: str) -> str:
@@ -104,14 +140,14 @@ def worker_env_id(env_id: str) -> str:
         return env_id
     spec = gym.registry.get(env_id)
     entry = spec.entry_point if spec is not None else None
-    if isinstance(entry, str) and entry.startswith("rhs_env."):
+    if isinstance(entry, str) and entry.startswith(("rhs_env.", "slam.")):  # the ids rhs_env registers
         return f"rhs_env:{env_id}"
     return env_id
 
 
 #: imported once by the forkserver, so each worker forked from it starts with them loaded
 #: (highway-env alone imports matplotlib and pygame: seconds per worker otherwise)
-FORKSERVER_PRELOAD = ("rhs_env", "rhs_env.envs", "rhs_env.registration", "rhs_env.slam_wrapper", "rhs_env.wrappers")
+FORKSERVER_PRELOAD = ("rhs_env", "rhs_env.envs", "rhs_env.registration", "rhs_env.wrappers", "slam.envs")
 
 
 def _preload_forkserver() -> None:
@@ -225,17 +261,26 @@ def train(
     checkpoint_freq: int = 5000,
     progress: bool = True,
     torch_threads: int | None = 1,
+    resume: bool = False,
 ) -> dict[str, Any]:
     """Train ``algo`` on ``env_id`` for ``timesteps`` steps; returns the summary written to ``out/train.json``.
 
     ``timesteps=None`` takes ``n_timesteps`` from the YAML. ``env_kwargs`` are
     merged over the YAML's. ``eval_freq`` / ``checkpoint_freq`` count env steps
-    over all envs (0 disables). ``torch_threads`` sets torch's intra-op
+    over all envs (0 disables). ``resume`` continues from the checkpoint with the
+    most steps in ``out/checkpoints`` (see :mod:`agents.resume`; SIGTERM / SIGINT
+    stop a run there, ``summary["interrupted"]`` is then True). ``torch_threads`` sets torch's intra-op
     threads in this process (1 by default: the envs need the other cores);
     worker processes get ``OMP_NUM_THREADS=1`` unless it is set already.
     """
     from stable_baselines3 import DQN, PPO
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
+    from stable_baselines3.common.callbacks import (
+        CallbackList,
+        CheckpointCallback,
+        EvalCallback,
+    )
+
+    from agents.resume import StopOnSignal, latest_checkpoint, load_checkpoint, save_checkpoint
 
     hp = load_hyperparams(algo, env_id, hyperparams)
     policy = hp.pop("policy")
@@ -247,6 +292,7 @@ def train(
     n_envs = int(n_envs if n_envs is not None else yaml_envs)
     if n_envs < 1:
         raise ValueError(f"n_envs must be >= 1, got {n_envs}")
+    check_train_args(timesteps, n_envs, seed, eval_freq, eval_episodes, checkpoint_freq)
     env_kwargs = {**(hp.pop("env_kwargs", None) or {}), **(env_kwargs or {})}
     hp["policy_kwargs"] = _resolve_policy_kwargs(hp.get("policy_kwargs", {}))
     hp_record = {k: v for k, v in load_hyperparams(algo, env_id, hyperparams).items() if k not in META_KEYS}
@@ -271,7 +317,14 @@ def train(
         tb = str(out / "tb") if _tensorboard_available() else None
         if tb is None:
             print("rhs-slam train: tensorboard is not installed; no TensorBoard logs", file=sys.stderr)
-        model = cls(policy, venv, seed=seed, verbose=0, tensorboard_log=tb, device="cpu", **hp)
+        found = latest_checkpoint(out, algo) if resume else None
+        if found is not None:
+            schedules = {k: v for k, v in hp.items() if k in ("learning_rate", "clip_range")}
+            model = load_checkpoint(cls, found[0], venv, custom_objects=schedules, tensorboard_log=tb)
+            print(f"rhs-slam train: resuming from {found[0]} ({model.num_timesteps} steps)", file=sys.stderr)
+        else:
+            model = cls(policy, venv, seed=seed, verbose=0, tensorboard_log=tb, device="cpu", **hp)
+        done = int(model.num_timesteps)
         TqdmCallback, CrashRateCallback = _callbacks_module()
         callbacks: list = [CrashRateCallback()]
         eval_cb = None
@@ -294,14 +347,23 @@ def train(
                 )
             )
         if progress:
-            callbacks.append(TqdmCallback(timesteps))
+            callbacks.append(TqdmCallback(max(0, timesteps - done)))
+        stopper = StopOnSignal()
+        callbacks.append(stopper)
         t0 = time.perf_counter()
         with warnings.catch_warnings():
             # the eval env is a DummyVecEnv, the training env a SubprocVecEnv: same envs, on purpose
             warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
-            model.learn(total_timesteps=timesteps, callback=CallbackList(callbacks), tb_log_name=algo)
-        wall = time.perf_counter() - t0
-        model.save(out / "model.zip")
+            if timesteps > done:
+                model.learn(total_timesteps=timesteps - done, callback=CallbackList(callbacks), tb_log_name=algo,
+                            reset_num_timesteps=done == 0)
+        wall = max(time.perf_counter() - t0, 1e-9)
+        if stopper.stopped:
+            path = save_checkpoint(model, out, algo)
+            print(f"rhs-slam train: interrupted at {model.num_timesteps} steps, saved {path}; "
+                  "run the same command with --resume to continue", file=sys.stderr)
+        else:
+            model.save(out / "model.zip")
     finally:
         venv.close()
         if eval_env is not None:
@@ -326,7 +388,11 @@ def train(
         },
         "best_eval_mean_return": float(eval_cb.best_mean_reward) if eval_cb is not None and eval_cb.n_calls else None,
         "model": str(out / "model.zip"),
+        "resumed_from_steps": done,
+        "interrupted": stopper.stopped,
     }
+    if stopper.stopped:
+        return summary
     if eval_cb is not None and eval_cb.best_mean_reward == float("-inf"):
         summary["best_eval_mean_return"] = None
     text = json.dumps(summary, indent=2)
@@ -352,10 +418,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--eval-episodes", type=int, default=3)
     parser.add_argument("--checkpoint-freq", type=int, default=5000, help="env steps between checkpoints (0: none)")
     parser.add_argument("--no-progress", action="store_true")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue from the latest checkpoint in OUT/checkpoints (after SIGTERM / SIGINT / a crash)")
 
 
 def run(args: argparse.Namespace) -> int:
+    from rhs_common.validation import check_output_path
+
     try:
+        check_output_path("--out", args.out, directory=True)
         env_kwargs = json.loads(args.env_kwargs)
         if not isinstance(env_kwargs, dict):
             raise ValueError("--env-kwargs must be a JSON object")  # noqa: TRY004  (reported as a usage error)
@@ -372,9 +443,10 @@ def run(args: argparse.Namespace) -> int:
             eval_episodes=args.eval_episodes,
             checkpoint_freq=args.checkpoint_freq,
             progress=not args.no_progress,
+            resume=args.resume,
         )
-    except (ValueError, json.JSONDecodeError) as exc:
+    except (ValueError, TypeError, json.JSONDecodeError) as exc:
         print(f"rhs-slam train: error: {exc}", file=sys.stderr)
         return 2
     print(json.dumps(summary, indent=2))
-    return 0
+    return 143 if summary.get("interrupted") else 0  # 128 + SIGTERM: the run is not finished

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from rhs_env.validation import check_choice, check_int, check_range
+from rhs_common.validation import check_int, check_range, check_types
 
 SPEED_OF_LIGHT = 299_792_458.0  # m/s
 
@@ -63,6 +63,7 @@ class RHSConfig:
     carrier_hz: float = 24.125e9
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_int("elements", self.elements, 2, 4096)
         check_range("spacing_wl", self.spacing_wl, 0.0, 2.0, low_open=True)
         check_range("refractive_index", self.refractive_index, 1.0, 10.0)
@@ -117,6 +118,10 @@ class RHSConfig:
         return asdict(self)
 
 
+#: most beam slots I per sweep (bounds ``ScanConfig.grid_deg`` below by ``sector_deg / MAX_SLOTS``)
+MAX_SLOTS = 360
+
+
 @dataclass(frozen=True)
 class ScanConfig:
     """The beam sweep of one radar: I slots of width ``grid_deg`` covering ``sector_deg``.
@@ -128,8 +133,11 @@ class ScanConfig:
     sector_deg: float = 90.0
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_range("sector_deg", self.sector_deg, 0.0, 180.0, low_open=True, high_open=True)
-        check_range("grid_deg", self.grid_deg, 0.0, self.sector_deg, low_open=True)
+        # at most MAX_SLOTS beams per sweep (0.25 deg over 90 deg): the pattern library
+        # build and every scan cost grow with I; 0.01 deg would be a 20-40 h build
+        check_range("grid_deg", self.grid_deg, self.sector_deg / MAX_SLOTS, self.sector_deg)
         ratio = self.sector_deg / self.grid_deg
         if abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio):
             raise ValueError(
@@ -272,47 +280,6 @@ def phased_array(config: RHSConfig, angles_deg: np.ndarray, elements: int | None
     pos = 0.5 * np.arange(m_pa)
     w = np.conj(steering(pos, np.deg2rad(angles_deg)))
     return ArrayAntenna("phased", pos, w, w.copy(), angles_deg, config.wavelength, meta={"elements": m_pa})
-
-
-def make_antenna(
-    kind: str,
-    config: RHSConfig | None = None,
-    scan: ScanConfig | None = None,
-    rng: np.random.Generator | None = None,
-    patterns: tuple[np.ndarray, np.ndarray] | None = None,
-) -> ArrayAntenna:
-    """Build an antenna by name: ``rhs`` | ``phased`` | ``random`` | ``hologram``.
-
-    ``rhs`` uses ``patterns=(tx_psi, rx_psi)`` when given, else the pattern
-    library for (config, scan) from :func:`rhs_env.patterns.library.get_library`
-    (shipped, or built once into the user cache). ``random`` draws psi uniformly
-    in [0, 1] per slot from ``rng`` (required for reproducibility).
-    """
-    check_choice("antenna", kind, ANTENNA_KINDS)
-    config = config or RHSConfig()
-    scan = scan or ScanConfig()
-    angles = scan.angles_deg
-    if kind == "phased":
-        return phased_array(config, angles)
-    if kind == "hologram":
-        return rhs_antenna(
-            config,
-            hologram_pattern(config, angles, config.tx_feed),
-            hologram_pattern(config, angles, config.rx_feed),
-            angles,
-            name="hologram",
-        )
-    if kind == "random":
-        if rng is None:
-            raise ValueError("antenna 'random' needs rng (a numpy Generator) so episodes are reproducible")
-        shape = (angles.size, config.elements)
-        return rhs_antenna(config, rng.uniform(0, 1, shape), rng.uniform(0, 1, shape), angles, name="random")
-    if patterns is None:
-        from rhs_env.patterns.library import get_library
-
-        lib = get_library(config, scan)
-        patterns = (lib.tx, lib.rx)
-    return rhs_antenna(config, patterns[0], patterns[1], angles, name="rhs")
 
 
 def config_json(*parts: dict[str, Any]) -> str:

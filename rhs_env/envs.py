@@ -30,20 +30,75 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from highway_env import utils
 from highway_env.envs.highway_env import HighwayEnv
 from highway_env.road.lane import LineType, StraightLane
 from highway_env.road.road import Road, RoadNetwork
 
-from rhs_env.scene import LandmarkConfig, Landmarks, place_roadside_landmarks, world_pose
-from rhs_env.validation import check_int, check_range
+from rhs_common.validation import check_bool, check_choice, check_int, check_range
+from rhs_env.scene import (
+    LandmarkConfig,
+    Landmarks,
+    place_roadside_landmarks,
+    world_pose,
+)
 
 #: the paper's obstacles (world frame, m) and start pose (SPEC section 7)
 PAPER_OBSTACLES = ((10.0, 65.0), (25.0, 10.0), (30.0, 65.0), (35.0, 10.0), (50.0, 65.0))
 PAPER_START = (0.0, 37.5)
 
 LANDMARK_COLOR = (60, 220, 60)
+
+
+def check_config_types(config: Mapping[str, Any], defaults: Mapping[str, Any]) -> None:
+    """``TypeError`` naming the first config key whose value's kind differs from its default's.
+
+    Applies to the scalar keys: a default bool needs a bool; a default number
+    (int or float) a real number, finite (``duration="40"`` or ``collision_reward=None``
+    would otherwise fail deep inside highway-env). The range checks follow in
+    ``_validate_config``.
+    """
+    for key, default in defaults.items():
+        value = config.get(key, default)
+        if isinstance(default, bool):
+            check_bool(key, value)
+        elif isinstance(default, (int, float)):
+            check_range(key, value)  # a finite number; the ranges of the keys we use follow
+
+
+def check_action(space: gym.spaces.Space, action: Any) -> Any:
+    """``action`` as the env's action space takes it, or a clear error naming the space.
+
+    ``Discrete(n)``: an integer (Python or numpy, or a one-element integer array) in
+    ``[start, start + n - 1]``; other types raise ``TypeError`` (``None``, ``"a"``,
+    ``2.5``), other values ``ValueError`` (``7``, ``-1``). ``Box``: a finite array of the
+    space's shape. Other spaces: ``space.contains(action)``.
+    """
+    if isinstance(space, gym.spaces.Discrete):
+        a = action
+        if isinstance(a, np.ndarray) and a.size == 1 and a.ndim <= 1:
+            a = a.reshape(())[()]
+        lo, hi = int(space.start), int(space.start + space.n - 1)
+        if not isinstance(a, (int, np.integer)) or isinstance(a, (bool, np.bool_)):
+            raise TypeError(f"action must be an integer in [{lo}, {hi}] (action space {space}), "
+                            f"got {action!r} ({type(action).__name__})")
+        if not lo <= int(a) <= hi:
+            raise ValueError(f"action must be in [{lo}, {hi}] (action space {space}), got {action!r}")
+        return int(a)
+    if isinstance(space, gym.spaces.Box):
+        try:
+            a = np.asarray(action, dtype=float)
+        except (TypeError, ValueError):
+            raise TypeError(f"action must be an array of shape {space.shape} (action space {space}), "
+                            f"got {action!r} ({type(action).__name__})") from None
+        if a.shape != space.shape or not np.all(np.isfinite(a)):
+            raise ValueError(f"action must be a finite array of shape {space.shape} (action space {space}), got {action!r}")
+        return a
+    if not space.contains(action):
+        raise ValueError(f"action {action!r} is not in the action space {space}")
+    return action
 
 
 class RHSHighwayEnv(HighwayEnv):
@@ -74,9 +129,17 @@ class RHSHighwayEnv(HighwayEnv):
         return config
 
     def __init__(self, config: dict | None = None, render_mode: str | None = None, **kwargs: Any) -> None:
+        if render_mode is not None:
+            check_choice("render_mode", render_mode, tuple(self.metadata["render_modes"]))
+        if config is not None and not isinstance(config, Mapping):
+            raise TypeError(f"config must be a dict of config keys, got {config!r} ({type(config).__name__})")
         merged = dict(config or {})
         merged.update(kwargs)
         super().__init__(merged, render_mode)
+
+    def step(self, action: Any):
+        """highway-env's step after :func:`check_action` (a clear error naming the action space)."""
+        return super().step(check_action(self.action_space, action))
 
     # ---- configuration
     def configure(self, config: dict | None) -> None:
@@ -105,6 +168,10 @@ class RHSHighwayEnv(HighwayEnv):
 
     def _validate_config(self) -> None:
         c = self.config
+        check_config_types(c, self.default_config())
+        check_range("screen_width", c["screen_width"], 1, 4096)
+        check_range("screen_height", c["screen_height"], 1, 4096)
+        check_range("scaling", c["scaling"], 0.0, 1000.0, low_open=True)
         check_int("lanes_count", c["lanes_count"], 1, 20)
         check_int("vehicles_count", c["vehicles_count"], 0, 500)
         check_int("controlled_vehicles", c["controlled_vehicles"], 1, 10)
@@ -142,23 +209,24 @@ class RHSHighwayEnv(HighwayEnv):
             return super().render()
         from highway_env.envs.common.graphics import EnvViewer
 
-        if self.viewer is None:
-            self.viewer = EnvViewer(self)
-            if self.viewer.offscreen:
+        viewer: Any = self.viewer  # type: ignore[has-type]  # highway-env's EnvViewer, made on the first render
+        if viewer is None:
+            viewer = self.viewer = EnvViewer(self)
+            if viewer.offscreen:
                 # highway-env disables its viewer under SDL_VIDEODRIVER=dummy, but
                 # offscreen drawing needs no display: keep rgb_array working headless.
-                self.viewer.enabled = True
+                viewer.enabled = True
         self.enable_auto_render = True
-        self.viewer.display()
+        viewer.display()
         self._draw_landmarks()
-        if not self.viewer.offscreen:
+        if not viewer.offscreen:
             import pygame
 
-            self.viewer.screen.blit(self.viewer.sim_surface, (0, 0))
+            viewer.screen.blit(viewer.sim_surface, (0, 0))
             pygame.display.flip()
-            self.viewer.handle_events()
+            viewer.handle_events()
         if self.render_mode == "rgb_array":
-            return self.viewer.get_image()
+            return viewer.get_image()
         return None
 
     def _draw_landmarks(self) -> None:
@@ -281,4 +349,4 @@ class RHSPaperEnv(RHSHighwayEnv):
             self.road.vehicles.append(v)
 
 
-__all__ = ["PAPER_OBSTACLES", "PAPER_START", "RHSHighwayEnv", "RHSPaperEnv"]
+__all__ = ["PAPER_OBSTACLES", "PAPER_START", "RHSHighwayEnv", "RHSPaperEnv", "check_action", "check_config_types"]

@@ -9,7 +9,7 @@ from typing import Any
 
 from threadpoolctl import threadpool_limits
 
-from rhs_env.validation import check_int
+from rhs_common.validation import check_int
 
 
 def _grid_task(args: tuple[Callable[..., Any], tuple[Any, ...]]) -> Any:

@@ -86,6 +86,9 @@ class PointCloud:
         radar: (N,) int, index of the radar (0 front, 1 left, 2 rear, 3 right).
         range_m: (N,) range from the radar, m.
         angle_rad: (N,) angle from the radar's boresight, rad (CCW positive).
+        range_std_m: (N,) range standard deviation, m (CRB at the point's SNR + floor,
+            :mod:`rhs_env.uncertainty`).
+        angle_std_rad: (N,) angle standard deviation, rad (idem).
         stage_times: wall time per stage, s: ``synthesis``, ``range_cfar``, ``omp``.
     """
 
@@ -93,6 +96,8 @@ class PointCloud:
     radar: np.ndarray
     range_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
     angle_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    range_std_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    angle_std_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
     stage_times: dict = field(default_factory=dict)
 
     def __len__(self) -> int:
@@ -124,6 +129,50 @@ def range_fft(y: np.ndarray, window: np.ndarray, zero_pad: int, bins: slice | No
     return out if bins is None else out[..., bins]
 
 
+@functools.lru_cache(maxsize=32)
+def window_exponentials(name: str, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The window as a short sum of complex exponentials, ``w[n] = sum_m c_m exp(j 2 pi mu_m n)``.
+
+    Every window of :data:`WINDOWS` is a cosine sum: hann, hamming and blackman
+    (scipy's symmetric forms) with period N - 1, taylor with period N, boxcar a
+    constant; the coefficients are fitted by least squares on the frequencies
+    ``mu = m / (N - 1)`` (else ``m / N``), |m| <= 4, and the fit is checked exact
+    (max error < 1e-6 of the peak: the float32 rounding of the window used by
+    the IQ path). Returns (mu, c) for :func:`tone_spectra`.
+    """
+    w = make_window(name, n).astype(float)
+    for period in (n - 1, n):
+        mu = np.arange(-4, 5) / period
+        basis = np.exp(2j * np.pi * np.arange(n)[:, None] * mu[None, :])
+        coef = np.linalg.lstsq(basis, w.astype(complex), rcond=None)[0]
+        keep = np.abs(coef) > 1e-6 * np.abs(coef).max()  # the window's own terms; the rest fits float32 rounding
+        mu, coef = mu[keep], np.linalg.lstsq(basis[:, keep], w.astype(complex), rcond=None)[0]
+        if np.abs(basis[:, keep] @ coef - w).max() <= 1e-6 * np.abs(w).max():
+            return mu, coef
+    raise ValueError(f"window {name!r} is not a short cosine sum of period N - 1 or N")
+
+
+def tone_spectra(name: str, n: int, zero_pad: int, n_bins: int, freq: np.ndarray) -> np.ndarray:
+    """Windowed, zero-padded spectra of unit tones ``exp(j 2 pi f_p n)``, bins ``k < n_bins``: (P, n_bins) complex128.
+
+    ``S_p[k] = sum_n w[n] exp(j 2 pi (f_p - k / (Z N)) n) = sum_m c_m D(k / (Z N) - f_p - mu_m)``
+    in closed form, with ``w[n] = sum_m c_m exp(j 2 pi mu_m n)`` (:func:`window_exponentials`)
+    and the Dirichlet kernel ``D(x) = sum_{n<N} exp(-j 2 pi x n) = exp(-j pi x (N-1)) sin(pi N x) / sin(pi x)``
+    (``N cos(pi N x) / cos(pi x)`` where ``sin(pi x) = 0``). ``freq`` in cycles per sample.
+    With ``e(x) = exp(j pi x)`` separable in the bin and the tone,
+    ``e(x) = e(k / (Z N)) e(-f_p - mu_m)``, no transcendental function is taken per (tone, bin).
+    """
+    mu, coef = window_exponentials(name, n)
+    k = np.arange(n_bins)[None, :, None] / (zero_pad * n)
+    fm = (np.asarray(freq, float)[:, None] + mu[None, :])[:, None, :]  # f + mu, (P, 1, J)
+    e1 = np.exp(1j * np.pi * k) * np.exp(-1j * np.pi * fm)  # e(x)
+    en = np.exp(1j * np.pi * n * k) * np.exp(-1j * np.pi * n * fm)  # e(N x)
+    s1, sn = e1.imag, en.imag
+    near = np.abs(s1) < 1e-12
+    ratio = np.where(near, n * en.real / np.where(near, e1.real, 1.0), sn / np.where(near, 1.0, s1))
+    return np.sum(coef * np.conj(en) * e1 * ratio, axis=-1)  # exp(-j pi x (N - 1)) = e(N x)^* e(x)
+
+
 def cfar_alpha(pfa: float, looks: int, train_cells: int) -> float:
     """CA-CFAR multiplier for Gamma(looks) cells: ``F^{-1}(1 - pfa; 2 looks, 2 train_cells looks)``."""
     return float(stats.f.isf(pfa, 2 * looks, 2 * train_cells * looks))
@@ -148,6 +197,7 @@ def ca_cfar_threshold(profile: np.ndarray, guard: int, train: int, stride: int, 
     return alpha * np.clip(mean, floor, cap)
 
 
+@functools.lru_cache(maxsize=64)  # a pure function of its scalars; ~5 s of quadrature per call
 def os_cfar_alpha(pfa: float, looks: int, train_cells: int, rank: int) -> float:
     """OS-CFAR multiplier: threshold ``alpha * Y_(rank)`` (rank-th smallest of the training cells).
 
@@ -212,9 +262,8 @@ def local_maxima(profile: np.ndarray, threshold: np.ndarray) -> np.ndarray:
 def parabolic_offset(ym: np.ndarray, y0: np.ndarray, yp: np.ndarray) -> np.ndarray:
     """Vertex offset in [-0.5, 0.5] of the parabola through (-1, ym), (0, y0), (1, yp)."""
     den = ym - 2.0 * y0 + yp
-    with np.errstate(divide="ignore", invalid="ignore"):
-        d = np.where(den < 0, 0.5 * (ym - yp) / den, 0.0)
-    return np.clip(np.nan_to_num(d), -0.5, 0.5)
+    d = np.divide(0.5 * (ym - yp), den, out=np.zeros(np.shape(den)), where=den < 0)  # 0 where not concave
+    return np.minimum(np.maximum(d, -0.5), 0.5)
 
 
 # --------------------------------------------------------------------------- angle
@@ -243,9 +292,7 @@ class AngleDictionary:
         n = round(2 * half / step)
         self.step = step
         self.candidates = -half + (np.arange(-margin, n + margin + 1)) * step  # rad, (I_c,)
-        self._wt = (antenna.tx_weights / np.linalg.norm(antenna.tx_weights, axis=1, keepdims=True)).T  # (M, I)
-        self._wr = (antenna.rx_weights / np.linalg.norm(antenna.rx_weights, axis=1, keepdims=True)).T
-        self._x = 2.0 * np.pi * antenna.positions_wl
+        self._set_weights(antenna)
         self.H = self.atoms(self.candidates)[0]  # (I, I_c) complex128
         self.norms = np.linalg.norm(self.H, axis=0)
         self.Hn = (self.H / self.norms).astype(np.complex64)  # unit-norm columns
@@ -255,44 +302,63 @@ class AngleDictionary:
     def slots(self) -> int:
         return self.H.shape[0]
 
+    def _set_weights(self, antenna: ArrayAntenna) -> None:
+        """Power-normalised Tx and Rx weights side by side, ``[w_T | w_R]`` (M, 2 I): one product gives t and r."""
+        self.antenna = antenna
+        wt = (antenna.tx_weights / np.linalg.norm(antenna.tx_weights, axis=1, keepdims=True)).T  # (M, I)
+        wr = (antenna.rx_weights / np.linalg.norm(antenna.rx_weights, axis=1, keepdims=True)).T
+        self._w2 = np.ascontiguousarray(np.concatenate([wt, wr], axis=1))
+        self._x = 2.0 * np.pi * antenna.positions_wl
+
     def atoms(self, theta: np.ndarray, order: int = 0) -> list[np.ndarray]:
-        """``[h, dh/dtheta, d2h/dtheta2][:order + 1]``, each (I,) + theta.shape, complex128."""
+        """``[h, dh/dtheta, d2h/dtheta2][:order + 1]``, each (I,) + theta.shape, complex128.
+
+        The steering vector and its derivatives are stacked and multiplied by
+        ``[w_T | w_R]`` in one matrix product: rows ``[a, a g1, a g2]`` give ``t, r``
+        and their derivatives, with ``g1 = j x cos(theta)`` and ``g2 = g1^2 - j x sin(theta)``.
+        """
         th = np.asarray(theta, dtype=float)
         shp = th.shape
         th = th.reshape(-1)
+        n_t, n_i = th.size, self._w2.shape[1] // 2
         a = steering(self.antenna.positions_wl, th)  # (T, M)
-        t = a @ self._wt  # (T, I)
-        r = a @ self._wr
-        out = [r * t]
-        if order >= 1:
-            g1 = 1j * self._x[None, :] * np.cos(th)[:, None]  # (T, M)
-            t1, r1 = (a * g1) @ self._wt, (a * g1) @ self._wr
-            out.append(r1 * t + r * t1)
-            if order >= 2:
-                g2 = g1 ** 2 - 1j * self._x[None, :] * np.sin(th)[:, None]
-                t2, r2 = (a * g2) @ self._wt, (a * g2) @ self._wr
-                out.append(r2 * t + 2 * r1 * t1 + r * t2)
+        if order == 0:
+            tr = a @ self._w2
+            return [(tr[:, n_i:] * tr[:, :n_i]).T.reshape((-1,) + shp)]
+        g1 = 1j * self._x[None, :] * np.cos(th)[:, None]  # (T, M)
+        rows = [a, a * g1]
+        if order >= 2:
+            rows.append(a * (g1 ** 2 - 1j * self._x[None, :] * np.sin(th)[:, None]))
+        tr = (np.concatenate(rows, axis=0) @ self._w2).reshape(len(rows), n_t, 2 * n_i)
+        t, r = tr[..., :n_i], tr[..., n_i:]
+        out = [r[0] * t[0], r[1] * t[0] + r[0] * t[1]]
+        if order >= 2:
+            out.append(r[2] * t[0] + 2 * r[1] * t[1] + r[0] * t[2])
         return [o.T.reshape((-1,) + shp) for o in out]
 
 
 def _newton_refine(dic: AngleDictionary, theta: np.ndarray, resid: np.ndarray, steps: int = 2) -> np.ndarray:
-    """Newton steps maximising ``f = |h^H r|^2 / ||h||^2`` per row; theta (D,), resid (D, I)."""
+    """Newton steps maximising ``f = |h^H r|^2 / ||h||^2`` per row; theta (D,), resid (D, I).
+
+    With ``g = h^H r``, ``G = |g|^2`` and ``n = ||h||^2`` (and their theta
+    derivatives from ``h', h''``): ``f' = (G' n - G n') / n^2``,
+    ``f'' = (G'' n^2 - G n n'' - 2 G' n n' + 2 G n'^2) / n^3``; a step
+    ``-f' / f''`` where f is concave, clipped to half a candidate spacing.
+    """
+    half = 0.5 * dic.step
     for _ in range(steps):
-        h, h1, h2 = (x.T for x in dic.atoms(theta, order=2))  # (D, I)
-        g = np.einsum("di,di->d", h.conj(), resid)
-        g1 = np.einsum("di,di->d", h1.conj(), resid)
-        g2 = np.einsum("di,di->d", h2.conj(), resid)
-        n = np.einsum("di,di->d", h.conj(), h).real
-        n1 = 2 * np.einsum("di,di->d", h1.conj(), h).real
-        n2 = 2 * np.einsum("di,di->d", h2.conj(), h).real + 2 * np.einsum("di,di->d", h1.conj(), h1).real
-        G = np.abs(g) ** 2
+        hs = np.stack(dic.atoms(theta, order=2), axis=0).transpose(0, 2, 1).conj()  # (3, D, I): conj h, h', h''
+        g, g1, g2 = np.einsum("kdi,di->kd", hs, resid)
+        hc = hs[0].conj()
+        n, n1, n2a = np.einsum("kdi,di->kd", hs, hc).real  # ||h||^2, h'^H h, h''^H h
+        n1, n2 = 2 * n1, 2 * n2a + 2 * np.einsum("di,di->d", hs[1], hs[1].conj()).real
+        G = g.real ** 2 + g.imag ** 2
         G1 = 2 * np.real(np.conj(g) * g1)
-        G2 = 2 * np.abs(g1) ** 2 + 2 * np.real(np.conj(g) * g2)
+        G2 = 2 * (g1.real ** 2 + g1.imag ** 2) + 2 * np.real(np.conj(g) * g2)
         f1 = (G1 * n - G * n1) / n ** 2
         f2 = (G2 * n ** 2 - G * n * n2 - 2 * G1 * n * n1 + 2 * G * n1 ** 2) / n ** 3
-        with np.errstate(divide="ignore", invalid="ignore"):
-            delta = np.where(f2 < 0, -f1 / f2, 0.0)
-        theta = theta + np.clip(np.nan_to_num(delta), -0.5 * dic.step, 0.5 * dic.step)
+        delta = np.divide(-f1, f2, out=np.zeros_like(f1), where=f2 < 0)
+        theta = theta + np.minimum(np.maximum(delta, -half), half)
     return theta
 
 
@@ -397,14 +463,24 @@ def _fftfreq(n: int) -> np.ndarray:
     return np.fft.fftfreq(n)
 
 
+@functools.lru_cache(maxsize=16)
+def _dtft_kernel(n_t: int, nfft: int, half: int) -> tuple[np.ndarray, np.ndarray]:
+    """Frequencies ``w_j = 2 pi j / nfft``, ``|j| <= half``, and ``exp(-j w_j t)`` (n_t, 2 half + 1), complex64."""
+    w = 2 * np.pi * np.arange(-half, half + 1) / nfft
+    return w, np.exp(-1j * np.outer(np.arange(n_t), w)).astype(np.complex64)
+
+
 def _doppler_grid_refine(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: np.ndarray) -> np.ndarray:
     """Residual chirp-phase rate d_omega (D,) maximising ``|sum_ic conj(h_i) r_ic exp(-j d_omega t_ic)|``.
 
     h (D, I) atoms, r (D, I, C) Doppler-compensated data, tgrid (I, C) integer
     chirp times (units of T_c), span (D,) half-width of the search, rad/chirp.
-    The sum is the DTFT of ``q_t = sum_{t_ic = t} conj(h_i) r_ic``, sampled by a
-    zero-padded FFT (>= 4x oversampled) and refined by a parabola through the
-    log-peak; the maximum is taken within ``|d_omega| <= span``.
+    The sum is the DTFT of ``q_t = sum_{t_ic = t} conj(h_i) r_ic``, sampled on the
+    grid ``2 pi k / nfft`` (``nfft`` >= 4x oversampled) and refined by a parabola
+    through the log-peak; the maximum is taken within ``|d_omega| <= span``. A
+    narrow search (the refinements: a few dozen grid points) evaluates the DTFT
+    directly on those points (one complex64 matrix product, the same samples as
+    the FFT); a wide one takes the zero-padded FFT.
     """
     d = h.shape[0]
     t = tgrid.reshape(-1).astype(int)
@@ -416,13 +492,20 @@ def _doppler_grid_refine(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: 
         q = np.zeros((d, n_t), complex)
         np.add.at(q, (slice(None), t), prod)
     nfft = 1 << math.ceil(math.log2(max(4 * n_t, 64)))
-    val = np.abs(sfft.fft(q, n=nfft, axis=1, workers=1)) ** 2  # bin k <-> omega = 2 pi k / nfft
-    w = 2 * np.pi * _fftfreq(nfft)  # rad/chirp
-    masked = np.where(np.abs(w)[None, :] <= span[:, None], val, -1.0)
-    j = np.argmax(masked, axis=1)
+    half = 1 << math.ceil(math.log2(math.ceil(float(np.max(span)) * nfft / (2 * np.pi)) + 1))  # few kernels
+    if 2 * half + 1 < nfft // 8:
+        w, kern = _dtft_kernel(n_t, nfft, half)
+        val = np.abs(q.astype(np.complex64) @ kern).astype(float) ** 2  # (D, 2 half + 1)
+        j = np.clip(np.argmax(np.where(np.abs(w)[None, :] <= span[:, None], val, -1.0), axis=1), 1, 2 * half - 1)
+        jm, jp = j - 1, j + 1
+    else:
+        val = np.abs(sfft.fft(q, n=nfft, axis=1, workers=1)) ** 2  # bin k <-> omega = 2 pi k / nfft
+        w = 2 * np.pi * _fftfreq(nfft)  # rad/chirp
+        j = np.argmax(np.where(np.abs(w)[None, :] <= span[:, None], val, -1.0), axis=1)
+        jm, jp = (j - 1) % nfft, (j + 1) % nfft
     rows = np.arange(d)
     lg = np.log(np.maximum(val, 1e-300))
-    off = parabolic_offset(lg[rows, (j - 1) % nfft], lg[rows, j], lg[rows, (j + 1) % nfft])
+    off = parabolic_offset(lg[rows, jm], lg[rows, j], lg[rows, jp])
     return w[j] + off * 2 * np.pi / nfft
 
 
@@ -438,7 +521,12 @@ def _joint_grid_search(dic: AngleDictionary, r: np.ndarray, w0: np.ndarray, span
     n_h = int(min(max_hyp, 2 * math.ceil(float(np.max(span * dwell)) / 0.5) + 1))
     u = np.linspace(-1.0, 1.0, n_h)
     om = w0[:, None] + span[:, None] * u[None, :]  # (D, H)
-    rho = np.einsum("dic,dhic->dhi", r, np.exp(-1j * om[:, :, None, None] * tgrid[None, None]))
+    t_slot, t_chirp = tgrid[:, :1] - tgrid[0, 0], tgrid[0] - tgrid[0, 0]
+    if np.array_equal(tgrid, tgrid[0, 0] + t_slot + t_chirp[None, :]):  # t_ic = t_i + t_c: separable phase
+        rho = np.einsum("dic,dhc->dhi", r, np.exp(-1j * om[:, :, None] * t_chirp))
+        rho *= np.exp(-1j * om[:, :, None] * (tgrid[0, 0] + t_slot[:, 0]))
+    else:
+        rho = np.einsum("dic,dhic->dhi", r, np.exp(-1j * om[:, :, None, None] * tgrid[None, None]))
     corr = np.abs(rho.astype(np.complex64) @ dic.Hn_conj) ** 2  # (D, H, I_c)
     flat = corr.reshape(d, -1).argmax(axis=1)
     hbest, j = np.unravel_index(flat, corr.shape[1:])
@@ -450,49 +538,51 @@ def _joint_grid_search(dic: AngleDictionary, r: np.ndarray, w0: np.ndarray, span
     return om[rows, hbest], dic.candidates[j] + off * dic.step
 
 
+def _doppler_atoms(dic: AngleDictionary, theta: np.ndarray, omega: np.ndarray, tgrid: np.ndarray) -> np.ndarray:
+    """Atoms ``a_i,c = h_i(theta) exp(j omega t_ic)`` over slots x chirps, (P, I C) for theta, omega (P,)."""
+    h = dic.atoms(theta)[0].T  # (P, I)
+    return (h[:, :, None] * np.exp(1j * omega[:, None, None] * tgrid[None])).reshape(theta.size, -1)
+
+
 def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, theta: np.ndarray,
                  domega: np.ndarray, valid: np.ndarray, span: np.ndarray, passes: int = 1,
-                 newton_steps: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Cyclic joint (angle, Doppler) refinement of every target on the full slot x chirp data.
+                 newton_steps: int = 2, atoms: np.ndarray | None = None,
+                 amp: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Joint (angle, Doppler) refinement of every target on the full slot x chirp data.
 
     Model: ``data[i, c] = sum_k s_k h_i(theta_k) exp(j d_omega_k t_ic) + noise``
-    (t_ic = chirp time / T_c over the sweep). For each target in turn, on its
-    partial residual: d_omega by :func:`_doppler_grid_refine` (around the
-    current value, half-width ``span``), then theta by Newton steps on the
-    Doppler-compensated slot vector ``rho_i = sum_c r_ic exp(-j d_omega t_ic)``;
-    finally least squares for all amplitudes with atoms ``a_k = h(theta_k)
-    exp(j d_omega_k t)``. Returns theta, d_omega, amplitudes (D, L) and atoms (D, I C, L).
+    (t_ic = chirp time / T_c over the sweep). Each pass re-fits every target
+    ``k`` of every row at once (Jacobi sweep, batched over all (row, target)
+    pairs) against its own partial residual ``data - sum_{j != k} a_j s_j``:
+    d_omega by :func:`_doppler_grid_refine` (around the current value, half-width
+    ``span``), then theta by Newton steps on the Doppler-compensated slot vector
+    ``rho_i = sum_c r_ic exp(-j d_omega t_ic)``; then least squares for all
+    amplitudes with atoms ``a_k = h(theta_k) exp(j d_omega_k t)``. ``atoms`` /
+    ``amp``: the current atoms (D, I C, L) and amplitudes, when the caller has them.
+    Returns theta, d_omega, amplitudes (D, L) and atoms (D, I C, L).
     """
     d, i, c = data.shape
-    n_l = theta.shape[1]
     flat = data.reshape(d, i * c)
-
-    def column(th: np.ndarray, dw: np.ndarray) -> np.ndarray:  # (D',) -> (D', I C)
-        h = dic.atoms(th)[0].T  # (D', I)
-        return (h[:, :, None] * np.exp(1j * dw[:, None, None] * tgrid[None])).reshape(th.size, i * c)
-
     theta, domega = theta.copy(), domega.copy()
-    a = np.zeros((d, i * c, n_l), complex)
-    for k in range(n_l):
-        rows = np.flatnonzero(valid[:, k])
-        if rows.size:
-            a[rows, :, k] = column(theta[rows, k], domega[rows, k])
-    s = _lstsq(a, flat[..., None])[..., 0]
+    dd, kk = np.nonzero(valid)
+    if atoms is None:
+        atoms = np.zeros((d, i * c, theta.shape[1]), complex)
+        atoms[dd, :, kk] = _doppler_atoms(dic, theta[dd, kk], domega[dd, kk], tgrid)
+    a = atoms.copy()
+    s = _lstsq(a, flat[..., None])[..., 0] if amp is None else amp.copy()
     for _ in range(passes):
-        for k in range(n_l):
-            rows = np.flatnonzero(valid[:, k])
-            if rows.size == 0:
-                continue
-            part = flat[rows] - np.einsum("dkl,dl->dk", a[rows], s[rows]) + a[rows, :, k] * s[rows, k : k + 1]
-            part = part.reshape(-1, i, c)
-            h = dic.atoms(theta[rows, k])[0].T  # (D', I)
-            base = np.exp(-1j * domega[rows, k][:, None, None] * tgrid[None])
-            dw = domega[rows, k] + _doppler_grid_refine(h, part * base, tgrid, span[rows])
+        fit = np.einsum("dkl,dl->dk", a, s)
+        part = (flat[dd] - fit[dd] + a[dd, :, kk] * s[dd, kk][:, None]).reshape(-1, i, c)
+        base = np.exp(-1j * domega[dd, kk][:, None, None] * tgrid[None])
+        h = (a[dd, :, kk].reshape(-1, i, c) * base)[:, :, 0]  # h(theta) of the current atom, (P, I)
+        dw = domega[dd, kk] + _doppler_grid_refine(h, part * base, tgrid, span[dd])
+        th = theta[dd, kk]
+        if newton_steps:
             rho = np.sum(part * np.exp(-1j * dw[:, None, None] * tgrid[None]), axis=2)
-            th = _newton_refine(dic, theta[rows, k], rho, newton_steps) if newton_steps else theta[rows, k]
-            theta[rows, k], domega[rows, k] = th, dw
-            a[rows, :, k] = column(th, dw)
-            s[rows] = _lstsq(a[rows], flat[rows, :, None])[..., 0]
+            th = _newton_refine(dic, th, rho, newton_steps)
+        theta[dd, kk], domega[dd, kk] = th, dw
+        a[dd, :, kk] = _doppler_atoms(dic, th, dw, tgrid)
+        s = _lstsq(a, flat[..., None])[..., 0]
     return theta, domega, s * valid, a
 
 
@@ -506,83 +596,98 @@ class DopplerOMPResult:
     residual: np.ndarray  # (D,) ||r||^2
 
 
+def _new_atom(dic: AngleDictionary, res: np.ndarray, tgrid: np.ndarray, noise_var: float,
+              newton_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """The next atom (theta, omega), each (D,), of the residuals ``res`` (D, I, C) (steps 1-2 of :func:`omp_doppler`).
+
+    Coarse Doppler from the chirp pairs, best dictionary candidate on the
+    Doppler-compensated slot vector (one complex64 matrix product for all rows),
+    a joint angle x Doppler search for the rows whose coarse-Doppler error
+    (5 sigma) turns into more than pi/2 of phase over the target's dwell, fine
+    Doppler over the sweep, Newton steps on the angle.
+    """
+    _, i, c = res.shape
+    t_span = float(tgrid.max() + 1)
+    reach = max(1, round(dic.H.shape[1] / max(i, 1)))
+    w0 = np.angle(np.einsum("dic,dic->d", res[:, :, 1:], res[:, :, :-1].conj()))
+    rc = res * np.exp(-1j * w0[:, None, None] * tgrid[None])
+    th = _grid_refine(dic, rc.sum(axis=2), None, reach)
+    snr = np.maximum(np.sum(np.abs(res) ** 2, axis=(1, 2)) / noise_var - i * c, 1.0)
+    span = np.clip(5.0 / np.sqrt(snr), min(np.pi, 8 * np.pi / t_span), np.pi)
+    # rows whose Doppler uncertainty turns into > pi/2 of phase ramp over the target's dwell
+    # (long dwell: weak beams such as the random patterns) get a joint angle x Doppler search
+    e_slot = np.maximum(np.sum(np.abs(res) ** 2, axis=2) - c * noise_var, 0.0)
+    dwell = e_slot.sum(1) ** 2 / np.maximum(np.sum(e_slot ** 2, axis=1), 1e-300) * c
+    dwell = np.minimum(np.maximum(dwell, c), t_span)
+    wide = 5.0 / np.sqrt(snr) * dwell > 0.5 * np.pi  # 5-sigma coarse-Doppler error -> > pi/2 of ramp
+    if np.any(wide):
+        sub = np.flatnonzero(wide)
+        w_s, th_s = _joint_grid_search(dic, res[sub], w0[sub], span[sub], dwell[sub], tgrid)
+        w0[sub], th[sub] = w_s, th_s
+        rc[sub] = res[sub] * np.exp(-1j * w_s[:, None, None] * tgrid[None])
+        span[sub] = np.minimum(span[sub], np.pi / dwell[sub])
+    w = w0 + _doppler_grid_refine(dic.atoms(th)[0].T, rc, tgrid, span)
+    if newton_steps:
+        rho = np.sum(res * np.exp(-1j * w[:, None, None] * tgrid[None]), axis=2)
+        th = _newton_refine(dic, th, rho, newton_steps)
+    return th, w
+
+
 def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_targets: int,
                 residual_threshold: np.ndarray, noise_var: float, relative_threshold: float = 0.0,
-                min_amplitude: float = 0.0, newton_steps: int = 2, cycles: int = 2) -> DopplerOMPResult:
+                min_amplitude: float = 0.0, newton_steps: int = 2, cycles: int = 2,
+                detected: bool = False) -> DopplerOMPResult:
     """OMP over the slot x chirp data with a Doppler per atom (the swept-beam OMP of paper Alg. 1).
 
     Model: ``data[d, i, c] = sum_k s_k h_i(theta_k) exp(j omega_k t_ic) + noise``,
     t_ic the integer chirp time (units of T_c) of chirp c of slot i over the sweep.
-    Each iteration, on the residual R of a row:
+    Batched over the rows d (all detections of a scan); each iteration, on the
+    residual R of every active row:
 
     1. coarse Doppler from the chirp pairs of R, ``omega = arg sum R[i, c+1] R*[i, c]``
        (unambiguous, one per range but recomputed on every residual, so targets
        at the same range with different radial speeds are each compensated);
     2. angle: best candidate of ``|H_n^H rho|`` with ``rho_i = sum_c R_ic exp(-j omega t_ic)``,
        then fine Doppler over the whole sweep (:func:`_doppler_grid_refine`) and
-       Newton steps on the angle;
+       Newton steps on the angle (:func:`_new_atom`);
     3. least squares for every amplitude on the support; with several atoms,
        ``cycles`` passes of :func:`joint_refine` (each atom re-fitted in angle and
        Doppler against its own partial residual);
     4. accept the new atom only if every ``|s_k| ||a_k|| >= min_amplitude``;
        continue while ``l < max_targets`` and ``||R||^2 >= max(delta_r, rel ||data||^2)``.
+
+    ``detected``: the rows passed a detector matched to the beam (:mod:`rhs_env.detection`),
+    so the first atom is taken without the residual and amplitude tests (both are
+    slot-summed statistics, weaker than that detector); the later atoms keep them.
     """
     data = np.asarray(data, complex)
     d, i, c = data.shape
     n_l = max_targets
-    theta = np.zeros((d, n_l))
-    omega = np.zeros((d, n_l))
+    theta, omega = np.zeros((d, n_l)), np.zeros((d, n_l))
     amp = np.zeros((d, n_l), complex)
     valid = np.zeros((d, n_l), bool)
     atoms = np.zeros((d, i * c, n_l), complex)
     resid = data.copy()
     r2 = np.sum(np.abs(resid) ** 2, axis=(1, 2))
     stop = np.maximum(np.asarray(residual_threshold, float), relative_threshold * r2)
-    active = r2 >= stop
-    reach = max(1, round(dic.H.shape[1] / max(i, 1)))
-    t_span = float(tgrid.max() + 1)
-    fine_span = min(np.pi, 8 * np.pi / t_span)
+    active = np.ones(d, bool) if detected else r2 >= stop
+    fine_span = min(np.pi, 8 * np.pi / float(tgrid.max() + 1))
     for l in range(n_l):
         rows = np.flatnonzero(active)
         if rows.size == 0:
             break
-        res_r = resid[rows]
-        w0 = np.angle(np.einsum("dic,dic->d", res_r[:, :, 1:], res_r[:, :, :-1].conj()))
-        rc = res_r * np.exp(-1j * w0[:, None, None] * tgrid[None])
-        th = _grid_refine(dic, rc.sum(axis=2), None, reach)
-        snr = np.maximum(np.sum(np.abs(res_r) ** 2, axis=(1, 2)) / noise_var - i * c, 1.0)
-        span = np.clip(5.0 / np.sqrt(snr), fine_span, np.pi)
-        # rows whose Doppler uncertainty turns into > pi/2 of phase ramp over the target's dwell
-        # (long dwell: weak beams such as the random patterns) get a joint angle x Doppler search
-        e_slot = np.maximum(np.sum(np.abs(res_r) ** 2, axis=2) - c * noise_var, 0.0)
-        dwell = e_slot.sum(1) ** 2 / np.maximum(np.sum(e_slot ** 2, axis=1), 1e-300) * c
-        dwell = np.minimum(np.maximum(dwell, c), t_span)
-        wide = 5.0 / np.sqrt(snr) * dwell > 0.5 * np.pi  # 5-sigma coarse-Doppler error -> > pi/2 of ramp
-        if np.any(wide):
-            sub = np.flatnonzero(wide)
-            w_s, th_s = _joint_grid_search(dic, res_r[sub], w0[sub], span[sub], dwell[sub], tgrid)
-            w0 = w0.copy()
-            w0[sub], th[sub] = w_s, th_s
-            rc[sub] = res_r[sub] * np.exp(-1j * w_s[:, None, None] * tgrid[None])
-            span = span.copy()
-            span[sub] = np.minimum(span[sub], np.pi / dwell[sub])
-        w = w0 + _doppler_grid_refine(dic.atoms(th)[0].T, rc, tgrid, span)
-        if newton_steps:
-            rho = np.sum(res_r * np.exp(-1j * w[:, None, None] * tgrid[None]), axis=2)
-            th = _newton_refine(dic, th, rho, newton_steps)
-        th_r, om_r, val_r = theta[rows].copy(), omega[rows].copy(), valid[rows].copy()
+        th, w = _new_atom(dic, resid[rows], tgrid, noise_var, newton_steps)
+        th_r, om_r, val_r, a = theta[rows], omega[rows], valid[rows], atoms[rows]
         th_r[:, l], om_r[:, l], val_r[:, l] = th, w, True
-        th_r, om_r, s, a = joint_refine(dic, data[rows], tgrid, th_r, om_r, val_r,
-                                        np.full(rows.size, fine_span), passes=0, newton_steps=newton_steps)
-        strength = np.abs(s) * np.linalg.norm(a, axis=1)
-        ok = np.all((strength >= min_amplitude) | ~val_r, axis=1)
-        if l > 0 and cycles and np.any(ok):  # cyclic joint refinement of the rows that keep the new atom
-            th_c, om_c, s_c, a_c = joint_refine(dic, data[rows[ok]], tgrid, th_r[ok], om_r[ok], val_r[ok],
-                                                np.full(int(ok.sum()), fine_span), passes=cycles,
-                                                newton_steps=newton_steps)
-            th_r[ok], om_r[ok], s[ok], a[ok] = th_c, om_c, s_c, a_c
-            strength = np.abs(s) * np.linalg.norm(a, axis=1)
-            ok &= np.all((strength >= min_amplitude) | ~val_r, axis=1)
+        a[:, :, l] = _doppler_atoms(dic, th, w, tgrid)
+        s = _lstsq(a, data[rows].reshape(rows.size, -1, 1))[..., 0] * val_r
+        ok = np.all((np.abs(s) * np.linalg.norm(a, axis=1) >= min_amplitude) | ~val_r, axis=1) | (detected and l == 0)
+        if l > 0 and cycles and np.any(ok):  # joint refinement of the rows that keep the new atom
+            k = np.flatnonzero(ok)
+            th_r[k], om_r[k], s[k], a[k] = joint_refine(dic, data[rows[k]], tgrid, th_r[k], om_r[k], val_r[k],
+                                                        np.full(k.size, fine_span), passes=cycles,
+                                                        newton_steps=newton_steps, atoms=a[k], amp=s[k])
+            ok &= np.all((np.abs(s) * np.linalg.norm(a, axis=1) >= min_amplitude) | ~val_r, axis=1)
         good = rows[ok]
         theta[good], omega[good], valid[good], amp[good], atoms[good] = th_r[ok], om_r[ok], val_r[ok], s[ok], a[ok]
         resid[good] = data[good] - np.einsum("dkl,dl->dk", a[ok], s[ok]).reshape(-1, i, c)
@@ -613,10 +718,7 @@ def angle_crb(antenna: ArrayAntenna, theta_rad: np.ndarray, snr: np.ndarray | fl
     """
     th = np.atleast_1d(np.asarray(theta_rad, dtype=float))
     dic = AngleDictionary.__new__(AngleDictionary)
-    dic.antenna = antenna
-    dic._wt = (antenna.tx_weights / np.linalg.norm(antenna.tx_weights, axis=1, keepdims=True)).T
-    dic._wr = (antenna.rx_weights / np.linalg.norm(antenna.rx_weights, axis=1, keepdims=True)).T
-    dic._x = 2.0 * np.pi * antenna.positions_wl
+    dic._set_weights(antenna)
     h, h1 = dic.atoms(th, order=1)  # (I, T)
     nh = np.sum(np.abs(h) ** 2, axis=0)
     proj = np.sum(np.abs(h1) ** 2, axis=0) - np.abs(np.sum(h.conj() * h1, axis=0)) ** 2 / nh

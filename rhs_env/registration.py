@@ -14,19 +14,25 @@ id                         entry point                                     obser
 =========================  ==============================================  =====================
 ``rhs-highway-v0``         ``rhs_env.envs:RHSHighwayEnv``                  Kinematics (truth)
 ``rhs-highway-radar-v0``   ``rhs_env.registration:make_highway_radar``     radar point cloud
-``rhs-highway-slam-v0``    ``rhs_env.slam_wrapper:make_highway_slam``      cloud + SLAM
-``rhs-paper-v0``           ``rhs_env.slam_wrapper:make_paper_slam``        cloud + SLAM
+``rhs-highway-slam-v0``    ``slam.envs:make_highway_slam``                 cloud + SLAM
+``rhs-paper-v0``           ``slam.envs:make_paper_slam``                   cloud + SLAM
 =========================  ==============================================  =====================
 
 Keyword arguments of ``gym.make`` go to the entry point: env config keys
 (``lanes_count=3``, ``landmarks={"spacing_m": 10}``, ``config={...}``,
-``render_mode="rgb_array"``) and, for the radar id, the wrapper's
-``radar={...}`` (``RadarConfig`` fields), ``antenna="phased"``,
-``max_points=...``, ``scatter={...}``, ``stage_times_in_info=True``.
+``render_mode="rgb_array"``) and the wrappers' own arguments, routed by their
+signatures (:func:`route_kwargs`): ``radar={...}`` (``RadarConfig`` fields),
+``antenna="phased"``, ``max_points=...``, ``scatter={...}`` for the radar;
+``slam={...}``, ``registration=...``, ``icp={...}``, ``pipeline={...}`` for the
+SLAM; ``map_gate_m``, ``landmarks_in_info`` for the SLAM metrics in ``info``;
+``stage_times_in_info=True`` and ``blas_threads=1`` (BLAS / OpenMP threads
+inside each step, restored after it; ``None`` opts into the process's own thread
+pools, see :mod:`rhs_common.threads`) for both wrappers.
 """
 
 from __future__ import annotations
 
+import inspect
 from typing import Any
 
 import gymnasium as gym
@@ -36,25 +42,28 @@ HIGHWAY_RADAR_ID = "rhs-highway-radar-v0"
 HIGHWAY_SLAM_ID = "rhs-highway-slam-v0"
 PAPER_ID = "rhs-paper-v0"
 
-#: keyword arguments that belong to :class:`rhs_env.wrappers.RadarObservation`
-RADAR_WRAPPER_KWARGS = ("radar", "antenna", "max_points", "scatter", "stage_times_in_info", "scatterers_in_info")
+def route_kwargs(kwargs: dict[str, Any], *wrappers: type) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """Split ``gym.make`` kwargs among wrapper classes by their ``__init__`` signatures.
 
-
-def _split(kwargs: dict[str, Any], names: tuple[str, ...]) -> tuple[dict[str, Any], dict[str, Any]]:
-    mine = {k: kwargs.pop(k) for k in list(kwargs) if k in names}
-    return mine, kwargs
+    A name every given wrapper accepts (``stage_times_in_info``) goes to each of them;
+    whatever no wrapper accepts is returned last: the env's own kwargs (highway-env
+    config keys, ``config``, ``render_mode``).
+    """
+    params = [set(inspect.signature(w).parameters) - {"env"} for w in wrappers]
+    rest = {k: v for k, v in kwargs.items() if not any(k in p for p in params)}
+    return [{k: v for k, v in kwargs.items() if k in p} for p in params], rest
 
 
 def make_highway_radar(**kwargs: Any) -> gym.Env:
     """``rhs-highway-radar-v0``: :class:`RHSHighwayEnv` under :class:`RadarObservation`.
 
-    Radar-wrapper kwargs (``RADAR_WRAPPER_KWARGS``) go to the wrapper, the rest
-    (``config``, ``render_mode``, config keys) to the env.
+    Kwargs of :class:`RadarObservation` (by its signature) go to the wrapper, the
+    rest (``config``, ``render_mode``, config keys) to the env.
     """
     from rhs_env.envs import RHSHighwayEnv
     from rhs_env.wrappers import RadarObservation
 
-    wrapper_kwargs, env_kwargs = _split(dict(kwargs), RADAR_WRAPPER_KWARGS)
+    (wrapper_kwargs,), env_kwargs = route_kwargs(kwargs, RadarObservation)
     return RadarObservation(RHSHighwayEnv(**with_cheap_base_observation(env_kwargs)), **wrapper_kwargs)
 
 
@@ -75,10 +84,11 @@ ENV_SPECS: tuple[tuple[str, str], ...] = (
     (HIGHWAY_RADAR_ID, "rhs_env.registration:make_highway_radar"),
 )
 
-#: the SLAM ids: scene -> RadarObservation -> SlamObservation (rhs_env.slam_wrapper)
+#: the SLAM ids: scene -> RadarObservation -> SlamObservation -> SlamMetricsInfo. They live one
+#: layer up (slam.envs); the string entry point is resolved only when such an env is made.
 SLAM_ENV_SPECS: tuple[tuple[str, str], ...] = (
-    (HIGHWAY_SLAM_ID, "rhs_env.slam_wrapper:make_highway_slam"),
-    (PAPER_ID, "rhs_env.slam_wrapper:make_paper_slam"),
+    (HIGHWAY_SLAM_ID, "slam.envs:make_highway_slam"),
+    (PAPER_ID, "slam.envs:make_paper_slam"),
 )
 
 

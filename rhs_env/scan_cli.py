@@ -23,7 +23,15 @@ from typing import Any
 
 import numpy as np
 
+from rhs_common.validation import check_output_path
 from rhs_env.antenna import ANTENNA_KINDS
+
+#: bounds that keep one scan's work and arithmetic finite: an RCS of 1e300 m^2 overflows the
+#: echo power (and its sidelobes wipe out every other target); 10 000 targets is ~100x a highway scene
+MAX_RCS_M2 = 1e4
+MAX_TARGETS = 10_000
+MAX_COORD_M = 1e4
+MAX_SPEED_MPS = 1e3
 
 
 class SceneError(ValueError):
@@ -47,18 +55,26 @@ def parse_scene(data: Any) -> dict:
     targets = data["targets"]
     if not isinstance(targets, list):
         raise SceneError("'targets' must be a list of [x, y, rcs_m2] rows")
+    if len(targets) > MAX_TARGETS:
+        raise SceneError(f"'targets' must have at most {MAX_TARGETS} rows, got {len(targets)}")
     rows = []
     for n, row in enumerate(targets):
         if not isinstance(row, list) or len(row) not in (3, 5):
             raise SceneError(f"targets[{n}] must be [x, y, rcs_m2] or [x, y, rcs_m2, vx, vy], got {row!r}")
         if not all(_finite_number(v) for v in row):
             raise SceneError(f"targets[{n}] must hold finite numbers, got {row!r}")
-        if row[2] < 0:
-            raise SceneError(f"targets[{n}] has a negative RCS {row[2]!r} m^2 (must be >= 0)")
+        if not 0 <= row[2] <= MAX_RCS_M2:
+            raise SceneError(f"targets[{n}] rcs_m2 must be in [0, {MAX_RCS_M2:g}] m^2, got {row[2]!r}")
+        if max(abs(row[0]), abs(row[1])) > MAX_COORD_M:
+            raise SceneError(f"targets[{n}] x, y must be within +-{MAX_COORD_M:g} m, got {row[:2]!r}")
+        if len(row) == 5 and max(abs(row[3]), abs(row[4])) > MAX_SPEED_MPS:
+            raise SceneError(f"targets[{n}] vx, vy must be within +-{MAX_SPEED_MPS:g} m/s, got {row[3:]!r}")
         rows.append([float(v) for v in row] + ([0.0, 0.0] if len(row) == 3 else []))
     occ = data.get("occluders", [])
     if not isinstance(occ, list):
         raise SceneError("'occluders' must be a list of [x0, y0, x1, y1] segments")
+    if len(occ) > MAX_TARGETS:
+        raise SceneError(f"'occluders' must have at most {MAX_TARGETS} rows, got {len(occ)}")
     segs = []
     for n, row in enumerate(occ):
         if not isinstance(row, list) or len(row) != 4 or not all(_finite_number(v) for v in row):
@@ -68,8 +84,8 @@ def parse_scene(data: Any) -> dict:
     if antenna not in ANTENNA_KINDS:
         raise SceneError(f"unknown antenna {antenna!r} (allowed: {', '.join(ANTENNA_KINDS)})")
     seed = data.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise SceneError(f"'seed' must be a non-negative integer, got {seed!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
+        raise SceneError(f"'seed' must be an integer in [0, 2**63), got {seed!r}")
     return {"targets": np.array(rows, float).reshape(-1, 5), "occluders": np.array(segs, float).reshape(-1, 4),
             "antenna": antenna, "seed": seed}
 
@@ -88,6 +104,12 @@ def _fail(msg: str) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.seed is not None and not 0 <= args.seed < 2**63:
+        return _fail(f"--seed must be an integer in [0, 2**63), got {args.seed}")
+    try:
+        check_output_path("--out", args.out)
+    except ValueError as exc:
+        return _fail(str(exc))
     try:
         text = Path(args.scene).read_text()
     except OSError as exc:
@@ -111,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = RadarConfig(antenna=antenna, scan=ScanConfig(grid_deg=args.grid_deg))
         rng = np.random.default_rng(seed)
         radar = RadarSystem(cfg, rng)
-    except ValueError as exc:
+    except (TypeError, ValueError) as exc:
         return _fail(str(exc))
     t = scene["targets"]
     k = t.shape[0]

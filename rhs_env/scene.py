@@ -32,15 +32,20 @@ those objects as occluding segments. It is vectorized over objects.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, fields
-from typing import TYPE_CHECKING, Any
+from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
-from rhs_env.validation import check_choice, check_int, check_range
-
-if TYPE_CHECKING:  # pragma: no cover - typing only
-    from rhs_env.scatterers import Occluders, Scatterers
+from rhs_common.geometry import rotation, wrap_angle
+from rhs_common.validation import (
+    build,
+    check_choice,
+    check_int,
+    check_range,
+    check_types,
+)
+from rhs_env.scatterers import Occluders, Scatterers
 
 #: object ids: landmarks are ``0 .. L-1``; other vehicles ``VEHICLE_ID_OFFSET + i``
 #: (``i`` = index in ``road.vehicles``); solid road objects ``OBJECT_ID_OFFSET + j``
@@ -52,23 +57,6 @@ LANDMARK_SIDES = ("both", "left", "right")
 
 
 # --------------------------------------------------------------------------- configs
-def _from_mapping(cls, value: Any, name: str):
-    """Build a config dataclass from ``None`` / an instance / a mapping of its fields."""
-    if value is None:
-        return cls()
-    if isinstance(value, cls):
-        return value
-    if isinstance(value, Mapping):
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(value) - known)
-        if unknown:
-            raise ValueError(
-                f"{name} has unknown field(s) {', '.join(map(repr, unknown))}; allowed: {', '.join(sorted(known))}"
-            )
-        return cls(**value)
-    raise ValueError(f"{name} must be a {cls.__name__} or a dict of its fields, got {type(value).__name__}")
-
-
 @dataclass(frozen=True)
 class LandmarkConfig:
     """Static roadside landmarks (posts, signs, barriers) placed along the road.
@@ -96,19 +84,21 @@ class LandmarkConfig:
     sides: str = "both"
 
     def __post_init__(self) -> None:
-        if not isinstance(self.enabled, (bool, np.bool_)):
-            raise ValueError(f"enabled must be True or False, got {self.enabled!r}")  # noqa: TRY004
+        check_types(self)
         check_range("spacing_m", self.spacing_m, 1.0, 1000.0)
         check_range("lateral_offset_m", self.lateral_offset_m, 0.0, 100.0)
         check_range("rcs_m2", self.rcs_m2, 0.0, 1e4, low_open=True)
-        check_range("jitter_m", self.jitter_m, 0.0, self.spacing_m / 2, high_open=True)
+        check_range("jitter_m", self.jitter_m, 0.0, None)
+        if self.jitter_m >= self.spacing_m / 2:  # a bound set by another field: name both
+            raise ValueError(f"jitter_m must be below spacing_m / 2 = {self.spacing_m / 2:g} "
+                             f"(spacing_m={self.spacing_m:g}), got {self.jitter_m!r}")
         check_range("lateral_jitter_m", self.lateral_jitter_m, 0.0, 50.0)
         check_choice("sides", self.sides, LANDMARK_SIDES)
 
     @classmethod
     def make(cls, value: Any) -> LandmarkConfig:
         """``None`` (defaults), a ``LandmarkConfig`` or a dict of its fields (validated)."""
-        return _from_mapping(cls, value, "landmarks")
+        return build(cls, value, "landmarks")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -134,16 +124,15 @@ class ScatterConfig:
     include_obstacles: bool = True
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_range("max_range_m", self.max_range_m, 0.0, 1000.0, low_open=True)
         check_range("vehicle_rcs_m2", self.vehicle_rcs_m2, 0.0, 1e4, low_open=True)
         check_int("points_per_face", self.points_per_face, 1, 16)
-        if not isinstance(self.include_obstacles, (bool, np.bool_)):
-            raise ValueError(f"include_obstacles must be True or False, got {self.include_obstacles!r}")  # noqa: TRY004
 
     @classmethod
     def make(cls, value: Any) -> ScatterConfig:
         """``None`` (defaults), a ``ScatterConfig`` or a dict of its fields (validated)."""
-        return _from_mapping(cls, value, "scatter")
+        return build(cls, value, "scatter")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -163,7 +152,7 @@ world_to_he_xy = he_to_world_xy  # the flip is its own inverse
 def world_pose(vehicle) -> np.ndarray:
     """(x, y, heading) of a highway-env vehicle in the world frame, heading wrapped to (-pi, pi]."""
     h = -float(vehicle.heading)
-    h = (h + np.pi) % (2 * np.pi) - np.pi
+    h = wrap_angle(h)
     if h == -np.pi:
         h = np.pi
     return np.array([float(vehicle.position[0]), -float(vehicle.position[1]), h])
@@ -261,7 +250,8 @@ class Landmarks:
     @classmethod
     def from_world(cls, xy_world: np.ndarray, rcs: float | np.ndarray) -> Landmarks:
         """Landmarks given in the world frame (y up), e.g. the paper's obstacle list."""
-        return cls(world_to_he_xy(np.asarray(xy_world, dtype=float).reshape(-1, 2)), rcs)
+        xy = world_to_he_xy(np.asarray(xy_world, dtype=float).reshape(-1, 2))
+        return cls(xy, np.broadcast_to(np.asarray(rcs, dtype=float), (len(xy),)).copy())
 
     def concat(self, other: Landmarks) -> Landmarks:
         return Landmarks(np.concatenate([self.xy_he, other.xy_he]), np.concatenate([self.rcs, other.rcs]))
@@ -338,15 +328,79 @@ _FACE_NORMALS = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
 _FACE_TANGENTS = np.array([[0.0, 1.0], [-1.0, 0.0], [0.0, -1.0], [1.0, 0.0]])
 
 
-def _rot(theta: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 2, 2) for angles theta."""
-    c, s = np.cos(theta), np.sin(theta)
-    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
-
-
 def _cross_z(omega: np.ndarray, r: np.ndarray) -> np.ndarray:
     """omega (scalar per row, broadcastable) x r in 2-D: omega * (-r_y, r_x)."""
     return np.asarray(omega)[..., None] * np.stack([-r[..., 1], r[..., 0]], axis=-1)
+
+
+def _nearby_objects(road, ego, radius: float, include_obstacles: bool) -> tuple[list, np.ndarray, np.ndarray]:
+    """Other vehicles (and solid obstacles) whose box may reach within ``radius`` of the ego:
+    the objects, their ids (``VEHICLE_ID_OFFSET + i`` / ``OBJECT_ID_OFFSET + j``) and static flags."""
+    objs, ids, static = [], [], []
+    for i, v in enumerate(road.vehicles if road is not None else ()):
+        if v is not ego:
+            objs.append(v)
+            ids.append(VEHICLE_ID_OFFSET + i)
+            static.append(False)
+    if include_obstacles and road is not None:
+        for j, o in enumerate(road.objects):
+            if getattr(o, "solid", False) and getattr(o, "collidable", True):
+                objs.append(o)
+                ids.append(OBJECT_ID_OFFSET + j)
+                static.append(True)
+    if not objs:
+        return [], np.zeros(0, dtype=np.int64), np.zeros(0, dtype=bool)
+    pos_he = np.array([o.position for o in objs], dtype=float).reshape(-1, 2)
+    diag = np.fromiter((np.hypot(o.LENGTH, o.WIDTH) for o in objs), float, len(objs))
+    keep = np.linalg.norm(pos_he - np.asarray(ego.position, dtype=float), axis=1) <= radius + diag / 2
+    return [o for o, k in zip(objs, keep) if k], np.asarray(ids, dtype=np.int64)[keep], np.asarray(static, bool)[keep]
+
+
+def _face_scatterers(objs: list, ids: np.ndarray, static: np.ndarray, ego_motion: dict[str, np.ndarray],
+                     cfg: ScatterConfig) -> tuple[Scatterers, Occluders]:
+    """Points on the visible faces of box objects and their four edges as occluders, vehicle frame.
+
+    A face is visible when its outward normal points toward the ego centre; the
+    object's ``vehicle_rcs_m2`` is shared among the ``points_per_face`` points of its
+    visible faces in proportion to their projected widths. Velocities of the rigid
+    motion, seen from the rotating ego frame: ``R^T (v_obj - v_ego) + w_obj x (q - c) - w_ego x q``.
+    """
+    e_pos, e_head, e_vel, e_rate = (ego_motion[k][0] for k in ("pos", "heading", "vel", "yaw_rate"))
+    r_t = rotation(-e_head)  # world -> vehicle frame
+    m = _motion_arrays(objs)
+    n_obj, p = len(objs), cfg.points_per_face
+    c = (m["pos"] - e_pos) @ r_t.T  # (V, 2) centres in the vehicle frame
+    rot = rotation(m["heading"] - e_head)  # (V, 2, 2) object -> vehicle frame
+    half = np.stack([m["length"], m["width"], m["length"], m["width"]], 1) / 2  # (V, 4)
+    face_len = np.stack([m["width"], m["length"], m["width"], m["length"]], 1)  # (V, 4)
+    normals = np.einsum("vij,fj->vfi", rot, _FACE_NORMALS)  # (V, 4, 2)
+    tangents = np.einsum("vij,fj->vfi", rot, _FACE_TANGENTS)
+    mids = c[:, None, :] + normals * half[..., None]  # (V, 4, 2)
+    dist = np.linalg.norm(mids, axis=-1)
+    cos_inc = -np.sum(normals * mids, axis=-1) / np.maximum(dist, 1e-9)  # normal . (ego - mid)/|.|
+    weight = np.where(cos_inc > 1e-9, face_len * cos_inc, 0.0)  # projected width of visible faces
+    total = weight.sum(axis=1)  # (V,)
+    share = np.divide(weight, total[:, None], out=np.zeros_like(weight), where=total[:, None] > 0)
+    frac = (np.arange(p) + 0.5) / p - 0.5  # (P,) positions along a face, in face lengths
+    pts = mids[:, :, None, :] + tangents[:, :, None, :] * (frac[None, None, :, None] * face_len[..., None, None])
+    rcs = np.broadcast_to((cfg.vehicle_rcs_m2 * share / p)[..., None], (n_obj, 4, p))
+    v_rel_c = (m["vel"] - e_vel) @ r_t.T  # (V, 2)
+    vel = (
+        v_rel_c[:, None, None, :]
+        + _cross_z(m["yaw_rate"][:, None, None], pts - c[:, None, None, :])
+        - _cross_z(np.asarray(e_rate), pts)
+    )
+    vis = np.broadcast_to((weight > 0)[..., None], (n_obj, 4, p))
+    corners = mids - tangents * (face_len[..., None] / 2)  # start corner of each face
+    ends = mids + tangents * (face_len[..., None] / 2)
+    scatterers = Scatterers(
+        xy=pts[vis],
+        velocity=vel[vis],
+        rcs=rcs[vis],
+        object_id=np.broadcast_to(ids[:, None, None], (n_obj, 4, p))[vis],
+        is_static=np.broadcast_to(static[:, None, None], (n_obj, 4, p))[vis],
+    )
+    return scatterers, Occluders(segments=np.stack([corners, ends], axis=2).reshape(-1, 2, 2), object_id=np.repeat(ids, 4))
 
 
 def scene_scatterers(
@@ -365,109 +419,32 @@ def scene_scatterers(
     Returns:
         ``(Scatterers, Occluders)`` (``rhs_env.scatterers``), everything in the
         vehicle frame (x forward, y left). Landmarks come first (sorted by id),
-        then the extended objects. Velocities are relative to the ego vehicle as
-        seen in its rotating frame: ``R^T (v_point - v_ego) - w_ego x q``, with
-        ``v_point = v_obj + w_obj x (p - c_obj)``; a static point's is minus the
-        ego velocity (plus the rotation term when the ego turns).
-        Each object within ``max_range_m`` contributes ``points_per_face`` points
-        on each face whose outward normal points toward the ego centre; its
-        ``vehicle_rcs_m2`` is shared among them in proportion to the faces'
-        projected widths. Its four box edges are occluders.
+        then the extended objects (:func:`_face_scatterers`). Velocities are
+        relative to the ego vehicle as seen in its rotating frame: ``R^T (v_point -
+        v_ego) - w_ego x q``, with ``v_point = v_obj + w_obj x (p - c_obj)``; a
+        static point's is minus the ego velocity (plus the rotation term when the ego turns).
     """
-    from rhs_env.scatterers import Occluders, Scatterers
-
     cfg = ScatterConfig.make(config)
     base = env.unwrapped
     ego = base.vehicle if ego is None else ego
     if ego is None:
         raise ValueError("scene_scatterers needs an ego vehicle (env.unwrapped.vehicle is None)")
-    road = base.road
     em = _motion_arrays([ego])
-    e_pos, e_head, e_vel, e_rate = em["pos"][0], em["heading"][0], em["vel"][0], em["yaw_rate"][0]
-    r_t = _rot(-e_head)  # world -> vehicle frame
-    radius = cfg.max_range_m
+    r_t = rotation(-em["heading"][0])  # world -> vehicle frame
 
-    # ---- static point landmarks
-    lms = get_landmarks(base)
-    idx = lms.near(np.asarray(ego.position, dtype=float), radius)
-    q_lm = (he_to_world_xy(lms.xy_he[idx]) - e_pos) @ r_t.T
-    v_lm = np.broadcast_to(r_t @ (-e_vel), q_lm.shape) - _cross_z(e_rate, q_lm)
+    lms = get_landmarks(base)  # static point landmarks
+    idx = lms.near(np.asarray(ego.position, dtype=float), cfg.max_range_m)
+    q_lm = (he_to_world_xy(lms.xy_he[idx]) - em["pos"][0]) @ r_t.T
+    v_lm = np.broadcast_to(r_t @ (-em["vel"][0]), q_lm.shape) - _cross_z(em["yaw_rate"][0], q_lm)
+    landmarks = Scatterers(xy=q_lm, velocity=v_lm, rcs=lms.rcs[idx], object_id=idx.astype(np.int64),
+                           is_static=np.ones(len(idx), dtype=bool))
 
-    # ---- extended objects: other vehicles and (optionally) solid obstacles
-    objs, ids, static = [], [], []
-    ego_he = np.asarray(ego.position, dtype=float)
-    for i, v in enumerate(road.vehicles if road is not None else ()):
-        if v is ego:
-            continue
-        objs.append(v)
-        ids.append(VEHICLE_ID_OFFSET + i)
-        static.append(False)
-    if cfg.include_obstacles and road is not None:
-        for j, o in enumerate(road.objects):
-            if getattr(o, "solid", False) and getattr(o, "collidable", True):
-                objs.append(o)
-                ids.append(OBJECT_ID_OFFSET + j)
-                static.append(True)
-    if objs:
-        pos_he = np.array([o.position for o in objs], dtype=float).reshape(-1, 2)
-        diag = np.fromiter((np.hypot(o.LENGTH, o.WIDTH) for o in objs), float, len(objs))
-        keep = np.linalg.norm(pos_he - ego_he, axis=1) <= radius + diag / 2
-        objs = [o for o, k in zip(objs, keep) if k]
-        ids = np.asarray(ids, dtype=np.int64)[keep]
-        static = np.asarray(static, dtype=bool)[keep]
-    xy_o = np.zeros((0, 2))
-    v_o = np.zeros((0, 2))
-    rcs_o = np.zeros(0)
-    id_o = np.zeros(0, dtype=np.int64)
-    st_o = np.zeros(0, dtype=bool)
-    segs = np.zeros((0, 2, 2))
-    seg_ids = np.zeros(0, dtype=np.int64)
-    if objs:
-        m = _motion_arrays(objs)
-        n_obj, p = len(objs), cfg.points_per_face
-        c = (m["pos"] - e_pos) @ r_t.T  # (V, 2) centres in the vehicle frame
-        rot = _rot(m["heading"] - e_head)  # (V, 2, 2) object -> vehicle frame
-        half = np.stack([m["length"], m["width"], m["length"], m["width"]], 1) / 2  # (V, 4)
-        face_len = np.stack([m["width"], m["length"], m["width"], m["length"]], 1)  # (V, 4)
-        normals = np.einsum("vij,fj->vfi", rot, _FACE_NORMALS)  # (V, 4, 2)
-        tangents = np.einsum("vij,fj->vfi", rot, _FACE_TANGENTS)
-        mids = c[:, None, :] + normals * half[..., None]  # (V, 4, 2)
-        dist = np.linalg.norm(mids, axis=-1)
-        cos_inc = -np.sum(normals * mids, axis=-1) / np.maximum(dist, 1e-9)  # normal . (ego - mid)/|.|
-        weight = np.where(cos_inc > 1e-9, face_len * cos_inc, 0.0)  # projected width of visible faces
-        total = weight.sum(axis=1)  # (V,)
-        share = np.divide(weight, total[:, None], out=np.zeros_like(weight), where=total[:, None] > 0)
-        frac = (np.arange(p) + 0.5) / p - 0.5  # (P,) positions along a face, in face lengths
-        pts = mids[:, :, None, :] + tangents[:, :, None, :] * (frac[None, None, :, None] * face_len[..., None, None])
-        rcs = np.broadcast_to((cfg.vehicle_rcs_m2 * share / p)[..., None], (n_obj, 4, p))
-        # point velocities: rigid motion of the object, seen from the rotating ego frame
-        v_rel_c = (m["vel"] - e_vel) @ r_t.T  # (V, 2)
-        vel = (
-            v_rel_c[:, None, None, :]
-            + _cross_z(m["yaw_rate"][:, None, None], pts - c[:, None, None, :])
-            - _cross_z(np.asarray(e_rate), pts)
-        )
-        vis = np.broadcast_to((weight > 0)[..., None], (n_obj, 4, p))
-        xy_o = pts[vis]
-        v_o = vel[vis]
-        rcs_o = rcs[vis]
-        id_o = np.broadcast_to(ids[:, None, None], (n_obj, 4, p))[vis]
-        st_o = np.broadcast_to(static[:, None, None], (n_obj, 4, p))[vis]
-        # occluders: the four box edges of every object
-        corners = mids - tangents * (face_len[..., None] / 2)  # start corner of each face
-        ends = mids + tangents * (face_len[..., None] / 2)
-        segs = np.stack([corners, ends], axis=2).reshape(-1, 2, 2)
-        seg_ids = np.repeat(ids, 4)
-
-    scatterers = Scatterers(
-        xy=np.concatenate([q_lm, xy_o]).astype(float),
-        velocity=np.concatenate([v_lm, v_o]).astype(float),
-        rcs=np.concatenate([lms.rcs[idx], rcs_o]).astype(float),
-        object_id=np.concatenate([idx.astype(np.int64), id_o]).astype(np.int64),
-        is_static=np.concatenate([np.ones(len(idx), dtype=bool), st_o]),
-    )
-    occluders = Occluders(segments=segs.astype(float), object_id=seg_ids.astype(np.int64))
-    return scatterers, occluders
+    objs, ids, static = _nearby_objects(base.road, ego, cfg.max_range_m, cfg.include_obstacles)
+    if not objs:
+        return landmarks, Occluders(segments=np.zeros((0, 2, 2)), object_id=np.zeros(0, dtype=np.int64))
+    faces, occluders = _face_scatterers(objs, ids, static, em, cfg)
+    fields = ("xy", "velocity", "rcs", "object_id", "is_static")
+    return Scatterers(*(np.concatenate([getattr(landmarks, k), getattr(faces, k)]) for k in fields)), occluders
 
 
 def scatterers_to_dict(scatterers) -> dict[str, np.ndarray]:

@@ -3,12 +3,17 @@
 :class:`RadarObservation` replaces the observation with the point cloud of the
 ego vehicle's four RHS radars (SPEC sections 4, 5 and 7):
 
-``Dict(points=Box((N_max, 4), float32), points_mask=MultiBinary(N_max))``
+``Dict(points=Box((N_max, 7), float32), points_mask=MultiBinary(N_max))``
 
-``points`` rows are x, y (vehicle frame, m), radial velocity (m/s, > 0
-receding) and amplitude (linear, over the noise std), zero padded, inside
-finite bounds (x, y: the radars' reach; velocity: the unambiguous radial
-speed; amplitude: [0, 1e9]); when the
+``points`` rows (:data:`POINT_FEATURES`) are x, y (vehicle frame, m), radial
+velocity (m/s, > 0 receding), amplitude (linear, over the noise std), range
+std (m) and angle std (rad) of the point (its Cramer-Rao bounds at its SNR plus
+a floor, :mod:`rhs_env.uncertainty`; the angle is measured from the boresight
+of the radar that saw it) and that radar's index (0 front, 1 left, 2 rear,
+3 right, mounts from :meth:`rhs_env.radar.RadarConfig.mounts`), zero padded,
+inside finite bounds (x, y: the radars' reach; velocity: the unambiguous
+radial speed; amplitude: [0, 1e9]; range std: [0, 1e3] m; angle std:
+[0, pi] rad; radar: [0, 3]); when the
 radar returns more than ``N_max`` points the weakest are dropped (the kept
 points stay in the radar's order). ``points_mask`` is 1 on real rows.
 
@@ -16,8 +21,9 @@ The wrapper owns the :class:`rhs_env.radar.RadarSystem`. At every reset its
 random generator is spawned from the env's ``np_random`` (a child seed
 sequence, which leaves the env's own stream untouched), so the same reset seed
 gives the same episode, radar noise included. ``info`` gets
-``scatterers`` (the ground truth handed to the radar, a dict of arrays in the
-vehicle frame), ``radar_points_total`` / ``radar_points_dropped``, and, with
+``radar_points_total`` / ``radar_points_dropped``, with ``scatterers_in_info=True``
+``scatterers`` (the ground truth handed to the radar, a dict of variable-length
+arrays in the vehicle frame), and, with
 ``stage_times_in_info=True``, ``radar_stage_times`` (seconds per processing
 stage; off by default because timings differ between otherwise identical runs,
 which the determinism checks of ``check_env`` would flag). The last stage
@@ -27,13 +33,16 @@ times are always on ``wrapper.stage_times``.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import fields, replace
-from typing import Any
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from rhs_common.threads import blas_threads_limit, check_blas_threads
+from rhs_common.validation import build, check_bool, check_choice, check_int
+from rhs_env.antenna import ANTENNA_KINDS
 from rhs_env.scene import (
     ScatterConfig,
     draw_disks,
@@ -42,52 +51,35 @@ from rhs_env.scene import (
     vehicle_to_he_xy,
     world_surface_pixels,
 )
-from rhs_env.validation import check_int
+from rhs_env.uncertainty import POINT_COLUMNS, point_rows
 
-POINT_FEATURES = ("x", "y", "radial_velocity", "amplitude")
+if TYPE_CHECKING:  # pragma: no cover - annotations only (the radar is imported when built)
+    from rhs_env.point_cloud import PointCloud
+    from rhs_env.radar import RadarSystem
+    from rhs_env.scatterers import Scatterers
+
+POINT_FEATURES = POINT_COLUMNS  # x, y, radial_velocity, amplitude, range_std, angle_std, radar
+RANGE_STD_MAX = 1e3  # m; a point without a usable SNR is clipped to this
 POINT_COLOR = (255, 40, 40)
 AMPLITUDE_MAX = 1e9  # linear echo amplitude over noise std; far above any physical echo
 
 
 def make_radar_config(radar: Any = None, antenna: str | None = None):
-    """A validated :class:`rhs_env.radar.RadarConfig` from ``None`` / a config / a dict of its fields.
+    """A validated :class:`rhs_env.radar.RadarConfig` from ``None`` / a config / a nested dict of its fields.
 
-    In a dict, ``rhs`` and ``scan`` may themselves be dicts (of
-    :class:`~rhs_env.antenna.RHSConfig` / :class:`~rhs_env.antenna.ScanConfig`
-    fields), e.g. ``{"scan": {"grid_deg": 5}, "max_range_m": 80}``. ``antenna``
-    (rhs | phased | random | hologram) overrides the antenna kind. Unknown
-    fields raise ``ValueError`` naming them.
+    ``{"scan": {"grid_deg": 5}, "max_range_m": 80}``; ``antenna`` (rhs | phased |
+    random | hologram) overrides the antenna kind. Errors name the field path
+    (``radar.scan.grid_deg must be ...``): ``ValueError`` for unknown fields and
+    out-of-range values, ``TypeError`` for wrong types.
     """
-    from rhs_env.antenna import RHSConfig, ScanConfig
     from rhs_env.radar import RadarConfig
 
-    if radar is None:
-        radar = {}
-    if isinstance(radar, RadarConfig):
-        return radar if antenna is None else replace(radar, antenna=antenna)
-    if not isinstance(radar, Mapping):
-        raise ValueError(f"radar must be a RadarConfig or a dict of its fields, got {type(radar).__name__}")  # noqa: TRY004
-    kwargs = dict(radar)
     if antenna is not None:
-        kwargs["antenna"] = antenna
-    known = {f.name for f in fields(RadarConfig)}
-    unknown = sorted(set(kwargs) - known)
-    if unknown:
-        raise ValueError(
-            f"radar has unknown field(s) {', '.join(map(repr, unknown))}; allowed: {', '.join(sorted(known))}"
-        )
-    for name, cls in (("rhs", RHSConfig), ("scan", ScanConfig)):
-        value = kwargs.get(name)
-        if isinstance(value, Mapping):
-            sub_known = {f.name for f in fields(cls)}
-            bad = sorted(set(value) - sub_known)
-            if bad:
-                raise ValueError(
-                    f"radar.{name} has unknown field(s) {', '.join(map(repr, bad))}; "
-                    f"allowed: {', '.join(sorted(sub_known))}"
-                )
-            kwargs[name] = cls(**value)
-    return RadarConfig(**kwargs)
+        check_choice("antenna", antenna, ANTENNA_KINDS)
+        if isinstance(radar, RadarConfig):
+            return replace(radar, antenna=antenna)
+        radar = {**(radar or {}), "antenna": antenna} if radar is None or isinstance(radar, Mapping) else radar
+    return build(RadarConfig, radar, "radar")
 
 
 def _spawn_rng(env: gym.Env) -> np.random.Generator:
@@ -111,7 +103,19 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         max_points: N_max, rows of the ``points`` observation, [1, 65536].
         scatter: a :class:`rhs_env.scene.ScatterConfig` or dict (range cut, vehicle RCS, ...).
         stage_times_in_info: add ``radar_stage_times`` to ``info`` (non-deterministic values).
-        scatterers_in_info: add the ground-truth ``scatterers`` to ``info``.
+        scatterers_in_info: add the ground-truth ``scatterers`` to ``info`` (variable length:
+            off by default so vector envs can stack ``info``).
+        blas_threads: BLAS / OpenMP threads inside ``step`` / ``reset`` (the radar's
+            work and the env's), restored after each call (:mod:`rhs_common.threads`);
+            default 1, ``None`` leaves the user's thread pools alone (opt into threads).
+
+    Example:
+        >>> import gymnasium as gym
+        >>> from rhs_env.envs import RHSPaperEnv
+        >>> env = RadarObservation(RHSPaperEnv(), radar={"scan": {"grid_deg": 5}}, max_points=32)
+        >>> obs, info = env.reset(seed=0)
+        >>> obs["points"].shape, int(obs["points_mask"].sum()) > 0
+        ((32, 7), True)
     """
 
     def __init__(
@@ -122,7 +126,8 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         max_points: int = 256,
         scatter: Any = None,
         stage_times_in_info: bool = False,
-        scatterers_in_info: bool = True,
+        scatterers_in_info: bool = False,
+        blas_threads: int | None = 1,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self,
@@ -132,9 +137,13 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             scatter=scatter,
             stage_times_in_info=stage_times_in_info,
             scatterers_in_info=scatterers_in_info,
+            blas_threads=blas_threads,
         )
         gym.ObservationWrapper.__init__(self, env)
         check_int("max_points", max_points, 1, 65536)
+        check_bool("stage_times_in_info", stage_times_in_info)
+        check_bool("scatterers_in_info", scatterers_in_info)
+        self.blas_threads = check_blas_threads(blas_threads)
         self.max_points = int(max_points)
         self.radar_config = make_radar_config(radar, antenna)
         self.scatter_config = ScatterConfig.make(scatter)
@@ -144,68 +153,74 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         cfg = self.radar_config
         reach = cfg.max_range_m + 0.5 * np.hypot(cfg.vehicle_length_m, cfg.vehicle_width_m)
         vmax = cfg.max_velocity_mps
-        self._low = np.array([-reach, -reach, -vmax, 0.0], dtype=np.float32)
-        self._high = np.array([reach, reach, vmax, AMPLITUDE_MAX], dtype=np.float32)
+        self._low = np.array([-reach, -reach, -vmax, 0.0, 0.0, 0.0, 0.0], dtype=np.float32)
+        self._high = np.array([reach, reach, vmax, AMPLITUDE_MAX, RANGE_STD_MAX, np.pi, 3.0], dtype=np.float32)
+        width = len(POINT_FEATURES)
         self.scatterers_in_info = bool(scatterers_in_info)
         self.observation_space = spaces.Dict(
             {
                 "points": spaces.Box(
-                    np.broadcast_to(self._low, (self.max_points, 4)),
-                    np.broadcast_to(self._high, (self.max_points, 4)),
+                    np.broadcast_to(self._low, (self.max_points, width)),
+                    np.broadcast_to(self._high, (self.max_points, width)),
                     dtype=np.float32,
                 ),
                 "points_mask": spaces.MultiBinary(self.max_points),
             }
         )
-        self.radar = None
+        self.radar: RadarSystem | None = None
         self._build_radar(np.random.default_rng(0))  # built now so bad configs fail here; rng replaced at reset
         self.stage_times: dict[str, float] = {}
-        self.last_cloud = None
-        self._last_info: dict[str, Any] = {}
+        self.last_cloud: PointCloud | None = None
+        self.last_scatterers: Scatterers | None = None
         self._points_he = np.zeros((0, 2))
+
+    @property
+    def _base(self) -> Any:
+        """The highway-env env underneath (its ``vehicle``, ``road``, ``config``: not in gymnasium's Env type)."""
+        return self.env.unwrapped
 
     # ---- gymnasium API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        obs, info = self.env.reset(seed=seed, options=options)
-        self._build_radar(_spawn_rng(self.env))
-        return self.observation(obs), self._with_info(info)
+        with blas_threads_limit(self.blas_threads):
+            obs, info = self.env.reset(seed=seed, options=options)
+            self._build_radar(_spawn_rng(self.env))
+            return self.observation(obs), self._with_info(info)
 
     def step(self, action):
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        return self.observation(obs), reward, terminated, truncated, self._with_info(info)
+        with blas_threads_limit(self.blas_threads):
+            obs, reward, terminated, truncated, info = self.env.step(action)
+            return self.observation(obs), reward, terminated, truncated, self._with_info(info)
 
     def observation(self, observation: Any) -> dict[str, np.ndarray]:
-        """Scan the current scene and return the padded point cloud (the env's own observation is ignored)."""
+        """Scan the current scene -> the padded point cloud (the env's own observation is ignored).
+
+        Keeps the scan (``last_cloud``, ``last_scatterers``) as the sensor's state; ``info`` is
+        built from it in :meth:`step` / :meth:`reset`.
+        """
         if self.radar is None:
             self._build_radar(_spawn_rng(self.env))
-        base = self.env.unwrapped
+        assert self.radar is not None
+        base = self._base
         ego = base.vehicle
         scatterers, occluders = scene_scatterers(base, ego, self.scatter_config)
         cloud = self.radar.scan(scatterers, occluders)
-        self.last_cloud = cloud
+        self.last_cloud, self.last_scatterers = cloud, scatterers
         self.stage_times = dict(getattr(cloud, "stage_times", {}) or {})
-        points = np.asarray(cloud.points, dtype=float).reshape(-1, 4)
-        n_total = len(points)
-        if n_total > self.max_points:
-            keep = np.sort(np.argpartition(-points[:, 3], self.max_points - 1)[: self.max_points])
-            points = points[keep]
+        points = point_rows(cloud)
+        if len(points) > self.max_points:  # keep the strongest, in the radar's order
+            points = points[np.sort(np.argpartition(-points[:, 3], self.max_points - 1)[: self.max_points])]
         n = len(points)
-        out_points = np.zeros((self.max_points, 4), dtype=np.float32)
+        out_points = np.zeros((self.max_points, len(POINT_FEATURES)), dtype=np.float32)
         out_points[:n] = np.clip(points, self._low, self._high)
         mask = np.zeros(self.max_points, dtype=np.int8)
         mask[:n] = 1
         self._points_he = vehicle_to_he_xy(points[:, :2], ego) if n else np.zeros((0, 2))
-        self._last_info = {"radar_points_total": n_total, "radar_points_dropped": n_total - n}
-        if self.scatterers_in_info:
-            self._last_info["scatterers"] = scatterers_to_dict(scatterers)
-        if self.stage_times_in_info:
-            self._last_info["radar_stage_times"] = dict(self.stage_times)
         return {"points": out_points, "points_mask": mask}
 
     def render(self):
         """The env's frame with the point cloud drawn over it (rgb_array); other modes pass through."""
         frame = self.env.render()
-        viewer = getattr(self.env.unwrapped, "viewer", None)
+        viewer = getattr(self._base, "viewer", None)
         if frame is not None and viewer is not None and viewer.offscreen and not getattr(viewer, "enabled", True):
             # highway-env disables its viewer under SDL_VIDEODRIVER=dummy; offscreen needs no display
             viewer.enabled = True
@@ -234,6 +249,11 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             self.radar.rng = rng
 
     def _with_info(self, info: dict[str, Any]) -> dict[str, Any]:
-        info = dict(info)
-        info.update(self._last_info)
-        return info
+        """``info`` plus the last scan's point counts (and, when asked, its truth and stage times)."""
+        total = len(self.last_cloud) if self.last_cloud is not None else 0
+        out = {**info, "radar_points_total": total, "radar_points_dropped": max(0, total - self.max_points)}
+        if self.scatterers_in_info and self.last_scatterers is not None:
+            out["scatterers"] = scatterers_to_dict(self.last_scatterers)
+        if self.stage_times_in_info:
+            out["radar_stage_times"] = dict(self.stage_times)
+        return out

@@ -1,18 +1,29 @@
 """Speed of every stage of rhs-slam, in one run, as JSON (never in timed tests).
 
-Sections (``--sections``, default all):
+Speeds are reported as ratios measured side by side in the same run (a busy
+machine slows both sides alike); the load average is recorded at the start of
+every section and printed beside it. Sections (``--sections``, default all):
 
 * ``envs``: steps per second of ``rhs-highway-v0``, ``rhs-highway-radar-v0`` and
   ``rhs-highway-slam-v0`` measured back to back on the same seeds and actions,
   with the radar's time per stage (synthesis, range/CFAR, OMP) and the SLAM's
-  time per stage (registration, association, RBPF) at 100 particles;
-* ``radar``: one 4-radar scan of a typical scene (scripts/benchmark_radar.py);
+  time per stage (registration, association, RBPF) at 100 particles; goals:
+  radar >= 0.75x and SLAM >= 0.67x the base env's steps/s;
+* ``load``: steady under load, the radar env's steps/s with one other busy
+  process (a CPU spin loop) against quiet, with single-threaded BLAS in the step
+  (the default) and with the process's own BLAS threads (``blas_threads=None``);
+  goal >= 0.85x;
+* ``vec``: the radar env in ``SubprocVecEnv`` with 2 workers against 1 (total
+  env steps/s); goal >= 1.8x;
+* ``radar``: one 4-radar scan of a typical scene (scripts/benchmark_radar.py),
+  both synthesis fidelities;
 * ``patterns``: time to build the dtheta = 1 deg default library with each
   method (scripts/benchmark_patterns.py; SDR on a subset, extrapolated);
-* ``training``: PPO training steps per second with 1 and 2 subprocess envs.
+* ``training``: PPO training steps/s with 2 subprocess envs on
+  ``rhs-highway-slam-v0`` against ``rhs-highway-v0``; goal >= 0.7x.
 
     python scripts/benchmark.py --out results/benchmark.json      # also writes results/benchmark.md
-    python scripts/benchmark.py --sections envs --steps 20   # keeps the other sections of --out
+    python scripts/benchmark.py --sections envs load vec --steps 30   # keeps the other sections of --out
 """
 
 from __future__ import annotations
@@ -21,6 +32,7 @@ import argparse
 import json
 import os
 import platform
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -29,7 +41,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
-SECTIONS = ("envs", "radar", "patterns", "training")
+SECTIONS = ("envs", "load", "vec", "radar", "patterns", "training")
+GOALS = {"radar_env_over_base": 0.75, "slam_env_over_base": 0.67, "loaded_over_quiet": 0.85,
+         "two_workers_over_one": 1.8, "ppo_slam_over_base": 0.7}
 
 
 def _mean_times(dicts: list[dict]) -> dict:
@@ -79,21 +93,95 @@ def bench_envs(steps: int, seed: int, grid_deg: float) -> dict:
     out["radar_slam_added_ms"] = out["rhs-highway-slam-v0"]["ms_per_step"] - base
     out["radar_added_over_base"] = out["radar_added_ms"] / base
     out["radar_slam_added_over_base"] = out["radar_slam_added_ms"] / base
+    out["radar_env_over_base"] = out["rhs-highway-radar-v0"]["steps_per_s"] / out["rhs-highway-v0"]["steps_per_s"]
+    out["slam_env_over_base"] = out["rhs-highway-slam-v0"]["steps_per_s"] / out["rhs-highway-v0"]["steps_per_s"]
+    return out
+
+
+def _steps_per_s(env, steps: int, seed: int) -> float:
+    """Env steps per second over ``steps`` steps of a fixed action sequence (resets on episode end)."""
+    actions = np.random.default_rng(seed).choice([1, 1, 1, 3, 4], size=steps)
+    env.reset(seed=seed)
+    t0 = time.perf_counter()
+    for n, a in enumerate(actions):
+        _, _, term, trunc, _ = env.step(int(a))
+        if term or trunc:
+            env.reset(seed=seed + n + 1)
+    return steps / (time.perf_counter() - t0)
+
+
+def bench_load(steps: int, seed: int, grid_deg: float) -> dict:
+    """Radar env steps/s quiet and with one busy process (a spin loop), for blas_threads 1 and None."""
+    import subprocess
+
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+
+    out = {}
+    for threads in (1, None):
+        env = gym.make("rhs-highway-radar-v0", radar={"scan": {"grid_deg": grid_deg}}, blas_threads=threads)
+        _steps_per_s(env, 3, seed)  # warm-up
+        quiet = _steps_per_s(env, steps, seed)
+        busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+        try:
+            time.sleep(0.5)
+            loaded = _steps_per_s(env, steps, seed)
+        finally:
+            busy.kill()
+            busy.wait()
+        env.close()
+        out[f"blas_threads_{threads}"] = {"quiet_steps_per_s": quiet, "loaded_steps_per_s": loaded,
+                                          "loaded_over_quiet": loaded / quiet}
+    out["loaded_over_quiet"] = out["blas_threads_1"]["loaded_over_quiet"]
+    return out
+
+
+def _make_radar_env(grid_deg: float):
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+
+    return gym.make("rhs-highway-radar-v0", radar={"scan": {"grid_deg": grid_deg}})
+
+
+def bench_vec(steps: int, seed: int, grid_deg: float) -> dict:
+    """Total env steps/s of the radar env in SubprocVecEnv with 1 and 2 workers (same steps per worker)."""
+    import functools
+
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    out = {}
+    for n in (1, 2):
+        venv = SubprocVecEnv([functools.partial(_make_radar_env, grid_deg) for _ in range(n)])
+        venv.seed(seed)
+        venv.reset()
+        rng = np.random.default_rng(seed)
+        venv.step(rng.choice([1, 3, 4], size=n))  # warm-up
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            venv.step(rng.choice([1, 1, 1, 3, 4], size=n))
+        dt = time.perf_counter() - t0
+        venv.close()
+        out[f"workers_{n}"] = {"steps_per_s": n * steps / dt, "steps_per_worker": steps}
+    out["two_workers_over_one"] = out["workers_2"]["steps_per_s"] / out["workers_1"]["steps_per_s"]
     return out
 
 
 def bench_training(timesteps: int, seed: int) -> dict:
-    """PPO steps/s on rhs-highway-slam-v0 with 1 and 2 subprocess envs."""
+    """PPO steps/s with 2 subprocess envs on rhs-highway-slam-v0 and on rhs-highway-v0."""
     import tempfile
 
     from agents.train import train
 
     out = {}
-    for n_envs in (1, 2):
+    for env_id in ("rhs-highway-slam-v0", "rhs-highway-v0"):
         with tempfile.TemporaryDirectory() as tmp:
-            s = train("ppo", "rhs-highway-slam-v0", timesteps, tmp, seed=seed, n_envs=n_envs,
-                      eval_freq=10**9, checkpoint_freq=10**9, progress=False)
-        out[f"n_envs_{n_envs}"] = {"timesteps": s["timesteps"], "steps_per_s": s["steps_per_s"], "wall_s": s["wall_time_s"]}
+            s = train("ppo", env_id, timesteps, tmp, seed=seed, n_envs=2, eval_freq=10**9,
+                      checkpoint_freq=10**9, progress=False)
+        out[env_id] = {"n_envs": 2, "timesteps": s["timesteps"], "steps_per_s": s["steps_per_s"],
+                       "wall_s": s["wall_time_s"]}
+    out["ppo_slam_over_base"] = out["rhs-highway-slam-v0"]["steps_per_s"] / out["rhs-highway-v0"]["steps_per_s"]
     return out
 
 
@@ -101,23 +189,59 @@ def _fmt(d: dict | None) -> str:
     return ", ".join(f"{k} {v:.1f}" for k, v in (d or {}).items()) or "-"
 
 
+def _md_envs(result: dict) -> list[str]:
+    e = result["envs"]
+    grid = result["settings"]["grid_deg"]
+    lines = [f"| env (default radar, dtheta = {grid:g} deg) | steps/s | ms/step | radar stages (ms) | SLAM stages (ms) |",
+             "|---|---:|---:|---|---|"]
+    for env_id in ("rhs-highway-v0", "rhs-highway-radar-v0", "rhs-highway-slam-v0"):
+        r = e[env_id]
+        lines.append(f"| `{env_id}` | {r['steps_per_s']:.1f} | {r['ms_per_step']:.1f} | "
+                     f"{_fmt(r['radar_stage_ms'])} | {_fmt(r['slam_stage_ms'])} |")
+    lines += ["", f"The radar adds {e['radar_added_ms']:.1f} ms per step ({e['radar_added_over_base']:.2f} x the "
+              f"base step), radar + SLAM {e['radar_slam_added_ms']:.1f} ms ({e['radar_slam_added_over_base']:.2f} x)."]
+    if "radar_env_over_base" in e:
+        lines.append(f"Steps/s over the base env: radar {e['radar_env_over_base']:.2f} x (goal >= "
+                     f"{GOALS['radar_env_over_base']}), SLAM {e['slam_env_over_base']:.2f} x (goal >= "
+                     f"{GOALS['slam_env_over_base']}).")
+    return [*lines, ""]
+
+
+def _md_ratios(result: dict) -> list[str]:
+    lines = []
+    if "load" in result:
+        ld = result["load"]
+        lines += ["| radar env, one other busy process | quiet steps/s | loaded steps/s | loaded / quiet |",
+                  "|---|---:|---:|---:|"]
+        for k in ("blas_threads_1", "blas_threads_None"):
+            r = ld[k]
+            lines.append(f"| `blas_threads={k.rsplit('_', 1)[1]}` | {r['quiet_steps_per_s']:.1f} | "
+                         f"{r['loaded_steps_per_s']:.1f} | {r['loaded_over_quiet']:.2f} |")
+        lines += [f"Goal: loaded / quiet >= {GOALS['loaded_over_quiet']} with the default (single-threaded BLAS).", ""]
+    if "vec" in result:
+        v = result["vec"]
+        lines += [f"SubprocVecEnv, radar env: 1 worker {v['workers_1']['steps_per_s']:.1f} steps/s, 2 workers "
+                  f"{v['workers_2']['steps_per_s']:.1f} steps/s: {v['two_workers_over_one']:.2f} x (goal >= "
+                  f"{GOALS['two_workers_over_one']}).", ""]
+    if "training" in result and "ppo_slam_over_base" in result["training"]:
+        t = result["training"]
+        lines += ["| PPO, 2 subprocess envs | steps/s |", "|---|---:|"]
+        lines += [f"| `{k}` | {t[k]['steps_per_s']:.1f} |" for k in ("rhs-highway-slam-v0", "rhs-highway-v0")]
+        lines += [f"PPO on the SLAM env over the base env: {t['ppo_slam_over_base']:.2f} x (goal >= "
+                  f"{GOALS['ppo_slam_over_base']}).", ""]
+    return lines
+
+
 def markdown(result: dict) -> str:
-    """The README table of a benchmark result."""
+    """The README tables of a benchmark result."""
     runs = result.get("section_runs", {})
     when = "; ".join(f"{k} {v['date']}, load {v['load_average'][0]:.1f}" for k, v in runs.items())
     lines = [f"Measured by `python scripts/benchmark.py` on {result['machine']['cpus']} CPU cores "
              + (f"(per section: {when})." if when else f"(load average at start {result['machine']['load_average']})."),
              ""]
     if "envs" in result:
-        e = result["envs"]
-        lines += ["| env (default radar, dtheta = %g deg) | steps/s | ms/step | radar stages (ms) | SLAM stages (ms) |"
-                  % result["settings"]["grid_deg"], "|---|---:|---:|---|---|"]
-        for env_id in ("rhs-highway-v0", "rhs-highway-radar-v0", "rhs-highway-slam-v0"):
-            r = e[env_id]
-            lines.append(f"| `{env_id}` | {r['steps_per_s']:.1f} | {r['ms_per_step']:.1f} | "
-                         f"{_fmt(r['radar_stage_ms'])} | {_fmt(r['slam_stage_ms'])} |")
-        lines += ["", f"The radar adds {e['radar_added_ms']:.1f} ms per step ({e['radar_added_over_base']:.2f} x the "
-                  f"base step), radar + SLAM {e['radar_slam_added_ms']:.1f} ms ({e['radar_slam_added_over_base']:.2f} x).", ""]
+        lines += _md_envs(result)
+    lines += _md_ratios(result)
     if "radar" in result:
         lines += ["| one 4-radar scan, typical scene | synthesis (ms) | range/CFAR (ms) | OMP (ms) | total (ms) |",
                   "|---|---:|---:|---:|---:|"]
@@ -139,66 +263,77 @@ def markdown(result: dict) -> str:
             lines.append(f"| fast, previous settings / today's on the same {len(v['angles_deg'])} grids (ratio) | "
                          f"{v['wall_ratio']:.2f} x wall, {v['cpu_ratio']:.2f} x CPU |")
         lines.append("")
-    if "training" in result:
-        lines += ["| PPO on `rhs-highway-slam-v0` | steps/s |", "|---|---:|"]
-        for k, r in result["training"].items():
-            lines.append(f"| {k.replace('n_envs_', '')} subprocess env(s) | {r['steps_per_s']:.1f} |")
-        lines.append("")
     return "\n".join(lines)
+
+
+def _run_section(sec: str, args: argparse.Namespace) -> dict:
+    if sec == "envs":
+        return bench_envs(args.steps, args.seed, args.grid_deg)
+    if sec == "load":
+        return bench_load(args.steps, args.seed, args.grid_deg)
+    if sec == "vec":
+        return bench_vec(args.steps, args.seed, args.grid_deg)
+    if sec == "radar":
+        from benchmark_radar import benchmark_radar
+
+        return {f"{a}_{f}": benchmark_radar(antenna=a, grid_deg=args.grid_deg, fidelity=f)
+                for a in ("rhs", "phased") for f in ("iq", "range")}
+    if sec == "patterns":
+        from benchmark_patterns import benchmark_patterns
+
+        return benchmark_patterns(grid_deg=1.0)
+    return bench_training(args.train_steps, args.seed)
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sections", nargs="+", choices=SECTIONS, default=list(SECTIONS))
-    ap.add_argument("--steps", type=int, default=40, help="env steps per id (envs section)")
+    ap.add_argument("--steps", type=int, default=40, help="env steps per measurement (envs, load, vec)")
     ap.add_argument("--grid-deg", type=float, default=1.0)
-    ap.add_argument("--train-steps", type=int, default=1024, help="PPO timesteps per setting (training section)")
+    ap.add_argument("--train-steps", type=int, default=1024, help="PPO timesteps per env id (training section)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmark.json"))
     args = ap.parse_args(argv)
-
+    commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
     result: dict = {
-        "machine": {
-            "python": platform.python_version(),
-            "cpus": os.cpu_count(),
-            "platform": platform.platform(),
-            "load_average": [round(x, 2) for x in os.getloadavg()],
-        },
-        "settings": vars(args),
+        "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "platform": platform.platform(),
+                    "load_average": [round(x, 2) for x in os.getloadavg()]},
+        "settings": vars(args), "commit": commit, "command": " ".join([sys.executable, *sys.argv]),
     }
-    if "envs" in args.sections:
-        print("benchmark: envs ...", file=sys.stderr)
-        result["envs"] = bench_envs(args.steps, args.seed, args.grid_deg)
-    if "radar" in args.sections:
-        print("benchmark: radar ...", file=sys.stderr)
-        from benchmark_radar import benchmark_radar
-
-        result["radar"] = {a: benchmark_radar(antenna=a, grid_deg=args.grid_deg) for a in ("rhs", "phased")}
-    if "patterns" in args.sections:
-        print("benchmark: patterns ...", file=sys.stderr)
-        from benchmark_patterns import benchmark_patterns
-
-        result["patterns"] = benchmark_patterns(grid_deg=1.0)
-    if "training" in args.sections:
-        print("benchmark: training ...", file=sys.stderr)
-        result["training"] = bench_training(args.train_steps, args.seed)
     out = Path(args.out)
     # sections not run now are kept from an existing file, with when and under what load they ran
     previous = json.loads(out.read_text()) if out.exists() else {}
     runs = previous.get("section_runs", {})
     for sec in SECTIONS:
         if sec in args.sections:
-            runs[sec] = {"date": time.strftime("%Y-%m-%d %H:%M"), "load_average": result["machine"]["load_average"]}
+            load = [round(x, 2) for x in os.getloadavg()]
+            print(f"benchmark: {sec} (load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}) ...", file=sys.stderr)
+            result[sec] = _run_section(sec, args)
+            runs[sec] = {"date": time.strftime("%Y-%m-%d %H:%M"), "load_average": load, "commit": commit}
         elif sec in previous:
             result[sec] = previous[sec]
             runs.setdefault(sec, {"date": "an earlier run",
                                   "load_average": previous.get("machine", {}).get("load_average", [float("nan")])})
     result["section_runs"] = {k: runs[k] for k in SECTIONS if k in runs}
+    result["goals"] = _goals(result)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2, default=float))
     out.with_suffix(".md").write_text(markdown(result) + "\n")
     print(json.dumps(result, indent=2, default=float))
+    for k, g in result["goals"].items():
+        print(f"{k}: {g['value']:.3f} (goal >= {g['goal']}) {'met' if g['met'] else 'NOT met'}", file=sys.stderr)
     return 0
+
+
+def _goals(result: dict) -> dict:
+    """Each issue-9 ratio present in the result, its goal and whether it is met."""
+    found = {}
+    for sec in ("envs", "load", "vec", "training"):
+        for k, goal in GOALS.items():
+            if k in result.get(sec, {}):
+                v = float(result[sec][k])
+                found[k] = {"value": v, "goal": goal, "met": v >= goal}
+    return found
 
 
 if __name__ == "__main__":

@@ -141,7 +141,13 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-    from agents.evaluate import SHIPPED_POLICY, SHIPPED_TRUTH_POLICY, policy_metadata, resolve_env, summarize
+    from agents.evaluate import (
+        SHIPPED_POLICY,
+        SHIPPED_TRUTH_POLICY,
+        policy_metadata,
+        resolve_env,
+        summarize,
+    )
 
     slam_policy = args.slam_policy or str(SHIPPED_POLICY)
     truth_policy = args.truth_policy or str(SHIPPED_TRUTH_POLICY)
@@ -195,7 +201,7 @@ def main(argv: list[str] | None = None) -> int:
 
         cfg = gym.make(truth_env, **truth_kwargs).unwrapped.config
         max_steps = round(cfg["duration"] * cfg["policy_frequency"])
-    except Exception:  # noqa: BLE001, S110  (only for the table's caption)
+    except Exception:
         pass
     result = {
         "episodes": args.episodes,

@@ -31,13 +31,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from rhs_common.geometry import wrap_angle
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from paper_episode import ANTENNAS, IDLE, add_episode_args, make_paper_env
@@ -65,7 +66,7 @@ def run_episode(
     env.close()
     true, est = np.asarray(true), np.asarray(est)
     pos_err = np.hypot(est[:, 0] - true[:, 0], est[:, 1] - true[:, 1])
-    head_err = (est[:, 2] - true[:, 2] + math.pi) % (2 * math.pi) - math.pi
+    head_err = wrap_angle(est[:, 2] - true[:, 2])
     n = len(true)
     return {
         "antenna": antenna,
@@ -76,9 +77,7 @@ def run_episode(
         "vehicle_max_error_m": float(np.max(pos_err)),
         "final_position_error_m": float(pos_err[-1]),
         "heading_rmse_rad": float(np.sqrt(np.mean(head_err**2))),
-        "obstacle_rmse_m": info[
-            "map_rmse_m"
-        ],  # None when nothing matched within the gate
+        "obstacle_rmse_m": info.get("map_rmse_m"),  # None when nothing matched within the gate
         "map_matched": int(info["map_matched"]),
         "map_missed": int(info["map_missed"]),
         "map_spurious": int(info["map_spurious"]),

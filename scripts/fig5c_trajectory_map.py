@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rhs_common.geometry import wrap_angle
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from paper_episode import ANTENNAS, IDLE, add_episode_args, make_paper_env
 
@@ -36,9 +38,9 @@ from paper_episode import ANTENNAS, IDLE, add_episode_args, make_paper_env
 def run(args: argparse.Namespace) -> dict:
     from tqdm import tqdm
 
-    from rhs_env.slam_wrapper import SlamObservation
-    from slam.registration import apply_motion
     from slam.metrics import map_metrics
+    from slam.registration import apply_motion
+    from slam.wrapper import SlamObservation
 
     env = make_paper_env(args, args.antenna, args.tx_power)
     slam = env
@@ -101,8 +103,8 @@ def run(args: argparse.Namespace) -> dict:
             }
         )
     pos_err = np.hypot(est[1:, 0] - true[1:, 0], est[1:, 1] - true[1:, 1])
-    head_err = (est[1:, 2] - true[1:, 2] + math.pi) % (2 * math.pi) - math.pi
-    world_heading = lambda p: (p[:, 2] + origin[2] + math.pi) % (2 * math.pi) - math.pi
+    head_err = wrap_angle(est[1:, 2] - true[1:, 2])
+    world_heading = lambda p: wrap_angle(p[:, 2] + origin[2])
     cloud = np.concatenate(clouds) if clouds else np.zeros((0, 2))
     return {
         "figure": "5c",

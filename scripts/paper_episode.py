@@ -12,7 +12,7 @@ import argparse
 from typing import Any
 
 from rhs_env.antenna import ANTENNA_KINDS
-from rhs_env.slam_wrapper import DEFAULT_REGISTRATION, REGISTRATIONS
+from slam.registration import DEFAULT_REGISTRATION, REGISTRATIONS
 
 POLICY_HZ = 5  # rhs-paper-v0: one SLAM cycle per 0.2 s
 IDLE = 1  # DiscreteMetaAction: keep lane and speed
@@ -51,6 +51,7 @@ def make_paper_env(args: argparse.Namespace, antenna: str, tx_power_dbm: float, 
         radar=radar,
         registration=args.registration,
         map_gate_m=float(args.map_gate),
+        landmarks_in_info=True,
         duration=args.cycles / POLICY_HZ,
         **kwargs,
     )

@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rhs_common.geometry import wrap_angle
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -106,7 +108,7 @@ def make_dataset(prev_list, cur_list, motions, priors_per_pair, prior_std, grid,
 
 def motion_errors(est: np.ndarray, truth: np.ndarray) -> dict:
     d = est - truth
-    rot = (d[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    rot = wrap_angle(d[:, 2])
     return {
         "translation_rmse_m": float(np.sqrt(np.mean(d[:, 0] ** 2 + d[:, 1] ** 2))),
         "rotation_rmse_deg": float(np.degrees(np.sqrt(np.mean(rot**2)))),
@@ -135,7 +137,12 @@ def main(argv=None) -> int:
         args.episodes, args.val_episodes, args.steps, args.epochs, args.priors_per_pair = 2, 1, 8, 2, 2
         args.paper_episodes = 1
 
-    from slam.cnn_registration import CNNRegistration, CNNTrainConfig, GridMapConfig, train_cnn
+    from slam.cnn_registration import (
+        CNNRegistration,
+        CNNTrainConfig,
+        GridMapConfig,
+        train_cnn,
+    )
     from slam.registration import ICPRegistration
 
     progress = not args.no_progress

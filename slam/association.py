@@ -28,6 +28,15 @@ Three steps, all in SI units (m, m/s, rad):
    ``delta_m`` means a new landmark (paper: "Cluster Match"). Everything is batched
    over particles (P), observations (M) and landmarks (L) with a P x M x L distance
    tensor.
+
+4. **Per-point covariance and Mahalanobis association** (:func:`point_covariance`,
+   :func:`cluster_covariance`, :func:`mahalanobis_associate`). A point measured at
+   range R and angle phi from its sensor at ``s`` has the vehicle-frame covariance
+   ``Sigma = sigma_R^2 u u^T + (R sigma_phi)^2 u_perp u_perp^T`` (``u`` the line of
+   sight); a cluster fuses its points in information form. Association gates on the
+   Mahalanobis distance ``d^2 = nu^T C^-1 nu`` with the full innovation covariance
+   ``C`` and enforces mutual exclusion (one observation per landmark and one
+   landmark per observation, per particle) by rounds of mutual-nearest matching.
 """
 
 from __future__ import annotations
@@ -45,6 +54,10 @@ __all__ = [
     "cluster_points",
     "to_map_frame",
     "associate",
+    "point_covariance",
+    "cluster_covariance",
+    "sym2_inverse",
+    "mahalanobis_associate",
 ]
 
 #: association code: observation starts a new landmark in this particle
@@ -280,3 +293,103 @@ def associate(
         idx = np.where(lose, DROPPED, idx)
         dist = np.where(lose, np.inf, dist)
     return idx, dist
+
+
+def point_covariance(
+    points: np.ndarray, sensor_xy: np.ndarray | None = None, floor_m: float = 0.0
+) -> np.ndarray:
+    """Vehicle-frame covariance (N, 2, 2) (m^2) of radar points with their own stds.
+
+    ``points`` (N, 7) rows ``x, y, vr, amplitude, range std (m), angle std (rad), radar``;
+    ``sensor_xy`` (S, 2) the radar positions in the vehicle frame indexed by the last
+    column (``None``: every sensor at the vehicle origin). With ``u`` the unit line of
+    sight from the sensor and ``R`` the range from it:
+
+    ``Sigma = sigma_R^2 u u^T + (R sigma_phi)^2 u_perp u_perp^T + floor_m^2 I``.
+    """
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] < 7:
+        raise ValueError(f"points must have shape (N, 7), got {pts.shape}")
+    if sensor_xy is None:
+        s = np.zeros((len(pts), 2))
+    else:
+        sens = np.asarray(sensor_xy, dtype=float).reshape(-1, 2)
+        s = sens[np.clip(pts[:, 6].astype(int), 0, len(sens) - 1)]
+    d = pts[:, :2] - s
+    r = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
+    u = d / r[:, None]
+    var_r = pts[:, 4] ** 2
+    var_c = (r * pts[:, 5]) ** 2
+    cov = np.empty((len(r), 2, 2))
+    cov[:, 0, 0] = var_r * u[:, 0] ** 2 + var_c * u[:, 1] ** 2 + floor_m**2
+    cov[:, 1, 1] = var_r * u[:, 1] ** 2 + var_c * u[:, 0] ** 2 + floor_m**2
+    cov[:, 0, 1] = cov[:, 1, 0] = (var_r - var_c) * u[:, 0] * u[:, 1]
+    return cov
+
+
+def sym2_inverse(a: np.ndarray, b: np.ndarray, c: np.ndarray):
+    """Inverse and determinant of symmetric 2 x 2 matrices ``[[a, b], [b, c]]`` (any shape).
+
+    Returns ``(i00, i01, i11, det)``; the determinant is floored at 1e-300.
+    """
+    det = np.maximum(a * c - b * b, 1e-300)
+    return c / det, -b / det, a / det, det
+
+
+def cluster_covariance(
+    points: np.ndarray, labels: np.ndarray, cov: np.ndarray, n_clusters: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Information fusion of the points of each cluster: positions (C, 2) and covariances (C, 2, 2).
+
+    ``Sigma_c = (sum_i Sigma_i^-1)^-1``, ``x_c = Sigma_c sum_i Sigma_i^-1 x_i`` (independent errors
+    of one scatterer). Adding the members' spread to ``Sigma_c`` (for clusters of distinct
+    scatterers) was tried and measured worse on the dense-pair scene (RHS ATE 0.14 / 0.10 m ->
+    0.24 / 0.19 m on tuning seeds 0 / 1), so it is not done.
+    """
+    i00, i01, i11, _ = sym2_inverse(cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1])
+    x, y = points[:, 0], points[:, 1]
+    info = [np.bincount(labels, weights=w, minlength=n_clusters) for w in (i00, i01, i11)]
+    vec = [
+        np.bincount(labels, weights=i00 * x + i01 * y, minlength=n_clusters),
+        np.bincount(labels, weights=i01 * x + i11 * y, minlength=n_clusters),
+    ]
+    c00, c01, c11, _ = sym2_inverse(*info)
+    out = np.empty((n_clusters, 2, 2))
+    out[:, 0, 0], out[:, 1, 1] = c00, c11
+    out[:, 0, 1] = out[:, 1, 0] = c01
+    xy = np.stack([c00 * vec[0] + c01 * vec[1], c01 * vec[0] + c11 * vec[1]], axis=1)
+    return xy, out
+
+
+def mahalanobis_associate(
+    d2: np.ndarray, gate2: float, new_gate2: float, rounds: int = 3
+) -> np.ndarray:
+    """Gated association with mutual exclusion from squared Mahalanobis distances ``d2`` (P, M, L).
+
+    Per particle, each round accepts the pairs (m, l) that are each other's nearest
+    among the still free observations and landmarks within ``gate2``; ``rounds``
+    rounds approximate the global nearest neighbour. An observation left without a
+    landmark is :data:`NEW` when every landmark is farther than ``new_gate2``
+    (``>= gate2``), else :data:`DROPPED` (its landmark went to a closer observation,
+    or it is ambiguous). Inactive landmarks must carry ``inf``.
+
+    Returns idx (P, M): landmark index, NEW or DROPPED.
+    """
+    P, M, L = d2.shape
+    idx = np.full((P, M), NEW, dtype=np.int64)
+    if M == 0 or L == 0:
+        return idx
+    near = d2.min(axis=2) <= new_gate2  # (P, M): some landmark close enough to forbid a new one
+    cost = np.where(d2 <= gate2, d2, np.inf)
+    for _ in range(rounds):
+        best_l = np.argmin(cost, axis=2)  # (P, M)
+        best_c = np.take_along_axis(cost, best_l[:, :, None], axis=2)[:, :, 0]
+        best_m = np.argmin(cost, axis=1)  # (P, L)
+        mutual = np.isfinite(best_c) & (np.take_along_axis(best_m, best_l, axis=1) == np.arange(M)[None, :])
+        if not mutual.any():
+            break
+        idx = np.where(mutual, best_l, idx)
+        pp, mm = np.nonzero(mutual)
+        cost[pp, mm, :] = np.inf
+        cost[pp, :, best_l[pp, mm]] = np.inf
+    return np.where((idx == NEW) & near, DROPPED, idx)

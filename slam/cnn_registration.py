@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rhs_env.validation import check_int, check_range
-from slam.registration import compose, points_in_frame
+from rhs_common.geometry import compose, points_in_frame
+from rhs_common.validation import check_int, check_range, check_types
 
 DEFAULT_WEIGHTS = Path(__file__).parent / "data" / "registration_cnn.pt"
 
@@ -36,6 +36,7 @@ class GridMapConfig:
     cell_m: float = 1.5
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_int("cells", self.cells, 8, 512)
         check_range("cell_m", self.cell_m, 0.0, 20.0, low_open=True)
 
@@ -108,6 +109,7 @@ class CNNTrainConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_int("epochs", self.epochs, 1, 10_000)
         check_int("batch_size", self.batch_size, 1, 65_536)
         check_range("learning_rate", self.learning_rate, 0.0, 1.0, low_open=True)
@@ -187,7 +189,7 @@ def train_cnn(
         err = (pred - y) * scale_t  # back to metres / radians
         return ((err**2) * w).sum(dim=1).mean()
 
-    history = {"train_loss": [], "val_loss": []}
+    history: dict[str, list[float]] = {"train_loss": [], "val_loss": []}
     bar = tqdm(range(cfg.epochs), desc="train CNN", disable=not progress)
     for _ in bar:
         net.train()

@@ -1,4 +1,4 @@
-"""Rao-Blackwellized particle filter SLAM (FastSLAM 1.0), vectorized over particles.
+"""Rao-Blackwellized particle filter SLAM (FastSLAM 2.0 / 1.0), vectorized over particles.
 
 Paper section VII-C ("Information Update"). Each particle c carries a vehicle pose
 ``p_c = (x, y, th)`` in the map frame (m, m, rad) and, per landmark u, a Gaussian
@@ -13,101 +13,142 @@ holds it: a landmark created from one observation gets one slot, activated in ev
 particle that did not associate that observation. Averaging a landmark across
 particles is therefore a weighted mean over one slot.
 
-One cycle (:meth:`RBPFSlam.update`):
+**Measurement model.** An observation is a point ``z`` in the vehicle frame with its
+own covariance ``Q`` (m^2): the radar's range / angle std of the point turned into
+Cartesian form (:func:`slam.association.point_covariance`), fused over a cluster,
+plus ``measurement_floor_m^2 I`` (errors outside the radar: clustering, timing).
+``measurement_noise="fixed"`` uses ``range_std_m`` / ``bearing_std_rad`` for every
+point instead (the first round's model). The prediction of landmark ``e`` from pose
+``p = (t, th)`` is ``h(p, e) = R(th)^T (e - t)``, linear in ``e`` (``H_e = R^T``) with
+the pose Jacobian ``H_p = [-R^T | (h_y, -h_x)^T]``.
 
-1. **Moving-point filter and clustering** (``slam.association``).
-2. **Propagation** (white-noise-acceleration model around the registration
-   estimate ``m = (dx, dy, dth)``, the current vehicle frame in the previous one):
-   ``p_c <- p_c (+) (m + n_c)``, i.e. ``[x, y] += R(th) [dx + n_x, dy + n_y]``,
-   ``th += dth + n_th``. The noise per axis has the std
+One cycle (:meth:`RBPFSlam.update`): predict, associate, update, weight, resample.
+
+1. **Predict.** The registration estimate ``m = (dx, dy, dth)`` (current vehicle frame
+   in the previous one) moves every particle, ``mu_c = p_c (+) m``; its uncertainty is
+   ``Sigma_p = diag(sigma_t^2, sigma_t^2, sigma_th^2)`` (map frame) with
    ``sigma_t = sqrt(trans_std^2 + (trans_frac |d|)^2 + (accel_std dt^2 / 2)^2)`` (m)
    and ``sigma_th = sqrt(rot_std^2 + (yaw_accel_std dt^2 / 2)^2)`` (rad): a constant
-   random acceleration over the cycle displaces the vehicle by ``a dt^2 / 2``, on top
-   of the registration error floor.
-3. **Association** per particle: nearest landmark within ``delta_m`` (paper).
-4. **Landmark EKF** (paper eqs. 10-12). The paper writes the update loosely
-   (``e += Lambda F^T J^-1 (p_hat - p)``); we implement the standard FastSLAM EKF:
-   range-bearing measurement ``z = (r, b)`` of the observation in the vehicle frame,
-   prediction ``f(e, p) = (|e - [x, y]|, atan2(e_y - y, e_x - x) - th)``,
+   random acceleration over the cycle displaces the vehicle by ``a dt^2 / 2``.
+   FastSLAM 1.0 samples ``p_c ~ N(mu_c, Sigma_p)`` here.
+2. **Associate** (per particle, at ``mu_c``): innovation ``nu = t + R z - e`` (map frame)
+   with covariance ``C = Lambda + R (Q + H_p,z Sigma_p H_p,z^T) R^T`` (``H_p`` evaluated
+   at the observation); gate ``nu^T C^-1 nu <= gate_mahalanobis^2``, mutual exclusion
+   (:func:`slam.association.mahalanobis_associate`); an observation within
+   ``new_gate_mahalanobis`` of a landmark it did not get is dropped, not made a new
+   landmark. ``association="nearest"`` is the paper's nearest landmark within ``delta_m``.
+   Recovery (FastSLAM 2.0): when the particles match fewer than
+   ``recovery_match_fraction`` of 3 or more observations, ``Sigma_p`` is inflated by
+   ``recovery_std_factor^2`` and the association repeated.
+3. **Update.**
+   *FastSLAM 2.0* (Montemerlo et al. 2003), all matched observations k of particle c
+   at once (they are independent given the pose): with ``nu_k = z_k - h(mu_c, e_k)``,
+   ``S_k = R^T Lambda_k R + Q_k``,
 
-   ``F = df/de = [[dx/r, dy/r], [-dy/r^2, dx/r^2]]``,
-   ``S = F Lambda F^T + Q``,   ``Q = diag(range_std^2, bearing_std^2)``,
-   ``K = Lambda F^T S^-1``,   ``nu = z - f(e, p)`` (bearing wrapped),
-   ``e <- e + K nu``,   ``Lambda <- (I - K F) Lambda`` (evaluated as
-   ``Lambda - K (Lambda F^T)^T`` and symmetrized; the batched 2 x 2 algebra is written
-   out on component arrays).
+   ``Lambda_p = Sigma_p^-1 + sum_k H_k^T S_k^-1 H_k``,  ``g = sum_k H_k^T S_k^-1 nu_k``,
+   ``p_c ~ N(mu_c + Lambda_p^-1 g, Lambda_p^-1)``
 
-   Range-bearing is chosen because it is the radar's native error structure: range
-   error is set by the bandwidth (c/2B = 0.6 m bins) and bearing error by the beam
-   grid, so a Cartesian error ellipse grows with range along the cross-range
-   direction; a constant Cartesian Q would over-trust far points and under-trust
-   near ones.
-   A new landmark is initialised by inverting the measurement:
-   ``e = [x, y] + r (cos(b + th), sin(b + th))``, ``Lambda = G Q G^T`` with
-   ``G = [[cos phi, -r sin phi], [sin phi, r cos phi]]``, ``phi = b + th``.
-5. **Weights**: ``log w_c += sum_m l_cm`` with the Gaussian log-likelihood
-   ``l = -nu^T S^-1 nu / 2 - log(2 pi) - log det(S) / 2`` for a matched observation and
-   a constant ``l_new`` (the same density at Mahalanobis distance
-   ``new_landmark_mahalanobis`` with ``S0 = 2 Q``, the innovation covariance of a
-   freshly initialised landmark) for a new one. ``weighting="amplitude"`` is the
-   paper's option ("weight of each obstacle = reflection amplitude, particle weight =
-   product"): taken literally it gives every particle the same factor whenever the
-   associations agree, so we read it as amplitude-weighted log-likelihoods,
-   ``log w_c += sum_m (a_m / mean(a)) l_cm``, stronger echoes counting more.
-   Normalisation by log-sum-exp; non-finite weights fall back to uniform.
-6. **Pruning**: a landmark not re-observed for ``prune_after_cycles`` cycles (or a
+   (the measurement-updated proposal, one Gauss-Newton step). Joint compatibility,
+   where cheap: a match whose residual at the corrected pose,
+   ``(nu_k - H_k delta)^T S_k^-1 (nu_k - H_k delta)``, exceeds the gate is dropped and
+   the proposal recomputed once. The importance weight is the joint marginal
+   likelihood of the matched observations, by Woodbury and the determinant lemma
+
+   ``log w_c += -(a - g^T Lambda_p^-1 g) / 2 - n log(2 pi)
+   - (sum_k log det S_k + log det Sigma_p + log det Lambda_p) / 2``,
+   ``a = sum_k nu_k^T S_k^-1 nu_k``.
+
+   *FastSLAM 1.0*: ``log w_c += sum_k log N(nu_k; 0, S_k)`` at the sampled pose.
+   Then, at the particle's pose, the landmark Kalman update (exact, the model is linear
+   in ``e``), in the map frame ``Q' = R Q R^T``, ``S = Lambda + Q'``:
+   ``e <- e + Lambda S^-1 nu``,  ``Lambda <- Lambda - Lambda S^-1 Lambda`` (symmetrized).
+   A new landmark starts at ``e = t + R z``, ``Lambda = R Q R^T``; it adds the constant
+   ``log N`` at Mahalanobis distance ``new_landmark_mahalanobis`` of the covariance a
+   match would have had.
+   ``weighting="amplitude"`` (FastSLAM 1.0 only) is the paper's option: per-observation
+   log-likelihoods weighted by ``a_m / mean(a)``.
+4. **Weight**: log-sum-exp normalisation; non-finite weights fall back to uniform.
+5. **Prune**: a landmark not re-observed for ``prune_after_cycles`` cycles (or a
    tentative one, fewer than ``min_hits`` updates, for ``tentative_prune_after_cycles``)
    is dropped from the particle; a slot held by no particle is freed. Confirmed
    landmarks leaving memory are archived (their weighted mean only) so the full
    map of a long run stays available (:meth:`RBPFSlam.full_map`), capped at
    ``max_retired``. When all ``max_landmarks`` slots are busy the oldest slot is
    evicted.
-7. **Estimate** (before resampling): weighted mean pose, heading on the circle
+6. **Estimate** (before resampling): weighted mean pose, heading on the circle
    ``atan2(sum w sin th, sum w cos th)``; landmarks weighted across the particles
    holding them.
-8. **Resampling**: systematic, when ``ESS = 1 / sum w^2 < resample_threshold P``;
+7. **Resample**: systematic, when ``ESS = 1 / sum w^2 < resample_threshold P``;
    all arrays are copied by fancy indexing (never aliased).
+
+Stage times (s) per cycle are in :attr:`SlamEstimate.stage_times`.
 """
 
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.special import logsumexp
 
-from rhs_env.validation import check_choice, check_int, check_range
-from slam.association import NEW, associate, cluster_points, static_mask, to_map_frame
+from rhs_common.geometry import circular_mean, wrap_angle
+from rhs_common.timing import StageTimer
+from rhs_common.validation import check_bool, check_choice, check_int, check_range, check_types
+from slam.association import (
+    DROPPED,
+    NEW,
+    associate,
+    cluster_covariance,
+    cluster_points,
+    mahalanobis_associate,
+    point_covariance,
+    static_mask,
+    sym2_inverse,
+    to_map_frame,
+)
 
-__all__ = ["SlamConfig", "SlamEstimate", "RBPFSlam", "wrap_angle", "circular_mean"]
+__all__ = ["SlamConfig", "SlamEstimate", "RBPFSlam", "StageTimer", "wrap_angle", "circular_mean"]
 
 _LOG2PI = math.log(2.0 * math.pi)
+VARIANTS = ("fastslam2", "fastslam1")
+ASSOCIATIONS = ("mahalanobis", "nearest")
+NOISE_MODELS = ("per_point", "fixed")
 
 
-def wrap_angle(a):
-    """Wrap angles (rad) to [-pi, pi)."""
-    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
+def rotate_sym2(c, s, b00, b01, b11):
+    """Components of ``R B R^T`` for symmetric B, ``R = [[c, -s], [s, c]]`` (broadcasting)."""
+    cc, ss, cs = c * c, s * s, c * s
+    return (
+        cc * b00 - 2.0 * cs * b01 + ss * b11,
+        cs * (b00 - b11) + (cc - ss) * b01,
+        ss * b00 + 2.0 * cs * b01 + cc * b11,
+    )
 
 
-def circular_mean(angles: np.ndarray, weights: np.ndarray | None = None) -> float:
-    """Weighted mean on the circle: ``atan2(sum w sin a, sum w cos a)`` (rad)."""
-    a = np.asarray(angles, dtype=float)
-    w = np.ones_like(a) if weights is None else np.asarray(weights, dtype=float)
-    return float(np.arctan2(np.sum(w * np.sin(a)), np.sum(w * np.cos(a))))
-
-
-@dataclass
+@dataclass(frozen=True)
 class SlamConfig:
     """RBPF SLAM settings (SI units). Validated at construction.
 
     n_particles: particles P. max_landmarks: landmark slots Lmax per particle.
-    delta_m: association gate (m). cluster_radius_m: points closer than this are one
-    object (m, 0 disables). range_std_m, bearing_std_rad: measurement noise Q.
+    variant: "fastslam2" (pose from the measurement-updated proposal) | "fastslam1"
+    (the paper's: pose from the motion model). association: "mahalanobis" (gated on
+    the full innovation covariance, mutual exclusion) | "nearest" (the paper's nearest
+    landmark within delta_m). gate_mahalanobis: match gate (Mahalanobis distance).
+    new_gate_mahalanobis: an unmatched observation this close to a landmark is dropped
+    instead of starting a new one. association_rounds: mutual-nearest rounds.
+    recovery_std_factor, recovery_match_fraction: FastSLAM 2.0 recovery: when the particles
+    match fewer than this fraction of >= 3 observations (the registration motion is likely
+    wrong, e.g. a collision), the motion std is multiplied by the factor and the association
+    repeated (1 disables).
+    joint_compatibility: drop matches inconsistent with the pose they jointly imply
+    (FastSLAM 2.0). measurement_noise: "per_point" (each point's own covariance) |
+    "fixed" (range_std_m, bearing_std_rad for every point). measurement_floor_m:
+    isotropic std added to every observation (m). delta_m: "nearest" gate (m).
+    cluster_radius_m: points closer than this are one object (m, 0 disables).
     trans_std_m, trans_frac, rot_std_rad, accel_std_mps2, yaw_accel_std_radps2:
     propagation noise (see module docstring). resample_threshold: resample when
-    ESS < threshold * P. weighting: "likelihood" | "amplitude".
+    ESS < threshold * P. weighting: "likelihood" | "amplitude" (fastslam1 only).
     new_landmark_mahalanobis: Mahalanobis distance defining the new-landmark
     log-likelihood. prune_after_cycles / tentative_prune_after_cycles / min_hits:
     pruning. min_existence: report a landmark when the weight of the particles
@@ -119,6 +160,16 @@ class SlamConfig:
 
     n_particles: int = 100
     max_landmarks: int = 256
+    variant: str = "fastslam2"
+    association: str = "mahalanobis"
+    gate_mahalanobis: float = 3.5
+    new_gate_mahalanobis: float = 6.0
+    association_rounds: int = 3
+    joint_compatibility: bool = True
+    recovery_std_factor: float = 10.0
+    recovery_match_fraction: float = 0.2
+    measurement_noise: str = "per_point"
+    measurement_floor_m: float = 0.03
     delta_m: float = 2.0
     cluster_radius_m: float = 1.0
     range_std_m: float = 0.3
@@ -141,8 +192,19 @@ class SlamConfig:
     retire_min_hits: int = 3
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_int("n_particles", self.n_particles, 1, 100_000)
         check_int("max_landmarks", self.max_landmarks, 1, 100_000)
+        check_choice("variant", self.variant, VARIANTS)
+        check_choice("association", self.association, ASSOCIATIONS)
+        check_range("gate_mahalanobis", self.gate_mahalanobis, 0.0, None, low_open=True)
+        check_range("new_gate_mahalanobis", self.new_gate_mahalanobis, self.gate_mahalanobis, None)
+        check_int("association_rounds", self.association_rounds, 1, 100)
+        check_bool("joint_compatibility", self.joint_compatibility)
+        check_range("recovery_std_factor", self.recovery_std_factor, 1.0, None)
+        check_range("recovery_match_fraction", self.recovery_match_fraction, 0.0, 1.0)
+        check_choice("measurement_noise", self.measurement_noise, NOISE_MODELS)
+        check_range("measurement_floor_m", self.measurement_floor_m, 0.0, None)
         check_range("delta_m", self.delta_m, 0.0, None, low_open=True)
         check_range("cluster_radius_m", self.cluster_radius_m, 0.0, None)
         check_range("range_std_m", self.range_std_m, 0.0, None, low_open=True)
@@ -154,6 +216,8 @@ class SlamConfig:
         check_range("yaw_accel_std_radps2", self.yaw_accel_std_radps2, 0.0, None)
         check_range("resample_threshold", self.resample_threshold, 0.0, 1.0)
         check_choice("weighting", self.weighting, ("likelihood", "amplitude"))
+        if self.weighting == "amplitude" and self.variant != "fastslam1":
+            raise ValueError("weighting='amplitude' needs variant='fastslam1' (per-observation likelihoods)")
         check_range("new_landmark_mahalanobis", self.new_landmark_mahalanobis, 0.0, None, low_open=True)
         check_int("prune_after_cycles", self.prune_after_cycles, 1, None)
         check_int("tentative_prune_after_cycles", self.tentative_prune_after_cycles, 1, None)
@@ -172,9 +236,10 @@ class SlamEstimate:
     pose (3,) x, y (m), heading (rad); pose_std (3,) weighted particle std;
     landmarks (L, 2) map frame (m); landmark_std (L,) per-axis RMS std
     ``sqrt(trace(Sigma) / 2)`` (m) including the spread across particles;
-    landmark_ids (L,) persistent ids; ess: effective sample size before resampling;
-    resampled: whether resampling ran; n_static_points / n_observations: points kept
-    by the moving-point filter and clustered observations; stage_times (s).
+    landmark_cov (L, 2, 2) (m^2); landmark_ids (L,) persistent ids; ess: effective
+    sample size before resampling; resampled: whether resampling ran;
+    n_static_points / n_observations / n_matched: points kept by the moving-point
+    filter, clustered observations, mean matches per particle; stage_times (s).
     """
 
     pose: np.ndarray
@@ -182,10 +247,12 @@ class SlamEstimate:
     landmarks: np.ndarray
     landmark_std: np.ndarray
     landmark_ids: np.ndarray
+    landmark_cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
     ess: float = float("nan")
     resampled: bool = False
     n_static_points: int = 0
     n_observations: int = 0
+    n_matched: float = 0.0
     stage_times: dict = field(default_factory=dict)
 
     def landmarks_vehicle(self) -> np.ndarray:
@@ -196,8 +263,21 @@ class SlamEstimate:
         return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], axis=1)
 
 
+@dataclass
+class Observations:
+    """Clustered static observations of one cycle: z (M, 2) vehicle frame (m), Q (M, 2, 2) (m^2), amp (M,)."""
+
+    z: np.ndarray
+    Q: np.ndarray
+    amp: np.ndarray
+    n_static: int = 0
+
+    def __len__(self) -> int:
+        return len(self.z)
+
+
 class RBPFSlam:
-    """FastSLAM 1.0 with dense, particle-vectorized state (see the module docstring).
+    """FastSLAM 2.0 (default) or 1.0 with dense, particle-vectorized state (module docstring).
 
     ``RBPFSlam(config, rng)``; ``rng`` is a ``numpy.random.Generator`` (or a seed).
     The first :meth:`update` after :meth:`reset` defines the map frame (its motion is
@@ -228,11 +308,7 @@ class RBPFSlam:
         self.next_id = 0
         self.retired_xy = np.zeros((0, 2))
         self.retired_ids = np.zeros(0, dtype=np.int64)
-        self.Q = np.diag([c.range_std_m**2, c.bearing_std_rad**2])
-        S0 = 2.0 * self.Q
-        self.log_new = float(
-            -0.5 * c.new_landmark_mahalanobis**2 - _LOG2PI - 0.5 * math.log(np.linalg.det(S0))
-        )
+        self.pose_var = np.zeros(3)  # diagonal of Sigma_p of the last prediction
         self.last_estimate: SlamEstimate | None = None
 
     @property
@@ -247,8 +323,9 @@ class RBPFSlam:
         motion: np.ndarray | None,
         dt: float,
         ego_velocity: np.ndarray | None = None,
+        cov: np.ndarray | None = None,
     ) -> SlamEstimate:
-        """One SLAM cycle.
+        """One SLAM cycle: predict, associate, update, weight, resample.
 
         points: (N, 4) x, y (vehicle frame, m), radial velocity (m/s), amplitude;
         (N, 2) is accepted (radial velocity 0, amplitude 1).
@@ -257,163 +334,280 @@ class RBPFSlam:
         dt: cycle duration (s), > 0.
         ego_velocity: optional (2,) ego velocity (m/s, vehicle frame) or (3,) with the
         yaw rate (rad/s); enables the moving-point filter.
+        cov: optional (N, 2, 2) vehicle-frame covariance of each point (m^2), used with
+        ``measurement_noise="per_point"``; without it the fixed model applies.
         """
-        c = self.config
         if not dt > 0 or not math.isfinite(dt):
             raise ValueError(f"dt must be in (0, inf), got {dt!r}")
-        times: dict[str, float] = {}
-        t0 = time.perf_counter()
-        pts = np.asarray(points, dtype=float)
-        if pts.ndim != 2 or pts.shape[1] not in (2, 4):
-            if pts.size == 0:
-                pts = np.zeros((0, 4))
-            else:
-                raise ValueError(f"points must have shape (N, 4) or (N, 2), got {pts.shape}")
-        if pts.shape[1] == 2:
-            pts = np.concatenate([pts, np.zeros((len(pts), 1)), np.ones((len(pts), 1))], axis=1)
-        pts = pts[np.all(np.isfinite(pts), axis=1)]
-        if ego_velocity is not None:
-            ev = np.asarray(ego_velocity, dtype=float).ravel()
-            yaw = float(ev[2]) if ev.size > 2 else 0.0
-            pts = pts[static_mask(pts, ev[:2], c.dynamic_threshold_mps, yaw_rate=yaw)]
-        n_static = len(pts)
-        obs, _ = cluster_points(pts, c.cluster_radius_m)
-        rng_obs = np.hypot(obs[:, 0], obs[:, 1])
-        obs = obs[rng_obs >= c.min_range_m]
-        times["preprocess"] = time.perf_counter() - t0
-
+        timer = StageTimer()
+        with timer("preprocess"):
+            obs = self._observations(points, ego_velocity, cov)
         self.cycle += 1
-        t0 = time.perf_counter()
-        if self.cycle > 0:
-            if motion is None:
-                motion = np.zeros(3)
-            motion = np.asarray(motion, dtype=float).reshape(3)
-            if not np.all(np.isfinite(motion)):
-                motion = np.zeros(3)
-            self._propagate(motion, dt)
-        times["propagate"] = time.perf_counter() - t0
-
-        M = len(obs)
-        P = c.n_particles
-        loglik = np.zeros((P, M))
-        if M:
-            t0 = time.perf_counter()
-            obs_map = to_map_frame(obs[:, :2], self.pose)  # (P, M, 2)
-            used = np.flatnonzero(self.slot_used)
-            idx_sub, _ = associate(
-                obs_map, self.mean[:, used], self.active[:, used], c.delta_m
-            )
-            idx = np.where(idx_sub >= 0, used[np.maximum(idx_sub, 0)] if used.size else 0, idx_sub)
-            times["association"] = time.perf_counter() - t0
-
-            t0 = time.perf_counter()
-            z = np.stack([np.hypot(obs[:, 0], obs[:, 1]), np.arctan2(obs[:, 1], obs[:, 0])], axis=1)
-            self._ekf_update(idx, z, loglik)
-            times["ekf_update"] = time.perf_counter() - t0
-
-            t0 = time.perf_counter()
-            self._add_landmarks(idx, obs, obs_map, z, loglik)
-            times["new_landmarks"] = time.perf_counter() - t0
-
-        t0 = time.perf_counter()
-        if M:
-            if c.weighting == "amplitude":
-                amp = np.maximum(obs[:, 3], 0.0)
-                mamp = amp.mean()
-                wm = amp / mamp if mamp > 0 else np.ones(M)
-            else:
-                wm = np.ones(M)
-            self.logw = self.logw + loglik @ wm
-        self._normalize()
-        w = self.weights
-        ess = float(1.0 / np.sum(w * w))
-        times["weights"] = time.perf_counter() - t0
-
-        t0 = time.perf_counter()
-        self._prune()
-        times["prune"] = time.perf_counter() - t0
-
-        t0 = time.perf_counter()
-        est = self._estimate()
-        times["estimate"] = time.perf_counter() - t0
-
-        t0 = time.perf_counter()
-        resampled = ess < c.resample_threshold * P
-        if resampled:
-            self._resample()
-        times["resample"] = time.perf_counter() - t0
-
-        est.ess = ess
-        est.resampled = bool(resampled)
-        est.n_static_points = int(n_static)
-        est.n_observations = int(M)
-        est.stage_times = times
+        with timer("predict"):
+            self._predict(motion, dt)
+        with timer("associate"):
+            idx = self._associate(obs)
+            if self._lost(idx):
+                self.pose_var = self.pose_var * self.config.recovery_std_factor**2
+                idx = self._associate(obs)
+        with timer("update"):
+            loglik, idx = self._update(idx, obs)
+        with timer("new_landmarks"):
+            loglik += self._add_landmarks(idx, obs)
+        with timer("weight"):
+            ess = self._weight(loglik)
+        with timer("prune"):
+            self._prune()
+        with timer("estimate"):
+            est = self._estimate()
+        with timer("resample"):
+            est.resampled = self._maybe_resample(ess)
+        est.ess, est.n_static_points, est.n_observations = ess, obs.n_static, len(obs)
+        est.n_matched = float(np.mean(np.sum(idx >= 0, axis=1))) if idx.size else 0.0
+        est.stage_times = timer.times
         self.last_estimate = est
         return est
 
-    # ------------------------------------------------------------ internals
-    def _propagate(self, motion: np.ndarray, dt: float) -> None:
-        """Pose composition with white-noise-acceleration noise (module docstring)."""
+    # ------------------------------------------------------------ stages
+    def _observations(self, points, ego_velocity, cov) -> Observations:
+        """Finite, static, clustered observations with their covariance (+ floor)."""
         c = self.config
-        P = c.n_particles
-        dist = math.hypot(motion[0], motion[1])
-        s_t = math.sqrt(c.trans_std_m**2 + (c.trans_frac * dist) ** 2 + (0.5 * c.accel_std_mps2 * dt * dt) ** 2)
-        s_r = math.sqrt(c.rot_std_rad**2 + (0.5 * c.yaw_accel_std_radps2 * dt * dt) ** 2)
-        d = np.broadcast_to(motion, (P, 3)).copy()
-        if s_t > 0:
-            d[:, :2] += s_t * self.rng.standard_normal((P, 2))
-        if s_r > 0:
-            d[:, 2] += s_r * self.rng.standard_normal(P)
+        pts = np.asarray(points, dtype=float)
+        if pts.size == 0:
+            pts = np.zeros((0, 4))
+        if pts.ndim != 2 or pts.shape[1] not in (2, 4):
+            raise ValueError(f"points must have shape (N, 4) or (N, 2), got {pts.shape}")
+        if pts.shape[1] == 2:
+            pts = np.concatenate([pts, np.zeros((len(pts), 1)), np.ones((len(pts), 1))], axis=1)
+        if cov is None or c.measurement_noise == "fixed":
+            rows = np.column_stack([pts, np.full(len(pts), c.range_std_m), np.full(len(pts), c.bearing_std_rad),
+                                    np.zeros(len(pts))])
+            cov = point_covariance(rows)
+        cov = np.asarray(cov, dtype=float).reshape(-1, 2, 2)
+        ok = np.all(np.isfinite(pts), axis=1) & np.all(np.isfinite(cov), axis=(1, 2))
+        pts, cov = pts[ok], cov[ok]
+        if ego_velocity is not None:
+            ev = np.asarray(ego_velocity, dtype=float).ravel()
+            keep = static_mask(pts, ev[:2], c.dynamic_threshold_mps, yaw_rate=float(ev[2]) if ev.size > 2 else 0.0)
+            pts, cov = pts[keep], cov[keep]
+        obs, labels = cluster_points(pts, c.cluster_radius_m)
+        Q = np.zeros((0, 2, 2))
+        if len(obs):
+            obs[:, :2], Q = cluster_covariance(pts, labels, cov, len(obs))
+        Q = Q + c.measurement_floor_m**2 * np.eye(2)
+        far = np.hypot(obs[:, 0], obs[:, 1]) >= c.min_range_m
+        return Observations(obs[far, :2], Q[far], obs[far, 3], len(pts))
+
+    def _predict(self, motion, dt: float) -> None:
+        """mu_c = p_c (+) m; Sigma_p = diag(s_t^2, s_t^2, s_th^2); FastSLAM 1.0 samples from it."""
+        c = self.config
+        self.pose_var = np.zeros(3)
+        if self.cycle == 0:
+            return
+        m = np.zeros(3) if motion is None else np.asarray(motion, dtype=float).reshape(3)
+        if not np.all(np.isfinite(m)):
+            m = np.zeros(3)
+        dist = math.hypot(m[0], m[1])
+        var_t = c.trans_std_m**2 + (c.trans_frac * dist) ** 2 + (0.5 * c.accel_std_mps2 * dt * dt) ** 2
+        var_r = c.rot_std_rad**2 + (0.5 * c.yaw_accel_std_radps2 * dt * dt) ** 2
         th = self.pose[:, 2]
         cth, sth = np.cos(th), np.sin(th)
-        self.pose[:, 0] += cth * d[:, 0] - sth * d[:, 1]
-        self.pose[:, 1] += sth * d[:, 0] + cth * d[:, 1]
-        self.pose[:, 2] = wrap_angle(th + d[:, 2])
+        self.pose[:, 0] += cth * m[0] - sth * m[1]
+        self.pose[:, 1] += sth * m[0] + cth * m[1]
+        self.pose[:, 2] = th + m[2]
+        self.pose_var = np.array([var_t, var_t, var_r])
+        if c.variant == "fastslam1":
+            self.pose += np.sqrt(self.pose_var) * self.rng.standard_normal(self.pose.shape)
+            self.pose_var = np.zeros(3)
+        self.pose[:, 2] = wrap_angle(self.pose[:, 2])
 
-    def _ekf_update(self, idx: np.ndarray, z: np.ndarray, loglik: np.ndarray) -> None:
-        """Batched EKF over every matched (particle, observation) pair (eqs. 10-12)."""
+    def _lost(self, idx: np.ndarray) -> bool:
+        """FastSLAM 2.0 recovery test: the map is non-empty, at least 3 observations, and the particles
+        match fewer than ``recovery_match_fraction`` of them (the motion prior is likely wrong)."""
+        c = self.config
+        M = idx.shape[1]
+        if c.variant != "fastslam2" or c.recovery_std_factor <= 1 or self.cycle == 0 or M < 3:
+            return False
+        if not self.slot_used.any():
+            return False
+        return float(np.mean(np.sum(idx >= 0, axis=1))) < c.recovery_match_fraction * M
+
+    def _observation_with_pose(self, obs: Observations):
+        """Vehicle-frame ``Q + H_p Sigma_p H_p^T`` per observation (``H_p`` at z): components (M,)."""
+        vt, _, vr = self.pose_var
+        zx, zy = obs.z[:, 0], obs.z[:, 1]
+        return (obs.Q[:, 0, 0] + vt + vr * zy * zy, obs.Q[:, 0, 1] - vr * zx * zy, obs.Q[:, 1, 1] + vt + vr * zx * zx)
+
+    def _associate(self, obs: Observations) -> np.ndarray:
+        """idx (P, M): landmark slot, NEW or DROPPED per particle and observation."""
+        c = self.config
+        P, M = c.n_particles, len(obs)
+        used = np.flatnonzero(self.slot_used)
+        if M == 0 or used.size == 0:
+            return np.full((P, M), NEW, dtype=np.int64)
+        obs_map = to_map_frame(obs.z, self.pose)  # (P, M, 2)
+        if c.association == "nearest":
+            sub, _ = associate(obs_map, self.mean[:, used], self.active[:, used], c.delta_m)
+        else:
+            cth, sth = np.cos(self.pose[:, 2])[:, None], np.sin(self.pose[:, 2])[:, None]
+            a00, a01, a11 = rotate_sym2(cth, sth, *self._observation_with_pose(obs))  # (P, M)
+            lam = self.cov[:, used]  # (P, L, 2, 2)
+            s00 = a00[:, :, None] + lam[:, None, :, 0, 0]
+            s01 = a01[:, :, None] + lam[:, None, :, 0, 1]
+            s11 = a11[:, :, None] + lam[:, None, :, 1, 1]
+            i00, i01, i11, _ = sym2_inverse(s00, s01, s11)
+            nx = obs_map[:, :, None, 0] - self.mean[:, None, used, 0]
+            ny = obs_map[:, :, None, 1] - self.mean[:, None, used, 1]
+            d2 = i00 * nx * nx + 2.0 * i01 * nx * ny + i11 * ny * ny
+            d2[~np.broadcast_to(self.active[:, None, used], d2.shape)] = np.inf
+            sub = mahalanobis_associate(d2, c.gate_mahalanobis**2, c.new_gate_mahalanobis**2, c.association_rounds)
+        return np.where(sub >= 0, used[np.maximum(sub, 0)], sub)
+
+    def _update(self, idx: np.ndarray, obs: Observations) -> tuple[np.ndarray, np.ndarray]:
+        """Pose (FastSLAM 2.0 proposal) and landmark updates; returns (log-likelihood (P,), idx)."""
+        c = self.config
+        loglik = np.zeros(c.n_particles)
+        if c.variant == "fastslam2" and self.cycle > 0:
+            loglik, idx = self._sample_proposal(idx, obs)
         pp, mm = np.nonzero(idx >= 0)
-        if pp.size == 0:
-            return
-        ll = idx[pp, mm]
-        e = self.mean[pp, ll]  # (K, 2) copies
-        Lam = self.cov[pp, ll]  # (K, 2, 2)
+        if pp.size:
+            ll_pair = self._landmark_update(pp, mm, idx[pp, mm], obs)
+            if c.variant == "fastslam1":
+                loglik += np.bincount(pp, weights=ll_pair * self._obs_weights(obs)[mm], minlength=c.n_particles)
+        return loglik, idx
+
+    def _obs_weights(self, obs: Observations) -> np.ndarray:
+        """Per-observation weight of the log-likelihood: 1, or ``a_m / mean(a)`` for "amplitude"."""
+        if self.config.weighting != "amplitude" or len(obs) == 0:
+            return np.ones(len(obs))
+        amp = np.maximum(obs.amp, 0.0)
+        mamp = amp.mean()
+        return amp / mamp if mamp > 0 else np.ones(len(obs))
+
+    def _proposal_terms(self, pp, mm, ll, obs: Observations):
+        """Per matched pair at mu: H_k (K, 2, 3), S_k^-1 (K, 2, 2), nu_k (K, 2), log det S_k (K,)."""
+        th = self.pose[pp, 2]
+        cth, sth = np.cos(th), np.sin(th)
+        d = self.mean[pp, ll] - self.pose[pp, :2]
+        hx, hy = cth * d[:, 0] + sth * d[:, 1], -sth * d[:, 0] + cth * d[:, 1]
+        nu = obs.z[mm] - np.stack([hx, hy], axis=1)
+        lam = self.cov[pp, ll]
+        l00, l01, l11 = rotate_sym2(cth, -sth, lam[:, 0, 0], lam[:, 0, 1], lam[:, 1, 1])  # R^T Lambda R
+        i00, i01, i11, det = sym2_inverse(l00 + obs.Q[mm, 0, 0], l01 + obs.Q[mm, 0, 1], l11 + obs.Q[mm, 1, 1])
+        H = np.zeros((pp.size, 2, 3))
+        H[:, 0, 0], H[:, 0, 1], H[:, 0, 2] = -cth, -sth, hy
+        H[:, 1, 0], H[:, 1, 1], H[:, 1, 2] = sth, -cth, -hx
+        Si = np.stack([np.stack([i00, i01], -1), np.stack([i01, i11], -1)], -2)
+        return H, Si, nu, np.log(det)
+
+    def _sample_proposal(self, idx: np.ndarray, obs: Observations) -> tuple[np.ndarray, np.ndarray]:
+        """FastSLAM 2.0: sample every pose from its measurement-updated proposal (module docstring)."""
+        c = self.config
+        P = c.n_particles
+        pp, mm = np.nonzero(idx >= 0)
+        H, Si, nu, logdet = self._proposal_terms(pp, mm, idx[pp, mm], obs)
+        prior_var = np.maximum(self.pose_var, 1e-18)
+        ok = np.ones(pp.size, dtype=bool)
+        for attempt in range(2 if c.joint_compatibility else 1):
+            HtSi = np.einsum("kia,kij->kaj", H, Si) * ok[:, None, None]  # (K, 3, 2)
+            info = np.zeros((P, 3, 3))
+            np.add.at(info, pp, np.einsum("kaj,kjb->kab", HtSi, H))
+            info += np.diag(1.0 / prior_var)
+            g = np.zeros((P, 3))
+            np.add.at(g, pp, np.einsum("kaj,kj->ka", HtSi, nu))
+            cov = np.linalg.inv(info)
+            delta = np.einsum("pab,pb->pa", cov, g)
+            if attempt == 1 or not c.joint_compatibility:
+                break
+            r = nu - np.einsum("kia,ka->ki", H, delta[pp])
+            bad = np.einsum("ki,kij,kj->k", r, Si, r) > c.gate_mahalanobis**2
+            if not bad.any():
+                break
+            ok &= ~bad
+            idx = idx.copy()
+            idx[pp[bad], mm[bad]] = DROPPED
+        quad = np.bincount(pp, weights=ok * np.einsum("ki,kij,kj->k", nu, Si, nu), minlength=P).astype(float)
+        quad = quad - np.einsum("pa,pa->p", g, delta)
+        n = np.bincount(pp, weights=ok.astype(float), minlength=P)
+        sum_logdet = np.bincount(pp, weights=ok * logdet, minlength=P)
+        logdet_post = np.sum(np.log(prior_var)) + np.linalg.slogdet(info)[1]
+        loglik = -0.5 * quad - n * _LOG2PI - 0.5 * (sum_logdet + logdet_post)
+        chol = np.linalg.cholesky(0.5 * (cov + cov.transpose(0, 2, 1)))
+        self.pose += delta + np.einsum("pab,pb->pa", chol, self.rng.standard_normal((P, 3)))
+        self.pose[:, 2] = wrap_angle(self.pose[:, 2])
+        return loglik, idx
+
+    def _landmark_update(self, pp, mm, ll, obs: Observations) -> np.ndarray:
+        """Kalman update of the matched landmarks at the particles' poses; log N(nu; 0, S) per pair."""
         pose = self.pose[pp]
-        dx = e[:, 0] - pose[:, 0]
-        dy = e[:, 1] - pose[:, 1]
-        q = np.maximum(dx * dx + dy * dy, 1e-12)
-        r = np.sqrt(q)
-        zhat_b = np.arctan2(dy, dx) - pose[:, 2]
-        nu = np.stack([z[mm, 0] - r, wrap_angle(z[mm, 1] - zhat_b)], axis=1)  # (K, 2)
-        # explicit 2 x 2 algebra on (K,) component arrays (Lambda and S symmetric)
-        a, b, c_, d = dx / r, dy / r, -dy / q, dx / q  # F = [[a, b], [c, d]]
-        l00, l01, l11 = Lam[:, 0, 0], 0.5 * (Lam[:, 0, 1] + Lam[:, 1, 0]), Lam[:, 1, 1]
-        g00 = l00 * a + l01 * b  # G = Lambda F^T
-        g01 = l00 * c_ + l01 * d
-        g10 = l01 * a + l11 * b
-        g11 = l01 * c_ + l11 * d
-        s00 = a * g00 + b * g10 + self.Q[0, 0]  # S = F Lambda F^T + Q
-        s01 = a * g01 + b * g11
-        s11 = c_ * g01 + d * g11 + self.Q[1, 1]
-        det = np.maximum(s00 * s11 - s01 * s01, 1e-300)
-        i00, i01, i11 = s11 / det, -s01 / det, s00 / det  # S^-1
-        k00 = g00 * i00 + g01 * i01  # K = Lambda F^T S^-1
-        k01 = g00 * i01 + g01 * i11
-        k10 = g10 * i00 + g11 * i01
-        k11 = g10 * i01 + g11 * i11
-        e_new = e + np.stack([k00 * nu[:, 0] + k01 * nu[:, 1], k10 * nu[:, 0] + k11 * nu[:, 1]], axis=1)
-        # (I - K F) Lambda = Lambda - K (Lambda F^T)^T, symmetrized
-        a01 = 0.5 * (k00 * g10 + k01 * g11 + k10 * g00 + k11 * g01)
-        Lam_new = np.empty_like(Lam)
-        Lam_new[:, 0, 0] = l00 - (k00 * g00 + k01 * g01)
-        Lam_new[:, 0, 1] = Lam_new[:, 1, 0] = l01 - a01
-        Lam_new[:, 1, 1] = l11 - (k10 * g10 + k11 * g11)
-        self.mean[pp, ll] = e_new
-        self.cov[pp, ll] = Lam_new
+        cth, sth = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+        z = obs.z[mm]
+        nu = pose[:, :2] + np.stack([cth * z[:, 0] - sth * z[:, 1], sth * z[:, 0] + cth * z[:, 1]], 1) - self.mean[pp, ll]
+        q00, q01, q11 = rotate_sym2(cth, sth, obs.Q[mm, 0, 0], obs.Q[mm, 0, 1], obs.Q[mm, 1, 1])
+        lam = self.cov[pp, ll]
+        l00, l01, l11 = lam[:, 0, 0], 0.5 * (lam[:, 0, 1] + lam[:, 1, 0]), lam[:, 1, 1]
+        i00, i01, i11, det = sym2_inverse(l00 + q00, l01 + q01, l11 + q11)
+        k00, k01 = l00 * i00 + l01 * i01, l00 * i01 + l01 * i11  # K = Lambda S^-1
+        k10, k11 = l01 * i00 + l11 * i01, l01 * i01 + l11 * i11
+        self.mean[pp, ll] += np.stack([k00 * nu[:, 0] + k01 * nu[:, 1], k10 * nu[:, 0] + k11 * nu[:, 1]], axis=1)
+        new = np.empty_like(lam)  # Lambda - K Lambda, symmetrized
+        new[:, 0, 0] = l00 - (k00 * l00 + k01 * l01)
+        new[:, 1, 1] = l11 - (k10 * l01 + k11 * l11)
+        new[:, 0, 1] = new[:, 1, 0] = l01 - 0.5 * (k00 * l01 + k01 * l11 + k10 * l00 + k11 * l01)
+        self.cov[pp, ll] = new
         self.hits[pp, ll] += 1
         self.last_seen[pp, ll] = self.cycle
         maha = i00 * nu[:, 0] ** 2 + 2.0 * i01 * nu[:, 0] * nu[:, 1] + i11 * nu[:, 1] ** 2
-        loglik[pp, mm] = -0.5 * maha - _LOG2PI - 0.5 * np.log(det)
+        return -0.5 * maha - _LOG2PI - 0.5 * np.log(det)
+
+    def _add_landmarks(self, idx: np.ndarray, obs: Observations) -> np.ndarray:
+        """One slot per observation NEW in some particle; returns the new-landmark log-likelihood (P,)."""
+        c = self.config
+        is_new = idx == NEW  # (P, M)
+        cand = np.flatnonzero(is_new.any(axis=0))
+        if cand.size == 0:
+            return np.zeros(c.n_particles)
+        if cand.size > c.max_landmarks:  # keep the strongest echoes
+            cand = np.sort(cand[np.argsort(-obs.amp[cand], kind="stable")[: c.max_landmarks]])
+            keep = np.zeros(len(obs), dtype=bool)
+            keep[cand] = True
+            is_new &= keep[None, :]
+        slots = self._free_slots(cand.size)
+        slot_of_obs = np.full(len(obs), -1, dtype=np.int64)
+        slot_of_obs[cand] = slots
+        self.slot_used[slots] = True
+        self.slot_id[slots] = np.arange(self.next_id, self.next_id + slots.size)
+        self.next_id += slots.size
+        self.active[:, slots] = False  # fresh slot: no particle holds it yet
+        pp, mm = np.nonzero(is_new)
+        ll = slot_of_obs[mm]
+        th = self.pose[pp, 2]
+        cth, sth = np.cos(th), np.sin(th)
+        z = obs.z[mm]
+        self.mean[pp, ll] = self.pose[pp, :2] + np.stack([cth * z[:, 0] - sth * z[:, 1], sth * z[:, 0] + cth * z[:, 1]], 1)
+        q00, q01, q11 = rotate_sym2(cth, sth, obs.Q[mm, 0, 0], obs.Q[mm, 0, 1], obs.Q[mm, 1, 1])
+        self.cov[pp, ll] = np.stack([np.stack([q00, q01], -1), np.stack([q01, q11], -1)], -2)
+        self.active[pp, ll] = True
+        self.hits[pp, ll] = 1
+        self.last_seen[pp, ll] = self.cycle
+        b00, b01, b11 = self._observation_with_pose(obs)  # a match's S ~ Q + pose terms + Lambda (= Q)
+        _, _, _, det = sym2_inverse(b00 + obs.Q[:, 0, 0], b01 + obs.Q[:, 0, 1], b11 + obs.Q[:, 1, 1])
+        log_new = -0.5 * c.new_landmark_mahalanobis**2 - _LOG2PI - 0.5 * np.log(det)
+        return np.bincount(pp, weights=(log_new * self._obs_weights(obs))[mm], minlength=c.n_particles)
+
+    def _weight(self, loglik: np.ndarray) -> float:
+        """log w += loglik; normalise; returns the effective sample size."""
+        self.logw = self.logw + loglik
+        self._normalize()
+        w = self.weights
+        return float(1.0 / np.sum(w * w))
+
+    def _maybe_resample(self, ess: float) -> bool:
+        """Systematic resampling when ESS < resample_threshold * P."""
+        if ess < self.config.resample_threshold * self.config.n_particles:
+            self._resample()
+            return True
+        return False
 
     def _free_slots(self, n: int) -> np.ndarray:
         """Return ``n`` free slot indices, evicting the least recently seen slots."""
@@ -428,42 +622,6 @@ class RBPFSlam:
         self.active[:, evict] = False
         self.slot_used[evict] = False
         return np.concatenate([free, evict])
-
-    def _add_landmarks(self, idx, obs, obs_map, z, loglik) -> None:
-        """Create one slot per observation that is NEW in at least one particle."""
-        c = self.config
-        is_new = idx == NEW  # (P, M)
-        cand = np.flatnonzero(is_new.any(axis=0))
-        if cand.size == 0:
-            return
-        if cand.size > c.max_landmarks:  # keep the strongest echoes
-            order = np.argsort(-obs[cand, 3], kind="stable")
-            cand = np.sort(cand[order[: c.max_landmarks]])
-            keep = np.zeros(obs.shape[0], dtype=bool)
-            keep[cand] = True
-            is_new &= keep[None, :]
-        slots = self._free_slots(cand.size)
-        slot_of_obs = np.full(obs.shape[0], -1, dtype=np.int64)
-        slot_of_obs[cand] = slots
-        self.slot_used[slots] = True
-        self.slot_id[slots] = np.arange(self.next_id, self.next_id + slots.size)
-        self.next_id += slots.size
-        self.active[:, slots] = False  # fresh slot: no particle holds it yet
-        pp, mm = np.nonzero(is_new)
-        ll = slot_of_obs[mm]
-        phi = z[mm, 1] + self.pose[pp, 2]
-        r = z[mm, 0]
-        G = np.empty((pp.size, 2, 2))
-        G[:, 0, 0] = np.cos(phi)
-        G[:, 0, 1] = -r * np.sin(phi)
-        G[:, 1, 0] = np.sin(phi)
-        G[:, 1, 1] = r * np.cos(phi)
-        self.mean[pp, ll] = obs_map[pp, mm]
-        self.cov[pp, ll] = G @ self.Q @ G.transpose(0, 2, 1)
-        self.active[pp, ll] = True
-        self.hits[pp, ll] = 1
-        self.last_seen[pp, ll] = self.cycle
-        loglik[pp, mm] = self.log_new
 
     def _normalize(self) -> None:
         """log-sum-exp normalization; non-finite or all-zero likelihoods -> uniform."""
@@ -554,14 +712,17 @@ class RBPFSlam:
             lm = mu[rep]
             lstd = np.sqrt(np.maximum(0.5 * (cov[rep, 0, 0] + cov[rep, 1, 1]), 0.0))
             ids = self.slot_id[used[rep]]
+            lcov = cov[rep]
         else:
             lm, lstd, ids = np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=np.int64)
+            lcov = np.zeros((0, 2, 2))
         return SlamEstimate(
             pose=np.array([x, y, th]),
             pose_std=np.array([sx, sy, sth]),
             landmarks=lm,
             landmark_std=lstd,
             landmark_ids=ids,
+            landmark_cov=lcov,
         )
 
     # --------------------------------------------------------------- queries

@@ -14,15 +14,16 @@ uniform false points, Doppler of a static scene (optionally moving targets).
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
-from rhs_env.validation import check_int, check_range
+from rhs_common.geometry import compose, points_in_frame, relative_motion
+from rhs_common.validation import check_int, check_range
 from slam.metrics import heading_rmse, map_metrics, position_rmse
-from slam.pipeline import SlamPipeline
+from slam.pipeline import PipelineConfig, SlamPipeline
 from slam.rbpf import SlamConfig
-from slam.registration import Registration, compose, points_in_frame, relative_motion
+from slam.registration import Registration
 
 __all__ = ["run_scenario", "SyntheticCloud", "RadarCloud", "compose", "poses_in_frame"]
 
@@ -44,7 +45,9 @@ class SyntheticCloud:
     vehicle frame from the last two poses over ``dt`` (zero on the first call), plus
     ``N(0, doppler_std^2)``. Amplitude: ``amplitude * (10 / max(r, 1))^2`` (R^-2, echo
     over noise, linear). ``movers`` (K2, 4) world x, y, vx, vy are moving targets
-    (m, m/s) that move with time ``t dt``.
+    (m, m/s) that move with time ``t dt``. ``report_std=True`` appends each point's
+    range std, bearing std and sensor index 0 (rows (N, 7), the sensor at the vehicle
+    origin): the true noise of the cloud; false points get the same stds.
     """
 
     def __init__(
@@ -61,6 +64,7 @@ class SyntheticCloud:
         amplitude: float = 100.0,
         dt: float = 0.1,
         movers: np.ndarray | None = None,
+        report_std: bool = False,
     ) -> None:
         check_range("max_range_m", max_range_m, 0.0, None, low_open=True)
         check_range("range_std_m", range_std_m, 0.0, None)
@@ -82,6 +86,7 @@ class SyntheticCloud:
         self.movers = None if movers is None else np.asarray(movers, dtype=float).reshape(-1, 4)
         self._prev_pose: np.ndarray | None = None
         self.last_true_xy = np.zeros((0, 2))
+        self.report_std = bool(report_std)
 
     def __call__(self, t: int, true_pose: np.ndarray) -> np.ndarray:
         pose = np.asarray(true_pose, dtype=float).reshape(3)
@@ -118,13 +123,21 @@ class SyntheticCloud:
         if nf:
             rr = self.max_range_m * np.sqrt(self.rng.random(nf))
             bb = self.rng.uniform(-math.pi, math.pi, nf)
-            fp = np.stack([rr * np.cos(bb), rr * np.sin(bb), -(v[0] * np.cos(bb) + v[1] * np.sin(bb)), np.full(nf, self.amplitude * 0.05)], axis=1)
+            vr_false = -(v[0] * np.cos(bb) + v[1] * np.sin(bb))
+            fp = np.stack([rr * np.cos(bb), rr * np.sin(bb), vr_false, np.full(nf, self.amplitude * 0.05)], axis=1)
             pts = np.concatenate([pts, fp])
+        if self.report_std:
+            n = len(pts)
+            std = np.column_stack([np.full(n, self.range_std_m), np.full(n, self.bearing_std_rad), np.zeros(n)])
+            pts = np.concatenate([pts, std], axis=1)
         return pts
 
 
 class RadarCloud:
-    """Point clouds of the simulated RHS radar for a scripted run (callable ``(t, true_pose) -> (N, 4)``).
+    """Point clouds of the simulated RHS radar for a scripted run (callable ``(t, true_pose) -> (N, 7)``).
+
+    Rows: x, y, radial velocity, amplitude, range std, angle std, radar index
+    (:func:`rhs_env.uncertainty.point_rows`).
 
     The world landmarks (K, 2) are static point scatterers of RCS ``rcs_m2``; each
     cycle they are moved into the vehicle frame of the true pose, their velocity
@@ -146,6 +159,7 @@ class RadarCloud:
 
     def __call__(self, t: int, true_pose: np.ndarray) -> np.ndarray:
         from rhs_env.scatterers import Scatterers
+        from rhs_env.uncertainty import point_rows
 
         pose = np.asarray(true_pose, dtype=float).reshape(3)
         lo, hi = max(t - 1, 0), min(t + 1, len(self.poses) - 1)
@@ -163,7 +177,7 @@ class RadarCloud:
         k = len(xy)
         sc = Scatterers(xy, rel_v, np.full(k, self.rcs_m2), np.arange(k), np.ones(k, bool))
         self.last_true_xy = xy[self.radar.in_view(sc)]
-        return np.asarray(self.radar.scan(sc).points, dtype=float).reshape(-1, 4)
+        return point_rows(self.radar.scan(sc))
 
 
 def run_scenario(
@@ -178,6 +192,7 @@ def run_scenario(
     map_gate_m: float = 2.0,
     use_doppler: bool = True,
     progress: bool = False,
+    sensor_xy: np.ndarray | None = None,
 ) -> dict:
     """Run SLAM over a scripted trajectory.
 
@@ -185,11 +200,14 @@ def run_scenario(
     ----------
     landmarks : (K, 2) true static landmarks, world frame (m).
     poses : (T, 3) true poses per cycle, world frame; ``poses[0]`` defines the map frame.
-    cloud_fn : ``cloud_fn(t, true_pose) -> (N, 4)`` point cloud in the vehicle frame.
+    cloud_fn : ``cloud_fn(t, true_pose) -> (N, 4)`` point cloud in the vehicle frame, or
+        (N, 7) with each point's range std, angle std and radar index.
     registration : object with ``.estimate(prev_points, points, prior=None) -> (3,)``;
         if it has ``set_true_motion`` (the odometry oracle) it receives the truth first.
     slam_config : RBPF settings. rng : numpy Generator or seed.
     dt : cycle duration (s). map_gate_m : gate of the Hungarian map metric (m).
+    sensor_xy : (S, 2) radar positions (vehicle frame, m) for (N, 7) clouds; default: for a
+        :class:`RadarCloud`, its radar's mounts, else the vehicle origin.
     use_doppler : filter moving points with the radial velocity. The ego velocity
         comes from the Doppler of the cloud itself (RANSAC fit of
         ``vr = -v . u``, :func:`slam.association.estimate_ego_velocity`), which also
@@ -212,57 +230,69 @@ def run_scenario(
     check_int("len(poses)", T, 1, None)
     rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
     cfg = slam_config if slam_config is not None else SlamConfig()
-    pipe = SlamPipeline(registration, cfg, rng, use_doppler=use_doppler)
-    slam = pipe.slam
-    origin = poses[0]
-    true_map = poses_in_frame(poses, origin)
-    true_lm = points_in_frame(np.asarray(landmarks, dtype=float).reshape(-1, 2), origin)
-
-    est_poses = np.zeros((T, 3))
-    pose_std = np.zeros((T, 3))
-    dr = np.zeros((T, 3))
-    motions = np.zeros((T, 3))
-    stage_sum: dict[str, float] = {}
-    max_slots = 0
-    finite = True
+    if sensor_xy is None and isinstance(cloud_fn, RadarCloud):
+        sensor_xy = cloud_fn.radar.config.mounts()[0]
+    pipe = SlamPipeline(registration, cfg, rng, PipelineConfig(use_doppler=use_doppler), sensor_xy=sensor_xy)
+    log = _RunLog(T)
     it = range(T)
     if progress:
         from tqdm import tqdm
 
         it = tqdm(it, desc="SLAM", unit="cycle")
     for t in it:
-        pts = np.asarray(cloud_fn(t, poses[t]), dtype=float).reshape(-1, 4)
-        true_motion = relative_motion(poses[t - 1], poses[t]) if t > 0 else None
-        res = pipe.step(pts, dt, true_motion=true_motion)
+        pts = np.asarray(cloud_fn(t, poses[t]), dtype=float)
+        if t > 0 and hasattr(registration, "set_true_motion"):  # the odometry oracle gets the truth
+            registration.set_true_motion(relative_motion(poses[t - 1], poses[t]))
+        log.record(t, pipe.step(pts, dt), pipe.slam.n_landmark_slots)
+    return log.result(pipe.slam, poses, landmarks, map_gate_m)
+
+
+class _RunLog:
+    """Per-cycle estimates of a scripted run and the summary dict of :func:`run_scenario`."""
+
+    def __init__(self, cycles: int) -> None:
+        self.est_poses = np.zeros((cycles, 3))
+        self.pose_std = np.zeros((cycles, 3))
+        self.dead_reckoning = np.zeros((cycles, 3))
+        self.motions = np.zeros((cycles, 3))
+        self.stage_sum: dict[str, float] = {}
+        self.max_slots = 0
+        self.finite = True
+
+    def record(self, t: int, res, slots: int) -> None:
         est, motion = res.estimate, res.motion
         for k, v in est.stage_times.items():
-            stage_sum[k] = stage_sum.get(k, 0.0) + v
-        motions[t] = motion
-        est_poses[t] = est.pose
-        pose_std[t] = est.pose_std
-        dr[t] = motion if t == 0 else compose(dr[t - 1], motion)
-        max_slots = max(max_slots, slam.n_landmark_slots)
-        finite &= bool(np.all(np.isfinite(est.pose)) and np.all(np.isfinite(est.landmarks)))
+            self.stage_sum[k] = self.stage_sum.get(k, 0.0) + v
+        self.motions[t] = motion
+        self.est_poses[t] = est.pose
+        self.pose_std[t] = est.pose_std
+        self.dead_reckoning[t] = motion if t == 0 else compose(self.dead_reckoning[t - 1], motion)
+        self.max_slots = max(self.max_slots, slots)
+        self.finite &= bool(np.all(np.isfinite(est.pose)) and np.all(np.isfinite(est.landmarks)))
 
-    lm, ids = slam.full_map()
-    mm = map_metrics(lm, true_lm, map_gate_m)
-    return dict(
-        estimated_poses=est_poses,
-        true_poses=true_map,
-        pose_std=pose_std,
-        landmarks=lm,
-        landmark_ids=ids,
-        true_landmarks=true_lm,
-        ate_rmse_m=position_rmse(est_poses, true_map),
-        heading_rmse_rad=heading_rmse(est_poses, true_map),
-        map_rmse_m=mm["rmse"],
-        map_matched=mm["matched"],
-        map_missed=mm["missed"],
-        map_spurious=mm["spurious"],
-        dead_reckoning_poses=dr,
-        dead_reckoning_rmse_m=position_rmse(dr, true_map),
-        motions=motions,
-        max_landmark_slots=max_slots,
-        finite=finite,
-        stage_times_s={k: v / T for k, v in stage_sum.items()},
-    )
+    def result(self, slam, poses: np.ndarray, landmarks: np.ndarray, map_gate_m: float) -> dict:
+        origin = poses[0]
+        true_map = poses_in_frame(poses, origin)
+        true_lm = points_in_frame(np.asarray(landmarks, dtype=float).reshape(-1, 2), origin)
+        lm, ids = slam.full_map()
+        mm = map_metrics(lm, true_lm, map_gate_m)
+        return dict(
+            estimated_poses=self.est_poses,
+            true_poses=true_map,
+            pose_std=self.pose_std,
+            landmarks=lm,
+            landmark_ids=ids,
+            true_landmarks=true_lm,
+            ate_rmse_m=position_rmse(self.est_poses, true_map),
+            heading_rmse_rad=heading_rmse(self.est_poses, true_map),
+            map_rmse_m=mm["rmse"],
+            map_matched=mm["matched"],
+            map_missed=mm["missed"],
+            map_spurious=mm["spurious"],
+            dead_reckoning_poses=self.dead_reckoning,
+            dead_reckoning_rmse_m=position_rmse(self.dead_reckoning, true_map),
+            motions=self.motions,
+            max_landmark_slots=self.max_slots,
+            finite=self.finite,
+            stage_times_s={k: v / len(poses) for k, v in self.stage_sum.items()},
+        )

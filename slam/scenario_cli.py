@@ -28,10 +28,23 @@ from typing import Any
 
 import numpy as np
 
+from rhs_common.validation import check_choice, check_int, check_output_path
+
 OPTIONAL = {"antenna", "seed", "dt", "registration", "rcs_m2", "grid_deg", "particles"}
 
+#: bounds that keep a run finite and physical: cycles and landmarks (work), coordinates,
+#: the speed between consecutive poses (a 1e9 m jump is not a drive), cycle length, RCS
+MAX_CYCLES = 100_000
+MAX_LANDMARKS = 100_000
+MAX_COORD_M = 1e6
+MAX_SPEED_MPS = 100.0
+MAX_DT_S = 10.0
+MAX_RCS_M2 = 1e4
+ANTENNAS = ("rhs", "phased", "random", "hologram")
+REGISTRATIONS = ("cnn", "icp", "odometry")
 
-def _array(doc: dict, key: str, cols: int, min_rows: int) -> np.ndarray:
+
+def _array(doc: dict, key: str, cols: int, min_rows: int, max_rows: int) -> np.ndarray:
     if key not in doc:
         raise ValueError(f"missing key {key!r}")
     try:
@@ -46,32 +59,62 @@ def _array(doc: dict, key: str, cols: int, min_rows: int) -> np.ndarray:
         raise ValueError(f"{key!r} needs at least {min_rows} rows, got {len(a)}")
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{key!r} must contain only finite numbers (no NaN or inf)")
+    if len(a) > max_rows:
+        raise ValueError(f"{key!r} must have at most {max_rows} rows, got {len(a)}")
+    if np.abs(a[:, :2]).max(initial=0.0) > MAX_COORD_M:
+        raise ValueError(f"{key!r} x, y must be within +-{MAX_COORD_M:g} m")
     return a
+
+
+def _number(doc: dict, key: str, default: float, high: float) -> float:
+    v = doc.get(key, default)
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise TypeError(f"{key!r} must be a number in (0, {high:g}], got {v!r} ({type(v).__name__})")
+    if not (math.isfinite(v) and 0 < v <= high):
+        raise ValueError(f"{key!r} must be in (0, {high:g}], got {v!r}")
+    return float(v)
+
+
+def _check_speed(poses: np.ndarray, dt: float) -> None:
+    """Consecutive poses at most ``MAX_SPEED_MPS * dt`` apart (ValueError naming the first jump)."""
+    step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+    bad = np.flatnonzero(step > MAX_SPEED_MPS * dt)
+    if bad.size:
+        k = int(bad[0]) + 1
+        raise ValueError(f"'poses'[{k}] is {step[k - 1]:.4g} m from the previous pose in dt={dt:g} s: at most "
+                         f"{MAX_SPEED_MPS:g} m/s x dt = {MAX_SPEED_MPS * dt:g} m per cycle")
 
 
 def parse_scenario(doc: Any) -> dict[str, Any]:
     """Validate a scenario document; returns the arrays and options (ValueError with a clear message)."""
     if not isinstance(doc, dict):
-        raise ValueError("the scenario must be a JSON object with 'landmarks' and 'poses'")
+        raise TypeError("the scenario must be a JSON object with 'landmarks' and 'poses'")
     unknown = sorted(set(doc) - OPTIONAL - {"landmarks", "poses"})
     if unknown:
         raise ValueError(f"unknown key(s) {', '.join(map(repr, unknown))}")
-    out = {"landmarks": _array(doc, "landmarks", 2, 0), "poses": _array(doc, "poses", 3, 2)}
+    from rhs_env.antenna import ScanConfig
+    from slam.rbpf import SlamConfig
+
+    out: dict[str, Any] = {"landmarks": _array(doc, "landmarks", 2, 0, MAX_LANDMARKS),
+                           "poses": _array(doc, "poses", 3, 2, MAX_CYCLES)}
     out["antenna"] = doc.get("antenna", "rhs")
+    check_choice("'antenna'", out["antenna"], ANTENNAS)
     out["registration"] = doc.get("registration", "icp")
+    check_choice("'registration'", out["registration"], REGISTRATIONS)
     seed = doc.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ValueError(f"'seed' must be a non-negative integer, got {seed!r}")
+    check_int("'seed'", seed, 0, 2**63 - 1)
     out["seed"] = seed
-    for key, default, lo in (("dt", 0.2, 0.0), ("rcs_m2", 5.0, 0.0), ("grid_deg", 1.0, 0.0)):
-        v = doc.get(key, default)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= lo:
-            raise ValueError(f"{key!r} must be a number > {lo}, got {v!r}")
-        out[key] = float(v)
-    particles = doc.get("particles", 100)
-    if isinstance(particles, bool) or not isinstance(particles, int) or particles < 1:
-        raise ValueError(f"'particles' must be a positive integer, got {particles!r}")
+    out["dt"] = _number(doc, "dt", 0.2, MAX_DT_S)
+    out["rcs_m2"] = _number(doc, "rcs_m2", 5.0, MAX_RCS_M2)
+    out["grid_deg"] = _number(doc, "grid_deg", 1.0, 180.0)
+    try:
+        ScanConfig(grid_deg=out["grid_deg"])  # the beam-grid bounds (at most MAX_SLOTS slots)
+        particles = doc.get("particles", 100)
+        SlamConfig(n_particles=particles)
+    except (TypeError, ValueError) as exc:
+        raise type(exc)(str(exc).replace("n_particles", "'particles'")) from None
     out["particles"] = particles
+    _check_speed(out["poses"], out["dt"])
     return out
 
 
@@ -79,8 +122,8 @@ def run_scripted(spec: dict[str, Any], progress: bool = False) -> dict[str, Any]
     """Run the radar + SLAM on a parsed scenario; returns the JSON-ready result."""
     from rhs_env.antenna import ScanConfig
     from rhs_env.radar import RadarConfig, RadarSystem
-    from rhs_env.slam_wrapper import make_registration
     from slam.rbpf import SlamConfig
+    from slam.registration import make_registration
     from slam.scenario import RadarCloud, run_scenario
 
     rng = np.random.default_rng(spec["seed"])
@@ -96,7 +139,7 @@ def run_scripted(spec: dict[str, Any], progress: bool = False) -> dict[str, Any]
         dt=spec["dt"],
         progress=progress,
     )
-    nan_to_none = lambda v: None if v is None or not np.isfinite(v) else float(v)  # noqa: E731
+    nan_to_none = lambda v: None if v is None or not np.isfinite(v) else float(v)
     return {
         "estimated_poses": np.round(res["estimated_poses"], 4).tolist(),
         "true_poses": np.round(res["true_poses"], 4).tolist(),
@@ -121,6 +164,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:
+        check_output_path("--out", args.out)
         try:
             doc = json.loads(Path(args.scenario).read_text())
         except FileNotFoundError:
@@ -138,7 +182,7 @@ def run(args: argparse.Namespace) -> int:
             Path(args.out).write_text(json.dumps(result, indent=1))
         except OSError as exc:
             raise ValueError(f"cannot write {args.out}: {exc.strerror or exc}") from None
-    except ValueError as exc:
+    except (TypeError, ValueError) as exc:
         print(f"rhs-slam scenario: error: {exc}", file=sys.stderr)
         return 2
     print(json.dumps({k: result[k] for k in ("ate_rmse_m", "map_rmse_m", "map_matched", "map_missed", "map_spurious")}))

@@ -32,7 +32,7 @@ from agents.evaluate import (
 )
 from agents.features import PointSetExtractor
 from agents.train import ALGOS, load_hyperparams, train, worker_env_id
-from rhs_env.cli import main as cli_main
+from rhs_slam.cli import main as cli_main
 
 SLAM = "rhs-highway-slam-v0"
 TRUTH = "rhs-highway-v0"
@@ -170,7 +170,16 @@ def test_hyperparams_and_worker_ids():
             hp = load_hyperparams(algo, env_id)
             assert hp["policy"] in ("MultiInputPolicy", "MlpPolicy")
             assert hp["n_envs"] >= 1
-    assert load_hyperparams("ppo", SLAM)["policy_kwargs"]["features_extractor_class"] == "point_set"
+    # the shipped YAML writes policy_kwargs as the Python expression rl-baselines3-zoo evals
+    from agents.train import _resolve_policy_kwargs
+
+    pk = _resolve_policy_kwargs(load_hyperparams("ppo", SLAM)["policy_kwargs"])
+    assert pk["features_extractor_class"] is PointSetExtractor
+    assert pk["features_extractor_kwargs"] == {"point_dim": 64, "box_dim": 32} and pk["net_arch"] == [64, 64]
+    assert _resolve_policy_kwargs({"features_extractor_class": "point_set"})["features_extractor_class"] is (
+        PointSetExtractor)  # the short name still works in hand-written YAML
+    with pytest.raises(ValueError, match="policy_kwargs"):
+        _resolve_policy_kwargs("__import__('os').system('true')")  # no builtins in scope
     # subprocess workers import rhs_env through the id's module prefix
     assert worker_env_id(SLAM) == f"rhs_env:{SLAM}"
     assert worker_env_id(TRUTH) == f"rhs_env:{TRUTH}"
@@ -285,7 +294,7 @@ def test_resolve_env_rules(trained):
 
 
 def test_demo_command_exits_0_and_writes_figure(trained, tmp_path, capsys):
-    # in-process (the console script is rhs_env.cli:main): saves a fresh interpreter's imports
+    # in-process (the console script is rhs_slam.cli:main): saves a fresh interpreter's imports
     out = tmp_path / "demo"
     rc = cli_main(["demo", "--policy", str(trained["model"]), "--seed", "2", "--out", str(out),
                    "--env-kwargs", json.dumps({"duration": 2}), "--animation"])  # fmt: skip

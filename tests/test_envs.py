@@ -50,10 +50,10 @@ def test_gymnasium_and_sb3_check_env(maker):
 
 
 def test_radar_observation_space_and_info():
-    env = make_radar()
+    env = make_radar(scatterers_in_info=True)
     obs, info = env.reset(seed=0)
     assert set(obs) == {"points", "points_mask"}
-    assert obs["points"].shape == (64, 4) and obs["points"].dtype == np.float32
+    assert obs["points"].shape == (64, 7) and obs["points"].dtype == np.float32
     assert obs["points_mask"].shape == (64,) and obs["points_mask"].dtype == np.int8
     n = int(obs["points_mask"].sum())
     assert n > 0 and np.all(obs["points"][n:] == 0) and np.all(obs["points_mask"][:n] == 1)
@@ -111,6 +111,8 @@ def test_same_seed_same_episode(maker):
         ("rhs-highway-radar-v0", {"radar": {"scan": {"grid_deg": 7.0}}}, "grid_deg"),
         ("rhs-highway-radar-v0", {"radar": {"bogus": 1}}, "bogus"),
         ("rhs-highway-radar-v0", {"scatter": {"vehicle_rcs_m2": -2}}, "vehicle_rcs_m2"),
+        ("rhs-highway-radar-v0", {"blas_threads": 0}, "blas_threads"),
+        ("rhs-highway-slam-v0", {"blas_threads": "many"}, "blas_threads"),
     ],
 )
 def test_bad_kwargs_raise_value_error_naming_the_field(env_id, kwargs, field):
@@ -154,9 +156,9 @@ def test_subproc_vec_env_steps():
         env_kwargs={**SMALL_ENV, **SMALL_RADAR},
     )
     obs = venv.reset()
-    assert obs["points"].shape == (2, 64, 4)
+    assert obs["points"].shape == (2, 64, 7)
     obs, rewards, _dones, infos = venv.step(np.array([1, 1]))
-    assert rewards.shape == (2,) and len(infos) == 2 and "scatterers" in infos[0]
+    assert rewards.shape == (2,) and len(infos) == 2 and "radar_points_total" in infos[0]
     venv.close()
 
 
@@ -196,10 +198,71 @@ def test_radar_wrapper_on_plain_highway_env(env_id):
 def test_radar_on_the_paper_scene_sees_the_obstacles():
     from rhs_env.envs import RHSPaperEnv
 
-    env = RadarObservation(RHSPaperEnv(), antenna="hologram", radar={"scan": {"grid_deg": 5.0}}, max_points=64)
+    env = RadarObservation(RHSPaperEnv(), antenna="hologram", radar={"scan": {"grid_deg": 5.0}}, max_points=64,
+                           scatterers_in_info=True)
     obs, info = env.reset(seed=0)
     sc = info["scatterers"]
     assert sc["is_static"].all() and len(sc["xy"]) == 5  # no traffic: the five obstacles
     pts = obs["points"][obs["points_mask"] == 1]
     assert len(pts) > 0
+    env.close()
+
+
+def _blas_threads() -> int:
+    from threadpoolctl import threadpool_info
+
+    return max(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas")
+
+
+@pytest.mark.parametrize("env_id", ["rhs-highway-radar-v0", "rhs-highway-slam-v0"])
+def test_step_runs_single_threaded_blas_and_restores_the_callers_limit(env_id):
+    """The radar (and SLAM) work sees 1 BLAS thread inside reset/step; the caller's 2 threads come back after."""
+    from threadpoolctl import threadpool_limits
+
+    seen = []
+    with threadpool_limits(2, user_api="blas"):
+        if _blas_threads() != 2:
+            pytest.skip("the BLAS in use does not allow 2 threads here")
+        for blas_threads, want in ((1, 1), (None, 2)):
+            env = gym.make(env_id, **{**SMALL_ENV, **SMALL_RADAR}, blas_threads=blas_threads)
+            radar = env
+            while not isinstance(radar, RadarObservation):
+                radar = radar.env
+            env.reset(seed=0)
+            scan = radar.radar.scan
+            radar.radar.scan = lambda *a, _f=scan, **k: (seen.append(_blas_threads()), _f(*a, **k))[1]
+            slam = env
+            while slam is not radar and not hasattr(slam, "pipeline"):
+                slam = slam.env
+            if slam is not radar:  # the SLAM pipeline's step too
+                step = slam.pipeline.step
+                slam.pipeline.step = lambda *a, _f=step, **k: (seen.append(_blas_threads()), _f(*a, **k))[1]
+            env.step(1)
+            env.reset(seed=1)
+            assert seen and set(seen) == {want}, (blas_threads, seen)
+            assert _blas_threads() == 2  # restored after the step
+            seen.clear()
+            env.close()
+
+
+def test_points_carry_their_uncertainty_and_radar():
+    env = make_radar()
+    obs, _ = env.reset(seed=1)
+    wrapper = env
+    while not isinstance(wrapper, RadarObservation):
+        wrapper = wrapper.env
+    cloud = wrapper.last_cloud
+    n = int(obs["points_mask"].sum())
+    assert n == len(cloud) > 0
+    rows = obs["points"][:n]
+    np.testing.assert_allclose(rows[:, 4], cloud.range_std_m, rtol=1e-6)
+    np.testing.assert_allclose(rows[:, 5], cloud.angle_std_rad, rtol=1e-6)
+    np.testing.assert_array_equal(rows[:, 6], cloud.radar)
+    # stds are positive, at least the floors, and shrink with the SNR (amplitude)
+    cfg = wrapper.radar_config
+    assert np.all(rows[:, 4] >= cfg.range_std_floor_m * (1 - 1e-6))
+    assert np.all(rows[:, 5] >= np.radians(cfg.angle_std_floor_deg) * (1 - 1e-6))
+    order = np.argsort(rows[:, 3])
+    assert rows[order[0], 5] > rows[order[-1], 5]
+    assert env.observation_space.contains(obs)
     env.close()

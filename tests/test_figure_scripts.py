@@ -79,7 +79,7 @@ def test_fig5a_quick(tmp_path):
         assert math.isfinite(ep["vehicle_rmse_m"]) and 0 <= ep["vehicle_rmse_m"] < 20
         assert ep["map_matched"] + ep["map_missed"] == 5  # the paper's five obstacles
         assert ep["obstacle_rmse_m"] is None or 0 <= ep["obstacle_rmse_m"] <= 2.0
-        assert {"registration", "propagate", "ekf_update"} <= set(
+        assert {"registration", "predict", "update"} <= set(
             ep["slam_stage_times_ms"]
         )
     rows = {r["antenna"]: r for r in res["rows"]}
@@ -161,7 +161,7 @@ def test_fig5c_quick(tmp_path):
 
 @pytest.mark.parametrize("name", ["fig5a_slam_rmse.py", "fig5c_trajectory_map.py"])
 def test_default_registration_is_the_envs_default(name):
-    from rhs_env.slam_wrapper import DEFAULT_REGISTRATION
+    from slam.registration import DEFAULT_REGISTRATION
 
     mod = load_script(name)
     assert mod.parse_args([]).registration == DEFAULT_REGISTRATION
@@ -195,3 +195,22 @@ def test_fig5b_small_run_writes_png_json_md(tmp_path):
         assert 0.0 <= r["rhs"]["detection_rate"] <= 1.0
         assert r["rhs"]["crb_cross_range_m"] > 0
     assert "| 5 | 24 |" in out.with_suffix(".md").read_text()
+
+
+def test_detection_curves_quick_writes_json_md_png(tmp_path):
+    """scripts/detection_curves.py --quick: files, provenance, and the theory curves ordered as physics says."""
+    res = run_script("detection_curves.py", "--quick", "--snr-min", "-16", "--snr-max", "-6",
+                     "--max-range", "45", "--out-dir", str(tmp_path))
+    assert res.returncode == 0, res.stderr[-2000:]
+    out = json.loads((tmp_path / "detection_curves.json").read_text())
+    assert len(out["provenance"]["commit"]) == 40 and "detection_curves.py" in out["provenance"]["command"]
+    check_png(tmp_path / "detection_curves.png")
+    assert "footprint" in (tmp_path / "detection_curves.md").read_text()
+    for ant in ("rhs", "phased"):
+        th = out["theory"][ant]
+        # the coherent matched filter bounds the footprint energy detector, which beats the slot sum
+        assert np.all(np.array(th["matched_filter"]) >= np.array(th["footprint_known_noise"]) - 1e-9)
+        assert np.all(np.array(th["footprint_known_noise"]) >= np.array(th["summed_known_noise"]) - 1e-9)
+        for d in ("summed", "footprint"):
+            assert all(0.0 <= p <= 1.0 for p in out["measured"][ant][d])
+    assert out["timing"]["detect_ratio_footprint_over_summed"] > 0

@@ -5,7 +5,12 @@ import math
 import numpy as np
 import pytest
 
-from slam.registration import ICPRegistration, OdometryRegistration, apply_motion, relative_motion
+from slam.registration import (
+    ICPRegistration,
+    OdometryRegistration,
+    apply_motion,
+    relative_motion,
+)
 
 
 def _cloud(rng, n=40):

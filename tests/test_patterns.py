@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rhs_env.antenna import RHSConfig, ScanConfig, make_antenna
+from rhs_env.antenna import RHSConfig, ScanConfig
+from rhs_env.antennas import make_antenna
 from rhs_env.patterns import library as L
 from rhs_env.patterns.fast import FastSettings
 from rhs_env.patterns.metrics import pattern_report, sidelobe_directions
@@ -166,7 +167,7 @@ def test_unreachable_cap_does_not_keep_a_weak_pattern(_small_p1: dict[float, flo
 def test_settings_validation_names_field() -> None:
     with pytest.raises(ValueError, match="oversample"):
         FastSettings(oversample=0.0)
-    with pytest.raises(ValueError, match="both_orders"):
+    with pytest.raises(TypeError, match="both_orders"):
         FastSettings(both_orders=1)
     with pytest.raises(ValueError, match="active_db"):
         FastSettings(active_db=3.0)

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rhs_env.antenna import RHSConfig, ScanConfig, make_antenna
+from rhs_env.antenna import RHSConfig, ScanConfig
+from rhs_env.antennas import make_antenna
 from rhs_env.point_cloud import (
     AngleDictionary,
     angle_crb,

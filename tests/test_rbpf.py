@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from slam.rbpf import RBPFSlam, SlamConfig, circular_mean
+from slam.rbpf import Observations, RBPFSlam, SlamConfig, circular_mean
 from slam.registration import ICPRegistration, OdometryRegistration
 from slam.scenario import SyntheticCloud, run_scenario
 
@@ -115,7 +115,7 @@ def test_heading_mean_on_circle():
 
 def test_amplitude_weighting_runs():
     lm, poses = _road(T=40)
-    cfg = SlamConfig(n_particles=30, weighting="amplitude", trans_std_m=0.05, rot_std_rad=0.01)
+    cfg = SlamConfig(n_particles=30, variant="fastslam1", weighting="amplitude", trans_std_m=0.05, rot_std_rad=0.01)
     cloud = SyntheticCloud(lm, 3, max_range_m=40.0, dt=0.1, range_std_m=0.2, bearing_std_rad=math.radians(1.0))
     r = run_scenario(lm, poses, cloud, OdometryRegistration(4, trans_std_m=0.05, rot_std_rad=0.01), cfg, 5, dt=0.1)
     assert r["finite"] and r["ate_rmse_m"] < r["dead_reckoning_rmse_m"]
@@ -158,31 +158,68 @@ def test_capacity_eviction_keeps_bound():
     cfg = SlamConfig(n_particles=5, max_landmarks=6, cluster_radius_m=0.0, **NOISELESS)
     slam = RBPFSlam(cfg, 0)
     rng = np.random.default_rng(0)
-    for t in range(20):
+    for _t in range(20):
         pts = np.column_stack([rng.uniform(-40, 40, (10, 2)), np.zeros(10), np.ones(10)])
         est = slam.update(pts, np.zeros(3), 0.1)
         assert slam.n_landmark_slots <= 6 and len(est.landmarks) <= 6
         assert np.all(np.isfinite(est.landmarks))
 
 
-def test_ekf_update_matches_dense_reference():
-    cfg = SlamConfig(n_particles=1, **NOISELESS)
+def test_landmark_update_matches_dense_reference():
+    cfg = SlamConfig(n_particles=1, measurement_floor_m=0.0, **NOISELESS)
     slam = RBPFSlam(cfg, 0)
     slam.update(np.array([[10.0, 5.0, 0.0, 1.0]]), None, 0.1)
     slam.pose[0] = [0.3, -0.2, 0.1]
     slam.cov[0, 0] = [[0.4, 0.1], [0.1, 0.2]]
     e0, L0, p = slam.mean[0, 0].copy(), slam.cov[0, 0].copy(), slam.pose[0].copy()
-    obs = np.array([9.5, 5.8])
-    loglik = np.zeros((1, 1))
-    z = np.array([[np.hypot(*obs), np.arctan2(obs[1], obs[0])]])
-    slam._ekf_update(np.array([[0]]), z, loglik)
-    d = e0 - p[:2]
-    q = d @ d
-    F = np.array([[d[0], d[1]] / np.sqrt(q), [-d[1] / q, d[0] / q]])
-    nu = z[0] - np.array([np.sqrt(q), np.arctan2(d[1], d[0]) - p[2]])
-    S = F @ L0 @ F.T + slam.Q
-    K = L0 @ F.T @ np.linalg.inv(S)
+    z = np.array([9.5, 5.8])
+    Q = np.array([[0.05, 0.01], [0.01, 0.02]])
+    obs = Observations(z[None], Q[None], np.ones(1))
+    ll = slam._landmark_update(np.array([0]), np.array([0]), np.array([0]), obs)
+    c, s = math.cos(p[2]), math.sin(p[2])
+    R = np.array([[c, -s], [s, c]])
+    nu = p[:2] + R @ z - e0
+    S = L0 + R @ Q @ R.T
+    K = L0 @ np.linalg.inv(S)
     np.testing.assert_allclose(slam.mean[0, 0], e0 + K @ nu, rtol=1e-12)
-    np.testing.assert_allclose(slam.cov[0, 0], (np.eye(2) - K @ F) @ L0, rtol=1e-10, atol=1e-14)
+    np.testing.assert_allclose(slam.cov[0, 0], (np.eye(2) - K) @ L0, rtol=1e-10, atol=1e-14)
     ref = -0.5 * nu @ np.linalg.solve(S, nu) - np.log(2 * np.pi) - 0.5 * np.log(np.linalg.det(S))
-    assert loglik[0, 0] == pytest.approx(ref, rel=1e-12)
+    assert ll[0] == pytest.approx(ref, rel=1e-12)
+
+
+def test_fastslam2_proposal_matches_dense_gaussian_algebra():
+    """Proposal mean/cov and weight against the joint Gaussian of two observations (one particle)."""
+    cfg = SlamConfig(n_particles=1, measurement_floor_m=0.0, joint_compatibility=False)
+    slam = RBPFSlam(cfg, 0)
+    slam.cycle = 1
+    slam.pose[0] = [1.0, 0.5, 0.2]
+    slam.pose_var = np.array([0.04, 0.04, 0.001])
+    slam.mean[0, :2] = [[12.0, 6.0], [4.0, -9.0]]
+    slam.cov[0, :2] = [[[0.02, 0.0], [0.0, 0.03]], [[0.05, 0.01], [0.01, 0.02]]]
+    slam.active[0, :2] = slam.slot_used[:2] = True
+    z = np.array([[10.3, 3.8], [1.2, -10.1]])
+    Q = np.array([np.diag([0.01, 0.02]), np.diag([0.03, 0.01])])
+    obs = Observations(z, Q, np.ones(2))
+    mu = slam.pose[0].copy()
+    slam.rng = np.random.default_rng(5)
+    loglik, _ = slam._sample_proposal(np.array([[0, 1]]), obs)
+    # dense reference: linearise h at mu, stack both observations
+    c, s = math.cos(mu[2]), math.sin(mu[2])
+    Rt = np.array([[c, s], [-s, c]])
+    Hs, nus, Ss = [], [], []
+    for k in range(2):
+        h = Rt @ (slam.mean[0, k] - mu[:2])
+        Hs.append(np.column_stack([-Rt, [h[1], -h[0]]]))
+        nus.append(z[k] - h)
+        Ss.append(Rt @ slam.cov[0, k] @ Rt.T + Q[k])
+    H, nu = np.vstack(Hs), np.concatenate(nus)
+    S = np.zeros((4, 4))
+    S[:2, :2], S[2:, 2:] = Ss
+    Sp = np.diag(slam.pose_var)
+    cov = np.linalg.inv(np.linalg.inv(Sp) + H.T @ np.linalg.solve(S, H))
+    mean = mu + cov @ H.T @ np.linalg.solve(S, nu)
+    C = S + H @ Sp @ H.T
+    ref = -0.5 * nu @ np.linalg.solve(C, nu) - 2 * np.log(2 * np.pi) - 0.5 * np.linalg.slogdet(C)[1]
+    assert loglik[0] == pytest.approx(ref, rel=1e-9)
+    draw = np.random.default_rng(5).standard_normal(3)
+    np.testing.assert_allclose(slam.pose[0], mean + np.linalg.cholesky(cov) @ draw, rtol=1e-9, atol=1e-12)

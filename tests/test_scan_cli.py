@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from rhs_env.cli import main
+from rhs_slam.cli import main
 
 
 def _run(tmp_path, scene, capsys, extra=()):
@@ -44,7 +44,7 @@ def test_scan_occluder_hides_target(tmp_path, capsys):
     [
         ("{not json", "not valid JSON"),
         ({"targets": [[1.0, 2.0]]}, "targets[0]"),
-        ({"targets": [[1.0, 2.0, -1.0]]}, "negative RCS"),
+        ({"targets": [[1.0, 2.0, -1.0]]}, "rcs_m2 must be in [0, 10000]"),
         ('{"targets": [[1.0, NaN, 5.0]]}', "finite"),
         ({"points": []}, "unknown scene key"),
         ({}, "missing the 'targets'"),

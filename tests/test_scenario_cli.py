@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from rhs_env.cli import main
+from rhs_slam.cli import main
 
 # 8 cycles straight along x at 6 m/s (dt 0.2 s), four landmarks on both sides, the coarse
 # 5-degree scan (I = 18) of the same-cost phased array: no pattern library, about a second.
@@ -37,7 +37,7 @@ def write(tmp_path, doc, name="scenario.json"):
 def run_cli(*args: str) -> subprocess.CompletedProcess:
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     return subprocess.run(
-        [sys.executable, "-m", "rhs_env.cli", "scenario", *args],
+        [sys.executable, "-m", "rhs_slam.cli", "scenario", *args],
         check=False,
         capture_output=True,
         text=True,
@@ -156,12 +156,13 @@ def test_missing_file_and_unwritable_output(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert code != 0 and len(err.splitlines()) == 1 and "cannot read" in err
     scen = write(tmp_path, GOOD)
+    (tmp_path / "a_file").write_text("")
     code = main(
         [
             "scenario",
             str(scen),
             "--out",
-            str(tmp_path / "no_dir" / "r.json"),
+            str(tmp_path / "a_file" / "r.json"),  # a file where the parent directory should be
             "--no-progress",
         ]
     )

@@ -54,11 +54,16 @@ def _add_vehicle(env, x, y, heading=0.0, speed=0.0, steering=0.0):
         ({"spacing_m": 10.0, "jitter_m": 5.0}, "jitter_m"),
         ({"lateral_jitter_m": -0.1}, "lateral_jitter_m"),
         ({"sides": "top"}, "sides"),
-        ({"enabled": "yes"}, "enabled"),
     ],
 )
 def test_landmark_config_rejects_bad_values(kwargs, field):
     with pytest.raises(ValueError, match=field):
+        LandmarkConfig(**kwargs)
+
+
+@pytest.mark.parametrize("kwargs, field", [({"enabled": "yes"}, "enabled"), ({"spacing_m": "20"}, "spacing_m")])
+def test_landmark_config_rejects_wrong_types(kwargs, field):
+    with pytest.raises(TypeError, match=field):
         LandmarkConfig(**kwargs)
 
 

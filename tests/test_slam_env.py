@@ -11,8 +11,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
 import rhs_env  # noqa: F401  (registers the ids)
-from rhs_env.slam_wrapper import SlamObservation
 from rhs_env.wrappers import RadarObservation
+from slam.wrapper import SlamObservation
 
 HIGHWAY_SLAM = "rhs-highway-slam-v0"
 PAPER = "rhs-paper-v0"
@@ -37,7 +37,6 @@ INFO_KEYS = {
     "estimated_pose",
     "position_error_m",
     "heading_error_rad",
-    "map_rmse_m",
 }
 
 
@@ -114,7 +113,7 @@ def test_observation_keys_shapes_dtypes(env_id):
     for _ in rollout(env, seed=3, steps=4):
         obs = _[0]
         assert set(obs) == SLAM_KEYS
-        assert obs["points"].shape == (64, 4) and obs["points"].dtype == np.float32
+        assert obs["points"].shape == (64, 7) and obs["points"].dtype == np.float32
         assert obs["points_mask"].shape == (64,) and obs["points_mask"].dtype == np.int8
         assert obs["pose"].shape == (3,) and obs["pose"].dtype == np.float32
         assert obs["pose_std"].shape == (3,) and obs["pose_std"].dtype == np.float32
@@ -157,9 +156,9 @@ def test_reset_pose_is_map_origin_and_info_is_consistent():
         )
         dth = (est[2] - true[2] + np.pi) % (2 * np.pi) - np.pi
         assert info["heading_error_rad"] == pytest.approx(abs(dth), abs=1e-12)
-        assert info["map_rmse_m"] is None or (
-            isinstance(info["map_rmse_m"], float) and info["map_rmse_m"] >= 0
-        )
+        # a float once a landmark matches, absent before (vector envs stack it under a mask)
+        assert ("map_rmse_m" in info) == (info["map_matched"] > 0)
+        assert "map_rmse_m" not in info or (isinstance(info["map_rmse_m"], float) and info["map_rmse_m"] >= 0)
         assert (
             "slam_stage_times" not in info
         )  # timings would break the determinism checks
@@ -187,7 +186,7 @@ def test_stage_times_on_request():
     env.reset(seed=0)
     _, _, _, _, info = env.step(IDLE)
     times = info["slam_stage_times"]
-    assert {"registration", "propagate", "ekf_update", "resample"} <= set(times)
+    assert {"registration", "predict", "associate", "update", "weight", "resample"} <= set(times)
     assert all(isinstance(v, float) and v >= 0 for v in times.values())
     assert "radar_stage_times" in info  # the flag reaches the radar wrapper too
     assert layer(env, SlamObservation).stage_times.keys() == times.keys()
@@ -224,6 +223,7 @@ def test_paper_env_slam_errors_small_with_odometry(antenna):
         antenna=antenna,
         registration="odometry",
         radar={"scan": {"grid_deg": 5.0}},
+        landmarks_in_info=True,
     )
     _, info = env.reset(seed=0)
     errs, heading = (
@@ -246,7 +246,7 @@ def test_paper_env_slam_errors_small_with_odometry(antenna):
     assert (
         info["map_matched"] == 5 and info["map_missed"] == 0
     )  # the paper's five obstacles
-    assert info["map_rmse_m"] is not None and info["map_rmse_m"] < 1.0
+    assert info.get("map_rmse_m") is not None and info["map_rmse_m"] < 1.0
     np.testing.assert_allclose(
         np.sort(info["true_landmarks"][:, 0]), [10.0, 25.0, 30.0, 35.0, 50.0], atol=1e-6
     )
@@ -279,12 +279,10 @@ def test_rgb_render_draws_slam_over_radar_frame():
     [
         ({"registration": "magic"}, "registration"),
         ({"max_landmarks": 0}, "max_landmarks"),
-        ({"max_landmarks": 2.5}, "max_landmarks"),
         ({"map_gate_m": -1.0}, "map_gate_m"),
         ({"slam": {"n_particles": 0}}, "n_particles"),
         ({"slam": {"delta_m": float("nan")}}, "delta_m"),
         ({"slam": {"no_such_field": 1}}, "no_such_field"),
-        ({"slam": "fast"}, "slam"),
         ({"radar": {"tx_power_dbm": 1e3}}, "tx_power_dbm"),
         ({"antenna": "laser"}, "antenna"),
         ({"max_points": 0}, "max_points"),
@@ -296,3 +294,35 @@ def test_rgb_render_draws_slam_over_radar_frame():
 def test_bad_kwargs_raise_value_error_naming_the_field(env_id, kwargs, field):
     with pytest.raises(ValueError, match=field):
         make(env_id, **kwargs)
+
+
+@pytest.mark.parametrize(
+    "kwargs, path",
+    [
+        ({"max_landmarks": 2.5}, "max_landmarks must be an integer"),
+        ({"slam": "fast"}, "slam must be a SlamConfig or a dict"),
+        ({"slam": {"n_particles": "100"}}, "slam.n_particles must be an integer"),
+        ({"radar": {"tx_power_dbm": "20"}}, "radar.tx_power_dbm must be a number"),
+        ({"radar": {"scan": {"grid_deg": "5"}}}, "radar.scan.grid_deg must be a number"),
+        ({"icp": {"max_iterations": 3.0}}, "icp.max_iterations must be an integer"),
+        ({"pipeline": {"use_doppler": "yes"}}, "pipeline.use_doppler must be True or False"),
+        ({"stage_times_in_info": "yes"}, "stage_times_in_info must be True or False"),
+    ],
+)
+def test_wrong_types_raise_type_error_naming_the_field_path(kwargs, path):
+    with pytest.raises(TypeError, match=path):
+        make(HIGHWAY_SLAM, **kwargs)
+
+
+def test_nested_range_errors_name_the_full_path():
+    with pytest.raises(ValueError, match=r"radar\.scan\.grid_deg must be in"):
+        make(HIGHWAY_SLAM, radar={"scan": {"grid_deg": 0.0}})
+    with pytest.raises(ValueError, match=r"icp\.yaw_search_rad must be in"):
+        make(HIGHWAY_SLAM, icp={"yaw_search_rad": 4.0})
+
+
+def test_icp_and_pipeline_settings_reach_the_slam_through_gym_make():
+    env = make(HIGHWAY_SLAM, icp={"max_iterations": 7}, pipeline={"use_doppler": False, "max_accel_mps2": 3.0})
+    pipe = env.get_wrapper_attr("pipeline")
+    assert pipe.registration.max_iterations == 7 and pipe.use_doppler is False and pipe.max_accel_mps2 == 3.0
+    env.close()

@@ -5,7 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from slam.metrics import heading_rmse, map_metrics, point_cloud_cycle, point_cloud_metrics, position_rmse
+from slam.metrics import (
+    heading_rmse,
+    map_metrics,
+    position_rmse,
+)
 
 
 def test_position_and_heading_rmse():
@@ -45,17 +49,3 @@ def test_map_metrics_empty():
     assert r["matched"] == 0 and r["missed"] == 3 and r["spurious"] == 0 and math.isnan(r["rmse"])
     with pytest.raises(ValueError, match="gate"):
         map_metrics(np.zeros((1, 2)), np.ones((1, 2)), 0.0)
-
-
-def test_point_cloud_metrics():
-    true = [np.array([[10.0, 0.0], [0.0, 20.0]]), np.array([[5.0, 5.0]])]
-    pts = [
-        np.array([[10.3, 0.0, 0.0, 1.0], [40.0, 0.0, 0.0, 1.0]]),  # one hit, one false
-        np.array([[5.0, 5.4, 0.0, 1.0]]),
-    ]
-    r = point_cloud_metrics(true, pts, gate=1.0)
-    assert r["detection_rate"] == pytest.approx(2 / 3)
-    assert r["rmse"] == pytest.approx(math.sqrt((0.09 + 0.16) / 2))
-    assert r["false_points_per_cycle"] == pytest.approx(0.5)
-    c = point_cloud_cycle(true[0], np.zeros((0, 4)))
-    assert c["detected"] == 0 and c["n_true"] == 2

@@ -44,11 +44,15 @@ def _table(rows: list[dict[str, float]]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rhs_common.validation import check_output_path
     from rhs_env.antenna import RHSConfig, ScanConfig
     from rhs_env.patterns.library import build_library, get_library, load
     from rhs_env.patterns.metrics import pattern_report
 
     try:
+        for name, path in (("--out", args.out), ("--json", args.json)):
+            if path is not None:
+                check_output_path(name, path)
         if args.load is not None:
             lib = load(args.load)
             config = lib.rhs_config()

@@ -71,6 +71,7 @@ import clarabel
 import numpy as np
 import scipy.sparse as sp
 
+from rhs_common.validation import check_bool, check_int, check_range, check_types
 from rhs_env.antenna import RHSConfig, ScanConfig, hologram_pattern
 from rhs_env.parallel import parallel_map
 from rhs_env.patterns.metrics import (
@@ -81,7 +82,6 @@ from rhs_env.patterns.metrics import (
     sidelobe_directions,
     two_way_power,
 )
-from rhs_env.validation import check_bool, check_int, check_range
 
 
 @dataclass(frozen=True)
@@ -148,6 +148,7 @@ class FastSettings:
     socp_tol: float = 1e-5
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_range("oversample", self.oversample, 0.0, 64.0, low_open=True)
         check_int("max_iter", self.max_iter, 1, 1000)
         check_range("tol", self.tol, 0.0, 1.0, low_open=True, high_open=True)

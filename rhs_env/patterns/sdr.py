@@ -36,10 +36,10 @@ from typing import Any
 
 import numpy as np
 
+from rhs_common.validation import check_choice, check_int, check_range, check_types
 from rhs_env.antenna import RHSConfig, ScanConfig
 from rhs_env.parallel import parallel_map
 from rhs_env.patterns.metrics import side_matrix, sidelobe_directions
-from rhs_env.validation import check_choice, check_int, check_range
 
 SDR_SOLVERS = ("CLARABEL", "SCS")
 
@@ -65,6 +65,7 @@ class SDRSettings:
     solver: str = "SCS"
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_range("oversample", self.oversample, 0.0, 64.0, low_open=True)
         check_int("max_iter", self.max_iter, 1, 200)
         check_range("delta_t", self.delta_t, 0.0, 1.0, low_open=True, high_open=True)
@@ -180,7 +181,7 @@ def optimize_grid_sdr(
     bounds: dict[str, float] = {}
     it = 0
     first = True
-    for it in range(1, settings.max_iter + 1):
+    for it in range(1, settings.max_iter + 1):  # noqa: B007 (it is reported after the loop)
         prev = cur
         for side, other in (("tx", "rx"), ("rx", "tx")):
             o = power(other, psi[other])[0]  # (1 + L,)

@@ -1,8 +1,10 @@
 """The ``rhs-slam`` console command.
 
-Each subcommand lives in its own module exposing ``configure(parser)`` and
-``run(args) -> int``; this file only dispatches, so importing the CLI stays
-cheap (torch, cvxpy and highway-env load only for the subcommand that needs them).
+The top of the layers (``rhs_env`` <- ``slam`` <- ``agents`` <- here). Each
+subcommand lives in its own module of the layer it belongs to, exposing
+``configure(parser)`` and ``run(args) -> int``; this file only dispatches. A
+subcommand whose module fails to import is an installation error and raises
+(it is never silently dropped from the help).
 """
 
 from __future__ import annotations
@@ -22,20 +24,6 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
-def _available() -> dict[str, tuple[str, str]]:
-    out = {}
-    for name, (module, text) in SUBCOMMANDS.items():
-        if importlib.util.find_spec(module.rsplit(".", 1)[0]) is None:
-            continue
-        try:
-            if importlib.util.find_spec(module) is None:
-                continue
-        except ModuleNotFoundError:
-            continue
-        out[name] = (module, text)
-    return out
-
-
 def build_parser() -> tuple[argparse.ArgumentParser, dict[str, str]]:
     parser = argparse.ArgumentParser(
         prog="rhs-slam",
@@ -43,7 +31,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, str]]:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     modules = {}
-    for name, (module, text) in _available().items():
+    for name, (module, text) in SUBCOMMANDS.items():
         p = sub.add_parser(name, help=text, description=text)
         importlib.import_module(module).configure(p)
         modules[name] = module

@@ -1,0 +1,36 @@
+"""Entry points of the SLAM env ids: scene -> RadarObservation -> SlamObservation -> SlamMetricsInfo.
+
+Registered by :mod:`rhs_env.registration` through string entry points
+(``"slam.envs:make_highway_slam"``), so ``rhs_env`` never imports this layer.
+``gym.make`` kwargs are routed to each wrapper by its signature
+(:func:`rhs_env.registration.route_kwargs`); the rest configure the scene.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+
+from rhs_env.envs import RHSHighwayEnv, RHSPaperEnv
+from rhs_env.registration import route_kwargs, with_cheap_base_observation
+from rhs_env.wrappers import RadarObservation
+from slam.metrics_info import SlamMetricsInfo
+from slam.wrapper import SlamObservation
+
+
+def make_slam_env(env_cls: type[gym.Env], kwargs: dict[str, Any]) -> gym.Env:
+    """``env_cls`` (a highway-env scene) under the radar, SLAM and SLAM-metrics wrappers."""
+    (radar_kw, slam_kw, metrics_kw), env_kw = route_kwargs(kwargs, RadarObservation, SlamObservation, SlamMetricsInfo)
+    base = env_cls(**with_cheap_base_observation(env_kw))
+    return SlamMetricsInfo(SlamObservation(RadarObservation(base, **radar_kw), **slam_kw), **metrics_kw)
+
+
+def make_highway_slam(**kwargs: Any) -> gym.Env:
+    """``rhs-highway-slam-v0``: the highway scene with traffic and roadside landmarks."""
+    return make_slam_env(RHSHighwayEnv, kwargs)
+
+
+def make_paper_slam(**kwargs: Any) -> gym.Env:
+    """``rhs-paper-v0``: the paper's Fig. 5c scene (50 cycles)."""
+    return make_slam_env(RHSPaperEnv, kwargs)

@@ -1,0 +1,124 @@
+"""The layering of the packages, checked on the source: imports flow one way, no cycles.
+
+Layers, bottom to top: ``rhs_common`` <- ``rhs_env`` <- ``slam`` <- ``agents`` <- ``rhs_slam``.
+Every import statement counts, lazy ones inside functions and ``TYPE_CHECKING``
+blocks included. Env ids may name upper layers in string entry points (not imports).
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+LAYERS = ("rhs_common", "rhs_env", "slam", "agents", "rhs_slam")
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for pkg in LAYERS:
+        for path in (ROOT / pkg).rglob("*.py"):
+            parts = path.relative_to(ROOT).with_suffix("").parts
+            name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+            out[name] = path
+    return out
+
+
+def _imports(path: Path, name: str, modules: dict[str, Path]) -> set[str]:
+    """Project modules imported anywhere in the file (``from a.b import c`` -> a.b.c when a module, else a.b)."""
+    is_pkg = path.name == "__init__.py"
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = name.split(".") if is_pkg else name.split(".")[:-1]
+                anchor = anchor[: len(anchor) - node.level + 1]
+                base = ".".join([*anchor, base] if base else anchor)
+            targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base for a in node.names]
+        else:
+            continue
+        found.update(t for t in targets if t in modules and t != name)
+    return found
+
+
+def _graph() -> dict[str, set[str]]:
+    modules = _modules()
+    return {name: _imports(path, name, modules) for name, path in modules.items()}
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    return out
+
+
+def _upward(graph: dict[str, set[str]], layer: str) -> list[str]:
+    rank = LAYERS.index(layer)
+    return sorted(
+        f"{src} -> {dst}"
+        for src, dsts in graph.items()
+        if src.split(".")[0] == layer
+        for dst in dsts
+        if LAYERS.index(dst.split(".")[0]) > rank
+    )
+
+
+def test_the_checker_finds_a_cycle_and_an_upward_import(tmp_path):
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    src = tmp_path / "x.py"
+    src.write_text("def f():\n    from slam.rbpf import SlamConfig\n")  # a lazy import counts
+    modules = {"rhs_env.x": src, "slam.rbpf": tmp_path / "rbpf.py"}
+    graph = {"rhs_env.x": _imports(src, "rhs_env.x", modules), "slam.rbpf": set()}
+    assert _upward(graph, "rhs_env") == ["rhs_env.x -> slam.rbpf"]
+
+
+def test_no_import_cycle_between_files():
+    assert _cycles(_graph()) == []
+
+
+@pytest.mark.parametrize("layer", LAYERS)
+def test_imports_flow_one_way(layer):
+    assert _upward(_graph(), layer) == []
+
+
+def test_slam_core_imports_without_gymnasium():
+    core = "slam.rbpf, slam.association, slam.registration, slam.pipeline, slam.metrics, slam.scenario"
+    code = f"import sys, {core}; bad = [m for m in ('gymnasium', 'highway_env', 'rhs_env') if m in sys.modules]; print(bad)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.strip() == "[]"

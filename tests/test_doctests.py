@@ -1,0 +1,18 @@
+"""The ``Example:`` blocks of the public wrappers and helpers run as tests."""
+
+from __future__ import annotations
+
+import doctest
+import importlib
+
+import pytest
+
+MODULES = ("rhs_common.validation", "rhs_common.timing", "rhs_env.wrappers", "slam.wrapper", "slam.metrics_info")
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_examples_run(name):
+    module = importlib.import_module(name)
+    result = doctest.testmod(module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    assert result.attempted > 0, f"{name} has no Example: block"
+    assert result.failed == 0

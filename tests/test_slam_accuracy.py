@@ -1,0 +1,58 @@
+"""scripts/slam_accuracy.py on its small config, and the Doppler track hold of the pipeline."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from slam.pipeline import PipelineConfig, SlamPipeline
+from slam.registration import OdometryRegistration
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+import slam_accuracy
+
+
+def test_quick_run_records_provenance_and_targets(tmp_path):
+    out = tmp_path / "acc"
+    assert slam_accuracy.main(["--quick", "--parts", "paper", "dense", "--no-progress", "--out", str(out)]) == 0
+    doc = json.loads(out.with_suffix(".json").read_text())
+    assert doc["commit"] and "--quick" in doc["command"] and doc["seeds"] == [100]
+    paper, dense = doc["parts"]["paper"], doc["parts"]["dense"]
+    assert paper["slam_config"]["variant"] == "fastslam2" and paper["slam_config"]["n_particles"] == 10
+    assert paper["runs"][0]["cycles"] == 6 and 0 <= paper["runs"][0]["position_rmse_m"] < 1.0
+    row = dense["runs"][0]
+    assert 2.0 <= row["separation_deg"][0] <= row["separation_deg"][1] <= 5.0
+    assert row["ratio_rhs_phased"] == pytest.approx(row["rhs_ate_m"] / row["phased_ate_m"])
+    md = out.with_suffix(".md").read_text()
+    assert "| paper | position_rmse_m |" in md and "| dense | ratio_rhs_phased |" in md
+
+
+def test_dense_scene_pairs_subtend_two_to_five_degrees_abeam():
+    lm, poses, delta = slam_accuracy.dense_scene(3, 20)
+    k = len(lm) // 2
+    sep = np.degrees(np.arctan2(lm[k:, 0] - lm[:k, 0], np.abs(lm[:k, 1])))
+    np.testing.assert_allclose(sep, delta, rtol=1e-9)
+    assert np.all((delta >= 2.0) & (delta <= 5.0)) and poses.shape == (20, 3)
+
+
+def _ring(v: np.ndarray, n: int = 24, r: float = 20.0) -> np.ndarray:
+    """Points on a ring around the car with the Doppler of a world moving at -v relative to it."""
+    b = np.linspace(-math.pi, math.pi, n, endpoint=False)
+    u = np.stack([np.cos(b), np.sin(b)], 1)
+    return np.column_stack([r * u, -(u @ v), np.full(n, 100.0)])
+
+
+@pytest.mark.parametrize("hold", [5, 0])
+def test_established_velocity_track_holds_through_a_platoon(hold):
+    pipe = SlamPipeline(OdometryRegistration(0), rng=0, options=PipelineConfig(reacquire_after_cycles=hold))
+    static = _ring(np.array([15.0, 0.0]))
+    for _ in range(5):
+        pipe.step(static, 0.2)
+    assert pipe.velocity[0] == pytest.approx(15.0, abs=0.1)
+    pipe.step(_ring(np.array([3.0, 0.0])), 0.2)  # only a platoon moving 12 m/s slower is in view
+    assert pipe.velocity[0] == pytest.approx(15.0 if hold else 3.0, abs=0.1)
