@@ -175,7 +175,8 @@ def main(argv: list[str] | None = None) -> int:
     res = {"commit": _commit(), "command": " ".join(["python scripts/pattern_sidelobe_limits.py", *sys.argv[1:]]
                                                     if argv is None else ["python", *argv]),
            "config": config.to_dict(), "scan": scan.to_dict(), "settings": settings.to_dict(), "caps_db": a.caps,
-           "subset": a.angles is not None, **sweep(config, scan, a.caps, a.workers, settings, angles), "load_average_1_5_15": list(os.getloadavg())}
+           "subset": a.angles is not None, **sweep(config, scan, a.caps, a.workers, settings, angles),
+           "load_average_1_5_15": list(os.getloadavg())}
     md = markdown(res)
     print(md)
     a.out.parent.mkdir(parents=True, exist_ok=True)
