@@ -253,11 +253,16 @@ def markdown(result: dict) -> str:
         lines.append("")
     if "patterns" in result:
         p = result["patterns"]
-        lines += ["| pattern library (M = 60, dtheta = 1 deg, 2 workers) | build time (s) |", "|---|---:|"]
+        n = f", n = {p['refractive_index']:g}" if "refractive_index" in p else ""
+        lines += [f"| pattern library (M = 60, dtheta = 1 deg{n}, 2 workers) | build time (s) |", "|---|---:|"]
         for m in ("fast", "sdr"):
             if m in p:
                 note = f" ({p[m]['note']})" if p[m].get("extrapolated") else ""
                 lines.append(f"| {m}{note} | {p[m]['build_s']:.1f} |")
+        if "fast_vs_previous" in p:
+            v = p["fast_vs_previous"]
+            lines.append(f"| fast, previous settings / today's on the same {len(v['angles_deg'])} grids (ratio) | "
+                         f"{v['wall_ratio']:.2f} x wall, {v['cpu_ratio']:.2f} x CPU |")
         lines.append("")
     return "\n".join(lines)
 

@@ -38,6 +38,9 @@ half-step (keeping the best), every start (the closed-form cosine holograms, plu
 optional random amplitudes) is run with the Tx and with the Rx half-step first, and
 only the best of these candidates after the sweep continues to convergence.
 
+The phase sweep screens each phase with ``sweep_evals`` SOCPs (a short rho search from
+the current sidelobe level) and runs the full search only on the best screened phase.
+
 **Active set.** Most sidelobe directions are far below rho, so each SOCP starts with the
 directions within ``active_db`` of the current peak and adds any direction its solution
 violates (re-solving), which keeps the cones few without changing the optimum.
@@ -48,6 +51,10 @@ has a high PSLR. With ``max_sidelobe_db`` the rho search is limited to
 is concave with G(0) >= 0), i.e. two-way sidelobes on D at most ``cap`` dB below the
 main lobe; iterates are ranked by delta, halved when the cap is missed
 (:func:`_score`). Where the cap is unreachable the plain delta step is taken.
+D samples the sidelobe region at ``hw / oversample``; with ``cap_refine`` the converged
+pattern is checked on the report's fine grid, the sidelobe peaks that break the cap are
+added to D (an exchange method for the semi-infinite constraint) and the alternation
+continues, so the cap holds on the fine grid where it is reachable.
 
 The SOCPs are solved with Clarabel directly (the problem data change with
 ``phi`` and ``w`` every half-step, and only ``b`` changes with ``rho``, which
@@ -68,6 +75,7 @@ from rhs_common.validation import check_bool, check_int, check_range, check_type
 from rhs_env.antenna import RHSConfig, ScanConfig, hologram_pattern
 from rhs_env.parallel import parallel_map
 from rhs_env.patterns.metrics import (
+    FINE_GRID_POINTS,
     mainlobe_checks,
     pointing_error_deg,
     side_matrix,
@@ -109,22 +117,35 @@ class FastSettings:
             current peak start in each half-step SOCP; directions that the solution violates
             are added and the SOCP re-solved, so every constraint on D holds (the active set
             only makes the SOCPs smaller), dB in [-80, 0].
+        sweep_evals: rho evaluations per phase in the phase-sweep half-steps, [1, 50]; when below
+            ``rho_evals`` every phase is screened with ``sweep_evals`` SOCPs and only the best
+            screened phase gets the full ``rho_evals`` search.
+        cap_refine: rounds of the fine-grid cap check, [0, 20]: after convergence the two-way
+            pattern is evaluated on the fine grid of the PSLR report
+            (``metrics.FINE_GRID_POINTS``); its sidelobe peaks above the cap join D and the
+            alternation continues. With 0 the cap holds on D only (sampled at ``hw / oversample``,
+            between whose samples a two-way sidelobe can rise about 1 dB above it).
+        socp_tol: relative duality-gap tolerance of the half-step SOCPs (Clarabel ``tol_gap_rel``;
+            ``tol_gap_abs`` is ``socp_tol / 100``), [1e-10, 1e-3].
     """
 
     oversample: float = 4.0
     max_iter: int = 100
-    tol: float = 1e-6
+    tol: float = 1e-5
     rho_evals: int = 8
     pointing: bool = True
     max_sidelobe_db: float = -16.5
     phase_sweep: int = 8
-    sweep_iters: int = 2
+    sweep_iters: int = 1
     starts: int = 1
     seed: int = 0
     pointing_check: float = 0.9
     warm_start: bool = False
     both_orders: bool = True
     active_db: float = -6.0
+    sweep_evals: int = 2
+    cap_refine: int = 3
+    socp_tol: float = 1e-5
 
     def __post_init__(self) -> None:
         check_types(self)
@@ -139,6 +160,9 @@ class FastSettings:
         check_range("max_sidelobe_db", self.max_sidelobe_db, -80.0, 0.0)
         check_range("pointing_check", self.pointing_check, 0.05, 1.0)
         check_range("active_db", self.active_db, -80.0, 0.0)
+        check_int("sweep_evals", self.sweep_evals, 1, 50)
+        check_int("cap_refine", self.cap_refine, 0, 20)
+        check_range("socp_tol", self.socp_tol, 1e-10, 1e-3)
         for name in ("pointing", "warm_start", "both_orders"):
             check_bool(name, getattr(self, name))
 
@@ -155,15 +179,15 @@ class _SideSOCP:
     """
 
     def __init__(self, b_i: np.ndarray, b_d: np.ndarray, w_d: np.ndarray, b_k: np.ndarray, w_k: np.ndarray,
-                 phi: float, active: np.ndarray | None = None) -> None:
+                 phi: float, active: np.ndarray | None = None, tol: float = 1e-6) -> None:
         self.c = np.real(np.exp(-1j * phi) * b_i)
         self.sd = np.sqrt(w_d)[:, None] * b_d
         self.sk = np.sqrt(w_k)[:, None] * b_k
         self.active = np.ones(b_d.shape[0], bool) if active is None else active.copy()
         settings = clarabel.DefaultSettings()
         settings.verbose = False
-        settings.tol_gap_rel = 1e-6
-        settings.tol_gap_abs = 1e-8
+        settings.tol_gap_rel = tol
+        settings.tol_gap_abs = tol / 100.0
         settings.presolve_enable = False
         self.settings = settings
         self.solver: Any = None
@@ -296,7 +320,8 @@ def optimize_grid_fast(
     sweep). ``info``: ``delta`` (P1 objective on D, normalised), ``capped`` (sidelobe cap met
     on D), ``iterations``, ``history`` (delta per alternation), ``start_deltas`` (delta of every
     screened candidate, start-major, Tx-first then Rx-first), ``order`` (``"tx"`` or ``"rx"``: the
-    side that moves first in the kept candidate), ``pointing_check`` (the one used).
+    side that moves first in the kept candidate), ``pointing_check`` (the one used),
+    ``refined`` (directions added to D by the fine-grid cap check).
     """
     settings = settings or FastSettings()
     near = settings.pointing_check
@@ -307,6 +332,171 @@ def optimize_grid_fast(
     return out
 
 
+Psi = dict[str, np.ndarray]
+Merit = tuple[float, float, bool]
+
+
+class _Grid:
+    """The data of one grid's problem: the sets D and K, the side matrices, the cap, the merit.
+
+    ``mats[side] = (b_i, B_D, B_K)`` (rows ``b(s)^T`` of :func:`side_matrix` at ``s_i``, D and K).
+    """
+
+    def __init__(self, config: RHSConfig, angle_deg: float, grid_deg: float, settings: FastSettings,
+                 near: float) -> None:
+        self.config, self.angle_deg, self.settings = config, angle_deg, settings
+        self.si = np.array([np.sin(np.deg2rad(angle_deg))])
+        self.s_k = mainlobe_checks(config, angle_deg, grid_deg, near) if settings.pointing else np.zeros(0)
+        self.feeds = {"tx": config.tx_feed, "rx": config.rx_feed}
+        self.kappa = 10.0 ** (settings.max_sidelobe_db / 20.0)
+        self.set_directions(sidelobe_directions(config, angle_deg, settings.oversample))
+
+    def set_directions(self, s_d: np.ndarray) -> None:
+        """Use ``s_d`` (sin theta) as the sidelobe set D."""
+        self.s_d = np.asarray(s_d, dtype=float)
+        self.mats = {
+            side: (side_matrix(self.config, self.si, f)[0], side_matrix(self.config, self.s_d, f),
+                   side_matrix(self.config, self.s_k, f))
+            for side, f in self.feeds.items()
+        }
+
+    def merit(self, p: Psi) -> Merit:
+        """(score, delta, sidelobe cap met on D); candidates are compared by score (:func:`_score`)."""
+        pw = two_way_power(self.config, p["tx"], p["rx"], np.concatenate([self.si, self.s_d]))
+        capped = bool(pw[1:].max() <= self.kappa**2 * pw[0] * (1 + 1e-6))
+        delta = float(pw[0] - pw[1:].max())
+        return _score(delta, capped), delta, capped
+
+
+def _search(g: _Grid, sv: _SideSOCP, rho0: float, evals: int) -> np.ndarray | None:
+    """:func:`_half_step` under the cap, else (cap unreachable from here) the plain delta step."""
+    x = _half_step(sv, rho0, evals, g.kappa)
+    if x is None and g.kappa < 1.0:
+        x = _half_step(sv, rho0, evals, np.inf)
+    return x if x is not None and np.any(x > 0) else None
+
+
+def _side_step(g: _Grid, psi: Psi, cur: Merit, side: str, other: str, nphi: int) -> tuple[Psi, Merit]:
+    """One half-step of ``side`` (``other`` fixed) over ``nphi`` main-lobe phases; keeps the best by merit.
+
+    With ``nphi > 1`` (phase sweep) every phase is screened with ``sweep_evals`` rho
+    evaluations and only the best screened phase gets the full ``rho_evals`` search.
+    """
+    st = g.settings
+    b_i, b_d, b_k = g.mats[side]
+    o_i_vec, o_d_mat, o_k_mat = g.mats[other]
+    o_i = abs(o_i_vec @ psi[other]) ** 2
+    if o_i <= 0:
+        return psi, cur
+    w_d = np.abs(o_d_mat @ psi[other]) ** 2 / o_i
+    w_k = np.abs(o_k_mat @ psi[other]) ** 2 / o_i if g.s_k.size else np.zeros(0)
+    phi0 = float(np.angle(b_i @ psi[side]))
+    level = w_d * np.abs(b_d @ psi[side]) ** 2  # weighted sidelobe power on D
+    rho0 = float(np.sqrt(level.max()))
+    active = level >= level.max() * 10.0 ** (st.active_db / 10.0)
+    evals = st.rho_evals if nphi == 1 else min(st.sweep_evals, st.rho_evals)
+    screened: list[tuple[Merit, _SideSOCP]] = []
+    for phi in phi0 + 2 * np.pi * np.arange(nphi) / nphi:
+        sv = _SideSOCP(b_i, b_d, w_d, b_k, w_k, float(phi), active, st.socp_tol)
+        x = _search(g, sv, rho0, evals)
+        if x is None:
+            continue
+        cand = {**psi, side: x / np.linalg.norm(x)}
+        m = g.merit(cand)
+        screened.append((m, sv))
+        if m >= cur:
+            psi, cur = cand, m
+    if screened and evals < st.rho_evals:  # full rho search on the best screened phase
+        sv = max(screened, key=lambda r: r[0])[1]
+        x = _search(g, sv, rho0, st.rho_evals)
+        if x is not None:
+            cand = {**psi, side: x / np.linalg.norm(x)}
+            m = g.merit(cand)
+            if m >= cur:
+                psi, cur = cand, m
+    return psi, cur
+
+
+def _alternate(g: _Grid, psi: Psi, first: int, last: int, order: tuple[str, str], sweep_iters: int
+               ) -> tuple[Psi, Merit, list[float], int]:
+    """Alternations ``first..last`` (1-based; the first ``sweep_iters`` sweep phi) from ``psi``,
+    each a half-step of ``order[0]`` then of ``order[1]``; returns (psi, merit, delta history, last it)."""
+    cur = g.merit(psi)
+    history = [cur[1]]
+    it = first - 1
+    for it in range(first, last + 1):
+        start = cur
+        nphi = g.settings.phase_sweep if it <= sweep_iters else 1
+        for side, other in (order, order[::-1]):
+            psi, cur = _side_step(g, psi, cur, side, other, nphi)
+        history.append(cur[1])
+        if it > sweep_iters and cur[2] == start[2] and (
+            cur[1] - start[1] <= g.settings.tol * max(abs(cur[1]), 1e-12)
+        ):
+            break
+    return psi, cur, history, it
+
+
+def _initial_points(g: _Grid, warm: list[tuple[np.ndarray, np.ndarray]] | None) -> list[Psi]:
+    """The starts (unit norm): ``warm`` pairs, else the cosine holograms plus ``starts - 1`` seeded
+    random amplitude pairs (the grid angle is mixed into the seed)."""
+    if warm:
+        inits = [{"tx": np.asarray(t, dtype=float), "rx": np.asarray(r, dtype=float)} for t, r in warm]
+    else:
+        cfg, st = g.config, g.settings
+        rng = np.random.default_rng([st.seed, round(g.angle_deg * 1e6) % (2**32)])
+        inits = [{side: hologram_pattern(cfg, np.array([g.angle_deg]), f)[0] for side, f in g.feeds.items()}]
+        for _ in range(st.starts - 1):
+            inits.append({side: rng.uniform(0.0, 1.0, cfg.elements) for side in g.feeds})
+    return [{k: v / np.linalg.norm(v) for k, v in p.items()} for p in inits]
+
+
+def _fine_sidelobes(g: _Grid, psi: Psi) -> tuple[np.ndarray, np.ndarray, float]:
+    """Two-way power on the fine grid of :func:`pattern_report` (``FINE_GRID_POINTS`` in sin theta)
+    outside the main lobe: (s, |h(s)|^2, |h(s_i)|^2)."""
+    s = np.linspace(-1.0, 1.0, FINE_GRID_POINTS)
+    s = s[np.abs(s - g.si[0]) > g.config.mainlobe_halfwidth]
+    p = two_way_power(g.config, psi["tx"], psi["rx"], np.concatenate([g.si, s]))
+    return s, p[1:], float(p[0])
+
+
+def _fine_violations(g: _Grid, psi: Psi) -> np.ndarray:
+    """sin(theta) of the local maxima of the fine-grid sidelobes that exceed the cap relative to ``|h(s_i)|^2``."""
+    s, p, p0 = _fine_sidelobes(g, psi)
+    peak = np.r_[True, p[1:] >= p[:-1]] & np.r_[p[:-1] >= p[1:], True]
+    return s[peak & (p > g.kappa**2 * p0 * (1 + 1e-9))]
+
+
+def _fine_key(g: _Grid, psi: Psi) -> tuple[bool, float]:
+    """Rank of a cap-refinement iterate on the fine grid: meeting the cap first; among those that
+    meet it the larger delta, among those that miss it the lower peak sidelobe (so a round never
+    makes the reported PSLR worse)."""
+    _, p, p0 = _fine_sidelobes(g, psi)
+    met = bool(p.max() <= g.kappa**2 * p0 * (1 + 1e-9))
+    return met, (p0 - float(p.max())) if met else -float(p.max()) / p0
+
+
+def _refine_cap(g: _Grid, psi: Psi, history: list[float], order: tuple[str, str]
+                ) -> tuple[Psi, Merit, list[float], int]:
+    """Up to ``cap_refine`` rounds: add the fine-grid sidelobe peaks that break the cap to D and continue
+    the alternation. Returns the kept iterate (best :func:`_fine_key`: the cap, delta and PSLR on the
+    fine grid), its merit on the final D, the history and
+    the number of added directions."""
+    kept = [psi]
+    refined = 0
+    for _ in range(g.settings.cap_refine if g.kappa < 1.0 else 0):
+        extra = _fine_violations(g, psi)
+        if extra.size == 0:
+            break
+        refined += extra.size
+        g.set_directions(np.unique(np.r_[g.s_d, extra]))
+        psi, _, more, _ = _alternate(g, psi, 1, g.settings.max_iter, order, 0)
+        history = history + more[1:]
+        kept.append(psi)
+    psi = max(kept, key=lambda p: _fine_key(g, p)) if len(kept) > 1 else psi
+    return psi, g.merit(psi), history, refined
+
+
 def _optimize(
     config: RHSConfig,
     angle_deg: float,
@@ -315,90 +505,24 @@ def _optimize(
     warm: list[tuple[np.ndarray, np.ndarray]] | None,
     near: float,
 ) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
-    si = np.array([np.sin(np.deg2rad(angle_deg))])
-    s_d = sidelobe_directions(config, angle_deg, settings.oversample)
-    s_k = mainlobe_checks(config, angle_deg, grid_deg, near) if settings.pointing else np.zeros(0)
-    feeds = {"tx": config.tx_feed, "rx": config.rx_feed}
-    mats = {
-        side: (side_matrix(config, si, f)[0], side_matrix(config, s_d, f), side_matrix(config, s_k, f))
-        for side, f in feeds.items()
-    }
-    kappa = 10.0 ** (settings.max_sidelobe_db / 20.0)
-
-    def merit(p: dict[str, np.ndarray]) -> tuple[float, float, bool]:
-        """(score, delta, sidelobe cap met on D); candidates are compared by score (:func:`_score`)."""
-        pw = two_way_power(config, p["tx"], p["rx"], np.concatenate([si, s_d]))
-        capped, delta = bool(pw[1:].max() <= kappa**2 * pw[0] * (1 + 1e-6)), float(pw[0] - pw[1:].max())
-        return _score(delta, capped), delta, capped
-
+    """Screen every start with each half-step order, continue the best to convergence, then (with
+    ``cap_refine``) add the fine-grid sidelobe peaks that break the cap to D and continue again."""
+    g = _Grid(config, angle_deg, grid_deg, settings, near)
     sweep_iters = 0 if warm else settings.sweep_iters
-
-    def alternate(psi: dict[str, np.ndarray], first: int, last: int, order: tuple[str, str]
-                  ) -> tuple[dict[str, np.ndarray], Any, list, int]:
-        """Alternations ``first..last`` (1-based; the first ``sweep_iters`` sweep phi) from ``psi``,
-        each a half-step of ``order[0]`` then of ``order[1]``."""
-        cur = merit(psi)
-        history = [cur[1]]
-        it = first - 1
-        for it in range(first, last + 1):
-            start = cur
-            for side, other in (order, order[::-1]):
-                b_i, b_d, b_k = mats[side]
-                o_i_vec, o_d_mat, o_k_mat = mats[other]
-                o_i = abs(o_i_vec @ psi[other]) ** 2
-                if o_i <= 0:
-                    continue
-                w_d = np.abs(o_d_mat @ psi[other]) ** 2 / o_i
-                w_k = np.abs(o_k_mat @ psi[other]) ** 2 / o_i if s_k.size else np.zeros(0)
-                phi0 = float(np.angle(b_i @ psi[side]))
-                nphi = settings.phase_sweep if it <= sweep_iters else 1
-                level = w_d * np.abs(b_d @ psi[side]) ** 2  # weighted sidelobe power on D
-                rho0 = float(np.sqrt(level.max()))
-                active = level >= level.max() * 10.0 ** (settings.active_db / 10.0)
-                for phi in phi0 + 2 * np.pi * np.arange(nphi) / nphi:
-                    sv = _SideSOCP(b_i, b_d, w_d, b_k, w_k, float(phi), active)
-                    x = _half_step(sv, rho0, settings.rho_evals, kappa)
-                    if x is None and kappa < 1.0:  # cap unreachable from here: plain delta step
-                        x = _half_step(sv, rho0, settings.rho_evals, np.inf)
-                    if x is None or not np.any(x > 0):
-                        continue
-                    cand = dict(psi)
-                    cand[side] = x / np.linalg.norm(x)
-                    m = merit(cand)
-                    if m >= cur:
-                        psi, cur = cand, m
-            history.append(cur[1])
-            if it > sweep_iters and cur[2] == start[2] and (
-                cur[1] - start[1] <= settings.tol * max(abs(cur[1]), 1e-12)
-            ):
-                break
-        return psi, cur, history, it
-
-    # starts: the cosine holograms, then seeded random amplitudes; screen each with the
-    # phase-sweep alternations and continue the best one to convergence
-    rng = np.random.default_rng([settings.seed, round(angle_deg * 1e6) % (2**32)])
-    if warm:
-        inits = [{"tx": np.asarray(t, dtype=float), "rx": np.asarray(r, dtype=float)} for t, r in warm]
-    else:
-        inits = [{side: hologram_pattern(config, np.array([angle_deg]), f)[0] for side, f in feeds.items()}]
-        for _ in range(settings.starts - 1):
-            inits.append({side: rng.uniform(0.0, 1.0, config.elements) for side in feeds})
-    # candidates: every start with each half-step order, screened for the phase-sweep
-    # alternations; the best one continues to convergence
     orders = [("tx", "rx"), ("rx", "tx")] if settings.both_orders else [("tx", "rx")]
     screen = min(max(sweep_iters, 1), settings.max_iter)
-    runs = []
-    for init in inits:
-        p0 = {k: v / np.linalg.norm(v) for k, v in init.items()}
-        runs += [(*alternate(p0, 1, screen, order), order) for order in orders]
+    runs = [(*_alternate(g, p0, 1, screen, order, sweep_iters), order)
+            for p0 in _initial_points(g, warm) for order in orders]
     psi, cur, history, it, order = max(runs, key=lambda r: r[1])
     if it < settings.max_iter:
-        psi, cur, more, it = alternate(psi, it + 1, settings.max_iter, order)
+        psi, cur, more, it = _alternate(g, psi, it + 1, settings.max_iter, order, sweep_iters)
         history = history + more[1:]
+    psi, cur, history, refined = _refine_cap(g, psi, history, order)
     tx = psi["tx"] / psi["tx"].max()
     rx = psi["rx"] / psi["rx"].max()
     return tx, rx, {"delta": cur[1], "capped": cur[2], "iterations": it, "history": history,
-                    "start_deltas": [r[1][1] for r in runs], "pointing_check": near, "order": order[0]}
+                    "start_deltas": [r[1][1] for r in runs], "pointing_check": near, "order": order[0],
+                    "refined": refined}
 
 
 def _mirror_index(config: RHSConfig, angles: np.ndarray) -> np.ndarray | None:
