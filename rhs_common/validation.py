@@ -34,7 +34,7 @@ Example:
     >>> build(Outer, {"detection": {"pfa": 2}}, "radar")
     Traceback (most recent call last):
     ...
-    ValueError: radar.detection.pfa must be in (0.0, 0.5], got 2
+    ValueError: radar.detection.pfa must be in (0.0, 0.5], got 2.0
     >>> build(Outer, {"detection": {"pfa": "2"}}, "radar")
     Traceback (most recent call last):
     ...
@@ -164,13 +164,20 @@ def _type_error(field: str, value: Any, hint: Any) -> str | None:
 
 
 def check_types(config: Any) -> None:
-    """``TypeError`` naming the first field of a config dataclass whose value does not fit its type hint."""
+    """``TypeError`` naming the first field of a config dataclass whose value does not fit its type hint.
+
+    An integer given for a ``float`` field is stored as a float, so equal configs compare
+    and hash equal (``grid_deg=5`` and ``grid_deg=5.0`` name the same pattern library).
+    """
     hints = _hints(type(config))
     for f in dataclasses.fields(config):
-        reason = _type_error(f.name, getattr(config, f.name), hints.get(f.name, Any))
+        value = getattr(config, f.name)
+        hint = hints.get(f.name, Any)
+        reason = _type_error(f.name, value, hint)
         if reason:
-            value = getattr(config, f.name)
             raise TypeError(f"{reason}, got {value!r} ({type(value).__name__})")
+        if hint is float and _is_int(value):
+            object.__setattr__(config, f.name, float(value))
 
 
 # --------------------------------------------------------------------------- building

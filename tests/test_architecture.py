@@ -142,3 +142,9 @@ def test_the_length_check_sees_a_long_function(tmp_path):
 def test_no_function_over_80_lines():
     long = [f for pkg in LAYERS for path in sorted((ROOT / pkg).rglob("*.py")) for f in _long_functions(path, 80)]
     assert long == []
+
+
+def test_an_integer_for_a_float_field_names_the_same_config():
+    from rhs_env.antenna import ScanConfig
+
+    assert ScanConfig(grid_deg=5) == ScanConfig(grid_deg=5.0) and isinstance(ScanConfig(grid_deg=5).grid_deg, float)
