@@ -116,8 +116,11 @@ def step_for_result(result_name: str) -> Step | None:
 def load_script(script: str):
     """Import ``scripts/<script>`` as a module (for its ``fingerprint()``)."""
     path = SCRIPTS / script
+    if path.stem in sys.modules:
+        return sys.modules[path.stem]
     spec = importlib.util.spec_from_file_location(path.stem, path)
     mod = importlib.util.module_from_spec(spec)
+    sys.modules[path.stem] = mod  # dataclasses resolve their annotations through sys.modules
     spec.loader.exec_module(mod)
     return mod
 
