@@ -247,12 +247,7 @@ def train(
     check_train_args(run.timesteps, run.n_envs, seed, eval_freq, eval_episodes, checkpoint_freq)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    os.environ.setdefault("MKL_NUM_THREADS", "1")
-    if torch_threads:
-        import torch
-
-        torch.set_num_threads(int(torch_threads))
+    _limit_threads(torch_threads)
     if run.n_envs > 1:
         _check_env_kwargs(env_id, run.env_kwargs)
     venv = make_vec_env(env_id, run.n_envs, seed, run.env_kwargs, monitor_dir=out / "monitor")
@@ -295,6 +290,16 @@ def train(
     if not stopper.stopped:
         _write_summary(out, summary)
     return summary
+
+
+def _limit_threads(torch_threads: int | None) -> None:
+    """torch's intra-op threads in this process; worker processes get ``OMP_NUM_THREADS=1`` unless set already."""
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    os.environ.setdefault("MKL_NUM_THREADS", "1")
+    if torch_threads:
+        import torch
+
+        torch.set_num_threads(int(torch_threads))
 
 
 @dataclass(frozen=True)

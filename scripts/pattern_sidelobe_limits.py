@@ -148,6 +148,13 @@ def markdown(res: dict) -> str:
     return "\n".join(lines)
 
 
+def fingerprint() -> list[float]:
+    """Small config: M = 16, 10-degree grid, caps -12 / -16 dB, one worker: PSLR, gain and pointing per grid and cap."""
+    res = sweep(RHSConfig(elements=16), ScanConfig(grid_deg=10.0), [-12.0, -16.0], 1, FastSettings())
+    keys = ("pslr_db", "mainlobe_gain_db", "pointing_error_deg")
+    return [float(r[k]) for r in res["grids"] for k in keys if k in r]
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--elements", type=int, default=60)

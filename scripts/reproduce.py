@@ -66,6 +66,10 @@ class Step:
 STEPS: tuple[Step, ...] = (
     Step("patterns_build", "build_patterns.py", ("--json", "results/patterns_build.json"),
          ("patterns_build.json",), 200, "rebuilds the shipped pattern libraries"),
+    Step("patterns_sidelobe_limits", "pattern_sidelobe_limits.py",
+         ("--caps", "-16.5", "-18", "-20", "--angles", "12.5", "13.5", "17.5", "18.5", "25.5", "36.5", "37.5", "38.5",
+          "39.5", "40.5", "41.5", "42.5", "43.5", "44.5"), ("patterns_sidelobe_limits.json",), 1200,
+         "the 14 one-degree grids worse than -20 dB, optimised under tighter caps"),
     Step("patterns_sdr_vs_fast", "compare_pattern_methods.py", (), ("patterns_sdr_vs_fast.json",), 260),
     Step("registration", "train_registration.py", ("--no-progress",), ("registration.json",), 400,
          "retrains the shipped CNN weights"),

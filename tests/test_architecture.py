@@ -127,7 +127,7 @@ def test_slam_core_imports_without_gymnasium():
 def _long_functions(path: Path, limit: int) -> list[str]:
     tree = ast.parse(path.read_text())
     return [
-        f"{path.relative_to(ROOT)}:{n.name} ({n.end_lineno - n.lineno + 1} lines)"
+        f"{path.relative_to(ROOT) if path.is_relative_to(ROOT) else path.name}:{n.name} ({n.end_lineno - n.lineno + 1} lines)"
         for n in ast.walk(tree)
         if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and n.end_lineno - n.lineno + 1 > limit
     ]
