@@ -57,6 +57,7 @@ def bench_envs(steps: int, seed: int, grid_deg: float) -> dict:
     """Steps/s of the three highway ids on identical seeds and action sequences."""
     import gymnasium as gym
 
+    import rhs_env  # noqa: F401  (registers the ids)
 
     out = {}
     radar = {"scan": {"grid_deg": grid_deg}}

@@ -250,6 +250,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         import gymnasium as gym
 
+        import rhs_env  # noqa: F401  (registers the ids)
 
         cfg = gym.make(truth_env, **truth_kwargs).unwrapped.config
         max_steps = round(cfg["duration"] * cfg["policy_frequency"])

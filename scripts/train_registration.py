@@ -56,6 +56,7 @@ def collect_pairs(episodes: int, steps: int, seed: int, env_kwargs: dict, progre
     import gymnasium as gym
     from tqdm.auto import tqdm
 
+    import rhs_env  # noqa: F401  (registers the ids)
     from rhs_env.scene import world_pose
     from slam.association import estimate_ego_velocity, static_mask
     from slam.registration import relative_motion
