@@ -88,17 +88,7 @@ class PointSetExtractor(BaseFeaturesExtractor):
             maxed = torch.where(mask.sum(dim=1) > 0, maxed, torch.zeros_like(maxed))
             feats += [maxed, mean]
         if self.box_net is not None:
-            parts = []
-            for k in self.box_keys:
-                v = obs[k].float().flatten(1)
-                s = BOX_SCALES.get(k)
-                if s is not None and v.shape[1] == len(s):
-                    v = v / torch.tensor(s, dtype=v.dtype, device=v.device)
-                    cols = BOX_COLUMNS.get(k)
-                    if cols is not None:
-                        v = v[:, list(cols)]
-                parts.append(v)
-            feats.append(self.box_net(torch.cat(parts, dim=1)))
+            feats.append(self.box_net(_box_features(obs, self.box_keys)))
         return torch.cat(feats, dim=1)
 
 
