@@ -31,8 +31,6 @@ benchmark's highway scene (same process, ratio of medians).
 from __future__ import annotations
 
 import argparse
-import json
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -42,6 +40,8 @@ import scipy.fft as sfft
 from scipy import stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _provenance import write_json
 
 from rhs_env.point_cloud import os_cfar_threshold
 from rhs_env.radar import RadarConfig, RadarSystem
@@ -172,25 +172,15 @@ def snr_at(pd: list[float], snr_db: np.ndarray, level: float) -> float | None:
     return float(np.interp(level, [p[k - 1], p[k]], [snr_db[k - 1], snr_db[k]]))
 
 
-def provenance(argv: list[str], script: str = "scripts/detection_curves.py") -> dict:
-    """Commit (and whether the tree had changes) and the command line."""
-    root = Path(__file__).resolve().parents[1]
-    try:
-        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True).stdout.strip()
-        dirty = bool(subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
-                                    capture_output=True, text=True).stdout.strip())
-    except OSError:
-        commit, dirty = "unknown", None
-    return {"commit": commit, "dirty": dirty, "command": " ".join(["python", script, *argv])}
-
-
 def write_outputs(res: dict, out_dir: Path) -> None:
     """JSON, markdown table and figure."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "detection_curves.json").write_text(json.dumps(res, indent=1))
+    started = res.pop("_started")
+    res["provenance"] = write_json(out_dir / "detection_curves.json", res, __file__, res["config"], started, fingerprint,
+                                   res.pop("_argv"))
     snr = np.array(res["snr_db"])
     lines = [f"Pd against the per-slot SNR at unit two-way gain, P_fa = {res['config']['pfa']:g} per range cell "
-             f"({res['config']['trials']} targets per point; `{res['provenance']['command']}`, commit "
+             f"({res['config']['trials']} targets per point; `{' '.join(res['provenance']['command'])}`, commit "
              f"{res['provenance']['commit'][:10]}). SNR (dB) needed for Pd = 0.5 / 0.9:", "",
              "| antenna | curve | Pd=0.5 | Pd=0.9 |", "|---|---|---|---|"]
     for ant in ANTENNAS:
@@ -262,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
         a.trials, a.pfa_scans, a.snr_step, a.timing_repeats = 8, 4, 5.0, 2
     snr = np.arange(a.snr_min, a.snr_max + 1e-9, a.snr_step)
     rng = np.random.default_rng(a.seed)
-    res = {"provenance": provenance(argv), "config": {**vars(a), "radar": RadarConfig().to_dict()},
+    res = {"_started": time.time(), "_argv": argv, "config": {**vars(a), "radar": RadarConfig().to_dict()},
            "snr_db": snr.tolist(), "measured": {}, "theory": {}, "pfa_check": {}}
     for ant in ANTENNAS:
         t0 = time.perf_counter()

@@ -23,7 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from detection_curves import provenance
+from _provenance import git_state
 
 POLICY_HZ = 5
 IDLE = 1
@@ -121,7 +121,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--detectors", nargs="+", default=list(DETECTORS), choices=DETECTORS)
     p.add_argument("--out-dir", default="results")
     a = p.parse_args(argv)
-    prov = provenance(argv, "scripts/low_snr_slam.py")  # at the start: the code that runs
+    state = git_state()  # at the start: the code that runs
+    prov = {"commit": state["commit"], "dirty": state["dirty"], "command": " ".join(["python", "scripts/low_snr_slam.py", *argv])}
     rows = []
     for seed in a.seeds:
         for d in a.detectors:

@@ -251,7 +251,7 @@ def test_detection_curves_quick_writes_json_md_png(tmp_path):
                      "--max-range", "45", "--out-dir", str(tmp_path))
     assert res.returncode == 0, res.stderr[-2000:]
     out = json.loads((tmp_path / "detection_curves.json").read_text())
-    assert len(out["provenance"]["commit"]) == 40 and "detection_curves.py" in out["provenance"]["command"]
+    assert len(out["provenance"]["commit"]) == 40 and "scripts/detection_curves.py" in out["provenance"]["command"]
     check_png(tmp_path / "detection_curves.png")
     assert "footprint" in (tmp_path / "detection_curves.md").read_text()
     for ant in ("rhs", "phased"):
