@@ -28,6 +28,8 @@ from typing import Any
 
 import numpy as np
 
+from rhs_env.registration import SLAM_ENV_SPECS
+
 DATA_DIR = Path(__file__).parent / "data"
 SHIPPED_POLICY = DATA_DIR / "ppo_rhs_highway_slam.zip"
 SHIPPED_TRUTH_POLICY = DATA_DIR / "ppo_rhs_highway_truth.zip"
@@ -134,7 +136,7 @@ def policy_metadata(policy: str | Path) -> dict[str, Any]:
 
 
 #: ids whose info carries the SLAM metrics (slam.metrics_info.SlamMetricsInfo)
-SLAM_ENV_IDS = ("rhs-highway-slam-v0", "rhs-paper-v0", "rhs-dense-v0")
+SLAM_ENV_IDS = tuple(env_id for env_id, _ in SLAM_ENV_SPECS)
 
 
 def resolve_env(
@@ -155,19 +157,15 @@ def resolve_env(
 
 def make_env(env_id: str, kwargs: dict[str, Any], **extra: Any):
     """``gym.make(env_id, **kwargs)``; on the SLAM ids the info keeps the true and estimated maps
-    (``landmarks_in_info``) for the episode record. Bad kwargs raise ``ValueError``."""
+    (``landmarks_in_info``) for the episode record. Bad kwargs raise the configs' own ``ValueError`` /
+    ``TypeError``, which name the field."""
     import gymnasium as gym
 
     import rhs_env  # noqa: F401  (registers the ids)
 
     if env_id.split(":")[-1] in SLAM_ENV_IDS:
         extra.setdefault("landmarks_in_info", True)
-    try:
-        return gym.make(env_id, **{**kwargs, **extra})
-    except TypeError as exc:
-        if "must be" in str(exc):  # a config field of the wrong type: the message names it
-            raise
-        raise ValueError(f"bad env kwargs for {env_id}: {exc}") from None
+    return gym.make(env_id, **{**kwargs, **extra})
 
 
 def load_policy(policy: str | Path, env=None, seed: int = 0):
