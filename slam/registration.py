@@ -295,14 +295,15 @@ def make_registration(
     rng: np.random.Generator | None = None,
     weights: str | None = None,
     truth: Callable[[], np.ndarray] | None = None,
+    icp: ICPConfig | None = None,
 ) -> Registration:
-    """``cnn`` (the shipped trained CNN), ``icp`` (classical baseline) or ``odometry`` (the oracle:
-    ``truth()`` returns the true motion of the cycle)."""
+    """``cnn`` (the shipped trained CNN), ``icp`` (classical baseline, settings ``icp``) or ``odometry``
+    (the oracle: ``truth()`` returns the true motion of the cycle)."""
     check_choice("registration", kind, REGISTRATIONS)
     if kind == "cnn":
         from slam.cnn_registration import CNNRegistration
 
         return CNNRegistration(weights)
     if kind == "icp":
-        return ICPRegistration()
+        return ICPRegistration(icp)
     return OdometryRegistration(rng=rng, truth=truth)

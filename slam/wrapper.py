@@ -41,7 +41,6 @@ from slam.rbpf import SlamConfig, SlamEstimate
 from slam.registration import (
     DEFAULT_REGISTRATION,
     ICPConfig,
-    ICPRegistration,
     make_registration,
 )
 
@@ -99,9 +98,7 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         self.icp_config = build(ICPConfig, icp, "icp")
         self.pipeline_config = build(PipelineConfig, pipeline, "pipeline")
         self.registration_kind = registration
-        reg = make_registration(registration, truth=self.true_motion)
-        if isinstance(reg, ICPRegistration):
-            reg = ICPRegistration(self.icp_config)
+        reg = make_registration(registration, truth=self.true_motion, icp=self.icp_config)
         radar_cfg = getattr(env, "radar_config", None)  # the radars' mounts place each point's line of sight
         sensor_xy = radar_cfg.mounts()[0] if radar_cfg is not None else None
         self.pipeline = SlamPipeline(
