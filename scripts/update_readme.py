@@ -2,7 +2,8 @@
 
 Each README block between ``<!-- results:NAME -->`` and ``<!-- /results:NAME -->``
 is replaced by ``results/NAME.md`` (written by the script that measured it), so
-every number in the README comes from a script a user can run. Blocks whose
+every number in the README comes from a script a user can run. A heading on the
+file's first line is dropped: the README section around the block has its own. Blocks whose
 file does not exist are left as they are. When ``results/NAME.json`` is not
 verified against the code (written before provenance existed, or the code's
 fingerprint changed since the run, see ``scripts/_provenance.py``), the block
@@ -41,6 +42,14 @@ def warning(name: str, results_dir: Path, fingerprints: dict) -> str:
     return f"\n> **Unverified:** {why}. These numbers may not match the code; rerun `{rerun}`.\n"
 
 
+HEADING = re.compile(r"\A#{1,6} [^\n]*\n+")
+
+
+def block_text(md: str) -> str:
+    """A results ``.md`` as a README block: without its leading heading (the README's section has one)."""
+    return HEADING.sub("", md.strip(), count=1).rstrip()
+
+
 def render(readme: str, results_dir: Path) -> str:
     fingerprints = load_fingerprints(results_dir / "fingerprints.json")
 
@@ -49,7 +58,7 @@ def render(readme: str, results_dir: Path) -> str:
         if not f.exists():
             return m.group(0)
         warn = warning(m.group("name"), results_dir, fingerprints)
-        return f"{m.group(1)}{f.read_text().rstrip()}\n{warn}{m.group(4)}"
+        return f"{m.group(1)}{block_text(f.read_text())}\n{warn}{m.group(4)}"
 
     return BLOCK.sub(sub, readme)
 

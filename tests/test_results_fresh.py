@@ -120,6 +120,13 @@ def test_verification_and_readme_warning(tmp_path):
     assert "reproduce.py --only fig5c" in out
 
 
+def test_readme_block_drops_the_results_files_own_heading():
+    """The README section has its heading; the block must not repeat it (or add an H1 mid-README)."""
+    assert update_readme.block_text("# SLAM accuracy\n\n| a |\n") == "| a |"
+    assert update_readme.block_text("### Claim\n| a |\n\n## kept\n") == "| a |\n\n## kept"
+    assert update_readme.block_text("| a |\n# not first\n") == "| a |\n# not first"
+
+
 def test_write_json_records_provenance_outside_results(tmp_path):
     out = tmp_path / "x.json"
     p = prov.write_json(out, {"v": 1}, SCRIPTS / "fig5c_trajectory_map.py", {"seed": 3, "path": tmp_path}, 0.0,
