@@ -60,6 +60,8 @@ class Step:
     no_fingerprint: str = ""
     #: run only when named with ``--only`` (historical 'before' records of a change)
     on_request: bool = False
+    #: another environment's Python, relative to the repository (an optional extra that conflicts with the base pins)
+    python: str = ""
 
 
 #: every results file and the step that writes it, in dependency order (libraries and weights first)
@@ -107,6 +109,9 @@ STEPS: tuple[Step, ...] = (
          no_fingerprint="timings"),
     Step("benchmark", "benchmark.py", ("--out", "results/benchmark.json"), ("benchmark.json",), 900, "timings",
          no_fingerprint="timings"),
+    Step("benchmark_rllib", "benchmark_rllib.py", (), ("benchmark_rllib.json",), 300,
+         "timings; in the rllib environment (README: Training beyond one machine)", no_fingerprint="timings",
+         python=".venv-rllib/bin/python"),
 )
 BY_NAME = {s.name: s for s in STEPS}
 
@@ -179,7 +184,12 @@ def run_steps(steps: list[Step], progress: bool) -> int:
         for s in steps:
             bar.set_postfix_str(s.name)
             t0 = time.time()
-            cmd = [sys.executable, str(SCRIPTS / s.script), *s.args]
+            python = str(ROOT / s.python) if s.python else sys.executable
+            if not Path(python).exists():
+                failed.append(s.name)
+                tqdm.write(f"reproduce: {s.name} needs {s.python} (see its note: {s.note}); skipped")
+                continue
+            cmd = [python, str(SCRIPTS / s.script), *s.args]
             proc = subprocess.run(cmd, cwd=ROOT, env={**env, **s.env}, check=False)
             bar.update(round(estimate(s)))
             if proc.returncode != 0:
