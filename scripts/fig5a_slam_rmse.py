@@ -173,7 +173,7 @@ def ratios(rows: list[dict]) -> list[dict]:
     return out
 
 
-def _fmt(s: dict, digits: int = 2) -> str:
+def _fmt(s: dict, digits: int = 3) -> str:
     """``mean [lo, hi]`` (95 % CI), or the mean alone for one seed."""
     if s["mean"] is None:
         return "n/a"
