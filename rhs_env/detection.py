@@ -256,30 +256,30 @@ class FootprintDetector:
                  window: np.ndarray) -> None:
         cfg = config
         self.footprints, self.centres = beam_footprints(dic, cfg.scan.sector_deg)  # (I, J), (J,)
-        c = cfg.chirps_per_slot
+        c = cfg.waveform.chirps_per_slot
         self.looks = self.footprints.sum(0) * c  # L_j
         shared = (self.footprints[:, :-1] & self.footprints[:, 1:]).sum(0) * c
-        self.pfa = cfg.cfar_pfa
+        self.pfa = cfg.detection.pfa
         self.p1, self.n_eff = _per_hypothesis_pfa(tuple(int(v) for v in self.looks),
-                                                  tuple(int(v) for v in shared), float(cfg.cfar_pfa))
-        self.method = cfg.cfar_method if cfg.detection == "cfar" else "fixed"
-        self.rank = max(1, round(cfg.cfar_rank * 2 * cfg.cfar_train))
-        self.alpha = _alphas(self.method, self.p1, tuple(int(v) for v in self.looks), 2 * cfg.cfar_train,
-                             self.rank, float(cfg.fixed_threshold_db))
+                                                  tuple(int(v) for v in shared), float(cfg.detection.pfa))
+        self.method = cfg.detection.method if cfg.detection.mode == "cfar" else "fixed"
+        self.rank = max(1, round(cfg.detection.rank * 2 * cfg.detection.train))
+        self.alpha = _alphas(self.method, self.p1, tuple(int(v) for v in self.looks), 2 * cfg.detection.train,
+                             self.rank, float(cfg.detection.fixed_threshold_db))
         self.floor = self.looks * float(noise_cell_var)  # noise mean of T_j, W
-        self.cap = self.floor * 10 ** (cfg.cfar_cap_db / 10)
+        self.cap = self.floor * 10 ** (cfg.detection.cap_db / 10)
         self._f = np.ascontiguousarray(self.footprints.T, dtype=np.float32)  # (J, I)
-        g, t = cfg.cfar_guard, cfg.cfar_train
+        g, t = cfg.detection.guard, cfg.detection.train
         self.train_step = training_step(window)
         near, far = np.arange(g + 1, g + t + 1), np.arange(g + t + 1, g + 2 * t + 1)
         # training offsets in order of preference: both sides, then further out (used at the ends of the profile)
-        self._offsets = cfg.zero_pad * self.train_step * np.concatenate([-near, near, -far, far])
+        self._offsets = cfg.waveform.zero_pad * self.train_step * np.concatenate([-near, near, -far, far])
         self._train = 2 * t
         self._tables: dict[int, np.ndarray] = {}
         self._leak = np.asarray(leak, float)
-        resp = np.abs(np.fft.fft(np.asarray(window, float), cfg.zero_pad * window.size)) ** 2
+        resp = np.abs(np.fft.fft(np.asarray(window, float), cfg.waveform.zero_pad * window.size)) ** 2
         self._null = int(np.argmax(np.diff(resp[: resp.size // 2]) > 0))  # first null of the main lobe, padded bins
-        self._margin = 10 ** (cfg.sidelobe_margin_db / 10)
+        self._margin = 10 ** (cfg.detection.sidelobe_margin_db / 10)
 
     def _training_cells(self, n: int) -> np.ndarray:
         """(n, 2 train) training-cell indices of each of n cells (cached per profile length).

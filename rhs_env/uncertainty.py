@@ -101,11 +101,11 @@ def attach_uncertainty(system, cloud) -> None:
     cloud.range_std_m, cloud.angle_std_rad = point_std(
         cloud.points[:, 3],
         g,
-        samples=cfg.samples,
-        sample_rate_hz=cfg.sample_rate_hz,
-        slope_hz_per_s=cfg.slope,
-        range_floor_m=cfg.range_std_floor_m,
-        angle_floor_rad=np.deg2rad(cfg.angle_std_floor_deg),
+        samples=cfg.waveform.samples,
+        sample_rate_hz=cfg.waveform.sample_rate_hz,
+        slope_hz_per_s=cfg.waveform.slope,
+        range_floor_m=cfg.uncertainty.range_std_floor_m,
+        angle_floor_rad=np.deg2rad(cfg.uncertainty.angle_std_floor_deg),
     )
 
 

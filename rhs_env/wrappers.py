@@ -151,7 +151,7 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         # bounds of a point: x, y within the radars' reach, the unambiguous radial
         # speed, amplitudes (echo / noise std) up to a physical ceiling
         cfg = self.radar_config
-        reach = cfg.max_range_m + 0.5 * np.hypot(cfg.vehicle_length_m, cfg.vehicle_width_m)
+        reach = cfg.max_range_m + 0.5 * np.hypot(cfg.mounting.vehicle_length_m, cfg.mounting.vehicle_width_m)
         vmax = cfg.max_velocity_mps
         self._low = np.array([-reach, -reach, -vmax, 0.0, 0.0, 0.0, 0.0], dtype=np.float32)
         self._high = np.array([reach, reach, vmax, AMPLITUDE_MAX, RANGE_STD_MAX, np.pi, 3.0], dtype=np.float32)
