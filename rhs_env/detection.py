@@ -4,7 +4,7 @@ Why not the slot sum. A swept-beam radar sees a target in the few slots whose
 two-way beam covers it (~3-4 of the 90 slots for the 60-element RHS, ~8 for the
 phased array of the same cost). The slot-summed profile ``P[k] = sum_{i,c}
 |Y[i, c, k]|^2`` (the paper's detector, :func:`rhs_env.radar.RadarSystem.process`
-with ``detector="summed"``) adds the noise of every other slot: a Gamma(I C)
+with ``detection.statistic="summed"``) adds the noise of every other slot: a Gamma(I C)
 statistic, I C = 360, for the energy of ~12 cells. Per range bin k the detector
 here tests every angle hypothesis j against its own footprint instead.
 
@@ -50,21 +50,21 @@ slots of F_j and F_{j+1} (Gamma(s C)), X, Y the others (Gamma(a C), Gamma(b C)),
 
 ``tau_j = Gamma^{-1}(1 - p_1; L_j)``, by quadrature; p_1 solves ``N_eff(p_1) p_1 = P_fa``
 (fixed point). CFAR per hypothesis along range (as the summed detector:
-ordered statistic of rank ``cfar_rank`` x 2 ``cfar_train`` training cells, or the
+ordered statistic of rank ``detection.rank`` x 2 ``detection.train`` training cells, or the
 cell average; the training cells are :func:`training_step` unpadded bins apart (2
 for the Hann window, whose adjacent bins are correlated: spaced one bin the
 measured P_fa was 1.3x the design for the RHS); at the ends of the profile the window is
-one-sided, always 2 ``cfar_train`` cells), multiplier from
+one-sided, always 2 ``detection.train`` cells), multiplier from
 :func:`os_alpha_fast` (= :func:`rhs_env.point_cloud.os_cfar_alpha`) / :func:`cfar_alpha` for Gamma(L_j) cells
 at p_1; the noise estimate is clipped to [floor_j, floor_j 10^(cap/10)] with
 ``floor_j = L_j sigma_Y^2`` the calibrated noise mean. Per hypothesis, the
 training cells hold only the echoes of that beam, so a vehicle at another angle
-no longer raises a landmark's threshold. ``detection="fixed"``: ``tau_j =
-10^(fixed_threshold_db / 10) floor_j``.
+no longer raises a landmark's threshold. ``detection.mode="fixed"``: ``tau_j =
+10^(detection.fixed_threshold_db / 10) floor_j``.
 
 Peaks: local maxima along range of T_j above the threshold (only these cells
 need the CFAR statistic: the threshold is never below ``alpha_j floor_j``); a
-peak weaker than ``sidelobe_margin_db`` above the window sidelobe of a stronger
+peak weaker than ``detection.sidelobe_margin_db`` above the window sidelobe of a stronger
 detected bin of the same radar, read on the peak's own hypothesis, is dropped; the detected (radar, bin)
 pairs are the union over hypotheses, less those inside the window main lobe of a
 stronger pair (any hypothesis) and weaker than its leak plus the margin: the
@@ -246,7 +246,8 @@ class FootprintDetector:
 
     Args:
         dic: the antenna's :class:`AngleDictionary`.
-        config: a :class:`rhs_env.radar.RadarConfig` (detection fields, chirps, scan sector, zero padding).
+        config: a :class:`rhs_env.radar_config.RadarConfig` (``detection``, ``waveform.chirps_per_slot`` and
+            ``zero_pad``, ``scan.sector_deg``).
         noise_cell_var: sigma_Y^2, noise variance of one cell Y[i, c, k] of the windowed FFT (W).
         leak: the window's power-leak envelope over padded bins (:func:`window_leak_envelope`).
         window: the range window w (N,).
@@ -284,7 +285,7 @@ class FootprintDetector:
     def _training_cells(self, n: int) -> np.ndarray:
         """(n, 2 train) training-cell indices of each of n cells (cached per profile length).
 
-        The first 2 ``cfar_train`` offsets inside the profile, in the order both sides
+        The first 2 ``detection.train`` offsets inside the profile, in the order both sides
         then further out: a symmetric window inside, one-sided at the ends.
         """
         tab = self._tables.get(n)

@@ -16,7 +16,7 @@ Dechirped echo of slot i, chirp c, sample n (paper eq. 2, as a sum of tones):
   chirp-to-chirp phase ``omega_k = 4 pi v_k T_c / lambda`` (v_k radial velocity,
   > 0 receding). The geometry is frozen at the scan instant (the range and
   bearing change over the ~7 ms sweep is neglected; the Doppler phase, which
-  is lambda-sensitive, is kept across chirps and slots; ``slot_doppler=False``
+  is lambda-sensitive, is kept across chirps and slots; ``waveform.slot_doppler=False``
   restarts it every slot).
 * ``|beta_k|^2 = sigma_k lambda^2 / ((4 pi)^3 R_k^4)`` (radar equation with the
   antenna gains in h), phase uniform in [0, 2 pi) from the rng.
@@ -30,10 +30,14 @@ h_i(theta_k) exp(j omega_k i C)`` (I x K) and ``E[k, (c, n)] = exp(j 2 pi (f_b,k
 + f_D,k) n / f_s + j omega_k c)`` (K x C N), batched over the four radars.
 
 Mounting: radars at the middle of the front, left, rear and right sides of a
-``vehicle_length`` x ``vehicle_width`` box, boresights 0, +90, 180, -90 deg.
+``mounting.vehicle_length_m`` x ``mounting.vehicle_width_m`` box, boresights 0, +90, 180, -90 deg.
 Field of view: the scan sector (+-45 deg) up to ``max_range_m``; hidden
 scatterers (:func:`rhs_env.scatterers.visible_mask`) return nothing.
 Far-field model: the array apertures (<= 0.3 m) are treated as points.
+
+Settings: :class:`RadarConfig` (:mod:`rhs_env.radar_config`, re-exported here) and its
+groups ``waveform`` (B, T_c, f_s, C, window, zero padding), ``link`` (P_t, F, T0),
+``detection``, ``estimation`` (OMP), ``uncertainty`` and ``mounting``.
 """
 
 from __future__ import annotations
@@ -454,7 +458,7 @@ class RadarSystem:
         return rd[o], kd[o]
 
     def _estimate_angles(self, spec: np.ndarray, rd: np.ndarray, kd: np.ndarray) -> _Targets:
-        """OMP (angle, Doppler, amplitude; up to ``omp_max_targets`` per cell) and per-target range offsets.
+        """OMP (angle, Doppler, amplitude; up to ``estimation.max_targets`` per cell) and per-target range offsets.
 
         One :func:`omp_doppler` call per distinct antenna (all four radars share
         one unless the patterns differ), batched over every detection of the scan.

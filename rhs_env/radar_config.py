@@ -2,18 +2,18 @@
 
 A :class:`RadarConfig` is a frozen dataclass of frozen groups, each validated
 on its own (``__post_init__``; errors name the field, and :func:`rhs_common.validation.build`
-prefixes the path: ``radar.detection.pfa must be in (0.0, 0.5], got 2``):
+prefixes the path: ``radar.detection.pfa must be in (0.0, 0.5], got 2.0``):
 
-==============  ===========================  ===================================================
-field           group                        what
-==============  ===========================  ===================================================
-``waveform``    :class:`WaveformConfig`      chirp, sampling, chirps per slot, range FFT
-``link``        :class:`LinkBudgetConfig`    Tx power, noise figure, temperature, noise on/off
-``detection``   :class:`DetectionConfig`     CFAR / fixed threshold, statistic, sidelobe check
-``estimation``  :class:`AngleEstimationConfig`  OMP angle / Doppler estimation per detection
-``uncertainty`` :class:`UncertaintyConfig`   floors of the per-point range / angle std
-``mounting``    :class:`MountingConfig`      the vehicle box the radars sit on
-==============  ===========================  ===================================================
+===============  ================================  ==================================================
+field            group                             what
+===============  ================================  ==================================================
+``waveform``     :class:`WaveformConfig`           chirp, sampling, chirps per slot, range FFT
+``link``         :class:`LinkBudgetConfig`         Tx power, noise figure, temperature, noise on/off
+``detection``    :class:`DetectionConfig`          CFAR / fixed threshold, statistic, sidelobe check
+``estimation``   :class:`AngleEstimationConfig`    OMP angle / Doppler estimation per detection
+``uncertainty``  :class:`UncertaintyConfig`        floors of the per-point range / angle std
+``mounting``     :class:`MountingConfig`           the vehicle box the radars sit on
+===============  ================================  ==================================================
 
 plus, at the top level, the antenna (``antenna`` kind, ``rhs`` geometry, ``scan``
 grid), the field of view (``min_range_m`` .. ``max_range_m``), the synthesis

@@ -10,7 +10,7 @@ velocity (m/s, > 0 receding), amplitude (linear, over the noise std), range
 std (m) and angle std (rad) of the point (its Cramer-Rao bounds at its SNR plus
 a floor, :mod:`rhs_env.uncertainty`; the angle is measured from the boresight
 of the radar that saw it) and that radar's index (0 front, 1 left, 2 rear,
-3 right, mounts from :meth:`rhs_env.radar.RadarConfig.mounts`), zero padded,
+3 right, mounts from :meth:`rhs_env.radar_config.MountingConfig.mounts`), zero padded,
 inside finite bounds (x, y: the radars' reach; velocity: the unambiguous
 radial speed; amplitude: [0, 1e9]; range std: [0, 1e3] m; angle std:
 [0, pi] rad; radar: [0, 3]); when the
@@ -67,7 +67,9 @@ AMPLITUDE_MAX = 1e9  # linear echo amplitude over noise std; far above any physi
 def make_radar_config(radar: Any = None, antenna: str | None = None):
     """A validated :class:`rhs_env.radar.RadarConfig` from ``None`` / a config / a nested dict of its fields.
 
-    ``{"scan": {"grid_deg": 5}, "max_range_m": 80}``; ``antenna`` (rhs | phased |
+    ``{"scan": {"grid_deg": 5}, "max_range_m": 80, "detection": {"pfa": 1e-5}}`` (the groups of
+    :mod:`rhs_env.radar_config`; the former flat names, ``{"cfar_pfa": 1e-5}``, still work with a
+    ``DeprecationWarning``); ``antenna`` (rhs | phased |
     random | hologram) overrides the antenna kind. Errors name the field path
     (``radar.scan.grid_deg must be ...``): ``ValueError`` for unknown fields and
     out-of-range values, ``TypeError`` for wrong types.
