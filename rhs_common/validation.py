@@ -8,6 +8,13 @@ nested mapping (what ``gym.make(..., radar={...})`` receives) into such a
 config, recursively by the type hints, and prefixes every error with the field
 path: ``radar.detection.pfa must be in (0.0, 0.5], got 2``.
 
+Fields that moved when a config was regrouped stay accepted in mappings: the
+class attribute ``MOVED_FIELDS`` (old name -> new dotted path, e.g.
+``{"cfar_pfa": "detection.pfa"}``) makes :func:`build` move each old key to its
+new place with a ``DeprecationWarning`` that names the new path
+(``radar.cfar_pfa is now radar.detection.pfa``); the same field given both ways
+is a ``ValueError``. :func:`flat_dict` is the inverse (the old flat dict of a config).
+
 Why a small builder of our own rather than pydantic's dataclasses or cattrs:
 both would do the recursion and the type checks, but the range checks and their
 messages (the allowed interval in the message) live in our ``__post_init__``
@@ -39,6 +46,14 @@ Example:
     Traceback (most recent call last):
     ...
     TypeError: radar.detection.pfa must be a number, got '2' (str)
+    >>> Outer.MOVED_FIELDS = {"cfar_pfa": "detection.pfa"}  # a field of before the grouping
+    >>> import warnings
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     build(Outer, {"cfar_pfa": 1e-3}, "radar").detection.pfa
+    0.001
+    >>> str(caught[0].message)
+    'radar.cfar_pfa is now radar.detection.pfa'
 """
 
 from __future__ import annotations
@@ -46,8 +61,10 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
+import sys
 import types
 import typing
+import warnings
 from collections.abc import Mapping
 from typing import Any, TypeVar
 
@@ -203,13 +220,110 @@ def _value(hint: Any, value: Any, path: str) -> Any:
 
 
 def unknown_fields_message(cls: type, unknown: list[str], path: str) -> str:
-    """``ValueError`` text for keys that are not fields of ``cls`` (with the new path of moved fields)."""
+    """``ValueError`` text for keys that are not fields of ``cls``."""
     known = sorted(f.name for f in dataclasses.fields(cls) if f.init)
-    moved: Mapping[str, str] = getattr(cls, "MOVED_FIELDS", {})
-    hints = [f"{k!r} is now {_join(path, moved[k])!r}" for k in unknown if k in moved]
     where = path or cls.__name__
-    msg = f"{where} has unknown field(s) {', '.join(map(repr, unknown))}; allowed: {', '.join(known)}"
-    return msg + (f" ({'; '.join(hints)})" if hints else "")
+    return f"{where} has unknown field(s) {', '.join(map(repr, unknown))}; allowed: {', '.join(known)}"
+
+
+#: packages whose frames a moved-field warning skips: it names the caller of ``gym.make`` / the config
+_INTERNAL_PACKAGES = ("rhs_common", "rhs_env", "slam", "agents", "rhs_slam", "gymnasium")
+
+
+def _caller_stacklevel() -> int:
+    """``stacklevel`` of the first frame outside this project's packages (and gymnasium), for ``warnings.warn``."""
+    frame = sys._getframe(1)
+    level = 1
+    while frame is not None and frame.f_globals.get("__name__", "").split(".")[0] in _INTERNAL_PACKAGES:
+        frame = frame.f_back  # type: ignore[assignment]
+        level += 1
+    return level
+
+
+def _moved_path(cls: type, key: str, value: Any) -> str | None:
+    """The new path of a key of ``cls.MOVED_FIELDS`` given in a mapping, None when it is taken as it is.
+
+    A moved name that is no longer a field always moves. A name that is a field
+    again, now a nested config (``detection``, once a string, now a group whose
+    ``mode`` the string became), moves only when its value is not that config or
+    a mapping of its fields.
+    """
+    moved: Mapping[str, str] = getattr(cls, "MOVED_FIELDS", {})
+    if key not in moved:
+        return None
+    names = {f.name for f in dataclasses.fields(cls) if f.init}
+    if key not in names:
+        return moved[key]
+    group = _nested_class(_hints(cls).get(key, Any))
+    if group is not None and not isinstance(value, (Mapping, group)) and moved[key].startswith(key + "."):
+        return moved[key]
+    return None
+
+
+def _place(tree: dict[str, Any], old: str, new: str, value: Any, path: str) -> None:
+    """Put ``value`` at the dotted path ``new`` of ``tree`` (copying the mappings on the way); ValueError on a conflict."""
+    old_p, new_p = _join(path, old), _join(path, new)
+    *parents, leaf = new.split(".")
+    node = tree
+    for i, part in enumerate(parents):
+        sub = node.get(part)
+        if sub is not None and not isinstance(sub, Mapping):
+            given = _join(path, ".".join(parents[: i + 1]))
+            raise ValueError(f"{old_p} (now {new_p}) conflicts with {given} given as a whole; give {new_p} once")
+        node[part] = dict(sub or {})
+        node = node[part]
+    if leaf in node:
+        raise ValueError(f"{old_p} and {new_p} both given ({old_p} is now {new_p}); give it once")
+    node[leaf] = value
+
+
+def apply_moved_fields(cls: type, value: Mapping[str, Any], path: str = "") -> dict[str, Any]:
+    """``value`` with the keys of ``cls.MOVED_FIELDS`` (old flat names) moved to their new nested paths.
+
+    Each moved key emits a ``DeprecationWarning`` naming the new path
+    (``radar.cfar_pfa is now radar.detection.pfa``); the same field given both
+    ways (``{"cfar_pfa": 1e-5, "detection": {"pfa": 1e-4}}``) is a ``ValueError``.
+    The input is not modified.
+    """
+    out = dict(value)
+    moves = []
+    for key, v in value.items():
+        new = _moved_path(cls, str(key), v)
+        if new is not None:
+            moves.append((str(key), new, out.pop(key)))
+    for old, new, v in moves:
+        warnings.warn(f"{_join(path, old)} is now {_join(path, new)}", DeprecationWarning,
+                      stacklevel=_caller_stacklevel())
+        _place(out, old, new, v, path)
+    return out
+
+
+def flat_dict(config: Any) -> dict[str, Any]:
+    """``asdict(config)`` with the fields of ``MOVED_FIELDS`` back under their old flat names.
+
+    The inverse of :func:`apply_moved_fields`: the dict the config had before its
+    fields were grouped (a stable identity for keys or seeds derived from it). A
+    field of a group that has no old name (added after the grouping) appears
+    under its dotted path.
+    """
+    tree = dataclasses.asdict(config)
+    moved: Mapping[str, str] = getattr(type(config), "MOVED_FIELDS", {})
+    by_new = {new: old for old, new in moved.items()}
+    groups = {new.split(".")[0] for new in moved.values()}
+    out = {k: v for k, v in tree.items() if k not in groups}
+
+    def walk(node: dict[str, Any], prefix: str) -> None:
+        for k, v in node.items():
+            p = _join(prefix, k)
+            if p in by_new:
+                out[by_new[p]] = v
+            elif isinstance(v, dict) and any(n.startswith(p + ".") for n in by_new):
+                walk(v, p)
+            else:
+                out[p] = v
+
+    walk({g: tree[g] for g in groups if g in tree}, "")
+    return out
 
 
 def build(cls: type[T], value: Any = None, path: str = "") -> T:
@@ -217,7 +331,9 @@ def build(cls: type[T], value: Any = None, path: str = "") -> T:
 
     Nested config fields accept mappings too. Errors name the field path:
     unknown keys and out-of-range values raise ``ValueError``, wrong types
-    ``TypeError``.
+    ``TypeError``. Old flat names listed in ``cls.MOVED_FIELDS`` (a class
+    attribute, old name -> new dotted path) are moved to their new place with a
+    ``DeprecationWarning`` (:func:`apply_moved_fields`).
     """
     if value is None:
         return cls()
@@ -226,6 +342,8 @@ def build(cls: type[T], value: Any = None, path: str = "") -> T:
     if not isinstance(value, Mapping):
         raise TypeError(f"{path or cls.__name__} must be a {cls.__name__} or a dict of its fields, "
                         f"got {type(value).__name__}")
+    if getattr(cls, "MOVED_FIELDS", None):
+        value = apply_moved_fields(cls, value, path)
     names = {f.name for f in dataclasses.fields(cls) if f.init}  # type: ignore[arg-type]
     unknown = sorted(str(k) for k in value if k not in names)
     if unknown:

@@ -4,7 +4,7 @@ Why not the slot sum. A swept-beam radar sees a target in the few slots whose
 two-way beam covers it (~3-4 of the 90 slots for the 60-element RHS, ~8 for the
 phased array of the same cost). The slot-summed profile ``P[k] = sum_{i,c}
 |Y[i, c, k]|^2`` (the paper's detector, :func:`rhs_env.radar.RadarSystem.process`
-with ``detector="summed"``) adds the noise of every other slot: a Gamma(I C)
+with ``detection.statistic="summed"``) adds the noise of every other slot: a Gamma(I C)
 statistic, I C = 360, for the energy of ~12 cells. Per range bin k the detector
 here tests every angle hypothesis j against its own footprint instead.
 
@@ -50,21 +50,21 @@ slots of F_j and F_{j+1} (Gamma(s C)), X, Y the others (Gamma(a C), Gamma(b C)),
 
 ``tau_j = Gamma^{-1}(1 - p_1; L_j)``, by quadrature; p_1 solves ``N_eff(p_1) p_1 = P_fa``
 (fixed point). CFAR per hypothesis along range (as the summed detector:
-ordered statistic of rank ``cfar_rank`` x 2 ``cfar_train`` training cells, or the
+ordered statistic of rank ``detection.rank`` x 2 ``detection.train`` training cells, or the
 cell average; the training cells are :func:`training_step` unpadded bins apart (2
 for the Hann window, whose adjacent bins are correlated: spaced one bin the
 measured P_fa was 1.3x the design for the RHS); at the ends of the profile the window is
-one-sided, always 2 ``cfar_train`` cells), multiplier from
+one-sided, always 2 ``detection.train`` cells), multiplier from
 :func:`os_alpha_fast` (= :func:`rhs_env.point_cloud.os_cfar_alpha`) / :func:`cfar_alpha` for Gamma(L_j) cells
 at p_1; the noise estimate is clipped to [floor_j, floor_j 10^(cap/10)] with
 ``floor_j = L_j sigma_Y^2`` the calibrated noise mean. Per hypothesis, the
 training cells hold only the echoes of that beam, so a vehicle at another angle
-no longer raises a landmark's threshold. ``detection="fixed"``: ``tau_j =
-10^(fixed_threshold_db / 10) floor_j``.
+no longer raises a landmark's threshold. ``detection.mode="fixed"``: ``tau_j =
+10^(detection.fixed_threshold_db / 10) floor_j``.
 
 Peaks: local maxima along range of T_j above the threshold (only these cells
 need the CFAR statistic: the threshold is never below ``alpha_j floor_j``); a
-peak weaker than ``sidelobe_margin_db`` above the window sidelobe of a stronger
+peak weaker than ``detection.sidelobe_margin_db`` above the window sidelobe of a stronger
 detected bin of the same radar, read on the peak's own hypothesis, is dropped; the detected (radar, bin)
 pairs are the union over hypotheses, less those inside the window main lobe of a
 stronger pair (any hypothesis) and weaker than its leak plus the margin: the
@@ -246,7 +246,8 @@ class FootprintDetector:
 
     Args:
         dic: the antenna's :class:`AngleDictionary`.
-        config: a :class:`rhs_env.radar.RadarConfig` (detection fields, chirps, scan sector, zero padding).
+        config: a :class:`rhs_env.radar_config.RadarConfig` (``detection``, ``waveform.chirps_per_slot`` and
+            ``zero_pad``, ``scan.sector_deg``).
         noise_cell_var: sigma_Y^2, noise variance of one cell Y[i, c, k] of the windowed FFT (W).
         leak: the window's power-leak envelope over padded bins (:func:`window_leak_envelope`).
         window: the range window w (N,).
@@ -256,35 +257,35 @@ class FootprintDetector:
                  window: np.ndarray) -> None:
         cfg = config
         self.footprints, self.centres = beam_footprints(dic, cfg.scan.sector_deg)  # (I, J), (J,)
-        c = cfg.chirps_per_slot
+        c = cfg.waveform.chirps_per_slot
         self.looks = self.footprints.sum(0) * c  # L_j
         shared = (self.footprints[:, :-1] & self.footprints[:, 1:]).sum(0) * c
-        self.pfa = cfg.cfar_pfa
+        self.pfa = cfg.detection.pfa
         self.p1, self.n_eff = _per_hypothesis_pfa(tuple(int(v) for v in self.looks),
-                                                  tuple(int(v) for v in shared), float(cfg.cfar_pfa))
-        self.method = cfg.cfar_method if cfg.detection == "cfar" else "fixed"
-        self.rank = max(1, round(cfg.cfar_rank * 2 * cfg.cfar_train))
-        self.alpha = _alphas(self.method, self.p1, tuple(int(v) for v in self.looks), 2 * cfg.cfar_train,
-                             self.rank, float(cfg.fixed_threshold_db))
+                                                  tuple(int(v) for v in shared), float(cfg.detection.pfa))
+        self.method = cfg.detection.method if cfg.detection.mode == "cfar" else "fixed"
+        self.rank = max(1, round(cfg.detection.rank * 2 * cfg.detection.train))
+        self.alpha = _alphas(self.method, self.p1, tuple(int(v) for v in self.looks), 2 * cfg.detection.train,
+                             self.rank, float(cfg.detection.fixed_threshold_db))
         self.floor = self.looks * float(noise_cell_var)  # noise mean of T_j, W
-        self.cap = self.floor * 10 ** (cfg.cfar_cap_db / 10)
+        self.cap = self.floor * 10 ** (cfg.detection.cap_db / 10)
         self._f = np.ascontiguousarray(self.footprints.T, dtype=np.float32)  # (J, I)
-        g, t = cfg.cfar_guard, cfg.cfar_train
+        g, t = cfg.detection.guard, cfg.detection.train
         self.train_step = training_step(window)
         near, far = np.arange(g + 1, g + t + 1), np.arange(g + t + 1, g + 2 * t + 1)
         # training offsets in order of preference: both sides, then further out (used at the ends of the profile)
-        self._offsets = cfg.zero_pad * self.train_step * np.concatenate([-near, near, -far, far])
+        self._offsets = cfg.waveform.zero_pad * self.train_step * np.concatenate([-near, near, -far, far])
         self._train = 2 * t
         self._tables: dict[int, np.ndarray] = {}
         self._leak = np.asarray(leak, float)
-        resp = np.abs(np.fft.fft(np.asarray(window, float), cfg.zero_pad * window.size)) ** 2
+        resp = np.abs(np.fft.fft(np.asarray(window, float), cfg.waveform.zero_pad * window.size)) ** 2
         self._null = int(np.argmax(np.diff(resp[: resp.size // 2]) > 0))  # first null of the main lobe, padded bins
-        self._margin = 10 ** (cfg.sidelobe_margin_db / 10)
+        self._margin = 10 ** (cfg.detection.sidelobe_margin_db / 10)
 
     def _training_cells(self, n: int) -> np.ndarray:
         """(n, 2 train) training-cell indices of each of n cells (cached per profile length).
 
-        The first 2 ``cfar_train`` offsets inside the profile, in the order both sides
+        The first 2 ``detection.train`` offsets inside the profile, in the order both sides
         then further out: a symmetric window inside, one-sided at the ends.
         """
         tab = self._tables.get(n)

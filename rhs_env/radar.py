@@ -16,7 +16,7 @@ Dechirped echo of slot i, chirp c, sample n (paper eq. 2, as a sum of tones):
   chirp-to-chirp phase ``omega_k = 4 pi v_k T_c / lambda`` (v_k radial velocity,
   > 0 receding). The geometry is frozen at the scan instant (the range and
   bearing change over the ~7 ms sweep is neglected; the Doppler phase, which
-  is lambda-sensitive, is kept across chirps and slots; ``slot_doppler=False``
+  is lambda-sensitive, is kept across chirps and slots; ``waveform.slot_doppler=False``
   restarts it every slot).
 * ``|beta_k|^2 = sigma_k lambda^2 / ((4 pi)^3 R_k^4)`` (radar equation with the
   antenna gains in h), phase uniform in [0, 2 pi) from the rng.
@@ -30,40 +30,30 @@ h_i(theta_k) exp(j omega_k i C)`` (I x K) and ``E[k, (c, n)] = exp(j 2 pi (f_b,k
 + f_D,k) n / f_s + j omega_k c)`` (K x C N), batched over the four radars.
 
 Mounting: radars at the middle of the front, left, rear and right sides of a
-``vehicle_length`` x ``vehicle_width`` box, boresights 0, +90, 180, -90 deg.
+``mounting.vehicle_length_m`` x ``mounting.vehicle_width_m`` box, boresights 0, +90, 180, -90 deg.
 Field of view: the scan sector (+-45 deg) up to ``max_range_m``; hidden
 scatterers (:func:`rhs_env.scatterers.visible_mask`) return nothing.
 Far-field model: the array apertures (<= 0.3 m) are treated as points.
+
+Settings: :class:`RadarConfig` (:mod:`rhs_env.radar_config`, re-exported here) and its
+groups ``waveform`` (B, T_c, f_s, C, window, zero padding), ``link`` (P_t, F, T0),
+``detection``, ``estimation`` (OMP), ``uncertainty`` and ``mounting``.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import scipy.fft as sfft
 
-from rhs_common.validation import (
-    check_bool,
-    check_choice,
-    check_int,
-    check_range,
-    check_types,
-)
-from rhs_env.antenna import (
-    ANTENNA_KINDS,
-    SPEED_OF_LIGHT,
-    ArrayAntenna,
-    RHSConfig,
-    ScanConfig,
-)
+from rhs_env.antenna import SPEED_OF_LIGHT, ArrayAntenna
 from rhs_env.antennas import make_antenna
-from rhs_env.detection import DETECTORS, FootprintDetector
+from rhs_env.detection import FootprintDetector
 from rhs_env.point_cloud import (
-    WINDOWS,
     AngleDictionary,
     PointCloud,
     _lstsq,
@@ -81,209 +71,34 @@ from rhs_env.point_cloud import (
     tone_spectra,
     window_leak_envelope,
 )
+from rhs_env.radar_config import (
+    BOLTZMANN,
+    AngleEstimationConfig,
+    DetectionConfig,
+    LinkBudgetConfig,
+    MountingConfig,
+    RadarConfig,
+    UncertaintyConfig,
+    WaveformConfig,
+)
 from rhs_env.scatterers import Occluders, Scatterers, visible_mask
 from rhs_env.uncertainty import attach_uncertainty
 
-__all__ = ["BOLTZMANN", "RADAR_NAMES", "PointCloud", "RadarConfig", "RadarSystem"]
+__all__ = [
+    "BOLTZMANN",
+    "RADAR_NAMES",
+    "AngleEstimationConfig",
+    "DetectionConfig",
+    "LinkBudgetConfig",
+    "MountingConfig",
+    "PointCloud",
+    "RadarConfig",
+    "RadarSystem",
+    "UncertaintyConfig",
+    "WaveformConfig",
+]
 
-BOLTZMANN = 1.380649e-23  # J/K
 RADAR_NAMES = ("front", "left", "rear", "right")
-DETECTION_MODES = ("cfar", "fixed")
-FIDELITIES = ("range", "iq")
-CFAR_METHODS = ("os", "ca")
-
-
-@dataclass(frozen=True)
-class RadarConfig:
-    """Waveform, link budget, processing and mounting of the four radars.
-
-    Waveform: ``bandwidth_hz`` B, ``chirp_s`` T_c, ``sample_rate_hz`` f_s (complex),
-    ``chirps_per_slot`` C. Link budget: ``tx_power_dbm``, ``noise_figure_db``,
-    ``temperature_k``; ``add_noise=False`` gives noiseless echoes (thresholds
-    still use the thermal noise level). Field of view: ``min_range_m`` ..
-    ``max_range_m`` inside the scan sector. Antenna: ``antenna`` kind
-    (rhs | phased | random | hologram), ``rhs`` geometry, ``scan`` grid.
-    Detection: ``detection`` "cfar" (``cfar_guard`` / ``cfar_train`` unpadded
-    bins per side, false-alarm probability ``cfar_pfa``; ``cfar_method`` "os",
-    ordered statistic of rank ``cfar_rank`` x cells, or "ca", cell averaging;
-    the noise estimate is clipped to [floor, floor + ``cfar_cap_db``] around
-    the calibrated noise floor: the slot-combined profile mixes every
-    direction, so without the cap a near vehicle in the training cells masks
-    landmarks a few metres behind it) or "fixed" (``fixed_threshold_db``
-    above the noise mean of the slot-combined profile, the paper's delta_d);
-    a peak weaker than ``sidelobe_margin_db`` above the window's sidelobe
-    envelope under a stronger peak is dropped; ``zero_pad`` FFT length
-    factor; ``window`` taper. ``detector``: the statistic CFAR runs on,
-    "footprint" (default: per angle hypothesis, the energy over that beam's
-    footprint of slots, :mod:`rhs_env.detection`; its first OMP atom per detected
-    bin is taken without the residual and amplitude tests, which the detection
-    replaces) or "summed" (the range profile summed over all slots and chirps, the
-    paper's variant).
-    OMP: ``omp_oversampling`` candidates per grid, ``omp_max_targets`` L_max per
-    range, ``omp_residual_pfa`` (delta_r: the residual noise alone exceeds with
-    this probability), ``omp_residual_rel_db`` (stop below this fraction of
-    ``||iota||^2``, the dynamic range of the angle model), ``omp_newton_steps``,
-    ``omp_min_snr_db`` (an atom whose amplitude SNR over the sweep, 20 log10 of
-    ``|s| ||a|| / sigma_Y``, is lower is rejected and ends the search).
-    Uncertainty: every point's range / angle std is its Cramer-Rao bound at its
-    SNR plus the floors ``range_std_floor_m`` / ``angle_std_floor_deg`` (model
-    error; :mod:`rhs_env.uncertainty`).
-    Mounting: ``vehicle_length_m``, ``vehicle_width_m``. ``slot_doppler``: the
-    Doppler phase runs on across the slots of the sweep (physical) or restarts.
-    Synthesis ``fidelity``: "iq" builds the dechirped samples and takes their
-    windowed FFT (the reference); "range" writes the range spectrum directly
-    (each tone's windowed, zero-padded spectrum in closed form, the noise as the
-    windowed FFT of white noise, only the bins searched), the same distribution
-    at a fraction of the cost (:meth:`RadarSystem.synthesize_spectrum`).
-    """
-
-    bandwidth_hz: float = 250e6
-    chirp_s: float = 20e-6
-    sample_rate_hz: float = 20e6
-    chirps_per_slot: int = 4
-    tx_power_dbm: float = 30.0
-    noise_figure_db: float = 10.0
-    temperature_k: float = 290.0
-    add_noise: bool = True
-    min_range_m: float = 1.0
-    max_range_m: float = 100.0
-    antenna: str = "rhs"
-    rhs: RHSConfig = field(default_factory=RHSConfig)
-    scan: ScanConfig = field(default_factory=ScanConfig)
-    detection: str = "cfar"
-    detector: str = "footprint"
-    cfar_guard: int = 2
-    cfar_train: int = 8
-    cfar_pfa: float = 1e-6
-    cfar_method: str = "os"
-    cfar_rank: float = 0.75
-    sidelobe_margin_db: float = 6.0
-    cfar_cap_db: float = 10.0
-    fixed_threshold_db: float = 15.0
-    zero_pad: int = 2
-    window: str = "hann"
-    omp_oversampling: int = 4
-    omp_max_targets: int = 4
-    omp_residual_pfa: float = 1e-3
-    omp_residual_rel_db: float = -25.0
-    omp_newton_steps: int = 2
-    omp_min_snr_db: float = 15.0
-    range_std_floor_m: float = 0.003
-    angle_std_floor_deg: float = 0.003
-    slot_doppler: bool = True
-    vehicle_length_m: float = 5.0
-    vehicle_width_m: float = 2.0
-    fidelity: str = "iq"
-
-    def __post_init__(self) -> None:
-        check_types(self)
-        check_range("bandwidth_hz", self.bandwidth_hz, 1e6, 5e9)
-        check_range("chirp_s", self.chirp_s, 1e-7, 1e-2)
-        check_range("sample_rate_hz", self.sample_rate_hz, 1e5, 1e10)
-        check_int("chirps_per_slot", self.chirps_per_slot, 2, 1024)
-        check_range("tx_power_dbm", self.tx_power_dbm, -100.0, 80.0)
-        check_range("noise_figure_db", self.noise_figure_db, 0.0, 60.0)
-        check_range("temperature_k", self.temperature_k, 0.0, 5000.0, low_open=True)
-        check_bool("add_noise", self.add_noise)
-        check_bool("slot_doppler", self.slot_doppler)
-        check_range("max_range_m", self.max_range_m, 1.0, 0.95 * self.unambiguous_range_m)
-        check_range("min_range_m", self.min_range_m, 0.0, self.max_range_m, high_open=True)
-        check_choice("antenna", self.antenna, ANTENNA_KINDS)
-        if not isinstance(self.rhs, RHSConfig):
-            raise ValueError(f"rhs must be an RHSConfig, got {type(self.rhs).__name__}")  # noqa: TRY004
-        if not isinstance(self.scan, ScanConfig):
-            raise ValueError(f"scan must be a ScanConfig, got {type(self.scan).__name__}")  # noqa: TRY004
-        check_choice("detection", self.detection, DETECTION_MODES)
-        check_choice("detector", self.detector, DETECTORS)
-        check_int("cfar_guard", self.cfar_guard, 0, 64)
-        check_int("cfar_train", self.cfar_train, 1, 256)
-        check_range("cfar_pfa", self.cfar_pfa, 0.0, 0.5, low_open=True)
-        check_choice("cfar_method", self.cfar_method, CFAR_METHODS)
-        check_range("cfar_rank", self.cfar_rank, 0.0, 1.0, low_open=True)
-        check_range("sidelobe_margin_db", self.sidelobe_margin_db, 0.0, 60.0)
-        check_range("cfar_cap_db", self.cfar_cap_db, 0.0, 200.0)
-        check_range("fixed_threshold_db", self.fixed_threshold_db, 0.0, 200.0)
-        check_int("zero_pad", self.zero_pad, 1, 16)
-        check_choice("window", self.window, WINDOWS)
-        check_int("omp_oversampling", self.omp_oversampling, 1, 64)
-        check_int("omp_max_targets", self.omp_max_targets, 1, 32)
-        check_range("omp_residual_pfa", self.omp_residual_pfa, 0.0, 0.5, low_open=True)
-        check_range("omp_residual_rel_db", self.omp_residual_rel_db, -200.0, 0.0)
-        check_int("omp_newton_steps", self.omp_newton_steps, 0, 10)
-        check_range("omp_min_snr_db", self.omp_min_snr_db, -50.0, 100.0)
-        check_range("range_std_floor_m", self.range_std_floor_m, 0.0, 10.0)
-        check_range("angle_std_floor_deg", self.angle_std_floor_deg, 0.0, 10.0)
-        check_range("vehicle_length_m", self.vehicle_length_m, 0.0, 50.0)
-        check_range("vehicle_width_m", self.vehicle_width_m, 0.0, 20.0)
-        check_choice("fidelity", self.fidelity, FIDELITIES)
-        n = self.sample_rate_hz * self.chirp_s
-        if abs(n - round(n)) > 1e-6 or round(n) < 16:
-            raise ValueError(
-                f"sample_rate_hz * chirp_s must be a whole number of samples >= 16, got {n:.6g}"
-            )
-
-    # -- derived quantities -------------------------------------------------
-    @property
-    def samples(self) -> int:
-        """N = f_s T_c samples per chirp."""
-        return round(self.sample_rate_hz * self.chirp_s)
-
-    @property
-    def slope(self) -> float:
-        """Chirp slope S = B / T_c, Hz/s."""
-        return self.bandwidth_hz / self.chirp_s
-
-    @property
-    def wavelength(self) -> float:
-        return self.rhs.wavelength
-
-    @property
-    def range_resolution_m(self) -> float:
-        """c0 / (2 B), m."""
-        return SPEED_OF_LIGHT / (2 * self.bandwidth_hz)
-
-    @property
-    def unambiguous_range_m(self) -> float:
-        """c0 f_s / (2 S): complex sampling, beat frequencies in [0, f_s)."""
-        return SPEED_OF_LIGHT * self.sample_rate_hz / (2 * self.bandwidth_hz / self.chirp_s)
-
-    @property
-    def max_velocity_mps(self) -> float:
-        """Unambiguous radial speed lambda / (4 T_c), m/s."""
-        return self.wavelength / (4 * self.chirp_s)
-
-    @property
-    def tx_power_w(self) -> float:
-        return 10 ** ((self.tx_power_dbm - 30) / 10)
-
-    @property
-    def noise_power_w(self) -> float:
-        """sigma_n^2 = k T0 F f_s per complex sample, W."""
-        return BOLTZMANN * self.temperature_k * 10 ** (self.noise_figure_db / 10) * self.sample_rate_hz
-
-    def echo_power_w(self, range_m: np.ndarray | float, rcs_m2: np.ndarray | float) -> np.ndarray:
-        """P_t |beta|^2 = P_t sigma lambda^2 / ((4 pi)^3 R^4) at unit two-way gain, W."""
-        r = np.asarray(range_m, float)
-        return self.tx_power_w * np.asarray(rcs_m2, float) * self.wavelength ** 2 / ((4 * np.pi) ** 3 * r ** 4)
-
-    def unit_gain_snr(self, range_m: np.ndarray | float, rcs_m2: np.ndarray | float) -> np.ndarray:
-        """|s|^2 / sigma_iota^2 of one slot's iota entry at unit two-way gain (the SNR of :func:`angle_crb`).
-
-        ``s = sqrt(P_t) beta C sum(w)``, ``sigma_iota^2 = C sigma_n^2 sum(w^2)``
-        (window w, C chirps combined coherently).
-        """
-        w = make_window(self.window, self.samples).astype(float)
-        gain = self.chirps_per_slot * w.sum() ** 2 / np.sum(w ** 2)
-        return self.echo_power_w(range_m, rcs_m2) * gain / self.noise_power_w
-
-    def mounts(self) -> tuple[np.ndarray, np.ndarray]:
-        """Radar positions (4, 2) m and boresights (4,) rad in the vehicle frame: front, left, rear, right."""
-        hl, hw = self.vehicle_length_m / 2, self.vehicle_width_m / 2
-        pos = np.array([[hl, 0.0], [0.0, hw], [-hl, 0.0], [0.0, -hw]])
-        return pos, np.deg2rad([0.0, 90.0, 180.0, -90.0])
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:
@@ -325,7 +140,7 @@ class RadarSystem:
                  antennas: ArrayAntenna | list[ArrayAntenna] | None = None) -> None:
         self.config = config = config or RadarConfig()
         self.rng = rng if rng is not None else np.random.default_rng()
-        self.positions, self.boresights = config.mounts()
+        self.positions, self.boresights = config.mounting.mounts()
         if antennas is not None:
             ants = [antennas] * 4 if isinstance(antennas, ArrayAntenna) else list(antennas)
             if len(ants) != 4:
@@ -346,40 +161,41 @@ class RadarSystem:
         for r, a in enumerate(ants):
             if id(a) not in seen:
                 seen[id(a)] = len(self._groups)
-                dic = AngleDictionary(a, config.scan.grid_deg, config.scan.sector_deg, config.omp_oversampling)
+                dic = AngleDictionary(a, config.scan.grid_deg, config.scan.sector_deg, config.estimation.oversampling)
                 self._groups.append((dic, []))
             radar_group[r] = seen[id(a)]
         self.dictionaries = [self._groups[radar_group[r]][0] for r in range(4)]
         self._radar_group = radar_group
         # processing constants
-        n, z = config.samples, config.zero_pad
-        self._window = make_window(config.window, n)
+        wf, det = config.waveform, config.detection
+        n, z = wf.samples, wf.zero_pad
+        self._window = make_window(wf.window, n)
         self._buffers: dict[str, np.ndarray] = {}
         self._n = np.arange(n)
         self._win_energy = float(np.sum(self._window.astype(float) ** 2))
-        bins_per_m = 2 * config.slope / SPEED_OF_LIGHT * z * n / config.sample_rate_hz
-        margin = (config.cfar_guard + config.cfar_train + 2) * z
+        bins_per_m = 2 * wf.slope / SPEED_OF_LIGHT * z * n / wf.sample_rate_hz
+        margin = (det.guard + det.train + 2) * z
         self._bin_hi = int(min(z * n, math.ceil(config.max_range_m * bins_per_m) + margin))
         self._bin_range = np.arange(self._bin_hi) / bins_per_m  # range of bin k (zero Doppler), m
         self._leak = window_leak_envelope(self._window, z, z * n // 2)
         self._same_angle = 0.25 * np.deg2rad(config.scan.grid_deg)
-        looks = config.scan.slots * config.chirps_per_slot
+        looks = config.scan.slots * wf.chirps_per_slot
         self._p_noise = looks * config.noise_power_w * self._win_energy  # mean of P per cell, pure noise
-        self._rank = max(1, round(config.cfar_rank * 2 * config.cfar_train))
-        if config.detection == "cfar" and config.cfar_method == "os":
-            self._alpha = os_cfar_alpha(config.cfar_pfa, looks, 2 * config.cfar_train, self._rank)
-        elif config.detection == "cfar":
-            self._alpha = cfar_alpha(config.cfar_pfa, looks, 2 * config.cfar_train)
+        self._rank = max(1, round(det.rank * 2 * det.train))
+        if det.mode == "cfar" and det.method == "os":
+            self._alpha = os_cfar_alpha(det.pfa, looks, 2 * det.train, self._rank)
+        elif det.mode == "cfar":
+            self._alpha = cfar_alpha(det.pfa, looks, 2 * det.train)
         else:
-            self._alpha = 10 ** (config.fixed_threshold_db / 10)
-        cells = config.scan.slots * config.chirps_per_slot
+            self._alpha = 10 ** (det.fixed_threshold_db / 10)
+        cells = config.scan.slots * wf.chirps_per_slot
         y_var = config.noise_power_w * self._win_energy
         self._detectors = ([FootprintDetector(dic, config, y_var, self._leak, self._window) for dic, _ in self._groups]
-                           if config.detector == "footprint" else [])
-        self._min_amp = 10 ** (config.omp_min_snr_db / 20) * math.sqrt(y_var)
-        self._delta_r = float(residual_threshold(y_var, cells, config.omp_residual_pfa))
-        i, c = config.scan.slots, config.chirps_per_slot
-        self._chirp_index = (np.arange(i)[:, None] * c * (1 if config.slot_doppler else 0)
+                           if det.statistic == "footprint" else [])
+        self._min_amp = 10 ** (config.estimation.min_snr_db / 20) * math.sqrt(y_var)
+        self._delta_r = float(residual_threshold(y_var, cells, config.estimation.residual_pfa))
+        i, c = config.scan.slots, wf.chirps_per_slot
+        self._chirp_index = (np.arange(i)[:, None] * c * (1 if wf.slot_doppler else 0)
                              + np.arange(c)[None, :]).astype(float)  # (I, C): chirp time / T_c
 
     # ------------------------------------------------------------------ geometry
@@ -435,9 +251,9 @@ class RadarSystem:
             sel = self._radar_group[rr] == g
             if np.any(sel):
                 h[:, sel] = dic.antenna.two_way_gain(th_k[sel])
-        omega = 4 * np.pi * v_k * cfg.chirp_s / lam  # rad per chirp
-        f_tot = 2 * cfg.slope * r_k / SPEED_OF_LIGHT + 2 * v_k / lam  # Hz
-        slot_t = np.arange(i_slots)[:, None] * (cfg.chirps_per_slot if cfg.slot_doppler else 0)
+        omega = 4 * np.pi * v_k * cfg.waveform.chirp_s / lam  # rad per chirp
+        f_tot = 2 * cfg.waveform.slope * r_k / SPEED_OF_LIGHT + 2 * v_k / lam  # Hz
+        slot_t = np.arange(i_slots)[:, None] * (cfg.waveform.chirps_per_slot if cfg.waveform.slot_doppler else 0)
         return rr, h * amp[None, :] * np.exp(1j * omega[None, :] * slot_t), omega, f_tot
 
     @staticmethod
@@ -459,16 +275,16 @@ class RadarSystem:
         CN(0, sigma_n^2) noise per sample. ``out``: optional complex64 array of 4 I C N elements to write into.
         """
         cfg = self.config
-        i_slots, c, n = cfg.scan.slots, cfg.chirps_per_slot, cfg.samples
+        i_slots, c, n = cfg.scan.slots, cfg.waveform.chirps_per_slot, cfg.waveform.samples
         y = np.empty((4, i_slots, c * n), np.complex64) if out is None else out.reshape(4, i_slots, c * n)
         y[...] = 0
         tones = self._echoes(scatterers, occluders)
         if tones is not None:
             rr, g_mat, omega, f_tot = tones
-            e_fast = np.exp(2j * np.pi * f_tot[:, None] * self._n[None, :] / cfg.sample_rate_hz)  # (P, N)
+            e_fast = np.exp(2j * np.pi * f_tot[:, None] * self._n[None, :] / cfg.waveform.sample_rate_hz)  # (P, N)
             e_slow = np.exp(1j * omega[:, None] * np.arange(c)[None, :])  # (P, C)
             self._mix(rr, g_mat, (e_slow[:, :, None] * e_fast[:, None, :]).reshape(rr.size, c * n), y)
-        if cfg.add_noise:
+        if cfg.link.add_noise:
             # circular complex Gaussian CN(0, sigma_n^2) by the polar method: |eps|^2 ~ Exp(sigma_n^2)
             # from -ln(1 - u1), phase 2 pi u2 (float32 uniforms: the radius tail is cut at P = 2^-24)
             u = self.rng.random(dtype=np.float32, out=self._buffer("u", (2,) + y.shape, np.float32))
@@ -503,12 +319,12 @@ class RadarSystem:
           IQ path's, ``sigma_n^2 sum_n w[n]^2 exp(-j 2 pi (k - l) n / (Z N))``.
         """
         cfg = self.config
-        i_slots, c, n, z, kb = cfg.scan.slots, cfg.chirps_per_slot, cfg.samples, cfg.zero_pad, self._bin_hi
+        i_slots, c, n, z, kb = cfg.scan.slots, cfg.waveform.chirps_per_slot, cfg.waveform.samples, cfg.waveform.zero_pad, self._bin_hi
         spec = self._noise_spectrum((4, i_slots, c))
         tones = self._echoes(scatterers, occluders)
         if tones is not None:
             rr, g_mat, omega, f_tot = tones
-            wk = tone_spectra(cfg.window, n, z, kb, f_tot / cfg.sample_rate_hz)  # (P, K_b)
+            wk = tone_spectra(cfg.waveform.window, n, z, kb, f_tot / cfg.waveform.sample_rate_hz)  # (P, K_b)
             e_mat = (np.exp(1j * omega[:, None] * np.arange(c))[:, :, None] * wk[:, None, :]).reshape(rr.size, c * kb)
             sig = self._buffer("sig", (4, i_slots, c * kb), np.complex64)
             self._mix(rr, g_mat, e_mat, sig)
@@ -525,10 +341,10 @@ class RadarSystem:
         folded into the radius, then one in-place zero-padded FFT per chirp.
         """
         cfg = self.config
-        n, z, kb = cfg.samples, cfg.zero_pad, self._bin_hi
+        n, z, kb = cfg.waveform.samples, cfg.waveform.zero_pad, self._bin_hi
         m = math.prod(shape)
         buf = self._buffer("nfft", (m, z * n), np.complex64)
-        if not cfg.add_noise:
+        if not cfg.link.add_noise:
             buf[:, :kb] = 0
             return buf[:, :kb].reshape(shape + (kb,))
         bits = self.rng.bit_generator.random_raw(m * n).view(np.int32)  # 2 m n independent 32-bit words
@@ -556,7 +372,7 @@ class RadarSystem:
     # ------------------------------------------------------------------ processing
     def range_spectrum(self, y: np.ndarray) -> np.ndarray:
         """Windowed, zero-padded range FFT of y (4, I, C, N) -> bins ``k < K_b`` (4, I, C, K_b) complex64 (a view)."""
-        z, n = self.config.zero_pad, self.config.samples
+        z, n = self.config.waveform.zero_pad, self.config.waveform.samples
         buf = self._buffer("fft", y.shape[:-1] + (z * n,), np.complex64)
         np.multiply(y, self._window, out=buf[..., :n])
         buf[..., n:] = 0
@@ -596,41 +412,41 @@ class RadarSystem:
     def _threshold(self, prof: np.ndarray) -> np.ndarray:
         """Detection threshold per cell of the profile: OS / CA CFAR (noise estimate clipped to [floor, cap]) or fixed."""
         cfg = self.config
-        cap = self._p_noise * 10 ** (cfg.cfar_cap_db / 10)
-        if cfg.detection == "cfar" and cfg.cfar_method == "os":
-            return os_cfar_threshold(prof, cfg.cfar_guard, cfg.cfar_train, cfg.zero_pad, self._alpha, self._rank,
+        cap = self._p_noise * 10 ** (cfg.detection.cap_db / 10)
+        if cfg.detection.mode == "cfar" and cfg.detection.method == "os":
+            return os_cfar_threshold(prof, cfg.detection.guard, cfg.detection.train, cfg.waveform.zero_pad, self._alpha, self._rank,
                                      floor=self._p_noise, cap=cap)
-        if cfg.detection == "cfar":
-            return ca_cfar_threshold(prof, cfg.cfar_guard, cfg.cfar_train, cfg.zero_pad, self._alpha,
+        if cfg.detection.mode == "cfar":
+            return ca_cfar_threshold(prof, cfg.detection.guard, cfg.detection.train, cfg.waveform.zero_pad, self._alpha,
                                      floor=self._p_noise, cap=cap)
         return np.full(prof.shape, self._alpha * self._p_noise)
 
     def _detect(self, spec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Detected range cells (radar rd, bin kd): CFAR peaks beyond ``min_range_m``, window sidelobes dropped.
 
-        ``config.detector`` chooses the statistic: "footprint", :class:`rhs_env.detection.FootprintDetector`
+        ``config.detection.statistic`` chooses the statistic: "footprint", :class:`rhs_env.detection.FootprintDetector`
         per antenna (CFAR per beam footprint of slots); "summed", CFAR on the slot-summed profile (the paper's).
         """
         cfg = self.config
-        if cfg.detector == "footprint":
+        if cfg.detection.statistic == "footprint":
             return self._detect_footprint(spec)
         prof = self._profile(spec)
         det = local_maxima(prof, self._threshold(prof))
-        det &= (self._bin_range >= cfg.min_range_m - cfg.range_resolution_m / 2)[None, :]
+        det &= (self._bin_range >= cfg.min_range_m - cfg.waveform.range_resolution_m / 2)[None, :]
         rd, kd = np.nonzero(det)
         if rd.size > 1:  # drop peaks explained by the window sidelobes of a stronger peak (same radar)
             pk = prof[rd, kd]
             dk = np.minimum(np.abs(kd[:, None] - kd[None, :]), self._leak.size - 1)
             leak = np.where((rd[:, None] == rd[None, :]) & (pk[None, :] > pk[:, None]),
                             pk[None, :] * self._leak[dk], 0.0).max(axis=1)
-            keep = pk >= 10 ** (cfg.sidelobe_margin_db / 10) * leak
+            keep = pk >= 10 ** (cfg.detection.sidelobe_margin_db / 10) * leak
             rd, kd = rd[keep], kd[keep]
         return rd, kd
 
     def _detect_footprint(self, spec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(rd, kd) of the footprint detectors, one per distinct antenna, sorted by radar then bin."""
         cfg = self.config
-        in_range = self._bin_range >= cfg.min_range_m - cfg.range_resolution_m / 2
+        in_range = self._bin_range >= cfg.min_range_m - cfg.waveform.range_resolution_m / 2
         rds, kds = [], []
         for g, det in enumerate(self._detectors):
             radars = np.flatnonzero(self._radar_group == g)
@@ -642,22 +458,22 @@ class RadarSystem:
         return rd[o], kd[o]
 
     def _estimate_angles(self, spec: np.ndarray, rd: np.ndarray, kd: np.ndarray) -> _Targets:
-        """OMP (angle, Doppler, amplitude; up to ``omp_max_targets`` per cell) and per-target range offsets.
+        """OMP (angle, Doppler, amplitude; up to ``estimation.max_targets`` per cell) and per-target range offsets.
 
         One :func:`omp_doppler` call per distinct antenna (all four radars share
         one unless the patterns differ), batched over every detection of the scan.
         """
         cfg = self.config
         yd = spec[rd, :, :, kd].astype(np.complex128)  # (D, I, C)
-        est = _Targets.empty(rd.size, cfg.omp_max_targets)
+        est = _Targets.empty(rd.size, cfg.estimation.max_targets)
         y_var = cfg.noise_power_w * self._win_energy  # noise variance per cell of Y
-        rel = 10 ** (cfg.omp_residual_rel_db / 10)
+        rel = 10 ** (cfg.estimation.residual_rel_db / 10)
         for g, (dic, _) in enumerate(self._groups):
             sel = np.flatnonzero(self._radar_group[rd] == g)
             if sel.size == 0:
                 continue
-            res = omp_doppler(dic, yd[sel], self._chirp_index, cfg.omp_max_targets, np.full(sel.size, self._delta_r),
-                              y_var, rel, self._min_amp, cfg.omp_newton_steps, cycles=2,
+            res = omp_doppler(dic, yd[sel], self._chirp_index, cfg.estimation.max_targets, np.full(sel.size, self._delta_r),
+                              y_var, rel, self._min_amp, cfg.estimation.newton_steps, cycles=2,
                               detected=bool(self._detectors))
             est.theta[sel], est.amp[sel], est.valid[sel], est.omega[sel] = res.theta, res.amp, res.valid, res.omega
             est.anorm[sel] = np.linalg.norm(res.atoms, axis=1)
@@ -671,7 +487,7 @@ class RadarSystem:
         log|s|^2 (a target merged into the peak of another lies within the window
         main lobe, +-2 bins).
         """
-        half = 2 * self.config.zero_pad + 1
+        half = 2 * self.config.waveform.zero_pad + 1
         kk = np.clip(kd[:, None] + np.arange(-half, half + 1)[None, :], 0, spec.shape[-1] - 1)
         nb = spec[rd[:, None], :, :, kk].reshape(rd.size, 2 * half + 1, -1)  # (D, W, I C)
         s_nb = _lstsq(atoms, np.swapaxes(nb, 1, 2).astype(complex))  # (D, L, W)
@@ -691,11 +507,11 @@ class RadarSystem:
         at the same angle (:meth:`_sidelobe_points`) are dropped.
         """
         cfg = self.config
-        lam, z, n = cfg.wavelength, cfg.zero_pad, cfg.samples
+        lam, z, n = cfg.wavelength, cfg.waveform.zero_pad, cfg.waveform.samples
         di, li = np.nonzero(est.valid)
-        vel = _wrap(est.omega[di, li]) * lam / (4 * np.pi * cfg.chirp_s)
-        f_beat = (kd[di] + est.tfrac[di, li]) * cfg.sample_rate_hz / (z * n) - 2 * vel / lam
-        rng_m = SPEED_OF_LIGHT * f_beat / (2 * cfg.slope)
+        vel = _wrap(est.omega[di, li]) * lam / (4 * np.pi * cfg.waveform.chirp_s)
+        f_beat = (kd[di] + est.tfrac[di, li]) * cfg.waveform.sample_rate_hz / (z * n) - 2 * vel / lam
+        rng_m = SPEED_OF_LIGHT * f_beat / (2 * cfg.waveform.slope)
         th = est.theta[di, li]
         radar = rd[di]
         ang_v = self.boresights[radar] + th
@@ -716,12 +532,12 @@ class RadarSystem:
         cfg = self.config
         if radar.size < 2:
             return np.zeros(radar.size, bool)
-        bins = rng_m * 2 * cfg.slope / SPEED_OF_LIGHT * cfg.zero_pad * cfg.samples / cfg.sample_rate_hz
+        bins = rng_m * 2 * cfg.waveform.slope / SPEED_OF_LIGHT * cfg.waveform.zero_pad * cfg.waveform.samples / cfg.waveform.sample_rate_hz
         dk = np.minimum(np.abs(np.rint(bins[:, None] - bins[None, :])).astype(int), self._leak.size - 1)
         same = (radar[:, None] == radar[None, :]) & (np.abs(th[:, None] - th[None, :]) < self._same_angle)
         a2 = a ** 2
         leak = np.where(same & (a2[None, :] > a2[:, None]), a2[None, :] * self._leak[dk], 0.0).max(axis=1)
-        return a2 < 10 ** (cfg.sidelobe_margin_db / 10) * leak
+        return a2 < 10 ** (cfg.detection.sidelobe_margin_db / 10) * leak
 
     def scan(self, scatterers: Scatterers, occluders: Occluders | None = None) -> PointCloud:
         """One sensing cycle of the four radars -> :class:`PointCloud` with ``stage_times``.
@@ -733,7 +549,7 @@ class RadarSystem:
         cfg = self.config
         if cfg.fidelity == "iq":
             y = self.synthesize(scatterers, occluders, out=self._buffer(
-                "y", (4, cfg.scan.slots, cfg.chirps_per_slot, cfg.samples), np.complex64))
+                "y", (4, cfg.scan.slots, cfg.waveform.chirps_per_slot, cfg.waveform.samples), np.complex64))
             t1 = time.perf_counter()
             cloud, times = self.process(y)
         else:

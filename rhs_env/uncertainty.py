@@ -24,8 +24,8 @@ plus a floor for what the bound does not model:
   bias of the sub-bin range interpolation (parabola through the log-power of a
   Hann-windowed, zero-padded spectrum), the coupling of range and Doppler,
   dictionary mismatch, which the single-target bounds ignore. Defaults
-  (``RadarConfig.range_std_floor_m`` = 3 mm, ``RadarConfig.angle_std_floor_deg``
-  = 0.003 deg) sit above the errors of isolated noiseless targets (0.7 mm,
+  (``RadarConfig.uncertainty.range_std_floor_m`` = 3 mm,
+  ``RadarConfig.uncertainty.angle_std_floor_deg`` = 0.003 deg) sit above the errors of isolated noiseless targets (0.7 mm,
   1e-4 deg RMS, ``tests/test_uncertainty.py``). Two targets in one range cell
   and errors outside the radar (timing, clustering) are not covered here: the
   SLAM filter adds its own floor (``slam.rbpf.SlamConfig.measurement_floor_m``).
@@ -101,11 +101,11 @@ def attach_uncertainty(system, cloud) -> None:
     cloud.range_std_m, cloud.angle_std_rad = point_std(
         cloud.points[:, 3],
         g,
-        samples=cfg.samples,
-        sample_rate_hz=cfg.sample_rate_hz,
-        slope_hz_per_s=cfg.slope,
-        range_floor_m=cfg.range_std_floor_m,
-        angle_floor_rad=np.deg2rad(cfg.angle_std_floor_deg),
+        samples=cfg.waveform.samples,
+        sample_rate_hz=cfg.waveform.sample_rate_hz,
+        slope_hz_per_s=cfg.waveform.slope,
+        range_floor_m=cfg.uncertainty.range_std_floor_m,
+        angle_floor_rad=np.deg2rad(cfg.uncertainty.angle_std_floor_deg),
     )
 
 

@@ -10,7 +10,7 @@ velocity (m/s, > 0 receding), amplitude (linear, over the noise std), range
 std (m) and angle std (rad) of the point (its Cramer-Rao bounds at its SNR plus
 a floor, :mod:`rhs_env.uncertainty`; the angle is measured from the boresight
 of the radar that saw it) and that radar's index (0 front, 1 left, 2 rear,
-3 right, mounts from :meth:`rhs_env.radar.RadarConfig.mounts`), zero padded,
+3 right, mounts from :meth:`rhs_env.radar_config.MountingConfig.mounts`), zero padded,
 inside finite bounds (x, y: the radars' reach; velocity: the unambiguous
 radial speed; amplitude: [0, 1e9]; range std: [0, 1e3] m; angle std:
 [0, pi] rad; radar: [0, 3]); when the
@@ -67,7 +67,9 @@ AMPLITUDE_MAX = 1e9  # linear echo amplitude over noise std; far above any physi
 def make_radar_config(radar: Any = None, antenna: str | None = None):
     """A validated :class:`rhs_env.radar.RadarConfig` from ``None`` / a config / a nested dict of its fields.
 
-    ``{"scan": {"grid_deg": 5}, "max_range_m": 80}``; ``antenna`` (rhs | phased |
+    ``{"scan": {"grid_deg": 5}, "max_range_m": 80, "detection": {"pfa": 1e-5}}`` (the groups of
+    :mod:`rhs_env.radar_config`; the former flat names, ``{"cfar_pfa": 1e-5}``, still work with a
+    ``DeprecationWarning``); ``antenna`` (rhs | phased |
     random | hologram) overrides the antenna kind. Errors name the field path
     (``radar.scan.grid_deg must be ...``): ``ValueError`` for unknown fields and
     out-of-range values, ``TypeError`` for wrong types.
@@ -151,7 +153,7 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         # bounds of a point: x, y within the radars' reach, the unambiguous radial
         # speed, amplitudes (echo / noise std) up to a physical ceiling
         cfg = self.radar_config
-        reach = cfg.max_range_m + 0.5 * np.hypot(cfg.vehicle_length_m, cfg.vehicle_width_m)
+        reach = cfg.max_range_m + 0.5 * np.hypot(cfg.mounting.vehicle_length_m, cfg.mounting.vehicle_width_m)
         vmax = cfg.max_velocity_mps
         self._low = np.array([-reach, -reach, -vmax, 0.0, 0.0, 0.0, 0.0], dtype=np.float32)
         self._high = np.array([reach, reach, vmax, AMPLITUDE_MAX, RANGE_STD_MAX, np.pi, 3.0], dtype=np.float32)

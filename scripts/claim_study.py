@@ -475,7 +475,7 @@ def run_slam_unit(radar: RadarSystem, k: int, sep_deg: float, snr_db: float, see
         kind = DEFAULT_REGISTRATION if reg == "default" else reg
         registration = make_registration(kind, rng=np.random.default_rng(s + 1))
         res = run_scenario(landmarks, poses, lambda t, _p: clouds[t], registration, None,
-                           np.random.default_rng(s + 2), dt=cfg.slam_dt_s, sensor_xy=radar.config.mounts()[0])
+                           np.random.default_rng(s + 2), dt=cfg.slam_dt_s, sensor_xy=radar.config.mounting.mounts()[0])
         out[reg] = {
             "registration": kind,
             "ate_m": float(res["ate_rmse_m"]),
@@ -523,7 +523,7 @@ def plan_units(cfg: StudyConfig, levels: tuple[str, ...]) -> list[dict[str, Any]
                                                "angle_gate_max_deg", "ospa_cutoff_deg", "crb_phase_draws")}
 
     def add(level: str, system: tuple[str, int | None, float | None], **cell: Any) -> None:
-        rc = radar_config(*system).to_dict()
+        rc = radar_config(*system).flat_dict()  # the flat field names: keys (and seeds) as before the grouping
         extra = {"slam": slam_fingerprint(), "cycles": cfg.slam_cycles, "speed": cfg.slam_speed_mps,
                  "dt": cfg.slam_dt_s, "regs": cfg.slam_registrations, "range_m": cfg.range_m} \
             if level == "slam" else pc_common

@@ -44,7 +44,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _provenance import write_json
 
 from rhs_env.point_cloud import os_cfar_threshold
-from rhs_env.radar import RadarConfig, RadarSystem
+from rhs_env.radar import DetectionConfig, RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers
 
 DETECTORS = ("summed", "footprint")
@@ -55,12 +55,13 @@ def spectra(radar: RadarSystem, scatterers: Scatterers) -> np.ndarray:
     """Range spectra (4, I, C, Kb) of one sweep, as :meth:`RadarSystem.process` computes them."""
     cfg = radar.config
     y = radar.synthesize(scatterers)
-    return sfft.fft(y * radar._window, n=cfg.zero_pad * cfg.samples, axis=-1, workers=1)[..., : radar._bin_hi]
+    n = cfg.waveform.zero_pad * cfg.waveform.samples
+    return sfft.fft(y * radar._window, n=n, axis=-1, workers=1)[..., : radar._bin_hi]
 
 
 def make_radars(antenna: str, pfa: float, max_range: float, seed: int) -> dict[str, RadarSystem]:
     """One RadarSystem per detector (same antenna and rng seed; synthesis uses the first one's rng)."""
-    return {d: RadarSystem(RadarConfig(antenna=antenna, detector=d, cfar_pfa=pfa, max_range_m=max_range),
+    return {d: RadarSystem(RadarConfig(antenna=antenna, detection=DetectionConfig(statistic=d, pfa=pfa), max_range_m=max_range),
                            np.random.default_rng(seed)) for d in DETECTORS}
 
 
@@ -69,8 +70,9 @@ def simulate_pd(radars: dict[str, RadarSystem], snr_db: np.ndarray, trials: int,
     """Measured Pd per detector and SNR (4 targets per sweep, one per radar)."""
     synth = radars["summed"]
     cfg = synth.config
-    bins_per_m = 2 * cfg.slope / 299_792_458.0 * cfg.zero_pad * cfg.samples / cfg.sample_rate_hz
-    tol = cfg.zero_pad + 1
+    wf = cfg.waveform
+    bins_per_m = 2 * wf.slope / 299_792_458.0 * wf.zero_pad * wf.samples / wf.sample_rate_hz
+    tol = wf.zero_pad + 1
     sweeps = int(np.ceil(trials / 4))
     pd = {d: [] for d in radars}
     for x in snr_db:
@@ -97,7 +99,7 @@ def theory_pd(radar: RadarSystem, snr_db: np.ndarray, pfa: float) -> dict[str, l
     theta = np.deg2rad(np.linspace(-40, 40, 161))
     g = np.abs(dic.atoms(theta)[0]) ** 2  # (I, T)
     e_unit = g.sum(0)  # sweep energy per unit snr_1
-    looks_all = cfg.scan.slots * cfg.chirps_per_slot
+    looks_all = cfg.scan.slots * cfg.waveform.chirps_per_slot
     out = {"matched_filter": [], "summed_known_noise": [], "footprint_known_noise": []}
     for x in snr_db:
         e = 10 ** (x / 10) * e_unit
@@ -117,13 +119,13 @@ def measure_pfa(radars: dict[str, RadarSystem], scans: int) -> dict[str, dict]:
     synth = radars["summed"]
     cfg = synth.config
     fp = radars["footprint"]._detectors[0]
-    cap = synth._p_noise * 10 ** (cfg.cfar_cap_db / 10)
+    cap = synth._p_noise * 10 ** (cfg.detection.cap_db / 10)
     hits = dict.fromkeys(radars, 0)
     cells = 0
     for _ in range(scans):
         spec = spectra(synth, Scatterers.empty())
         prof = np.sum(np.abs(spec) ** 2, axis=(1, 2))
-        thr = os_cfar_threshold(prof, cfg.cfar_guard, cfg.cfar_train, cfg.zero_pad, synth._alpha, synth._rank,
+        thr = os_cfar_threshold(prof, cfg.detection.guard, cfg.detection.train, cfg.waveform.zero_pad, synth._alpha, synth._rank,
                                 floor=synth._p_noise, cap=cap)
         hits["summed"] += int(np.sum(prof > thr))
         hits["footprint"] += int(fp.exceedance(fp.statistic(spec)).sum())
@@ -131,7 +133,7 @@ def measure_pfa(radars: dict[str, RadarSystem], scans: int) -> dict[str, dict]:
     res = {}
     for d, h in hits.items():
         lo, hi = stats.beta.ppf([0.025, 0.975], h + 0.5, cells - h + 0.5)  # Jeffreys 95 % interval
-        res[d] = {"design": cfg.cfar_pfa, "measured": h / cells, "hits": h, "cells": cells, "ci95": [lo, hi]}
+        res[d] = {"design": cfg.detection.pfa, "measured": h / cells, "hits": h, "cells": cells, "ci95": [lo, hi]}
     return res
 
 
@@ -140,7 +142,8 @@ def time_detectors(antenna: str, repeats: int, seed: int = 0) -> dict:
     from benchmark_radar import typical_scene
 
     scene, occ = typical_scene(np.random.default_rng(seed + 1))
-    radars = {d: RadarSystem(RadarConfig(antenna=antenna, detector=d), np.random.default_rng(seed)) for d in DETECTORS}
+    radars = {d: RadarSystem(RadarConfig(antenna=antenna, detection=DetectionConfig(statistic=d)), np.random.default_rng(seed))
+              for d in DETECTORS}
     spec = spectra(radars["summed"], scene)
     det_ms = {d: [] for d in DETECTORS}
     scan_ms = {d: [] for d in DETECTORS}
@@ -235,7 +238,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--trials", type=int, default=80, help="targets per SNR point and curve")
-    p.add_argument("--pfa", type=float, default=1e-6, help="design P_fa of the curves (RadarConfig.cfar_pfa)")
+    p.add_argument("--pfa", type=float, default=1e-6, help="design P_fa of the curves (RadarConfig.detection.pfa)")
     p.add_argument("--pfa-check", type=float, default=1e-3, help="design P_fa of the noise-only check")
     p.add_argument("--pfa-scans", type=int, default=40, help="noise-only sweeps of the check")
     p.add_argument("--range", type=float, default=40.0, help="target range, m")

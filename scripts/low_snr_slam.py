@@ -38,7 +38,7 @@ def run_episode(antenna: str, detector: str, seed: int, a: argparse.Namespace) -
     import rhs_env  # noqa: F401  (registers the ids)
 
     env = gym.make("rhs-paper-v0", antenna=antenna, registration=a.registration, duration=a.cycles / POLICY_HZ,
-                   obstacle_rcs_m2=a.rcs, radar={"tx_power_dbm": a.power, "detector": detector})
+                   obstacle_rcs_m2=a.rcs, radar={"link": {"tx_power_dbm": a.power}, "detection": {"statistic": detector}})
     t0 = time.perf_counter()
     obs, info = env.reset(seed=int(seed))
     true, est, npts = [], [], []

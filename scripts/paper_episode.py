@@ -40,8 +40,7 @@ def make_paper_env(args: argparse.Namespace, antenna: str, tx_power_dbm: float, 
     import rhs_env  # noqa: F401  (registers the ids)
 
     radar = {
-        "tx_power_dbm": float(tx_power_dbm),
-        "noise_figure_db": float(args.noise_figure),
+        "link": {"tx_power_dbm": float(tx_power_dbm), "noise_figure_db": float(args.noise_figure)},
         "scan": {"grid_deg": float(args.grid_deg)},
         "rhs": {"elements": int(args.elements)},
     }

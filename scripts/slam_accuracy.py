@@ -164,7 +164,7 @@ def run_paper(args, slam: dict) -> dict[str, Any]:
 
     import rhs_env  # noqa: F401
 
-    kw: dict[str, Any] = {"radar": {"tx_power_dbm": 30.0}, "duration": args.paper_cycles / POLICY_HZ}
+    kw: dict[str, Any] = {"radar": {"link": {"tx_power_dbm": 30.0}}, "duration": args.paper_cycles / POLICY_HZ}
     if slam:
         kw["slam"] = slam
     env = gym.make("rhs-paper-v0", **kw)

@@ -231,7 +231,7 @@ def run_scenario(
     rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
     cfg = slam_config if slam_config is not None else SlamConfig()
     if sensor_xy is None and isinstance(cloud_fn, RadarCloud):
-        sensor_xy = cloud_fn.radar.config.mounts()[0]
+        sensor_xy = cloud_fn.radar.config.mounting.mounts()[0]
     pipe = SlamPipeline(registration, cfg, rng, PipelineConfig(use_doppler=use_doppler), sensor_xy=sensor_xy)
     log = _RunLog(T)
     it = range(T)

@@ -100,7 +100,7 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         self.registration_kind = registration
         reg = make_registration(registration, truth=self.true_motion, icp=self.icp_config)
         radar_cfg = getattr(env, "radar_config", None)  # the radars' mounts place each point's line of sight
-        sensor_xy = radar_cfg.mounts()[0] if radar_cfg is not None else None
+        sensor_xy = radar_cfg.mounting.mounts()[0] if radar_cfg is not None else None
         self.pipeline = SlamPipeline(
             reg, self.slam_config, np.random.default_rng(0), self.pipeline_config, sensor_xy=sensor_xy
         )

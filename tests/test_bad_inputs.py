@@ -27,7 +27,8 @@ BAD_OUT = "/proc/rhs-slam-no-such-dir/out.json"  # cannot be created, even by ro
 
 CASES = [
     # ---- wrong types: TypeError naming the field (numbers as strings used to pass and fail deep inside)
-    ("tx_power as string", "make", (RADAR, {"radar": {"tx_power_dbm": "20"}}), TypeError, "radar.tx_power_dbm"),
+    ("tx_power as string", "make", (RADAR, {"radar": {"link": {"tx_power_dbm": "20"}}}), TypeError,
+     "radar.link.tx_power_dbm"),
     ("grid_deg as string", "make", (RADAR, {"radar": {"scan": {"grid_deg": "5"}}}), TypeError, "radar.scan.grid_deg"),
     ("radar not a dict", "make", (RADAR, {"radar": 5}), TypeError, "radar"),
     ("stage_times as string", "make", (RADAR, {"stage_times_in_info": "yes"}), TypeError, "stage_times_in_info"),
@@ -57,7 +58,8 @@ CASES = [
      "obstacle_rcs_m2 must be in (0.0, 10000.0]"),
     ("a million vehicles", "make", (HW, {"vehicles_count": 10**6}), ValueError, "vehicles_count must be in [0, 500]"),
     ("no points", "make", (RADAR, {"max_points": 0}), ValueError, "max_points must be in [1, 65536]"),
-    ("pfa NaN", "make", (RADAR, {"radar": {"cfar_pfa": math.nan}}), ValueError, "radar.cfar_pfa must be a finite"),
+    ("pfa NaN", "make", (RADAR, {"radar": {"detection": {"pfa": math.nan}}}), ValueError,
+     "radar.detection.pfa must be a finite"),
     ("max range inf", "make", (RADAR, {"radar": {"max_range_m": math.inf}}), ValueError, "radar.max_range_m"),
     ("delta_m inf", "make", (SLAM, {"slam": {"delta_m": math.inf}}), ValueError, "slam.delta_m must be a finite"),
     ("screen 1e9 px", "make", (HW, {"screen_width": 10**9}), ValueError, "screen_width must be in [1, 4096]"),
@@ -98,8 +100,8 @@ CASES = [
      "n_envs must be in [1, 256]"),
     ("train seed -1", "cli", ["train", "--env", HW, "--out", "OUTDIR", "--seed", "-1"], SystemExit, "seed"),
     ("demo unwritable out", "cli", ["demo", "--out", BAD_OUT], SystemExit, "--out"),
-    ("demo kwarg type", "cli", ["demo", "--out", "OUTDIR", "--env-kwargs", '{"radar": {"tx_power_dbm": "20"}}'],
-     SystemExit, "radar.tx_power_dbm"),
+    ("demo kwarg type", "cli", ["demo", "--out", "OUTDIR", "--env-kwargs", '{"radar": {"link": {"tx_power_dbm": "20"}}}'],
+     SystemExit, "radar.link.tx_power_dbm"),
     ("evaluate kwarg type", "cli", ["evaluate", "--out", "OUT", "--env-kwargs", '{"max_points": 1.5}'], SystemExit,
      "max_points"),
     ("demo seed -1", "cli", ["demo", "--out", "OUTDIR", "--seed", "-1"], SystemExit, "--seed"),

@@ -146,3 +146,10 @@ def test_shards_split_the_pending_units_into_their_own_cache_files(tmp_path):
     assert len(data["pointcloud"]["cells"]) == n_cells and data["pointcloud"]["ratios"]
     with pytest.raises(SystemExit):
         cs.main(["--small", "--shard", "2/2"])
+
+
+def test_radar_part_of_the_cache_keys_and_seeds_is_unchanged_by_the_config_grouping():
+    """Cells are keyed (and seeded) by the flat radar dict of before RadarConfig was grouped: same values, same cache."""
+    for system, want in [(("rhs", None, 5.0), "d275ff64210281e0"), (("phased", None, None), "1d2ca399a5d54c8c"),
+                         (("rhs", 16, 2.0), "8e027f1b641d692c")]:
+        assert cs._fingerprint(cs.radar_config(*system).flat_dict()) == want, system

@@ -10,7 +10,7 @@ from scipy import stats
 from rhs_env.antenna import ScanConfig
 from rhs_env.detection import beam_footprints, os_alpha_fast, training_step, union_false_alarm
 from rhs_env.point_cloud import make_window, os_cfar_alpha
-from rhs_env.radar import RadarConfig, RadarSystem
+from rhs_env.radar import DetectionConfig, LinkBudgetConfig, RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers
 
 
@@ -18,12 +18,13 @@ def _spectra(radar: RadarSystem, scatterers: Scatterers) -> np.ndarray:
     """Range spectra (4, I, C, Kb) of one sweep, as RadarSystem.process computes them."""
     cfg = radar.config
     y = radar.synthesize(scatterers)
-    return sfft.fft(y * radar._window, n=cfg.zero_pad * cfg.samples, axis=-1, workers=1)[..., : radar._bin_hi]
+    n = cfg.waveform.zero_pad * cfg.waveform.samples
+    return sfft.fft(y * radar._window, n=n, axis=-1, workers=1)[..., : radar._bin_hi]
 
 
 def test_detector_field_is_validated():
-    with pytest.raises(ValueError, match="detector"):
-        RadarConfig(detector="glrt-typo")
+    with pytest.raises(ValueError, match="statistic"):
+        DetectionConfig(statistic="glrt-typo")
 
 
 def test_os_alpha_fast_matches_the_reference_quadrature():
@@ -73,8 +74,8 @@ def test_footprint_cfar_false_alarm_rate_matches_design(antenna):
     conservative (Monte Carlo), so the rate may be lower but never above.
     """
     pfa = 1e-2
-    cfg = RadarConfig(antenna=antenna, detector="footprint", cfar_pfa=pfa, scan=ScanConfig(grid_deg=2.0),
-                      max_range_m=50.0)
+    cfg = RadarConfig(antenna=antenna, detection=DetectionConfig(statistic="footprint", pfa=pfa),
+                      scan=ScanConfig(grid_deg=2.0), max_range_m=50.0)
     radar = RadarSystem(cfg, np.random.default_rng(5))
     det = radar._detectors[0]
     hits = cells = 0
@@ -90,8 +91,9 @@ def test_footprint_cfar_false_alarm_rate_matches_design(antenna):
 
 def test_footprint_detects_weak_rhs_targets_the_summed_profile_misses():
     """Single RHS targets at ~19 dB of sweep energy: detection rate of the footprint detector >> slot sum."""
-    base = dict(antenna="rhs", tx_power_dbm=0.0, scan=ScanConfig(grid_deg=2.0), max_range_m=60.0)
-    radars = {d: RadarSystem(RadarConfig(detector=d, **base), np.random.default_rng(11)) for d in ("summed", "footprint")}
+    base = dict(antenna="rhs", link=LinkBudgetConfig(tx_power_dbm=0.0), scan=ScanConfig(grid_deg=2.0), max_range_m=60.0)
+    radars = {d: RadarSystem(RadarConfig(detection=DetectionConfig(statistic=d), **base), np.random.default_rng(11))
+              for d in ("summed", "footprint")}
     rng = np.random.default_rng(12)
     found = dict.fromkeys(radars, 0)
     trials, r_m = 30, 45.0
@@ -109,7 +111,8 @@ def test_footprint_detects_weak_rhs_targets_the_summed_profile_misses():
 
 def test_footprint_scan_end_to_end():
     """The full chain with the footprint detector: a weak target becomes a point; empty scenes stay empty."""
-    cfg = RadarConfig(antenna="rhs", detector="footprint", tx_power_dbm=0.0, scan=ScanConfig(grid_deg=2.0))
+    cfg = RadarConfig(antenna="rhs", detection=DetectionConfig(statistic="footprint"),
+                      link=LinkBudgetConfig(tx_power_dbm=0.0), scan=ScanConfig(grid_deg=2.0))
     radar = RadarSystem(cfg, np.random.default_rng(3))
     th = np.deg2rad(12.0)
     xy = radar.positions[0] + 45.0 * np.array([np.cos(th), np.sin(th)])

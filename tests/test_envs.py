@@ -260,8 +260,8 @@ def test_points_carry_their_uncertainty_and_radar():
     np.testing.assert_array_equal(rows[:, 6], cloud.radar)
     # stds are positive, at least the floors, and shrink with the SNR (amplitude)
     cfg = wrapper.radar_config
-    assert np.all(rows[:, 4] >= cfg.range_std_floor_m * (1 - 1e-6))
-    assert np.all(rows[:, 5] >= np.radians(cfg.angle_std_floor_deg) * (1 - 1e-6))
+    assert np.all(rows[:, 4] >= cfg.uncertainty.range_std_floor_m * (1 - 1e-6))
+    assert np.all(rows[:, 5] >= np.radians(cfg.uncertainty.angle_std_floor_deg) * (1 - 1e-6))
     order = np.argsort(rows[:, 3])
     assert rows[order[0], 5] > rows[order[-1], 5]
     assert env.observation_space.contains(obs)

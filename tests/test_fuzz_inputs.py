@@ -22,8 +22,9 @@ from slam.scenario_cli import parse_scenario
 #: a valid, cheap radar/SLAM configuration: every leaf is a field the fuzzer mutates (the
 #: closed-form hologram antenna: a valid mutation never starts a pattern-library build)
 BASE = {
-    "radar": {"scan": {"grid_deg": 5.0}, "rhs": {"elements": 24}, "max_range_m": 60.0, "tx_power_dbm": 30.0,
-              "cfar_pfa": 1e-6, "omp_max_targets": 4, "add_noise": True, "antenna": "hologram"},
+    "radar": {"scan": {"grid_deg": 5.0}, "rhs": {"elements": 24}, "max_range_m": 60.0, "antenna": "hologram",
+              "link": {"tx_power_dbm": 30.0, "add_noise": True}, "detection": {"pfa": 1e-6},
+              "estimation": {"max_targets": 4}},
     "max_points": 32,
     "scatter": {"vehicle_rcs_m2": 10.0, "points_per_face": 2},
     "landmarks": {"spacing_m": 20.0, "rcs_m2": 5.0},

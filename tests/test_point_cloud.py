@@ -21,7 +21,7 @@ from rhs_env.point_cloud import (
     pointcloud_metrics,
     range_fft,
 )
-from rhs_env.radar import RadarConfig, RadarSystem
+from rhs_env.radar import LinkBudgetConfig, RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
@@ -135,7 +135,7 @@ def test_os_cfar_false_alarm_rate_matches_design():
 
 def test_crb_is_a_lower_bound_of_the_measured_angle_error():
     """Single target at moderate SNR: the OMP angle error is within a small factor of the CRB, never below it."""
-    cfg = RadarConfig(antenna="phased", tx_power_dbm=0.0)
+    cfg = RadarConfig(antenna="phased", link=LinkBudgetConfig(tx_power_dbm=0.0))
     radar = RadarSystem(cfg, np.random.default_rng(3))
     th, rng_m = np.deg2rad(8.3), 40.0
     xy = radar.positions[0] + rng_m * np.array([np.cos(th), np.sin(th)])

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from rhs_env.antenna import ScanConfig
-from rhs_env.radar import RadarConfig, RadarSystem
+from rhs_env.radar import DetectionConfig, LinkBudgetConfig, RadarConfig, RadarSystem, WaveformConfig
 from rhs_env.scatterers import Occluders, Scatterers, visible_mask
 
 BIN = 0.6  # c / 2B, m
@@ -24,20 +24,20 @@ def _nearest(cloud, xy):
 
 @pytest.fixture(scope="module")
 def noiseless():
-    return RadarSystem(RadarConfig(antenna="hologram", add_noise=False), np.random.default_rng(0))
+    return RadarSystem(RadarConfig(antenna="hologram", link=LinkBudgetConfig(add_noise=False)), np.random.default_rng(0))
 
 
 def test_config_validation_names_field():
-    with pytest.raises(ValueError, match="cfar_pfa"):
-        RadarConfig(cfar_pfa=0.0)
+    with pytest.raises(ValueError, match="pfa"):
+        DetectionConfig(pfa=0.0)
     with pytest.raises(ValueError, match="antenna"):
         RadarConfig(antenna="horn")
     with pytest.raises(ValueError, match="max_range_m"):
         RadarConfig(max_range_m=500.0)
     with pytest.raises(ValueError, match="chirps_per_slot"):
-        RadarConfig(chirps_per_slot=1)
+        WaveformConfig(chirps_per_slot=1)
     cfg = RadarConfig()
-    assert cfg.samples == 400 and abs(cfg.range_resolution_m - 0.5996) < 1e-3
+    assert cfg.waveform.samples == 400 and abs(cfg.waveform.range_resolution_m - 0.5996) < 1e-3
 
 
 def test_single_noiseless_target_range_and_angle(noiseless):
@@ -107,7 +107,7 @@ def test_fov_and_max_range(noiseless):
 
 @pytest.mark.parametrize("slot_doppler", [True, False])
 def test_radial_velocity_measured(slot_doppler):
-    radar = RadarSystem(RadarConfig(antenna="phased", slot_doppler=slot_doppler), np.random.default_rng(3))
+    radar = RadarSystem(RadarConfig(antenna="phased", waveform=WaveformConfig(slot_doppler=slot_doppler)), np.random.default_rng(3))
     xy = _polar(radar, 0, 35.0, 12.0)
     u = (xy - radar.positions[0]) / np.linalg.norm(xy - radar.positions[0])
     vel = np.array([[-22.0, 3.0]])
@@ -188,16 +188,16 @@ def test_same_range_different_velocities_both_measured():
         assert abs(cloud.points[i, 2] - float(v @ u)) < 0.3
 
 
-@pytest.mark.parametrize("kw", [{"cfar_method": "ca"}, {"detection": "fixed", "fixed_threshold_db": 15.0}])
+@pytest.mark.parametrize("kw", [{"method": "ca"}, {"mode": "fixed", "fixed_threshold_db": 15.0}])
 def test_detection_options_work(kw):
-    radar = RadarSystem(RadarConfig(antenna="phased", **kw), np.random.default_rng(1))
+    radar = RadarSystem(RadarConfig(antenna="phased", detection=DetectionConfig(**kw)), np.random.default_rng(1))
     xy = _polar(radar, 1, 33.0, -7.0)
     cloud = radar.scan(Scatterers.static_points([xy]))
     assert _nearest(cloud, xy)[1] < 0.3
 
 
 def test_two_targets_same_range_resolved_default_rhs():
-    radar = RadarSystem(RadarConfig(add_noise=False), np.random.default_rng(0))
+    radar = RadarSystem(RadarConfig(link=LinkBudgetConfig(add_noise=False)), np.random.default_rng(0))
     pts = [_polar(radar, 3, 40.0, 2.0), _polar(radar, 3, 40.0, 12.0)]
     cloud = radar.scan(Scatterers.static_points(pts))
     assert len(cloud) == 2, cloud.points

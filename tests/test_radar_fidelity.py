@@ -16,7 +16,7 @@ import pytest
 
 from rhs_env.antenna import RHSConfig, ScanConfig
 from rhs_env.point_cloud import WINDOWS, make_window, tone_spectra, window_exponentials
-from rhs_env.radar import RadarConfig, RadarSystem
+from rhs_env.radar import DetectionConfig, LinkBudgetConfig, RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers
 
 SMALL = RadarConfig(antenna="hologram", scan=ScanConfig(grid_deg=5.0), rhs=RHSConfig(elements=24), max_range_m=60.0)
@@ -42,7 +42,7 @@ def test_tone_spectrum_in_closed_form_equals_the_fft_of_the_samples(window):
 
 def test_noiseless_spectrum_matches_the_iq_path():
     """Same echoes (same generator state): the direct spectrum is the FFT of the synthesized samples."""
-    cfg = replace(SMALL, add_noise=False)
+    cfg = replace(SMALL, link=LinkBudgetConfig(add_noise=False))
     scat = Scatterers(np.array([[20.0, 3.0], [-35.0, -8.0], [4.0, 41.0]]), np.array([[-20.0, 1.0], [3.0, 0.0], [0.0, 5.0]]),
                       [5.0, 10.0, 1.0], [0, 1, 2], [True, False, True])
     iq = RadarSystem(cfg, np.random.default_rng(3))
@@ -57,8 +57,8 @@ def test_noise_bins_have_the_covariance_of_the_windowed_fft_of_white_noise():
     """E[Y_k Y_{k+d}^*] = sigma^2 sum_n w[n]^2 exp(+j 2 pi d n / (Z N)) for d = 0..3 (half-bin lags included)."""
     radar = RadarSystem(replace(SMALL, fidelity="range"), np.random.default_rng(5))
     cfg = radar.config
-    n, z = cfg.samples, cfg.zero_pad
-    w2 = make_window(cfg.window, n).astype(float) ** 2
+    n, z = cfg.waveform.samples, cfg.waveform.zero_pad
+    w2 = make_window(cfg.waveform.window, n).astype(float) ** 2
     ys = [radar.synthesize_spectrum(Scatterers.empty()).reshape(-1, radar._bin_hi).astype(complex) for _ in range(4)]
     y = np.concatenate(ys) / np.sqrt(cfg.noise_power_w)
     for d in range(4):
@@ -72,9 +72,9 @@ def test_noise_bins_have_the_covariance_of_the_windowed_fft_of_white_noise():
 @pytest.mark.parametrize("fidelity", ["range", "iq"])
 def test_cfar_false_alarm_rate_on_noise_only_scans_is_the_design_pfa(fidelity):
     pfa = 1e-3
-    radar = RadarSystem(replace(SMALL, cfar_pfa=pfa, fidelity=fidelity), np.random.default_rng(11))
+    radar = RadarSystem(replace(SMALL, detection=DetectionConfig(pfa=pfa), fidelity=fidelity), np.random.default_rng(11))
     cfg = radar.config
-    edge = cfg.zero_pad * (cfg.cfar_guard + cfg.cfar_train)  # cells with the full training window
+    edge = cfg.waveform.zero_pad * (cfg.detection.guard + cfg.detection.train)  # cells with the full training window
     exceed = cells = 0
     for _ in range(250):
         if fidelity == "range":

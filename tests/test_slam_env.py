@@ -283,7 +283,7 @@ def test_rgb_render_draws_slam_over_radar_frame():
         ({"slam": {"n_particles": 0}}, "n_particles"),
         ({"slam": {"delta_m": float("nan")}}, "delta_m"),
         ({"slam": {"no_such_field": 1}}, "no_such_field"),
-        ({"radar": {"tx_power_dbm": 1e3}}, "tx_power_dbm"),
+        ({"radar": {"link": {"tx_power_dbm": 1e3}}}, "radar.link.tx_power_dbm"),
         ({"antenna": "laser"}, "antenna"),
         ({"max_points": 0}, "max_points"),
         ({"ego_speed": -3.0}, "ego_speed"),  # paper: out of range; highway: unknown key
@@ -302,7 +302,7 @@ def test_bad_kwargs_raise_value_error_naming_the_field(env_id, kwargs, field):
         ({"max_landmarks": 2.5}, "max_landmarks must be an integer"),
         ({"slam": "fast"}, "slam must be a SlamConfig or a dict"),
         ({"slam": {"n_particles": "100"}}, "slam.n_particles must be an integer"),
-        ({"radar": {"tx_power_dbm": "20"}}, "radar.tx_power_dbm must be a number"),
+        ({"radar": {"link": {"tx_power_dbm": "20"}}}, "radar.link.tx_power_dbm must be a number"),
         ({"radar": {"scan": {"grid_deg": "5"}}}, "radar.scan.grid_deg must be a number"),
         ({"icp": {"max_iterations": 3.0}}, "icp.max_iterations must be an integer"),
         ({"pipeline": {"use_doppler": "yes"}}, "pipeline.use_doppler must be True or False"),

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from rhs_env.radar import RadarConfig, RadarSystem
+from rhs_env.radar import LinkBudgetConfig, RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers
 from rhs_env.uncertainty import point_rows
 from slam.association import point_covariance
@@ -27,7 +27,7 @@ from slam.scenario import SyntheticCloud, run_scenario
 
 def _isolated_errors(add_noise: bool, tx_power_dbm: float, n: int, antenna: str = "rhs", seed: int = 0):
     """Range / angle errors and predicted stds of the strongest front-radar point, one target per scan."""
-    rs = RadarSystem(RadarConfig(add_noise=add_noise, tx_power_dbm=tx_power_dbm, antenna=antenna),
+    rs = RadarSystem(RadarConfig(link=LinkBudgetConfig(add_noise=add_noise, tx_power_dbm=tx_power_dbm), antenna=antenna),
                      np.random.default_rng(seed))
     rng = np.random.default_rng(seed + 1)
     out = []
@@ -61,8 +61,8 @@ def test_point_nees_is_chi_square_at_low_snr(antenna):
 def test_noiseless_errors_inside_the_floors():
     e = _isolated_errors(False, 30.0, 12)
     cfg = RadarConfig()
-    assert np.sqrt(np.mean(e[:, 0] ** 2)) < cfg.range_std_floor_m
-    assert np.degrees(np.sqrt(np.mean(e[:, 1] ** 2))) < cfg.angle_std_floor_deg
+    assert np.sqrt(np.mean(e[:, 0] ** 2)) < cfg.uncertainty.range_std_floor_m
+    assert np.degrees(np.sqrt(np.mean(e[:, 1] ** 2))) < cfg.uncertainty.angle_std_floor_deg
 
 
 def test_rhs_angle_std_about_three_times_below_phased():
