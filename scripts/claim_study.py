@@ -63,7 +63,6 @@ import hashlib
 import json
 import math
 import os
-import subprocess
 import sys
 import time
 from dataclasses import asdict, dataclass
@@ -82,6 +81,8 @@ from rhs_env.scatterers import Scatterers
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _provenance import write_json
+
 LEVELS = ("pointcloud", "elements", "slam")
 PAPER_RATIO = 1.0 / 3.0
 
@@ -567,24 +568,13 @@ def load_cache(path: Path) -> dict[str, Any]:
     return out
 
 
-def provenance(cfg: StudyConfig, argv: list[str]) -> dict[str, Any]:
-    """commit, dirty, command line and the full configuration (study, default radar, default SLAM)."""
+def run_config(cfg: StudyConfig, cache_dir: Path, report_only: bool) -> dict[str, Any]:
+    """The full configuration recorded in the provenance: study, default radar, default SLAM, cache."""
     from slam.rbpf import SlamConfig
     from slam.registration import DEFAULT_REGISTRATION
 
-    def git(*a: str) -> str:
-        try:
-            return subprocess.run(["git", *a], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
-        except (OSError, subprocess.CalledProcessError):
-            return ""
-
-    return {
-        "commit": git("rev-parse", "HEAD"),
-        "dirty": bool(git("status", "--porcelain", "--untracked-files=no")),
-        "command": ["python", "scripts/claim_study.py", *argv],
-        "config": {"study": asdict(cfg), "radar": RadarConfig().to_dict(), "slam": asdict(SlamConfig()),
-                   "registration": DEFAULT_REGISTRATION},
-    }
+    return {"study": asdict(cfg), "radar": RadarConfig().to_dict(), "slam": asdict(SlamConfig()),
+            "registration": DEFAULT_REGISTRATION, "cache_dir": str(cache_dir), "report_only": report_only}  # fmt: skip
 
 
 class Systems:
@@ -762,10 +752,9 @@ def load_caches(cache_dir: Path, stem: str) -> dict[str, Any]:
 
 
 def build_results(cfg: StudyConfig, units: list[dict[str, Any]], cache: dict[str, Any], systems: Systems,
-                  argv: list[str], wall_s: float) -> dict[str, Any]:
+                  wall_s: float) -> dict[str, Any]:
     present = tuple(lv for lv in LEVELS if any(u["level"] == lv and u["key"] in cache for u in units))
-    data: dict[str, Any] = {**provenance(cfg, argv), "levels": list(present),
-                            "antenna_properties": antenna_table(cfg, systems, present)}
+    data: dict[str, Any] = {"levels": list(present), "antenna_properties": antenna_table(cfg, systems, present)}
     for lv in ("pointcloud", "elements"):
         if lv in present:
             data[lv] = aggregate_pc(units, cache, cfg, lv)
@@ -840,14 +829,13 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{len(units)} units in the study, {len(selected) - len(pending)} of the requested ones cached, "
           f"{len(pending)} to run", flush=True)
     systems = Systems()
-    t0 = time.perf_counter()
+    started, t0 = time.time(), time.perf_counter()
     if pending and not a.report_only:
         compute(pending, cfg, systems, cache_dir, stem, not a.no_progress, "" if sn == 1 else f"_shard{si}of{sn}")
     cache = load_caches(cache_dir, stem)
-    data = build_results(cfg, units, cache, systems, argv, time.perf_counter() - t0)
-    out.mkdir(parents=True, exist_ok=True)
-    data = finite_json(data)
-    (out / f"{stem}.json").write_text(json.dumps(data, indent=1))
+    data = finite_json(build_results(cfg, units, cache, systems, time.perf_counter() - t0))
+    data["provenance"] = write_json(out / f"{stem}.json", data, __file__, run_config(cfg, cache_dir, a.report_only),
+                                    started, fingerprint_fn=None if a.small else fingerprint, argv=argv)  # fmt: skip
     from claim_study_report import make_figures, write_markdown
 
     write_markdown(data, out / f"{stem}.md")

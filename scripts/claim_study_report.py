@@ -94,7 +94,7 @@ def _verdict_pointcloud(data: dict) -> list[str]:
     for k in ks:
         seps, snrs, val, hi = ratio_grid(data, k)
         n = int(np.isfinite(val).sum())
-        cut = data["config"]["study"]["ospa_cutoff_deg"]
+        cut = data["provenance"]["config"]["study"]["ospa_cutoff_deg"]
         lo_bound = np.full_like(val, np.nan)
         fail = np.zeros(val.shape, bool)
         for r in data["pointcloud"]["ratios"]:
@@ -128,7 +128,7 @@ def classify(data: dict, k: int, antenna: str = "rhs") -> dict[str, dict[str, in
     phased array, by > 0.5 per group), ``other``; and ``both_fail`` (both at >= 80 % of the OSPA
     cut-off, whatever the ratio), counted with the losses.
     """
-    cut = data["config"]["study"]["ospa_cutoff_deg"]
+    cut = data["provenance"]["config"]["study"]["ospa_cutoff_deg"]
     out: dict[str, dict[str, int]] = {"win": {}, "loss": {}}
     for r in data["pointcloud"]["ratios"]:
         if r["k"] != k or r["antenna"] != antenna or r["ospa_ratio"][0] is None:
@@ -247,7 +247,7 @@ def _elements_section(data: dict) -> list[str]:
           " RHS RMSE / CRB |", "|---:|---:|---:|---:|---:|---:|---:|---:|"]
     ratios = {(r["elements"], r["sep_deg"], r["snr_db"]): r for r in el["ratios"] if r["antenna"] == "rhs"}
     props = data["antenna_properties"]
-    grid = data["config"]["study"]["elements_grid_deg"]
+    grid = data["provenance"]["config"]["study"]["elements_grid_deg"]
     narrow = {m: p["rhs"]["beamwidth_3db_deg"] for m in {r[0] for r in ratios}
               if (p := props.get(f"M{m}", {})).get("rhs") and p["rhs"]["beamwidth_3db_deg"] < grid}
     if narrow:
@@ -266,10 +266,11 @@ def _elements_section(data: dict) -> list[str]:
 
 def write_markdown(data: dict, path: Path) -> None:
     """The README section "Does the paper's claim hold?" from the study's JSON."""
-    cfg = data["config"]["study"]
-    md = ["### Does the paper's claim hold?", "",
-          f"Measured by `{' '.join(data['command'])}` at commit `{data['commit'][:10]}`"
-          f"{' (dirty tree)' if data['dirty'] else ''}; `results/claim_study.json`. Point-cloud level: groups of "
+    prov = data["provenance"]
+    cfg = prov["config"]["study"]
+    md = [
+          f"Measured by `{' '.join(prov['command'])}` at commit `{prov['commit'][:10]}`"
+          f"{' (dirty tree)' if prov['dirty'] else ''}; `results/claim_study.json`. Point-cloud level: groups of "
           f"K targets in one range cell at {cfg['range_m']:g} m, {cfg['seeds']} trials per cell; SNR is the "
           "per-slot SNR at unit two-way gain (add each antenna's two-way gain for the SNR it sees). Group error: "
           f"OSPA distance (cut-off {cfg['ospa_cutoff_deg']:g} deg) between the true angles and the points in the "

@@ -147,6 +147,8 @@ def recorded_seconds(step: Step) -> float | None:
         except (OSError, ValueError):
             continue
         prov = (data.get("provenance") if isinstance(data, dict) else None) or {}
+        if (prov.get("config") or {}).get("report_only"):
+            continue  # written from a cache: its wall time is not the step's
         if prov.get("wall_s") is not None:
             return float(prov["wall_s"])
     return None

@@ -102,8 +102,9 @@ def small_run(tmp_path_factory):
 def test_small_study_writes_results_readme_section_and_figures(small_run):
     data = json.loads((small_run / "claim_study_small.json").read_text())
     assert set(data["levels"]) == {"pointcloud", "elements", "slam"}
-    assert len(data["commit"]) == 40 and data["command"][1] == "scripts/claim_study.py"
-    assert data["config"]["study"]["seeds"] == cs.SMALL.seeds and "radar" in data["config"]
+    prov = data["provenance"]
+    assert len(prov["commit"]) == 40 and prov["command"][1] == "scripts/claim_study.py"
+    assert prov["config"]["study"]["seeds"] == cs.SMALL.seeds and "radar" in prov["config"]
     cells = data["pointcloud"]["cells"]
     assert len(cells) == 2 * len(cs.SMALL.separations_deg) * len(cs.SMALL.snr_db)
     for c in cells:
@@ -120,7 +121,7 @@ def test_small_study_writes_results_readme_section_and_figures(small_run):
         assert c["n"] == cs.SMALL.slam_seeds and c["odometry"]["registration"] == "odometry"
         assert c["odometry"]["ate_m"][0] >= 0
     md = (small_run / "claim_study_small.md").read_text()
-    assert md.startswith("### Does the paper's claim hold?")
+    assert md.startswith("Measured by `python scripts/claim_study.py")
     assert "CRB" in md and "two-way peak gain" in md and "ATE" in md
     for f in ("regime", "resolution", "slam", "elements"):
         assert (small_run / f"claim_study_small_{f}.png").stat().st_size > 1000
