@@ -381,7 +381,7 @@ def _notes(doc: dict) -> list[str]:
         by = {k: sum(r.get("unmatched_by_scans", {}).get(k, 0) for r in runs) for k in ("0", "1", ">=2")}
         hidden = sum(r.get("unmatched_never_in_view", 0) for r in runs)
         out.append(f"\nHighway: constant meta-action {hw.get('action', IDLE)} (4 = SLOWER, 20 m/s, no lane change; "
-                   f"IDLE crashes into traffic on every seed), {crashed} of {len(runs)} runs crashed. "
+                   f"IDLE crashed into traffic on each of the seeds 0..4 and 100..104), {crashed} of {len(runs)} runs crashed. "
                    "`matched_fraction` counts every landmark that has been within the radar's 100 m range (the "
                    "issue's 'seen'); `measured_matched_fraction` only those the radar measured (a point within "
                    "1 m in >= 2 scans, `slam.metrics`); `visible_matched_fraction` those in its unoccluded view "
