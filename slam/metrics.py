@@ -8,6 +8,18 @@
   distance; pairs farther than the gate are not matches. RMSE over matches,
   ``missed`` = true landmarks without a match, ``spurious`` = estimated landmarks
   without a match.
+- :func:`landmark_hits` and :func:`matched_fraction`: the map's recall over a
+  chosen subset of the true landmarks. Which landmarks count as *seen* is a
+  definition the caller states. :class:`slam.metrics_info.SlamMetricsInfo`'s
+  ``map_matched`` / ``map_missed`` count every landmark that has been within
+  radar range (``max_range_m``, a disc: field of view, traffic occlusion and
+  detection ignored). ``scripts/slam_accuracy.py`` also reports the
+  **measured** matched fraction: a landmark counts as seen once the radar has
+  produced a point within :data:`MEASURED_GATE_M` (1 m) of its true position in
+  at least :data:`MEASURED_MIN_SCANS` (2) scans, the number of updates the RBPF
+  needs before it reports a landmark (``SlamConfig.min_hits``). A landmark the
+  radar never measured (occluded by traffic, detected once at the edge of range)
+  cannot be in any map, so it says nothing about the SLAM.
 
 The point-cloud metric (detection rate, RMSE, false points) is
 :func:`rhs_env.point_cloud.pointcloud_metrics`, next to the radar that makes the clouds.
@@ -25,7 +37,16 @@ __all__ = [
     "heading_rmse",
     "position_errors",
     "map_metrics",
+    "landmark_hits",
+    "matched_fraction",
+    "MEASURED_GATE_M",
+    "MEASURED_MIN_SCANS",
 ]
+
+#: a radar point within this distance (m) of a true landmark measured it (the SLAM's ``cluster_radius_m``)
+MEASURED_GATE_M = 1.0
+#: scans with such a point before a landmark counts as measured (the RBPF's ``min_hits``)
+MEASURED_MIN_SCANS = 2
 
 
 def position_errors(est: np.ndarray, true: np.ndarray) -> np.ndarray:
@@ -77,3 +98,35 @@ def map_metrics(est: np.ndarray, true: np.ndarray, gate: float = 2.0) -> dict:
     m = int(ok.sum())
     rmse = float(np.sqrt(np.mean(d[r, c] ** 2))) if m else float("nan")
     return dict(rmse=rmse, matched=m, missed=nt - m, spurious=ne - m, pairs=np.stack([r, c], axis=1))
+
+
+def landmark_hits(points_xy: np.ndarray, landmarks_xy: np.ndarray, gate: float = MEASURED_GATE_M) -> np.ndarray:
+    """(K,) bool: some point of the scan (N, 2) lies within ``gate`` (m) of landmark k (K, 2).
+
+    Both in the same frame. Summed over scans it gives the number of scans that
+    measured each landmark (the *measured* definition of the module docstring).
+    """
+    if not gate > 0:
+        raise ValueError(f"gate must be in (0, inf), got {gate!r}")
+    pts = np.asarray(points_xy, dtype=float).reshape(-1, 2)
+    lm = np.asarray(landmarks_xy, dtype=float).reshape(-1, 2)
+    if len(pts) == 0 or len(lm) == 0:
+        return np.zeros(len(lm), dtype=bool)
+    d2 = np.sum((lm[:, None, :] - pts[None, :, :]) ** 2, axis=2)
+    return np.asarray(d2.min(axis=1) <= gate * gate, dtype=bool)
+
+
+def matched_fraction(est: np.ndarray, true: np.ndarray, keep: np.ndarray | None = None, gate: float = 2.0) -> float | None:
+    """Fraction of the true landmarks ``true[keep]`` that the map ``est`` matches (Hungarian within ``gate``).
+
+    ``matched / keep.sum()``, the estimated map matched against the kept landmarks only
+    (an estimate of a dropped landmark is then spurious, not a match); None when
+    nothing is kept.
+    """
+    true = np.asarray(true, dtype=float).reshape(-1, 2)
+    keep = np.ones(len(true), dtype=bool) if keep is None else np.asarray(keep, dtype=bool).reshape(-1)
+    if keep.shape != (len(true),):
+        raise ValueError(f"keep must have one entry per true landmark ({len(true)}), got {keep.shape}")
+    if not keep.any():
+        return None
+    return map_metrics(est, true[keep], gate)["matched"] / int(keep.sum())

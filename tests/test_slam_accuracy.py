@@ -32,12 +32,41 @@ def test_quick_run_records_provenance_and_targets(tmp_path):
     assert "| paper | position_rmse_m |" in md and "| dense | ratio_rhs_phased |" in md
 
 
-def test_dense_scene_pairs_subtend_two_to_five_degrees_abeam():
-    lm, poses, delta = slam_accuracy.dense_scene(3, 20)
+def test_dense_scene_pairs_two_to_five_degrees_apart_in_one_range_cell_from_mid_drive():
+    lm, poses, delta = slam_accuracy.dense_scene(3, 40)
     k = len(lm) // 2
-    sep = np.degrees(np.arctan2(lm[k:, 0] - lm[:k, 0], np.abs(lm[:k, 1])))
-    np.testing.assert_allclose(sep, delta, rtol=1e-9)
-    assert np.all((delta >= 2.0) & (delta <= 5.0)) and poses.shape == (20, 3)
+    a, b = lm[:k], lm[k:]
+    mid = np.array([poses[-1, 0] / 2, 0.0])
+    # seen from the middle of the drive: delta apart, at equal ranges (one range cell)
+    ta, tb = np.arctan2(*(a - mid)[:, ::-1].T), np.arctan2(*(b - mid)[:, ::-1].T)
+    np.testing.assert_allclose(np.degrees(np.abs(np.angle(np.exp(1j * (ta - tb))))), delta, rtol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(a - mid, axis=1), np.linalg.norm(b - mid, axis=1))
+    assert np.all((delta >= 2.0) & (delta <= 5.0)) and poses.shape == (40, 3)
+    assert poses[-1, 0] == pytest.approx(6.0 * 0.2 * 39) and k >= 10
+    lateral = np.abs((a[:, 1] + b[:, 1]) / 2)
+    assert np.all((lateral >= 20.0) & (lateral <= 35.0))
+
+
+def test_pair_geometry_counts_the_regime():
+    lm, poses, _ = slam_accuracy.dense_scene(0, 40)
+    g = slam_accuracy.pair_geometry(lm, poses)
+    assert 0.3 < g["regime"] <= min(g["angle_2_5_deg"], g["same_range_cell"]) <= 1
+    assert g["regime_pair_cycles"] > 0
+    # a pair straight ahead, its gap along the line of sight: never in one range cell
+    ahead = np.array([[50.0, 0.0], [52.0, 0.0]])
+    g2 = slam_accuracy.pair_geometry(ahead, np.zeros((3, 3)))
+    assert g2["same_range_cell"] == 0.0 and g2["regime"] == 0.0
+
+
+def test_quick_highway_drives_slower_and_reports_the_measured_fraction(tmp_path):
+    out = tmp_path / "hw"
+    assert slam_accuracy.main(["--quick", "--parts", "highway", "--seeds", "0", "--no-progress", "--out", str(out)]) == 0
+    hw = json.loads(out.with_suffix(".json").read_text())["parts"]["highway"]
+    run = hw["runs"][0]
+    assert hw["action"] == slam_accuracy.SLOWER and run["cycles"] == 10 and not run["crashed"]
+    assert run["measured"] <= run["seen"] and sum(run["unmatched_by_scans"].values()) == run["missed"]
+    assert 0 <= run["measured_matched_fraction"] <= 1
+    assert "| highway | measured_matched_fraction |" in out.with_suffix(".md").read_text()
 
 
 def _ring(v: np.ndarray, n: int = 24, r: float = 20.0) -> np.ndarray:

@@ -6,8 +6,12 @@ import numpy as np
 import pytest
 
 from slam.metrics import (
+    MEASURED_GATE_M,
+    MEASURED_MIN_SCANS,
     heading_rmse,
+    landmark_hits,
     map_metrics,
+    matched_fraction,
     position_rmse,
 )
 
@@ -49,3 +53,24 @@ def test_map_metrics_empty():
     assert r["matched"] == 0 and r["missed"] == 3 and r["spurious"] == 0 and math.isnan(r["rmse"])
     with pytest.raises(ValueError, match="gate"):
         map_metrics(np.zeros((1, 2)), np.ones((1, 2)), 0.0)
+
+
+def test_landmark_hits_within_the_gate():
+    lm = np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0]])
+    pts = np.array([[0.5, 0.5], [10.0, 1.01], [30.0, 0.0]])
+    np.testing.assert_array_equal(landmark_hits(pts, lm, 1.0), [True, False, False])
+    np.testing.assert_array_equal(landmark_hits(np.zeros((0, 2)), lm), [False, False, False])
+    assert MEASURED_GATE_M == 1.0 and MEASURED_MIN_SCANS == 2
+    with pytest.raises(ValueError, match="gate"):
+        landmark_hits(pts, lm, 0.0)
+
+
+def test_matched_fraction_over_the_measured_landmarks():
+    true = np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0], [30.0, 0.0]])
+    est = np.array([[0.1, 0.0], [10.2, 0.0]])  # the map holds the two landmarks the radar measured
+    scans = np.array([5, 3, 1, 0])  # scans with a point within the gate of each true landmark
+    assert matched_fraction(est, true, None) == 0.5  # every landmark within range counts
+    assert matched_fraction(est, true, scans >= MEASURED_MIN_SCANS) == 1.0
+    assert matched_fraction(est, true, np.zeros(4, bool)) is None
+    with pytest.raises(ValueError, match="one entry per true landmark"):
+        matched_fraction(est, true, np.ones(3, bool))
