@@ -8,13 +8,14 @@ obstacles' RCS ``--rcs`` m^2 (default 0.005: 30 dB below the scene's 5 m^2, the
 issue's low-SNR case). Vehicle ATE: position RMSE of the SLAM pose over the cycles
 (map frame = start pose, no alignment); also the final error, the map matched /
 missed / spurious counts (Hungarian, 2 m gate) and the points per cycle. Writes
-``low_snr_slam.json`` (commit, command line, config, every episode) and ``.md``.
+``low_snr_slam.json`` (every episode, with the provenance of
+``scripts/_provenance.write_json``: commit, command line, config, and the
+fingerprint of the finished run) and ``.md``.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -23,7 +24,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _provenance import git_state
+from _provenance import write_json
 
 POLICY_HZ = 5
 IDLE = 1
@@ -81,7 +82,7 @@ def markdown(res: dict) -> str:
     c = res["config"]
     lines = [f"Low-SNR SLAM on `rhs-paper-v0`: obstacle RCS {c['rcs']:g} m^2 (30 dB below 5 m^2), "
              f"{c['power']:g} dBm, {c['registration']} registration, {c['cycles']} cycles, seeds "
-             f"{', '.join(map(str, c['seeds_done']))} (`{res['provenance']['command']}`, commit "
+             f"{', '.join(map(str, c['seeds_done']))} (`{' '.join(res['provenance']['command'])}`, commit "
              f"{res['provenance']['commit'][:10]}).", "",
              "| detector | antenna | vehicle ATE (m), mean ± std | median | obstacles matched (of 5) | points / cycle |",
              "|---|---|---:|---:|---:|---:|"]
@@ -121,9 +122,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--detectors", nargs="+", default=list(DETECTORS), choices=DETECTORS)
     p.add_argument("--out-dir", default="results")
     a = p.parse_args(argv)
-    state = git_state()  # at the start: the code that runs
-    prov = {"commit": state["commit"], "dirty": state["dirty"], "command": " ".join(["python", "scripts/low_snr_slam.py", *argv])}
-    rows = []
+    started = time.time()
+    rows: list[dict] = []
     for seed in a.seeds:
         for d in a.detectors:
             for ant in a.antennas:
@@ -131,18 +131,22 @@ def main(argv: list[str] | None = None) -> int:
                 rows.append(r)
                 print(f"seed {seed} {d:9s} {ant:6s} ATE {r['ate_m']:.3f} m, final {r['final_error_m']:.2f} m, "
                       f"matched {r['map_matched']}, {r['points_per_cycle']:.1f} pts, {r['wall_s']:.0f} s", flush=True)
-        write(prov, a, rows)  # after every seed: an interrupted run keeps the seeds it finished
-    print(markdown(write(prov, a, rows)))
+        write(a, rows, started, argv, final=False)  # after every seed: an interrupted run keeps the seeds it finished
+    print(markdown(write(a, rows, started, argv, final=True)))
     return 0
 
 
-def write(prov: dict, a: argparse.Namespace, rows: list[dict]) -> dict:
-    """JSON and markdown of the episodes so far (``config.seeds_done`` lists the finished seeds)."""
+def write(a: argparse.Namespace, rows: list[dict], started: float, argv: list[str], final: bool) -> dict:
+    """JSON and markdown of the episodes so far (``config.seeds_done`` lists the finished seeds).
+
+    Only the finished run records its fingerprint: a partial file reads as unverified.
+    """
     done = sorted({r["seed"] for r in rows})
-    res = {"provenance": prov, "config": {**vars(a), "seeds_done": done}, "episodes": rows, "summary": summary(rows)}
+    config = {**vars(a), "seeds_done": done}
+    res = {"config": config, "episodes": rows, "summary": summary(rows)}
     out = Path(a.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "low_snr_slam.json").write_text(json.dumps(res, indent=1))
+    res["provenance"] = write_json(out / "low_snr_slam.json", res, __file__, config, started,
+                                   fingerprint_fn=fingerprint if final else None, argv=argv)  # fmt: skip
     (out / "low_snr_slam.md").write_text(markdown(res))
     return res
 
