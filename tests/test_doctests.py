@@ -7,7 +7,14 @@ import importlib
 
 import pytest
 
-MODULES = ("rhs_common.validation", "rhs_common.timing", "rhs_env.wrappers", "slam.wrapper", "slam.metrics_info")
+MODULES = (
+    "rhs_common.validation",
+    "rhs_common.timing",
+    "rhs_env.wrappers",
+    "slam.wrapper",
+    "slam.metrics_info",
+    "agents.decision",
+)
 
 
 @pytest.mark.parametrize("name", MODULES)
