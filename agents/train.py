@@ -33,6 +33,7 @@ import sys
 import time
 import warnings
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -198,8 +199,7 @@ def make_vec_env(
         vec_env_cls=vec_cls,
         monitor_dir=str(monitor_dir) if monitor_dir else None,
         monitor_kwargs={"info_keywords": ("crashed",)},
-        wrapper_class=HoldAction if k > 1 else None,
-        wrapper_kwargs={"k": k} if k > 1 else None,
+        wrapper_class=partial(HoldAction, k=k) if k > 1 else None,
     )
 
 
