@@ -57,9 +57,6 @@ VARIANTS: dict[str, tuple[str, dict, dict]] = {
     # highway-env's 1 Hz discount 0.8; --timesteps stays the env-step budget (timesteps / 5 decisions)
     "hold5_truth": (TRUTH, {}, HOLD5),
     "hold5_slam": (SLAM, FIVE_DEG, HOLD5),
-    # the same on a reward where standing still earns nothing (SPEED): does the always-positive
-    # default reward (SLOWER already earns ~0.7 of the per-step maximum) make SLOWER the optimum PPO finds?
-    "hold5_speed_truth": (TRUTH, SPEED, HOLD5),
 }
 
 
