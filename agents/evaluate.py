@@ -14,7 +14,10 @@ beside it (``model.zip`` -> ``model.json``) naming the env id and ``env_kwargs``
 it was trained on. Without ``--env`` the policy's env is used; with the same
 env, its ``env_kwargs`` are the defaults and ``--env-kwargs`` is merged over
 them (key by key, top level), so the policy always meets the observation it
-was trained on unless asked otherwise. The default policy is the shipped one,
+was trained on unless asked otherwise. A policy trained with a ``decision_interval``
+k > 1 (saved in the same JSON, :mod:`agents.decision`) is loaded as a
+:class:`agents.decision.HeldPolicy`: it decides every k env steps and repeats its
+action between, so every policy is scored per env step on the same seeds. The default policy is the shipped one,
 ``agents/data/ppo_rhs_highway_slam.zip`` (with ``ppo_rhs_highway_slam.json``).
 """
 
@@ -28,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from agents.decision import held
 from rhs_env.registration import SLAM_ENV_SPECS
 
 DATA_DIR = Path(__file__).parent / "data"
@@ -172,7 +176,9 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
     """``"random"``, ``"constant:<action>"``, ``"idm[:<m/s>]"``, or a stable-baselines3 zip (PPO or DQN: from the JSON
     beside it, else tried in turn).
 
-    With ``env``, the policy's observation space is checked against the env's.
+    With ``env``, the policy's observation space is checked against the env's. A zip whose JSON
+    has ``decision_interval`` k > 1 comes back as a :class:`agents.decision.HeldPolicy` (decides every
+    k ``predict`` calls; :func:`run_episode` resets it at each episode start).
     """
     if is_scripted(policy):
         if env is None:
@@ -215,7 +221,7 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
     if env is not None:
         check_spaces(model, env, path)
         model = PointColumnAdapter.wrap(model, env)
-    return model
+    return held(model, policy_metadata(path).get("decision_interval", 1))
 
 
 def _load_rllib(path: Path, env=None):
@@ -334,8 +340,11 @@ def run_episode(
     """One episode; returns its return, crash flag, mean speed, SLAM errors and the trajectories.
 
     ``frames`` collects ``env.render()`` per step; ``trace`` the ``(obs, info)`` of the reset and of
-    every step; ``bar`` (a tqdm bar) is advanced by one per step.
+    every step; ``bar`` (a tqdm bar) is advanced by one per step. A policy with a ``reset()``
+    (:class:`agents.decision.HeldPolicy`) is reset first.
     """
+    if callable(getattr(policy, "reset", None)):
+        policy.reset()
     obs, info = env.reset(seed=seed)
     if frames is not None:
         frames.append(env.render())

@@ -3,7 +3,8 @@
 PPO or DQN with the hyperparameters of ``agents/hyperparams/<algo>.yml`` for the
 env id (rl-baselines3-zoo style: ``policy``, ``n_envs``, ``n_timesteps``,
 ``env_kwargs``, ``policy_kwargs``, ``lin_<value>`` learning-rate schedules, and
-the algorithm's own arguments), ``SubprocVecEnv`` over ``n_envs`` envs each
+the algorithm's own arguments; plus ``decision_interval``, default 1: env steps
+per agent decision, see :mod:`agents.decision`), ``SubprocVecEnv`` over ``n_envs`` envs each
 wrapped in a ``Monitor`` that logs ``crashed`` (``DIR/monitor/*.monitor.csv``;
 TensorBoard also gets ``rollout/crash_rate``), TensorBoard logs, an
 ``EvalCallback`` on a separate env, periodic checkpoints and a progress bar.
@@ -12,7 +13,8 @@ Writes into ``DIR``:
 
 * ``model.zip``: the final policy, and ``model.json`` beside it: the env id and
   ``env_kwargs`` it was trained on (``rhs-slam evaluate`` / ``demo`` default to
-  them), with the settings and timings of the run;
+  them) and its ``decision_interval`` (evaluation holds each action that long),
+  with the settings and timings of the run;
 * ``best_model.zip`` / ``best_model.json``: the best policy of the periodic evaluations;
 * ``checkpoints/``, ``tb/`` (TensorBoard), ``eval/evaluations.npz``, ``monitor/``;
 * ``train.json``: the same summary as ``model.json``.
@@ -31,6 +33,7 @@ import sys
 import time
 import warnings
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +42,7 @@ import yaml
 ALGOS = ("ppo", "dqn")
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 #: keys of a hyperparameter entry that are not arguments of the algorithm class
-META_KEYS = ("policy", "n_envs", "n_timesteps", "env_kwargs")
+META_KEYS = ("policy", "n_envs", "n_timesteps", "env_kwargs", "decision_interval")
 
 
 def load_hyperparams(algo: str, env_id: str, path: str | Path | None = None) -> dict[str, Any]:
@@ -170,13 +173,21 @@ def make_vec_env(
     env_kwargs: dict | None = None,
     subprocess: bool = True,
     monitor_dir: str | Path | None = None,
+    decision_interval: int = 1,
 ):
-    """``n_envs`` copies of ``env_id`` (``Monitor`` logging ``crashed``), in subprocesses when n_envs > 1."""
+    """``n_envs`` copies of ``env_id`` (``Monitor`` logging ``crashed``), in subprocesses when n_envs > 1.
+
+    ``decision_interval`` > 1 wraps each ``Monitor`` in :class:`agents.decision.HoldAction`
+    (the monitor still counts env steps and per-step rewards).
+    """
     from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
+    from agents.decision import HoldAction, check_decision_interval
+
     if n_envs < 1:
         raise ValueError(f"n_envs must be >= 1, got {n_envs}")
+    k = check_decision_interval(decision_interval)
     vec_cls = SubprocVecEnv if (subprocess and n_envs > 1) else DummyVecEnv
     if vec_cls is SubprocVecEnv:
         _preload_forkserver()
@@ -188,6 +199,7 @@ def make_vec_env(
         vec_env_cls=vec_cls,
         monitor_dir=str(monitor_dir) if monitor_dir else None,
         monitor_kwargs={"info_keywords": ("crashed",)},
+        wrapper_class=partial(HoldAction, k=k) if k > 1 else None,
     )
 
 
@@ -232,7 +244,9 @@ def train(
 
     ``timesteps=None`` takes ``n_timesteps`` from the YAML. ``env_kwargs`` are
     merged over the YAML's. ``eval_freq`` / ``checkpoint_freq`` count env steps
-    over all envs (0 disables). ``resume`` continues from the checkpoint with the
+    over all envs (0 disables). With a ``decision_interval`` k in the YAML the agent
+    acts every k env steps (:class:`agents.decision.HoldAction`): ``timesteps`` stays
+    the env-step budget, i.e. ``ceil(timesteps / k)`` decisions. ``resume`` continues from the checkpoint with the
     most steps in ``out/checkpoints`` (see :mod:`agents.resume`; SIGTERM / SIGINT
     stop a run there, ``summary["interrupted"]`` is then True). ``torch_threads`` sets torch's intra-op
     threads in this process (1 by default: the envs need the other cores);
@@ -250,7 +264,9 @@ def train(
     _limit_threads(torch_threads)
     if run.n_envs > 1:
         _check_env_kwargs(env_id, run.env_kwargs)
-    venv = make_vec_env(env_id, run.n_envs, seed, run.env_kwargs, monitor_dir=out / "monitor")
+    k = run.decision_interval
+    venv = make_vec_env(env_id, run.n_envs, seed, run.env_kwargs, monitor_dir=out / "monitor", decision_interval=k)
+    decisions = -(-run.timesteps // k)
     eval_env = None
     try:
         cls = {"ppo": PPO, "dqn": DQN}[algo]
@@ -267,13 +283,13 @@ def train(
         done = int(model.num_timesteps)
         stopper = StopOnSignal()
         callbacks, eval_cb, eval_env = _callbacks(algo, env_id, run, seed, out, eval_freq, eval_episodes,
-                                                  checkpoint_freq, max(0, run.timesteps - done) if progress else None)
+                                                  checkpoint_freq, max(0, decisions - done) if progress else None)
         t0 = time.perf_counter()
         with warnings.catch_warnings():
             # the eval env is a DummyVecEnv, the training env a SubprocVecEnv: same envs, on purpose
             warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
-            if run.timesteps > done:
-                model.learn(total_timesteps=run.timesteps - done, callback=CallbackList([*callbacks, stopper]),
+            if decisions > done:
+                model.learn(total_timesteps=decisions - done, callback=CallbackList([*callbacks, stopper]),
                             tb_log_name=algo, reset_num_timesteps=done == 0)
         wall = max(time.perf_counter() - t0, 1e-9)
         if stopper.stopped:
@@ -312,12 +328,16 @@ class _RunSettings:
     env_kwargs: dict[str, Any]
     hp: dict[str, Any]  # constructor kwargs of the algorithm (schedules and policy_kwargs resolved)
     hp_record: dict[str, Any]  # the YAML as written, for the summary
+    decision_interval: int = 1  # env steps per agent decision (agents.decision.HoldAction)
 
 
 def _run_settings(algo: str, env_id: str, timesteps: int | None, n_envs: int | None,
                   hyperparams: str | Path | None, env_kwargs: dict | None) -> _RunSettings:
+    from agents.decision import check_decision_interval
+
     hp = load_hyperparams(algo, env_id, hyperparams)
     policy = hp.pop("policy")
+    k = check_decision_interval(hp.pop("decision_interval", 1))
     yaml_steps = hp.pop("n_timesteps", None)
     steps = int(timesteps if timesteps is not None else (yaml_steps or 0))
     if steps < 1:
@@ -329,7 +349,7 @@ def _run_settings(algo: str, env_id: str, timesteps: int | None, n_envs: int | N
     kwargs = {**(hp.pop("env_kwargs", None) or {}), **(env_kwargs or {})}
     hp["policy_kwargs"] = _resolve_policy_kwargs(hp.get("policy_kwargs", {}))
     record = {k: v for k, v in load_hyperparams(algo, env_id, hyperparams).items() if k not in META_KEYS}
-    return _RunSettings(policy, steps, envs, kwargs, _resolve_schedules(hp), record)
+    return _RunSettings(policy, steps, envs, kwargs, _resolve_schedules(hp), record, k)
 
 
 def _callbacks(algo: str, env_id: str, run: _RunSettings, seed: int, out: Path, eval_freq: int,
@@ -342,12 +362,14 @@ def _callbacks(algo: str, env_id: str, run: _RunSettings, seed: int, out: Path, 
     callbacks: list = [CrashRateCallback()]
     eval_cb = eval_env = None
     if eval_freq and eval_freq > 0:
-        eval_env = make_vec_env(env_id, 1, seed + 10_000, run.env_kwargs, subprocess=False)
-        eval_cb = EvalCallback(eval_env, n_eval_episodes=eval_episodes, eval_freq=max(1, eval_freq // run.n_envs),
+        k = run.decision_interval
+        eval_env = make_vec_env(env_id, 1, seed + 10_000, run.env_kwargs, subprocess=False, decision_interval=k)
+        eval_cb = EvalCallback(eval_env, n_eval_episodes=eval_episodes,
+                               eval_freq=max(1, eval_freq // (run.n_envs * k)),
                                best_model_save_path=str(out), log_path=str(out / "eval"), deterministic=True, verbose=0)
         callbacks.append(eval_cb)
     if checkpoint_freq and checkpoint_freq > 0:
-        callbacks.append(CheckpointCallback(save_freq=max(1, checkpoint_freq // run.n_envs),
+        callbacks.append(CheckpointCallback(save_freq=max(1, checkpoint_freq // (run.n_envs * run.decision_interval)),
                                             save_path=str(out / "checkpoints"), name_prefix=algo))
     if progress_total is not None:
         callbacks.append(TqdmCallback(progress_total))
@@ -363,11 +385,14 @@ def _summary(algo: str, env_id: str, run: _RunSettings, seed: int, model, eval_c
         "env_id": env_id.split(":", 1)[-1],
         "env_kwargs": run.env_kwargs,
         "policy": run.policy,
-        "timesteps": int(model.num_timesteps),
+        # env steps: decisions x decision_interval (an episode cut short by a crash takes fewer)
+        "timesteps": int(model.num_timesteps) * run.decision_interval,
+        "decision_interval": run.decision_interval,
+        "decisions": int(model.num_timesteps),
         "n_envs": run.n_envs,
         "seed": seed,
         "wall_time_s": round(wall, 1),
-        "steps_per_s": round(model.num_timesteps / wall, 2),
+        "steps_per_s": round(model.num_timesteps * run.decision_interval / wall, 2),
         "hyperparams": run.hp_record,
         "recent_episodes": {
             "count": len(recent),
@@ -377,7 +402,7 @@ def _summary(algo: str, env_id: str, run: _RunSettings, seed: int, model, eval_c
         },
         "best_eval_mean_return": None if best is None or best == float("-inf") else best,
         "model": str(out / "model.zip"),
-        "resumed_from_steps": done,
+        "resumed_from_steps": done * run.decision_interval,
         "interrupted": interrupted,
     }
 
@@ -417,9 +442,13 @@ def train_rllib_backend(
 
     if num_env_runners is not None and int(num_env_runners) < 0:
         raise ValueError(f"num_env_runners must be >= 0, got {num_env_runners}")
-    require_ray()
+    from agents.decision import check_decision_interval
+
     hp = load_hyperparams("ppo", env_id, hyperparams)
     hp.pop("policy")
+    if check_decision_interval(hp.pop("decision_interval", 1)) != 1:
+        raise ValueError("decision_interval > 1 is for the sb3 backend; the rllib backend decides every env step")
+    require_ray()
     yaml_steps = hp.pop("n_timesteps", None)
     timesteps = int(timesteps if timesteps is not None else (yaml_steps or 0))
     if timesteps < 1:

@@ -13,7 +13,8 @@ the commit, command line and full config.
 
 Variants (``VARIANTS``): reward terms and normalisation (highway-env's
 ``collision_reward``, ``high_speed_reward``, ``normalize_reward``), discount,
-entropy bonus, and the observation (ground-truth Kinematics on ``rhs-highway-v0``
+entropy bonus, the decision interval (``hold5_*``: the action held for 5 env
+steps, :mod:`agents.decision`; evaluation still scores every env step), and the observation (ground-truth Kinematics on ``rhs-highway-v0``
 vs radar point cloud + SLAM on ``rhs-highway-slam-v0`` with the 5-degree grid).
 """
 
@@ -38,6 +39,7 @@ DEFAULT_REWARD = {"collision_reward": -1, "high_speed_reward": 0.4, "right_lane_
                   "reward_speed_range": [20, 30], "normalize_reward": True}  # fmt: skip
 NO_NORM = {"normalize_reward": False}
 SPEED = {"normalize_reward": False, "high_speed_reward": 1.0, "right_lane_reward": 0.0, "collision_reward": -5}
+HOLD5 = {"decision_interval": 5, "gamma": 0.8}
 #: name -> (env id, training env kwargs, hyperparameter overrides)
 VARIANTS: dict[str, tuple[str, dict, dict]] = {
     "base_truth": (TRUTH, {}, {}),
@@ -51,6 +53,10 @@ VARIANTS: dict[str, tuple[str, dict, dict]] = {
     "grid_slam": (SLAM, FIVE_DEG, {"policy_kwargs": {"features_extractor_class": "grid", "net_arch": [64, 64]}}),
     "grid_no_norm_slam": (SLAM, {**FIVE_DEG, **NO_NORM},
                           {"policy_kwargs": {"features_extractor_class": "grid", "net_arch": [64, 64]}}),
+    # a decision every 5 env steps (1 Hz, highway-env's own rate; agents.decision.HoldAction), with
+    # highway-env's 1 Hz discount 0.8; --timesteps stays the env-step budget (timesteps / 5 decisions)
+    "hold5_truth": (TRUTH, {}, HOLD5),
+    "hold5_slam": (SLAM, FIVE_DEG, HOLD5),
 }
 
 
@@ -91,6 +97,8 @@ def run_variant(name: str, timesteps: int, seed: int, episodes: int, eval_seed: 
         "eval_env_kwargs": eval_kwargs,
         "hyperparams": entry,
         "timesteps": s["timesteps"],
+        "decision_interval": s.get("decision_interval", 1),
+        "decisions": s.get("decisions", s["timesteps"]),
         "seed": seed,
         "train_wall_s": round(train_wall, 1),
         "train_recent_episodes": s["recent_episodes"],
@@ -112,7 +120,9 @@ def _action_histogram(policy: Path, env_id: str, kwargs: dict, seed: int) -> dic
     from agents.evaluate import load_policy
 
     env = gym.make(env_id, **kwargs)
-    model = load_policy(policy, env)
+    model = load_policy(policy, env)  # a HeldPolicy for a decision_interval > 1
+    if callable(getattr(model, "reset", None)):
+        model.reset()
     obs, _ = env.reset(seed=seed)
     names = env.unwrapped.action_type.actions
     counts: dict[str, int] = {}

@@ -7,8 +7,15 @@ import importlib
 
 import pytest
 
-MODULES = ("rhs_common.validation", "rhs_common.timing", "rhs_env.radar_config", "rhs_env.wrappers", "slam.wrapper",
-           "slam.metrics_info")
+MODULES = (
+    "rhs_common.validation",
+    "rhs_common.timing",
+    "rhs_env.radar_config",
+    "rhs_env.wrappers",
+    "slam.wrapper",
+    "slam.metrics_info",
+    "agents.decision",
+)
 
 
 @pytest.mark.parametrize("name", MODULES)

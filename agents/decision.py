@@ -1,0 +1,136 @@
+"""A decision interval: the agent decides every ``k`` env steps (issue 12, goal 1).
+
+The envs step at 5 Hz (one radar scan and SLAM cycle per step, 200 steps per
+40 s episode), five times highway-env's usual 1 Hz decision rate. Meta-actions
+(FASTER, SLOWER, lane changes) take effect over seconds, so a decision every
+step stretches credit assignment over five times as many decisions.
+
+* :class:`HoldAction` (training): one agent step = ``k`` env steps with the
+  action held; the reward is the sum of the ``k`` rewards, the episode stops
+  early on ``terminated`` / ``truncated``, and the last observation and info are
+  returned (``info["held_steps"]``: the env steps taken). SLAM keeps cycling at
+  5 Hz underneath: only the agent's decisions are sparser.
+* :class:`HeldPolicy` (evaluation): a policy that re-decides every ``k``
+  ``predict`` calls and repeats its last action otherwise, so a policy trained
+  with :class:`HoldAction` is still scored per env step on the same seeds.
+  :func:`agents.evaluate.run_episode` calls its :meth:`HeldPolicy.reset` at
+  every episode start.
+
+The interval is the ``decision_interval`` key of a hyperparameter entry
+(``agents/hyperparams/ppo.yml`` style, default 1); ``rhs-slam train`` saves it
+in the JSON beside the model zip and :func:`agents.evaluate.load_policy` reads
+it back.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+
+#: largest accepted interval (a 40 s episode at 5 Hz has 200 steps)
+MAX_DECISION_INTERVAL = 1000
+
+
+def check_decision_interval(value: Any) -> int:
+    """``value`` as an int in ``[1, MAX_DECISION_INTERVAL]``, else ``ValueError`` naming ``decision_interval``.
+
+    Example:
+        >>> check_decision_interval(5)
+        5
+        >>> check_decision_interval(0)
+        Traceback (most recent call last):
+        ...
+        ValueError: decision_interval must be an integer in [1, 1000] (env steps per decision), got 0
+    """
+    ok = isinstance(value, int) and not isinstance(value, bool)
+    if not ok or not 1 <= value <= MAX_DECISION_INTERVAL:
+        raise ValueError(f"decision_interval must be an integer in [1, {MAX_DECISION_INTERVAL}] "
+                         f"(env steps per decision), got {value!r}")  # fmt: skip
+    return int(value)
+
+
+class HoldAction(gym.Wrapper):
+    """Hold each action for ``k`` env steps; the reward is their sum.
+
+    Stops early when the episode ends (``terminated`` or ``truncated``) and
+    returns the last observation and info, with ``info["held_steps"]`` the env
+    steps actually taken. Spaces are the env's. Wrap it outside a ``Monitor``
+    so episode returns and lengths stay counted per env step.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> env = HoldAction(gym.make("CartPole-v1"), 5)
+        >>> obs, info = env.reset(seed=0)
+        >>> obs, reward, terminated, truncated, info = env.step(0)
+        >>> reward, info["held_steps"]
+        (5.0, 5)
+        >>> while not (terminated or truncated):
+        ...     obs, reward, terminated, truncated, info = env.step(0)
+        >>> terminated, info["held_steps"] < 5, reward == info["held_steps"]
+        (True, True, True)
+    """
+
+    def __init__(self, env: gym.Env, k: int):
+        super().__init__(env)
+        self.k = check_decision_interval(k)
+
+    def step(self, action):
+        total, taken = 0.0, 0
+        while True:
+            obs, reward, terminated, truncated, info = self.env.step(action)
+            total += float(reward)
+            taken += 1
+            if terminated or truncated or taken == self.k:
+                break
+        info = {**info, "held_steps": taken}
+        return obs, total, terminated, truncated, info
+
+
+class HeldPolicy:
+    """A policy (``predict(obs, deterministic)``) that decides every ``k`` calls and repeats its action between.
+
+    Call :meth:`reset` at the start of each episode (``run_episode`` does), so
+    the first step of every episode is a fresh decision.
+
+    Example:
+        >>> class Count:
+        ...     calls = 0
+        ...     def predict(self, obs, deterministic=True):
+        ...         self.calls += 1
+        ...         return self.calls, None
+        >>> policy = HeldPolicy(Count(), 3)
+        >>> [policy.predict(None)[0] for _ in range(7)]
+        [1, 1, 1, 2, 2, 2, 3]
+        >>> policy.reset()
+        >>> policy.predict(None)[0]
+        4
+    """
+
+    def __init__(self, model, k: int):
+        self.model, self.k = model, check_decision_interval(k)
+        self._action: Any = None
+        self._state: Any = None
+        self._left = 0
+
+    def reset(self) -> None:
+        """Forget the held action: the next ``predict`` decides."""
+        self._action, self._state, self._left = None, None, 0
+        if hasattr(self.model, "reset"):
+            self.model.reset()
+
+    def predict(self, obs, *args, **kwargs):
+        if self._left <= 0:
+            self._action, self._state = self.model.predict(obs, *args, **kwargs)
+            self._left = self.k
+        self._left -= 1
+        return self._action, self._state
+
+    def __getattr__(self, name):
+        return getattr(self.model, name)
+
+
+def held(model, k: int):
+    """``model`` itself for ``k == 1``, else a :class:`HeldPolicy` over it."""
+    k = check_decision_interval(k)
+    return model if k == 1 else HeldPolicy(model, k)
