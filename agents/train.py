@@ -252,10 +252,9 @@ def train(
     threads in this process (1 by default: the envs need the other cores);
     worker processes get ``OMP_NUM_THREADS=1`` unless it is set already.
     """
-    from stable_baselines3 import DQN, PPO
     from stable_baselines3.common.callbacks import CallbackList
 
-    from agents.resume import StopOnSignal, latest_checkpoint, load_checkpoint, save_checkpoint
+    from agents.resume import StopOnSignal, save_checkpoint
 
     run = _run_settings(algo, env_id, timesteps, n_envs, hyperparams, env_kwargs)
     check_train_args(run.timesteps, run.n_envs, seed, eval_freq, eval_episodes, checkpoint_freq)
@@ -269,17 +268,7 @@ def train(
     decisions = -(-run.timesteps // k)
     eval_env = None
     try:
-        cls = {"ppo": PPO, "dqn": DQN}[algo]
-        tb = str(out / "tb") if _tensorboard_available() else None
-        if tb is None:
-            print("rhs-slam train: tensorboard is not installed; no TensorBoard logs", file=sys.stderr)
-        found = latest_checkpoint(out, algo) if resume else None
-        if found is not None:
-            schedules = {k: v for k, v in run.hp.items() if k in ("learning_rate", "clip_range")}
-            model = load_checkpoint(cls, found[0], venv, custom_objects=schedules, tensorboard_log=tb)
-            print(f"rhs-slam train: resuming from {found[0]} ({model.num_timesteps} steps)", file=sys.stderr)
-        else:
-            model = cls(run.policy, venv, seed=seed, verbose=0, tensorboard_log=tb, device="cpu", **run.hp)
+        model = _new_or_resumed_model(algo, run, venv, seed, out, resume)
         done = int(model.num_timesteps)
         stopper = StopOnSignal()
         callbacks, eval_cb, eval_env = _callbacks(algo, env_id, run, seed, out, eval_freq, eval_episodes,
@@ -306,6 +295,25 @@ def train(
     if not stopper.stopped:
         _write_summary(out, summary)
     return summary
+
+
+def _new_or_resumed_model(algo: str, run: _RunSettings, venv: Any, seed: int, out: Path, resume: bool) -> Any:
+    """A fresh ``algo`` model on ``venv``, or (``resume``) the checkpoint with the most steps in ``out/checkpoints``."""
+    from stable_baselines3 import DQN, PPO
+
+    from agents.resume import latest_checkpoint, load_checkpoint
+
+    cls = {"ppo": PPO, "dqn": DQN}[algo]
+    tb = str(out / "tb") if _tensorboard_available() else None
+    if tb is None:
+        print("rhs-slam train: tensorboard is not installed; no TensorBoard logs", file=sys.stderr)
+    found = latest_checkpoint(out, algo) if resume else None
+    if found is None:
+        return cls(run.policy, venv, seed=seed, verbose=0, tensorboard_log=tb, device="cpu", **run.hp)
+    schedules = {k: v for k, v in run.hp.items() if k in ("learning_rate", "clip_range")}
+    model = load_checkpoint(cls, found[0], venv, custom_objects=schedules, tensorboard_log=tb)
+    print(f"rhs-slam train: resuming from {found[0]} ({model.num_timesteps} steps)", file=sys.stderr)
+    return model
 
 
 def _limit_threads(torch_threads: int | None) -> None:
