@@ -257,14 +257,30 @@ class RadarSystem:
         return rr, h * amp[None, :] * np.exp(1j * omega[None, :] * slot_t), omega, f_tot
 
     @staticmethod
-    def _mix(rr: np.ndarray, g_mat: np.ndarray, e_mat: np.ndarray, out: np.ndarray) -> None:
-        """``out[r] = G_r @ E_r`` (4, I, X): the tones of radar r only (rr sorted), one batched product."""
+    def _mix(rr: np.ndarray, g_mat: np.ndarray, e_mat: np.ndarray | tuple[np.ndarray, np.ndarray],
+             out: np.ndarray) -> None:
+        """``out[r] = G_r @ E_r`` (4, I, X): the tones of radar r only (rr sorted), one batched product.
+
+        ``e_mat``: E (P, X), or the factors ``(e_slow (P, C), e_fast (P, N))`` of ``E[p, (c, n)] =
+        e_slow[p, c] e_fast[p, n]``, multiplied straight into the complex64 operand (the same values).
+        """
         counts = np.bincount(rr, minlength=4)
-        slot = np.arange(rr.size) - np.concatenate([[0], np.cumsum(counts)[:-1]])[rr]
+        start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        slot = np.arange(rr.size) - start[rr]
+        width = e_mat.shape[1] if isinstance(e_mat, np.ndarray) else e_mat[0].shape[1] * e_mat[1].shape[1]
         gp = np.zeros((4, g_mat.shape[0], counts.max()), np.complex64)
-        ep = np.zeros((4, counts.max(), e_mat.shape[1]), np.complex64)
+        ep = np.empty((4, counts.max(), width), np.complex64)
         gp[rr, :, slot] = g_mat.T
-        ep[rr, slot] = e_mat
+        if isinstance(e_mat, np.ndarray):
+            ep[...] = 0
+            ep[rr, slot] = e_mat
+        else:
+            e_slow, e_fast = e_mat
+            for r in range(4):
+                lo, hi = int(start[r]), int(start[r] + counts[r])
+                np.multiply(e_slow[lo:hi, :, None], e_fast[lo:hi, None, :],
+                            out=ep[r, : hi - lo].reshape(hi - lo, e_slow.shape[1], e_fast.shape[1]))
+                ep[r, hi - lo:] = 0
         np.matmul(gp, ep, out=out)
 
     def synthesize(self, scatterers: Scatterers, occluders: Occluders | None = None,
@@ -277,13 +293,14 @@ class RadarSystem:
         cfg = self.config
         i_slots, c, n = cfg.scan.slots, cfg.waveform.chirps_per_slot, cfg.waveform.samples
         y = np.empty((4, i_slots, c * n), np.complex64) if out is None else out.reshape(4, i_slots, c * n)
-        y[...] = 0
         tones = self._echoes(scatterers, occluders)
-        if tones is not None:
+        if tones is None:
+            y[...] = 0
+        else:  # the product G @ E writes every sample of y
             rr, g_mat, omega, f_tot = tones
             e_fast = np.exp(2j * np.pi * f_tot[:, None] * self._n[None, :] / cfg.waveform.sample_rate_hz)  # (P, N)
             e_slow = np.exp(1j * omega[:, None] * np.arange(c)[None, :])  # (P, C)
-            self._mix(rr, g_mat, (e_slow[:, :, None] * e_fast[:, None, :]).reshape(rr.size, c * n), y)
+            self._mix(rr, g_mat, (e_slow, e_fast), y)
         if cfg.link.add_noise:
             # circular complex Gaussian CN(0, sigma_n^2) by the polar method: |eps|^2 ~ Exp(sigma_n^2)
             # from -ln(1 - u1), phase 2 pi u2 (float32 uniforms: the radius tail is cut at P = 2^-24)
