@@ -207,9 +207,10 @@ class RadarSystem:
         unit = d / np.maximum(rng_m, 1e-12)[..., None]
         return rng_m, ang, unit
 
-    def visible(self, scatterers: Scatterers, occluders: Occluders | None = None) -> np.ndarray:
-        """(4, K) bool: inside radar r's sector and range interval and in line of sight."""
-        rng_m, ang, _ = self.radar_frame(scatterers.xy)
+    def visible(self, scatterers: Scatterers, occluders: Occluders | None = None,
+                frame: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+        """(4, K) bool: inside radar r's sector and range interval and in line of sight (``frame``: :meth:`radar_frame`'s)."""
+        rng_m, ang, _ = self.radar_frame(scatterers.xy) if frame is None else frame
         half = np.deg2rad(self.config.scan.sector_deg) / 2
         fov = (np.abs(ang) <= half) & (rng_m <= self.config.max_range_m) & (rng_m >= self.config.min_range_m)
         return np.asarray(fov & visible_mask(self.positions, scatterers, occluders), dtype=bool)
@@ -237,11 +238,12 @@ class RadarSystem:
         cfg = self.config
         if not len(scatterers):
             return None
-        rr, kk = np.nonzero(self.visible(scatterers, occluders))
+        frame = self.radar_frame(scatterers.xy)
+        rr, kk = np.nonzero(self.visible(scatterers, occluders, frame))
         if rr.size == 0:
             return None
         lam, i_slots = cfg.wavelength, cfg.scan.slots
-        rng_m, ang, unit = self.radar_frame(scatterers.xy)
+        rng_m, ang, unit = frame
         r_k, th_k = rng_m[rr, kk], ang[rr, kk]
         v_k = np.einsum("pd,pd->p", unit[rr, kk], scatterers.velocity[kk])  # radial, m/s
         phase0 = self.rng.uniform(0.0, 2 * np.pi, rr.size)
