@@ -309,6 +309,34 @@ class AngleDictionary:
         wr = (antenna.rx_weights / np.linalg.norm(antenna.rx_weights, axis=1, keepdims=True)).T
         self._w2 = np.ascontiguousarray(np.concatenate([wt, wr], axis=1))
         self._x = 2.0 * np.pi * antenna.positions_wl
+        self._steer_cache: dict[int, np.ndarray] = {}
+
+    def _steering(self, th: np.ndarray) -> np.ndarray:
+        """``steering(positions_wl, th)`` (T, M) for a flat th, rows cached per angle (its bit pattern).
+
+        The OMP evaluates the atoms at the same angle several times (the grid angle and
+        the first Newton step, a refined angle and the next pass, the uncertainty of the
+        points); ``steering`` is element-wise, so a cached row is the row it would compute.
+        """
+        cache = self._steer_cache
+        keys = th.view(np.int64).tolist()
+        rows = [cache.get(k) for k in keys]
+        miss = [n for n, r in enumerate(rows) if r is None]
+        if len(miss) == len(keys):
+            out = steering(self.antenna.positions_wl, th)
+        else:
+            out = np.empty((th.size, self._x.size), complex)
+            for n, r in enumerate(rows):
+                if r is not None:
+                    out[n] = r
+            if miss:
+                out[miss] = steering(self.antenna.positions_wl, th[miss])
+        if len(cache) + len(miss) > 8192:  # bounded: angles of older scans are not seen again
+            cache.clear()
+        for n in miss:
+            cache[keys[n]] = out[n]
+        out.flags.writeable = False  # its rows are cached
+        return out
 
     def atoms(self, theta: np.ndarray, order: int = 0) -> list[np.ndarray]:
         """``[h, dh/dtheta, d2h/dtheta2][:order + 1]``, each (I,) + theta.shape, complex128.
@@ -324,7 +352,7 @@ class AngleDictionary:
     def _atom_rows(self, th: np.ndarray, order: int) -> list[np.ndarray]:
         """:meth:`atoms` for a flat theta (T,), each (T, I) (not transposed)."""
         n_t, n_i = th.size, self._w2.shape[1] // 2
-        a = steering(self.antenna.positions_wl, th)  # (T, M)
+        a = self._steering(th)  # (T, M)
         if order == 0:
             tr = a @ self._w2
             return [tr[:, n_i:] * tr[:, :n_i]]
