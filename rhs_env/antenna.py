@@ -211,17 +211,22 @@ class ArrayAntenna:
     def slots(self) -> int:
         return self.angles_deg.size
 
-    def tx_gain(self, theta_rad: np.ndarray, normalized: bool = True) -> np.ndarray:
-        """One-way Tx gain t_i(theta) = a(theta)^T w_T,i for every slot; shape (I,) + theta.shape."""
-        a = steering(self.positions_wl, theta_rad)  # (..., M)
+    def tx_gain(self, theta_rad: np.ndarray, normalized: bool = True, a: np.ndarray | None = None) -> np.ndarray:
+        """One-way Tx gain t_i(theta) = a(theta)^T w_T,i for every slot; shape (I,) + theta.shape.
+
+        ``a``: the steering vectors ``steering(positions_wl, theta_rad)`` when the caller has them.
+        """
+        if a is None:
+            a = steering(self.positions_wl, theta_rad)  # (..., M)
         t = np.tensordot(self.tx_weights, a, axes=([1], [a.ndim - 1]))
         if normalized:
             t = t / self._tx_norm.reshape((-1,) + (1,) * (t.ndim - 1))
         return t
 
-    def rx_gain(self, theta_rad: np.ndarray, normalized: bool = True) -> np.ndarray:
-        """One-way Rx gain r_i(theta) = w_R,i^T a(theta) for every slot; shape (I,) + theta.shape."""
-        a = steering(self.positions_wl, theta_rad)
+    def rx_gain(self, theta_rad: np.ndarray, normalized: bool = True, a: np.ndarray | None = None) -> np.ndarray:
+        """One-way Rx gain r_i(theta) = w_R,i^T a(theta) for every slot; shape (I,) + theta.shape (``a`` as in tx_gain)."""
+        if a is None:
+            a = steering(self.positions_wl, theta_rad)
         r = np.tensordot(self.rx_weights, a, axes=([1], [a.ndim - 1]))
         if normalized:
             r = r / self._rx_norm.reshape((-1,) + (1,) * (r.ndim - 1))
@@ -229,7 +234,8 @@ class ArrayAntenna:
 
     def two_way_gain(self, theta_rad: np.ndarray, normalized: bool = True) -> np.ndarray:
         """h_i(theta) = r_i(theta) t_i(theta), shape (I,) + theta.shape (the dictionary H for a theta grid)."""
-        return self.rx_gain(theta_rad, normalized) * self.tx_gain(theta_rad, normalized)
+        a = steering(self.positions_wl, theta_rad)  # one steering vector for both gains
+        return self.rx_gain(theta_rad, normalized, a) * self.tx_gain(theta_rad, normalized, a)
 
 
 def check_amplitudes(name: str, psi: np.ndarray, slots: int, elements: int) -> np.ndarray:

@@ -300,9 +300,18 @@ class FootprintDetector:
         return self._f.shape[0]
 
     def statistic(self, spec: np.ndarray) -> np.ndarray:
-        """T (R, J, K) float32: footprint energies of spectra ``spec`` (R, I, C, K) (one matmul ``F^T E``)."""
-        e = np.einsum("ricb,ricb->rib", spec.real, spec.real)
-        e += np.einsum("ricb,ricb->rib", spec.imag, spec.imag)
+        """T (R, J, K) float32: footprint energies of spectra ``spec`` (R, I, C, K) (one matmul ``F^T E``).
+
+        ``E = sum_c re^2 + sum_c im^2``: one einsum over the interleaved (re, im) float32 view
+        (the same sums over c as two einsums on the strided real and imaginary parts, in half the time).
+        """
+        if spec.dtype == np.complex64 and spec.strides[-1] == spec.itemsize:
+            f = spec.view(np.float32)  # (R, I, C, 2 K): re, im interleaved
+            p = np.einsum("ricb,ricb->rib", f, f)
+            e = p[..., 0::2] + p[..., 1::2]
+        else:
+            e = np.einsum("ricb,ricb->rib", spec.real, spec.real)
+            e += np.einsum("ricb,ricb->rib", spec.imag, spec.imag)
         return np.matmul(self._f, e)
 
     def threshold(self, stat: np.ndarray, r: np.ndarray, j: np.ndarray, k: np.ndarray) -> np.ndarray:

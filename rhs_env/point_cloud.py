@@ -309,6 +309,34 @@ class AngleDictionary:
         wr = (antenna.rx_weights / np.linalg.norm(antenna.rx_weights, axis=1, keepdims=True)).T
         self._w2 = np.ascontiguousarray(np.concatenate([wt, wr], axis=1))
         self._x = 2.0 * np.pi * antenna.positions_wl
+        self._steer_cache: dict[int, np.ndarray] = {}
+
+    def _steering(self, th: np.ndarray) -> np.ndarray:
+        """``steering(positions_wl, th)`` (T, M) for a flat th, rows cached per angle (its bit pattern).
+
+        The OMP evaluates the atoms at the same angle several times (the grid angle and
+        the first Newton step, a refined angle and the next pass, the uncertainty of the
+        points); ``steering`` is element-wise, so a cached row is the row it would compute.
+        """
+        cache = self._steer_cache
+        keys = th.view(np.int64).tolist()
+        rows = [cache.get(k) for k in keys]
+        miss = [n for n, r in enumerate(rows) if r is None]
+        if len(miss) == len(keys):
+            out = steering(self.antenna.positions_wl, th)
+        else:
+            out = np.empty((th.size, self._x.size), complex)
+            for n, r in enumerate(rows):
+                if r is not None:
+                    out[n] = r
+            if miss:
+                out[miss] = steering(self.antenna.positions_wl, th[miss])
+        if len(cache) + len(miss) > 8192:  # bounded: angles of older scans are not seen again
+            cache.clear()
+        for n in miss:
+            cache[keys[n]] = out[n]
+        out.flags.writeable = False  # its rows are cached
+        return out
 
     def atoms(self, theta: np.ndarray, order: int = 0) -> list[np.ndarray]:
         """``[h, dh/dtheta, d2h/dtheta2][:order + 1]``, each (I,) + theta.shape, complex128.
@@ -319,12 +347,15 @@ class AngleDictionary:
         """
         th = np.asarray(theta, dtype=float)
         shp = th.shape
-        th = th.reshape(-1)
+        return [o.T.reshape((-1,) + shp) for o in self._atom_rows(th.reshape(-1), order)]
+
+    def _atom_rows(self, th: np.ndarray, order: int) -> list[np.ndarray]:
+        """:meth:`atoms` for a flat theta (T,), each (T, I) (not transposed)."""
         n_t, n_i = th.size, self._w2.shape[1] // 2
-        a = steering(self.antenna.positions_wl, th)  # (T, M)
+        a = self._steering(th)  # (T, M)
         if order == 0:
             tr = a @ self._w2
-            return [(tr[:, n_i:] * tr[:, :n_i]).T.reshape((-1,) + shp)]
+            return [tr[:, n_i:] * tr[:, :n_i]]
         g1 = 1j * self._x[None, :] * np.cos(th)[:, None]  # (T, M)
         rows = [a, a * g1]
         if order >= 2:
@@ -334,7 +365,7 @@ class AngleDictionary:
         out = [r[0] * t[0], r[1] * t[0] + r[0] * t[1]]
         if order >= 2:
             out.append(r[2] * t[0] + 2 * r[1] * t[1] + r[0] * t[2])
-        return [o.T.reshape((-1,) + shp) for o in out]
+        return out
 
 
 def _newton_refine(dic: AngleDictionary, theta: np.ndarray, resid: np.ndarray, steps: int = 2) -> np.ndarray:
@@ -346,8 +377,12 @@ def _newton_refine(dic: AngleDictionary, theta: np.ndarray, resid: np.ndarray, s
     ``-f' / f''`` where f is concave, clipped to half a candidate spacing.
     """
     half = 0.5 * dic.step
+    n_i = dic.slots
     for _ in range(steps):
-        hs = np.stack(dic.atoms(theta, order=2), axis=0).transpose(0, 2, 1).conj()  # (3, D, I): conj h, h', h''
+        # (3, D, I): conj h, h', h'' (stored slot-major, (3, I, D), as the einsums below have always read it)
+        hs = np.empty((3, n_i, theta.size), complex).transpose(0, 2, 1)
+        for k, o in enumerate(dic._atom_rows(np.asarray(theta, dtype=float).reshape(-1), 2)):
+            np.conjugate(o, out=hs[k])
         g, g1, g2 = np.einsum("kdi,di->kd", hs, resid)
         hc = hs[0].conj()
         n, n1, n2a = np.einsum("kdi,di->kd", hs, hc).real  # ||h||^2, h'^H h, h''^H h
@@ -372,9 +407,10 @@ def _grid_refine(dic: AngleDictionary, resid: np.ndarray, center: np.ndarray | N
         corr = np.where(np.abs(cols - j0[:, None]) <= reach, corr, -1.0)
     j = np.argmax(corr, axis=1)
     rows = np.arange(corr.shape[0])
-    jm, jp = np.clip(j - 1, 0, n_c - 1), np.clip(j + 1, 0, n_c - 1)
-    lg = np.log(np.maximum(corr, 1e-30))
-    off = parabolic_offset(lg[rows, jm], lg[rows, j], lg[rows, jp])
+    jm, jp = np.maximum(j - 1, 0), np.minimum(j + 1, n_c - 1)
+    # log-parabola through the three samples (the log of those only)
+    lg = np.log(np.maximum(corr[rows[:, None], np.stack([jm, j, jp], 1)], 1e-30))
+    off = parabolic_offset(lg[:, 0], lg[:, 1], lg[:, 2])
     off = np.where((j == 0) | (j == n_c - 1), 0.0, off)
     return dic.candidates[j] + off * dic.step
 
@@ -463,6 +499,22 @@ def _fftfreq(n: int) -> np.ndarray:
     return np.fft.fftfreq(n)
 
 
+_TIME_INDEX: dict[bytes, tuple[np.ndarray, int, bool]] = {}
+
+
+def _time_index(tgrid: np.ndarray) -> tuple[np.ndarray, int, bool]:
+    """Integer chirp times ``t`` (flattened tgrid), ``n_t = max + 1`` and whether ``t`` is ``0..n_t-1`` (cached per grid)."""
+    key = tgrid.tobytes() + repr(tgrid.shape).encode()
+    hit = _TIME_INDEX.get(key)
+    if hit is None:
+        t = tgrid.reshape(-1).astype(int)
+        n_t = int(t.max()) + 1
+        hit = (t, n_t, bool(t.size == n_t and np.array_equal(t, np.arange(n_t))))
+        if len(_TIME_INDEX) < 64:
+            _TIME_INDEX[key] = hit
+    return hit
+
+
 @functools.lru_cache(maxsize=16)
 def _dtft_kernel(n_t: int, nfft: int, half: int) -> tuple[np.ndarray, np.ndarray]:
     """Frequencies ``w_j = 2 pi j / nfft``, ``|j| <= half``, and ``exp(-j w_j t)`` (n_t, 2 half + 1), complex64."""
@@ -483,10 +535,9 @@ def _doppler_grid_refine(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: 
     the FFT); a wide one takes the zero-padded FFT.
     """
     d = h.shape[0]
-    t = tgrid.reshape(-1).astype(int)
-    n_t = int(t.max()) + 1
+    t, n_t, consecutive = _time_index(tgrid)
     prod = (h.conj()[:, :, None] * r).reshape(d, -1)
-    if t.size == n_t and np.array_equal(t, np.arange(n_t)):
+    if consecutive:
         q = prod  # every chirp has its own time (Doppler phase runs across slots)
     else:
         q = np.zeros((d, n_t), complex)
@@ -496,16 +547,17 @@ def _doppler_grid_refine(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: 
     if 2 * half + 1 < nfft // 8:
         w, kern = _dtft_kernel(n_t, nfft, half)
         val = np.abs(q.astype(np.complex64) @ kern).astype(float) ** 2  # (D, 2 half + 1)
-        j = np.clip(np.argmax(np.where(np.abs(w)[None, :] <= span[:, None], val, -1.0), axis=1), 1, 2 * half - 1)
+        j = np.argmax(np.where(np.abs(w)[None, :] <= span[:, None], val, -1.0), axis=1)
+        j = np.minimum(np.maximum(j, 1), 2 * half - 1)
         jm, jp = j - 1, j + 1
     else:
         val = np.abs(sfft.fft(q, n=nfft, axis=1, workers=1)) ** 2  # bin k <-> omega = 2 pi k / nfft
         w = 2 * np.pi * _fftfreq(nfft)  # rad/chirp
         j = np.argmax(np.where(np.abs(w)[None, :] <= span[:, None], val, -1.0), axis=1)
         jm, jp = (j - 1) % nfft, (j + 1) % nfft
-    rows = np.arange(d)
-    lg = np.log(np.maximum(val, 1e-300))
-    off = parabolic_offset(lg[rows, jm], lg[rows, j], lg[rows, jp])
+    # log-parabola through the three samples (the log of those only)
+    lg = np.log(np.maximum(val[np.arange(d)[:, None], np.stack([jm, j, jp], 1)], 1e-300))
+    off = parabolic_offset(lg[:, 0], lg[:, 1], lg[:, 2])
     return w[j] + off * 2 * np.pi / nfft
 
 
@@ -532,16 +584,24 @@ def _joint_grid_search(dic: AngleDictionary, r: np.ndarray, w0: np.ndarray, span
     hbest, j = np.unravel_index(flat, corr.shape[1:])
     rows = np.arange(d)
     n_c = corr.shape[2]
-    line = np.log(np.maximum(corr[rows, hbest], 1e-30))
-    jm, jp = np.clip(j - 1, 0, n_c - 1), np.clip(j + 1, 0, n_c - 1)
-    off = parabolic_offset(line[rows, jm], line[rows, j], line[rows, jp])
+    jm, jp = np.maximum(j - 1, 0), np.minimum(j + 1, n_c - 1)
+    # log-parabola through the three samples (the log of those only)
+    line = np.log(np.maximum(corr[rows[:, None], hbest[:, None], np.stack([jm, j, jp], 1)], 1e-30))
+    off = parabolic_offset(line[:, 0], line[:, 1], line[:, 2])
     return om[rows, hbest], dic.candidates[j] + off * dic.step
 
 
-def _doppler_atoms(dic: AngleDictionary, theta: np.ndarray, omega: np.ndarray, tgrid: np.ndarray) -> np.ndarray:
-    """Atoms ``a_i,c = h_i(theta) exp(j omega t_ic)`` over slots x chirps, (P, I C) for theta, omega (P,)."""
+def _doppler_atoms(dic: AngleDictionary, theta: np.ndarray, omega: np.ndarray, tgrid: np.ndarray,
+                   phase: np.ndarray | None = None) -> np.ndarray:
+    """Atoms ``a_i,c = h_i(theta) exp(j omega t_ic)`` over slots x chirps, (P, I C) for theta, omega (P,).
+
+    ``phase``: ``exp(j omega t)`` (P, I, C) when the caller has it (the conjugate of the
+    ``exp(-j omega t)`` it compensated the data with: the same values, not recomputed).
+    """
     h = dic.atoms(theta)[0].T  # (P, I)
-    return (h[:, :, None] * np.exp(1j * omega[:, None, None] * tgrid[None])).reshape(theta.size, -1)
+    if phase is None:
+        phase = np.exp(1j * omega[:, None, None] * tgrid[None])
+    return (h[:, :, None] * phase).reshape(theta.size, -1)
 
 
 def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, theta: np.ndarray,
@@ -570,18 +630,21 @@ def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, thet
         atoms[dd, :, kk] = _doppler_atoms(dic, theta[dd, kk], domega[dd, kk], tgrid)
     a = atoms.copy()
     s = _lstsq(a, flat[..., None])[..., 0] if amp is None else amp.copy()
+    base = None  # exp(-j d_omega t) of the current d_omega, carried from the previous pass
     for _ in range(passes):
         fit = np.einsum("dkl,dl->dk", a, s)
         part = (flat[dd] - fit[dd] + a[dd, :, kk] * s[dd, kk][:, None]).reshape(-1, i, c)
-        base = np.exp(-1j * domega[dd, kk][:, None, None] * tgrid[None])
-        h = (a[dd, :, kk].reshape(-1, i, c) * base)[:, :, 0]  # h(theta) of the current atom, (P, I)
+        if base is None:
+            base = np.exp(-1j * domega[dd, kk][:, None, None] * tgrid[None])
+        h = a[dd, :, kk].reshape(-1, i, c)[:, :, 0] * base[:, :, 0]  # h(theta) of the current atom, (P, I)
         dw = domega[dd, kk] + _doppler_grid_refine(h, part * base, tgrid, span[dd])
         th = theta[dd, kk]
+        base = np.exp(-1j * dw[:, None, None] * tgrid[None])
         if newton_steps:
-            rho = np.sum(part * np.exp(-1j * dw[:, None, None] * tgrid[None]), axis=2)
+            rho = np.sum(part * base, axis=2)
             th = _newton_refine(dic, th, rho, newton_steps)
         theta[dd, kk], domega[dd, kk] = th, dw
-        a[dd, :, kk] = _doppler_atoms(dic, th, dw, tgrid)
+        a[dd, :, kk] = _doppler_atoms(dic, th, dw, tgrid, np.conj(base))
         s = _lstsq(a, flat[..., None])[..., 0]
     return theta, domega, s * valid, a
 
@@ -597,14 +660,15 @@ class DopplerOMPResult:
 
 
 def _new_atom(dic: AngleDictionary, res: np.ndarray, tgrid: np.ndarray, noise_var: float,
-              newton_steps: int) -> tuple[np.ndarray, np.ndarray]:
+              newton_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """The next atom (theta, omega), each (D,), of the residuals ``res`` (D, I, C) (steps 1-2 of :func:`omp_doppler`).
 
     Coarse Doppler from the chirp pairs, best dictionary candidate on the
     Doppler-compensated slot vector (one complex64 matrix product for all rows),
     a joint angle x Doppler search for the rows whose coarse-Doppler error
     (5 sigma) turns into more than pi/2 of phase over the target's dwell, fine
-    Doppler over the sweep, Newton steps on the angle.
+    Doppler over the sweep, Newton steps on the angle. Also returns ``exp(j omega t)``
+    (D, I, C) of the new atoms when the Newton steps computed it (else None).
     """
     _, i, c = res.shape
     t_span = float(tgrid.max() + 1)
@@ -612,11 +676,12 @@ def _new_atom(dic: AngleDictionary, res: np.ndarray, tgrid: np.ndarray, noise_va
     w0 = np.angle(np.einsum("dic,dic->d", res[:, :, 1:], res[:, :, :-1].conj()))
     rc = res * np.exp(-1j * w0[:, None, None] * tgrid[None])
     th = _grid_refine(dic, rc.sum(axis=2), None, reach)
-    snr = np.maximum(np.sum(np.abs(res) ** 2, axis=(1, 2)) / noise_var - i * c, 1.0)
-    span = np.clip(5.0 / np.sqrt(snr), min(np.pi, 8 * np.pi / t_span), np.pi)
+    p_res = np.abs(res) ** 2
+    snr = np.maximum(np.sum(p_res, axis=(1, 2)) / noise_var - i * c, 1.0)
+    span = np.minimum(np.maximum(5.0 / np.sqrt(snr), min(np.pi, 8 * np.pi / t_span)), np.pi)
     # rows whose Doppler uncertainty turns into > pi/2 of phase ramp over the target's dwell
     # (long dwell: weak beams such as the random patterns) get a joint angle x Doppler search
-    e_slot = np.maximum(np.sum(np.abs(res) ** 2, axis=2) - c * noise_var, 0.0)
+    e_slot = np.maximum(np.sum(p_res, axis=2) - c * noise_var, 0.0)
     dwell = e_slot.sum(1) ** 2 / np.maximum(np.sum(e_slot ** 2, axis=1), 1e-300) * c
     dwell = np.minimum(np.maximum(dwell, c), t_span)
     wide = 5.0 / np.sqrt(snr) * dwell > 0.5 * np.pi  # 5-sigma coarse-Doppler error -> > pi/2 of ramp
@@ -627,10 +692,13 @@ def _new_atom(dic: AngleDictionary, res: np.ndarray, tgrid: np.ndarray, noise_va
         rc[sub] = res[sub] * np.exp(-1j * w_s[:, None, None] * tgrid[None])
         span[sub] = np.minimum(span[sub], np.pi / dwell[sub])
     w = w0 + _doppler_grid_refine(dic.atoms(th)[0].T, rc, tgrid, span)
+    phase = None
     if newton_steps:
-        rho = np.sum(res * np.exp(-1j * w[:, None, None] * tgrid[None]), axis=2)
+        comp = np.exp(-1j * w[:, None, None] * tgrid[None])
+        rho = np.sum(res * comp, axis=2)
         th = _newton_refine(dic, th, rho, newton_steps)
-    return th, w
+        phase = np.conj(comp, out=comp)
+    return th, w, phase
 
 
 def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_targets: int,
@@ -676,10 +744,10 @@ def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_t
         rows = np.flatnonzero(active)
         if rows.size == 0:
             break
-        th, w = _new_atom(dic, resid[rows], tgrid, noise_var, newton_steps)
+        th, w, phase = _new_atom(dic, resid[rows], tgrid, noise_var, newton_steps)
         th_r, om_r, val_r, a = theta[rows], omega[rows], valid[rows], atoms[rows]
         th_r[:, l], om_r[:, l], val_r[:, l] = th, w, True
-        a[:, :, l] = _doppler_atoms(dic, th, w, tgrid)
+        a[:, :, l] = _doppler_atoms(dic, th, w, tgrid, phase)
         s = _lstsq(a, data[rows].reshape(rows.size, -1, 1))[..., 0] * val_r
         ok = np.all((np.abs(s) * np.linalg.norm(a, axis=1) >= min_amplitude) | ~val_r, axis=1) | (detected and l == 0)
         if l > 0 and cycles and np.any(ok):  # joint refinement of the rows that keep the new atom

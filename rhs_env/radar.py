@@ -207,9 +207,10 @@ class RadarSystem:
         unit = d / np.maximum(rng_m, 1e-12)[..., None]
         return rng_m, ang, unit
 
-    def visible(self, scatterers: Scatterers, occluders: Occluders | None = None) -> np.ndarray:
-        """(4, K) bool: inside radar r's sector and range interval and in line of sight."""
-        rng_m, ang, _ = self.radar_frame(scatterers.xy)
+    def visible(self, scatterers: Scatterers, occluders: Occluders | None = None,
+                frame: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+        """(4, K) bool: inside radar r's sector and range interval and in line of sight (``frame``: :meth:`radar_frame`'s)."""
+        rng_m, ang, _ = self.radar_frame(scatterers.xy) if frame is None else frame
         half = np.deg2rad(self.config.scan.sector_deg) / 2
         fov = (np.abs(ang) <= half) & (rng_m <= self.config.max_range_m) & (rng_m >= self.config.min_range_m)
         return np.asarray(fov & visible_mask(self.positions, scatterers, occluders), dtype=bool)
@@ -237,11 +238,12 @@ class RadarSystem:
         cfg = self.config
         if not len(scatterers):
             return None
-        rr, kk = np.nonzero(self.visible(scatterers, occluders))
+        frame = self.radar_frame(scatterers.xy)
+        rr, kk = np.nonzero(self.visible(scatterers, occluders, frame))
         if rr.size == 0:
             return None
         lam, i_slots = cfg.wavelength, cfg.scan.slots
-        rng_m, ang, unit = self.radar_frame(scatterers.xy)
+        rng_m, ang, unit = frame
         r_k, th_k = rng_m[rr, kk], ang[rr, kk]
         v_k = np.einsum("pd,pd->p", unit[rr, kk], scatterers.velocity[kk])  # radial, m/s
         phase0 = self.rng.uniform(0.0, 2 * np.pi, rr.size)
@@ -257,14 +259,30 @@ class RadarSystem:
         return rr, h * amp[None, :] * np.exp(1j * omega[None, :] * slot_t), omega, f_tot
 
     @staticmethod
-    def _mix(rr: np.ndarray, g_mat: np.ndarray, e_mat: np.ndarray, out: np.ndarray) -> None:
-        """``out[r] = G_r @ E_r`` (4, I, X): the tones of radar r only (rr sorted), one batched product."""
+    def _mix(rr: np.ndarray, g_mat: np.ndarray, e_mat: np.ndarray | tuple[np.ndarray, np.ndarray],
+             out: np.ndarray) -> None:
+        """``out[r] = G_r @ E_r`` (4, I, X): the tones of radar r only (rr sorted), one batched product.
+
+        ``e_mat``: E (P, X), or the factors ``(e_slow (P, C), e_fast (P, N))`` of ``E[p, (c, n)] =
+        e_slow[p, c] e_fast[p, n]``, multiplied straight into the complex64 operand (the same values).
+        """
         counts = np.bincount(rr, minlength=4)
-        slot = np.arange(rr.size) - np.concatenate([[0], np.cumsum(counts)[:-1]])[rr]
+        start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        slot = np.arange(rr.size) - start[rr]
+        width = e_mat.shape[1] if isinstance(e_mat, np.ndarray) else e_mat[0].shape[1] * e_mat[1].shape[1]
         gp = np.zeros((4, g_mat.shape[0], counts.max()), np.complex64)
-        ep = np.zeros((4, counts.max(), e_mat.shape[1]), np.complex64)
+        ep = np.empty((4, counts.max(), width), np.complex64)
         gp[rr, :, slot] = g_mat.T
-        ep[rr, slot] = e_mat
+        if isinstance(e_mat, np.ndarray):
+            ep[...] = 0
+            ep[rr, slot] = e_mat
+        else:
+            e_slow, e_fast = e_mat
+            for r in range(4):
+                lo, hi = int(start[r]), int(start[r] + counts[r])
+                np.multiply(e_slow[lo:hi, :, None], e_fast[lo:hi, None, :],
+                            out=ep[r, : hi - lo].reshape(hi - lo, e_slow.shape[1], e_fast.shape[1]))
+                ep[r, hi - lo:] = 0
         np.matmul(gp, ep, out=out)
 
     def synthesize(self, scatterers: Scatterers, occluders: Occluders | None = None,
@@ -277,17 +295,18 @@ class RadarSystem:
         cfg = self.config
         i_slots, c, n = cfg.scan.slots, cfg.waveform.chirps_per_slot, cfg.waveform.samples
         y = np.empty((4, i_slots, c * n), np.complex64) if out is None else out.reshape(4, i_slots, c * n)
-        y[...] = 0
         tones = self._echoes(scatterers, occluders)
-        if tones is not None:
+        if tones is None:
+            y[...] = 0
+        else:  # the product G @ E writes every sample of y
             rr, g_mat, omega, f_tot = tones
             e_fast = np.exp(2j * np.pi * f_tot[:, None] * self._n[None, :] / cfg.waveform.sample_rate_hz)  # (P, N)
             e_slow = np.exp(1j * omega[:, None] * np.arange(c)[None, :])  # (P, C)
-            self._mix(rr, g_mat, (e_slow[:, :, None] * e_fast[:, None, :]).reshape(rr.size, c * n), y)
+            self._mix(rr, g_mat, (e_slow, e_fast), y)
         if cfg.link.add_noise:
             # circular complex Gaussian CN(0, sigma_n^2) by the polar method: |eps|^2 ~ Exp(sigma_n^2)
             # from -ln(1 - u1), phase 2 pi u2 (float32 uniforms: the radius tail is cut at P = 2^-24)
-            u = self.rng.random(dtype=np.float32, out=self._buffer("u", (2,) + y.shape, np.float32))
+            u = self._uniform32(self._buffer("u", (2,) + y.shape, np.float32))
             rad = self._buffer("rad", y.shape, np.float32)
             tmp = self._buffer("tmp", y.shape, np.float32)
             np.negative(u[0], out=rad)
@@ -304,6 +323,26 @@ class RadarSystem:
             tmp *= rad
             y.imag += tmp
         return y.reshape(4, i_slots, c, n)
+
+    def _uniform32(self, out: np.ndarray) -> np.ndarray:
+        """``self.rng.random(dtype=np.float32, out=out)``: the same numbers, drawn faster for PCG64.
+
+        ``Generator.random`` in float32 takes 32-bit words ``w`` of the bit generator
+        (PCG64: the low then the high half of each 64-bit output) and returns
+        ``(w >> 8) 2^-24``; for an even count and no buffered half word that is
+        exactly the vectorised form below on ``random_raw``, and the generator ends
+        in the same state. Any other generator (or a buffered half word) takes the
+        ``Generator.random`` call itself.
+        """
+        bg = self.rng.bit_generator
+        if (out.size % 2 or not out.flags.c_contiguous or not np.little_endian or type(bg) is not np.random.PCG64
+                or bg.state.get("has_uint32", 1) != 0):
+            return self.rng.random(dtype=np.float32, out=out)
+        words = bg.random_raw(out.size // 2).view(np.uint32)  # little-endian: low half first
+        np.right_shift(words, 8, out=words)
+        np.copyto(out.reshape(-1), words, casting="unsafe")  # < 2^24: exact in float32
+        out *= np.float32(2.0 ** -24)
+        return out
 
     def synthesize_spectrum(self, scatterers: Scatterers, occluders: Occluders | None = None) -> np.ndarray:
         """Range spectrum Y (4, I, C, K_b) complex64 of one sweep, written directly (``fidelity="range"``).

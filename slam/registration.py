@@ -82,6 +82,21 @@ def _procrustes_2d(src: np.ndarray, dst: np.ndarray, w: np.ndarray) -> np.ndarra
     return np.array([t[0], t[1], th])
 
 
+def _median(x: np.ndarray) -> float:
+    """``float(np.median(x))`` of a non-empty 1-D array without NaN, as np.median computes it.
+
+    np.median partitions around the middle and averages the middle element (odd size)
+    or the two middle ones (``(a + b) / 2``, even size): the same arithmetic here,
+    without its generic axis / NaN handling (a third of an ICP iteration's time).
+    """
+    n = x.size
+    h = n // 2
+    if n % 2:
+        return float(np.partition(x, h)[h])
+    p = np.partition(x, (h - 1, h))
+    return float((p[h - 1] + p[h]) / 2)
+
+
 @dataclass(frozen=True)
 class ICPConfig:
     """Settings of :class:`ICPRegistration` (see its docstring for their roles).
@@ -217,7 +232,7 @@ class ICPRegistration:
             ok = np.isfinite(d)
             if ok.sum() < self.min_pairs:
                 break
-            gate = max(self.min_gate_m, self.outlier_factor * float(np.median(d[ok])))
+            gate = max(self.min_gate_m, self.outlier_factor * _median(d[ok]))
             ok &= d <= gate
             if ok.sum() < self.min_pairs:
                 break
