@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rhs_env.antenna import ScanConfig
+from rhs_env.antenna import RHSConfig, ScanConfig
 from rhs_env.radar import DetectionConfig, LinkBudgetConfig, RadarConfig, RadarSystem, WaveformConfig
 from rhs_env.scatterers import Occluders, Scatterers, visible_mask
 
@@ -203,3 +203,22 @@ def test_two_targets_same_range_resolved_default_rhs():
     assert len(cloud) == 2, cloud.points
     for p in pts:
         assert _nearest(cloud, p)[1] < 0.2
+
+
+@pytest.mark.parametrize("seed", [0, 7, 123])
+def test_fast_float32_uniforms_equal_the_generators_own(seed):
+    """RadarSystem._uniform32 draws PCG64's raw words itself (a speed-up): the same numbers and the same
+    generator state afterwards as ``Generator.random(dtype=float32)``, so seeded outputs do not change
+    (a numpy that changed its float32 recipe would fail here, not silently alter the noise)."""
+    radar = RadarSystem(RadarConfig(scan=ScanConfig(grid_deg=10.0), rhs=RHSConfig(elements=16)),
+                        rng=np.random.default_rng(seed))
+    ref = np.random.default_rng(seed)
+    for shape in [(2, 4, 6), (2, 3), (5,)]:  # even sizes take the fast path, odd ones the generator's call
+        got = radar._uniform32(np.empty(shape, np.float32))
+        want = ref.random(dtype=np.float32, size=shape)
+        np.testing.assert_array_equal(got, want)
+        # the same state: the same position and buffered half word (a spent half word's stale value aside)
+        a, b = radar.rng.bit_generator.state, ref.bit_generator.state
+        assert a["state"] == b["state"] and a["has_uint32"] == b["has_uint32"]
+        assert not a["has_uint32"] or a["uinteger"] == b["uinteger"]
+    np.testing.assert_array_equal(radar.rng.random(9, dtype=np.float32), ref.random(9, dtype=np.float32))
