@@ -159,9 +159,17 @@ def numbers(obj: Any) -> list[float]:
 
 
 def compute_fingerprint(fn) -> dict[str, Any]:
-    """Run a script's ``fingerprint()`` and return ``{hash, values, seconds}``."""
+    """Run a script's ``fingerprint()`` and return ``{hash, values, seconds}``.
+
+    It runs with single-threaded BLAS / OpenMP whatever the caller's setting: a threaded
+    reduction sums in another order, and a SLAM episode turns that round-off into a
+    different trajectory, so the same code would give two fingerprints.
+    """
+    from rhs_common.threads import blas_threads_limit
+
     t0 = time.perf_counter()
-    h, values = digest(fn())
+    with blas_threads_limit(1):
+        h, values = digest(fn())
     return {"hash": h, "values": values, "seconds": round(time.perf_counter() - t0, 2)}
 
 
