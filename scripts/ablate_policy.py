@@ -169,6 +169,27 @@ def _merge(out: Path, key: str, rec: dict) -> None:
         out.write_text(json.dumps(table, indent=2) + "\n")
 
 
+def markdown(table: dict) -> str:
+    """The README table of every record: greedy evaluation on the default reward, mean +- 95 % t-interval."""
+    from scipy import stats
+
+    def ci(s: dict) -> str:
+        half = stats.t.ppf(0.975, s["n"] - 1) * s["sem"] if s.get("n", 0) > 1 else float("nan")
+        return f"{s['mean']:.1f} ± {half:.1f}"
+
+    rows = ["| record | env | training env kwargs / scripted policy | env steps | decisions every | gamma | return | "
+            "collisions | speed (m/s) | commit |", "|---|---|---|---:|---:|---:|---:|---:|---:|---|"]
+    for key, r in table.items():
+        e = r["eval"]
+        rows.append(f"| `{key}` | `{r['env_id']}` | {json.dumps(r.get('train_env_kwargs', {})) if 'timesteps' in r else r['policy']} "
+                    f"| {r.get('timesteps', '-')} | {r.get('decision_interval', 1) if 'timesteps' in r else '-'} "
+                    f"| {r.get('hyperparams', {}).get('gamma', '-')} "
+                    f"| {ci(e['return'])} | {e['collision_rate']:.2f} ({len(r['runs'])} ep.) | {ci(e['mean_speed_mps'])} "
+                    f"| {str(r.get('commit', ''))[:10]} |")  # fmt: skip
+    return ("Greedy evaluation on the default reward, seeds from 1000 (the `policies` seeds); mean ± 95 % t-interval "
+            "over episodes. References: scripted drivers on the same seeds.\n\n" + "\n".join(rows) + "\n")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("variants", nargs="+", choices=[*VARIANTS, *REFERENCES])
@@ -194,6 +215,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name}: return {e['return']['mean']:.1f}, collisions {e['collision_rate']:.2f}, speed "
               f"{e['mean_speed_mps']['mean']:.1f} m/s, actions {rec['greedy_action_histogram_first_episode']}",
               file=sys.stderr)  # fmt: skip
+    out = Path(args.out)
+    out.with_suffix(".md").write_text(markdown(json.loads(out.read_text())))
     return 0
 
 
