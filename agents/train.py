@@ -121,6 +121,23 @@ def _resolve_policy_kwargs(kwargs: dict[str, Any] | str) -> dict[str, Any]:
     return kwargs
 
 
+def _policy_kwargs_by_name(kwargs: dict[str, Any] | str) -> dict[str, Any]:
+    """``policy_kwargs`` with the extractor by its registered name (``"point_set"``), as the RLlib backend takes it.
+
+    The shipped YAML writes it as rl-baselines3-zoo's Python expression naming the class.
+    """
+    from agents.features import FEATURE_EXTRACTORS
+
+    kwargs = dict(eval_policy_kwargs(kwargs) if isinstance(kwargs, str) else (kwargs or {}))
+    cls = kwargs.get("features_extractor_class")
+    if cls is not None and not isinstance(cls, str):
+        names = [name for name, c in FEATURE_EXTRACTORS.items() if c is cls]
+        if not names:
+            raise ValueError(f"features_extractor_class must be one of {list(FEATURE_EXTRACTORS)}, got {cls!r}")
+        kwargs["features_extractor_class"] = names[0]
+    return kwargs
+
+
 def check_train_args(timesteps: int, n_envs: int, seed: int, eval_freq: int, eval_episodes: int,
                      checkpoint_freq: int) -> None:
     """Bounds that keep a training run finite (``ValueError`` / ``TypeError`` naming the argument)."""
@@ -454,6 +471,7 @@ def train_rllib_backend(
 
     hp = load_hyperparams("ppo", env_id, hyperparams)
     hp.pop("policy")
+    hp["policy_kwargs"] = _policy_kwargs_by_name(hp.get("policy_kwargs") or {})
     if check_decision_interval(hp.pop("decision_interval", 1)) != 1:
         raise ValueError("decision_interval > 1 is for the sb3 backend; the rllib backend decides every env step")
     require_ray()

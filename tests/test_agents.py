@@ -448,3 +448,17 @@ def test_rllib_backend_without_ray_says_how_to_install(tmp_path, capsys):
         pytest.skip("ray is installed here (tests/test_rllib.py covers the backend)")
     assert cli_main(["train", "--backend", "rllib", "--out", str(tmp_path / "r"), "--timesteps", "8"]) == 2
     assert "pip install" in capsys.readouterr().err
+
+
+def test_rllib_backend_reads_the_shipped_yaml_policy_kwargs():
+    """The shipped ppo.yml writes policy_kwargs as rl-baselines3-zoo's expression; the RLlib backend takes the
+    extractor by name (``rhs-slam train --backend rllib --env rhs-highway-slam-v0`` with the shipped YAML)."""
+    from agents.train import _policy_kwargs_by_name, load_hyperparams
+
+    hp = load_hyperparams("ppo", "rhs-highway-slam-v0")
+    assert isinstance(hp["policy_kwargs"], str)
+    kw = _policy_kwargs_by_name(hp["policy_kwargs"])
+    assert kw["features_extractor_class"] == "point_set" and kw["net_arch"] == [64, 64]
+    assert _policy_kwargs_by_name({"features_extractor_class": "grid"})["features_extractor_class"] == "grid"
+    with pytest.raises(ValueError, match="features_extractor_class"):
+        _policy_kwargs_by_name({"features_extractor_class": dict})
