@@ -33,7 +33,8 @@ MAX_DECISION_INTERVAL = 1000
 
 
 def check_decision_interval(value: Any) -> int:
-    """``value`` as an int in ``[1, MAX_DECISION_INTERVAL]``, else ``ValueError`` naming ``decision_interval``.
+    """``value`` as an int in ``[1, MAX_DECISION_INTERVAL]``: ``TypeError`` if not an int, ``ValueError`` if out of
+    range, both naming ``decision_interval``.
 
     Example:
         >>> check_decision_interval(5)
@@ -43,8 +44,9 @@ def check_decision_interval(value: Any) -> int:
         ...
         ValueError: decision_interval must be an integer in [1, 1000] (env steps per decision), got 0
     """
-    ok = isinstance(value, int) and not isinstance(value, bool)
-    if not ok or not 1 <= value <= MAX_DECISION_INTERVAL:
+    if not isinstance(value, int) or isinstance(value, bool):
+        raise TypeError(f"decision_interval must be an integer (env steps per decision), got {value!r}")
+    if not 1 <= value <= MAX_DECISION_INTERVAL:
         raise ValueError(f"decision_interval must be an integer in [1, {MAX_DECISION_INTERVAL}] "
                          f"(env steps per decision), got {value!r}")  # fmt: skip
     return int(value)

@@ -66,13 +66,14 @@ def test_hold_action_of_one_is_the_env():
     assert ra[1] == rb[1] and ra[4]["held_steps"] == 1
 
 
-@pytest.mark.parametrize("bad", [0, -1, 1001, 2.5, True, "5", None])
-def test_decision_interval_is_validated(bad):
-    with pytest.raises(ValueError, match="decision_interval"):
+@pytest.mark.parametrize(("bad", "error"), [(0, ValueError), (-1, ValueError), (1001, ValueError), (2.5, TypeError),
+                                            (True, TypeError), ("5", TypeError), (None, TypeError)])
+def test_decision_interval_is_validated(bad, error):
+    with pytest.raises(error, match="decision_interval"):
         check_decision_interval(bad)
-    with pytest.raises(ValueError, match="decision_interval"):
+    with pytest.raises(error, match="decision_interval"):
         HoldAction(Counter(), bad)
-    with pytest.raises(ValueError, match="decision_interval"):
+    with pytest.raises(error, match="decision_interval"):
         held(object(), bad)
 
 
