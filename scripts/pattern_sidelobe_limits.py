@@ -23,10 +23,8 @@ aperture and feed arrangement).
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -38,6 +36,9 @@ from rhs_env.patterns.fast import FastSettings, build_fast
 from rhs_env.patterns.metrics import pattern_report
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "scripts"))
+from _provenance import write_json
+
 MET_TOL_DB = 0.01  # a cap counts as met when the fine-grid PSLR is within this of it
 
 
@@ -60,14 +61,6 @@ def twin_offsets_hw(config: RHSConfig, angles_deg: np.ndarray) -> dict[str, np.n
         past = np.where(np.abs(tw) > 1.0, np.abs(tw) - 1.0, np.inf)
         out[f"{side}_twin_past_endfire_hw"] = np.min(past, axis=1) / hw
     return out
-
-
-def _commit() -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True,
-                              check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def sweep(config: RHSConfig, scan: ScanConfig, caps: list[float], workers: int,
@@ -126,7 +119,7 @@ def markdown(res: dict) -> str:
     lines = [(f"Two-way sidelobe caps, fast method, M={c['elements']}, n={c['refractive_index']:.4g}, "
               f"{res['scan']['grid_deg']:g}-degree grids "
               f"({'the listed subset' if res.get('subset') else 'theta >= 0'}; theta < 0 mirrors them), "
-              f"`{res['command']}`."), "",
+              f"`{' '.join(res['provenance']['command'])}`."), "",
              ("| cap dB | grids meeting it | worst PSLR dB | median PSLR dB | median gain dB | min gain dB | "
               "grids missing it (deg) |"), "|---:|---:|---:|---:|---:|---:|---|"]
     for p in res["per_cap"]:
@@ -179,15 +172,15 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"pattern_sidelobe_limits: error: {exc}", file=sys.stderr)
         return 2
-    res = {"commit": _commit(), "command": " ".join(["python scripts/pattern_sidelobe_limits.py", *sys.argv[1:]]
-                                                    if argv is None else ["python", *argv]),
-           "config": config.to_dict(), "scan": scan.to_dict(), "settings": settings.to_dict(), "caps_db": a.caps,
+    started = time.time()
+    res = {"config": config.to_dict(), "scan": scan.to_dict(), "settings": settings.to_dict(), "caps_db": a.caps,
            "subset": a.angles is not None, **sweep(config, scan, a.caps, a.workers, settings, angles),
            "load_average_1_5_15": list(os.getloadavg())}
+    run_config = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(a).items()}
+    res["provenance"] = write_json(a.out, res, __file__, run_config, started, fingerprint_fn=fingerprint,
+                                   argv=sys.argv[1:] if argv is None else argv)  # fmt: skip
     md = markdown(res)
     print(md)
-    a.out.parent.mkdir(parents=True, exist_ok=True)
-    a.out.write_text(json.dumps(res, indent=1))
     a.out.with_suffix(".md").write_text(md + "\n")
     return 0
 

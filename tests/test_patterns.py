@@ -307,4 +307,4 @@ def test_sidelobe_limits_script_small_config(tmp_path: Path) -> None:
         assert r["cap_met"] == (r["pslr_db"] <= r["cap_db"] + 0.01)
         assert r["rx_twin_offset_hw"] >= 0 and r["tx_twin_offset_hw"] >= 0
     assert res["best_achievable_worst_pslr_db"] == max(b["best_pslr_db"] for b in res["best_per_grid"])
-    assert res["commit"] and "| -12 |" in (tmp_path / "s.md").read_text()
+    assert res["provenance"]["commit"] and "| -12 |" in (tmp_path / "s.md").read_text()
