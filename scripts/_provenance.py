@@ -106,12 +106,18 @@ def jsonable(obj: Any) -> Any:
     if isinstance(obj, (list, tuple, set)):
         return [jsonable(v) for v in obj]
     if isinstance(obj, Path):
-        return str(obj)
+        return _repo_relative(obj)
     if hasattr(obj, "tolist"):  # numpy scalars and arrays
         return obj.tolist()
     if obj is None or isinstance(obj, (bool, int, float, str)):
         return obj
     return repr(obj)
+
+
+def _repo_relative(path: Path) -> str:
+    """A path inside the repository as relative to its root (a record names no machine's folders)."""
+    resolved = path.resolve()
+    return str(resolved.relative_to(ROOT)) if resolved.is_relative_to(ROOT) else str(path)
 
 
 def script_name(script: str | Path) -> str:

@@ -301,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
     result: dict = {
         "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "platform": platform.platform(),
                     "load_average": [round(x, 2) for x in os.getloadavg()]},
-        "settings": vars(args), "commit": commit, "command": " ".join([sys.executable, *sys.argv]),
+        "settings": vars(args), "commit": commit, "command": " ".join(["python", f"scripts/{Path(sys.argv[0]).name}", *sys.argv[1:]]),
     }
     out = Path(args.out)
     # sections not run now are kept from an existing file, with when and under what load they ran

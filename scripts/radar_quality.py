@@ -97,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.fidelity is not None:
         cfg = replace(cfg, fidelity=a.fidelity)
     res = {"metrics": evaluate(cfg, a.scenes, a.seed), "scenes": a.scenes, "seed": a.seed,
-           "command": " ".join(sys.argv), "config": cfg.to_dict(),
+           "command": " ".join(["python", f"scripts/{Path(sys.argv[0]).name}", *sys.argv[1:]]), "config": cfg.to_dict(),
            "commit": subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True,
                                     text=True).stdout.strip()}
     if a.out:

@@ -137,3 +137,9 @@ def test_write_json_records_provenance_outside_results(tmp_path):
     assert p["config"] == {"seed": 3, "path": str(tmp_path)}
     assert p["fingerprint"]["hash"] == prov.digest([1.0, 2.0])[0]
     assert set(p) >= {"commit", "dirty", "dirty_files", "started_utc", "wall_s", "python", "numpy"}
+
+
+def test_recorded_paths_inside_the_repository_are_relative(tmp_path):
+    """A results file names no machine's folders: paths inside the repository are recorded from its root."""
+    cfg = prov.jsonable({"lib": prov.ROOT / "rhs_env" / "patterns" / "data", "out": tmp_path / "x.json"})
+    assert cfg["lib"] == "rhs_env/patterns/data" and cfg["out"] == str(tmp_path / "x.json")
