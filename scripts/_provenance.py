@@ -125,6 +125,11 @@ def script_name(script: str | Path) -> str:
     return Path(script).stem
 
 
+def command_line(script: str | Path, argv: list[str] | None = None) -> list[str]:
+    """``python scripts/<script> <argv>`` as a user reruns it (``argv`` defaults to this process's arguments)."""
+    return ["python", f"scripts/{Path(script).name}", *map(str, sys.argv[1:] if argv is None else argv)]
+
+
 def provenance(script: str | Path, config: Any, started: float, argv: list[str] | None = None) -> dict[str, Any]:
     """The provenance block of a run of ``script`` that began at ``time.time() == started``."""
     import numpy as np
@@ -132,7 +137,7 @@ def provenance(script: str | Path, config: Any, started: float, argv: list[str] 
     args = sys.argv[1:] if argv is None else list(argv)
     return {
         **STATE_AT_START,
-        "command": ["python", f"scripts/{Path(script).name}", *map(str, args)],
+        "command": command_line(script, args),
         "config": jsonable(config),
         "python": platform.python_version(),
         "numpy": np.__version__,

@@ -41,7 +41,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
-from _provenance import write_json
+from _provenance import command_line, write_json
 
 SECTIONS = ("envs", "load", "vec", "radar", "patterns", "training")
 GOALS = {"radar_env_over_base": 0.75, "slam_env_over_base": 0.67, "loaded_over_quiet": 0.85,
@@ -301,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
     result: dict = {
         "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "platform": platform.platform(),
                     "load_average": [round(x, 2) for x in os.getloadavg()]},
-        "settings": vars(args), "commit": commit, "command": " ".join(["python", f"scripts/{Path(sys.argv[0]).name}", *sys.argv[1:]]),
+        "settings": vars(args), "commit": commit, "command": " ".join(command_line(__file__)),
     }
     out = Path(args.out)
     # sections not run now are kept from an existing file, with when and under what load they ran

@@ -43,12 +43,12 @@ def train_batch(env_id: str) -> int:
     return int(hp["n_steps"]) * int(hp.get("n_envs", 1))
 
 
-def run_once(env_id: str, runners: int, iterations: int, env_kwargs: dict, seed: int) -> dict:
+def run_once(env_id: str, runners: int, iterations: int, batch: int, env_kwargs: dict, seed: int) -> dict:
     """Train ``iterations`` PPO iterations with ``runners`` env runners; steps/s excluding the first."""
     from agents.train import train_rllib_backend
 
     with tempfile.TemporaryDirectory() as out:
-        summary = train_rllib_backend(env_id, iterations * train_batch(env_id), out, seed=seed, env_kwargs=env_kwargs,
+        summary = train_rllib_backend(env_id, iterations * batch, out, seed=seed, env_kwargs=env_kwargs,
                                       num_env_runners=runners, checkpoint_freq=0, progress=False)  # fmt: skip
     its = summary["iterations"]
     steady = its[1:] or its
@@ -103,16 +103,17 @@ def main(argv: list[str] | None = None) -> int:
     require_ray()
     started = time.time()
     load_start = os.getloadavg()[0]
+    batch = train_batch(a.env)
     init_ray(None, max(a.runners))  # one Ray instance for every row: a restart per row would cost start-up time
     try:
-        runs = [run_once(a.env, r, a.iterations, a.env_kwargs, a.seed) for r in a.runners]
+        runs = [run_once(a.env, r, a.iterations, batch, a.env_kwargs, a.seed) for r in a.runners]
     finally:
         import ray
 
         ray.shutdown()
     by = {r["runners"]: r["steps_per_s"] for r in runs}
     res = {
-        "env_id": a.env, "env_kwargs": a.env_kwargs, "iterations": a.iterations, "train_batch": train_batch(a.env),
+        "env_id": a.env, "env_kwargs": a.env_kwargs, "iterations": a.iterations, "train_batch": batch,
         "cpus": os.cpu_count(),
         "load_start": load_start, "load_end": os.getloadavg()[0], "runs": runs,
         "speedup": round(by[2] / by[1], 3) if 1 in by and 2 in by else None,

@@ -574,8 +574,7 @@ def run_config(cfg: StudyConfig, cache_dir: Path, report_only: bool) -> dict[str
     from slam.registration import DEFAULT_REGISTRATION
 
     return {"study": asdict(cfg), "radar": RadarConfig().to_dict(), "slam": asdict(SlamConfig()),
-            "registration": DEFAULT_REGISTRATION, "report_only": report_only,
-            "cache_dir": str(cache_dir.resolve().relative_to(ROOT) if cache_dir.resolve().is_relative_to(ROOT) else cache_dir)}  # fmt: skip
+            "registration": DEFAULT_REGISTRATION, "report_only": report_only, "cache_dir": cache_dir}  # fmt: skip
 
 
 class Systems:

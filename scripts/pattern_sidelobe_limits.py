@@ -176,8 +176,7 @@ def main(argv: list[str] | None = None) -> int:
     res = {"config": config.to_dict(), "scan": scan.to_dict(), "settings": settings.to_dict(), "caps_db": a.caps,
            "subset": a.angles is not None, **sweep(config, scan, a.caps, a.workers, settings, angles),
            "load_average_1_5_15": list(os.getloadavg())}
-    run_config = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(a).items()}
-    res["provenance"] = write_json(a.out, res, __file__, run_config, started, fingerprint_fn=fingerprint,
+    res["provenance"] = write_json(a.out, res, __file__, a, started, fingerprint_fn=fingerprint,
                                    argv=sys.argv[1:] if argv is None else argv)  # fmt: skip
     md = markdown(res)
     print(md)

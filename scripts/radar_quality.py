@@ -27,7 +27,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
-from _provenance import numbers, write_json
+from _provenance import command_line, numbers, write_json
 
 from rhs_env.antenna import ScanConfig
 from rhs_env.radar import RadarConfig, RadarSystem
@@ -97,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.fidelity is not None:
         cfg = replace(cfg, fidelity=a.fidelity)
     res = {"metrics": evaluate(cfg, a.scenes, a.seed), "scenes": a.scenes, "seed": a.seed,
-           "command": " ".join(["python", f"scripts/{Path(sys.argv[0]).name}", *sys.argv[1:]]), "config": cfg.to_dict(),
+           "command": " ".join(command_line(__file__)), "config": cfg.to_dict(),
            "commit": subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True,
                                     text=True).stdout.strip()}
     if a.out:
