@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from agents.decision import held
+from agents.expert import HeadwayDriver
 from rhs_env.registration import SLAM_ENV_SPECS
 
 DATA_DIR = Path(__file__).parent / "data"
@@ -41,9 +42,9 @@ DEFAULT_ENV = "rhs-highway-slam-v0"
 
 
 def is_scripted(policy: str | Path) -> bool:
-    """``"random"``, ``"constant:<action>"``, ``"idm"`` or ``"idm:<m/s>"``: policies that need no file."""
+    """``"random"``, ``"constant:<action>"``, ``"idm"``, ``"idm:<m/s>"`` or ``"headway"``: policies that need no file."""
     text = str(policy)
-    return text in ("random", "idm") or text.startswith(("constant:", "idm:"))
+    return text in ("random", "idm", "headway") or text.startswith(("constant:", "idm:"))
 
 
 class ConstantPolicy:
@@ -173,8 +174,9 @@ def make_env(env_id: str, kwargs: dict[str, Any], **extra: Any):
 
 
 def load_policy(policy: str | Path, env=None, seed: int = 0):
-    """``"random"``, ``"constant:<action>"``, ``"idm[:<m/s>]"``, or a stable-baselines3 zip (PPO or DQN: from the JSON
-    beside it, else tried in turn).
+    """``"random"``, ``"constant:<action>"``, ``"idm[:<m/s>]"``, ``"headway"`` (:class:`agents.expert.HeadwayDriver`,
+    the DAgger expert), or a stable-baselines3 zip (PPO, DQN or a DAgger student: from the JSON beside it, else
+    PPO and DQN tried in turn).
 
     With ``env``, the policy's observation space is checked against the env's. A zip whose JSON
     has ``decision_interval`` k > 1 comes back as a :class:`agents.decision.HeldPolicy` (decides every
@@ -185,6 +187,8 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
             raise ValueError(f"policy {policy!r} needs the env for its action space")
         if str(policy) == "random":
             return RandomPolicy(env.action_space, seed)
+        if str(policy) == "headway":
+            return HeadwayDriver(env)
         if str(policy).split(":", 1)[0] == "idm":
             speed = None
             if ":" in str(policy):
@@ -205,7 +209,7 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
         return _load_rllib(path, env)
     from stable_baselines3 import DQN, PPO
 
-    classes = {"ppo": PPO, "dqn": DQN}
+    classes = {"ppo": PPO, "dqn": DQN, "dagger": PPO}  # a DAgger student is a PPO policy (agents.imitation)
     algo = str(policy_metadata(path).get("algo", "")).lower()
     order = [classes[algo]] if algo in classes else [PPO, DQN]
     errors = []
@@ -515,7 +519,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--policy",
         default=str(SHIPPED_POLICY),
-        help="SB3 zip, RLlib checkpoint dir, 'random', 'constant:ACTION' or 'idm[:M/S]' (IDM + MOBIL driver; "
+        help="SB3 zip, RLlib checkpoint dir, 'random', 'constant:ACTION', 'idm[:M/S]' (IDM + MOBIL driver) or 'headway' "
+        "(the DAgger expert; "
         "default: shipped policy)",
     )
     parser.add_argument("--env", default=None, help=f"env id (default: the policy's, else {DEFAULT_ENV})")

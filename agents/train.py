@@ -35,11 +35,11 @@ import warnings
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import yaml
 
-ALGOS = ("ppo", "dqn")
+ALGOS = ("ppo", "dqn", "dagger")
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 #: keys of a hyperparameter entry that are not arguments of the algorithm class
 META_KEYS = ("policy", "n_envs", "n_timesteps", "env_kwargs", "decision_interval")
@@ -191,11 +191,14 @@ def make_vec_env(
     subprocess: bool = True,
     monitor_dir: str | Path | None = None,
     decision_interval: int = 1,
+    wrapper: Callable[[Any], Any] | None = None,
 ):
     """``n_envs`` copies of ``env_id`` (``Monitor`` logging ``crashed``), in subprocesses when n_envs > 1.
 
     ``decision_interval`` > 1 wraps each ``Monitor`` in :class:`agents.decision.HoldAction`
-    (the monitor still counts env steps and per-step rewards).
+    (the monitor still counts env steps and per-step rewards). ``wrapper`` (a picklable
+    callable, env -> env) wraps each ``Monitor`` first, e.g.
+    :class:`agents.imitation.ExpertActionInfo`.
     """
     from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
@@ -216,8 +219,24 @@ def make_vec_env(
         vec_env_cls=vec_cls,
         monitor_dir=str(monitor_dir) if monitor_dir else None,
         monitor_kwargs={"info_keywords": ("crashed",)},
-        wrapper_class=partial(HoldAction, k=k) if k > 1 else None,
+        wrapper_class=_compose(wrapper, partial(HoldAction, k=k) if k > 1 else None),
     )
+
+
+def _compose(*wrappers: Callable[[Any], Any] | None) -> Callable[[Any], Any] | None:
+    """The wrappers applied in order (the first innermost); None when there are none."""
+    chain = [w for w in wrappers if w is not None]
+    if not chain:
+        return None
+    if len(chain) == 1:
+        return chain[0]
+    return partial(_apply_all, chain)
+
+
+def _apply_all(chain: list[Callable[[Any], Any]], env: Any) -> Any:
+    for wrap in chain:
+        env = wrap(env)
+    return env
 
 
 def _check_env_kwargs(env_id: str, env_kwargs: dict[str, Any]) -> None:
@@ -269,6 +288,13 @@ def train(
     threads in this process (1 by default: the envs need the other cores);
     worker processes get ``OMP_NUM_THREADS=1`` unless it is set already.
     """
+    if algo == "dagger":
+        from agents.imitation import train_dagger
+
+        if resume:
+            raise ValueError("--resume is for PPO / DQN; a DAgger run is short and starts over")
+        return train_dagger(env_id, timesteps, out, seed=seed, n_envs=n_envs, hyperparams=hyperparams,
+                            env_kwargs=env_kwargs, progress=progress, torch_threads=torch_threads)
     from stable_baselines3.common.callbacks import CallbackList
 
     from agents.resume import StopOnSignal, save_checkpoint

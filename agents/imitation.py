@@ -1,0 +1,312 @@
+"""Imitation of a privileged driver: DAgger (``rhs-slam train --algo dagger``).
+
+The student is a stable-baselines3 ``ActorCriticPolicy`` (the same network as
+PPO's, so the result is a PPO zip that ``rhs-slam evaluate`` / ``demo`` load)
+that sees only the env's observation (on ``rhs-highway-slam-v0``: the radar
+point cloud and the SLAM estimate). The expert, :class:`agents.expert.HeadwayDriver`,
+reads the simulator's true road state, which the student never sees
+("learning by cheating": a privileged teacher, a sensor-only student).
+
+DAgger (Ross, Gordon & Bagnell, 2011), iteration ``i = 0 .. I-1``:
+
+1. Drive ``N / I`` env steps with the mixture that takes the expert's action
+   with probability ``beta_i = beta_decay ** i`` and the student's greedy action
+   otherwise (``i = 0``: the expert alone); record every visited observation with
+   the *expert's* action there, ``a*(s)``, whoever drove.
+2. Fit the student on all data so far, ``D = D_0 u ... u D_i``, by weighted
+   maximum likelihood of the expert's action:
+
+       L(theta) = - sum_{(o, a*) in D} w_{a*} log pi_theta(a* | o) / sum w_{a*},
+       w_a = (|D| / (K n_a)) ** p,
+
+   with ``n_a`` the samples labelled ``a``, ``K`` the actions present and ``p =
+   class_weight_power``; Adam, ``epochs`` passes of minibatches of ``batch_size``.
+   The expert holds its lane and speed (IDLE) in ~95 % of states: unweighted
+   (p = 0) the student learns IDLE everywhere, and IDLE crashes into the first
+   slower car; p = 1 balances the actions fully.
+
+Before step 2 the student is scored on the new data it has not been fitted to
+(``agreement``: the fraction of states where its greedy action equals the
+expert's). ``N`` counts env steps over all envs, like PPO's ``n_timesteps``,
+so a DAgger and a PPO run with the same ``N`` have the same simulation budget.
+
+Hyperparameters come from ``agents/hyperparams/dagger.yml`` (per env id:
+``policy``, ``policy_kwargs``, ``n_envs``, ``n_timesteps``, ``env_kwargs`` and
+the fields of :class:`DaggerConfig`, plus ``expert``: fields of
+:class:`agents.expert.HeadwayDriverConfig`).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import asdict, dataclass
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from agents.expert import HeadwayDriver, HeadwayDriverConfig
+from rhs_common.validation import build, check_int, check_range, check_types
+
+EXPERT_KEY = "expert_action"
+
+
+@dataclass(frozen=True)
+class DaggerConfig:
+    """DAgger's schedule and the student's supervised fit."""
+
+    iterations: int = 5  # I: collect-and-fit rounds
+    beta_decay: float = 0.5  # beta_i = beta_decay ** i: the expert's share of control in round i
+    epochs: int = 8  # passes over the aggregated data per round
+    batch_size: int = 256
+    learning_rate: float = 1e-3  # Adam
+    class_weight_power: float = 0.5  # p: the expert's action a weighs (n / (K n_a)) ** p in the loss (0: plain)
+
+    def __post_init__(self) -> None:
+        check_types(self)
+        check_int("iterations", self.iterations, 1, 1000)
+        check_range("beta_decay", self.beta_decay, 0.0, 1.0)
+        check_int("epochs", self.epochs, 1, 1000)
+        check_int("batch_size", self.batch_size, 1, 1_000_000)
+        check_range("learning_rate", self.learning_rate, 0.0, 1.0, low_open=True)
+        check_range("class_weight_power", self.class_weight_power, 0.0, 2.0)
+
+
+class ExpertActionInfo(gym.Wrapper):
+    """Adds ``info["expert_action"]``: the :class:`HeadwayDriver`'s action in the state just observed.
+
+    Lives inside each (subprocess) env, so a vectorised collector gets the labels
+    with the observations. ``expert`` is a :class:`agents.expert.HeadwayDriverConfig` or a dict.
+
+    Example:
+        >>> import gymnasium as gym, rhs_env
+        >>> env = ExpertActionInfo(gym.make("rhs-highway-v0", vehicles_count=5))
+        >>> _, info = env.reset(seed=0)
+        >>> info["expert_action"] in range(5)
+        True
+    """
+
+    def __init__(self, env: gym.Env, expert: Any = None):
+        super().__init__(env)
+        self.driver = HeadwayDriver(env, expert)
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        return obs, {**info, EXPERT_KEY: self.driver.act()}
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        return obs, reward, terminated, truncated, {**info, EXPERT_KEY: self.driver.act()}
+
+
+class Dataset:
+    """Aggregated (observation, expert action) pairs; dict observations are kept per key."""
+
+    def __init__(self) -> None:
+        self.obs: list[Any] = []
+        self.actions: list[int] = []
+
+    def __len__(self) -> int:
+        return len(self.actions)
+
+    def add(self, obs: Any, action: int) -> None:
+        self.obs.append(obs)
+        self.actions.append(int(action))
+
+    def arrays(self) -> tuple[Any, np.ndarray]:
+        """Observations stacked (a dict of arrays for Dict spaces) and the actions, int64."""
+        if self.obs and isinstance(self.obs[0], dict):
+            stacked: Any = {k: np.stack([o[k] for o in self.obs]) for k in self.obs[0]}
+        else:
+            stacked = np.stack(self.obs)
+        return stacked, np.asarray(self.actions, dtype=np.int64)
+
+
+def _index(obs: Any, idx: np.ndarray) -> Any:
+    return {k: v[idx] for k, v in obs.items()} if isinstance(obs, dict) else obs[idx]
+
+
+def _row(obs: Any, i: int) -> Any:
+    return {k: np.array(v[i]) for k, v in obs.items()} if isinstance(obs, dict) else np.array(obs[i])
+
+
+def collect(venv, model, steps: int, beta: float, rng: np.random.Generator, data: Dataset,
+            obs: Any, labels: np.ndarray, progress=None) -> tuple[Any, np.ndarray, dict[str, Any]]:
+    """Drive ``steps`` env steps (over all envs) with the beta-mixture; add (obs, expert action) to ``data``.
+
+    ``obs`` / ``labels`` are the envs' current observations and expert actions
+    (from the previous call, or a reset); the updated ones are returned with
+    episode statistics of the episodes that ended here.
+    """
+    n = venv.num_envs
+    returns, crashes, lengths = [], [], []
+    taken = 0
+    while taken < steps:
+        student, _ = model.predict(obs, deterministic=True)
+        use_expert = rng.random(n) < beta
+        actions = np.where(use_expert, labels, np.asarray(student).reshape(n))
+        for i in range(n):
+            data.add(_row(obs, i), labels[i])
+        obs, _, dones, infos = venv.step(actions)
+        labels = np.array([info[EXPERT_KEY] for info in infos], dtype=np.int64)
+        for i in np.flatnonzero(dones):
+            labels[i] = venv.reset_infos[i][EXPERT_KEY]  # the new episode's first state
+            episode = infos[i].get("episode") or {}
+            returns.append(float(episode.get("r", np.nan)))
+            lengths.append(int(episode.get("l", 0)))
+            crashes.append(bool(infos[i].get("crashed", False)))
+        taken += n
+        if progress is not None:
+            progress.update(n)
+    stats = {
+        "episodes": len(returns),
+        "mean_return": float(np.mean(returns)) if returns else None,
+        "mean_length": float(np.mean(lengths)) if lengths else None,
+        "crash_rate": float(np.mean(crashes)) if crashes else None,
+    }
+    return obs, labels, stats
+
+
+def agreement(model, obs: Any, actions: np.ndarray, batch_size: int = 1024) -> float:
+    """Fraction of ``obs`` where the student's greedy action is ``actions``."""
+    import torch
+
+    policy = model.policy
+    hits = 0
+    with torch.no_grad():
+        for start in range(0, len(actions), batch_size):
+            idx = np.arange(start, min(start + batch_size, len(actions)))
+            tensor, _ = policy.obs_to_tensor(_index(obs, idx))
+            greedy = policy.get_distribution(tensor).get_actions(deterministic=True).cpu().numpy()
+            hits += int(np.sum(greedy.reshape(-1) == actions[idx]))
+    return hits / max(1, len(actions))
+
+
+def class_weights(actions: np.ndarray, power: float) -> np.ndarray:
+    """w_a = (n / (K n_a)) ** power per action index a (0 for actions absent from ``actions``).
+
+    >>> class_weights(np.array([1, 1, 1, 4]), 1.0)[[1, 4]].tolist()
+    [0.6666666666666666, 2.0]
+    """
+    counts = np.bincount(actions, minlength=int(actions.max()) + 1).astype(float)
+    present = counts > 0
+    w = np.zeros_like(counts)
+    w[present] = (counts.sum() / (present.sum() * counts[present])) ** power
+    return w
+
+
+def fit(model, data: Dataset, config: DaggerConfig, rng: np.random.Generator, optimizer) -> float:
+    """``config.epochs`` passes of minibatch maximum likelihood of the expert's actions; the last epoch's mean loss."""
+    import torch
+
+    policy = model.policy
+    obs, actions = data.arrays()
+    weights = torch.as_tensor(class_weights(actions, config.class_weight_power), dtype=torch.float32)
+    policy.set_training_mode(True)
+    mean_loss = float("nan")
+    for _ in range(config.epochs):
+        order = rng.permutation(len(actions))
+        losses = []
+        for start in range(0, len(order), config.batch_size):
+            idx = order[start : start + config.batch_size]
+            tensor, _ = policy.obs_to_tensor(_index(obs, idx))
+            log_prob = policy.get_distribution(tensor).log_prob(torch.as_tensor(actions[idx]))
+            w = weights[torch.as_tensor(actions[idx])]
+            loss = -(w * log_prob).sum() / w.sum()
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+            losses.append(float(loss.detach()))
+        mean_loss = float(np.mean(losses))
+    policy.set_training_mode(False)
+    return mean_loss
+
+
+def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int = 0, n_envs: int | None = None,
+                 hyperparams: str | Path | None = None, env_kwargs: dict | None = None,
+                 progress: bool = True, torch_threads: int | None = 1) -> dict[str, Any]:
+    """DAgger on ``env_id`` for ``timesteps`` env steps; writes ``out/model.zip``, ``model.json``, ``train.json``.
+
+    Returns the summary (as in :func:`agents.train.train`, with ``algo: "dagger"``
+    and one record per iteration: beta, the student's agreement with the expert
+    on the new states before fitting, the fit loss and the episodes driven).
+    """
+    import torch
+    from stable_baselines3 import PPO
+    from tqdm.auto import tqdm
+
+    from agents.train import _limit_threads, _run_settings, _write_summary, check_train_args, make_vec_env
+
+    run = _run_settings("dagger", env_id, timesteps, n_envs, hyperparams, env_kwargs)
+    expert = build(HeadwayDriverConfig, run.hp.get("expert"), "expert")
+    config = build(DaggerConfig, {k: v for k, v in run.hp.items() if k not in ("policy_kwargs", "expert")}, "dagger")
+    check_train_args(run.timesteps, run.n_envs, seed, 0, 1, 0)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    _limit_threads(torch_threads)
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    venv = make_vec_env(env_id, run.n_envs, seed, run.env_kwargs, monitor_dir=out / "monitor",
+                        wrapper=partial(ExpertActionInfo, expert=expert))
+    t0 = time.perf_counter()
+    records = []
+    try:
+        model = PPO(run.policy, venv, seed=seed, device="cpu", verbose=0,
+                    policy_kwargs=run.hp.get("policy_kwargs") or {})
+        optimizer = torch.optim.Adam(model.policy.parameters(), lr=config.learning_rate)
+        data = Dataset()
+        obs = venv.reset()
+        labels = np.array([info[EXPERT_KEY] for info in venv.reset_infos], dtype=np.int64)
+        per_round = -(-run.timesteps // config.iterations)
+        bar = tqdm(total=run.timesteps, desc="dagger", unit="step", disable=not progress)
+        for i in range(config.iterations):
+            beta = config.beta_decay**i
+            start = len(data)
+            steps = min(per_round, run.timesteps - i * per_round)
+            obs, labels, stats = collect(venv, model, steps, beta, rng, data, obs, labels, bar)
+            new_obs, new_actions = _new(data, start)
+            agree = agreement(model, new_obs, new_actions) if i > 0 else None
+            loss = fit(model, data, config, rng, optimizer)
+            records.append({"iteration": i, "beta": beta, "samples": len(data),
+                            "agreement_before_fit": agree, "fit_loss": loss, **stats})
+            print(f"dagger: round {i}: beta {beta:.3f}, {len(data)} samples, agreement "
+                  f"{'-' if agree is None else f'{agree:.3f}'}, loss {loss:.3f}, episodes {stats}", file=sys.stderr)
+        bar.close()
+        model.num_timesteps = len(data)
+        model.save(out / "model.zip")
+    finally:
+        venv.close()
+    wall = max(time.perf_counter() - t0, 1e-9)
+    summary = {
+        "algo": "dagger",
+        "env_id": env_id.split(":", 1)[-1],
+        "env_kwargs": run.env_kwargs,
+        "policy": run.policy,
+        "timesteps": len(data),
+        "decision_interval": 1,
+        "decisions": len(data),
+        "n_envs": run.n_envs,
+        "seed": seed,
+        "wall_time_s": round(wall, 1),
+        "steps_per_s": round(len(data) / wall, 2),
+        "hyperparams": run.hp_record,
+        "dagger": asdict(config),
+        "expert": expert.to_dict(),
+        "iterations": records,
+        "model": str(out / "model.zip"),
+        "interrupted": False,
+    }
+    _write_summary(out, summary)
+    (out / "iterations.json").write_text(json.dumps(records, indent=2))
+    return summary
+
+
+def _new(data: Dataset, start: int) -> tuple[Any, np.ndarray]:
+    """The samples added since index ``start``, stacked."""
+    tail = Dataset()
+    tail.obs, tail.actions = data.obs[start:], data.actions[start:]
+    return tail.arrays()
