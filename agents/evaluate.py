@@ -18,7 +18,8 @@ was trained on unless asked otherwise. A policy trained with a ``decision_interv
 k > 1 (saved in the same JSON, :mod:`agents.decision`) is loaded as a
 :class:`agents.decision.HeldPolicy`: it decides every k env steps and repeats its
 action between, so every policy is scored per env step on the same seeds. The default policy is the shipped one,
-``agents/data/ppo_rhs_highway_slam.zip`` (with ``ppo_rhs_highway_slam.json``).
+``agents/data/dagger_rhs_highway_slam.zip`` (with ``dagger_rhs_highway_slam.json``): a DAgger student
+of :class:`agents.expert.HeadwayDriver` (:mod:`agents.imitation`).
 """
 
 from __future__ import annotations
@@ -36,8 +37,11 @@ from agents.expert import HeadwayDriver
 from rhs_env.registration import SLAM_ENV_SPECS
 
 DATA_DIR = Path(__file__).parent / "data"
-SHIPPED_POLICY = DATA_DIR / "ppo_rhs_highway_slam.zip"
-SHIPPED_TRUTH_POLICY = DATA_DIR / "ppo_rhs_highway_truth.zip"
+SHIPPED_POLICY = DATA_DIR / "dagger_rhs_highway_slam.zip"
+SHIPPED_TRUTH_POLICY = DATA_DIR / "dagger_rhs_highway_truth.zip"
+#: the earlier shipped PPO policies (40k env steps): the algorithm ablation of results/policies.md
+PPO_POLICY = DATA_DIR / "ppo_rhs_highway_slam.zip"
+PPO_TRUTH_POLICY = DATA_DIR / "ppo_rhs_highway_truth.zip"
 DEFAULT_ENV = "rhs-highway-slam-v0"
 
 
@@ -225,7 +229,8 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
     if env is not None:
         check_spaces(model, env, path)
         model = PointColumnAdapter.wrap(model, env)
-    return held(model, policy_metadata(path).get("decision_interval", 1))
+    meta = policy_metadata(path)
+    return held(model, meta.get("decision_interval", 1), meta.get("decision_mode", "hold"))
 
 
 def _load_rllib(path: Path, env=None):

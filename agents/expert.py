@@ -22,7 +22,7 @@ capped at the top target speed ``v_max``. Each decision:
    taken as soon as the smaller *escape* gaps allow (``d0 / 2`` ahead and behind
    plus ``T_r`` times the follower's closing speed).
 2. **Speed.** Otherwise SLOWER when the ego's target speed exceeds
-   ``v_safe(own lane)``, FASTER when the next target speed is at most
+   ``v_safe(own lane)`` or the cruise speed ``v_c``, FASTER when the next target speed is at most
    ``min(v_safe - margin, v_c)``, else IDLE. The cruise speed ``v_c`` (25 m/s)
    is the traffic's pace (highway-env's cars drive 20-25 m/s): at the top
    target speed, 30 m/s, the ego would close on every car ahead at 5-10 m/s.
@@ -65,6 +65,7 @@ class HeadwayDriverConfig:
     margin_mps: float = 2.0  # speed margin before FASTER; a left change needs margin + 1 m/s of gain
     rear_headway_s: float = 1.0  # T_r: time gap left to a faster follower in the target lane
     keep_right_tolerance_mps: float = 0.5  # a right lane may be this much slower and still be taken
+    lookahead_m: float = 60.0  # a leader slower than the lowest target speed this close makes the lane one to leave
     cruise_speed_mps: float = 25.0  # v_c: the highest target speed chosen (the traffic's pace; 30 m/s closes on it)
 
     def __post_init__(self) -> None:
@@ -74,6 +75,7 @@ class HeadwayDriverConfig:
         check_range("margin_mps", self.margin_mps, 0.0, 20.0)
         check_range("rear_headway_s", self.rear_headway_s, 0.0, 10.0)
         check_range("keep_right_tolerance_mps", self.keep_right_tolerance_mps, 0.0, 20.0)
+        check_range("lookahead_m", self.lookahead_m, 0.0, 500.0)
         check_range("cruise_speed_mps", self.cruise_speed_mps, 0.0, 60.0, low_open=True)
 
     def to_dict(self) -> dict[str, float]:
@@ -137,7 +139,10 @@ class HeadwayDriver:
         """LANE_LEFT / LANE_RIGHT when a side lane is worth taking, else None."""
         c = self.config
         own = ego.target_lane_index
-        trapped = v_own < v_min + c.margin_mps  # the gap (nearly) closes at the lowest target speed: any better lane
+        front, _ = self.env.unwrapped.road.neighbour_vehicles(ego, own)
+        slow_leader = front is not None and front.speed < v_min and self._bumper_gap(ego, front) < c.lookahead_m
+        # the gap closes, or will, even at the lowest target speed: any better lane will do
+        trapped = v_own < v_min + c.margin_mps or slow_leader
         best, best_v, best_right = None, v_own, False
         for lane in self.env.unwrapped.road.network.side_lanes(own):
             if not self.is_open(lane, escape=trapped):
@@ -164,7 +169,7 @@ class HeadwayDriver:
             if lane_action is not None:
                 return lane_action
         i = int(ego.speed_index)
-        if speeds[i] > v_own and i > 0:
+        if speeds[i] > min(v_own, max(c.cruise_speed_mps, float(speeds[0]))) and i > 0:
             return SLOWER
         if i + 1 < len(speeds) and speeds[i + 1] <= min(v_safe - c.margin_mps, c.cruise_speed_mps):
             return FASTER

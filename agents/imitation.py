@@ -29,6 +29,8 @@ Before step 2 the student is scored on the new data it has not been fitted to
 (``agreement``: the fraction of states where its greedy action equals the
 expert's). ``N`` counts env steps over all envs, like PPO's ``n_timesteps``,
 so a DAgger and a PPO run with the same ``N`` have the same simulation budget.
+With ``decision_interval: k`` (:mod:`agents.decision`) the student and the expert
+decide every k env steps (``N / k`` labelled decisions), the action held between.
 
 Hyperparameters come from ``agents/hyperparams/dagger.yml`` (per env id:
 ``policy``, ``policy_kwargs``, ``n_envs``, ``n_timesteps``, ``env_kwargs`` and
@@ -153,12 +155,12 @@ def collect(venv, model, steps: int, beta: float, rng: np.random.Generator, data
             data.add(_row(obs, i), labels[i])
         obs, _, dones, infos = venv.step(actions)
         labels = np.array([info[EXPERT_KEY] for info in infos], dtype=np.int64)
-        for i in np.flatnonzero(dones):
-            labels[i] = venv.reset_infos[i][EXPERT_KEY]  # the new episode's first state
-            episode = infos[i].get("episode") or {}
+        for j in map(int, np.flatnonzero(dones)):
+            labels[j] = venv.reset_infos[j][EXPERT_KEY]  # the new episode's first state
+            episode = infos[j].get("episode") or {}
             returns.append(float(episode.get("r", np.nan)))
             lengths.append(int(episode.get("l", 0)))
-            crashes.append(bool(infos[i].get("crashed", False)))
+            crashes.append(bool(infos[j].get("crashed", False)))
         taken += n
         if progress is not None:
             progress.update(n)
@@ -250,8 +252,11 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
     _limit_threads(torch_threads)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
+    k = run.decision_interval
     venv = make_vec_env(env_id, run.n_envs, seed, run.env_kwargs, monitor_dir=out / "monitor",
-                        wrapper=partial(ExpertActionInfo, expert=expert))
+                        wrapper=partial(ExpertActionInfo, expert=expert), decision_interval=k,
+                        decision_mode=run.decision_mode)
+    decisions = -(-run.timesteps // k)
     t0 = time.perf_counter()
     records = []
     try:
@@ -261,12 +266,12 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
         data = Dataset()
         obs = venv.reset()
         labels = np.array([info[EXPERT_KEY] for info in venv.reset_infos], dtype=np.int64)
-        per_round = -(-run.timesteps // config.iterations)
-        bar = tqdm(total=run.timesteps, desc="dagger", unit="step", disable=not progress)
+        per_round = -(-decisions // config.iterations)
+        bar = tqdm(total=decisions, desc="dagger", unit="decision", disable=not progress)
         for i in range(config.iterations):
             beta = config.beta_decay**i
             start = len(data)
-            steps = min(per_round, run.timesteps - i * per_round)
+            steps = min(per_round, decisions - i * per_round)
             obs, labels, stats = collect(venv, model, steps, beta, rng, data, obs, labels, bar)
             new_obs, new_actions = _new(data, start)
             agree = agreement(model, new_obs, new_actions) if i > 0 else None
@@ -286,13 +291,14 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
         "env_id": env_id.split(":", 1)[-1],
         "env_kwargs": run.env_kwargs,
         "policy": run.policy,
-        "timesteps": len(data),
-        "decision_interval": 1,
+        "timesteps": len(data) * k,  # env steps (an episode cut short by a crash takes fewer)
+        "decision_interval": k,
+        "decision_mode": run.decision_mode,
         "decisions": len(data),
         "n_envs": run.n_envs,
         "seed": seed,
         "wall_time_s": round(wall, 1),
-        "steps_per_s": round(len(data) / wall, 2),
+        "steps_per_s": round(len(data) * k / wall, 2),
         "hyperparams": run.hp_record,
         "dagger": asdict(config),
         "expert": expert.to_dict(),

@@ -32,17 +32,18 @@ import os
 import sys
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import yaml
 
 ALGOS = ("ppo", "dqn", "dagger")
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 #: keys of a hyperparameter entry that are not arguments of the algorithm class
-META_KEYS = ("policy", "n_envs", "n_timesteps", "env_kwargs", "decision_interval")
+META_KEYS = ("policy", "n_envs", "n_timesteps", "env_kwargs", "decision_interval", "decision_mode")
 
 
 def load_hyperparams(algo: str, env_id: str, path: str | Path | None = None) -> dict[str, Any]:
@@ -192,18 +193,20 @@ def make_vec_env(
     monitor_dir: str | Path | None = None,
     decision_interval: int = 1,
     wrapper: Callable[[Any], Any] | None = None,
+    decision_mode: str = "hold",
 ):
     """``n_envs`` copies of ``env_id`` (``Monitor`` logging ``crashed``), in subprocesses when n_envs > 1.
 
     ``decision_interval`` > 1 wraps each ``Monitor`` in :class:`agents.decision.HoldAction`
-    (the monitor still counts env steps and per-step rewards). ``wrapper`` (a picklable
+    (the monitor still counts env steps and per-step rewards), which repeats the action
+    or, with ``decision_mode="pulse"``, fills the steps after it with IDLE. ``wrapper`` (a picklable
     callable, env -> env) wraps each ``Monitor`` first, e.g.
     :class:`agents.imitation.ExpertActionInfo`.
     """
     from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-    from agents.decision import HoldAction, check_decision_interval
+    from agents.decision import HoldAction, check_decision_interval, fill_action
 
     if n_envs < 1:
         raise ValueError(f"n_envs must be >= 1, got {n_envs}")
@@ -219,7 +222,7 @@ def make_vec_env(
         vec_env_cls=vec_cls,
         monitor_dir=str(monitor_dir) if monitor_dir else None,
         monitor_kwargs={"info_keywords": ("crashed",)},
-        wrapper_class=_compose(wrapper, partial(HoldAction, k=k) if k > 1 else None),
+        wrapper_class=_compose(wrapper, partial(HoldAction, k=k, fill=fill_action(decision_mode)) if k > 1 else None),
     )
 
 
@@ -307,7 +310,8 @@ def train(
     if run.n_envs > 1:
         _check_env_kwargs(env_id, run.env_kwargs)
     k = run.decision_interval
-    venv = make_vec_env(env_id, run.n_envs, seed, run.env_kwargs, monitor_dir=out / "monitor", decision_interval=k)
+    venv = make_vec_env(env_id, run.n_envs, seed, run.env_kwargs, monitor_dir=out / "monitor", decision_interval=k,
+                        decision_mode=run.decision_mode)
     decisions = -(-run.timesteps // k)
     eval_env = None
     try:
@@ -380,15 +384,17 @@ class _RunSettings:
     hp: dict[str, Any]  # constructor kwargs of the algorithm (schedules and policy_kwargs resolved)
     hp_record: dict[str, Any]  # the YAML as written, for the summary
     decision_interval: int = 1  # env steps per agent decision (agents.decision.HoldAction)
+    decision_mode: str = "hold"  # between decisions: the action repeated, or IDLE after it ("pulse")
 
 
 def _run_settings(algo: str, env_id: str, timesteps: int | None, n_envs: int | None,
                   hyperparams: str | Path | None, env_kwargs: dict | None) -> _RunSettings:
-    from agents.decision import check_decision_interval
+    from agents.decision import check_decision_interval, check_decision_mode
 
     hp = load_hyperparams(algo, env_id, hyperparams)
     policy = hp.pop("policy")
     k = check_decision_interval(hp.pop("decision_interval", 1))
+    mode = check_decision_mode(hp.pop("decision_mode", "hold"))
     yaml_steps = hp.pop("n_timesteps", None)
     steps = int(timesteps if timesteps is not None else (yaml_steps or 0))
     if steps < 1:
@@ -400,7 +406,7 @@ def _run_settings(algo: str, env_id: str, timesteps: int | None, n_envs: int | N
     kwargs = {**(hp.pop("env_kwargs", None) or {}), **(env_kwargs or {})}
     hp["policy_kwargs"] = _resolve_policy_kwargs(hp.get("policy_kwargs", {}))
     record = {k: v for k, v in load_hyperparams(algo, env_id, hyperparams).items() if k not in META_KEYS}
-    return _RunSettings(policy, steps, envs, kwargs, _resolve_schedules(hp), record, k)
+    return _RunSettings(policy, steps, envs, kwargs, _resolve_schedules(hp), record, k, mode)
 
 
 def _callbacks(algo: str, env_id: str, run: _RunSettings, seed: int, out: Path, eval_freq: int,
@@ -414,7 +420,8 @@ def _callbacks(algo: str, env_id: str, run: _RunSettings, seed: int, out: Path, 
     eval_cb = eval_env = None
     if eval_freq and eval_freq > 0:
         k = run.decision_interval
-        eval_env = make_vec_env(env_id, 1, seed + 10_000, run.env_kwargs, subprocess=False, decision_interval=k)
+        eval_env = make_vec_env(env_id, 1, seed + 10_000, run.env_kwargs, subprocess=False, decision_interval=k,
+                                decision_mode=run.decision_mode)
         eval_cb = EvalCallback(eval_env, n_eval_episodes=eval_episodes,
                                eval_freq=max(1, eval_freq // (run.n_envs * k)),
                                best_model_save_path=str(out), log_path=str(out / "eval"), deterministic=True, verbose=0)
@@ -439,6 +446,7 @@ def _summary(algo: str, env_id: str, run: _RunSettings, seed: int, model, eval_c
         # env steps: decisions x decision_interval (an episode cut short by a crash takes fewer)
         "timesteps": int(model.num_timesteps) * run.decision_interval,
         "decision_interval": run.decision_interval,
+        "decision_mode": run.decision_mode,
         "decisions": int(model.num_timesteps),
         "n_envs": run.n_envs,
         "seed": seed,
@@ -493,11 +501,12 @@ def train_rllib_backend(
 
     if num_env_runners is not None and int(num_env_runners) < 0:
         raise ValueError(f"num_env_runners must be >= 0, got {num_env_runners}")
-    from agents.decision import check_decision_interval
+    from agents.decision import check_decision_interval, check_decision_mode
 
     hp = load_hyperparams("ppo", env_id, hyperparams)
     hp.pop("policy")
     hp["policy_kwargs"] = _policy_kwargs_by_name(hp.get("policy_kwargs") or {})
+    check_decision_mode(hp.pop("decision_mode", "hold"))
     if check_decision_interval(hp.pop("decision_interval", 1)) != 1:
         raise ValueError("decision_interval > 1 is for the sb3 backend; the rllib backend decides every env step")
     require_ray()

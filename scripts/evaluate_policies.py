@@ -2,11 +2,16 @@
 
 Rows (every policy meets the same traffic: episode k uses seed ``--seed + k``):
 
-* ``PPO, SLAM observation``: ``agents/data/ppo_rhs_highway_slam.zip`` on
-  ``rhs-highway-slam-v0`` with the env kwargs saved beside it (SLAM in the loop);
+* ``DAgger, SLAM observation``: ``agents/data/dagger_rhs_highway_slam.zip`` (the
+  shipped policy) on ``rhs-highway-slam-v0`` with the env kwargs saved beside it
+  (SLAM in the loop);
 * ``random``: uniformly random actions on the same env and config;
-* ``PPO, ground truth``: ``agents/data/ppo_rhs_highway_truth.zip`` on
+* ``DAgger, ground truth``: ``agents/data/dagger_rhs_highway_truth.zip`` on
   ``rhs-highway-v0`` (highway-env Kinematics observation of the same scene);
+* ``PPO`` on either observation (``agents/data/ppo_rhs_highway_{slam,truth}.zip``,
+  the earlier shipped policies): the algorithm ablation, skipped with ``--no-ppo``;
+* ``HeadwayDriver``: the DAgger expert (:class:`agents.expert.HeadwayDriver`, a
+  scripted time-gap driver on the simulator state), on ``rhs-highway-v0``;
 * ``always SLOWER``: a scripted reference, action 4 (SLOWER) at every step, i.e.
   the lowest target speed (20 m/s) in the current lane, on ``rhs-highway-v0``;
 * ``IDM + MOBIL``: a strong scripted reference, highway-env's own ``IDMVehicle``
@@ -38,9 +43,12 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
 from _provenance import write_json
+from train_policy import ANTENNA_STUDY, TARGETS, target_path
 
 REWARD_AIM, COLLISION_AIM = 0.8, 1.5
 #: issue 12, goal 1: return vs always-SLOWER, collision rate, return vs the ground-truth policy
@@ -80,6 +88,86 @@ def fingerprint() -> list[float]:
     return out
 
 
+def mean_ci(values: list[float]) -> tuple[float, float]:
+    """Mean and the half-width of its 95 % Student-t interval."""
+    from scipy.stats import t
+
+    v = np.asarray(values, dtype=float)
+    half = float(t.ppf(0.975, v.size - 1) * v.std(ddof=1) / np.sqrt(v.size)) if v.size > 1 else float("nan")
+    return float(v.mean()), half
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """95 % Wilson score interval of a rate k / n."""
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return float(max(0.0, centre - half)), float(min(1.0, centre + half))
+
+
+def antenna_study(episodes: int, seed: int, workers: int) -> dict:
+    """Issue 12 goal 2: DAgger students on RHS and phased-array observations, same budget, same seeds.
+
+    For each env (highway, dense roadside) both policies drive the same seeds; the RHS - phased return
+    difference is paired over seeds (95 % t-interval), collision rates get Wilson intervals.
+    """
+    from agents.evaluate import policy_metadata, resolve_env, summarize
+
+    seeds = list(range(seed, seed + episodes))
+    rows, pairs = [], []
+    for name in ANTENNA_STUDY:
+        policy = target_path("dagger", name)
+        if not policy.exists():
+            raise SystemExit(f"evaluate_policies: {policy} is missing: python scripts/train_policy.py --only {name}")
+        env_id, kwargs = resolve_env(str(policy))
+        print(f"evaluate_policies: antenna study: {name} on {env_id}, {episodes} episodes ...", file=sys.stderr)
+        t0 = time.perf_counter()
+        runs = run_policy(str(policy), env_id, kwargs, seeds, workers)
+        meta = policy_metadata(policy)
+        antenna = (kwargs.get("radar") or {}).get("antenna", "rhs")
+        summary = summarize(runs)
+        rows.append({"name": name, "policy": str(policy.relative_to(ROOT)), "env_id": env_id, "env_kwargs": kwargs,
+                     "antenna": antenna, "timesteps": meta.get("timesteps"), "wall_s": round(time.perf_counter() - t0, 1),
+                     "summary": summary, "return_ci": mean_ci([r["return"] for r in runs]),
+                     "collision_ci": wilson(summary["collisions"], len(runs)),
+                     "returns": [r["return"] for r in runs]})  # fmt: skip
+    for env_id in dict.fromkeys(r["env_id"] for r in rows):
+        rhs = next(r for r in rows if r["env_id"] == env_id and r["antenna"] == "rhs")
+        phased = next(r for r in rows if r["env_id"] == env_id and r["antenna"] == "phased")
+        diff = mean_ci([a - b for a, b in zip(rhs["returns"], phased["returns"])])
+        pairs.append({"env_id": env_id, "return_diff_rhs_minus_phased": diff})
+    return {"episodes": episodes, "seeds": seeds, "targets": {n: TARGETS[n][0] for n in ANTENNA_STUDY},
+            "rows": rows, "pairs": pairs}
+
+
+def antenna_markdown(study: dict) -> str:
+    lines = [
+        (
+            f"Does the antenna matter for driving? DAgger students (same expert, same env-step budget per env) on RHS "
+            f"and on phased-array observations, {study['episodes']} seeds ({study['seeds'][0]}..{study['seeds'][-1]}) "
+            "each, mean ± 95 % t-interval; collision rates with 95 % Wilson intervals."
+        ),
+        "",
+        "| env | antenna | training env steps | return | collision rate | mean speed (m/s) | SLAM position RMSE (m) |",
+        "|---|---|---:|---|---|---|---|",
+    ]
+    for r in study["rows"]:
+        s = r["summary"]
+        lo, hi = r["collision_ci"]
+        m, h = r["return_ci"]
+        lines.append(
+            f"| `{r['env_id']}` | {r['antenna']} | {r['timesteps']} | {m:.1f} ± {h:.1f} | {s['collision_rate']:.2f} "
+            f"({s['collisions']}/{s['episodes']}; {lo:.2f}-{hi:.2f}) | {_fmt(s['mean_speed_mps'])} "
+            f"| {_fmt(s['position_rmse_m'], 2)} |"
+        )
+    lines.append("")
+    for p in study["pairs"]:
+        m, h = p["return_diff_rhs_minus_phased"]
+        verdict = "RHS higher" if m - h > 0 else ("phased higher" if m + h < 0 else "no significant difference")
+        lines.append(f"`{p['env_id']}`: return RHS - phased, paired over seeds: {m:+.1f} ± {h:.1f} ({verdict}).  ")
+    return "\n".join(lines) + "\n"
+
+
 def _fmt(stats: dict, digits: int = 1, spread: bool = True) -> str:
     if stats.get("mean") is None:
         return "n/a"
@@ -111,7 +199,7 @@ def markdown(result: dict) -> str:
             f"({s['collisions']}/{s['episodes']}) | {_fmt(s['mean_speed_mps'])} | {_fmt(s['episode_length'], 0)} "
             f"| {_fmt(s['position_rmse_m'], 2)} | {_fmt(s['map_rmse_m'], 2)} |"
         )
-    slam_row = next(r for r in rows if r["key"] == "ppo_slam")
+    slam_row = next(r for r in rows if r["key"] == "slam")
     kw = slam_row["env_kwargs"]
     lines += [
         "",
@@ -121,15 +209,18 @@ def markdown(result: dict) -> str:
             if kw
             else "with its default configuration"
         )
-        + f"; the ground-truth and scripted rows on `{next(r for r in rows if r['key'] == 'ppo_truth')['env_id']}`: "
+        + f"; the ground-truth and scripted rows on `{next(r for r in rows if r['key'] == 'truth')['env_id']}`: "
         "the same scene and traffic (same seed and actions give the same episode on both ids), observed through "
         'highway-env\'s Kinematics table. "Always SLOWER" (lowest target speed, 20 m/s, never changing lane) is '
         "a scripted reference for the learned policies; \"IDM + MOBIL\" is highway-env's own driver model "
-        "(the traffic's) in the ego's seat with a desired speed of 30 m/s: a strong scripted reference.",
+        "(the traffic's) in the ego's seat with a desired speed of 30 m/s: a strong scripted reference. "
+        "\"HeadwayDriver\" is the DAgger expert (agents/expert.py): meta-actions chosen from the true gaps "
+        "and speeds; the DAgger students see only their observation. Same budget: both DAgger students and "
+        "both PPO policies saw the env-step counts listed under Training.",
     ]
     aim = result["aim"]
     ref = next((r for r in rows if r["key"] == "slower"), None)
-    learned = [r for r in rows if r["key"] in ("ppo_slam", "ppo_truth")]
+    learned = [r for r in rows if r["key"] in ("slam", "truth")]
     if ref is not None and all(r["summary"]["return"]["mean"] < ref["summary"]["return"]["mean"] for r in learned):
         why = ""
         if all(r["summary"]["collision_rate"] > 0 for r in learned):
@@ -148,7 +239,7 @@ def markdown(result: dict) -> str:
         lines += [
             "",
             (
-                f"Issue 12 goal (SLAM policy): return / always-SLOWER **{goal['return_vs_slower']:.2f}** "
+                f"Issue 12 goal (DAgger SLAM policy): return / always-SLOWER **{goal['return_vs_slower']:.2f}** "
                 f"(aim >= {GOAL_VS_SLOWER}), collision rate **{goal['collision_rate']:.2f}** (aim <= {GOAL_COLLISIONS}), "
                 f"mean speed {goal['speed_gain_mps']:+.2f} m/s vs always-SLOWER (aim > 0), return / ground-truth "
                 f"policy **{goal['return_vs_truth']:.2f}** (aim >= {GOAL_VS_TRUTH}): goal "
@@ -159,6 +250,8 @@ def markdown(result: dict) -> str:
         "",
         f"Training (scripts/train_policy.py): {result['training_text']}",
     ]
+    if result.get("antenna"):
+        lines += ["", antenna_markdown(result["antenna"]).rstrip("\n")]
     return "\n".join(lines) + "\n"
 
 
@@ -167,8 +260,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--episodes", type=int, default=50)
     ap.add_argument("--seed", type=int, default=1000, help="first seed (training used 0.. and 10000..)")
     ap.add_argument("--workers", type=int, default=2, help="processes per policy")
-    ap.add_argument("--slam-policy", default=None, help="default: agents/data/ppo_rhs_highway_slam.zip")
-    ap.add_argument("--truth-policy", default=None, help="default: agents/data/ppo_rhs_highway_truth.zip")
+    ap.add_argument("--slam-policy", default=None, help="default: agents/data/dagger_rhs_highway_slam.zip")
+    ap.add_argument("--truth-policy", default=None, help="default: agents/data/dagger_rhs_highway_truth.zip")
+    ap.add_argument("--no-ppo", action="store_true", help="skip the PPO rows (the algorithm ablation)")
+    ap.add_argument("--no-antenna", action="store_true", help="skip the antenna study (issue 12 goal 2)")
+    ap.add_argument("--antenna-episodes", type=int, default=50, help="seeds per policy in the antenna study")
     ap.add_argument("--out-dir", default=str(ROOT / "results"))
     ap.add_argument("--render-only", action="store_true", help="rewrite policies.md from policies.json, no runs")
     args = ap.parse_args(argv)
@@ -181,6 +277,8 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
     from agents.evaluate import (
+        PPO_POLICY,
+        PPO_TRUTH_POLICY,
         SHIPPED_POLICY,
         SHIPPED_TRUTH_POLICY,
         policy_metadata,
@@ -193,10 +291,19 @@ def main(argv: list[str] | None = None) -> int:
     slam_env, slam_kwargs = resolve_env(slam_policy)
     truth_env, truth_kwargs = resolve_env(truth_policy)
     seeds = list(range(args.seed, args.seed + args.episodes))
+    slam_obs, truth_obs = "radar point cloud + SLAM", "highway-env Kinematics (truth)"
     specs = [
-        ("ppo_slam", "PPO (shipped)", "radar point cloud + SLAM", slam_policy, slam_env, slam_kwargs),
+        ("slam", "DAgger (shipped)", slam_obs, slam_policy, slam_env, slam_kwargs),
+        ("truth", "DAgger (ground truth)", truth_obs, truth_policy, truth_env, truth_kwargs),
         ("random", "random", "(none)", "random", slam_env, slam_kwargs),
-        ("ppo_truth", "PPO (ground truth)", "highway-env Kinematics (truth)", truth_policy, truth_env, truth_kwargs),
+    ]
+    if not args.no_ppo:
+        specs += [
+            ("ppo_slam", "PPO (earlier shipped)", slam_obs, str(PPO_POLICY), *resolve_env(str(PPO_POLICY))),
+            ("ppo_truth", "PPO (ground truth)", truth_obs, str(PPO_TRUTH_POLICY), *resolve_env(str(PPO_TRUTH_POLICY))),
+        ]
+    specs += [
+        ("headway", "HeadwayDriver (DAgger expert, scripted)", "(simulator state)", "headway", truth_env, truth_kwargs),
         ("slower", "always SLOWER (scripted)", "(none)", "constant:4", truth_env, truth_kwargs),
         ("idm", "IDM + MOBIL (highway-env, scripted)", "(simulator state)", "idm", truth_env, truth_kwargs),
     ]
@@ -216,17 +323,17 @@ def main(argv: list[str] | None = None) -> int:
         rows.append({"key": key, "label": label, "observation": obs, "policy": policy, "env_id": env_id,
                      "env_kwargs": kwargs, "wall_s": round(wall, 1), "summary": summary, "runs": slim})  # fmt: skip
     by = {r["key"]: r["summary"] for r in rows}
-    ret_ratio = by["ppo_slam"]["return"]["mean"] / by["ppo_truth"]["return"]["mean"]
-    c_slam, c_truth = by["ppo_slam"]["collision_rate"], by["ppo_truth"]["collision_rate"]
+    ret_ratio = by["slam"]["return"]["mean"] / by["truth"]["return"]["mean"]
+    c_slam, c_truth = by["slam"]["collision_rate"], by["truth"]["collision_rate"]
     if c_truth > 0:
         c_ratio, c_text, c_ok = c_slam / c_truth, f"{c_slam / c_truth:.2f}", c_slam <= COLLISION_AIM * c_truth
     else:
         c_ratio, c_text, c_ok = None, ("0/0" if c_slam == 0 else f"{c_slam:.2f} vs 0"), c_slam == 0
     slower = by["slower"]
     goal = {
-        "return_vs_slower": by["ppo_slam"]["return"]["mean"] / slower["return"]["mean"],
+        "return_vs_slower": by["slam"]["return"]["mean"] / slower["return"]["mean"],
         "collision_rate": c_slam,
-        "speed_gain_mps": by["ppo_slam"]["mean_speed_mps"]["mean"] - slower["mean_speed_mps"]["mean"],
+        "speed_gain_mps": by["slam"]["mean_speed_mps"]["mean"] - slower["mean_speed_mps"]["mean"],
         "return_vs_truth": ret_ratio,
     }
     goal["met"] = bool(
@@ -236,13 +343,17 @@ def main(argv: list[str] | None = None) -> int:
         and ret_ratio >= GOAL_VS_TRUTH
     )
     training = {}
-    for key, policy in (("ppo_slam", slam_policy), ("ppo_truth", truth_policy)):
+    for key, policy in (("slam", slam_policy), ("truth", truth_policy)) + (
+        () if args.no_ppo else (("ppo_slam", str(PPO_POLICY)), ("ppo_truth", str(PPO_TRUTH_POLICY)))
+    ):
         meta = policy_metadata(policy)
         training[key] = {
-            k: meta.get(k) for k in ("env_id", "env_kwargs", "timesteps", "n_envs", "wall_time_s", "steps_per_s")
+            k: meta.get(k)
+            for k in ("algo", "env_id", "env_kwargs", "timesteps", "n_envs", "wall_time_s", "steps_per_s")
         }
     training_text = "; ".join(
-        f"{k}: {v['timesteps']} steps on {v['env_id']} with {v['n_envs']} subprocess envs in {v['wall_time_s']} s "
+        f"{k} ({v['algo'] or 'ppo'}): {v['timesteps']} env steps on {v['env_id']} with {v['n_envs']} subprocess envs "
+        f"in {v['wall_time_s']} s "
         f"({v['steps_per_s']} steps/s)" + (f", env kwargs `{json.dumps(v['env_kwargs'])}`" if v["env_kwargs"] else "")
         for k, v in training.items()
     )
@@ -273,6 +384,8 @@ def main(argv: list[str] | None = None) -> int:
         "training": training,
         "training_text": training_text,
     }
+    if not args.no_antenna:
+        result["antenna"] = antenna_study(args.antenna_episodes, args.seed, args.workers)
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "policies.json", result, __file__, args, started, fingerprint, argv)

@@ -1,10 +1,15 @@
-"""Train the shipped driving policies (PPO) and record how they were made.
+"""Train the shipped driving policies (DAgger by default) and record how they were made.
 
-* ``agents/data/ppo_rhs_highway_slam.zip``: trained on ``rhs-highway-slam-v0``
-  (point cloud + SLAM estimate), SLAM in the loop at every step;
-* ``agents/data/ppo_rhs_highway_truth.zip``: the same algorithm, hyperparameters
-  (``agents/hyperparams/ppo.yml``) and number of steps on ``rhs-highway-v0``
+* ``agents/data/dagger_rhs_highway_slam.zip``: trained on ``rhs-highway-slam-v0``
+  (point cloud + SLAM estimate), SLAM in the loop at every step, by DAgger from
+  the privileged :class:`agents.expert.HeadwayDriver` (:mod:`agents.imitation`);
+* ``agents/data/dagger_rhs_highway_truth.zip``: the same algorithm, hyperparameters
+  (``agents/hyperparams/dagger.yml``) and number of env steps on ``rhs-highway-v0``
   (ground-truth Kinematics), for comparison.
+
+``--algo ppo`` trains PPO instead (``agents/hyperparams/ppo.yml``) into
+``ppo_rhs_highway_{slam,truth}.zip``: the earlier shipped policies, kept as the
+algorithm ablation.
 
 Each zip gets a JSON beside it (env id, ``env_kwargs``, timesteps, wall time,
 hyperparameters) that ``rhs-slam evaluate`` / ``rhs-slam demo`` read to rebuild
@@ -13,7 +18,8 @@ runs (timesteps, wall time, steps/s, machine). TensorBoard logs, checkpoints,
 monitor CSVs and evaluations stay in ``--work-dir`` (default ``runs/policies``,
 not shipped).
 
-    OMP_NUM_THREADS=1 python scripts/train_policy.py                  # both policies
+    OMP_NUM_THREADS=1 python scripts/train_policy.py                  # the shipped DAgger policies
+    python scripts/train_policy.py --only slam_phased dense dense_phased   # the rest of the antenna study
     python scripts/train_policy.py --only slam --timesteps 20000 --n-envs 2
     python scripts/train_policy.py --slam-env-kwargs '{"radar": {"scan": {"grid_deg": 5}}}'
 
@@ -38,11 +44,37 @@ sys.path.insert(0, str(ROOT / "scripts"))
 from _provenance import write_json
 
 DATA = ROOT / "agents" / "data"
-SLAM_ID, TRUTH_ID = "rhs-highway-slam-v0", "rhs-highway-v0"
-TARGETS = {
-    "slam": (SLAM_ID, DATA / "ppo_rhs_highway_slam.zip"),
-    "truth": (TRUTH_ID, DATA / "ppo_rhs_highway_truth.zip"),
+SLAM_ID, TRUTH_ID, DENSE_ID = "rhs-highway-slam-v0", "rhs-highway-v0", "rhs-dense-v0"
+ALGOS = ("dagger", "ppo")
+#: name -> (env id, radar kwargs merged over --slam-env-kwargs; None: a ground-truth env, no radar)
+TARGETS: dict[str, tuple[str, dict | None]] = {
+    "slam": (SLAM_ID, {}),
+    "truth": (TRUTH_ID, None),
+    # issue 12 goal 2, does the antenna matter for driving: the same student on a phased array, and both on
+    # the dense roadside
+    "slam_phased": (SLAM_ID, {"antenna": "phased"}),
+    "dense": (DENSE_ID, {}),
+    "dense_phased": (DENSE_ID, {"antenna": "phased"}),
 }
+SHIPPED = ("slam", "truth")
+#: the radar / SLAM envs train on a 5-degree beam grid (18 beams per sweep, ~2x faster than the 1-degree default)
+SLAM_ENV_KWARGS = {"radar": {"scan": {"grid_deg": 5}}}
+ANTENNA_STUDY = ("slam", "slam_phased", "dense", "dense_phased")
+
+
+def target_path(algo: str, name: str, data_dir: Path = DATA) -> Path:
+    """Where the ``name`` policy trained by ``algo`` goes: ``<algo>_rhs_highway_<name>.zip``, the antenna
+    study's other policies in ``antenna/``."""
+    sub = "antenna/" if name not in SHIPPED else ""
+    return Path(data_dir) / f"{sub}{algo}_rhs_highway_{name}.zip"
+
+
+def target_env_kwargs(name: str, slam_kwargs: dict) -> dict:
+    """``--slam-env-kwargs`` with the target's radar settings merged into its ``radar`` dict ({} for ground truth)."""
+    radar = TARGETS[name][1]
+    if radar is None:
+        return {}
+    return {**slam_kwargs, "radar": {**(slam_kwargs.get("radar") or {}), **radar}} if radar else dict(slam_kwargs)
 MAX_BYTES = 1_000_000
 
 
@@ -67,18 +99,18 @@ def _registration_weights() -> dict:
 def train_one(name: str, args: argparse.Namespace, env_kwargs: dict) -> dict:
     from agents.train import metadata_path, train
 
-    env_id, target = TARGETS[name]
-    target = Path(args.data_dir) / target.name
-    work = Path(args.work_dir) / name
+    env_id = TARGETS[name][0]
+    target = target_path(args.algo, name, Path(args.data_dir))
+    work = Path(args.work_dir) / f"{args.algo}_{name}"
     if work.exists():
         shutil.rmtree(work)
     print(
-        f"train_policy: {name}: PPO on {env_id}, {args.timesteps} steps, {args.n_envs} envs -> {target}",
+        f"train_policy: {name}: {args.algo} on {env_id}, {args.timesteps} steps, {args.n_envs} envs -> {target}",
         file=sys.stderr,
     )
     t0 = time.perf_counter()
     summary = train(
-        "ppo",
+        args.algo,
         env_id,
         args.timesteps,
         work,
@@ -120,15 +152,28 @@ def _display(path: Path) -> str:
         return str(path)
 
 
+def _read_record(path: Path) -> dict:
+    """The training record; entries of before the algorithms were named (``slam``, ``truth``) were PPO's."""
+    record = json.loads(path.read_text()) if path.exists() else {}
+    for old in ("slam", "truth"):
+        if old in record:
+            record.setdefault(f"ppo_{old}", record.pop(old))
+    return record
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--only", choices=tuple(TARGETS), default=None, help="train one policy only")
+    ap.add_argument("--algo", choices=ALGOS, default="dagger", help="dagger (default, shipped) or ppo (ablation)")
+    ap.add_argument("--only", nargs="+", choices=tuple(TARGETS), default=None,
+                    help=f"train these policies only (default: {' '.join(SHIPPED)}; the antenna study: "
+                    f"{' '.join(ANTENNA_STUDY)})")
     ap.add_argument(
-        "--timesteps", type=int, default=None, help="env steps per policy (default: n_timesteps of ppo.yml)"
+        "--timesteps", type=int, default=None, help="env steps per policy (default: n_timesteps of the algo's YAML)"
     )
     ap.add_argument("--n-envs", type=int, default=2, help="subprocess envs (default 2)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--slam-env-kwargs", default="{}", help="JSON env kwargs of the SLAM policy's env (saved with it)")
+    ap.add_argument("--slam-env-kwargs", default=json.dumps(SLAM_ENV_KWARGS),
+                    help="JSON env kwargs of the radar / SLAM policies' envs (saved with them; default: %(default)s)")
     ap.add_argument("--eval-freq", type=int, default=5000, help="env steps between evaluations (0: none)")
     ap.add_argument("--eval-episodes", type=int, default=2)
     ap.add_argument("--checkpoint-freq", type=int, default=5000)
@@ -147,20 +192,19 @@ def main(argv: list[str] | None = None) -> int:
     if args.timesteps is None:
         from agents.train import load_hyperparams
 
-        args.timesteps = int(load_hyperparams("ppo", SLAM_ID)["n_timesteps"])
+        args.timesteps = int(load_hyperparams(args.algo, SLAM_ID)["n_timesteps"])
     record_path = Path(args.record)
-    record = json.loads(record_path.read_text()) if record_path.exists() else {}
-    record["machine"] = _machine()
-    record["registration_weights"] = _registration_weights()
-    for name in TARGETS:
-        if args.only and name != args.only:
-            continue
-        meta = train_one(name, args, slam_kwargs if name == "slam" else {})
-        record[name] = {
+    machine, weights = _machine(), _registration_weights()
+    for name in args.only or SHIPPED:
+        meta = train_one(name, args, target_env_kwargs(name, slam_kwargs))
+        record = _read_record(record_path)  # now: another run (--only) may have written its entry meanwhile
+        record["machine"], record["registration_weights"] = machine, weights
+        record[f"{args.algo}_{name}"] = {
             k: meta[k]
             for k in ("env_id", "env_kwargs", "timesteps", "n_envs", "seed", "wall_time_s", "total_wall_time_s",
                       "steps_per_s", "hyperparams", "recent_episodes", "best_eval_mean_return", "shipped",
-                      "model", "zip_bytes")
+                      "model", "zip_bytes", "algo", "iterations")
+            if k in meta
         }  # fmt: skip
         record.pop("provenance", None)  # the record of this run's (training itself: no fingerprint, minutes long)
         write_json(record_path, record, __file__, args, started, argv=argv)
