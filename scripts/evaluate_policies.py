@@ -105,24 +105,28 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
     return float(max(0.0, centre - half)), float(min(1.0, centre + half))
 
 
-def antenna_study(episodes: int, seed: int, workers: int) -> dict:
+def antenna_study(episodes: int, seed: int, workers: int, done: dict[str, list[dict]] | None = None) -> dict:
     """Issue 12 goal 2: DAgger students on RHS and phased-array observations, same budget, same seeds.
 
     For each env (highway, dense roadside) both policies drive the same seeds; the RHS - phased return
-    difference is paired over seeds (95 % t-interval), collision rates get Wilson intervals.
+    difference is paired over seeds (95 % t-interval), collision rates get Wilson intervals. ``done``
+    maps a policy path to episodes already run on these seeds and its own env (the goal-1 table's), reused.
     """
     from agents.evaluate import policy_metadata, resolve_env, summarize
 
     seeds = list(range(seed, seed + episodes))
     rows, pairs = [], []
-    for name in ANTENNA_STUDY:
+    missing = [name for name in ANTENNA_STUDY if not target_path("dagger", name).exists()]
+    for name in missing:
+        print(f"evaluate_policies: antenna study: {target_path('dagger', name)} is missing (train it with "
+              f"python scripts/train_policy.py --only {name}); its row is left out", file=sys.stderr)
+    for name in (n for n in ANTENNA_STUDY if n not in missing):
         policy = target_path("dagger", name)
-        if not policy.exists():
-            raise SystemExit(f"evaluate_policies: {policy} is missing: python scripts/train_policy.py --only {name}")
         env_id, kwargs = resolve_env(str(policy))
         print(f"evaluate_policies: antenna study: {name} on {env_id}, {episodes} episodes ...", file=sys.stderr)
         t0 = time.perf_counter()
-        runs = run_policy(str(policy), env_id, kwargs, seeds, workers)
+        reuse = (done or {}).get(str(policy))
+        runs = reuse if reuse is not None and len(reuse) == episodes else run_policy(str(policy), env_id, kwargs, seeds, workers)
         meta = policy_metadata(policy)
         antenna = (kwargs.get("radar") or {}).get("antenna", "rhs")
         summary = summarize(runs)
@@ -132,12 +136,14 @@ def antenna_study(episodes: int, seed: int, workers: int) -> dict:
                      "collision_ci": wilson(summary["collisions"], len(runs)),
                      "returns": [r["return"] for r in runs]})  # fmt: skip
     for env_id in dict.fromkeys(r["env_id"] for r in rows):
-        rhs = next(r for r in rows if r["env_id"] == env_id and r["antenna"] == "rhs")
-        phased = next(r for r in rows if r["env_id"] == env_id and r["antenna"] == "phased")
+        rhs = next((r for r in rows if r["env_id"] == env_id and r["antenna"] == "rhs"), None)
+        phased = next((r for r in rows if r["env_id"] == env_id and r["antenna"] == "phased"), None)
+        if rhs is None or phased is None:
+            continue
         diff = mean_ci([a - b for a, b in zip(rhs["returns"], phased["returns"])])
         pairs.append({"env_id": env_id, "return_diff_rhs_minus_phased": diff})
     return {"episodes": episodes, "seeds": seeds, "targets": {n: TARGETS[n][0] for n in ANTENNA_STUDY},
-            "rows": rows, "pairs": pairs}
+            "rows": rows, "pairs": pairs, "missing": missing}
 
 
 def antenna_markdown(study: dict) -> str:
@@ -165,6 +171,9 @@ def antenna_markdown(study: dict) -> str:
         m, h = p["return_diff_rhs_minus_phased"]
         verdict = "RHS higher" if m - h > 0 else ("phased higher" if m + h < 0 else "no significant difference")
         lines.append(f"`{p['env_id']}`: return RHS - phased, paired over seeds: {m:+.1f} ± {h:.1f} ({verdict}).  ")
+    if study.get("missing"):
+        lines.append(f"Not trained yet, so not in the table: {', '.join(study['missing'])} "
+                     "(`python scripts/train_policy.py --only NAME`).")
     return "\n".join(lines) + "\n"
 
 
@@ -281,6 +290,7 @@ def main(argv: list[str] | None = None) -> int:
         PPO_TRUTH_POLICY,
         SHIPPED_POLICY,
         SHIPPED_TRUTH_POLICY,
+        is_scripted,
         policy_metadata,
         resolve_env,
         summarize,
@@ -385,7 +395,9 @@ def main(argv: list[str] | None = None) -> int:
         "training_text": training_text,
     }
     if not args.no_antenna:
-        result["antenna"] = antenna_study(args.antenna_episodes, args.seed, args.workers)
+        done = {r["policy"]: r["runs"] for r in rows if r["env_kwargs"] == resolve_env(r["policy"])[1]
+                and r["env_id"] == resolve_env(r["policy"])[0] and not is_scripted(r["policy"])}
+        result["antenna"] = antenna_study(args.antenna_episodes, args.seed, args.workers, done)
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "policies.json", result, __file__, args, started, fingerprint, argv)

@@ -17,7 +17,7 @@ import pytest
 from gymnasium import spaces
 
 import rhs_env  # noqa: F401  (registers the ids)
-from agents.decision import HeldPolicy, HoldAction, check_decision_interval, held
+from agents.decision import HeldPolicy, HoldAction, check_decision_interval, check_decision_mode, fill_action, held
 from agents.evaluate import evaluate, load_policy, make_env, run_episode
 from agents.train import train, train_rllib_backend
 
@@ -56,6 +56,27 @@ def test_hold_action_sums_k_rewards_and_stops_at_the_end():
     assert r == 7 and info["held_steps"] == 1 and term and obs[0] == 7 and info["t"] == 7
     assert env.unwrapped.actions == [2, 2, 2, 1, 1, 1, 0]
     assert env.observation_space == Counter.observation_space and env.action_space == Counter.action_space
+
+
+def test_pulse_mode_takes_the_action_once_then_idle():
+    """decision_mode "pulse": meta-actions are impulses, so the steps after a decision get IDLE (1)."""
+    env = HoldAction(Counter(end=7), 3, fill=fill_action("pulse"))
+    env.reset(seed=0)
+    _, r, *_ = env.step(2)
+    env.step(0)
+    assert r == 1 + 2 + 3 and env.unwrapped.actions == [2, 1, 1, 0, 1, 1]
+    assert fill_action("hold") is None
+    with pytest.raises(ValueError, match="decision_mode must be one of hold, pulse"):
+        check_decision_mode("repeat")
+
+    class Inner:
+        def predict(self, obs, deterministic=True):
+            return 4, None
+
+    policy = held(Inner(), 3, "pulse")
+    assert [policy.predict(None)[0] for _ in range(7)] == [4, 1, 1, 4, 1, 1, 4]
+    with pytest.raises(ValueError, match="decision_mode"):
+        held(Inner(), 3, "sometimes")
 
 
 def test_hold_action_of_one_is_the_env():

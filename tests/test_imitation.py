@@ -162,13 +162,15 @@ def test_rhs_slam_train_dagger_writes_a_policy_that_evaluate_loads(tmp_path):
 
     hp = tmp_path / "dagger.yml"
     hp.write_text(
-        f"{TRUTH}:\n  policy: MlpPolicy\n  n_envs: 1\n  n_timesteps: 120\n  iterations: 3\n  beta_decay: 0.5\n"
+        f"{TRUTH}:\n  policy: MlpPolicy\n  n_envs: 1\n  n_timesteps: 240\n  iterations: 3\n  beta_decay: 0.5\n"
+        "  decision_interval: 2\n  decision_mode: pulse\n"
         "  epochs: 2\n  batch_size: 32\n  learning_rate: 1.0e-3\n  expert: {headway_s: 1.2}\n"
         "  policy_kwargs:\n    net_arch: [16]\n"
     )
     kw = {"vehicles_count": 5, "duration": 4}
     summary = train("dagger", TRUTH, None, tmp_path / "run", hyperparams=hp, env_kwargs=kw, progress=False)
-    assert summary["algo"] == "dagger" and summary["timesteps"] == 120
+    assert summary["algo"] == "dagger" and summary["decisions"] == 120 and summary["timesteps"] == 240
+    assert (summary["decision_interval"], summary["decision_mode"]) == (2, "pulse")
     assert [r["beta"] for r in summary["iterations"]] == [1.0, 0.5, 0.25]
     assert summary["iterations"][0]["agreement_before_fit"] is None
     assert all(0.0 <= r["agreement_before_fit"] <= 1.0 for r in summary["iterations"][1:])
@@ -178,8 +180,9 @@ def test_rhs_slam_train_dagger_writes_a_policy_that_evaluate_loads(tmp_path):
     assert json.loads((tmp_path / "run" / "iterations.json").read_text())[-1]["samples"] == 120
     env = gym.make(TRUTH, **kw)
     policy = load_policy(tmp_path / "run" / "model.zip", env)
+    assert (policy.k, policy.fill) == (2, 1)  # decides every 2 steps, IDLE between (pulse)
     obs, _ = env.reset(seed=0)
     action, _ = policy.predict(obs, deterministic=True)
-    assert int(action) in range(5)
+    assert int(action) in range(5) and policy.predict(obs)[0] == 1
     with pytest.raises(ValueError, match="resume"):
         train("dagger", TRUTH, None, tmp_path / "run", hyperparams=hp, resume=True, progress=False)

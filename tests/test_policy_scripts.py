@@ -1,0 +1,50 @@
+"""scripts/train_policy.py and scripts/evaluate_policies.py: targets, env kwargs, intervals, the antenna table."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
+sys.path.insert(0, str(SCRIPTS))
+
+import evaluate_policies  # noqa: E402
+import train_policy  # noqa: E402
+
+
+def test_targets_merge_the_radar_settings_and_ship_where_evaluate_looks():
+    from agents.evaluate import PPO_POLICY, SHIPPED_POLICY, SHIPPED_TRUTH_POLICY
+
+    grid = {"radar": {"scan": {"grid_deg": 5}}}
+    assert train_policy.target_env_kwargs("slam", grid) == grid
+    assert train_policy.target_env_kwargs("truth", grid) == {}
+    assert train_policy.target_env_kwargs("dense_phased", grid) == {"radar": {"scan": {"grid_deg": 5}, "antenna": "phased"}}
+    assert train_policy.target_path("dagger", "slam") == SHIPPED_POLICY
+    assert train_policy.target_path("dagger", "truth") == SHIPPED_TRUTH_POLICY
+    assert train_policy.target_path("ppo", "slam") == PPO_POLICY
+    assert train_policy.target_path("dagger", "slam_phased").parent.name == "antenna"
+    assert set(train_policy.ANTENNA_STUDY) <= set(train_policy.TARGETS)
+
+
+def test_intervals():
+    lo, hi = evaluate_policies.wilson(0, 50)
+    assert lo == 0.0 and 0.05 < hi < 0.08  # 0/50: the rate is below 7 % with 95 % confidence
+    lo, hi = evaluate_policies.wilson(25, 50)
+    assert lo < 0.5 < hi and hi - 0.5 == pytest.approx(0.5 - lo)
+    m, h = evaluate_policies.mean_ci([1.0, 2.0, 3.0, 4.0])
+    assert m == 2.5 and h == pytest.approx(3.182446 * np.std([1, 2, 3, 4], ddof=1) / 2, rel=1e-5)
+
+
+def test_antenna_table_states_the_paired_verdict():
+    row = {"env_id": "rhs-highway-slam-v0", "timesteps": 40000, "return_ci": (150.0, 3.0), "collision_ci": (0.0, 0.07),
+           "summary": {"collision_rate": 0.0, "collisions": 0, "episodes": 50, "mean_speed_mps": {"mean": 23.0, "std": 1.0},
+                       "position_rmse_m": {"mean": 0.2, "std": 0.1}}}  # fmt: skip
+    study = {"episodes": 50, "seeds": list(range(1000, 1050)), "missing": ["dense"],
+             "rows": [{**row, "antenna": "rhs"}, {**row, "antenna": "phased"}],
+             "pairs": [{"env_id": "rhs-highway-slam-v0", "return_diff_rhs_minus_phased": (4.0, 1.0)}]}  # fmt: skip
+    text = evaluate_policies.antenna_markdown(study)
+    assert "| `rhs-highway-slam-v0` | rhs | 40000 | 150.0 ± 3.0 | 0.00 (0/50; 0.00-0.07)" in text
+    assert "+4.0 ± 1.0 (RHS higher)" in text and "Not trained yet" in text and "dense" in text
