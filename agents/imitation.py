@@ -228,6 +228,33 @@ def fit(model, data: Dataset, config: DaggerConfig, rng: np.random.Generator, op
     return mean_loss
 
 
+def dagger_rounds(venv, model, config: DaggerConfig, decisions: int, rng: np.random.Generator,
+                  progress: bool = True) -> tuple[Dataset, list[dict[str, Any]]]:
+    """The DAgger loop of the module docstring over ``decisions`` labelled decisions; the data and one record per round."""
+    import torch
+    from tqdm.auto import tqdm
+
+    optimizer = torch.optim.Adam(model.policy.parameters(), lr=config.learning_rate)
+    data, records = Dataset(), []
+    obs = venv.reset()
+    labels = np.array([info[EXPERT_KEY] for info in venv.reset_infos], dtype=np.int64)
+    per_round = -(-decisions // config.iterations)
+    bar = tqdm(total=decisions, desc="dagger", unit="decision", disable=not progress)
+    for i in range(config.iterations):
+        beta = config.beta_decay**i
+        start = len(data)
+        steps = min(per_round, decisions - i * per_round)
+        obs, labels, stats = collect(venv, model, steps, beta, rng, data, obs, labels, bar)
+        agree = agreement(model, *_new(data, start)) if i > 0 else None
+        loss = fit(model, data, config, rng, optimizer)
+        records.append({"iteration": i, "beta": beta, "samples": len(data),
+                        "agreement_before_fit": agree, "fit_loss": loss, **stats})
+        print(f"dagger: round {i}: beta {beta:.3f}, {len(data)} samples, agreement "
+              f"{'-' if agree is None else f'{agree:.3f}'}, loss {loss:.3f}, episodes {stats}", file=sys.stderr)
+    bar.close()
+    return data, records
+
+
 def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int = 0, n_envs: int | None = None,
                  hyperparams: str | Path | None = None, env_kwargs: dict | None = None,
                  progress: bool = True, torch_threads: int | None = 1) -> dict[str, Any]:
@@ -239,17 +266,16 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
     """
     import torch
     from stable_baselines3 import PPO
-    from tqdm.auto import tqdm
 
-    from agents.train import _limit_threads, _run_settings, _write_summary, check_train_args, make_vec_env
+    from agents.run_setup import check_train_args, limit_threads, make_vec_env, run_settings, write_summary
 
-    run = _run_settings("dagger", env_id, timesteps, n_envs, hyperparams, env_kwargs)
+    run = run_settings("dagger", env_id, timesteps, n_envs, hyperparams, env_kwargs)
     expert = build(HeadwayDriverConfig, run.hp.get("expert"), "expert")
     config = build(DaggerConfig, {k: v for k, v in run.hp.items() if k not in ("policy_kwargs", "expert")}, "dagger")
     check_train_args(run.timesteps, run.n_envs, seed, 0, 1, 0)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    _limit_threads(torch_threads)
+    limit_threads(torch_threads)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     k = run.decision_interval
@@ -258,29 +284,10 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
                         decision_mode=run.decision_mode)
     decisions = -(-run.timesteps // k)
     t0 = time.perf_counter()
-    records = []
     try:
         model = PPO(run.policy, venv, seed=seed, device="cpu", verbose=0,
                     policy_kwargs=run.hp.get("policy_kwargs") or {})
-        optimizer = torch.optim.Adam(model.policy.parameters(), lr=config.learning_rate)
-        data = Dataset()
-        obs = venv.reset()
-        labels = np.array([info[EXPERT_KEY] for info in venv.reset_infos], dtype=np.int64)
-        per_round = -(-decisions // config.iterations)
-        bar = tqdm(total=decisions, desc="dagger", unit="decision", disable=not progress)
-        for i in range(config.iterations):
-            beta = config.beta_decay**i
-            start = len(data)
-            steps = min(per_round, decisions - i * per_round)
-            obs, labels, stats = collect(venv, model, steps, beta, rng, data, obs, labels, bar)
-            new_obs, new_actions = _new(data, start)
-            agree = agreement(model, new_obs, new_actions) if i > 0 else None
-            loss = fit(model, data, config, rng, optimizer)
-            records.append({"iteration": i, "beta": beta, "samples": len(data),
-                            "agreement_before_fit": agree, "fit_loss": loss, **stats})
-            print(f"dagger: round {i}: beta {beta:.3f}, {len(data)} samples, agreement "
-                  f"{'-' if agree is None else f'{agree:.3f}'}, loss {loss:.3f}, episodes {stats}", file=sys.stderr)
-        bar.close()
+        data, records = dagger_rounds(venv, model, config, decisions, rng, progress)
         model.num_timesteps = len(data)
         model.save(out / "model.zip")
     finally:
@@ -306,7 +313,7 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
         "model": str(out / "model.zip"),
         "interrupted": False,
     }
-    _write_summary(out, summary)
+    write_summary(out, summary)
     (out / "iterations.json").write_text(json.dumps(records, indent=2))
     return summary
 

@@ -28,239 +28,32 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 import warnings
-from collections.abc import Callable
-from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 from typing import Any
 
-import yaml
-
-ALGOS = ("ppo", "dqn", "dagger")
-HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
-#: keys of a hyperparameter entry that are not arguments of the algorithm class
-META_KEYS = ("policy", "n_envs", "n_timesteps", "env_kwargs", "decision_interval", "decision_mode")
-
-
-def load_hyperparams(algo: str, env_id: str, path: str | Path | None = None) -> dict[str, Any]:
-    """Hyperparameters for ``env_id`` from a zoo-style YAML file (default: the shipped one for ``algo``)."""
-    if algo not in ALGOS:
-        raise ValueError(f"algo must be one of {ALGOS}, got {algo!r}")
-    path = Path(path) if path else HYPERPARAMS_DIR / f"{algo}.yml"
-    if not path.exists():
-        raise ValueError(f"hyperparameter file not found: {path}")
-    table = yaml.safe_load(path.read_text()) or {}
-    key = env_id.split(":", 1)[-1]
-    if key not in table:
-        raise ValueError(f"{path} has no hyperparameters for env {key!r} (has: {', '.join(table)})")
-    hp = dict(table[key])
-    if "policy" not in hp:
-        raise ValueError(f"{path}: entry {key!r} has no 'policy'")
-    return hp
-
-
-def metadata_path(policy: str | Path) -> Path:
-    """The JSON written beside a policy zip (``model.zip`` -> ``model.json``)."""
-    return Path(policy).with_suffix(".json")
-
-
-def _linear_schedule(initial: float):
-    def schedule(progress_remaining: float) -> float:
-        return progress_remaining * initial
-
-    return schedule
-
-
-def _resolve_schedules(hp: dict[str, Any]) -> dict[str, Any]:
-    """zoo-style ``"lin_5e-4"`` values -> linear schedules from that value to 0."""
-    out = dict(hp)
-    for key in ("learning_rate", "clip_range"):
-        value = out.get(key)
-        if isinstance(value, str):
-            if not value.startswith("lin_"):
-                raise ValueError(f"{key} must be a number or 'lin_<number>', got {value!r}")
-            out[key] = _linear_schedule(float(value[4:]))
-    return out
-
-
-def eval_policy_kwargs(text: str) -> dict[str, Any]:
-    """A zoo-style ``policy_kwargs`` string -> dict, evaluated with the names rl-baselines3-zoo offers.
-
-    rl-baselines3-zoo ``eval``s such strings in its own module (``importlib``, ``nn``, ``th``
-    in scope); the same string works here, with nothing else in scope (no builtins but ``dict``).
-    """
-    import importlib
-
-    import torch
-    from torch import nn
-
-    names = {"dict": dict, "importlib": importlib, "nn": nn, "th": torch}
-    try:
-        value = eval(text, {"__builtins__": {}}, names)
-    except Exception as exc:
-        raise ValueError(f"policy_kwargs: cannot evaluate {text!r}: {exc}") from None
-    if not isinstance(value, dict):
-        raise ValueError(f"policy_kwargs must evaluate to a dict, got {type(value).__name__}")  # noqa: TRY004
-    return value
-
-
-def _resolve_policy_kwargs(kwargs: dict[str, Any] | str) -> dict[str, Any]:
-    from agents.features import FEATURE_EXTRACTORS
-
-    if isinstance(kwargs, str):
-        kwargs = eval_policy_kwargs(kwargs)
-    kwargs = dict(kwargs or {})
-    name = kwargs.get("features_extractor_class")
-    if isinstance(name, str):
-        if name not in FEATURE_EXTRACTORS:
-            raise ValueError(f"features_extractor_class must be one of {list(FEATURE_EXTRACTORS)}, got {name!r}")
-        kwargs["features_extractor_class"] = FEATURE_EXTRACTORS[name]
-    return kwargs
-
-
-def _policy_kwargs_by_name(kwargs: dict[str, Any] | str) -> dict[str, Any]:
-    """``policy_kwargs`` with the extractor by its registered name (``"point_set"``), as the RLlib backend takes it.
-
-    The shipped YAML writes it as rl-baselines3-zoo's Python expression naming the class.
-    """
-    from agents.features import FEATURE_EXTRACTORS
-
-    kwargs = dict(eval_policy_kwargs(kwargs) if isinstance(kwargs, str) else (kwargs or {}))
-    cls = kwargs.get("features_extractor_class")
-    if cls is not None and not isinstance(cls, str):
-        names = [name for name, c in FEATURE_EXTRACTORS.items() if c is cls]
-        if not names:
-            raise ValueError(f"features_extractor_class must be one of {list(FEATURE_EXTRACTORS)}, got {cls!r}")
-        kwargs["features_extractor_class"] = names[0]
-    return kwargs
-
-
-def check_train_args(timesteps: int, n_envs: int, seed: int, eval_freq: int, eval_episodes: int,
-                     checkpoint_freq: int) -> None:
-    """Bounds that keep a training run finite (``ValueError`` / ``TypeError`` naming the argument)."""
-    from rhs_common.validation import check_int
-
-    check_int("timesteps", timesteps, 1, 10**9)
-    check_int("n_envs", n_envs, 1, 256)
-    check_int("seed", seed, 0, 2**32 - 1)  # numpy's legacy seeding inside stable-baselines3
-    check_int("eval_freq", eval_freq, 0, 10**9)
-    check_int("eval_episodes", eval_episodes, 1, 10_000)
-    check_int("checkpoint_freq", checkpoint_freq, 0, 10**9)
-
-
-def worker_env_id(env_id: str) -> str:
-    """``env_id`` as a fresh worker process can resolve it: the rhs ids get the ``rhs_env:`` prefix."""
-    import gymnasium as gym
-
-    import rhs_env  # noqa: F401  (registers the ids in this process)
-
-    if ":" in env_id:
-        return env_id
-    spec = gym.registry.get(env_id)
-    entry = spec.entry_point if spec is not None else None
-    if isinstance(entry, str) and entry.startswith(("rhs_env.", "slam.")):  # the ids rhs_env registers
-        return f"rhs_env:{env_id}"
-    return env_id
-
-
-#: imported once by the forkserver, so each worker forked from it starts with them loaded
-#: (highway-env alone imports matplotlib and pygame: seconds per worker otherwise)
-FORKSERVER_PRELOAD = ("rhs_env", "rhs_env.envs", "rhs_env.registration", "rhs_env.wrappers", "slam.envs")
-
-
-def _preload_forkserver() -> None:
-    """Ask the forkserver (SB3's default start method on Linux) to import the env modules once.
-
-    No effect when the forkserver is already running or another start method is used;
-    the server only imports, it starts no threads, so forking from it stays safe.
-    """
-    import multiprocessing
-
-    if "forkserver" in multiprocessing.get_all_start_methods():
-        multiprocessing.set_forkserver_preload(["__main__", *FORKSERVER_PRELOAD])
-
-
-def make_vec_env(
-    env_id: str,
-    n_envs: int,
-    seed: int,
-    env_kwargs: dict | None = None,
-    subprocess: bool = True,
-    monitor_dir: str | Path | None = None,
-    decision_interval: int = 1,
-    wrapper: Callable[[Any], Any] | None = None,
-    decision_mode: str = "hold",
-):
-    """``n_envs`` copies of ``env_id`` (``Monitor`` logging ``crashed``), in subprocesses when n_envs > 1.
-
-    ``decision_interval`` > 1 wraps each ``Monitor`` in :class:`agents.decision.HoldAction`
-    (the monitor still counts env steps and per-step rewards), which repeats the action
-    or, with ``decision_mode="pulse"``, fills the steps after it with IDLE. ``wrapper`` (a picklable
-    callable, env -> env) wraps each ``Monitor`` first, e.g.
-    :class:`agents.imitation.ExpertActionInfo`.
-    """
-    from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
-
-    from agents.decision import HoldAction, check_decision_interval, fill_action
-
-    if n_envs < 1:
-        raise ValueError(f"n_envs must be >= 1, got {n_envs}")
-    k = check_decision_interval(decision_interval)
-    vec_cls = SubprocVecEnv if (subprocess and n_envs > 1) else DummyVecEnv
-    if vec_cls is SubprocVecEnv:
-        _preload_forkserver()
-    return sb3_make_vec_env(
-        worker_env_id(env_id),
-        n_envs=n_envs,
-        seed=seed,
-        env_kwargs=env_kwargs or {},
-        vec_env_cls=vec_cls,
-        monitor_dir=str(monitor_dir) if monitor_dir else None,
-        monitor_kwargs={"info_keywords": ("crashed",)},
-        wrapper_class=_compose(wrapper, partial(HoldAction, k=k, fill=fill_action(decision_mode)) if k > 1 else None),
-    )
-
-
-def _compose(*wrappers: Callable[[Any], Any] | None) -> Callable[[Any], Any] | None:
-    """The wrappers applied in order (the first innermost); None when there are none."""
-    chain = [w for w in wrappers if w is not None]
-    if not chain:
-        return None
-    if len(chain) == 1:
-        return chain[0]
-    return partial(_apply_all, chain)
-
-
-def _apply_all(chain: list[Callable[[Any], Any]], env: Any) -> Any:
-    for wrap in chain:
-        env = wrap(env)
-    return env
-
-
-def _check_env_kwargs(env_id: str, env_kwargs: dict[str, Any]) -> None:
-    """Build and close one env here, so bad ``env_kwargs`` raise a readable error before workers start."""
-    import gymnasium as gym
-
-    import rhs_env  # noqa: F401
-
-    try:
-        env = gym.make(env_id.split(":", 1)[-1] if env_id.startswith("rhs_env:") else env_id, **env_kwargs)
-    except TypeError as exc:
-        raise ValueError(f"bad env_kwargs for {env_id}: {exc}") from None
-    env.close()
-
-
-def _tensorboard_available() -> bool:
-    try:
-        import tensorboard  # noqa: F401
-    except ImportError:
-        return False
-    return True
+from agents.run_setup import (  # noqa: F401  (re-exported: the names users of agents.train know)
+    ALGOS,
+    FORKSERVER_PRELOAD,
+    HYPERPARAMS_DIR,
+    META_KEYS,
+    RunSettings,
+    _check_env_kwargs,
+    _policy_kwargs_by_name,
+    _resolve_policy_kwargs,
+    _tensorboard_available,
+    check_train_args,
+    eval_policy_kwargs,
+    limit_threads,
+    load_hyperparams,
+    make_vec_env,
+    metadata_path,
+    run_settings,
+    worker_env_id,
+    write_summary,
+)
 
 
 def train(
@@ -302,11 +95,11 @@ def train(
 
     from agents.resume import StopOnSignal, save_checkpoint
 
-    run = _run_settings(algo, env_id, timesteps, n_envs, hyperparams, env_kwargs)
+    run = run_settings(algo, env_id, timesteps, n_envs, hyperparams, env_kwargs)
     check_train_args(run.timesteps, run.n_envs, seed, eval_freq, eval_episodes, checkpoint_freq)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    _limit_threads(torch_threads)
+    limit_threads(torch_threads)
     if run.n_envs > 1:
         _check_env_kwargs(env_id, run.env_kwargs)
     k = run.decision_interval
@@ -340,11 +133,11 @@ def train(
             eval_env.close()
     summary = _summary(algo, env_id, run, seed, model, eval_cb, out, wall, done, stopper.stopped)
     if not stopper.stopped:
-        _write_summary(out, summary)
+        write_summary(out, summary)
     return summary
 
 
-def _new_or_resumed_model(algo: str, run: _RunSettings, venv: Any, seed: int, out: Path, resume: bool) -> Any:
+def _new_or_resumed_model(algo: str, run: RunSettings, venv: Any, seed: int, out: Path, resume: bool) -> Any:
     """A fresh ``algo`` model on ``venv``, or (``resume``) the checkpoint with the most steps in ``out/checkpoints``."""
     from stable_baselines3 import DQN, PPO
 
@@ -363,53 +156,7 @@ def _new_or_resumed_model(algo: str, run: _RunSettings, venv: Any, seed: int, ou
     return model
 
 
-def _limit_threads(torch_threads: int | None) -> None:
-    """torch's intra-op threads in this process; worker processes get ``OMP_NUM_THREADS=1`` unless set already."""
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    os.environ.setdefault("MKL_NUM_THREADS", "1")
-    if torch_threads:
-        import torch
-
-        torch.set_num_threads(int(torch_threads))
-
-
-@dataclass(frozen=True)
-class _RunSettings:
-    """What a training run uses, from the YAML merged with the caller's arguments."""
-
-    policy: str
-    timesteps: int
-    n_envs: int
-    env_kwargs: dict[str, Any]
-    hp: dict[str, Any]  # constructor kwargs of the algorithm (schedules and policy_kwargs resolved)
-    hp_record: dict[str, Any]  # the YAML as written, for the summary
-    decision_interval: int = 1  # env steps per agent decision (agents.decision.HoldAction)
-    decision_mode: str = "hold"  # between decisions: the action repeated, or IDLE after it ("pulse")
-
-
-def _run_settings(algo: str, env_id: str, timesteps: int | None, n_envs: int | None,
-                  hyperparams: str | Path | None, env_kwargs: dict | None) -> _RunSettings:
-    from agents.decision import check_decision_interval, check_decision_mode
-
-    hp = load_hyperparams(algo, env_id, hyperparams)
-    policy = hp.pop("policy")
-    k = check_decision_interval(hp.pop("decision_interval", 1))
-    mode = check_decision_mode(hp.pop("decision_mode", "hold"))
-    yaml_steps = hp.pop("n_timesteps", None)
-    steps = int(timesteps if timesteps is not None else (yaml_steps or 0))
-    if steps < 1:
-        raise ValueError(f"timesteps must be >= 1, got {steps}")
-    yaml_envs = hp.pop("n_envs", 1)
-    envs = int(n_envs if n_envs is not None else yaml_envs)
-    if envs < 1:
-        raise ValueError(f"n_envs must be >= 1, got {envs}")
-    kwargs = {**(hp.pop("env_kwargs", None) or {}), **(env_kwargs or {})}
-    hp["policy_kwargs"] = _resolve_policy_kwargs(hp.get("policy_kwargs", {}))
-    record = {k: v for k, v in load_hyperparams(algo, env_id, hyperparams).items() if k not in META_KEYS}
-    return _RunSettings(policy, steps, envs, kwargs, _resolve_schedules(hp), record, k, mode)
-
-
-def _callbacks(algo: str, env_id: str, run: _RunSettings, seed: int, out: Path, eval_freq: int,
+def _callbacks(algo: str, env_id: str, run: RunSettings, seed: int, out: Path, eval_freq: int,
                eval_episodes: int, checkpoint_freq: int, progress_total: int | None):
     """Crash-rate logging, evaluation (its env returned to be closed), checkpoints, progress bar."""
     from stable_baselines3.common.callbacks import CheckpointCallback, EvalCallback
@@ -434,7 +181,7 @@ def _callbacks(algo: str, env_id: str, run: _RunSettings, seed: int, out: Path, 
     return callbacks, eval_cb, eval_env
 
 
-def _summary(algo: str, env_id: str, run: _RunSettings, seed: int, model, eval_cb, out: Path, wall: float,
+def _summary(algo: str, env_id: str, run: RunSettings, seed: int, model, eval_cb, out: Path, wall: float,
              done: int, interrupted: bool) -> dict[str, Any]:
     recent = list(model.ep_info_buffer)
     best = float(eval_cb.best_mean_reward) if eval_cb is not None and eval_cb.n_calls else None
@@ -464,15 +211,6 @@ def _summary(algo: str, env_id: str, run: _RunSettings, seed: int, model, eval_c
         "resumed_from_steps": done * run.decision_interval,
         "interrupted": interrupted,
     }
-
-
-def _write_summary(out: Path, summary: dict[str, Any]) -> None:
-    """``out/train.json`` and the metadata JSON beside ``model.zip`` (and ``best_model.zip``)."""
-    text = json.dumps(summary, indent=2)
-    (out / "train.json").write_text(text)
-    metadata_path(out / "model.zip").write_text(text)
-    if (out / "best_model.zip").exists():
-        metadata_path(out / "best_model.zip").write_text(json.dumps({**summary, "model": str(out / "best_model.zip")}, indent=2))
 
 
 BACKENDS = ("sb3", "rllib")
