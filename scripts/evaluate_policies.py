@@ -225,7 +225,10 @@ def markdown(result: dict) -> str:
         "(the traffic's) in the ego's seat with a desired speed of 30 m/s: a strong scripted reference. "
         "\"HeadwayDriver\" is the DAgger expert (agents/expert.py): meta-actions chosen from the true gaps "
         "and speeds; the DAgger students see only their observation. Same budget: both DAgger students and "
-        "both PPO policies saw the env-step counts listed under Training.",
+        "both PPO policies saw the env-step counts listed under Training. highway-env's default Kinematics "
+        "observation lists the 4 nearest vehicles *ahead*: it hides the followers the expert checks before "
+        "a lane change, which the radar's 360-degree point cloud shows; the all-around row observes 8 "
+        "vehicles, behind as well.",
     ]
     aim = result["aim"]
     ref = next((r for r in rows if r["key"] == "slower"), None)
@@ -251,7 +254,8 @@ def markdown(result: dict) -> str:
                 f"Issue 12 goal (DAgger SLAM policy): return / always-SLOWER **{goal['return_vs_slower']:.2f}** "
                 f"(aim >= {GOAL_VS_SLOWER}), collision rate **{goal['collision_rate']:.2f}** (aim <= {GOAL_COLLISIONS}), "
                 f"mean speed {goal['speed_gain_mps']:+.2f} m/s vs always-SLOWER (aim > 0), return / ground-truth "
-                f"policy **{goal['return_vs_truth']:.2f}** (aim >= {GOAL_VS_TRUTH}): goal "
+                f"policy **{goal.get('return_vs_best_truth', goal['return_vs_truth']):.2f}** "
+                f"(`{goal.get('truth_reference', 'truth')}`, the better one; aim >= {GOAL_VS_TRUTH}): goal "
                 f"{'met' if goal['met'] else 'NOT met'}."
             ),
         ]
@@ -305,8 +309,12 @@ def main(argv: list[str] | None = None) -> int:
     specs = [
         ("slam", "DAgger (shipped)", slam_obs, slam_policy, slam_env, slam_kwargs),
         ("truth", "DAgger (ground truth)", truth_obs, truth_policy, truth_env, truth_kwargs),
-        ("random", "random", "(none)", "random", slam_env, slam_kwargs),
     ]
+    all_around = target_path("dagger", "truth_all_around")
+    if all_around.exists():
+        specs.append(("truth_all_around", "DAgger (ground truth, all around)",
+                      "Kinematics, 8 vehicles incl. behind (truth)", str(all_around), *resolve_env(str(all_around))))
+    specs.append(("random", "random", "(none)", "random", slam_env, slam_kwargs))
     if not args.no_ppo:
         specs += [
             ("ppo_slam", "PPO (earlier shipped)", slam_obs, str(PPO_POLICY), *resolve_env(str(PPO_POLICY))),
@@ -345,15 +353,20 @@ def main(argv: list[str] | None = None) -> int:
         "collision_rate": c_slam,
         "speed_gain_mps": by["slam"]["mean_speed_mps"]["mean"] - slower["mean_speed_mps"]["mean"],
         "return_vs_truth": ret_ratio,
+        # against the better ground-truth policy (the all-around one when it was trained): the stricter reference
+        "truth_reference": max((k for k in ("truth", "truth_all_around") if k in by), key=lambda k: by[k]["return"]["mean"]),
     }
+    goal["return_vs_best_truth"] = by["slam"]["return"]["mean"] / by[goal["truth_reference"]]["return"]["mean"]
     goal["met"] = bool(
         goal["return_vs_slower"] >= GOAL_VS_SLOWER
         and c_slam <= GOAL_COLLISIONS
         and goal["speed_gain_mps"] > 0
-        and ret_ratio >= GOAL_VS_TRUTH
+        and goal["return_vs_best_truth"] >= GOAL_VS_TRUTH
     )
     training = {}
-    for key, policy in (("slam", slam_policy), ("truth", truth_policy)) + (
+    for key, policy in (("slam", slam_policy), ("truth", truth_policy)) + tuple(
+        (key, policy) for key, _, _, policy, _, _ in specs if key == "truth_all_around"
+    ) + (
         () if args.no_ppo else (("ppo_slam", str(PPO_POLICY)), ("ppo_truth", str(PPO_TRUTH_POLICY)))
     ):
         meta = policy_metadata(policy)

@@ -46,10 +46,14 @@ from _provenance import write_json
 DATA = ROOT / "agents" / "data"
 SLAM_ID, TRUTH_ID, DENSE_ID = "rhs-highway-slam-v0", "rhs-highway-v0", "rhs-dense-v0"
 ALGOS = ("dagger", "ppo")
-#: name -> (env id, radar kwargs merged over --slam-env-kwargs; None: a ground-truth env, no radar)
-TARGETS: dict[str, tuple[str, dict | None]] = {
+#: highway-env's Kinematics observation with the followers in view: 8 vehicles, behind as well as ahead (the
+#: default sees the 4 nearest vehicles ahead only, not the followers the expert checks before a lane change)
+KINEMATICS_ALL_AROUND = {"observation": {"type": "Kinematics", "vehicles_count": 8, "see_behind": True}}
+#: name -> (env id, radar kwargs merged over --slam-env-kwargs; None: a ground-truth env, no radar[, env kwargs])
+TARGETS: dict[str, tuple] = {
     "slam": (SLAM_ID, {}),
     "truth": (TRUTH_ID, None),
+    "truth_all_around": (TRUTH_ID, None, KINEMATICS_ALL_AROUND),
     # issue 12 goal 2, does the antenna matter for driving: the same student on a phased array, and both on
     # the dense roadside
     "slam_phased": (SLAM_ID, {"antenna": "phased"}),
@@ -65,7 +69,7 @@ ANTENNA_STUDY = ("slam", "slam_phased", "dense", "dense_phased")
 def target_path(algo: str, name: str, data_dir: Path = DATA) -> Path:
     """Where the ``name`` policy trained by ``algo`` goes: ``<algo>_rhs_highway_<name>.zip``, the antenna
     study's other policies in ``antenna/``."""
-    sub = "antenna/" if name not in SHIPPED else ""
+    sub = "" if name in SHIPPED else ("truth/" if name.startswith("truth") else "antenna/")
     return Path(data_dir) / f"{sub}{algo}_rhs_highway_{name}.zip"
 
 
@@ -73,7 +77,7 @@ def target_env_kwargs(name: str, slam_kwargs: dict) -> dict:
     """``--slam-env-kwargs`` with the target's radar settings merged into its ``radar`` dict ({} for ground truth)."""
     radar = TARGETS[name][1]
     if radar is None:
-        return {}
+        return dict(TARGETS[name][2]) if len(TARGETS[name]) > 2 else {}
     return {**slam_kwargs, "radar": {**(slam_kwargs.get("radar") or {}), **radar}} if radar else dict(slam_kwargs)
 MAX_BYTES = 1_000_000
 
