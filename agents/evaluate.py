@@ -18,8 +18,8 @@ was trained on unless asked otherwise. A policy trained with a ``decision_interv
 k > 1 (saved in the same JSON, :mod:`agents.decision`) is loaded as a
 :class:`agents.decision.HeldPolicy`: it decides every k env steps and repeats its
 action between, so every policy is scored per env step on the same seeds. The default policy is the shipped one,
-``agents/data/dagger_rhs_highway_slam.zip`` (with ``dagger_rhs_highway_slam.json``): a DAgger student
-of :class:`agents.expert.HeadwayDriver` (:mod:`agents.imitation`).
+``agents/data/ppo_rhs_highway_slam.zip`` (with ``ppo_rhs_highway_slam.json``); ``dagger_rhs_highway_slam.zip``
+beside it is a DAgger student of :class:`agents.expert.HeadwayDriver` (:mod:`agents.imitation`).
 """
 
 from __future__ import annotations
@@ -37,11 +37,11 @@ from agents.expert import HeadwayDriver
 from rhs_env.registration import SLAM_ENV_SPECS
 
 DATA_DIR = Path(__file__).parent / "data"
-SHIPPED_POLICY = DATA_DIR / "dagger_rhs_highway_slam.zip"
-SHIPPED_TRUTH_POLICY = DATA_DIR / "dagger_rhs_highway_truth.zip"
-#: the earlier shipped PPO policies (40k env steps): the algorithm ablation of results/policies.md
-PPO_POLICY = DATA_DIR / "ppo_rhs_highway_slam.zip"
-PPO_TRUTH_POLICY = DATA_DIR / "ppo_rhs_highway_truth.zip"
+SHIPPED_POLICY = DATA_DIR / "ppo_rhs_highway_slam.zip"
+SHIPPED_TRUTH_POLICY = DATA_DIR / "ppo_rhs_highway_truth.zip"
+#: DAgger students of agents.expert.HeadwayDriver (40k env steps, like the PPO ones): results/policies.md compares
+DAGGER_POLICY = DATA_DIR / "dagger_rhs_highway_slam.zip"
+DAGGER_TRUTH_POLICY = DATA_DIR / "dagger_rhs_highway_truth.zip"
 DEFAULT_ENV = "rhs-highway-slam-v0"
 
 

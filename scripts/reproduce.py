@@ -93,9 +93,10 @@ STEPS: tuple[Step, ...] = (
           "--out", "results/slam_accuracy_before", "--no-progress"),
          ("slam_accuracy_before.json",), 1800, on_request=True, no_fingerprint="the 'before' record of the SLAM change (issue 10), "
          "kept for comparison: measured on the code before it; the command is the first-round model at HEAD"),
-    Step("train_policy", "train_policy.py", ("--no-progress", "--only", "slam", "truth", "slam_phased", "dense",
-                                             "dense_phased"), ("train_policy.json",), 3600,
-         "retrains the shipped policies", no_fingerprint="a record of training runs (timesteps, wall time); "
+    Step("train_policy", "train_policy.py", ("--no-progress", "--algo", "dagger", "--only", "slam", "truth",
+                                             "truth_all_around", "slam_phased", "dense", "dense_phased"),
+         ("train_policy.json",), 7200,
+         "trains the DAgger policies (PPO: --algo ppo)", no_fingerprint="a record of training runs (timesteps, wall time); "
          "what the policies do is fingerprinted by the policies step"),
     Step("policies", "evaluate_policies.py", (), ("policies.json",), 220),
     Step("detection_curves", "detection_curves.py", (), ("detection_curves.json",), 600),

@@ -1,15 +1,19 @@
-"""Train the shipped driving policies (DAgger by default) and record how they were made.
+"""Train the driving policies and record how they were made.
 
-* ``agents/data/dagger_rhs_highway_slam.zip``: trained on ``rhs-highway-slam-v0``
-  (point cloud + SLAM estimate), SLAM in the loop at every step, by DAgger from
-  the privileged :class:`agents.expert.HeadwayDriver` (:mod:`agents.imitation`);
-* ``agents/data/dagger_rhs_highway_truth.zip``: the same algorithm, hyperparameters
-  (``agents/hyperparams/dagger.yml``) and number of env steps on ``rhs-highway-v0``
-  (ground-truth Kinematics), for comparison.
+``--algo dagger`` (default): DAgger students of the privileged
+:class:`agents.expert.HeadwayDriver` (:mod:`agents.imitation`,
+``agents/hyperparams/dagger.yml``):
 
-``--algo ppo`` trains PPO instead (``agents/hyperparams/ppo.yml``) into
-``ppo_rhs_highway_{slam,truth}.zip``: the earlier shipped policies, kept as the
-algorithm ablation.
+* ``agents/data/dagger_rhs_highway_slam.zip``: on ``rhs-highway-slam-v0`` (point
+  cloud + SLAM estimate), SLAM in the loop at every step;
+* ``agents/data/dagger_rhs_highway_truth.zip``: the same algorithm,
+  hyperparameters and env steps on ``rhs-highway-v0`` (ground-truth Kinematics);
+* ``--only truth_all_around``: on a Kinematics observation of 8 vehicles, behind
+  as well (``agents/data/truth/``); ``--only slam_phased dense dense_phased``: the
+  antenna study of ``evaluate_policies.py`` (``agents/data/antenna/``).
+
+``--algo ppo`` trains PPO (``agents/hyperparams/ppo.yml``) into
+``ppo_rhs_highway_{slam,truth}.zip``: the shipped policies (``rhs-slam demo``).
 
 Each zip gets a JSON beside it (env id, ``env_kwargs``, timesteps, wall time,
 hyperparameters) that ``rhs-slam evaluate`` / ``rhs-slam demo`` read to rebuild
