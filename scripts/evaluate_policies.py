@@ -77,11 +77,13 @@ def run_policy(policy: str, env_id: str, env_kwargs: dict, seeds: list[int], wor
 
 
 def fingerprint() -> list[float]:
-    """The shipped SLAM and ground-truth policies, one 2-second episode (10 steps) each, seed 1000: seconds."""
-    from agents.evaluate import SHIPPED_POLICY, SHIPPED_TRUTH_POLICY, resolve_env
+    """The shipped SLAM and ground-truth policies and the DAgger students, one 2-second episode (10 steps) each,
+    seed 1000."""
+    from agents.evaluate import DAGGER_POLICY, DAGGER_TRUTH_POLICY, SHIPPED_POLICY, SHIPPED_TRUTH_POLICY, resolve_env
 
     out = []
-    for policy in (SHIPPED_POLICY, SHIPPED_TRUTH_POLICY):
+    students = [p for p in (DAGGER_POLICY, DAGGER_TRUTH_POLICY, target_path("dagger", "truth_all_around")) if p.exists()]
+    for policy in (SHIPPED_POLICY, SHIPPED_TRUTH_POLICY, *students):
         env_id, kwargs = resolve_env(str(policy))
         run = _chunk(str(policy), env_id, {**kwargs, "duration": 2}, [1000])[0]
         out += [run[k] for k in sorted(run) if isinstance(run[k], (int, float)) and not k.endswith("_s")]

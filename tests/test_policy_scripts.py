@@ -16,15 +16,16 @@ import train_policy  # noqa: E402
 
 
 def test_targets_merge_the_radar_settings_and_ship_where_evaluate_looks():
-    from agents.evaluate import PPO_POLICY, SHIPPED_POLICY, SHIPPED_TRUTH_POLICY
+    from agents.evaluate import DAGGER_POLICY, DAGGER_TRUTH_POLICY, SHIPPED_POLICY
 
     grid = {"radar": {"scan": {"grid_deg": 5}}}
     assert train_policy.target_env_kwargs("slam", grid) == grid
     assert train_policy.target_env_kwargs("truth", grid) == {}
     assert train_policy.target_env_kwargs("dense_phased", grid) == {"radar": {"scan": {"grid_deg": 5}, "antenna": "phased"}}
-    assert train_policy.target_path("dagger", "slam") == SHIPPED_POLICY
-    assert train_policy.target_path("dagger", "truth") == SHIPPED_TRUTH_POLICY
-    assert train_policy.target_path("ppo", "slam") == PPO_POLICY
+    assert train_policy.target_path("dagger", "slam") == DAGGER_POLICY
+    assert train_policy.target_path("dagger", "truth") == DAGGER_TRUTH_POLICY
+    assert train_policy.target_path("ppo", "slam") == SHIPPED_POLICY
+    assert train_policy.target_env_kwargs("truth_all_around", grid)["observation"]["see_behind"] is True
     assert train_policy.target_path("dagger", "slam_phased").parent.name == "antenna"
     assert set(train_policy.ANTENNA_STUDY) <= set(train_policy.TARGETS)
 
