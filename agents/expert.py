@@ -16,11 +16,12 @@ capped at the top target speed ``v_max``. Each decision:
    (``v`` the ego speed). The ego moves right to an open lane whose ``v_safe`` is
    within ``keep_right_tolerance`` of its own lane's and at least its speed
    (highway-env pays for the right lane), and left only for a gain in ``v_safe``
-   of more than ``margin + 1`` m/s. When its own lane cannot be held even at the
-   lowest target speed ``v_min`` (``v_safe < v_min``: a leader slower than 20 m/s,
-   which meta-actions cannot follow), any side lane with a higher ``v_safe`` is
-   taken as soon as the smaller *escape* gaps allow (``d0 / 2`` ahead and behind
-   plus ``T_r`` times the follower's closing speed).
+   of more than ``margin + 1`` m/s. When its own lane cannot be held at the
+   lowest target speed ``v_min`` (``v_safe < v_min + margin``, or a leader slower
+   than ``v_min`` within ``lookahead_m``: meta-actions cannot drive below 20 m/s),
+   any side lane with a higher ``v_safe`` is taken as soon as the smaller
+   *escape* gaps allow (``d0 / 2`` ahead and behind plus ``T_r`` times the
+   follower's closing speed).
 2. **Speed.** Otherwise SLOWER when the ego's target speed exceeds
    ``v_safe(own lane)`` or the cruise speed ``v_c``, FASTER when the next target speed is at most
    ``min(v_safe - margin, v_c)``, else IDLE. The cruise speed ``v_c`` (25 m/s)

@@ -21,9 +21,10 @@ DAgger (Ross, Gordon & Bagnell, 2011), iteration ``i = 0 .. I-1``:
 
    with ``n_a`` the samples labelled ``a``, ``K`` the actions present and ``p =
    class_weight_power``; Adam, ``epochs`` passes of minibatches of ``batch_size``.
-   The expert holds its lane and speed (IDLE) in ~95 % of states: unweighted
+   The expert holds its lane and speed (IDLE) in most states: unweighted
    (p = 0) the student learns IDLE everywhere, and IDLE crashes into the first
-   slower car; p = 1 balances the actions fully.
+   slower car; p = 1 balances the actions fully (and overshoots: the student then
+   changes lane and speed where the expert would not).
 
 Before step 2 the student is scored on the new data it has not been fitted to
 (``agreement``: the fraction of states where its greedy action equals the
