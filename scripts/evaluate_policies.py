@@ -419,8 +419,8 @@ def main(argv: list[str] | None = None) -> int:
         "training_text": training_text,
     }
     if not args.no_antenna:
-        done = {r["policy"]: r["runs"] for r in rows if r["env_kwargs"] == resolve_env(r["policy"])[1]
-                and r["env_id"] == resolve_env(r["policy"])[0] and not is_scripted(r["policy"])}
+        # every learned row already ran on its policy's own env (learned_specs resolves it)
+        done = {r["policy"]: r["runs"] for r in rows if not is_scripted(r["policy"])}
         result["antenna"] = antenna_study(args.antenna_episodes, args.seed, args.workers, done)
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
