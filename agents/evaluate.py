@@ -46,9 +46,10 @@ DEFAULT_ENV = "rhs-highway-slam-v0"
 
 
 def is_scripted(policy: str | Path) -> bool:
-    """``"random"``, ``"constant:<action>"``, ``"idm"``, ``"idm:<m/s>"`` or ``"headway"``: policies that need no file."""
+    """``"random"``, ``"constant:<action>"``, ``"idm"``, ``"idm:<m/s>"``, ``"headway"`` or ``"headway:<k>"``: policies
+    that need no file."""
     text = str(policy)
-    return text in ("random", "idm", "headway") or text.startswith(("constant:", "idm:"))
+    return text in ("random", "idm", "headway") or text.startswith(("constant:", "idm:", "headway:"))
 
 
 class ConstantPolicy:
@@ -178,9 +179,9 @@ def make_env(env_id: str, kwargs: dict[str, Any], **extra: Any):
 
 
 def load_policy(policy: str | Path, env=None, seed: int = 0):
-    """``"random"``, ``"constant:<action>"``, ``"idm[:<m/s>]"``, ``"headway"`` (:class:`agents.expert.HeadwayDriver`,
-    the DAgger expert), or a stable-baselines3 zip (PPO, DQN or a DAgger student: from the JSON beside it, else
-    PPO and DQN tried in turn).
+    """``"random"``, ``"constant:<action>"``, ``"idm[:<m/s>]"``, ``"headway[:<k>]"``
+    (:class:`agents.expert.HeadwayDriver`, the DAgger expert; with k, pulsed every k steps), or a
+    stable-baselines3 zip (PPO, DQN or a DAgger student: from the JSON beside it, else PPO and DQN tried in turn).
 
     With ``env``, the policy's observation space is checked against the env's. A zip whose JSON
     has ``decision_interval`` k > 1 comes back as a :class:`agents.decision.HeldPolicy` (decides every
@@ -191,8 +192,8 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
             raise ValueError(f"policy {policy!r} needs the env for its action space")
         if str(policy) == "random":
             return RandomPolicy(env.action_space, seed)
-        if str(policy) == "headway":
-            return HeadwayDriver(env)
+        if str(policy).split(":", 1)[0] == "headway":
+            return _headway(str(policy), env)
         if str(policy).split(":", 1)[0] == "idm":
             speed = None
             if ":" in str(policy):
@@ -231,6 +232,18 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
         model = PointColumnAdapter.wrap(model, env)
     meta = policy_metadata(path)
     return held(model, meta.get("decision_interval", 1), meta.get("decision_mode", "hold"))
+
+
+def _headway(policy: str, env):
+    """``"headway"``: the HeadwayDriver deciding every step; ``"headway:<k>"``: deciding every k steps, IDLE
+    between (decision_mode pulse: how the DAgger students drive and how the expert labelled their states)."""
+    if ":" not in policy:
+        return HeadwayDriver(env)
+    try:
+        k = int(policy.split(":", 1)[1])
+    except ValueError:
+        raise ValueError(f"headway policy must be 'headway' or 'headway:<decision interval>', got {policy!r}") from None
+    return held(HeadwayDriver(env), k, "pulse")
 
 
 def _load_rllib(path: Path, env=None):
@@ -524,9 +537,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--policy",
         default=str(SHIPPED_POLICY),
-        help="SB3 zip, RLlib checkpoint dir, 'random', 'constant:ACTION', 'idm[:M/S]' (IDM + MOBIL driver) or 'headway' "
-        "(the DAgger expert; "
-        "default: shipped policy)",
+        help="SB3 zip, RLlib checkpoint dir, 'random', 'constant:ACTION', 'idm[:M/S]' (IDM + MOBIL driver) or "
+        "'headway[:K]' (the DAgger expert, deciding every K steps; default: shipped policy)",
     )
     parser.add_argument("--env", default=None, help=f"env id (default: the policy's, else {DEFAULT_ENV})")
     parser.add_argument("--episodes", type=int, default=5)

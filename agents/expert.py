@@ -55,6 +55,7 @@ from rhs_common.validation import build, check_range, check_types
 
 # highway-env's DiscreteMetaAction indices (ACTIONS_ALL)
 LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = 0, 1, 2, 3, 4
+_LOOK_UP = object()  # safe_speed's default: find the lane's leader itself
 
 
 @dataclass(frozen=True)
@@ -109,10 +110,19 @@ class HeadwayDriver:
         """Gap along the lane between bumpers, m (negative ``lane_distance_to`` for a follower)."""
         return abs(ego.lane_distance_to(other)) - 0.5 * (ego.LENGTH + other.LENGTH)
 
-    def safe_speed(self, lane_index) -> float:
-        """v_safe = v_f + (g - d0) / T in ``lane_index`` (infinity without a leader), m/s."""
+    def leader(self, lane_index):
+        """The vehicle ahead of the ego in ``lane_index`` (None when the lane ahead is empty)."""
+        front, _ = self.env.unwrapped.road.neighbour_vehicles(self._ego, lane_index)
+        return front
+
+    def safe_speed(self, lane_index, front: Any = _LOOK_UP) -> float:
+        """v_safe = v_f + (g - d0) / T in ``lane_index`` (infinity without a leader), m/s.
+
+        ``front``: the lane's leader when the caller already has it (None: no leader).
+        """
         ego, c = self._ego, self.config
-        front, _ = self.env.unwrapped.road.neighbour_vehicles(ego, lane_index)
+        if front is _LOOK_UP:
+            front = self.leader(lane_index)
         if front is None:
             return float("inf")
         return float(front.speed + (self._bumper_gap(ego, front) - c.standstill_gap_m) / c.headway_s)
@@ -136,11 +146,10 @@ class HeadwayDriver:
         need = d0 + c.rear_headway_s * closing if escape else d0 + 2.0 * c.rear_headway_s * closing + 0.5 * rear.speed
         return self._bumper_gap(ego, rear) > need
 
-    def _lane_action(self, ego, v_own: float, v_max: float, v_min: float) -> int | None:
-        """LANE_LEFT / LANE_RIGHT when a side lane is worth taking, else None."""
+    def _lane_action(self, ego, front, v_own: float, v_max: float, v_min: float) -> int | None:
+        """LANE_LEFT / LANE_RIGHT when a side lane is worth taking, else None (``front``: the own lane's leader)."""
         c = self.config
         own = ego.target_lane_index
-        front, _ = self.env.unwrapped.road.neighbour_vehicles(ego, own)
         slow_leader = front is not None and front.speed < v_min and self._bumper_gap(ego, front) < c.lookahead_m
         # the gap closes, or will, even at the lowest target speed: any better lane will do
         trapped = v_own < v_min + c.margin_mps or slow_leader
@@ -163,10 +172,11 @@ class HeadwayDriver:
         ego, c = self._ego, self.config
         speeds = np.asarray(ego.target_speeds, dtype=float)
         v_max = float(speeds[-1])
-        v_safe = self.safe_speed(ego.target_lane_index)
+        front = self.leader(ego.target_lane_index)
+        v_safe = self.safe_speed(ego.target_lane_index, front)
         v_own = min(v_safe, v_max)
         if ego.lane_index == ego.target_lane_index:
-            lane_action = self._lane_action(ego, v_own, v_max, float(speeds[0]))
+            lane_action = self._lane_action(ego, front, v_own, v_max, float(speeds[0]))
             if lane_action is not None:
                 return lane_action
         i = int(ego.speed_index)

@@ -268,7 +268,7 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
     import torch
     from stable_baselines3 import PPO
 
-    from agents.run_setup import check_train_args, limit_threads, make_vec_env, run_settings, write_summary
+    from agents.run_setup import check_train_args, limit_threads, make_vec_env, run_settings, run_summary, write_summary
 
     run = run_settings("dagger", env_id, timesteps, n_envs, hyperparams, env_kwargs)
     expert = build(HeadwayDriverConfig, run.hp.get("expert"), "expert")
@@ -293,27 +293,8 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
         model.save(out / "model.zip")
     finally:
         venv.close()
-    wall = max(time.perf_counter() - t0, 1e-9)
-    summary = {
-        "algo": "dagger",
-        "env_id": env_id.split(":", 1)[-1],
-        "env_kwargs": run.env_kwargs,
-        "policy": run.policy,
-        "timesteps": len(data) * k,  # env steps (an episode cut short by a crash takes fewer)
-        "decision_interval": k,
-        "decision_mode": run.decision_mode,
-        "decisions": len(data),
-        "n_envs": run.n_envs,
-        "seed": seed,
-        "wall_time_s": round(wall, 1),
-        "steps_per_s": round(len(data) * k / wall, 2),
-        "hyperparams": run.hp_record,
-        "dagger": asdict(config),
-        "expert": expert.to_dict(),
-        "iterations": records,
-        "model": str(out / "model.zip"),
-        "interrupted": False,
-    }
+    summary = run_summary("dagger", env_id, run, seed, len(data), time.perf_counter() - t0, out,
+                          dagger=asdict(config), expert=expert.to_dict(), iterations=records, interrupted=False)
     write_summary(out, summary)
     (out / "iterations.json").write_text(json.dumps(records, indent=2))
     return summary

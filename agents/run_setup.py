@@ -289,6 +289,33 @@ def run_settings(algo: str, env_id: str, timesteps: int | None, n_envs: int | No
     return RunSettings(policy, steps, envs, kwargs, _resolve_schedules(hp), record, k, mode)
 
 
+def run_summary(algo: str, env_id: str, run: RunSettings, seed: int, decisions: int, wall: float, out: Path,
+                **extra: Any) -> dict[str, Any]:
+    """The record of a finished run that every trainer writes (``extra`` appended: the algorithm's own fields).
+
+    ``timesteps`` counts env steps, ``decisions x decision_interval`` (an episode cut short by a crash
+    takes fewer); ``steps_per_s`` is timesteps over the wall time ``wall`` (s).
+    """
+    wall = max(wall, 1e-9)
+    return {
+        "algo": algo,
+        "env_id": env_id.split(":", 1)[-1],
+        "env_kwargs": run.env_kwargs,
+        "policy": run.policy,
+        "timesteps": int(decisions) * run.decision_interval,
+        "decision_interval": run.decision_interval,
+        "decision_mode": run.decision_mode,
+        "decisions": int(decisions),
+        "n_envs": run.n_envs,
+        "seed": seed,
+        "wall_time_s": round(wall, 1),
+        "steps_per_s": round(int(decisions) * run.decision_interval / wall, 2),
+        "hyperparams": run.hp_record,
+        "model": str(out / "model.zip"),
+        **extra,
+    }
+
+
 def write_summary(out: Path, summary: dict[str, Any]) -> None:
     """``out/train.json`` and the metadata JSON beside ``model.zip`` (and ``best_model.zip``)."""
     text = json.dumps(summary, indent=2)

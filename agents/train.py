@@ -51,6 +51,7 @@ from agents.run_setup import (  # noqa: F401  (re-exported: the names users of a
     make_vec_env,
     metadata_path,
     run_settings,
+    run_summary,
     worker_env_id,
     write_summary,
 )
@@ -185,32 +186,18 @@ def _summary(algo: str, env_id: str, run: RunSettings, seed: int, model, eval_cb
              done: int, interrupted: bool) -> dict[str, Any]:
     recent = list(model.ep_info_buffer)
     best = float(eval_cb.best_mean_reward) if eval_cb is not None and eval_cb.n_calls else None
-    return {
-        "algo": algo,
-        "env_id": env_id.split(":", 1)[-1],
-        "env_kwargs": run.env_kwargs,
-        "policy": run.policy,
-        # env steps: decisions x decision_interval (an episode cut short by a crash takes fewer)
-        "timesteps": int(model.num_timesteps) * run.decision_interval,
-        "decision_interval": run.decision_interval,
-        "decision_mode": run.decision_mode,
-        "decisions": int(model.num_timesteps),
-        "n_envs": run.n_envs,
-        "seed": seed,
-        "wall_time_s": round(wall, 1),
-        "steps_per_s": round(model.num_timesteps * run.decision_interval / wall, 2),
-        "hyperparams": run.hp_record,
-        "recent_episodes": {
+    return run_summary(
+        algo, env_id, run, seed, int(model.num_timesteps), wall, out,
+        recent_episodes={
             "count": len(recent),
             "mean_return": sum(e["r"] for e in recent) / len(recent) if recent else None,
             "mean_length": sum(e["l"] for e in recent) / len(recent) if recent else None,
             "crash_rate": sum(float(e.get("crashed", 0)) for e in recent) / len(recent) if recent else None,
         },
-        "best_eval_mean_return": None if best is None or best == float("-inf") else best,
-        "model": str(out / "model.zip"),
-        "resumed_from_steps": done * run.decision_interval,
-        "interrupted": interrupted,
-    }
+        best_eval_mean_return=None if best is None or best == float("-inf") else best,
+        resumed_from_steps=done * run.decision_interval,
+        interrupted=interrupted,
+    )
 
 
 BACKENDS = ("sb3", "rllib")

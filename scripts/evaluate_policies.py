@@ -11,7 +11,9 @@ Rows (every policy meets the same traffic: episode k uses seed ``--seed + k``):
   Kinematics observation (``agents/data/truth/``), when trained;
 * ``random``: uniformly random actions on the SLAM env and config;
 * ``HeadwayDriver``: the DAgger expert (:class:`agents.expert.HeadwayDriver`, a
-  scripted time-gap driver on the simulator state), on ``rhs-highway-v0``;
+  scripted time-gap driver on the simulator state), on ``rhs-highway-v0``, deciding
+  every step and, as it taught the students, every k steps with IDLE between
+  (``headway:<k>``, k the students' decision interval);
 * ``always SLOWER``: a scripted reference, action 4 (SLOWER) at every step, i.e.
   the lowest target speed (20 m/s) in the current lane, on ``rhs-highway-v0``;
 * ``IDM + MOBIL``: a strong scripted reference, highway-env's own ``IDMVehicle``
@@ -332,6 +334,7 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
     from agents.evaluate import (
+        DAGGER_POLICY,
         SHIPPED_POLICY,
         SHIPPED_TRUTH_POLICY,
         is_scripted,
@@ -345,9 +348,14 @@ def main(argv: list[str] | None = None) -> int:
     slam_env, slam_kwargs = resolve_env(slam_policy)
     truth_env, truth_kwargs = resolve_env(truth_policy)
     seeds = list(range(args.seed, args.seed + args.episodes))
+    # the expert as the DAgger students learned from it: deciding at their decision interval, pulsed
+    teacher_k = int(policy_metadata(DAGGER_POLICY).get("decision_interval") or 1) if DAGGER_POLICY.exists() else 1
     specs = learned_specs(slam_policy, truth_policy, args.no_dagger) + [
         ("random", "random", "(none)", "random", slam_env, slam_kwargs),
-        ("headway", "HeadwayDriver (DAgger expert, scripted)", "(simulator state)", "headway", truth_env, truth_kwargs),
+        ("headway", "HeadwayDriver (DAgger expert, scripted, 5 Hz)", "(simulator state)", "headway", truth_env,
+         truth_kwargs),
+        ("headway_teacher", f"HeadwayDriver every {teacher_k} steps, IDLE between (as it taught)", "(simulator state)",
+         f"headway:{teacher_k}", truth_env, truth_kwargs),
         ("slower", "always SLOWER (scripted)", "(none)", "constant:4", truth_env, truth_kwargs),
         ("idm", "IDM + MOBIL (highway-env, scripted)", "(simulator state)", "idm", truth_env, truth_kwargs),
     ]

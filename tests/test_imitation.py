@@ -103,6 +103,20 @@ def test_headway_driver_is_a_scripted_policy_that_beats_always_slower_on_same_se
     assert head["return"]["mean"] > slow["return"]["mean"]
 
 
+def test_headway_k_decides_every_k_steps_and_idles_between():
+    env, _ = _road(lane=2, speed=20.0, speed_index=0)  # empty road, right lane: it speeds up to its cruise speed
+    plain = load_policy("headway", env)
+    assert isinstance(plain, HeadwayDriver)
+    pulsed = load_policy("headway:3", env)
+    actions = [int(pulsed.predict(None)[0]) for _ in range(6)]
+    assert actions == [FASTER, IDLE, IDLE, FASTER, IDLE, IDLE]  # the expert says FASTER at every step here
+    assert plain.predict(None)[0] == FASTER
+    with pytest.raises(ValueError, match="headway:<decision interval>"):
+        load_policy("headway:x", env)
+    with pytest.raises(ValueError, match="decision_interval"):
+        load_policy("headway:0", env)
+
+
 def test_expert_action_info_labels_reset_and_every_step():
     env = ExpertActionInfo(gym.make(TRUTH, vehicles_count=5, duration=2))
     _, info = env.reset(seed=1)
