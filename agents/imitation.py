@@ -44,6 +44,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from functools import partial
 from pathlib import Path
@@ -230,8 +231,12 @@ def fit(model, data: Dataset, config: DaggerConfig, rng: np.random.Generator, op
 
 
 def dagger_rounds(venv, model, config: DaggerConfig, decisions: int, rng: np.random.Generator,
-                  progress: bool = True) -> tuple[Dataset, list[dict[str, Any]]]:
-    """The DAgger loop of the module docstring over ``decisions`` labelled decisions; the data and one record per round."""
+                  progress: bool = True, on_round: Callable[[dict[str, Any]], None] | None = None,
+                  ) -> tuple[Dataset, list[dict[str, Any]]]:
+    """The DAgger loop of the module docstring over ``decisions`` labelled decisions; the data and one record per round.
+
+    ``on_round(record)`` is called after each round's fit (checkpoints, logs).
+    """
     import torch
     from tqdm.auto import tqdm
 
@@ -252,8 +257,36 @@ def dagger_rounds(venv, model, config: DaggerConfig, decisions: int, rng: np.ran
                         "agreement_before_fit": agree, "fit_loss": loss, **stats})
         print(f"dagger: round {i}: beta {beta:.3f}, {len(data)} samples, agreement "
               f"{'-' if agree is None else f'{agree:.3f}'}, loss {loss:.3f}, episodes {stats}", file=sys.stderr)
+        if on_round is not None:
+            on_round(records[-1])
     bar.close()
     return data, records
+
+
+class RoundLog:
+    """After each DAgger round: a checkpoint ``out/checkpoints/dagger_round_<i>.zip``, the round's record as
+    scalars (SB3's logger: ``out/progress.csv`` and, with tensorboard installed, ``out/tb``) and
+    ``out/iterations.json`` so far, so a long run in the background can be watched and stopped."""
+
+    def __init__(self, model, out: Path, k: int):
+        from stable_baselines3.common.logger import configure
+
+        from agents.run_setup import _tensorboard_available
+
+        self.model, self.out, self.k = model, out, k
+        self.records: list[dict[str, Any]] = []
+        formats = ["csv", "tensorboard"] if _tensorboard_available() else ["csv"]
+        self.logger = configure(str(out / "tb") if "tensorboard" in formats else str(out), formats)
+        (out / "checkpoints").mkdir(parents=True, exist_ok=True)
+
+    def __call__(self, record: dict[str, Any]) -> None:
+        self.records.append(record)
+        self.model.save(self.out / "checkpoints" / f"dagger_round_{record['iteration']}.zip")
+        for key, value in record.items():
+            if key != "iteration" and value is not None:
+                self.logger.record(f"dagger/{key}", value)
+        self.logger.dump(step=record["samples"] * self.k)  # x-axis: env steps so far
+        (self.out / "iterations.json").write_text(json.dumps(self.records, indent=2))
 
 
 def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int = 0, n_envs: int | None = None,
@@ -288,7 +321,9 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
     try:
         model = PPO(run.policy, venv, seed=seed, device="cpu", verbose=0,
                     policy_kwargs=run.hp.get("policy_kwargs") or {})
-        data, records = dagger_rounds(venv, model, config, decisions, rng, progress)
+        log = RoundLog(model, out, k)
+        data, records = dagger_rounds(venv, model, config, decisions, rng, progress, on_round=log)
+        log.logger.close()
         model.num_timesteps = len(data)
         model.save(out / "model.zip")
     finally:
@@ -296,7 +331,6 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
     summary = run_summary("dagger", env_id, run, seed, len(data), time.perf_counter() - t0, out,
                           dagger=asdict(config), expert=expert.to_dict(), iterations=records, interrupted=False)
     write_summary(out, summary)
-    (out / "iterations.json").write_text(json.dumps(records, indent=2))
     return summary
 
 
