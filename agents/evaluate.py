@@ -18,8 +18,9 @@ was trained on unless asked otherwise. A policy trained with a ``decision_interv
 k > 1 (saved in the same JSON, :mod:`agents.decision`) is loaded as a
 :class:`agents.decision.HeldPolicy`: it decides every k env steps and repeats its
 action between, so every policy is scored per env step on the same seeds. The default policy is the shipped one,
-``agents/data/ppo_rhs_highway_slam.zip`` (with ``ppo_rhs_highway_slam.json``); ``dagger_rhs_highway_slam.zip``
-beside it is a DAgger student of :class:`agents.expert.HeadwayDriver` (:mod:`agents.imitation`).
+``agents/data/dagger_rhs_highway_slam.zip`` (with ``dagger_rhs_highway_slam.json``), a DAgger student of
+:class:`agents.expert.HeadwayDriver` (:mod:`agents.imitation`); ``ppo_rhs_highway_slam.zip`` beside it is PPO
+with the same budget (it learned always-SLOWER).
 """
 
 from __future__ import annotations
@@ -37,11 +38,14 @@ from agents.expert import HeadwayDriver
 from rhs_env.registration import SLAM_ENV_SPECS
 
 DATA_DIR = Path(__file__).parent / "data"
-SHIPPED_POLICY = DATA_DIR / "ppo_rhs_highway_slam.zip"
-SHIPPED_TRUTH_POLICY = DATA_DIR / "ppo_rhs_highway_truth.zip"
-#: DAgger students of agents.expert.HeadwayDriver (40k env steps, like the PPO ones): results/policies.md compares
+#: DAgger students of agents.expert.HeadwayDriver, 40k env steps each: on radar + SLAM (shipped) and ground truth
 DAGGER_POLICY = DATA_DIR / "dagger_rhs_highway_slam.zip"
 DAGGER_TRUTH_POLICY = DATA_DIR / "dagger_rhs_highway_truth.zip"
+#: PPO with the same budget (agents/hyperparams/ppo.yml): results/policies.md compares
+PPO_POLICY = DATA_DIR / "ppo_rhs_highway_slam.zip"
+PPO_TRUTH_POLICY = DATA_DIR / "ppo_rhs_highway_truth.zip"
+#: the policy of ``rhs-slam demo`` / ``evaluate`` by default, and its ground-truth twin
+SHIPPED_POLICY, SHIPPED_TRUTH_POLICY = DAGGER_POLICY, DAGGER_TRUTH_POLICY
 DEFAULT_ENV = "rhs-highway-slam-v0"
 
 

@@ -2,13 +2,14 @@
 
 Rows (every policy meets the same traffic: episode k uses seed ``--seed + k``):
 
-* ``PPO (shipped)``: ``agents/data/ppo_rhs_highway_slam.zip`` on
-  ``rhs-highway-slam-v0`` with the env kwargs saved beside it (SLAM in the loop);
-* ``PPO (ground truth)``: ``agents/data/ppo_rhs_highway_truth.zip`` on
-  ``rhs-highway-v0`` (highway-env Kinematics observation of the same scene);
-* ``DAgger`` on either observation (``agents/data/dagger_rhs_highway_{slam,truth}.zip``,
-  students of the HeadwayDriver, :mod:`agents.imitation`), and on an all-around
-  Kinematics observation (``agents/data/truth/``), when trained;
+* ``DAgger (shipped)``: ``agents/data/dagger_rhs_highway_slam.zip`` (a student of
+  the HeadwayDriver, :mod:`agents.imitation`) on ``rhs-highway-slam-v0`` with the
+  env kwargs saved beside it (SLAM in the loop);
+* ``DAgger (ground truth)``: ``agents/data/dagger_rhs_highway_truth.zip`` on
+  ``rhs-highway-v0`` (highway-env Kinematics observation of the same scene), and
+  on an all-around Kinematics observation (``agents/data/truth/``), when trained;
+* ``PPO`` on either observation (``agents/data/ppo_rhs_highway_{slam,truth}.zip``,
+  the same env-step budget);
 * ``random``: uniformly random actions on the SLAM env and config;
 * ``HeadwayDriver``: the DAgger expert (:class:`agents.expert.HeadwayDriver`, a
   scripted time-gap driver on the simulator state), on ``rhs-highway-v0``, deciding
@@ -79,13 +80,13 @@ def run_policy(policy: str, env_id: str, env_kwargs: dict, seeds: list[int], wor
 
 
 def fingerprint() -> list[float]:
-    """The shipped SLAM and ground-truth policies and the DAgger students, one 2-second episode (10 steps) each,
-    seed 1000."""
-    from agents.evaluate import DAGGER_POLICY, DAGGER_TRUTH_POLICY, SHIPPED_POLICY, SHIPPED_TRUTH_POLICY, resolve_env
+    """The shipped SLAM and ground-truth policies, the all-around student and the PPO policies, one 2-second
+    episode (10 steps) each, seed 1000."""
+    from agents.evaluate import PPO_POLICY, PPO_TRUTH_POLICY, SHIPPED_POLICY, SHIPPED_TRUTH_POLICY, resolve_env
 
     out = []
-    students = [p for p in (DAGGER_POLICY, DAGGER_TRUTH_POLICY, target_path("dagger", "truth_all_around")) if p.exists()]
-    for policy in (SHIPPED_POLICY, SHIPPED_TRUTH_POLICY, *students):
+    others = [p for p in (target_path("dagger", "truth_all_around"), PPO_POLICY, PPO_TRUTH_POLICY) if p.exists()]
+    for policy in (SHIPPED_POLICY, SHIPPED_TRUTH_POLICY, *others):
         env_id, kwargs = resolve_env(str(policy))
         run = _chunk(str(policy), env_id, {**kwargs, "duration": 2}, [1000])[0]
         out += [run[k] for k in sorted(run) if isinstance(run[k], (int, float)) and not k.endswith("_s")]
@@ -181,31 +182,32 @@ def antenna_markdown(study: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def learned_specs(slam_policy: str, truth_policy: str, no_dagger: bool = False) -> list[tuple]:
-    """(key, label, observation, policy, env id, env kwargs) of the learned policies: PPO (shipped) and DAgger."""
-    from agents.evaluate import DAGGER_POLICY, DAGGER_TRUTH_POLICY, resolve_env
+def learned_specs(slam_policy: str, truth_policy: str, shipped_only: bool = False) -> list[tuple]:
+    """(key, label, observation, policy, env id, env kwargs) of the learned policies: the shipped pair (DAgger),
+    the all-around DAgger student and PPO with the same budget."""
+    from agents.evaluate import PPO_POLICY, PPO_TRUTH_POLICY, resolve_env
 
     slam_obs, truth_obs = "radar point cloud + SLAM", "highway-env Kinematics (truth)"
     specs = [
-        ("slam", "PPO (shipped)", slam_obs, slam_policy, *resolve_env(slam_policy)),
-        ("truth", "PPO (ground truth)", truth_obs, truth_policy, *resolve_env(truth_policy)),
+        ("slam", "DAgger (shipped)", slam_obs, slam_policy, *resolve_env(slam_policy)),
+        ("truth", "DAgger (ground truth)", truth_obs, truth_policy, *resolve_env(truth_policy)),
     ]
-    dagger = [("dagger_slam", "DAgger", slam_obs, DAGGER_POLICY), ("dagger_truth", "DAgger (ground truth)", truth_obs,
-              DAGGER_TRUTH_POLICY), ("truth_all_around", "DAgger (ground truth, all around)",
-              "Kinematics, 8 vehicles incl. behind (truth)", target_path("dagger", "truth_all_around"))]  # fmt: skip
-    for key, label, obs, path in [] if no_dagger else dagger:
+    others = [("truth_all_around", "DAgger (ground truth, all around)", "Kinematics, 8 vehicles incl. behind (truth)",
+               target_path("dagger", "truth_all_around"), "dagger"), ("ppo_slam", "PPO", slam_obs, PPO_POLICY, "ppo"),
+              ("ppo_truth", "PPO (ground truth)", truth_obs, PPO_TRUTH_POLICY, "ppo")]  # fmt: skip
+    for key, label, obs, path, algo in [] if shipped_only else others:
         if Path(path).exists():
             specs.append((key, label, obs, str(path), *resolve_env(str(path))))
         else:
-            print(f"evaluate_policies: {path} is missing (scripts/train_policy.py --algo dagger); row left out",
+            print(f"evaluate_policies: {path} is missing (scripts/train_policy.py --algo {algo}); row left out",
                   file=sys.stderr)
     return specs
 
 
 def goal_of(by: dict[str, dict], key: str) -> dict:
     """Issue 12 goal 1 for the SLAM policy ``key``: against always-SLOWER and the better ground-truth policy of the
-    same algorithm (PPO: ``truth``; DAgger: ``dagger_truth`` or the all-around one, whichever returns more)."""
-    truths = ["truth"] if key == "slam" else [k for k in ("dagger_truth", "truth_all_around") if k in by]
+    same algorithm (PPO: ``ppo_truth``; DAgger: ``truth`` or the all-around one, whichever returns more)."""
+    truths = ["ppo_truth"] if key == "ppo_slam" else [k for k in ("truth", "truth_all_around") if k in by]
     ref = max(truths, key=lambda k: by[k]["return"]["mean"])
     s, slower = by[key], by["slower"]
     goal = {
@@ -317,9 +319,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--episodes", type=int, default=50)
     ap.add_argument("--seed", type=int, default=1000, help="first seed (training used 0.. and 10000..)")
     ap.add_argument("--workers", type=int, default=2, help="processes per policy")
-    ap.add_argument("--slam-policy", default=None, help="default: agents/data/dagger_rhs_highway_slam.zip")
+    ap.add_argument("--slam-policy", default=None, help="default: agents/data/dagger_rhs_highway_slam.zip (shipped)")
     ap.add_argument("--truth-policy", default=None, help="default: agents/data/dagger_rhs_highway_truth.zip")
-    ap.add_argument("--no-dagger", action="store_true", help="skip the DAgger rows")
+    ap.add_argument("--shipped-only", action="store_true", help="skip the all-around and PPO rows")
     ap.add_argument("--no-antenna", action="store_true", help="skip the antenna study (issue 12 goal 2)")
     ap.add_argument("--antenna-episodes", type=int, default=50, help="seeds per policy in the antenna study")
     ap.add_argument("--out-dir", default=str(ROOT / "results"))
@@ -334,7 +336,6 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
     from agents.evaluate import (
-        DAGGER_POLICY,
         SHIPPED_POLICY,
         SHIPPED_TRUTH_POLICY,
         is_scripted,
@@ -349,8 +350,8 @@ def main(argv: list[str] | None = None) -> int:
     truth_env, truth_kwargs = resolve_env(truth_policy)
     seeds = list(range(args.seed, args.seed + args.episodes))
     # the expert as the DAgger students learned from it: deciding at their decision interval, pulsed
-    teacher_k = int(policy_metadata(DAGGER_POLICY).get("decision_interval") or 1) if DAGGER_POLICY.exists() else 1
-    specs = learned_specs(slam_policy, truth_policy, args.no_dagger) + [
+    teacher_k = int(policy_metadata(SHIPPED_POLICY).get("decision_interval") or 1) if SHIPPED_POLICY.exists() else 1
+    specs = learned_specs(slam_policy, truth_policy, args.shipped_only) + [
         ("random", "random", "(none)", "random", slam_env, slam_kwargs),
         ("headway", "HeadwayDriver (DAgger expert, scripted, 5 Hz)", "(simulator state)", "headway", truth_env,
          truth_kwargs),
@@ -381,7 +382,7 @@ def main(argv: list[str] | None = None) -> int:
         c_ratio, c_text, c_ok = c_slam / c_truth, f"{c_slam / c_truth:.2f}", c_slam <= COLLISION_AIM * c_truth
     else:
         c_ratio, c_text, c_ok = None, ("0/0" if c_slam == 0 else f"{c_slam:.2f} vs 0"), c_slam == 0
-    goals = {key: goal_of(by, key) for key in ("slam", "dagger_slam") if key in by}
+    goals = {key: goal_of(by, key) for key in ("slam", "ppo_slam") if key in by}
     goal = next((g for g in goals.values() if g["met"]), goals["slam"])
     training = {}
     for key, _, _, policy, _, _ in specs:

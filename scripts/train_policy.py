@@ -5,7 +5,8 @@
 ``agents/hyperparams/dagger.yml``):
 
 * ``agents/data/dagger_rhs_highway_slam.zip``: on ``rhs-highway-slam-v0`` (point
-  cloud + SLAM estimate), SLAM in the loop at every step;
+  cloud + SLAM estimate), SLAM in the loop at every step: the shipped policy
+  (``rhs-slam demo``);
 * ``agents/data/dagger_rhs_highway_truth.zip``: the same algorithm,
   hyperparameters and env steps on ``rhs-highway-v0`` (ground-truth Kinematics);
 * ``--only truth_all_around``: on a Kinematics observation of 8 vehicles, behind
@@ -13,7 +14,7 @@
   antenna study of ``evaluate_policies.py`` (``agents/data/antenna/``).
 
 ``--algo ppo`` trains PPO (``agents/hyperparams/ppo.yml``) into
-``ppo_rhs_highway_{slam,truth}.zip``: the shipped policies (``rhs-slam demo``).
+``ppo_rhs_highway_{slam,truth}.zip``, the PPO rows of the policies table.
 
 Each zip gets a JSON beside it (env id, ``env_kwargs``, timesteps, wall time,
 hyperparameters) that ``rhs-slam evaluate`` / ``rhs-slam demo`` read to rebuild

@@ -16,15 +16,15 @@ import train_policy  # noqa: E402
 
 
 def test_targets_merge_the_radar_settings_and_ship_where_evaluate_looks():
-    from agents.evaluate import DAGGER_POLICY, DAGGER_TRUTH_POLICY, SHIPPED_POLICY
+    from agents.evaluate import PPO_POLICY, SHIPPED_POLICY, SHIPPED_TRUTH_POLICY
 
     grid = {"radar": {"scan": {"grid_deg": 5}}}
     assert train_policy.target_env_kwargs("slam", grid) == grid
     assert train_policy.target_env_kwargs("truth", grid) == {}
     assert train_policy.target_env_kwargs("dense_phased", grid) == {"radar": {"scan": {"grid_deg": 5}, "antenna": "phased"}}
-    assert train_policy.target_path("dagger", "slam") == DAGGER_POLICY
-    assert train_policy.target_path("dagger", "truth") == DAGGER_TRUTH_POLICY
-    assert train_policy.target_path("ppo", "slam") == SHIPPED_POLICY
+    assert train_policy.target_path("dagger", "slam") == SHIPPED_POLICY
+    assert train_policy.target_path("dagger", "truth") == SHIPPED_TRUTH_POLICY
+    assert train_policy.target_path("ppo", "slam") == PPO_POLICY
     assert train_policy.target_env_kwargs("truth_all_around", grid)["observation"]["see_behind"] is True
     assert train_policy.target_path("dagger", "slam_phased").parent.name == "antenna"
     assert set(train_policy.ANTENNA_STUDY) <= set(train_policy.TARGETS)
@@ -49,3 +49,18 @@ def test_antenna_table_states_the_paired_verdict():
     text = evaluate_policies.antenna_markdown(study)
     assert "| `rhs-highway-slam-v0` | rhs | 40000 | 150.0 ± 3.0 | 0.00 (0/50; 0.00-0.07)" in text
     assert "+4.0 ± 1.0 (RHS higher)" in text and "Not trained yet" in text and "dense" in text
+
+
+def _row(ret: float, collisions: float, speed: float) -> dict:
+    return {"return": {"mean": ret}, "collision_rate": collisions, "mean_speed_mps": {"mean": speed}}
+
+
+def test_goal_compares_each_slam_policy_with_the_better_truth_policy_of_its_algorithm():
+    by = {"slower": _row(140.0, 0.0, 20.0), "slam": _row(160.0, 0.04, 24.0), "truth": _row(150.0, 0.1, 24.0),
+          "truth_all_around": _row(170.0, 0.1, 24.0), "ppo_slam": _row(140.0, 0.0, 20.0), "ppo_truth": _row(120.0, 0.3, 21.0)}  # fmt: skip
+    goal = evaluate_policies.goal_of(by, "slam")
+    assert goal["truth_reference"] == "truth_all_around" and goal["return_vs_slower"] == pytest.approx(160 / 140)
+    assert goal["met"]  # 1.14x SLOWER, 4 % collisions, faster, 0.94 of the best truth policy
+    assert not evaluate_policies.goal_of({**by, "slam": _row(160.0, 0.06, 24.0)}, "slam")["met"]  # collisions
+    ppo = evaluate_policies.goal_of(by, "ppo_slam")
+    assert ppo["truth_reference"] == "ppo_truth" and not ppo["met"]  # no faster than always-SLOWER
