@@ -58,7 +58,6 @@ from rhs_common.validation import build, check_range, check_types
 
 # highway-env's DiscreteMetaAction indices (ACTIONS_ALL)
 LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = 0, 1, 2, 3, 4
-_LOOK_UP = object()  # safe_speed's default: find the lane's leader itself
 
 
 @dataclass(frozen=True)
@@ -120,17 +119,16 @@ class HeadwayDriver:
         front, _ = self.env.unwrapped.road.neighbour_vehicles(self._ego, lane_index)
         return front
 
-    def safe_speed(self, lane_index, front: Any = _LOOK_UP) -> float:
-        """v_safe = v_f + (g - d0) / T in ``lane_index`` (infinity without a leader), m/s.
+    def safe_speed(self, lane_index) -> float:
+        """v_safe in ``lane_index``, m/s (:meth:`safe_speed_behind` its leader)."""
+        return self.safe_speed_behind(self.leader(lane_index))
 
-        ``front``: the lane's leader when the caller already has it (None: no leader).
-        """
-        ego, c = self._ego, self.config
-        if front is _LOOK_UP:
-            front = self.leader(lane_index)
+    def safe_speed_behind(self, front) -> float:
+        """v_safe = v_f + (g - d0) / T behind the leader ``front`` (infinity for None), m/s."""
         if front is None:
             return float("inf")
-        return float(front.speed + (self._bumper_gap(ego, front) - c.standstill_gap_m) / c.headway_s)
+        c = self.config
+        return float(front.speed + (self._bumper_gap(self._ego, front) - c.standstill_gap_m) / c.headway_s)
 
     def is_open(self, lane_index, escape: bool = False) -> bool:
         """Room to move into ``lane_index`` now: enough gap to its leader and to its (faster) follower.
@@ -173,7 +171,7 @@ class HeadwayDriver:
             if not self.is_open(lane, escape=trapped):
                 continue
             side_front = self.leader(lane)
-            v = min(self.safe_speed(lane, side_front), v_max)
+            v = min(self.safe_speed_behind(side_front), v_max)
             right = lane[2] > own[2]
             side_trap = self.time_to_trap(side_front, v_min)
             if side_trap < own_trap:  # never into a lane whose slow leader traps the ego sooner than its own
@@ -194,7 +192,7 @@ class HeadwayDriver:
         speeds = np.asarray(ego.target_speeds, dtype=float)
         v_max = float(speeds[-1])
         front = self.leader(ego.target_lane_index)
-        v_safe = self.safe_speed(ego.target_lane_index, front)
+        v_safe = self.safe_speed_behind(front)
         v_own = min(v_safe, v_max)
         if ego.lane_index == ego.target_lane_index:
             lane_action = self._lane_action(ego, front, v_own, v_max, float(speeds[0]))
