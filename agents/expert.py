@@ -19,12 +19,9 @@ capped at the top target speed ``v_max``. Each decision:
    of more than ``margin + 1`` m/s. When its own lane cannot be held at the
    lowest target speed ``v_min`` (``v_safe < v_min + margin``, or a leader slower
    than ``v_min`` within ``lookahead_m``: meta-actions cannot drive below 20 m/s),
-   any side lane with a higher ``v_safe``, or one that traps later,
-   ``t_trap(L) > t_trap(own) + trap_margin`` with ``t_trap = (g - d0) / (v_min - v_f)``
-   for a leader slower than ``v_min`` (infinity otherwise: the time until the gap
-   is gone at ``v_min``), is taken as soon as the smaller *escape* gaps allow
-   (``d0 / 2`` ahead and behind plus ``T_r`` times the follower's closing speed).
-   No lane that traps sooner than the own lane is ever taken.
+   any side lane with a higher ``v_safe`` is taken as soon as the smaller
+   *escape* gaps allow (``d0 / 2`` ahead and behind plus ``T_r`` times the
+   follower's closing speed).
 2. **Speed.** Otherwise SLOWER when the ego's target speed exceeds
    ``v_safe(own lane)`` or the cruise speed ``v_c``, FASTER when the next target speed is at most
    ``min(v_safe - margin, v_c)``, else IDLE. The cruise speed ``v_c`` (25 m/s)
@@ -71,7 +68,6 @@ class HeadwayDriverConfig:
     keep_right_tolerance_mps: float = 0.5  # a right lane may be this much slower and still be taken
     lookahead_m: float = 60.0  # a leader slower than the lowest target speed this close makes the lane one to leave
     cruise_speed_mps: float = 25.0  # v_c: the highest target speed chosen (the traffic's pace; 30 m/s closes on it)
-    trap_margin_s: float = 3.0  # trapped, a side lane is taken when it traps this much later than the own lane
 
     def __post_init__(self) -> None:
         check_types(self)
@@ -82,7 +78,6 @@ class HeadwayDriverConfig:
         check_range("keep_right_tolerance_mps", self.keep_right_tolerance_mps, 0.0, 20.0)
         check_range("lookahead_m", self.lookahead_m, 0.0, 500.0)
         check_range("cruise_speed_mps", self.cruise_speed_mps, 0.0, 60.0, low_open=True)
-        check_range("trap_margin_s", self.trap_margin_s, 0.0, 60.0)
 
     def to_dict(self) -> dict[str, float]:
         return asdict(self)
@@ -149,15 +144,6 @@ class HeadwayDriver:
         need = d0 + c.rear_headway_s * closing if escape else d0 + 2.0 * c.rear_headway_s * closing + 0.5 * rear.speed
         return self._bumper_gap(ego, rear) > need
 
-    def time_to_trap(self, front, v_min: float) -> float:
-        """s until a leader slower than ``v_min`` is ``d0`` ahead with the ego at ``v_min``: ``(g - d0) / (v_min - v_f)``.
-
-        Infinity without a leader, or with one at ``v_min`` or faster (meta-actions cannot drive below ``v_min``).
-        """
-        if front is None or front.speed >= v_min:
-            return float("inf")
-        return (self._bumper_gap(self._ego, front) - self.config.standstill_gap_m) / (v_min - front.speed)
-
     def _lane_action(self, ego, front, v_own: float, v_max: float, v_min: float) -> int | None:
         """LANE_LEFT / LANE_RIGHT when a side lane is worth taking, else None (``front``: the own lane's leader)."""
         c = self.config
@@ -166,20 +152,13 @@ class HeadwayDriver:
         # the gap closes, or will, even at the lowest target speed: any better lane will do
         trapped = v_own < v_min + c.margin_mps or slow_leader
         best, best_v, best_right = None, v_own, False
-        own_trap = self.time_to_trap(front, v_min)
         for lane in self.env.unwrapped.road.network.side_lanes(own):
             if not self.is_open(lane, escape=trapped):
                 continue
-            side_front = self.leader(lane)
-            v = min(self.safe_speed_behind(side_front), v_max)
+            v = min(self.safe_speed(lane), v_max)
             right = lane[2] > own[2]
-            side_trap = self.time_to_trap(side_front, v_min)
-            if side_trap < own_trap:  # never into a lane whose slow leader traps the ego sooner than its own
-                continue
             keep_right = right and v >= v_own - c.keep_right_tolerance_mps and v >= min(v_max, ego.speed)
-            # trapped: a lane that can be held longer (slower leaders trap later) beats one with a higher v_safe now
-            later = side_trap > own_trap + c.trap_margin_s
-            worth = keep_right or v - v_own > c.margin_mps + 1.0 or (trapped and (v > v_own or later))
+            worth = keep_right or v - v_own > c.margin_mps + 1.0 or (trapped and v > v_own)
             if worth and (best is None or v > best_v or (right and v >= best_v)):
                 best, best_v, best_right = lane, v, right
         if best is None:
