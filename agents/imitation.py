@@ -264,7 +264,7 @@ def dagger_rounds(venv, model, config: DaggerConfig, decisions: int, rng: np.ran
 
 
 class RoundLog:
-    """After each DAgger round: a checkpoint ``out/checkpoints/dagger_round_<i>.zip``, the round's record as
+    """After each DAgger round: a checkpoint ``out/checkpoints/dagger_round_<ii>.zip`` (two digits), the round's record as
     scalars (SB3's logger: ``out/progress.csv`` and, with tensorboard installed, ``out/tb``) and
     ``out/iterations.json`` so far, so a long run in the background can be watched and stopped."""
 
@@ -281,7 +281,7 @@ class RoundLog:
 
     def __call__(self, record: dict[str, Any]) -> None:
         self.records.append(record)
-        self.model.save(self.out / "checkpoints" / f"dagger_round_{record['iteration']}.zip")
+        self.model.save(self.out / "checkpoints" / f"dagger_round_{record['iteration']:02d}.zip")
         for key, value in record.items():
             if key != "iteration" and value is not None:
                 self.logger.record(f"dagger/{key}", value)

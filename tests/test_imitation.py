@@ -193,7 +193,7 @@ def test_rhs_slam_train_dagger_writes_a_policy_that_evaluate_loads(tmp_path):
     assert meta["algo"] == "dagger" and meta["env_kwargs"] == kw
     assert json.loads((tmp_path / "run" / "iterations.json").read_text())[-1]["samples"] == 120
     rounds = sorted(p.name for p in (tmp_path / "run" / "checkpoints").glob("dagger_round_*.zip"))
-    assert rounds == ["dagger_round_0.zip", "dagger_round_1.zip", "dagger_round_2.zip"]
+    assert rounds == ["dagger_round_00.zip", "dagger_round_01.zip", "dagger_round_02.zip"]
     logged = list((tmp_path / "run").rglob("progress.csv"))
     assert logged and "dagger/agreement_before_fit" in logged[0].read_text().splitlines()[0]
     env = gym.make(TRUTH, **kw)
