@@ -314,6 +314,24 @@ def markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def rerun_antenna(args: argparse.Namespace, started: float, argv: list[str] | None) -> int:
+    """``--antenna-only``: the antenna study again, the goal tables of ``policies.json`` kept (their episodes are
+    reused where a study policy is one of them); the earlier run's provenance is kept as ``tables_provenance``."""
+    out = Path(args.out_dir)
+    result = json.loads((out / "policies.json").read_text())
+    if result["episodes"] != args.antenna_episodes or result["seeds"][0] != args.seed:
+        raise SystemExit("evaluate_policies: --antenna-only needs the seeds of policies.json "
+                         f"({result['episodes']} from {result['seeds'][0]})")
+    tables = result.pop("provenance")
+    result.setdefault("tables_provenance", tables)  # the run that made the goal tables, not an earlier --antenna-only
+    done = {r["policy"]: r["runs"] for r in result["rows"]}
+    result["antenna"] = antenna_study(args.antenna_episodes, args.seed, args.workers, done)
+    write_json(out / "policies.json", result, __file__, args, started, fingerprint, argv)
+    (out / "policies.md").write_text(markdown(result))
+    print(antenna_markdown(result["antenna"]))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--episodes", type=int, default=50)
@@ -326,6 +344,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--antenna-episodes", type=int, default=50, help="seeds per policy in the antenna study")
     ap.add_argument("--out-dir", default=str(ROOT / "results"))
     ap.add_argument("--render-only", action="store_true", help="rewrite policies.md from policies.json, no runs")
+    ap.add_argument("--antenna-only", action="store_true",
+                    help="rerun only the antenna study (e.g. after training its policies) into the existing policies.json")
     args = ap.parse_args(argv)
     started = time.time()
     if args.render_only:
@@ -334,6 +354,8 @@ def main(argv: list[str] | None = None) -> int:
         print(markdown(result))
         return 0
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    if args.antenna_only:
+        return rerun_antenna(args, started, argv)
 
     from agents.evaluate import (
         SHIPPED_POLICY,

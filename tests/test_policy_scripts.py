@@ -64,3 +64,31 @@ def test_goal_compares_each_slam_policy_with_the_better_truth_policy_of_its_algo
     assert not evaluate_policies.goal_of({**by, "slam": _row(160.0, 0.06, 24.0)}, "slam")["met"]  # collisions
     ppo = evaluate_policies.goal_of(by, "ppo_slam")
     assert ppo["truth_reference"] == "ppo_truth" and not ppo["met"]  # no faster than always-SLOWER
+
+
+def test_antenna_only_reruns_the_study_and_keeps_the_tables_and_their_provenance(tmp_path, monkeypatch):
+    import json
+
+    rows = [{"key": "slam", "policy": "p.zip", "runs": [{"return": 1.0}]}]
+    old = {"episodes": 3, "seeds": [1000, 1001, 1002], "rows": rows, "provenance": {"commit": "abc"}}
+    (tmp_path / "policies.json").write_text(json.dumps(old))
+    seen = {}
+
+    def study(episodes, seed, workers, done):
+        seen.update(episodes=episodes, seed=seed, done=done)
+        return {"rows": [], "pairs": []}
+
+    monkeypatch.setattr(evaluate_policies, "antenna_study", study)
+    monkeypatch.setattr(evaluate_policies, "markdown", lambda result: "table\n")
+    monkeypatch.setattr(evaluate_policies, "antenna_markdown", lambda study: "antenna\n")
+    monkeypatch.setattr(evaluate_policies, "fingerprint", lambda: [1.0])
+    args = ["--antenna-only", "--antenna-episodes", "3", "--out-dir", str(tmp_path)]
+    assert evaluate_policies.main(args) == 0
+    new = json.loads((tmp_path / "policies.json").read_text())
+    assert seen == {"episodes": 3, "seed": 1000, "done": {"p.zip": [{"return": 1.0}]}}  # the goal table's episodes
+    assert new["rows"] == rows and new["antenna"] == {"rows": [], "pairs": []}
+    assert new["tables_provenance"] == {"commit": "abc"} and "--antenna-only" in new["provenance"]["command"]
+    assert evaluate_policies.main(args) == 0  # a second rerun keeps the provenance of the tables' run
+    assert json.loads((tmp_path / "policies.json").read_text())["tables_provenance"] == {"commit": "abc"}
+    with pytest.raises(SystemExit, match="needs the seeds"):
+        evaluate_policies.main(["--antenna-only", "--antenna-episodes", "50", "--out-dir", str(tmp_path)])
