@@ -10,8 +10,8 @@ reads the simulator's true road state, which the student never sees
 DAgger (Ross, Gordon & Bagnell, 2011), iteration ``i = 0 .. I-1``:
 
 1. Drive ``N / I`` env steps with the mixture that takes the expert's action
-   with probability ``beta_i = beta_decay ** i`` and the student's greedy action
-   otherwise (``i = 0``: the expert alone); record every visited observation with
+   with probability ``beta_i = beta_0 beta_decay ** i`` and the student's greedy action
+   otherwise (``beta_0 = 1``: the expert alone in round 0); record every visited observation with
    the *expert's* action there, ``a*(s)``, whoever drove.
 2. Fit the student on all data so far, ``D = D_0 u ... u D_i``, by weighted
    maximum likelihood of the expert's action:
@@ -32,6 +32,11 @@ expert's). ``N`` counts env steps over all envs, like PPO's ``n_timesteps``,
 so a DAgger and a PPO run with the same ``N`` have the same simulation budget.
 With ``decision_interval: k`` (:mod:`agents.decision`) the student and the expert
 decide every k env steps (``N / k`` labelled decisions), the action held between.
+
+**Continuation** (``init_policy``): the student starts from a trained student's
+weights and DAgger goes on with ``beta_0 < 1`` on fresh data, so the rounds label
+the states the trained student itself reaches (where its mistakes are); the
+summary records the parent and the total budget, parent's env steps plus these.
 
 Hyperparameters come from ``agents/hyperparams/dagger.yml`` (per env id:
 ``policy``, ``policy_kwargs``, ``n_envs``, ``n_timesteps``, ``env_kwargs`` and
@@ -64,7 +69,8 @@ class DaggerConfig:
     """DAgger's schedule and the student's supervised fit."""
 
     iterations: int = 5  # I: collect-and-fit rounds
-    beta_decay: float = 0.5  # beta_i = beta_decay ** i: the expert's share of control in round i
+    beta_decay: float = 0.5  # beta_i = first_beta * beta_decay ** i: the expert's share of control in round i
+    first_beta: float = 1.0  # beta_0 (below 1 when the student starts trained: a continuation, ``init_policy``)
     epochs: int = 8  # passes over the aggregated data per round
     batch_size: int = 256
     learning_rate: float = 1e-3  # Adam
@@ -74,6 +80,7 @@ class DaggerConfig:
         check_types(self)
         check_int("iterations", self.iterations, 1, 1000)
         check_range("beta_decay", self.beta_decay, 0.0, 1.0)
+        check_range("first_beta", self.first_beta, 0.0, 1.0)
         check_int("epochs", self.epochs, 1, 1000)
         check_int("batch_size", self.batch_size, 1, 1_000_000)
         check_range("learning_rate", self.learning_rate, 0.0, 1.0, low_open=True)
@@ -232,10 +239,11 @@ def fit(model, data: Dataset, config: DaggerConfig, rng: np.random.Generator, op
 
 def dagger_rounds(venv, model, config: DaggerConfig, decisions: int, rng: np.random.Generator,
                   progress: bool = True, on_round: Callable[[dict[str, Any]], None] | None = None,
-                  ) -> tuple[Dataset, list[dict[str, Any]]]:
+                  trained: bool = False) -> tuple[Dataset, list[dict[str, Any]]]:
     """The DAgger loop of the module docstring over ``decisions`` labelled decisions; the data and one record per round.
 
-    ``on_round(record)`` is called after each round's fit (checkpoints, logs).
+    ``on_round(record)`` is called after each round's fit (checkpoints, logs). ``trained``: the student
+    starts trained (a continuation), so its agreement is scored in round 0 as well.
     """
     import torch
     from tqdm.auto import tqdm
@@ -244,14 +252,16 @@ def dagger_rounds(venv, model, config: DaggerConfig, decisions: int, rng: np.ran
     data, records = Dataset(), []
     obs = venv.reset()
     labels = np.array([info[EXPERT_KEY] for info in venv.reset_infos], dtype=np.int64)
-    per_round = -(-decisions // config.iterations)
+    if decisions < config.iterations:
+        raise ValueError(f"DAgger needs at least one decision per round: {decisions} decisions for "
+                         f"dagger.iterations = {config.iterations} (raise the timesteps or lower the iterations)")
     bar = tqdm(total=decisions, desc="dagger", unit="decision", disable=not progress)
     for i in range(config.iterations):
-        beta = config.beta_decay**i
+        beta = config.first_beta * config.beta_decay**i
         start = len(data)
-        steps = min(per_round, decisions - i * per_round)
+        steps = decisions // config.iterations + (i < decisions % config.iterations)  # the decisions split evenly
         obs, labels, stats = collect(venv, model, steps, beta, rng, data, obs, labels, bar)
-        agree = agreement(model, *_new(data, start)) if i > 0 else None
+        agree = agreement(model, *_new(data, start)) if i > 0 or trained else None
         loss = fit(model, data, config, rng, optimizer)
         records.append({"iteration": i, "beta": beta, "samples": len(data),
                         "agreement_before_fit": agree, "fit_loss": loss, **stats})
@@ -291,12 +301,16 @@ class RoundLog:
 
 def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int = 0, n_envs: int | None = None,
                  hyperparams: str | Path | None = None, env_kwargs: dict | None = None,
-                 progress: bool = True, torch_threads: int | None = 1) -> dict[str, Any]:
+                 progress: bool = True, torch_threads: int | None = 1,
+                 init_policy: str | Path | None = None) -> dict[str, Any]:
     """DAgger on ``env_id`` for ``timesteps`` env steps; writes ``out/model.zip``, ``model.json``, ``train.json``.
 
     Returns the summary (as in :func:`agents.train.train`, with ``algo: "dagger"``
     and one record per iteration: beta, the student's agreement with the expert
     on the new states before fitting, the fit loss and the episodes driven).
+    ``init_policy``: a student zip to continue from (same observation space and
+    network; ``ValueError`` otherwise); the summary then has ``init_policy`` and
+    ``total_timesteps`` (the parent's plus this run's env steps).
     """
     import torch
     from stable_baselines3 import PPO
@@ -321,17 +335,47 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
     try:
         model = PPO(run.policy, venv, seed=seed, device="cpu", verbose=0,
                     policy_kwargs=run.hp.get("policy_kwargs") or {})
+        parent = None if init_policy is None else load_student(model, init_policy)
         log = RoundLog(model, out, k)
-        data, records = dagger_rounds(venv, model, config, decisions, rng, progress, on_round=log)
+        data, records = dagger_rounds(venv, model, config, decisions, rng, progress, on_round=log,
+                                      trained=parent is not None)
         log.logger.close()
         model.num_timesteps = len(data)
         model.save(out / "model.zip")
     finally:
         venv.close()
+    extra = {} if parent is None else {"init_policy": str(init_policy),
+                                       "total_timesteps": int(parent.get("total_timesteps", parent.get("timesteps", 0)))
+                                       + len(data) * k}
     summary = run_summary("dagger", env_id, run, seed, len(data), time.perf_counter() - t0, out,
-                          dagger=asdict(config), expert=expert.to_dict(), iterations=records, interrupted=False)
+                          dagger=asdict(config), expert=expert.to_dict(), iterations=records, interrupted=False,
+                          **extra)
     write_summary(out, summary)
     return summary
+
+
+def load_student(model, path: str | Path) -> dict[str, Any]:
+    """Copy the weights of the student zip ``path`` into ``model``'s policy; returns the zip's metadata (or {}).
+
+    Raises ``FileNotFoundError`` for a missing zip and ``ValueError`` when its observation space or
+    network differs from ``model``'s (a continuation needs the same student).
+    """
+    from stable_baselines3 import PPO
+
+    from agents.evaluate import policy_metadata
+
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"init_policy: no such student zip: {path}")
+    parent = PPO.load(path, device="cpu")
+    if parent.observation_space != model.observation_space:
+        raise ValueError(f"init_policy: {path} was trained on another observation space "
+                         f"({parent.observation_space} vs {model.observation_space})")
+    try:
+        model.policy.load_state_dict(parent.policy.state_dict())
+    except RuntimeError as exc:
+        raise ValueError(f"init_policy: {path} has another network than the YAML's policy_kwargs: {exc}") from None
+    return policy_metadata(path)
 
 
 def _new(data: Dataset, start: int) -> tuple[Any, np.ndarray]:

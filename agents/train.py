@@ -72,6 +72,7 @@ def train(
     progress: bool = True,
     torch_threads: int | None = 1,
     resume: bool = False,
+    init_policy: str | Path | None = None,
 ) -> dict[str, Any]:
     """Train ``algo`` on ``env_id`` for ``timesteps`` steps; returns the summary written to ``out/train.json``.
 
@@ -83,15 +84,19 @@ def train(
     most steps in ``out/checkpoints`` (see :mod:`agents.resume`; SIGTERM / SIGINT
     stop a run there, ``summary["interrupted"]`` is then True). ``torch_threads`` sets torch's intra-op
     threads in this process (1 by default: the envs need the other cores);
-    worker processes get ``OMP_NUM_THREADS=1`` unless it is set already.
+    worker processes get ``OMP_NUM_THREADS=1`` unless it is set already. ``init_policy`` (DAgger only):
+    continue from that student zip (:func:`agents.imitation.train_dagger`).
     """
+    if init_policy is not None and algo != "dagger":
+        raise ValueError(f"--init-policy continues a DAgger student; for {algo} use --resume")
     if algo == "dagger":
         from agents.imitation import train_dagger
 
         if resume:
             raise ValueError("--resume is for PPO / DQN; a DAgger run is short and starts over")
         return train_dagger(env_id, timesteps, out, seed=seed, n_envs=n_envs, hyperparams=hyperparams,
-                            env_kwargs=env_kwargs, progress=progress, torch_threads=torch_threads)
+                            env_kwargs=env_kwargs, progress=progress, torch_threads=torch_threads,
+                            init_policy=init_policy)
     from stable_baselines3.common.callbacks import CallbackList
 
     from agents.resume import StopOnSignal, save_checkpoint
@@ -274,6 +279,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--address", default=None,
         help="rllib: join an existing Ray cluster ('auto', 'HOST:6379' or 'ray://HOST:10001'; default: a local one)",
     )  # fmt: skip
+    parser.add_argument("--init-policy", default=None,
+                        help="dagger: continue from this student zip (first_beta / iterations of the YAML)")
     parser.add_argument("--resume", action="store_true",
                         help="continue from the latest checkpoint in OUT/checkpoints (after SIGTERM / SIGINT / a crash)")
 
@@ -317,8 +324,9 @@ def run(args: argparse.Namespace) -> int:
             checkpoint_freq=args.checkpoint_freq,
             progress=not args.no_progress,
             resume=args.resume,
+            init_policy=args.init_policy,
         )
-    except (ValueError, TypeError, json.JSONDecodeError) as exc:
+    except (ValueError, TypeError, FileNotFoundError, json.JSONDecodeError) as exc:
         print(f"rhs-slam train: error: {exc}", file=sys.stderr)
         return 2
     print(json.dumps(summary, indent=2))

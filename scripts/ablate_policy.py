@@ -1,21 +1,30 @@
 """Short, measured ablations of what limits learning to drive (issue 12, goal 1).
 
-Each named variant trains PPO (stable-baselines3 backend, ``agents/hyperparams/ppo.yml``
-with the variant's overrides) for ``--timesteps`` steps on its env and training
-env kwargs, then evaluates the final policy **greedily on the default reward**
-(whatever reward the variant trained on) on the same seeds as
-``scripts/evaluate_policies.py`` (``--seed``, ``--seed + 1``, ...), next to the
-scripted always-SLOWER driver on the same seeds. Results are merged into
-``--out`` (default ``results/ablations.json``) under the variant's name, with
-the commit, command line and full config.
+Each named variant trains PPO or a DAgger student (stable-baselines3 backend,
+``agents/hyperparams/ppo.yml`` or ``dagger.yml`` with the variant's overrides) for
+``--timesteps`` env steps on its env and training env kwargs, then evaluates the
+final policy **greedily on the default reward** (whatever reward the variant
+trained on) on the same seeds as ``scripts/evaluate_policies.py`` (``--eval-seed``,
+``--eval-seed + 1``, ...), next to scripted drivers on the same seeds (``ref_*``).
+Records are merged into ``--out`` (default ``results/ablations.json``, under
+``records``) under ``variant/seed/timesteps``, each with the commit and command
+line that made it; the file carries the provenance of its latest run. ``--fresh``
+starts a new table (what ``scripts/reproduce.py --only ablations`` does).
 
     OMP_NUM_THREADS=1 nice -n 10 python scripts/ablate_policy.py base_truth no_norm_truth --timesteps 15000
 
-Variants (``VARIANTS``): reward terms and normalisation (highway-env's
-``collision_reward``, ``high_speed_reward``, ``normalize_reward``), discount,
-entropy bonus, the decision interval (``hold5_*``: the action held for 5 env
-steps, :mod:`agents.decision`; evaluation still scores every env step), and the observation (ground-truth Kinematics on ``rhs-highway-v0``
-vs radar point cloud + SLAM on ``rhs-highway-slam-v0`` with the 5-degree grid).
+Variants (``VARIANTS``):
+
+* PPO: reward terms and normalisation (highway-env's ``collision_reward``,
+  ``high_speed_reward``, ``normalize_reward``), discount, entropy bonus, the
+  decision interval (``hold5_*``: the action held for 5 env steps,
+  :mod:`agents.decision`; evaluation still scores every env step), and the
+  observation (ground-truth Kinematics on ``rhs-highway-v0`` vs radar point cloud
+  + SLAM on ``rhs-highway-slam-v0`` with the 5-degree grid; ``grid_*``: the
+  ego-centred occupancy grid encoder instead of the point-set one);
+* DAgger (``dagger_*``): the shipped recipe on the same budget, without class
+  weights (``p0``: plain maximum likelihood), with meta-actions held instead of
+  pulsed between decisions (``hold``), and deciding at 5 Hz (``5hz``).
 """
 
 from __future__ import annotations
@@ -32,6 +41,7 @@ from pathlib import Path
 import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "scripts"))
 TRUTH, SLAM = "rhs-highway-v0", "rhs-highway-slam-v0"
 FIVE_DEG = {"radar": {"scan": {"grid_deg": 5}}}
 #: the default reward of the envs (highway-env's), restored for evaluation
@@ -40,7 +50,7 @@ DEFAULT_REWARD = {"collision_reward": -1, "high_speed_reward": 0.4, "right_lane_
 NO_NORM = {"normalize_reward": False}
 SPEED = {"normalize_reward": False, "high_speed_reward": 1.0, "right_lane_reward": 0.0, "collision_reward": -5}
 HOLD5 = {"decision_interval": 5, "gamma": 0.8}
-#: name -> (env id, training env kwargs, hyperparameter overrides)
+#: name -> (env id, training env kwargs, hyperparameter overrides): PPO (agents/hyperparams/ppo.yml)
 VARIANTS: dict[str, tuple[str, dict, dict]] = {
     "base_truth": (TRUTH, {}, {}),
     "no_norm_truth": (TRUTH, NO_NORM, {}),
@@ -58,6 +68,17 @@ VARIANTS: dict[str, tuple[str, dict, dict]] = {
     "hold5_truth": (TRUTH, {}, HOLD5),
     "hold5_slam": (SLAM, FIVE_DEG, HOLD5),
 }
+#: name -> (env id, training env kwargs, overrides): DAgger students (agents/hyperparams/dagger.yml)
+DAGGER_VARIANTS: dict[str, tuple[str, dict, dict]] = {
+    "dagger_truth": (TRUTH, {}, {}),
+    "dagger_p0_truth": (TRUTH, {}, {"class_weight_power": 0.0}),
+    "dagger_hold_truth": (TRUTH, {}, {"decision_mode": "hold"}),
+    "dagger_5hz_truth": (TRUTH, {}, {"decision_interval": 1}),
+    "dagger_slam": (SLAM, FIVE_DEG, {}),
+}
+#: what ``scripts/reproduce.py --only ablations`` runs (``--fresh``, default budget and seeds)
+REPRODUCE = ("ref_slower", "ref_idm", "base_truth", "speed_truth", "no_norm_slam", "grid_slam", "dagger_truth",
+             "dagger_p0_truth", "dagger_hold_truth")
 
 
 def _commit() -> str:
@@ -74,15 +95,16 @@ def run_variant(name: str, timesteps: int, seed: int, episodes: int, eval_seed: 
     from agents.evaluate import evaluate, summarize
     from agents.train import HYPERPARAMS_DIR, train
 
-    env_id, env_kwargs, overrides = VARIANTS[name]
-    table = yaml.safe_load((HYPERPARAMS_DIR / "ppo.yml").read_text())
+    algo = "dagger" if name in DAGGER_VARIANTS else "ppo"
+    env_id, env_kwargs, overrides = (DAGGER_VARIANTS if algo == "dagger" else VARIANTS)[name]
+    table = yaml.safe_load((HYPERPARAMS_DIR / f"{algo}.yml").read_text())
     entry = {**table[env_id], **overrides}
     with tempfile.TemporaryDirectory() as tmp:
-        hp_path = Path(tmp) / "ppo.yml"
+        hp_path = Path(tmp) / f"{algo}.yml"
         hp_path.write_text(yaml.safe_dump({env_id: entry}))
         out = ROOT / "runs" / "ablations" / f"{name}_s{seed}"
         t0 = time.perf_counter()
-        s = train("ppo", env_id, timesteps, out, seed=seed, n_envs=n_envs, hyperparams=hp_path, env_kwargs=env_kwargs,
+        s = train(algo, env_id, timesteps, out, seed=seed, n_envs=n_envs, hyperparams=hp_path, env_kwargs=env_kwargs,
                   eval_freq=0, checkpoint_freq=0, progress=False)  # fmt: skip
         train_wall = time.perf_counter() - t0
     eval_kwargs = {**env_kwargs, **DEFAULT_REWARD}
@@ -92,6 +114,7 @@ def run_variant(name: str, timesteps: int, seed: int, episodes: int, eval_seed: 
     runs = [{k: r[k] for k in ("seed", "return", "steps", "crashed", "mean_speed")} for r in ev["runs"]]
     actions = _action_histogram(out / "model.zip", env_id, eval_kwargs, eval_seed)
     return {
+        "algo": algo,
         "env_id": env_id,
         "train_env_kwargs": env_kwargs,
         "eval_env_kwargs": eval_kwargs,
@@ -101,7 +124,8 @@ def run_variant(name: str, timesteps: int, seed: int, episodes: int, eval_seed: 
         "decisions": s.get("decisions", s["timesteps"]),
         "seed": seed,
         "train_wall_s": round(train_wall, 1),
-        "train_recent_episodes": s["recent_episodes"],
+        "train_recent_episodes": s.get("recent_episodes"),
+        "dagger_iterations": s.get("iterations"),
         "eval": {k: v for k, v in summarize(ev["runs"]).items() if k in ("episodes", "return", "collision_rate",
                                                                          "mean_speed_mps", "episode_length")},  # fmt: skip
         "eval_seeds": ev["seeds"],
@@ -157,16 +181,26 @@ def run_reference(name: str, episodes: int, eval_seed: int) -> dict:
     }
 
 
-def _merge(out: Path, key: str, rec: dict) -> None:
-    """Add ``rec`` under ``key`` to the JSON table at ``out`` (locked: variants run in parallel processes)."""
+def records(data: dict) -> dict:
+    """The records of an ablations file (``records``; a file of before the provenance block was the table itself)."""
+    if "records" in data:
+        return dict(data["records"])
+    return {k: v for k, v in data.items() if k != "provenance"}
+
+
+def _merge(out: Path, key: str, rec: dict, args: argparse.Namespace, started: float, argv: list[str] | None) -> None:
+    """Add ``rec`` under ``key`` to the records at ``out`` and rewrite it with this run's provenance
+    (locked: variants may run in parallel processes)."""
     import fcntl
+
+    from _provenance import write_json
 
     out.parent.mkdir(parents=True, exist_ok=True)
     with open(out.with_suffix(".lock"), "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
-        table = json.loads(out.read_text()) if out.exists() else {}
+        table = records(json.loads(out.read_text())) if out.exists() else {}
         table[key] = rec
-        out.write_text(json.dumps(table, indent=2) + "\n")
+        write_json(out, {"records": table}, __file__, args, started, argv=argv)
 
 
 def markdown(table: dict) -> str:
@@ -177,13 +211,17 @@ def markdown(table: dict) -> str:
         half = stats.t.ppf(0.975, s["n"] - 1) * s["sem"] if s.get("n", 0) > 1 else float("nan")
         return f"{s['mean']:.1f} ± {half:.1f}"
 
-    rows = ["| record | env | training env kwargs / scripted policy | env steps | decisions every | gamma | return | "
-            "collisions | speed (m/s) | commit |", "|---|---|---|---:|---:|---:|---:|---:|---:|---|"]
-    for key, r in table.items():
+    rows = ["| record | algorithm | env | training env kwargs / scripted policy | env steps | decisions every | "
+            "gamma | return | collisions | speed (m/s) | commit |", "|---|---|---|---|---:|---:|---:|---:|---:|---:|---|"]
+    for key, r in records(table).items():
         e = r["eval"]
-        rows.append(f"| `{key}` | `{r['env_id']}` | {json.dumps(r.get('train_env_kwargs', {})) if 'timesteps' in r else r['policy']} "
-                    f"| {r.get('timesteps', '-')} | {r.get('decision_interval', 1) if 'timesteps' in r else '-'} "
-                    f"| {r.get('hyperparams', {}).get('gamma', '-')} "
+        trained = "timesteps" in r
+        hp = r.get("hyperparams", {})
+        gamma = hp.get("gamma", "-") if r.get("algo", "ppo") == "ppo" else "-"
+        interval = f"{r.get('decision_interval', 1)} ({hp.get('decision_mode', 'hold')})" if trained else "-"
+        rows.append(f"| `{key}` | {r.get('algo', 'ppo') if trained else 'scripted'} | `{r['env_id']}` "
+                    f"| {json.dumps(r.get('train_env_kwargs', {})) if trained else r['policy']} "
+                    f"| {r.get('timesteps', '-')} | {interval} | {gamma} "
                     f"| {ci(e['return'])} | {e['collision_rate']:.2f} ({len(r['runs'])} ep.) | {ci(e['mean_speed_mps'])} "
                     f"| {str(r.get('commit', ''))[:10]} |")  # fmt: skip
     return ("Greedy evaluation on the default reward, seeds from 1000 (the `policies` seeds); mean ± 95 % t-interval "
@@ -192,14 +230,20 @@ def markdown(table: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("variants", nargs="+", choices=[*VARIANTS, *REFERENCES])
+    ap.add_argument("variants", nargs="*", choices=[*VARIANTS, *DAGGER_VARIANTS, *REFERENCES],
+                    help=f"default: {' '.join(REPRODUCE)}")
     ap.add_argument("--timesteps", type=int, default=15000)
     ap.add_argument("--seed", type=int, default=0, help="training seed")
     ap.add_argument("--episodes", type=int, default=20)
     ap.add_argument("--eval-seed", type=int, default=1000)
     ap.add_argument("--n-envs", type=int, default=None)
     ap.add_argument("--out", default=str(ROOT / "results" / "ablations.json"))
+    ap.add_argument("--fresh", action="store_true", help="start a new table (drop the records already in --out)")
     args = ap.parse_args(argv)
+    args.variants = args.variants or list(REPRODUCE)
+    started = time.time()
+    if args.fresh and Path(args.out).exists():
+        Path(args.out).unlink()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     command = " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])])
     commit = _commit()  # the code this process runs (the worktree may move on during a long run)
@@ -210,7 +254,7 @@ def main(argv: list[str] | None = None) -> int:
             rec = run_variant(name, args.timesteps, args.seed, args.episodes, args.eval_seed, args.n_envs)
             key = f"{name}/seed{args.seed}/{args.timesteps}"
         rec.update(commit=commit, command=command)
-        _merge(Path(args.out), key, rec)
+        _merge(Path(args.out), key, rec, args, started, argv)
         e = rec["eval"]
         print(f"{name}: return {e['return']['mean']:.1f}, collisions {e['collision_rate']:.2f}, speed "
               f"{e['mean_speed_mps']['mean']:.1f} m/s, actions {rec['greedy_action_histogram_first_episode']}",

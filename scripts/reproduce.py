@@ -104,8 +104,9 @@ STEPS: tuple[Step, ...] = (
          ("low_snr_slam.json",), 900),
     Step("claim_study", "claim_study.py", (), ("claim_study.json",), 3600,
          "point-cloud, element and SLAM levels; resumes from results/claim_study_cache_*.jsonl"),
-    Step("ablations", "ablate_policy.py", ("speed_truth", "base_truth", "grid_slam", "no_norm_slam"), ("ablations.json",),
-         3600, "short PPO ablations", no_fingerprint="a record of training runs (minutes each even when tiny); "
+    Step("ablations", "ablate_policy.py", ("--fresh",), ("ablations.json",), 4500,
+         "short PPO and DAgger ablations (ablate_policy.REPRODUCE)",
+         no_fingerprint="a record of training runs (minutes each even when tiny); "
          "the policies they make are evaluated on the same seeds as the policies step"),
     Step("benchmark_radar", "benchmark_radar.py", (), ("benchmark_radar.json",), 60, "timings",
          no_fingerprint="timings"),

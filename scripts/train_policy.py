@@ -28,6 +28,13 @@ not shipped).
     python scripts/train_policy.py --only slam --timesteps 20000 --n-envs 2
     python scripts/train_policy.py --slam-env-kwargs '{"radar": {"scan": {"grid_deg": 5}}}'
 
+``--continue-from DIR`` continues each DAgger student from its zip under DIR
+(``agents.imitation``, continuation: ``agents/hyperparams/dagger_continue.yml``,
+beta_0 < 1, fresh data on the student's own states) into ``--data-dir``; its
+record keeps the parent and the total budget (``total_timesteps``):
+
+    python scripts/train_policy.py --continue-from agents/data --only slam truth --data-dir runs/continued
+
 ``--slam-env-kwargs`` (JSON) trains the SLAM policy on a cheaper configuration
 of the same env id; it is saved beside the policy and used by default when the
 policy is evaluated or demonstrated.
@@ -85,6 +92,7 @@ def target_env_kwargs(name: str, slam_kwargs: dict) -> dict:
         return dict(TARGETS[name][2]) if len(TARGETS[name]) > 2 else {}
     return {**slam_kwargs, "radar": {**(slam_kwargs.get("radar") or {}), **radar}} if radar else dict(slam_kwargs)
 MAX_BYTES = 1_000_000
+CONTINUE_YAML = ROOT / "agents" / "hyperparams" / "dagger_continue.yml"
 
 
 def _machine() -> dict:
@@ -130,6 +138,8 @@ def train_one(name: str, args: argparse.Namespace, env_kwargs: dict) -> dict:
         eval_episodes=args.eval_episodes,
         checkpoint_freq=args.checkpoint_freq,
         progress=not args.no_progress,
+        hyperparams=args.hyperparams,
+        init_policy=None if args.continue_from is None else target_path(args.algo, name, Path(args.continue_from)),
     )
     total = time.perf_counter() - t0
     source = work / ("best_model.zip" if args.ship == "best" and (work / "best_model.zip").exists() else "model.zip")
@@ -189,6 +199,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ship", choices=("final", "best"), default="final", help="which model to ship")
     ap.add_argument("--work-dir", default=str(ROOT / "runs" / "policies"))
     ap.add_argument("--data-dir", default=str(DATA), help="where the policy zips go (default: agents/data)")
+    ap.add_argument("--hyperparams", default=None,
+                    help="zoo-style YAML (default: agents/hyperparams/ALGO.yml; with --continue-from: dagger_continue.yml)")
+    ap.add_argument("--continue-from", default=None,
+                    help="dagger: continue every student from its zip in this data dir (e.g. agents/data)")
     ap.add_argument("--record", default=str(ROOT / "results" / "train_policy.json"))
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
@@ -198,10 +212,14 @@ def main(argv: list[str] | None = None) -> int:
     slam_kwargs = json.loads(args.slam_env_kwargs)
     if not isinstance(slam_kwargs, dict):
         ap.error("--slam-env-kwargs must be a JSON object")
+    if args.continue_from is not None:
+        if args.algo != "dagger":
+            ap.error("--continue-from continues DAgger students (--algo dagger)")
+        args.hyperparams = args.hyperparams or str(CONTINUE_YAML)
     if args.timesteps is None:
         from agents.train import load_hyperparams
 
-        args.timesteps = int(load_hyperparams(args.algo, SLAM_ID)["n_timesteps"])
+        args.timesteps = int(load_hyperparams(args.algo, SLAM_ID, args.hyperparams)["n_timesteps"])
     record_path = Path(args.record)
     machine, weights = _machine(), _registration_weights()
     for name in args.only or SHIPPED:
@@ -212,7 +230,7 @@ def main(argv: list[str] | None = None) -> int:
             k: meta[k]
             for k in ("env_id", "env_kwargs", "timesteps", "n_envs", "seed", "wall_time_s", "total_wall_time_s",
                       "steps_per_s", "hyperparams", "recent_episodes", "best_eval_mean_return", "shipped",
-                      "model", "zip_bytes", "algo", "iterations")
+                      "model", "zip_bytes", "algo", "iterations", "init_policy", "total_timesteps")
             if k in meta
         }  # fmt: skip
         record.pop("provenance", None)  # the record of this run's (training itself: no fingerprint, minutes long)

@@ -204,3 +204,44 @@ def test_rhs_slam_train_dagger_writes_a_policy_that_evaluate_loads(tmp_path):
     assert int(action) in range(5) and policy.predict(obs)[0] == 1
     with pytest.raises(ValueError, match="resume"):
         train("dagger", TRUTH, None, tmp_path / "run", hyperparams=hp, resume=True, progress=False)
+
+
+def test_dagger_continuation_starts_from_the_parent_and_counts_its_budget(tmp_path):
+    """--init-policy: the student starts with the parent's weights (it agrees with the parent on every state before
+    any fit), beta starts at first_beta, and the record adds the parent's env steps to this run's."""
+    import torch
+
+    from agents.imitation import load_student
+    from agents.train import train
+
+    hp = tmp_path / "dagger.yml"
+    base = (f"{TRUTH}:\n  policy: MlpPolicy\n  n_envs: 1\n  n_timesteps: 120\n  iterations: 2\n  beta_decay: 0.5\n"
+            "  epochs: 2\n  batch_size: 32\n  learning_rate: 1.0e-3\n  policy_kwargs:\n    net_arch: [16]\n")
+    hp.write_text(base)
+    kw = {"vehicles_count": 5, "duration": 4}
+    train("dagger", TRUTH, None, tmp_path / "parent", hyperparams=hp, env_kwargs=kw, progress=False)
+    hp.write_text(base + "  first_beta: 0.2\n")
+    child = train("dagger", TRUTH, 60, tmp_path / "child", hyperparams=hp, env_kwargs=kw, progress=False,
+                  init_policy=tmp_path / "parent" / "model.zip")
+    assert [r["beta"] for r in child["iterations"]] == [0.2, 0.1]
+    assert child["iterations"][0]["agreement_before_fit"] is not None  # a trained student is scored in round 0
+    assert child["total_timesteps"] == 120 + 60 and child["init_policy"].endswith("model.zip")
+
+    from stable_baselines3 import PPO
+
+    fresh = PPO("MlpPolicy", gym.make(TRUTH, **kw), seed=5, device="cpu", policy_kwargs={"net_arch": [16]})
+    assert load_student(fresh, tmp_path / "parent" / "model.zip")["timesteps"] == 120
+    parent = PPO.load(tmp_path / "parent" / "model.zip", device="cpu")
+    for a, b in zip(fresh.policy.state_dict().values(), parent.policy.state_dict().values()):
+        assert torch.equal(a, b)
+    wider = PPO("MlpPolicy", gym.make(TRUTH, **kw), device="cpu", policy_kwargs={"net_arch": [32]})
+    with pytest.raises(ValueError, match="another network"):
+        load_student(wider, tmp_path / "parent" / "model.zip")
+    with pytest.raises(FileNotFoundError):
+        load_student(wider, tmp_path / "missing.zip")
+    with pytest.raises(ValueError, match="init-policy"):
+        train("ppo", TRUTH, 64, tmp_path / "ppo", init_policy=tmp_path / "parent" / "model.zip", progress=False)
+    with pytest.raises(ValueError, match=r"dagger\.first_beta must be in \[0\.0, 1\.0\]"):
+        from rhs_common.validation import build
+
+        build(DaggerConfig, {"first_beta": 2.0}, "dagger")

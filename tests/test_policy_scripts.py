@@ -92,3 +92,30 @@ def test_antenna_only_reruns_the_study_and_keeps_the_tables_and_their_provenance
     assert json.loads((tmp_path / "policies.json").read_text())["tables_provenance"] == {"commit": "abc"}
     with pytest.raises(SystemExit, match="needs the seeds"):
         evaluate_policies.main(["--antenna-only", "--antenna-episodes", "50", "--out-dir", str(tmp_path)])
+
+
+def test_ablations_train_and_evaluate_each_algorithm_into_a_table_with_provenance(tmp_path):
+    """ablate_policy: a DAgger variant and a scripted reference land in ``records`` with their commit, the file
+    carries the run's provenance, the table names the algorithm and how decisions are filled; --fresh starts over."""
+    import json
+
+    import ablate_policy
+
+    assert set(ablate_policy.REPRODUCE) <= {*ablate_policy.VARIANTS, *ablate_policy.DAGGER_VARIANTS,
+                                            *ablate_policy.REFERENCES}
+    out = tmp_path / "ablations.json"
+    ablate_policy.main(["ref_slower", "--episodes", "2", "--out", str(out)])
+    legacy = json.loads(out.read_text())["records"]  # the layout of before the provenance block: records at the top
+    out.write_text(json.dumps(legacy))
+    ablate_policy.main(["dagger_hold_truth", "--timesteps", "100", "--episodes", "2", "--n-envs", "1",
+                        "--out", str(out)])
+    data = json.loads(out.read_text())
+    assert set(data["records"]) == {"dagger_hold_truth/seed0/100", "ref_slower/2"}
+    assert data["provenance"]["command"][1] == "scripts/ablate_policy.py"
+    rec = data["records"]["dagger_hold_truth/seed0/100"]
+    assert rec["algo"] == "dagger" and rec["hyperparams"]["decision_mode"] == "hold"
+    assert len(rec["runs"]) == 2 and rec["commit"] and rec["dagger_iterations"]
+    table = out.with_suffix(".md").read_text()
+    assert "| dagger | `rhs-highway-v0` |" in table and "5 (hold)" in table and "| scripted |" in table
+    ablate_policy.main(["ref_slower", "--episodes", "2", "--out", str(out), "--fresh"])
+    assert set(json.loads(out.read_text())["records"]) == {"ref_slower/2"}
