@@ -33,6 +33,12 @@ so a DAgger and a PPO run with the same ``N`` have the same simulation budget.
 With ``decision_interval: k`` (:mod:`agents.decision`) the student and the expert
 decide every k env steps (``N / k`` labelled decisions), the action held between.
 
+**Labels between decisions** (``label_between``): the k - 1 states the env passes
+through between two decisions are labelled too, with the action the expert would
+choose there (:class:`ExpertActionInfo` with ``between = k``): k times the samples
+for the same simulation budget (the student still decides every k steps; those
+states are where a decision taken a little earlier or later would have been made).
+
 **Continuation** (``init_policy``): the student starts from a trained student's
 weights and DAgger goes on with ``beta_0 < 1`` on fresh data, so the rounds label
 the states the trained student itself reaches (where its mistakes are); the
@@ -59,9 +65,10 @@ import gymnasium as gym
 import numpy as np
 
 from agents.expert import HeadwayDriver, HeadwayDriverConfig
-from rhs_common.validation import build, check_int, check_range, check_types
+from rhs_common.validation import build, check_bool, check_int, check_range, check_types
 
 EXPERT_KEY = "expert_action"
+BETWEEN_KEY = "expert_between"
 
 
 @dataclass(frozen=True)
@@ -75,6 +82,7 @@ class DaggerConfig:
     batch_size: int = 256
     learning_rate: float = 1e-3  # Adam
     class_weight_power: float = 0.5  # p: the expert's action a weighs (n / (K n_a)) ** p in the loss (0: plain)
+    label_between: bool = False  # also label the k - 1 states between two decisions (k = decision_interval)
 
     def __post_init__(self) -> None:
         check_types(self)
@@ -85,6 +93,7 @@ class DaggerConfig:
         check_int("batch_size", self.batch_size, 1, 1_000_000)
         check_range("learning_rate", self.learning_rate, 0.0, 1.0, low_open=True)
         check_range("class_weight_power", self.class_weight_power, 0.0, 2.0)
+        check_bool("label_between", self.label_between)
 
 
 class ExpertActionInfo(gym.Wrapper):
@@ -92,6 +101,10 @@ class ExpertActionInfo(gym.Wrapper):
 
     Lives inside each (subprocess) env, so a vectorised collector gets the labels
     with the observations. ``expert`` is a :class:`agents.expert.HeadwayDriverConfig` or a dict.
+    ``between = k`` (> 1; inside a :class:`agents.decision.HoldAction` of the same k): the info of
+    every k-th step since the reset (and of the episode's last) also carries ``info["expert_between"]``,
+    the ``(observation, expert action)`` of the steps since the previous one: the states between two
+    decisions, labelled with what the expert would decide there (``DaggerConfig.label_between``).
 
     Example:
         >>> import gymnasium as gym, rhs_env
@@ -101,17 +114,35 @@ class ExpertActionInfo(gym.Wrapper):
         True
     """
 
-    def __init__(self, env: gym.Env, expert: Any = None):
+    def __init__(self, env: gym.Env, expert: Any = None, between: int = 1):
         super().__init__(env)
         self.driver = HeadwayDriver(env, expert)
+        check_int("between", between, 1, 1000)
+        self.between = between
+        self._steps = 0  # steps since the reset; (obs, label) since the last k-th step
+        self._held: list[tuple[Any, int]] = []
 
     def reset(self, **kwargs):
         obs, info = self.env.reset(**kwargs)
+        self._steps, self._held = 0, []
         return obs, {**info, EXPERT_KEY: self.driver.act()}
 
     def step(self, action):
         obs, reward, terminated, truncated, info = self.env.step(action)
-        return obs, reward, terminated, truncated, {**info, EXPERT_KEY: self.driver.act()}
+        label = self.driver.act()
+        info = {**info, EXPERT_KEY: label}
+        if self.between > 1:
+            self._steps += 1
+            if self._steps % self.between == 0 or terminated or truncated:
+                info[BETWEEN_KEY], self._held = self._held, []
+            else:  # a state between two decisions: the student never decides here, the expert's label still holds
+                self._held.append((_copy(obs), label))
+        return obs, reward, terminated, truncated, info
+
+
+def _copy(obs: Any) -> Any:
+    """A copy of an observation (a dict of arrays or an array) that the env cannot overwrite later."""
+    return {k: np.array(v, copy=True) for k, v in obs.items()} if isinstance(obs, dict) else np.array(obs, copy=True)
 
 
 class Dataset:
@@ -163,6 +194,9 @@ def collect(venv, model, steps: int, beta: float, rng: np.random.Generator, data
         for i in range(n):
             data.add(_row(obs, i), labels[i])
         obs, _, dones, infos = venv.step(actions)
+        for info in infos:
+            for between_obs, between_label in info.get(BETWEEN_KEY, ()):
+                data.add(between_obs, between_label)
         labels = np.array([info[EXPERT_KEY] for info in infos], dtype=np.int64)
         for j in map(int, np.flatnonzero(dones)):
             labels[j] = venv.reset_infos[j][EXPERT_KEY]  # the new episode's first state
@@ -256,6 +290,7 @@ def dagger_rounds(venv, model, config: DaggerConfig, decisions: int, rng: np.ran
         raise ValueError(f"DAgger needs at least one decision per round: {decisions} decisions for "
                          f"dagger.iterations = {config.iterations} (raise the timesteps or lower the iterations)")
     bar = tqdm(total=decisions, desc="dagger", unit="decision", disable=not progress)
+    done = 0  # decisions so far (samples: more with label_between)
     for i in range(config.iterations):
         beta = config.first_beta * config.beta_decay**i
         start = len(data)
@@ -263,7 +298,8 @@ def dagger_rounds(venv, model, config: DaggerConfig, decisions: int, rng: np.ran
         obs, labels, stats = collect(venv, model, steps, beta, rng, data, obs, labels, bar)
         agree = agreement(model, *_new(data, start)) if i > 0 or trained else None
         loss = fit(model, data, config, rng, optimizer)
-        records.append({"iteration": i, "beta": beta, "samples": len(data),
+        done += steps
+        records.append({"iteration": i, "beta": beta, "decisions": done, "samples": len(data),
                         "agreement_before_fit": agree, "fit_loss": loss, **stats})
         print(f"dagger: round {i}: beta {beta:.3f}, {len(data)} samples, agreement "
               f"{'-' if agree is None else f'{agree:.3f}'}, loss {loss:.3f}, episodes {stats}", file=sys.stderr)
@@ -295,7 +331,7 @@ class RoundLog:
         for key, value in record.items():
             if key != "iteration" and value is not None:
                 self.logger.record(f"dagger/{key}", value)
-        self.logger.dump(step=record["samples"] * self.k)  # x-axis: env steps so far
+        self.logger.dump(step=record["decisions"] * self.k)  # x-axis: env steps so far
         (self.out / "iterations.json").write_text(json.dumps(self.records, indent=2))
 
 
@@ -328,7 +364,8 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
     rng = np.random.default_rng(seed)
     k = run.decision_interval
     venv = make_vec_env(env_id, run.n_envs, seed, run.env_kwargs, monitor_dir=out / "monitor",
-                        wrapper=partial(ExpertActionInfo, expert=expert), decision_interval=k,
+                        wrapper=partial(ExpertActionInfo, expert=expert, between=k if config.label_between else 1),
+                        decision_interval=k,
                         decision_mode=run.decision_mode)
     decisions = -(-run.timesteps // k)
     t0 = time.perf_counter()
@@ -340,14 +377,15 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
         data, records = dagger_rounds(venv, model, config, decisions, rng, progress, on_round=log,
                                       trained=parent is not None)
         log.logger.close()
-        model.num_timesteps = len(data)
+        decided = records[-1]["decisions"]
+        model.num_timesteps = decided
         model.save(out / "model.zip")
     finally:
         venv.close()
     extra = {} if parent is None else {"init_policy": str(init_policy),
                                        "total_timesteps": int(parent.get("total_timesteps", parent.get("timesteps", 0)))
-                                       + len(data) * k}
-    summary = run_summary("dagger", env_id, run, seed, len(data), time.perf_counter() - t0, out,
+                                       + decided * k}
+    summary = run_summary("dagger", env_id, run, seed, decided, time.perf_counter() - t0, out,
                           dagger=asdict(config), expert=expert.to_dict(), iterations=records, interrupted=False,
                           **extra)
     write_summary(out, summary)

@@ -24,7 +24,8 @@ Variants (``VARIANTS``):
   ego-centred occupancy grid encoder instead of the point-set one);
 * DAgger (``dagger_*``): the shipped recipe on the same budget, without class
   weights (``p0``: plain maximum likelihood), with meta-actions held instead of
-  pulsed between decisions (``hold``), and deciding at 5 Hz (``5hz``).
+  pulsed between decisions (``hold``), deciding at 5 Hz (``5hz``), and with the
+  states between decisions labelled too (``between``: 5x the samples, same env steps).
 """
 
 from __future__ import annotations
@@ -74,11 +75,12 @@ DAGGER_VARIANTS: dict[str, tuple[str, dict, dict]] = {
     "dagger_p0_truth": (TRUTH, {}, {"class_weight_power": 0.0}),
     "dagger_hold_truth": (TRUTH, {}, {"decision_mode": "hold"}),
     "dagger_5hz_truth": (TRUTH, {}, {"decision_interval": 1}),
+    "dagger_between_truth": (TRUTH, {}, {"label_between": True}),
     "dagger_slam": (SLAM, FIVE_DEG, {}),
 }
 #: what ``scripts/reproduce.py --only ablations`` runs (``--fresh``, default budget and seeds)
-REPRODUCE = ("ref_slower", "ref_idm", "base_truth", "speed_truth", "no_norm_slam", "grid_slam", "dagger_truth",
-             "dagger_p0_truth", "dagger_hold_truth")
+REPRODUCE = ("ref_slower", "ref_idm", "base_truth", "speed_truth", "grid_slam", "dagger_truth", "dagger_p0_truth",
+             "dagger_hold_truth", "dagger_between_truth")
 
 
 def _commit() -> str:

@@ -245,3 +245,32 @@ def test_dagger_continuation_starts_from_the_parent_and_counts_its_budget(tmp_pa
         from rhs_common.validation import build
 
         build(DaggerConfig, {"first_beta": 2.0}, "dagger")
+
+
+def test_labels_between_decisions_come_with_the_next_decision_and_add_samples_not_steps(tmp_path):
+    """ExpertActionInfo(between=k) inside HoldAction(k): each decision's info carries the k - 1 states passed
+    through since the previous decision, each with the expert's action there; DAgger with label_between
+    trains on them (k x the samples) while its budget stays the env steps."""
+    from agents.decision import HoldAction
+    from agents.imitation import BETWEEN_KEY
+    from agents.train import train
+
+    kw = {"vehicles_count": 5, "duration": 6}
+    env = HoldAction(ExpertActionInfo(gym.make(TRUTH, **kw), between=3), 3, fill=1)
+    expert = env.env.driver
+    obs, info = env.reset(seed=0)
+    obs, _, term, trunc, info = env.step(info[EXPERT_KEY])
+    assert len(info[BETWEEN_KEY]) == 2 and all(a in range(5) for _, a in info[BETWEEN_KEY])
+    assert info[EXPERT_KEY] == expert.act()  # the returned state's label is the decision's, not in the list
+    (first, _), (second, _) = info[BETWEEN_KEY]
+    assert not np.array_equal(first, second) and not np.array_equal(second, obs)  # three different states
+    hp = tmp_path / "dagger.yml"
+    hp.write_text(f"{TRUTH}:\n  policy: MlpPolicy\n  n_envs: 1\n  n_timesteps: 90\n  iterations: 2\n"
+                  "  decision_interval: 3\n  decision_mode: pulse\n  label_between: true\n"
+                  "  epochs: 1\n  batch_size: 32\n  policy_kwargs:\n    net_arch: [16]\n")
+    summary = train("dagger", TRUTH, None, tmp_path / "run", hyperparams=hp, env_kwargs=kw, progress=False)
+    last = summary["iterations"][-1]
+    assert summary["timesteps"] == 90 and last["decisions"] == 30
+    assert 30 < last["samples"] <= 90  # an episode cut short by a crash has fewer states between
+    with pytest.raises(TypeError, match="label_between"):
+        DaggerConfig(label_between="yes")
