@@ -232,8 +232,9 @@ def markdown(table: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("variants", nargs="*", choices=[*VARIANTS, *DAGGER_VARIANTS, *REFERENCES],
-                    help=f"default: {' '.join(REPRODUCE)}")
+    known = [*VARIANTS, *DAGGER_VARIANTS, *REFERENCES]
+    ap.add_argument("variants", nargs="*", metavar="VARIANT",
+                    help=f"of: {', '.join(known)} (default: {' '.join(REPRODUCE)})")
     ap.add_argument("--timesteps", type=int, default=15000)
     ap.add_argument("--seed", type=int, default=0, help="training seed")
     ap.add_argument("--episodes", type=int, default=20)
@@ -242,6 +243,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default=str(ROOT / "results" / "ablations.json"))
     ap.add_argument("--fresh", action="store_true", help="start a new table (drop the records already in --out)")
     args = ap.parse_args(argv)
+    unknown = [v for v in args.variants if v not in known]
+    if unknown:
+        ap.error(f"unknown variants {unknown}; choose from {', '.join(known)}")
     args.variants = args.variants or list(REPRODUCE)
     started = time.time()
     if args.fresh and Path(args.out).exists():

@@ -104,6 +104,8 @@ def test_ablations_train_and_evaluate_each_algorithm_into_a_table_with_provenanc
     assert set(ablate_policy.REPRODUCE) <= {*ablate_policy.VARIANTS, *ablate_policy.DAGGER_VARIANTS,
                                             *ablate_policy.REFERENCES}
     out = tmp_path / "ablations.json"
+    with pytest.raises(SystemExit):
+        ablate_policy.main(["no_such_variant", "--out", str(out)])
     ablate_policy.main(["ref_slower", "--episodes", "2", "--out", str(out)])
     legacy = json.loads(out.read_text())["records"]  # the layout of before the provenance block: records at the top
     out.write_text(json.dumps(legacy))
