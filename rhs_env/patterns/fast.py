@@ -197,31 +197,25 @@ class _SideSOCP:
         m = self.c.size
         sd = self.sd[self.active]
         L, K = sd.shape[0], self.sk.shape[0]
-        eye = sp.identity(m, format="csr")
-        blocks = [-eye, sp.vstack([sp.csr_matrix((1, m)), -eye])]  # psi >= 0, ||psi|| <= 1
-        bvec = [np.zeros(m), np.r_[1.0, np.zeros(m)]]
+        # A, written dense (at most a few hundred rows of m) and stored sparse (its zeros dropped):
+        # rows 0..m-1: -psi <= 0 (psi >= 0); m..2m: the cone (1, psi) (||psi|| <= 1), head row zero;
+        # then (head, Re, Im) per sidelobe direction (head row zero, b_head = rho) and per main-lobe
+        # point (head -c: sqrt(w_k) |b_k^T psi| <= c^T psi)
+        a = np.zeros((2 * m + 1 + 3 * (L + K), m))
+        a[np.arange(m), np.arange(m)] = -1.0
+        a[m + 1 + np.arange(m), np.arange(m)] = -1.0
+        side = a[2 * m + 1 : 2 * m + 1 + 3 * L].reshape(L, 3, m)
+        side[:, 1, :], side[:, 2, :] = -sd.real, -sd.imag
+        main = a[2 * m + 1 + 3 * L :].reshape(K, 3, m)
+        main[:, 0, :], main[:, 1, :], main[:, 2, :] = -self.c, -self.sk.real, -self.sk.imag
         cones: list[Any] = [clarabel.NonnegativeConeT(m), clarabel.SecondOrderConeT(m + 1)]
-        # sidelobe cones: rows (head, Re, Im) per direction; the head row of A is zero, b_head = rho
-        a_side = np.zeros((L, 3, m))
-        a_side[:, 1, :] = -sd.real
-        a_side[:, 2, :] = -sd.imag
-        blocks.append(sp.csr_matrix(a_side.reshape(3 * L, m)))
-        bvec.append(np.zeros(3 * L))
-        cones += [clarabel.SecondOrderConeT(3)] * L
-        if K:  # main-lobe cones: sqrt(w_k) |b_k^T psi| <= c^T psi
-            a_main = np.zeros((K, 3, m))
-            a_main[:, 0, :] = -self.c
-            a_main[:, 1, :] = -self.sk.real
-            a_main[:, 2, :] = -self.sk.imag
-            blocks.append(sp.csr_matrix(a_main.reshape(3 * K, m)))
-            bvec.append(np.zeros(3 * K))
-            cones += [clarabel.SecondOrderConeT(3)] * K
-        self.b = np.concatenate(bvec)
+        cones += [clarabel.SecondOrderConeT(3)] * (L + K)
+        self.b = np.zeros(a.shape[0])
+        self.b[m] = 1.0
         self.head = 2 * m + 1 + 3 * np.arange(L)
         b = self.b.copy()
         b[self.head] = rho
-        self.solver = clarabel.DefaultSolver(sp.csc_matrix((m, m)), -self.c, sp.vstack(blocks, format="csc"), b,
-                                             cones, self.settings)
+        self.solver = clarabel.DefaultSolver(sp.csc_matrix((m, m)), -self.c, sp.csc_matrix(a), b, cones, self.settings)
 
     def solve(self, rho: float) -> tuple[float, float, np.ndarray] | None:
         """Return (G(rho), G'(rho), psi) or None when the solver fails.
