@@ -512,7 +512,8 @@ class RadarSystem:
             if sel.size == 0:
                 continue
             res = omp_doppler(dic, yd[sel], self._chirp_index, cfg.estimation.max_targets, np.full(sel.size, self._delta_r),
-                              y_var, rel, self._min_amp, cfg.estimation.newton_steps, cycles=2,
+                              y_var, rel, self._min_amp, cfg.estimation.newton_steps,
+                              cycles=cfg.estimation.refine_passes,
                               detected=bool(self._detectors))
             est.theta[sel], est.amp[sel], est.valid[sel], est.omega[sel] = res.theta, res.amp, res.valid, res.omega
             est.anorm[sel] = np.linalg.norm(res.atoms, axis=1)

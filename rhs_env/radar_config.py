@@ -244,6 +244,8 @@ class AngleEstimationConfig:
         residual_rel_db: stop below this fraction of ``||iota||^2`` (the dynamic
             range of the angle model), dB (-200 .. 0).
         newton_steps: Newton refinements of each atom's angle (0 .. 10).
+        refine_passes: cyclic re-refinement passes of every atom in angle and Doppler against its
+            own partial residual, after each new atom (0 .. 10; :func:`rhs_env.point_cloud.joint_refine`).
         min_snr_db: an atom whose amplitude SNR over the sweep, ``20 log10(|s| ||a|| / sigma_Y)``,
             is lower is rejected and ends the search, dB (-50 .. 100).
     """
@@ -253,6 +255,7 @@ class AngleEstimationConfig:
     residual_pfa: float = 1e-3
     residual_rel_db: float = -25.0
     newton_steps: int = 2
+    refine_passes: int = 2
     min_snr_db: float = 15.0
 
     def __post_init__(self) -> None:
@@ -262,6 +265,7 @@ class AngleEstimationConfig:
         check_range("residual_pfa", self.residual_pfa, 0.0, 0.5, low_open=True)
         check_range("residual_rel_db", self.residual_rel_db, -200.0, 0.0)
         check_int("newton_steps", self.newton_steps, 0, 10)
+        check_int("refine_passes", self.refine_passes, 0, 10)
         check_range("min_snr_db", self.min_snr_db, -50.0, 100.0)
 
 

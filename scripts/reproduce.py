@@ -84,6 +84,8 @@ STEPS: tuple[Step, ...] = (
     Step("registration_in_loop", "registration_in_loop.py", ("--no-progress",), ("registration_in_loop.json",), 900),
     Step("radar_quality", "radar_quality.py", ("--out", "results/radar_quality_after.json"),
          ("radar_quality_after.json",), 300),
+    Step("radar_profiles", "radar_profiles.py", ("--no-progress", "--out", "results/radar_profiles.json"),
+         ("radar_profiles.json",), 900, "speed against quality of the processing settings (issue 9)"),
     Step("radar_quality_before", "radar_quality.py", ("--fidelity", "iq", "--out", "results/radar_quality_before.json"),
          ("radar_quality_before.json",), 600, on_request=True, no_fingerprint="the 'before' record of the radar change (issue 9), kept "
          "for comparison: measured on the code before it; the command is its closest equivalent at HEAD"),
