@@ -213,16 +213,19 @@ def markdown(table: dict) -> str:
         half = stats.t.ppf(0.975, s["n"] - 1) * s["sem"] if s.get("n", 0) > 1 else float("nan")
         return f"{s['mean']:.1f} ± {half:.1f}"
 
-    rows = ["| record | algorithm | env | training env kwargs / scripted policy | env steps | decisions every | "
-            "gamma | return | collisions | speed (m/s) | commit |", "|---|---|---|---|---:|---:|---:|---:|---:|---:|---|"]
+    rows = ["| record | algorithm | env | training env kwargs / scripted policy | hyperparameters changed | env steps | "
+            "decisions every | gamma | return | collisions | speed (m/s) | commit |",
+            "|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---|"]
     for key, r in records(table).items():
+        variant = {**VARIANTS, **DAGGER_VARIANTS}.get(key.split("/", 1)[0])
+        changed = json.dumps(variant[2]) if variant and variant[2] else "-"
         e = r["eval"]
         trained = "timesteps" in r
         hp = r.get("hyperparams", {})
         gamma = hp.get("gamma", "-") if r.get("algo", "ppo") == "ppo" else "-"
         interval = f"{r.get('decision_interval', 1)} ({hp.get('decision_mode', 'hold')})" if trained else "-"
         rows.append(f"| `{key}` | {r.get('algo', 'ppo') if trained else 'scripted'} | `{r['env_id']}` "
-                    f"| {json.dumps(r.get('train_env_kwargs', {})) if trained else r['policy']} "
+                    f"| {json.dumps(r.get('train_env_kwargs', {})) if trained else r['policy']} | {changed} "
                     f"| {r.get('timesteps', '-')} | {interval} | {gamma} "
                     f"| {ci(e['return'])} | {e['collision_rate']:.2f} ({len(r['runs'])} ep.) | {ci(e['mean_speed_mps'])} "
                     f"| {str(r.get('commit', ''))[:10]} |")  # fmt: skip
@@ -242,7 +245,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--n-envs", type=int, default=None)
     ap.add_argument("--out", default=str(ROOT / "results" / "ablations.json"))
     ap.add_argument("--fresh", action="store_true", help="start a new table (drop the records already in --out)")
+    ap.add_argument("--report-only", action="store_true", help="rewrite the .md beside --out from its records")
     args = ap.parse_args(argv)
+    if args.report_only:
+        out = Path(args.out)
+        out.with_suffix(".md").write_text(markdown(json.loads(out.read_text())))
+        return 0
     unknown = [v for v in args.variants if v not in known]
     if unknown:
         ap.error(f"unknown variants {unknown}; choose from {', '.join(known)}")
