@@ -79,8 +79,8 @@ DAGGER_VARIANTS: dict[str, tuple[str, dict, dict]] = {
     "dagger_slam": (SLAM, FIVE_DEG, {}),
 }
 #: what ``scripts/reproduce.py --only ablations`` runs (``--fresh``, default budget and seeds)
-REPRODUCE = ("ref_slower", "ref_idm", "base_truth", "speed_truth", "grid_slam", "dagger_truth", "dagger_p0_truth",
-             "dagger_hold_truth", "dagger_between_truth")
+REPRODUCE = ("ref_slower", "ref_idm", "ref_headway", "ref_headway_fine_speeds", "base_truth", "speed_truth", "grid_slam",
+             "dagger_truth", "dagger_p0_truth", "dagger_hold_truth", "dagger_between_truth")
 
 
 def _commit() -> str:
@@ -164,17 +164,29 @@ def _action_histogram(policy: Path, env_id: str, kwargs: dict, seed: int) -> dic
 
 
 #: scripted references on the same seeds (no training): name -> policy
-REFERENCES = {"ref_slower": "constant:4", "ref_idm": "idm"}
+#: highway-env's meta-actions with target speeds down to 10 m/s (default: 20, 25, 30): SLOWER can go below 20 m/s
+FINE_SPEEDS = {"action": {"type": "DiscreteMetaAction", "target_speeds": [10, 15, 20, 25, 30]}}
+#: scripted references on the same seeds (no training): name -> (policy, env kwargs over the default reward)
+REFERENCES: dict[str, tuple[str, dict]] = {
+    "ref_slower": ("constant:4", {}),
+    "ref_idm": ("idm", {}),
+    # the DAgger expert as it taught (every 5 steps, IDLE between), and with target speeds down to 10 m/s: whether
+    # the 20 m/s floor of the meta-actions is what its collisions (which bound its students') come from
+    "ref_headway": ("headway:5", {}),
+    "ref_headway_fine_speeds": ("headway:5", FINE_SPEEDS),
+}
 
 
 def run_reference(name: str, episodes: int, eval_seed: int) -> dict:
     from agents.evaluate import evaluate, summarize
 
-    ev = evaluate(REFERENCES[name], TRUTH, episodes, eval_seed, DEFAULT_REWARD, progress=False)
+    policy, kwargs = REFERENCES[name]
+    eval_kwargs = {**kwargs, **DEFAULT_REWARD}
+    ev = evaluate(policy, TRUTH, episodes, eval_seed, eval_kwargs, progress=False)
     return {
         "env_id": TRUTH,
-        "policy": REFERENCES[name],
-        "eval_env_kwargs": DEFAULT_REWARD,
+        "policy": policy,
+        "eval_env_kwargs": eval_kwargs,
         "eval": {k: v for k, v in summarize(ev["runs"]).items() if k in ("episodes", "return", "collision_rate",
                                                                          "mean_speed_mps", "episode_length")},  # fmt: skip
         "eval_seeds": ev["seeds"],
@@ -205,6 +217,12 @@ def _merge(out: Path, key: str, rec: dict, args: argparse.Namespace, started: fl
         write_json(out, {"records": table}, __file__, args, started, argv=argv)
 
 
+def _scripted(r: dict) -> str:
+    """A scripted reference's policy, with the env kwargs it adds to the default reward (if any)."""
+    extra = {k: v for k, v in r.get("eval_env_kwargs", {}).items() if k not in DEFAULT_REWARD}
+    return r["policy"] + (f" on {json.dumps(extra)}" if extra else "")
+
+
 def markdown(table: dict) -> str:
     """The README table of every record: greedy evaluation on the default reward, mean +- 95 % t-interval."""
     from scipy import stats
@@ -225,7 +243,7 @@ def markdown(table: dict) -> str:
         gamma = hp.get("gamma", "-") if r.get("algo", "ppo") == "ppo" else "-"
         interval = f"{r.get('decision_interval', 1)} ({hp.get('decision_mode', 'hold')})" if trained else "-"
         rows.append(f"| `{key}` | {r.get('algo', 'ppo') if trained else 'scripted'} | `{r['env_id']}` "
-                    f"| {json.dumps(r.get('train_env_kwargs', {})) if trained else r['policy']} | {changed} "
+                    f"| {json.dumps(r.get('train_env_kwargs', {})) if trained else _scripted(r)} | {changed} "
                     f"| {r.get('timesteps', '-')} | {interval} | {gamma} "
                     f"| {ci(e['return'])} | {e['collision_rate']:.2f} ({len(r['runs'])} ep.) | {ci(e['mean_speed_mps'])} "
                     f"| {str(r.get('commit', ''))[:10]} |")  # fmt: skip

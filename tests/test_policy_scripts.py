@@ -119,5 +119,15 @@ def test_ablations_train_and_evaluate_each_algorithm_into_a_table_with_provenanc
     assert len(rec["runs"]) == 2 and rec["commit"] and rec["dagger_iterations"]
     table = out.with_suffix(".md").read_text()
     assert "| dagger | `rhs-highway-v0` |" in table and "5 (hold)" in table and "| scripted |" in table
-    ablate_policy.main(["ref_slower", "--episodes", "2", "--out", str(out), "--fresh"])
-    assert set(json.loads(out.read_text())["records"]) == {"ref_slower/2"}
+    ablate_policy.main(["ref_headway_fine_speeds", "--episodes", "2", "--out", str(out), "--fresh"])
+    fine = json.loads(out.read_text())["records"]
+    assert set(fine) == {"ref_headway_fine_speeds/2"}
+    assert fine["ref_headway_fine_speeds/2"]["eval_env_kwargs"]["action"]["target_speeds"][0] == 10
+    assert "headway:5 on {\"action\"" in out.with_suffix(".md").read_text()
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+
+    env = gym.make("rhs-highway-v0", vehicles_count=2, **ablate_policy.FINE_SPEEDS)
+    env.reset(seed=0)
+    assert list(env.unwrapped.vehicle.target_speeds) == [10, 15, 20, 25, 30]  # the ego's SLOWER goes below 20 m/s
