@@ -57,6 +57,20 @@ from agents.run_setup import (  # noqa: F401  (re-exported: the names users of a
 )
 
 
+def _train_dagger(algo: str, env_id: str, timesteps: int | None, out: str | Path, seed: int, n_envs: int | None,
+                  hyperparams: str | Path | None, env_kwargs: dict | None, progress: bool, torch_threads: int | None,
+                  resume: bool, init_policy: str | Path | None) -> dict[str, Any]:
+    """:func:`train`'s DAgger branch (:func:`agents.imitation.train_dagger`); the flags it does not take are errors."""
+    from agents.imitation import train_dagger
+
+    if algo != "dagger":
+        raise ValueError(f"--init-policy continues a DAgger student; for {algo} use --resume")
+    if resume:
+        raise ValueError("--resume is for PPO / DQN; a DAgger run is short and starts over")
+    return train_dagger(env_id, timesteps, out, seed=seed, n_envs=n_envs, hyperparams=hyperparams,
+                        env_kwargs=env_kwargs, progress=progress, torch_threads=torch_threads, init_policy=init_policy)
+
+
 def train(
     algo: str,
     env_id: str,
@@ -87,16 +101,9 @@ def train(
     worker processes get ``OMP_NUM_THREADS=1`` unless it is set already. ``init_policy`` (DAgger only):
     continue from that student zip (:func:`agents.imitation.train_dagger`).
     """
-    if init_policy is not None and algo != "dagger":
-        raise ValueError(f"--init-policy continues a DAgger student; for {algo} use --resume")
-    if algo == "dagger":
-        from agents.imitation import train_dagger
-
-        if resume:
-            raise ValueError("--resume is for PPO / DQN; a DAgger run is short and starts over")
-        return train_dagger(env_id, timesteps, out, seed=seed, n_envs=n_envs, hyperparams=hyperparams,
-                            env_kwargs=env_kwargs, progress=progress, torch_threads=torch_threads,
-                            init_policy=init_policy)
+    if algo == "dagger" or init_policy is not None:
+        return _train_dagger(algo, env_id, timesteps, out, seed, n_envs, hyperparams, env_kwargs, progress,
+                             torch_threads, resume, init_policy)
     from stable_baselines3.common.callbacks import CallbackList
 
     from agents.resume import StopOnSignal, save_checkpoint

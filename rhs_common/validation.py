@@ -304,9 +304,13 @@ def flat_dict(config: Any) -> dict[str, Any]:
     The inverse of :func:`apply_moved_fields`: the dict the config had before its
     fields were grouped (a stable identity for keys or seeds derived from it). A
     field of a group that has no old name (added after the grouping) appears
-    under its dotted path.
+    under its dotted path, except where the class attribute ``ADDED_FIELDS``
+    (dotted path -> the value that behaves as before the field existed) holds its
+    value: then it is left out, so the identity of a config that does what it
+    did before is the identity it had.
     """
     tree = dataclasses.asdict(config)
+    added: Mapping[str, Any] = getattr(type(config), "ADDED_FIELDS", {})
     moved: Mapping[str, str] = getattr(type(config), "MOVED_FIELDS", {})
     by_new = {new: old for old, new in moved.items()}
     groups = {new.split(".")[0] for new in moved.values()}
@@ -319,7 +323,7 @@ def flat_dict(config: Any) -> dict[str, Any]:
                 out[by_new[p]] = v
             elif isinstance(v, dict) and any(n.startswith(p + ".") for n in by_new):
                 walk(v, p)
-            else:
+            elif not (p in added and v == added[p]):
                 out[p] = v
 
     walk({g: tree[g] for g in groups if g in tree}, "")

@@ -360,6 +360,9 @@ class RadarConfig:
 
     #: flat names of before the grouping, mapped by :func:`rhs_common.validation.build` with a DeprecationWarning
     MOVED_FIELDS: ClassVar[MappingProxyType[str, str]] = MappingProxyType(_MOVED)
+    #: fields added since the grouping -> the value that does what the code did before them (left out of
+    #: :meth:`flat_dict` at that value: cache keys and seeds derived from it stay as they were)
+    ADDED_FIELDS: ClassVar[MappingProxyType[str, Any]] = MappingProxyType({"estimation.refine_passes": 2})
 
     antenna: str = "rhs"
     rhs: RHSConfig = field(default_factory=RHSConfig)
