@@ -33,7 +33,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -43,6 +42,8 @@ import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
+from _provenance import STATE_AT_START, write_json
+
 TRUTH, SLAM = "rhs-highway-v0", "rhs-highway-slam-v0"
 FIVE_DEG = {"radar": {"scan": {"grid_deg": 5}}}
 #: the default reward of the envs (highway-env's), restored for evaluation
@@ -77,19 +78,11 @@ DAGGER_VARIANTS: dict[str, tuple[str, dict, dict]] = {
     "dagger_5hz_truth": (TRUTH, {}, {"decision_interval": 1}),
     "dagger_between_truth": (TRUTH, {}, {"label_between": True}),
     "dagger_slam": (SLAM, FIVE_DEG, {}),
+    "dagger_between_slam": (SLAM, FIVE_DEG, {"label_between": True}),
 }
 #: what ``scripts/reproduce.py --only ablations`` runs (``--fresh``, default budget and seeds)
 REPRODUCE = ("ref_slower", "ref_idm", "ref_headway", "ref_headway_fine_speeds", "base_truth", "speed_truth", "grid_slam",
              "dagger_truth", "dagger_p0_truth", "dagger_hold_truth", "dagger_between_truth")
-
-
-def _commit() -> str:
-    try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True, check=True)
-        dirty = subprocess.run(["git", "status", "--porcelain"], cwd=ROOT, capture_output=True, text=True).stdout
-        return out.stdout.strip() + ("-dirty" if dirty.strip() else "")
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def run_variant(name: str, timesteps: int, seed: int, episodes: int, eval_seed: int, n_envs: int | None) -> dict:
@@ -166,21 +159,23 @@ def _action_histogram(policy: Path, env_id: str, kwargs: dict, seed: int) -> dic
 #: scripted references on the same seeds (no training): name -> policy
 #: highway-env's meta-actions with target speeds down to 10 m/s (default: 20, 25, 30): SLOWER can go below 20 m/s
 FINE_SPEEDS = {"action": {"type": "DiscreteMetaAction", "target_speeds": [10, 15, 20, 25, 30]}}
-#: scripted references on the same seeds (no training): name -> (policy, env kwargs over the default reward)
-REFERENCES: dict[str, tuple[str, dict]] = {
-    "ref_slower": ("constant:4", {}),
-    "ref_idm": ("idm", {}),
+#: scripted references on the same seeds (no training): name -> (policy, env kwargs over the default reward,
+#: episodes: None for --episodes)
+REFERENCES: dict[str, tuple[str, dict, int | None]] = {
+    "ref_slower": ("constant:4", {}, None),
+    "ref_idm": ("idm", {}, None),
     # the DAgger expert as it taught (every 5 steps, IDLE between), and with target speeds down to 10 m/s: whether
-    # the 20 m/s floor of the meta-actions is what its collisions (which bound its students') come from
-    "ref_headway": ("headway:5", {}),
-    "ref_headway_fine_speeds": ("headway:5", FINE_SPEEDS),
+    # the 20 m/s floor of the meta-actions is what its collisions (which bound its students') come from; a few
+    # percent, so 200 seeds whatever --episodes says
+    "ref_headway": ("headway:5", {}, 200),
+    "ref_headway_fine_speeds": ("headway:5", FINE_SPEEDS, 200),
 }
 
 
 def run_reference(name: str, episodes: int, eval_seed: int) -> dict:
     from agents.evaluate import evaluate, summarize
 
-    policy, kwargs = REFERENCES[name]
+    policy, kwargs, _ = REFERENCES[name]
     eval_kwargs = {**kwargs, **DEFAULT_REWARD}
     ev = evaluate(policy, TRUTH, episodes, eval_seed, eval_kwargs, progress=False)
     return {
@@ -206,8 +201,6 @@ def _merge(out: Path, key: str, rec: dict, args: argparse.Namespace, started: fl
     """Add ``rec`` under ``key`` to the records at ``out`` and rewrite it with this run's provenance
     (locked: variants may run in parallel processes)."""
     import fcntl
-
-    from _provenance import write_json
 
     out.parent.mkdir(parents=True, exist_ok=True)
     with open(out.with_suffix(".lock"), "w") as lock:
@@ -278,10 +271,12 @@ def main(argv: list[str] | None = None) -> int:
         Path(args.out).unlink()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     command = " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])])
-    commit = _commit()  # the code this process runs (the worktree may move on during a long run)
+    state = STATE_AT_START  # the code this process runs (the worktree may move on during a long run)
+    commit = f"{state['commit'] or 'unknown'}{'-dirty' if state['dirty'] else ''}"
     for name in args.variants:
         if name in REFERENCES:
-            rec, key = run_reference(name, args.episodes, args.eval_seed), f"{name}/{args.episodes}"
+            episodes = REFERENCES[name][2] or args.episodes
+            rec, key = run_reference(name, episodes, args.eval_seed), f"{name}/{episodes}"
         else:
             rec = run_variant(name, args.timesteps, args.seed, args.episodes, args.eval_seed, args.n_envs)
             key = f"{name}/seed{args.seed}/{args.timesteps}"

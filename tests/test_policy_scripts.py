@@ -94,7 +94,7 @@ def test_antenna_only_reruns_the_study_and_keeps_the_tables_and_their_provenance
         evaluate_policies.main(["--antenna-only", "--antenna-episodes", "50", "--out-dir", str(tmp_path)])
 
 
-def test_ablations_train_and_evaluate_each_algorithm_into_a_table_with_provenance(tmp_path):
+def test_ablations_train_and_evaluate_each_algorithm_into_a_table_with_provenance(tmp_path, monkeypatch):
     """ablate_policy: a DAgger variant and a scripted reference land in ``records`` with their commit, the file
     carries the run's provenance, the table names the algorithm and how decisions are filled; --fresh starts over."""
     import json
@@ -119,6 +119,9 @@ def test_ablations_train_and_evaluate_each_algorithm_into_a_table_with_provenanc
     assert len(rec["runs"]) == 2 and rec["commit"] and rec["dagger_iterations"]
     table = out.with_suffix(".md").read_text()
     assert "| dagger | `rhs-highway-v0` |" in table and "5 (hold)" in table and "| scripted |" in table
+    assert ablate_policy.REFERENCES["ref_headway_fine_speeds"][2] == 200  # its rate is a few %: 200 seeds, always
+    monkeypatch.setitem(ablate_policy.REFERENCES, "ref_headway_fine_speeds",
+                        (*ablate_policy.REFERENCES["ref_headway_fine_speeds"][:2], None))  # here: --episodes
     ablate_policy.main(["ref_headway_fine_speeds", "--episodes", "2", "--out", str(out), "--fresh"])
     fine = json.loads(out.read_text())["records"]
     assert set(fine) == {"ref_headway_fine_speeds/2"}
