@@ -43,6 +43,7 @@ import yaml
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
 from _provenance import STATE_AT_START, write_json
+from train_policy import FINE_SPEEDS  # target speeds down to 10 m/s (highway-env's default: 20, 25, 30)
 
 TRUTH, SLAM = "rhs-highway-v0", "rhs-highway-slam-v0"
 FIVE_DEG = {"radar": {"scan": {"grid_deg": 5}}}
@@ -156,9 +157,6 @@ def _action_histogram(policy: Path, env_id: str, kwargs: dict, seed: int) -> dic
     return counts
 
 
-#: scripted references on the same seeds (no training): name -> policy
-#: highway-env's meta-actions with target speeds down to 10 m/s (default: 20, 25, 30): SLOWER can go below 20 m/s
-FINE_SPEEDS = {"action": {"type": "DiscreteMetaAction", "target_speeds": [10, 15, 20, 25, 30]}}
 #: scripted references on the same seeds (no training): name -> (policy, env kwargs over the default reward,
 #: episodes: None for --episodes)
 REFERENCES: dict[str, tuple[str, dict, int | None]] = {

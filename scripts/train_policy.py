@@ -75,6 +75,10 @@ TARGETS: dict[str, tuple] = {
 SHIPPED = ("slam", "truth")
 #: the radar / SLAM envs train on a 5-degree beam grid (18 beams per sweep, ~2x faster than the 1-degree default)
 SLAM_ENV_KWARGS = {"radar": {"scan": {"grid_deg": 5}}}
+#: every policy's env (``--env-kwargs``): highway-env's DiscreteMetaAction with target speeds down to 10 m/s
+#: instead of [20, 25, 30]. With them the expert can slow behind a slower leader instead of crashing into it
+#: (results/ablations.json, 200 seeds: 2 collisions against 5) and its students learn that.
+FINE_SPEEDS = {"action": {"type": "DiscreteMetaAction", "target_speeds": [10, 15, 20, 25, 30]}}
 ANTENNA_STUDY = ("slam", "slam_phased", "dense", "dense_phased")
 
 
@@ -85,12 +89,14 @@ def target_path(algo: str, name: str, data_dir: Path = DATA) -> Path:
     return Path(data_dir) / f"{sub}{algo}_rhs_highway_{name}.zip"
 
 
-def target_env_kwargs(name: str, slam_kwargs: dict) -> dict:
-    """``--slam-env-kwargs`` with the target's radar settings merged into its ``radar`` dict ({} for ground truth)."""
-    radar = TARGETS[name][1]
+def target_env_kwargs(name: str, slam_kwargs: dict, env_kwargs: dict | None = None) -> dict:
+    """``env_kwargs`` (every target's: ``--env-kwargs``), then for a radar target ``--slam-env-kwargs`` with the
+    target's radar settings merged into its ``radar`` dict, for a ground-truth one its own observation kwargs."""
+    base, radar = dict(env_kwargs or {}), TARGETS[name][1]
     if radar is None:
-        return dict(TARGETS[name][2]) if len(TARGETS[name]) > 2 else {}
-    return {**slam_kwargs, "radar": {**(slam_kwargs.get("radar") or {}), **radar}} if radar else dict(slam_kwargs)
+        return {**base, **(TARGETS[name][2] if len(TARGETS[name]) > 2 else {})}
+    merged = {**base, **slam_kwargs}
+    return {**merged, "radar": {**(slam_kwargs.get("radar") or {}), **radar}} if radar else merged
 MAX_BYTES = 1_000_000
 CONTINUE_YAML = ROOT / "agents" / "hyperparams" / "dagger_continue.yml"
 
@@ -193,6 +199,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--slam-env-kwargs", default=json.dumps(SLAM_ENV_KWARGS),
                     help="JSON env kwargs of the radar / SLAM policies' envs (saved with them; default: %(default)s)")
+    ap.add_argument("--env-kwargs", default=json.dumps(FINE_SPEEDS),
+                    help="JSON env kwargs of every policy's env, under the radar ones (default: %(default)s; "
+                    "'{}': highway-env's action set, target speeds [20, 25, 30])")
     ap.add_argument("--eval-freq", type=int, default=5000, help="env steps between evaluations (0: none)")
     ap.add_argument("--eval-episodes", type=int, default=2)
     ap.add_argument("--checkpoint-freq", type=int, default=5000)
@@ -209,9 +218,10 @@ def main(argv: list[str] | None = None) -> int:
     started = time.time()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-    slam_kwargs = json.loads(args.slam_env_kwargs)
-    if not isinstance(slam_kwargs, dict):
-        ap.error("--slam-env-kwargs must be a JSON object")
+    slam_kwargs, env_kwargs = json.loads(args.slam_env_kwargs), json.loads(args.env_kwargs)
+    for flag, value in (("--slam-env-kwargs", slam_kwargs), ("--env-kwargs", env_kwargs)):
+        if not isinstance(value, dict):
+            ap.error(f"{flag} must be a JSON object")
     if args.continue_from is not None:
         if args.algo != "dagger":
             ap.error("--continue-from continues DAgger students (--algo dagger)")
@@ -223,7 +233,7 @@ def main(argv: list[str] | None = None) -> int:
     record_path = Path(args.record)
     machine, weights = _machine(), _registration_weights()
     for name in args.only or SHIPPED:
-        meta = train_one(name, args, target_env_kwargs(name, slam_kwargs))
+        meta = train_one(name, args, target_env_kwargs(name, slam_kwargs, env_kwargs))
         record = _read_record(record_path)  # now: another run (--only) may have written its entry meanwhile
         record["machine"], record["registration_weights"] = machine, weights
         record[f"{args.algo}_{name}"] = {

@@ -27,6 +27,11 @@ def test_targets_merge_the_radar_settings_and_ship_where_evaluate_looks():
     assert train_policy.target_path("ppo", "slam") == PPO_POLICY
     assert train_policy.target_env_kwargs("truth_all_around", grid)["observation"]["see_behind"] is True
     assert train_policy.target_path("dagger", "slam_phased").parent.name == "antenna"
+    # --env-kwargs (every target's: the action set) lies under the radar and observation settings
+    fine = train_policy.FINE_SPEEDS
+    assert train_policy.target_env_kwargs("truth", grid, fine) == fine
+    assert train_policy.target_env_kwargs("slam", grid, fine) == {**fine, **grid}
+    assert train_policy.target_env_kwargs("truth_all_around", grid, fine)["action"] == fine["action"]
     assert set(train_policy.ANTENNA_STUDY) <= set(train_policy.TARGETS)
 
 
