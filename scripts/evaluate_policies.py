@@ -16,7 +16,9 @@ Rows (every policy meets the same traffic: episode k uses seed ``--seed + k``):
   every step and, as it taught the students, every k steps with IDLE between
   (``headway:<k>``, k the students' decision interval);
 * ``always SLOWER``: a scripted reference, action 4 (SLOWER) at every step, i.e.
-  the lowest target speed (20 m/s) in the current lane, on ``rhs-highway-v0``;
+  the lowest target speed (20 m/s) in the current lane, on ``rhs-highway-v0`` with
+  highway-env's action set as issue 12 set the goal (the students' env kwargs may
+  widen the target speeds, ``train_policy.FINE_SPEEDS``: the reference does not);
 * ``IDM + MOBIL``: a strong scripted reference, highway-env's own ``IDMVehicle``
   (IDM car following, MOBIL lane changes, desired speed 30 m/s) in the ego's
   seat (``agents.evaluate.IDMMobilPolicy``), on ``rhs-highway-v0``.
@@ -151,6 +153,15 @@ def antenna_study(episodes: int, seed: int, workers: int, done: dict[str, list[d
             "rows": rows, "pairs": pairs, "missing": missing}
 
 
+#: highway-env's DiscreteMetaAction target speeds (m/s) when the env kwargs do not set them
+DEFAULT_SPEEDS = [20, 25, 30]
+
+
+def target_speeds(env_kwargs: dict) -> list:
+    """The meta-actions' target speeds (m/s) of an env made with ``env_kwargs``."""
+    return list((env_kwargs.get("action") or {}).get("target_speeds", DEFAULT_SPEEDS))
+
+
 def antenna_markdown(study: dict) -> str:
     lines = [
         (
@@ -159,15 +170,17 @@ def antenna_markdown(study: dict) -> str:
             "each, mean ± 95 % t-interval; collision rates with 95 % Wilson intervals."
         ),
         "",
-        "| env | antenna | training env steps | return | collision rate | mean speed (m/s) | SLAM position RMSE (m) |",
-        "|---|---|---:|---|---|---|---|",
+        "| env | antenna | target speeds (m/s) | training env steps | return | collision rate | mean speed (m/s) "
+        "| SLAM position RMSE (m) |",
+        "|---|---|---|---:|---|---|---|---|",
     ]
     for r in study["rows"]:
         s = r["summary"]
         lo, hi = r["collision_ci"]
         m, h = r["return_ci"]
         lines.append(
-            f"| `{r['env_id']}` | {r['antenna']} | {r['timesteps']} | {m:.1f} ± {h:.1f} | {s['collision_rate']:.2f} "
+            f"| `{r['env_id']}` | {r['antenna']} | {', '.join(map(str, target_speeds(r['env_kwargs'])))} "
+            f"| {r['timesteps']} | {m:.1f} ± {h:.1f} | {s['collision_rate']:.2f} "
             f"({s['collisions']}/{s['episodes']}; {lo:.2f}-{hi:.2f}) | {_fmt(s['mean_speed_mps'])} "
             f"| {_fmt(s['position_rmse_m'], 2)} |"
         )
@@ -276,6 +289,14 @@ def markdown(result: dict) -> str:
         "a lane change, which the radar's 360-degree point cloud shows; the all-around row observes 8 "
         "vehicles, behind as well.",
     ]
+    speeds = target_speeds(kw)
+    if speeds != DEFAULT_SPEEDS:
+        lines += [
+            "",
+            f"The learned policies and the HeadwayDriver rows choose among target speeds {speeds} m/s (env kwargs "
+            f"`action`); always SLOWER and IDM + MOBIL keep highway-env's {DEFAULT_SPEEDS}, the set issue 12 set its "
+            f"goal against (on the wider set, always SLOWER would hold {speeds[0]} m/s and return less).",
+        ]
     aim = result["aim"]
     ref = next((r for r in rows if r["key"] == "slower"), None)
     learned = [r for r in rows if r["key"] in ("slam", "truth")]
@@ -373,14 +394,16 @@ def main(argv: list[str] | None = None) -> int:
     seeds = list(range(args.seed, args.seed + args.episodes))
     # the expert as the DAgger students learned from it: deciding at their decision interval, pulsed
     teacher_k = int(policy_metadata(SHIPPED_POLICY).get("decision_interval") or 1) if SHIPPED_POLICY.exists() else 1
+    # the goal's references as issued: highway-env's action set (always SLOWER holds 20 m/s, not the students' 10)
+    issued_kwargs = {k: v for k, v in truth_kwargs.items() if k != "action"}
     specs = learned_specs(slam_policy, truth_policy, args.shipped_only) + [
         ("random", "random", "(none)", "random", slam_env, slam_kwargs),
         ("headway", "HeadwayDriver (DAgger expert, scripted, 5 Hz)", "(simulator state)", "headway", truth_env,
          truth_kwargs),
         ("headway_teacher", f"HeadwayDriver every {teacher_k} steps, IDLE between (as it taught)", "(simulator state)",
          f"headway:{teacher_k}", truth_env, truth_kwargs),
-        ("slower", "always SLOWER (scripted)", "(none)", "constant:4", truth_env, truth_kwargs),
-        ("idm", "IDM + MOBIL (highway-env, scripted)", "(simulator state)", "idm", truth_env, truth_kwargs),
+        ("slower", "always SLOWER (scripted)", "(none)", "constant:4", truth_env, issued_kwargs),
+        ("idm", "IDM + MOBIL (highway-env, scripted)", "(simulator state)", "idm", truth_env, issued_kwargs),
     ]
     rows = []
     for key, label, obs, policy, env_id, kwargs in specs:
