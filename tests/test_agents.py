@@ -402,6 +402,9 @@ def test_shipped_policies_are_small_and_described():
     # same simulation budget for the two students of each algorithm (issue 12: "trained with the same budget")
     for slam_policy, truth_policy in ((SHIPPED_POLICY, SHIPPED_TRUTH_POLICY), (PPO_POLICY, PPO_TRUTH_POLICY)):
         assert abs(policy_metadata(slam_policy)["timesteps"] - policy_metadata(truth_policy)["timesteps"]) <= 1000
+        # and the same action set: the observation is the only difference
+        actions = [policy_metadata(p)["env_kwargs"].get("action") for p in (slam_policy, truth_policy)]
+        assert actions[0] == actions[1]
 
 
 def test_shipped_slam_policy_loads_acts_and_beats_random():

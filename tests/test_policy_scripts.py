@@ -35,6 +35,23 @@ def test_targets_merge_the_radar_settings_and_ship_where_evaluate_looks():
     assert set(train_policy.ANTENNA_STUDY) <= set(train_policy.TARGETS)
 
 
+def test_antenna_study_pairs_differ_only_in_the_antenna():
+    """Goal 2 compares students trained alike: same env steps, expert, hyperparameters and action set; only the
+    ``radar.antenna`` of their env kwargs differs."""
+    from agents.evaluate import policy_metadata
+
+    pairs = [("slam_rhs", "slam_phased"), ("dense", "dense_phased")]
+    trained = [(a, b) for a, b in pairs if all(train_policy.target_path("dagger", n).exists() for n in (a, b))]
+    assert trained, "no antenna-study pair is shipped (scripts/train_policy.py --only slam_rhs slam_phased)"
+    for a, b in trained:
+        ma, mb = (policy_metadata(train_policy.target_path("dagger", n)) for n in (a, b))
+        for key in ("env_id", "timesteps", "n_envs", "hyperparams", "expert", "decision_interval"):
+            assert ma[key] == mb[key], (a, b, key)
+        ka, kb = ({**m["env_kwargs"], "radar": {k: v for k, v in m["env_kwargs"]["radar"].items() if k != "antenna"}}
+                  for m in (ma, mb))
+        assert ka == kb and mb["env_kwargs"]["radar"]["antenna"] == "phased"
+
+
 def test_intervals():
     lo, hi = evaluate_policies.wilson(0, 50)
     assert lo == 0.0 and 0.05 < hi < 0.08  # 0/50: the rate is below 7 % with 95 % confidence
