@@ -16,6 +16,10 @@
 ``--algo ppo`` trains PPO (``agents/hyperparams/ppo.yml``) into
 ``ppo_rhs_highway_{slam,truth}.zip``, the PPO rows of the policies table.
 
+Every policy's env gets ``--env-kwargs`` (default :data:`FINE_SPEEDS`: highway-env's
+meta-actions with target speeds down to 10 m/s, so that the expert, and its students,
+can slow behind a leader slower than 20 m/s); the radar targets add ``--slam-env-kwargs``.
+
 Each zip gets a JSON beside it (env id, ``env_kwargs``, timesteps, wall time,
 hyperparameters) that ``rhs-slam evaluate`` / ``rhs-slam demo`` read to rebuild
 the env the policy was trained on. ``results/train_policy.json`` records both
