@@ -96,7 +96,7 @@ STEPS: tuple[Step, ...] = (
          ("slam_accuracy_before.json",), 1800, on_request=True, no_fingerprint="the 'before' record of the SLAM change (issue 10), "
          "kept for comparison: measured on the code before it; the command is the first-round model at HEAD"),
     Step("train_policy", "train_policy.py", ("--no-progress", "--algo", "dagger", "--only", "slam", "truth",
-                                             "truth_all_around", "slam_phased", "dense", "dense_phased"),
+                                             "truth_all_around", "slam_rhs", "slam_phased", "dense", "dense_phased"),
          ("train_policy.json",), 7200,
          "trains the DAgger policies (PPO: --algo ppo)", no_fingerprint="a record of training runs (timesteps, wall time); "
          "what the policies do is fingerprinted by the policies step"),

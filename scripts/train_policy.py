@@ -10,8 +10,8 @@
 * ``agents/data/dagger_rhs_highway_truth.zip``: the same algorithm,
   hyperparameters and env steps on ``rhs-highway-v0`` (ground-truth Kinematics);
 * ``--only truth_all_around``: on a Kinematics observation of 8 vehicles, behind
-  as well (``agents/data/truth/``); ``--only slam_phased dense dense_phased``:
-  the rest of the antenna study of ``evaluate_policies.py`` (``agents/data/antenna/``).
+  as well (``agents/data/truth/``); ``--only slam_rhs slam_phased dense dense_phased``:
+  the antenna study of ``evaluate_policies.py`` (``agents/data/antenna/``).
 
 ``--algo ppo`` trains PPO (``agents/hyperparams/ppo.yml``) into
 ``ppo_rhs_highway_{slam,truth}.zip``, the PPO rows of the policies table.
@@ -28,7 +28,7 @@ monitor CSVs and evaluations stay in ``--work-dir`` (default ``runs/policies``,
 not shipped).
 
     OMP_NUM_THREADS=1 python scripts/train_policy.py                  # the shipped DAgger policies
-    python scripts/train_policy.py --only slam_phased dense dense_phased   # the rest of the antenna study
+    python scripts/train_policy.py --only slam_rhs slam_phased dense dense_phased   # the antenna study
     python scripts/train_policy.py --only slam --timesteps 20000 --n-envs 2
     python scripts/train_policy.py --slam-env-kwargs '{"radar": {"scan": {"grid_deg": 5}}}'
 
@@ -70,8 +70,9 @@ TARGETS: dict[str, tuple] = {
     "slam": (SLAM_ID, {}),
     "truth": (TRUTH_ID, None),
     "truth_all_around": (TRUTH_ID, None, KINEMATICS_ALL_AROUND),
-    # issue 12 goal 2, does the antenna matter for driving: the shipped student's twin on a phased array, and
-    # both on the dense roadside
+    # issue 12 goal 2, does the antenna matter for driving: the same student on the RHS and on a phased array,
+    # and both on the dense roadside
+    "slam_rhs": (SLAM_ID, {"antenna": "rhs"}),
     "slam_phased": (SLAM_ID, {"antenna": "phased"}),
     "dense": (DENSE_ID, {}),
     "dense_phased": (DENSE_ID, {"antenna": "phased"}),
@@ -83,7 +84,7 @@ SLAM_ENV_KWARGS = {"radar": {"scan": {"grid_deg": 5}}}
 #: instead of [20, 25, 30]. With them the expert can slow behind a slower leader instead of crashing into it
 #: (results/ablations.json, 200 seeds: 2 collisions against 5) and its students learn that.
 FINE_SPEEDS = {"action": {"type": "DiscreteMetaAction", "target_speeds": [10, 15, 20, 25, 30]}}
-ANTENNA_STUDY = ("slam", "slam_phased", "dense", "dense_phased")
+ANTENNA_STUDY = ("slam_rhs", "slam_phased", "dense", "dense_phased")
 
 
 def target_path(algo: str, name: str, data_dir: Path = DATA) -> Path:

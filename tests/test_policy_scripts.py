@@ -40,9 +40,9 @@ def test_antenna_study_pairs_differ_only_in_the_antenna():
     ``radar.antenna`` of their env kwargs differs."""
     from agents.evaluate import policy_metadata
 
-    pairs = [("slam", "slam_phased"), ("dense", "dense_phased")]
+    pairs = [("slam_rhs", "slam_phased"), ("dense", "dense_phased")]
     trained = [(a, b) for a, b in pairs if all(train_policy.target_path("dagger", n).exists() for n in (a, b))]
-    assert trained, "no antenna-study pair is shipped (scripts/train_policy.py --only slam slam_phased)"
+    assert trained, "no antenna-study pair is shipped (scripts/train_policy.py --only slam_rhs slam_phased)"
     for a, b in trained:
         ma, mb = (policy_metadata(train_policy.target_path("dagger", n)) for n in (a, b))
         for key in ("env_id", "timesteps", "n_envs", "hyperparams", "expert", "decision_interval"):
