@@ -153,13 +153,18 @@ def antenna_study(episodes: int, seed: int, workers: int, done: dict[str, list[d
             "rows": rows, "pairs": pairs, "missing": missing}
 
 
-#: highway-env's DiscreteMetaAction target speeds (m/s) when the env kwargs do not set them
-DEFAULT_SPEEDS = [20, 25, 30]
+def target_speeds(env_kwargs: dict) -> list[float]:
+    """The meta-actions' target speeds (m/s) of an env made with ``env_kwargs``: its ``action`` config's, else
+    highway-env's default (``MDPVehicle.DEFAULT_TARGET_SPEEDS``, what ``DiscreteMetaAction`` then uses)."""
+    from highway_env.vehicle.controller import MDPVehicle
+
+    speeds = (env_kwargs.get("action") or {}).get("target_speeds", MDPVehicle.DEFAULT_TARGET_SPEEDS)
+    return [float(v) for v in speeds]
 
 
-def target_speeds(env_kwargs: dict) -> list:
-    """The meta-actions' target speeds (m/s) of an env made with ``env_kwargs``."""
-    return list((env_kwargs.get("action") or {}).get("target_speeds", DEFAULT_SPEEDS))
+def speeds_text(speeds: list[float]) -> str:
+    """``10, 15, 20`` (m/s)."""
+    return ", ".join(f"{v:g}" for v in speeds)
 
 
 def antenna_markdown(study: dict) -> str:
@@ -179,7 +184,7 @@ def antenna_markdown(study: dict) -> str:
         lo, hi = r["collision_ci"]
         m, h = r["return_ci"]
         lines.append(
-            f"| `{r['env_id']}` | {r['antenna']} | {', '.join(map(str, target_speeds(r['env_kwargs'])))} "
+            f"| `{r['env_id']}` | {r['antenna']} | {speeds_text(target_speeds(r['env_kwargs']))} "
             f"| {r['timesteps']} | {m:.1f} ± {h:.1f} | {s['collision_rate']:.2f} "
             f"({s['collisions']}/{s['episodes']}; {lo:.2f}-{hi:.2f}) | {_fmt(s['mean_speed_mps'])} "
             f"| {_fmt(s['position_rmse_m'], 2)} |"
@@ -289,13 +294,14 @@ def markdown(result: dict) -> str:
         "a lane change, which the radar's 360-degree point cloud shows; the all-around row observes 8 "
         "vehicles, behind as well.",
     ]
-    speeds = target_speeds(kw)
-    if speeds != DEFAULT_SPEEDS:
+    speeds, default = target_speeds(kw), target_speeds({})
+    if speeds != default:
         lines += [
             "",
-            f"The learned policies and the HeadwayDriver rows choose among target speeds {speeds} m/s (env kwargs "
-            f"`action`); always SLOWER and IDM + MOBIL keep highway-env's {DEFAULT_SPEEDS}, the set issue 12 set its "
-            f"goal against (on the wider set, always SLOWER would hold {speeds[0]} m/s and return less).",
+            f"The learned policies and the HeadwayDriver rows choose among target speeds [{speeds_text(speeds)}] m/s "
+            f"(env kwargs `action`); always SLOWER and IDM + MOBIL keep highway-env's [{speeds_text(default)}], the "
+            f"set issue 12 set its goal against (on the wider set, always SLOWER would hold {speeds[0]:g} m/s and "
+            "return less).",
         ]
     aim = result["aim"]
     ref = next((r for r in rows if r["key"] == "slower"), None)

@@ -102,6 +102,8 @@ def target_env_kwargs(name: str, slam_kwargs: dict, env_kwargs: dict | None = No
         return {**base, **(TARGETS[name][2] if len(TARGETS[name]) > 2 else {})}
     merged = {**base, **slam_kwargs}
     return {**merged, "radar": {**(slam_kwargs.get("radar") or {}), **radar}} if radar else merged
+
+
 MAX_BYTES = 1_000_000
 CONTINUE_YAML = ROOT / "agents" / "hyperparams" / "dagger_continue.yml"
 

@@ -52,6 +52,22 @@ def test_antenna_study_pairs_differ_only_in_the_antenna():
         assert ka == kb and mb["env_kwargs"]["radar"]["antenna"] == "phased"
 
 
+def test_goal_references_drive_on_the_action_set_the_goal_was_issued_with():
+    """results/policies.json: the students drive on their own action set, always SLOWER and IDM + MOBIL on
+    highway-env's default one (always SLOWER then holds 20 m/s, not the students' lowest target speed)."""
+    import json
+
+    rows = {r["key"]: r for r in json.loads((SCRIPTS.parent / "results" / "policies.json").read_text())["rows"]}
+    default = evaluate_policies.target_speeds({})
+    assert default == [20.0, 25.0, 30.0]  # highway-env's MDPVehicle.DEFAULT_TARGET_SPEEDS
+    for key in ("slower", "idm"):
+        assert evaluate_policies.target_speeds(rows[key]["env_kwargs"]) == default, key
+    assert rows["slower"]["summary"]["mean_speed_mps"]["mean"] == pytest.approx(20.0, abs=0.5)
+    student = evaluate_policies.target_speeds(rows["slam"]["env_kwargs"])
+    assert student == evaluate_policies.target_speeds(rows["truth"]["env_kwargs"])
+    assert evaluate_policies.target_speeds(rows["headway_teacher"]["env_kwargs"]) == student
+
+
 def test_intervals():
     lo, hi = evaluate_policies.wilson(0, 50)
     assert lo == 0.0 and 0.05 < hi < 0.08  # 0/50: the rate is below 7 % with 95 % confidence
