@@ -9,6 +9,10 @@ every section and printed beside it. Sections (``--sections``, default all):
   with the radar's time per stage (synthesis, range/CFAR, OMP) and the SLAM's
   time per stage (registration, association, RBPF) at 100 particles; goals:
   radar >= 0.75x and SLAM >= 0.67x the base env's steps/s;
+* ``floor``: what the IQ path costs before any processing, per 4-radar scan: the
+  noise of its 4 I C N samples (a scan of an empty scene) and their range FFT; set
+  beside the radar budget that the ``envs`` goals leave (radar <= base step x
+  (1 / 0.75 - 1); radar + SLAM <= base step x (1 / 0.67 - 1));
 * ``load``: steady under load, the radar env's steps/s with one other busy
   process (a CPU spin loop) against quiet, with single-threaded BLAS in the step
   (the default) and with the process's own BLAS threads (``blas_threads=None``);
@@ -43,7 +47,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
 from _provenance import command_line, write_json
 
-SECTIONS = ("envs", "load", "vec", "radar", "patterns", "training")
+SECTIONS = ("envs", "floor", "load", "vec", "radar", "patterns", "training")
 GOALS = {"radar_env_over_base": 0.75, "slam_env_over_base": 0.67, "loaded_over_quiet": 0.85,
          "two_workers_over_one": 1.8, "ppo_slam_over_base": 0.7}
 
@@ -68,6 +72,8 @@ def bench_envs(steps: int, seed: int, grid_deg: float) -> dict:
     ):
         env = gym.make(env_id, **kwargs)
         env.reset(seed=seed)
+        for a in (1, 1, 1):  # warm-up: the first steps build caches (steering rows, FFT plans) and are not typical
+            env.step(a)
         actions = np.random.default_rng(seed).choice([1, 1, 1, 3, 4], size=steps)
         radar_times, slam_times = [], []
         t0 = time.perf_counter()
@@ -110,6 +116,51 @@ def _steps_per_s(env, steps: int, seed: int) -> float:
         if term or trunc:
             env.reset(seed=seed + n + 1)
     return steps / (time.perf_counter() - t0)
+
+
+def bench_floor(grid_deg: float, seed: int, repeats: int = 30) -> dict:
+    """Median ms per 4-radar scan of the IQ path's data-size floor: noise synthesis and range FFT.
+
+    ``synthesis_noise_ms``: :meth:`RadarSystem.synthesize` of an empty scene (every one of the
+    4 I C N samples gets CN(0, sigma_n^2) noise and nothing else); ``range_fft_ms``: the
+    windowed, zero-padded range FFT of those samples. Any scan pays both before detection.
+    """
+    from rhs_env.antenna import ScanConfig
+    from rhs_env.radar import RadarConfig, RadarSystem
+    from rhs_env.scatterers import Scatterers
+
+    cfg = RadarConfig(scan=ScanConfig(grid_deg=grid_deg))
+    radar = RadarSystem(cfg, np.random.default_rng(seed))
+    empty = Scatterers(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0, int), np.zeros(0, bool))
+    noise, fft = [], []
+    for _ in range(repeats + 1):
+        t0 = time.perf_counter()
+        y = radar.synthesize(empty)
+        t1 = time.perf_counter()
+        radar.range_spectrum(y)
+        noise.append(t1 - t0)
+        fft.append(time.perf_counter() - t1)
+    wf = cfg.waveform
+    return {"samples_per_scan": 4 * cfg.scan.slots * wf.chirps_per_slot * wf.samples, "repeats": repeats,
+            "synthesis_noise_ms": 1e3 * float(np.median(noise[1:])), "range_fft_ms": 1e3 * float(np.median(fft[1:])),
+            "floor_ms": 1e3 * float(np.median(noise[1:]) + np.median(fft[1:]))}
+
+
+def radar_budget(result: dict) -> dict | None:
+    """The radar's time per scan that the envs goals allow, beside the floor (None without both sections).
+
+    Radar env >= g_r x the base env's steps/s means radar <= base ms x (1 / g_r - 1); SLAM env >= g_s x
+    means radar + SLAM <= base ms x (1 / g_s - 1), i.e. radar <= that minus the SLAM stages.
+    """
+    if "envs" not in result or "floor" not in result:
+        return None
+    e = result["envs"]
+    base = e["rhs-highway-v0"]["ms_per_step"]
+    slam = sum((e["rhs-highway-slam-v0"].get("slam_stage_ms") or {}).values())
+    radar_ms = base * (1 / GOALS["radar_env_over_base"] - 1)
+    slam_ms = base * (1 / GOALS["slam_env_over_base"] - 1) - slam
+    return {"base_ms_per_step": base, "radar_budget_ms": radar_ms, "slam_stages_ms": slam,
+            "radar_budget_with_slam_ms": slam_ms, "floor_ms": result["floor"]["floor_ms"]}
 
 
 def bench_load(steps: int, seed: int, grid_deg: float) -> dict:
@@ -243,6 +294,15 @@ def markdown(result: dict) -> str:
              ""]
     if "envs" in result:
         lines += _md_envs(result)
+    budget = radar_budget(result)
+    if budget is not None:
+        f = result["floor"]
+        lines += [f"The IQ path's floor per 4-radar scan ({f['samples_per_scan']} samples): noise "
+                  f"{f['synthesis_noise_ms']:.1f} ms + range FFT {f['range_fft_ms']:.1f} ms = {f['floor_ms']:.1f} ms, "
+                  f"before detection and OMP. The goals leave the radar {budget['radar_budget_ms']:.1f} ms "
+                  f"(radar env >= {GOALS['radar_env_over_base']} x) and {budget['radar_budget_with_slam_ms']:.1f} ms "
+                  f"beside the SLAM's {budget['slam_stages_ms']:.1f} ms (SLAM env >= {GOALS['slam_env_over_base']} x) "
+                  f"of a {budget['base_ms_per_step']:.1f} ms base step.", ""]
     lines += _md_ratios(result)
     if "radar" in result:
         lines += ["| one 4-radar scan, typical scene | synthesis (ms) | range/CFAR (ms) | OMP (ms) | total (ms) |",
@@ -271,6 +331,8 @@ def markdown(result: dict) -> str:
 def _run_section(sec: str, args: argparse.Namespace) -> dict:
     if sec == "envs":
         return bench_envs(args.steps, args.seed, args.grid_deg)
+    if sec == "floor":
+        return bench_floor(args.grid_deg, args.seed)
     if sec == "load":
         return bench_load(args.steps, args.seed, args.grid_deg)
     if sec == "vec":
@@ -319,6 +381,7 @@ def main(argv: list[str] | None = None) -> int:
                                   "load_average": previous.get("machine", {}).get("load_average", [float("nan")])})
     result["section_runs"] = {k: runs[k] for k in SECTIONS if k in runs}
     result["goals"] = _goals(result)
+    result["radar_budget"] = radar_budget(result)
     out.parent.mkdir(parents=True, exist_ok=True)
     write_json(out, result, __file__, args, started, argv=argv)  # timings: provenance, no fingerprint
     out.with_suffix(".md").write_text(markdown(result) + "\n")

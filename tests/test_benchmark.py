@@ -1,0 +1,48 @@
+"""scripts/benchmark.py: the sections' bookkeeping (not the speeds: those are never asserted)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
+
+import benchmark
+
+
+def test_floor_times_the_noise_and_fft_of_every_sample_of_a_scan():
+    f = benchmark.bench_floor(grid_deg=5.0, seed=0, repeats=2)
+    assert f["samples_per_scan"] == 4 * 18 * 4 * 400  # 4 radars x I slots (90 deg / 5 deg) x C chirps x N samples
+    assert f["synthesis_noise_ms"] > 0 and f["range_fft_ms"] > 0
+    assert f["floor_ms"] == pytest.approx(f["synthesis_noise_ms"] + f["range_fft_ms"])
+
+
+def _result(base_ms: float, slam_stage_ms: dict) -> dict:
+    envs = {"rhs-highway-v0": {"ms_per_step": base_ms},
+            "rhs-highway-slam-v0": {"ms_per_step": 3 * base_ms, "slam_stage_ms": slam_stage_ms}}
+    floor = {"samples_per_scan": 576000, "synthesis_noise_ms": 5.0, "range_fft_ms": 3.0, "floor_ms": 8.0}
+    return {"envs": envs, "floor": floor}
+
+
+def test_radar_budget_follows_from_the_goals():
+    b = benchmark.radar_budget(_result(20.0, {"update": 2.0, "registration": 1.0}))
+    # radar env >= 0.75 x base steps/s <=> base + radar <= base / 0.75
+    assert b["radar_budget_ms"] == pytest.approx(20.0 / benchmark.GOALS["radar_env_over_base"] - 20.0)
+    assert b["radar_budget_with_slam_ms"] == pytest.approx(20.0 / benchmark.GOALS["slam_env_over_base"] - 20.0 - 3.0)
+    assert b["floor_ms"] == 8.0
+    assert benchmark.radar_budget({"envs": {}}) is None
+
+
+def test_markdown_sets_the_floor_beside_the_budget():
+    res = _result(20.0, {"update": 2.0})
+    res.update(machine={"cpus": 2, "load_average": [0.1, 0.1, 0.1]}, settings={"grid_deg": 1.0})
+    res["envs"]["rhs-highway-radar-v0"] = {"ms_per_step": 40.0}
+    for r in res["envs"].values():
+        r.update(steps_per_s=1e3 / r["ms_per_step"], radar_stage_ms=None, slam_stage_ms=r.get("slam_stage_ms"))
+    res["envs"].update(radar_added_ms=20.0, radar_slam_added_ms=40.0, radar_added_over_base=1.0,
+                       radar_slam_added_over_base=2.0)
+    text = benchmark.markdown(res)
+    assert "noise 5.0 ms + range FFT 3.0 ms = 8.0 ms" in text
+    assert f"leave the radar {20.0 / 0.75 - 20.0:.1f} ms" in text
