@@ -101,6 +101,8 @@ STEPS: tuple[Step, ...] = (
          "trains the DAgger policies (PPO: --algo ppo)", no_fingerprint="a record of training runs (timesteps, wall time); "
          "what the policies do is fingerprinted by the policies step"),
     Step("policies", "evaluate_policies.py", (), ("policies.json",), 220),
+    Step("crash_analysis", "crash_analysis.py", (), ("crash_analysis.json",), 700,
+         "the shipped radar + SLAM student's crashes against the expert's labels"),
     Step("detection_curves", "detection_curves.py", (), ("detection_curves.json",), 600),
     Step("low_snr_slam", "low_snr_slam.py", ("--seeds", "100", "101", "102", "103", "104", "105", "106", "107"),
          ("low_snr_slam.json",), 900),

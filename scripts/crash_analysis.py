@@ -1,0 +1,249 @@
+"""Why a student crashes: its last decision against the expert's, and whether the radar saw what it hit.
+
+Issue 12 asks what limits learning to drive on radar SLAM. This script replays a
+policy (default: the shipped radar + SLAM student) on held-out seeds with the
+DAgger expert (:class:`agents.expert.HeadwayDriver`, on the simulator state)
+labelling every state it reaches. For each collision it takes the student's last
+decision before the crash (decisions every ``decision_interval`` env steps,
+:class:`agents.decision.HeldPolicy`) and reports:
+
+* the student's and the expert's meta-action at that decision;
+* the hazard: the vehicle it hit (highway-env flags both vehicles of a collision),
+  and how many radar points of that decision's observation lie in the hit vehicle's
+  box (its 5 m x 2 m outline in the ego frame, grown by ``--margin-m`` each side);
+* a category: ``expert too`` (the expert would have chosen the same action),
+  ``seen, student disagreed`` (the hazard had points in the observation: the policy,
+  not the sensing, failed), ``not seen`` (no point on it: a sensing miss).
+
+Also, over every episode, the share of the student's decisions that match the
+expert's (agreement on its own states). Points are the observation's ``points``
+rows (x forward, y left, vehicle frame, m); highway-env's lateral axis points right,
+so a vehicle at highway offset (dx, dy) from the ego lies at (dx, -dy) in that frame
+(both rotated by the ego heading).
+
+    OMP_NUM_THREADS=1 python scripts/crash_analysis.py                   # the shipped student, seeds 1000-1049 and 2000-2049
+    python scripts/crash_analysis.py --policy agents/data/dagger_rhs_highway_slam.zip --seeds 2000 --episodes 20
+
+Writes ``results/crash_analysis.json`` (every episode's decisions summary and every
+crash) and ``results/crash_analysis.md`` (the README table).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "scripts"))
+from _provenance import write_json
+
+DEFAULT_POLICY = "agents/data/dagger_rhs_highway_slam.zip"
+DEFAULT_SEEDS = (1000, 2000)
+CATEGORIES = ("seen, student disagreed", "not seen", "expert too")
+#: vehicles within this distance of the ego are kept at each decision (the hit one is among them), m
+NEAR_M = 60.0
+
+
+def ego_frame(ego, position: np.ndarray, heading: float) -> tuple[np.ndarray, float]:
+    """A highway-env position and heading in the ego's radar frame: (x forward, y left) m, and heading rad."""
+    c, s = np.cos(ego.heading), np.sin(ego.heading)
+    d = np.asarray(position, float) - ego.position
+    return np.array([c * d[0] + s * d[1], -(-s * d[0] + c * d[1])]), -(heading - ego.heading)
+
+
+def points_in_box(points: np.ndarray, centre: np.ndarray, heading: float, length: float, width: float,
+                  margin: float) -> int:
+    """Number of points (P, 2) inside the oriented box (centre, heading, length x width) grown by ``margin`` each side."""
+    c, s = np.cos(heading), np.sin(heading)
+    d = points - centre[None, :]
+    along, across = d @ np.array([c, s]), d @ np.array([-s, c])
+    inside = (np.abs(along) <= length / 2 + margin) & (np.abs(across) <= width / 2 + margin)
+    return int(inside.sum())
+
+
+def _observed_points(obs: dict) -> np.ndarray:
+    """The valid rows' (x, y) of a SLAM / radar observation (``points`` with ``points_mask``), (P, 2)."""
+    if not isinstance(obs, dict) or "points" not in obs:
+        return np.zeros((0, 2))
+    pts = np.asarray(obs["points"], float)
+    mask = np.asarray(obs.get("points_mask", np.ones(len(pts))), bool)
+    return pts[mask, :2]
+
+
+def _neighbours(env) -> dict[int, tuple[np.ndarray, float, float, float]]:
+    """id -> (centre, heading, length, width) in the ego frame of every other vehicle within NEAR_M."""
+    road, ego = env.unwrapped.road, env.unwrapped.vehicle
+    out = {}
+    for v in road.vehicles:
+        if v is ego or np.linalg.norm(v.position - ego.position) > NEAR_M:
+            continue
+        centre, heading = ego_frame(ego, v.position, v.heading)
+        out[id(v)] = (centre, heading, float(v.LENGTH), float(v.WIDTH))
+    return out
+
+
+def run_labelled(env, model, expert, seed: int, k: int, margin: float) -> dict[str, Any]:
+    """One episode of ``model`` with the expert's label at each of its decisions (every k steps)."""
+    from agents.evaluate import _action
+
+    if callable(getattr(model, "reset", None)):
+        model.reset()
+    obs, _ = env.reset(seed=seed)
+    names = env.unwrapped.action_type.actions
+    decisions: list[dict[str, Any]] = []
+    total, t, done, crashed = 0.0, 0, False, False
+    while not done:
+        action, _ = model.predict(obs, deterministic=True)
+        a = int(_action(action))
+        if t % k == 0:
+            decisions.append({"step": t, "student": a, "expert": int(expert.act()),
+                              "points": _observed_points(obs), "near": _neighbours(env)})
+        obs, reward, terminated, truncated, info = env.step(a)
+        total += float(reward)
+        t += 1
+        crashed = crashed or bool(info.get("crashed", False))
+        done = terminated or truncated
+    agree = [d["student"] == d["expert"] for d in decisions]
+    run: dict[str, Any] = {"seed": seed, "return": total, "steps": t, "crashed": crashed,
+                           "decisions": len(decisions), "agreement": float(np.mean(agree)) if agree else None}
+    if crashed:
+        run["crash"] = _crash_record(env, decisions, names, margin)
+    return run
+
+
+def _crash_record(env, decisions: list[dict], names: dict, margin: float) -> dict[str, Any]:
+    """The last decision before the crash: actions, the hit vehicle's position and its points then, the category."""
+    ego = env.unwrapped.vehicle
+    hit = [v for v in env.unwrapped.road.vehicles if v is not ego and getattr(v, "crashed", False)]
+    last = decisions[-1]
+    rec: dict[str, Any] = {"decision_step": last["step"], "student": names[last["student"]],
+                           "expert": names[last["expert"]], "hit_found": bool(hit)}
+    other = min(hit, key=lambda v: np.linalg.norm(v.position - ego.position)) if hit else None
+    box = last["near"].get(id(other)) if other is not None else None
+    if box is None:
+        rec.update(hazard_xy=None, hazard_points=None)
+    else:
+        centre, heading, length, width = box
+        rec.update(hazard_xy=[round(float(x), 2) for x in centre],
+                   hazard_points=points_in_box(last["points"], centre, heading, length, width, margin))
+    rec["category"] = category(rec)
+    return rec
+
+
+def category(rec: dict[str, Any]) -> str:
+    """``expert too`` / ``seen, student disagreed`` / ``not seen`` for a crash record (see the module docstring)."""
+    if rec["student"] == rec["expert"]:
+        return "expert too"
+    return "seen, student disagreed" if (rec.get("hazard_points") or 0) > 0 else "not seen"
+
+
+def _chunk(policy: str, seeds: list[int], margin: float, env_kwargs: dict | None = None) -> list[dict]:
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    import rhs_env  # noqa: F401
+    from agents.decision import HeldPolicy
+    from agents.evaluate import load_policy, make_env, resolve_env
+    from agents.expert import HeadwayDriver
+
+    env_id, kwargs = resolve_env(policy, None, None)
+    env = make_env(env_id, {**kwargs, **(env_kwargs or {})})
+    try:
+        model = load_policy(policy, env, 0)
+        k = model.k if isinstance(model, HeldPolicy) else 1
+        expert = HeadwayDriver(env)
+        return [run_labelled(env, model, expert, s, k, margin) for s in seeds]
+    finally:
+        env.close()
+
+
+def run_seeds(policy: str, seeds: list[int], margin: float, workers: int) -> list[dict]:
+    """Episodes on ``seeds``, split over ``workers`` processes (single-threaded BLAS each)."""
+    if workers <= 1:
+        return _chunk(policy, seeds, margin)
+    from rhs_env.parallel import single_threaded_worker
+
+    k = -(-len(seeds) // workers)
+    parts = [seeds[i : i + k] for i in range(0, len(seeds), k)]
+    with ProcessPoolExecutor(max_workers=len(parts), initializer=single_threaded_worker) as pool:
+        done = list(pool.map(_chunk, [policy] * len(parts), parts, [margin] * len(parts)))
+    return [r for part in done for r in part]
+
+
+def summarize(runs: list[dict]) -> dict[str, Any]:
+    """Crash counts per category and the decision agreement with the expert (all episodes, crash episodes)."""
+    crashes = [r["crash"] for r in runs if r["crashed"]]
+    counts = {c: sum(1 for x in crashes if x["category"] == c) for c in CATEGORIES}
+    agree = [r["agreement"] for r in runs if r["agreement"] is not None]
+    agree_crash = [r["agreement"] for r in runs if r["crashed"] and r["agreement"] is not None]
+    return {"episodes": len(runs), "collisions": len(crashes), "categories": counts,
+            "agreement": float(np.mean(agree)) if agree else None,
+            "agreement_crash_episodes": float(np.mean(agree_crash)) if agree_crash else None}
+
+
+def markdown(result: dict) -> str:
+    s = result["summary"]
+    n = result["episodes"]
+    seeds = ", ".join(f"{a}-{a + n - 1}" if n > 1 else str(a) for a in result["seed_starts"])
+    lines = [f"`{result['policy']}` on seeds {seeds}: {s['collisions']} collision{'s' * (s['collisions'] != 1)} in "
+             f"{s['episodes']} episodes; "
+             f"its decisions match the expert's on {100 * s['agreement']:.1f} % of its own states "
+             + (f"({100 * s['agreement_crash_episodes']:.1f} % in the episodes that crash)." if s["collisions"] else "."),
+             "", "| seed | last decision (env step) | student | expert | hit vehicle at that decision (x, y m) "
+             f"| radar points on it (box + {result['margin_m']:g} m) | category |", "|---:|---:|---|---|---|---:|---|"]
+    for r in result["runs"]:
+        if not r["crashed"]:
+            continue
+        c = r["crash"]
+        xy = "-" if c["hazard_xy"] is None else f"({c['hazard_xy'][0]:.1f}, {c['hazard_xy'][1]:.1f})"
+        pts = "-" if c["hazard_points"] is None else str(c["hazard_points"])
+        lines.append(f"| {r['seed']} | {c['decision_step']} | {c['student']} | {c['expert']} | {xy} | {pts} | "
+                     f"{c['category']} |")
+    lines += ["", "Crashes per category: " + ", ".join(f"{k} {v}" for k, v in s["categories"].items()) + "."]
+    return "\n".join(lines) + "\n"
+
+
+def fingerprint() -> list[float]:
+    """The shipped student, one 2-second episode (10 steps) on seed 1000: return, steps, decisions, agreement."""
+    policy = str(ROOT / DEFAULT_POLICY)
+    if not Path(policy).exists():
+        return []
+    run = _chunk(policy, [1000], 1.0, {"duration": 2})[0]
+    return [run["return"], run["steps"], run["decisions"], run["agreement"], float(run["crashed"])]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--policy", default=DEFAULT_POLICY)
+    ap.add_argument("--seeds", type=int, nargs="+", default=list(DEFAULT_SEEDS),
+                    help="first seed of each block of --episodes seeds")
+    ap.add_argument("--episodes", type=int, default=50, help="episodes per seed block")
+    ap.add_argument("--margin-m", type=float, default=1.0, help="the hit vehicle's box grown by this each side, m")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--out", default=str(ROOT / "results" / "crash_analysis.json"))
+    args = ap.parse_args(argv)
+    if args.episodes < 1:
+        raise SystemExit(f"--episodes must be >= 1, got {args.episodes}")
+    if args.margin_m < 0:
+        raise SystemExit(f"--margin-m must be >= 0, got {args.margin_m}")
+    if not Path(args.policy).exists():
+        raise SystemExit(f"policy not found: {args.policy}")
+    started = time.time()
+    seeds = [a + k for a in args.seeds for k in range(args.episodes)]
+    runs = run_seeds(args.policy, seeds, args.margin_m, args.workers)
+    result = {"policy": args.policy, "seed_starts": args.seeds, "episodes": args.episodes, "margin_m": args.margin_m,
+              "summary": summarize(runs), "runs": runs}
+    out = Path(args.out)
+    write_json(out, result, __file__, args, started, fingerprint, argv)
+    out.with_suffix(".md").write_text(markdown(result))
+    print(markdown(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,58 @@
+"""scripts/crash_analysis.py: frames, the hazard's points and the crash categories."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
+
+import crash_analysis as ca
+
+
+def test_ego_frame_puts_highway_left_on_positive_y():
+    # highway-env: x along the road, y to the right (lanes numbered left to right)
+    ego = SimpleNamespace(position=np.array([100.0, 4.0]), heading=0.0)
+    xy, heading = ca.ego_frame(ego, np.array([106.5, 0.0]), 0.0)  # 6.5 m ahead, one lane to the left
+    assert xy == pytest.approx([6.5, 4.0])
+    assert heading == pytest.approx(0.0)
+    ego_turned = SimpleNamespace(position=np.zeros(2), heading=np.pi / 2)  # driving along +y (to the right)
+    xy, _ = ca.ego_frame(ego_turned, np.array([0.0, 10.0]), np.pi / 2)
+    assert xy == pytest.approx([10.0, 0.0], abs=1e-12)
+
+
+def test_points_in_box_counts_the_grown_oriented_outline():
+    centre = np.array([10.0, 3.0])
+    pts = np.array([[10.0, 3.0], [12.4, 3.9], [13.4, 3.0], [14.0, 3.0], [10.0, 4.9], [10.0, 5.1]])
+    assert ca.points_in_box(pts, centre, 0.0, 5.0, 2.0, 0.0) == 2  # centre and (12.4, 3.9)
+    assert ca.points_in_box(pts, centre, 0.0, 5.0, 2.0, 1.0) == 4  # + (13.4, 3) and (10, 4.9)
+    # rotated 90 deg: the 5 m side runs along y
+    assert ca.points_in_box(np.array([[10.0, 5.4], [12.4, 3.0]]), centre, np.pi / 2, 5.0, 2.0, 0.0) == 1
+
+
+@pytest.mark.parametrize(("student", "expert", "points", "expected"), [
+    ("LANE_LEFT", "LANE_LEFT", 0, "expert too"),
+    ("LANE_LEFT", "SLOWER", 3, "seen, student disagreed"),
+    ("FASTER", "IDLE", 0, "not seen"),
+    ("FASTER", "IDLE", None, "not seen"),
+])
+def test_category(student, expert, points, expected):
+    assert ca.category({"student": student, "expert": expert, "hazard_points": points}) == expected
+
+
+def test_summary_and_markdown():
+    crash = {"decision_step": 85, "student": "LANE_LEFT", "expert": "SLOWER", "hit_found": True,
+             "hazard_xy": [6.5, 4.0], "hazard_points": 2, "category": "seen, student disagreed"}
+    runs = [{"seed": 2000, "crashed": False, "agreement": 0.9},
+            {"seed": 2001, "crashed": True, "agreement": 0.7, "crash": crash}]
+    s = ca.summarize(runs)
+    assert s["collisions"] == 1 and s["categories"]["seen, student disagreed"] == 1
+    assert s["agreement"] == pytest.approx(0.8) and s["agreement_crash_episodes"] == pytest.approx(0.7)
+    md = ca.markdown({"policy": "p.zip", "seed_starts": [2000], "episodes": 2, "margin_m": 1.0,
+                      "summary": s, "runs": runs})
+    assert "seeds 2000-2001: 1 collision in 2 episodes" in md
+    assert "| 2001 | 85 | LANE_LEFT | SLOWER | (6.5, 4.0) | 2 | seen, student disagreed |" in md
