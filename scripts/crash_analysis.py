@@ -1,17 +1,18 @@
-"""Why a student crashes: its last decision against the expert's, and whether the radar saw what it hit.
+"""Why a student crashes: its last decisions against the expert's, and whether the radar saw what it hit.
 
 Issue 12 asks what limits learning to drive on radar SLAM. This script replays a
 policy (default: the shipped radar + SLAM student) on held-out seeds with the
 DAgger expert (:class:`agents.expert.HeadwayDriver`, on the simulator state)
 labelling every state it reaches. For each collision it takes the student's last
-decision before the crash (decisions every ``decision_interval`` env steps,
-:class:`agents.decision.HeldPolicy`) and reports:
+``--window`` decisions before the crash (decisions every ``decision_interval`` env
+steps, :class:`agents.decision.HeldPolicy`), and the first of them where the
+student's action differs from the expert's (the last one when none does), and reports:
 
-* the student's and the expert's meta-action at that decision;
+* the student's and the expert's meta-actions over the window, and at that decision;
 * the hazard: the vehicle it hit (highway-env flags both vehicles of a collision),
   and how many radar points of that decision's observation lie in the hit vehicle's
   box (its 5 m x 2 m outline in the ego frame, grown by ``--margin-m`` each side);
-* a category: ``expert too`` (the expert would have chosen the same action),
+* a category: ``expert too`` (the expert would have chosen the same actions),
   ``seen, student disagreed`` (the hazard had points in the observation: the policy,
   not the sensing, failed), ``not seen`` (no point on it: a sensing miss).
 
@@ -89,7 +90,7 @@ def _neighbours(env) -> dict[int, tuple[np.ndarray, float, float, float]]:
     return out
 
 
-def run_labelled(env, model, expert, seed: int, k: int, margin: float) -> dict[str, Any]:
+def run_labelled(env, model, expert, seed: int, k: int, margin: float, window: int = 3) -> dict[str, Any]:
     """One episode of ``model`` with the expert's label at each of its decisions (every k steps)."""
     from agents.evaluate import _action
 
@@ -114,25 +115,34 @@ def run_labelled(env, model, expert, seed: int, k: int, margin: float) -> dict[s
     run: dict[str, Any] = {"seed": seed, "return": total, "steps": t, "crashed": crashed,
                            "decisions": len(decisions), "agreement": float(np.mean(agree)) if agree else None}
     if crashed:
-        run["crash"] = _crash_record(env, decisions, names, margin)
+        run["crash"] = _crash_record(env, decisions, names, margin, window)
     return run
 
 
-def _crash_record(env, decisions: list[dict], names: dict, margin: float) -> dict[str, Any]:
-    """The last decision before the crash: actions, the hit vehicle's position and its points then, the category."""
+def _crash_record(env, decisions: list[dict], names: dict, margin: float, window: int) -> dict[str, Any]:
+    """The crash seen from the student's last ``window`` decisions before it.
+
+    The decision that counts is the first of them where the student's action differs from the expert's
+    (the last one when they all agree); at that decision: both actions, the hit vehicle's position and
+    its radar points in the observation. Also both action sequences over the window.
+    """
     ego = env.unwrapped.vehicle
     hit = [v for v in env.unwrapped.road.vehicles if v is not ego and getattr(v, "crashed", False)]
-    last = decisions[-1]
-    rec: dict[str, Any] = {"decision_step": last["step"], "student": names[last["student"]],
-                           "expert": names[last["expert"]], "hit_found": bool(hit)}
+    last = decisions[-window:]
+    differ = [d for d in last if d["student"] != d["expert"]]
+    chosen = differ[0] if differ else last[-1]
+    rec: dict[str, Any] = {"decision_step": chosen["step"], "student": names[chosen["student"]],
+                           "expert": names[chosen["expert"]], "hit_found": bool(hit),
+                           "student_window": [names[d["student"]] for d in last],
+                           "expert_window": [names[d["expert"]] for d in last]}
     other = min(hit, key=lambda v: np.linalg.norm(v.position - ego.position)) if hit else None
-    box = last["near"].get(id(other)) if other is not None else None
+    box = chosen["near"].get(id(other)) if other is not None else None
     if box is None:
         rec.update(hazard_xy=None, hazard_points=None)
     else:
         centre, heading, length, width = box
         rec.update(hazard_xy=[round(float(x), 2) for x in centre],
-                   hazard_points=points_in_box(last["points"], centre, heading, length, width, margin))
+                   hazard_points=points_in_box(chosen["points"], centre, heading, length, width, margin))
     rec["category"] = category(rec)
     return rec
 
@@ -144,7 +154,7 @@ def category(rec: dict[str, Any]) -> str:
     return "seen, student disagreed" if (rec.get("hazard_points") or 0) > 0 else "not seen"
 
 
-def _chunk(policy: str, seeds: list[int], margin: float, env_kwargs: dict | None = None) -> list[dict]:
+def _chunk(policy: str, seeds: list[int], margin: float, window: int, env_kwargs: dict | None = None) -> list[dict]:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import rhs_env  # noqa: F401
     from agents.decision import HeldPolicy
@@ -157,21 +167,21 @@ def _chunk(policy: str, seeds: list[int], margin: float, env_kwargs: dict | None
         model = load_policy(policy, env, 0)
         k = model.k if isinstance(model, HeldPolicy) else 1
         expert = HeadwayDriver(env)
-        return [run_labelled(env, model, expert, s, k, margin) for s in seeds]
+        return [run_labelled(env, model, expert, s, k, margin, window) for s in seeds]
     finally:
         env.close()
 
 
-def run_seeds(policy: str, seeds: list[int], margin: float, workers: int) -> list[dict]:
+def run_seeds(policy: str, seeds: list[int], margin: float, window: int, workers: int) -> list[dict]:
     """Episodes on ``seeds``, split over ``workers`` processes (single-threaded BLAS each)."""
     if workers <= 1:
-        return _chunk(policy, seeds, margin)
+        return _chunk(policy, seeds, margin, window)
     from rhs_env.parallel import single_threaded_worker
 
     k = -(-len(seeds) // workers)
     parts = [seeds[i : i + k] for i in range(0, len(seeds), k)]
     with ProcessPoolExecutor(max_workers=len(parts), initializer=single_threaded_worker) as pool:
-        done = list(pool.map(_chunk, [policy] * len(parts), parts, [margin] * len(parts)))
+        done = list(pool.map(_chunk, [policy] * len(parts), parts, [margin] * len(parts), [window] * len(parts)))
     return [r for part in done for r in part]
 
 
@@ -194,16 +204,18 @@ def markdown(result: dict) -> str:
              f"{s['episodes']} episodes; "
              f"its decisions match the expert's on {100 * s['agreement']:.1f} % of its own states "
              + (f"({100 * s['agreement_crash_episodes']:.1f} % in the episodes that crash)." if s["collisions"] else "."),
-             "", "| seed | last decision (env step) | student | expert | hit vehicle at that decision (x, y m) "
-             f"| radar points on it (box + {result['margin_m']:g} m) | category |", "|---:|---:|---|---|---|---:|---|"]
+             "", f"Per crash, the student's last {result['window']} decisions against the expert's "
+             "labels; the decision that counts is the first where they differ (else the last).", "",
+             "| seed | student, last decisions | expert | decision (env step) | hit vehicle then (x, y m) "
+             f"| radar points on it (box + {result['margin_m']:g} m) | category |", "|---:|---|---|---:|---|---:|---|"]
     for r in result["runs"]:
         if not r["crashed"]:
             continue
         c = r["crash"]
         xy = "-" if c["hazard_xy"] is None else f"({c['hazard_xy'][0]:.1f}, {c['hazard_xy'][1]:.1f})"
         pts = "-" if c["hazard_points"] is None else str(c["hazard_points"])
-        lines.append(f"| {r['seed']} | {c['decision_step']} | {c['student']} | {c['expert']} | {xy} | {pts} | "
-                     f"{c['category']} |")
+        lines.append(f"| {r['seed']} | {', '.join(c['student_window'])} | {', '.join(c['expert_window'])} | "
+                     f"{c['decision_step']} | {xy} | {pts} | {c['category']} |")
     lines += ["", "Crashes per category: " + ", ".join(f"{k} {v}" for k, v in s["categories"].items()) + "."]
     return "\n".join(lines) + "\n"
 
@@ -213,7 +225,7 @@ def fingerprint() -> list[float]:
     policy = str(ROOT / DEFAULT_POLICY)
     if not Path(policy).exists():
         return []
-    run = _chunk(policy, [1000], 1.0, {"duration": 2})[0]
+    run = _chunk(policy, [1000], 1.0, 3, {"duration": 2})[0]
     return [run["return"], run["steps"], run["decisions"], run["agreement"], float(run["crashed"])]
 
 
@@ -224,19 +236,22 @@ def main(argv: list[str] | None = None) -> int:
                     help="first seed of each block of --episodes seeds")
     ap.add_argument("--episodes", type=int, default=50, help="episodes per seed block")
     ap.add_argument("--margin-m", type=float, default=1.0, help="the hit vehicle's box grown by this each side, m")
+    ap.add_argument("--window", type=int, default=3, help="the student's last decisions before a crash that are examined")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", default=str(ROOT / "results" / "crash_analysis.json"))
     args = ap.parse_args(argv)
     if args.episodes < 1:
         raise SystemExit(f"--episodes must be >= 1, got {args.episodes}")
+    if args.window < 1:
+        raise SystemExit(f"--window must be >= 1, got {args.window}")
     if args.margin_m < 0:
         raise SystemExit(f"--margin-m must be >= 0, got {args.margin_m}")
     if not Path(args.policy).exists():
         raise SystemExit(f"policy not found: {args.policy}")
     started = time.time()
     seeds = [a + k for a in args.seeds for k in range(args.episodes)]
-    runs = run_seeds(args.policy, seeds, args.margin_m, args.workers)
-    result = {"policy": args.policy, "seed_starts": args.seeds, "episodes": args.episodes, "margin_m": args.margin_m,
+    runs = run_seeds(args.policy, seeds, args.margin_m, args.window, args.workers)
+    result = {"policy": args.policy, "seed_starts": args.seeds, "episodes": args.episodes, "margin_m": args.margin_m, "window": args.window,
               "summary": summarize(runs), "runs": runs}
     out = Path(args.out)
     write_json(out, result, __file__, args, started, fingerprint, argv)

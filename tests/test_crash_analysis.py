@@ -46,13 +46,14 @@ def test_category(student, expert, points, expected):
 
 def test_summary_and_markdown():
     crash = {"decision_step": 85, "student": "LANE_LEFT", "expert": "SLOWER", "hit_found": True,
+             "student_window": ["IDLE", "LANE_LEFT"], "expert_window": ["IDLE", "SLOWER"],
              "hazard_xy": [6.5, 4.0], "hazard_points": 2, "category": "seen, student disagreed"}
     runs = [{"seed": 2000, "crashed": False, "agreement": 0.9},
             {"seed": 2001, "crashed": True, "agreement": 0.7, "crash": crash}]
     s = ca.summarize(runs)
     assert s["collisions"] == 1 and s["categories"]["seen, student disagreed"] == 1
     assert s["agreement"] == pytest.approx(0.8) and s["agreement_crash_episodes"] == pytest.approx(0.7)
-    md = ca.markdown({"policy": "p.zip", "seed_starts": [2000], "episodes": 2, "margin_m": 1.0,
+    md = ca.markdown({"policy": "p.zip", "seed_starts": [2000], "episodes": 2, "margin_m": 1.0, "window": 2,
                       "summary": s, "runs": runs})
     assert "seeds 2000-2001: 1 collision in 2 episodes" in md
-    assert "| 2001 | 85 | LANE_LEFT | SLOWER | (6.5, 4.0) | 2 | seen, student disagreed |" in md
+    assert "| 2001 | IDLE, LANE_LEFT | IDLE, SLOWER | 85 | (6.5, 4.0) | 2 | seen, student disagreed |" in md
