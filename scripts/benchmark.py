@@ -352,7 +352,7 @@ def _run_section(sec: str, args: argparse.Namespace) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sections", nargs="+", choices=SECTIONS, default=list(SECTIONS))
-    ap.add_argument("--steps", type=int, default=40, help="env steps per measurement (envs, load, vec)")
+    ap.add_argument("--steps", type=int, default=100, help="env steps per measurement (envs, load, vec)")
     ap.add_argument("--grid-deg", type=float, default=1.0)
     ap.add_argument("--train-steps", type=int, default=1024, help="PPO timesteps per env id (training section)")
     ap.add_argument("--seed", type=int, default=0)
