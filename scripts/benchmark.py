@@ -123,7 +123,8 @@ def bench_floor(grid_deg: float, seed: int, repeats: int = 30) -> dict:
 
     ``synthesis_noise_ms``: :meth:`RadarSystem.synthesize` of an empty scene (every one of the
     4 I C N samples gets CN(0, sigma_n^2) noise and nothing else); ``range_fft_ms``: the
-    windowed, zero-padded range FFT of those samples. Any scan pays both before detection.
+    windowed, zero-padded range FFT of those samples. Every IQ scan (the default fidelity) pays
+    both before detection.
     """
     from rhs_env.antenna import ScanConfig
     from rhs_env.radar import RadarConfig, RadarSystem
