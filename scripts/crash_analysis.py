@@ -79,7 +79,11 @@ def _observed_points(obs: dict) -> np.ndarray:
 
 
 def _neighbours(env) -> dict[int, tuple[np.ndarray, float, float, float]]:
-    """id -> (centre, heading, length, width) in the ego frame of every other vehicle within NEAR_M."""
+    """id -> (centre, heading, length, width) in the ego frame of every other vehicle within NEAR_M.
+
+    Keyed by ``id``: highway-env creates an episode's vehicles at reset and keeps them all in
+    ``road.vehicles`` (collided ones included), so an id names one vehicle for the whole episode.
+    """
     road, ego = env.unwrapped.road, env.unwrapped.vehicle
     out = {}
     for v in road.vehicles:
