@@ -35,7 +35,6 @@ import argparse
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -94,32 +93,44 @@ def _neighbours(env) -> dict[int, tuple[np.ndarray, float, float, float]]:
     return out
 
 
-def run_labelled(env, model, expert, seed: int, k: int, margin: float, window: int = 3) -> dict[str, Any]:
-    """One episode of ``model`` with the expert's label at each of its decisions (every k steps)."""
-    from agents.evaluate import _action
+class LabelledPolicy:
+    """``model`` as :func:`agents.evaluate.run_episode` drives it, with the expert's label at each of its decisions.
 
-    if callable(getattr(model, "reset", None)):
-        model.reset()
-    obs, _ = env.reset(seed=seed)
-    names = env.unwrapped.action_type.actions
-    decisions: list[dict[str, Any]] = []
-    total, t, done, crashed = 0.0, 0, False, False
-    while not done:
-        action, _ = model.predict(obs, deterministic=True)
-        a = int(_action(action))
-        if t % k == 0:
-            decisions.append({"step": t, "student": a, "expert": int(expert.act()),
-                              "points": _observed_points(obs), "near": _neighbours(env)})
-        obs, reward, terminated, truncated, info = env.step(a)
-        total += float(reward)
-        t += 1
-        crashed = crashed or bool(info.get("crashed", False))
-        done = terminated or truncated
-    agree = [d["student"] == d["expert"] for d in decisions]
-    run: dict[str, Any] = {"seed": seed, "return": total, "steps": t, "crashed": crashed,
-                           "decisions": len(decisions), "agreement": float(np.mean(agree)) if agree else None}
-    if crashed:
-        run["crash"] = _crash_record(env, decisions, names, margin, window)
+    A decision is every k-th ``predict`` of an episode (:class:`agents.decision.HeldPolicy` decides on those);
+    at each, ``decisions`` gets the env step, both actions, the observation's radar points and the neighbours.
+    """
+
+    def __init__(self, model, expert, env, k: int) -> None:
+        self.model, self.expert, self.env, self.k = model, expert, env, k
+        self.decisions: list[dict[str, Any]] = []
+        self._t = 0
+
+    def reset(self) -> None:
+        self.decisions, self._t = [], 0
+        if callable(getattr(self.model, "reset", None)):
+            self.model.reset()
+
+    def predict(self, obs, deterministic: bool = True):
+        from agents.evaluate import _action
+
+        action, state = self.model.predict(obs, deterministic=deterministic)
+        if self._t % self.k == 0:
+            self.decisions.append({"step": self._t, "student": int(_action(action)), "expert": int(self.expert.act()),
+                                   "points": _observed_points(obs), "near": _neighbours(self.env)})
+        self._t += 1
+        return action, state
+
+
+def run_labelled(env, policy: LabelledPolicy, seed: int, margin: float, window: int = 3) -> dict[str, Any]:
+    """One episode (:func:`agents.evaluate.run_episode`) with the agreement of its decisions and its crash record."""
+    from agents.evaluate import run_episode
+
+    ep = run_episode(env, policy, seed)
+    agree = [d["student"] == d["expert"] for d in policy.decisions]
+    run: dict[str, Any] = {"seed": seed, "return": ep["return"], "steps": ep["steps"], "crashed": ep["crashed"],
+                           "decisions": len(agree), "agreement": float(np.mean(agree)) if agree else None}
+    if ep["crashed"]:
+        run["crash"] = _crash_record(env, policy.decisions, env.unwrapped.action_type.actions, margin, window)
     return run
 
 
@@ -170,22 +181,19 @@ def _chunk(policy: str, seeds: list[int], margin: float, window: int, env_kwargs
     try:
         model = load_policy(policy, env, 0)
         k = model.k if isinstance(model, HeldPolicy) else 1
-        expert = HeadwayDriver(env)
-        return [run_labelled(env, model, expert, s, k, margin, window) for s in seeds]
+        labelled = LabelledPolicy(model, HeadwayDriver(env), env, k)
+        return [run_labelled(env, labelled, s, margin, window) for s in seeds]
     finally:
         env.close()
 
 
 def run_seeds(policy: str, seeds: list[int], margin: float, window: int, workers: int) -> list[dict]:
-    """Episodes on ``seeds``, split over ``workers`` processes (single-threaded BLAS each)."""
-    if workers <= 1:
-        return _chunk(policy, seeds, margin, window)
-    from rhs_env.parallel import single_threaded_worker
+    """Episodes on ``seeds``, in ``workers`` contiguous chunks (:func:`rhs_env.parallel.parallel_map`)."""
+    from rhs_env.parallel import parallel_map
 
     k = -(-len(seeds) // workers)
     parts = [seeds[i : i + k] for i in range(0, len(seeds), k)]
-    with ProcessPoolExecutor(max_workers=len(parts), initializer=single_threaded_worker) as pool:
-        done = list(pool.map(_chunk, [policy] * len(parts), parts, [margin] * len(parts), [window] * len(parts)))
+    done = parallel_map(_chunk, [(policy, part, margin, window) for part in parts], workers)
     return [r for part in done for r in part]
 
 
@@ -246,6 +254,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.episodes < 1:
         raise SystemExit(f"--episodes must be >= 1, got {args.episodes}")
+    if args.workers < 1:
+        raise SystemExit(f"--workers must be >= 1, got {args.workers}")
     if args.window < 1:
         raise SystemExit(f"--window must be >= 1, got {args.window}")
     if args.margin_m < 0:
