@@ -173,6 +173,29 @@ def tone_spectra(name: str, n: int, zero_pad: int, n_bins: int, freq: np.ndarray
     return np.sum(coef * np.conj(en) * e1 * ratio, axis=-1)  # exp(-j pi x (N - 1)) = e(N x)^* e(x)
 
 
+#: the largest |R(d)| / R(0) of the alias term that half-rate noise synthesis may add on the searched bins
+NOISE_ALIAS_TOL = 1e-4
+
+
+def noise_decimation(window: np.ndarray, zero_pad: int, n_bins: int, tol: float = NOISE_ALIAS_TOL) -> int:
+    """Rate divisor D (2 or 1) at which the noise of the first ``n_bins`` bins of a windowed FFT may be drawn.
+
+    The bins ``k < K`` of ``FFT_{Z N}(w * eps)``, eps white, have the covariance
+    ``R(k - l) = sum_n w[n]^2 exp(-j 2 pi (k - l) n / (Z N))``. Drawn at half rate
+    (``sqrt(2) w[2 m] eps[m]``, m < N / 2, FFT of ``Z N / 2`` bins) they have
+    ``R(k - l) + R(k - l + Z N / 2)``: exact up to the alias term, whose lags are
+    ``Z N / 2 - K < |d'| < Z N / 2 + K``. D = 2 when N is even and that term stays
+    under ``tol`` R(0) there (a Hann window, N = 400, Z = 2, K = 334: 3e-8; a boxcar's
+    slow sidelobes are not), else 1.
+    """
+    n = len(window)
+    if n % 2 or n_bins >= zero_pad * n // 2:
+        return 1
+    r = np.abs(np.fft.fft(np.asarray(window, float) ** 2, zero_pad * n))
+    lags = np.arange(zero_pad * n // 2 - n_bins + 1, zero_pad * n // 2 + n_bins) % (zero_pad * n)
+    return 2 if r[lags].max() <= tol * r[0] else 1
+
+
 def cfar_alpha(pfa: float, looks: int, train_cells: int) -> float:
     """CA-CFAR multiplier for Gamma(looks) cells: ``F^{-1}(1 - pfa; 2 looks, 2 train_cells looks)``."""
     return float(stats.f.isf(pfa, 2 * looks, 2 * train_cells * looks))

@@ -62,6 +62,7 @@ from rhs_env.point_cloud import (
     cfar_alpha,
     local_maxima,
     make_window,
+    noise_decimation,
     omp_doppler,
     os_cfar_alpha,
     os_cfar_threshold,
@@ -178,6 +179,7 @@ class RadarSystem:
         self._bin_hi = int(min(z * n, math.ceil(config.max_range_m * bins_per_m) + margin))
         self._bin_range = np.arange(self._bin_hi) / bins_per_m  # range of bin k (zero Doppler), m
         self._leak = window_leak_envelope(self._window, z, z * n // 2)
+        self._noise_rate = noise_decimation(self._window, z, self._bin_hi)
         self._same_angle = 0.25 * np.deg2rad(config.scan.grid_deg)
         looks = config.scan.slots * wf.chirps_per_slot
         self._p_noise = looks * config.noise_power_w * self._win_energy  # mean of P per cell, pure noise
@@ -373,6 +375,14 @@ class RadarSystem:
     def _noise_spectrum(self, shape: tuple[int, ...]) -> np.ndarray:
         """``FFT_{Z N}(w * eps)[..., :K_b]``, eps ~ CN(0, sigma_n^2) i.i.d. (zeros without noise): shape + (K_b,), a view.
 
+        Drawn at the rate ``1 / D`` (:func:`noise_decimation`, D = 2 for the default Hann
+        window and range): ``x[m] = sqrt(D) w[D m] eps[m]``, m < N / D, and its FFT of
+        ``Z N / D`` bins. For D = 2 its bins have the covariance
+        ``R(k - l) + R(k - l + Z N / 2)``, ``R(d) = sigma_n^2 sum_n w[n]^2
+        exp(-j 2 pi d n / (Z N))`` (the identity ``2 sum_{n even} g[n] = sum_n g[n] (1 + (-1)^n)``):
+        the full-rate covariance R plus an alias term that :func:`noise_decimation` has checked
+        to be negligible on the searched bins. Half the normals and half the FFT.
+
         eps by the polar method as in :meth:`synthesize` (``|eps| = sigma_n
         sqrt(-ln(1 - u1))``, phase ``2 pi u2``), the uniforms as 24-bit fractions
         of the generator's raw 64-bit draws (one draw gives u1 and u2 for two
@@ -380,7 +390,8 @@ class RadarSystem:
         folded into the radius, then one in-place zero-padded FFT per chirp.
         """
         cfg = self.config
-        n, z, kb = cfg.waveform.samples, cfg.waveform.zero_pad, self._bin_hi
+        d, z, kb = self._noise_rate, cfg.waveform.zero_pad, self._bin_hi
+        n = cfg.waveform.samples // d
         m = math.prod(shape)
         buf = self._buffer("nfft", (m, z * n), np.complex64)
         if not cfg.link.add_noise:
@@ -397,7 +408,7 @@ class RadarSystem:
         np.log1p(rad, out=rad)
         np.negative(rad, out=rad)
         np.sqrt(rad, out=rad)
-        rad *= self._window * np.float32(math.sqrt(cfg.noise_power_w))
+        rad *= self._window[::d] * np.float32(math.sqrt(d * cfg.noise_power_w))
         ph *= np.float32(2 * np.pi)
         tmp = self._buffer("ntmp", (m, n), np.float32)
         np.cos(ph, out=tmp)

@@ -17,6 +17,7 @@ def test_floor_times_the_noise_and_fft_of_every_sample_of_a_scan():
     assert f["samples_per_scan"] == 4 * 18 * 4 * 400  # 4 radars x I slots (90 deg / 5 deg) x C chirps x N samples
     assert f["synthesis_noise_ms"] > 0 and f["range_fft_ms"] > 0
     assert f["floor_ms"] == pytest.approx(f["synthesis_noise_ms"] + f["range_fft_ms"])
+    assert f["range_noise_ms"] > 0
 
 
 def _result(base_ms: float, slam_stage_ms: dict) -> dict:
@@ -44,5 +45,7 @@ def test_markdown_sets_the_floor_beside_the_budget():
     res["envs"].update(radar_added_ms=20.0, radar_slam_added_ms=40.0, radar_added_over_base=1.0,
                        radar_slam_added_over_base=2.0)
     text = benchmark.markdown(res)
-    assert "noise 5.0 ms + range FFT 3.0 ms = 8.0 ms" in text
+    assert "noise 5.0 ms + range FFT 3.0 ms = 8.0 ms, before detection and OMP. The goals" in text
+    res["floor"]["range_noise_ms"] = 2.5
+    assert "at half rate) 2.5 ms. The goals leave" in benchmark.markdown(res)
     assert f"leave the radar {20.0 / 0.75 - 20.0:.1f} ms" in text

@@ -53,9 +53,13 @@ def test_noiseless_spectrum_matches_the_iq_path():
     assert np.abs(got - ref).max() < 1e-5 * np.abs(ref).max()
 
 
-def test_noise_bins_have_the_covariance_of_the_windowed_fft_of_white_noise():
-    """E[Y_k Y_{k+d}^*] = sigma^2 sum_n w[n]^2 exp(+j 2 pi d n / (Z N)) for d = 0..3 (half-bin lags included)."""
-    radar = RadarSystem(replace(SMALL, fidelity="range"), np.random.default_rng(5))
+@pytest.mark.parametrize(("window", "rate"), [("hann", 2), ("boxcar", 1)])
+def test_noise_bins_have_the_covariance_of_the_windowed_fft_of_white_noise(window, rate):
+    """E[Y_k Y_{k+d}^*] = sigma^2 sum_n w[n]^2 exp(+j 2 pi d n / (Z N)) for d = 0..3 (half-bin lags included),
+    whether the noise is drawn at half rate (Hann: the alias term is negligible) or at full rate (boxcar)."""
+    cfg = replace(SMALL, fidelity="range", waveform=replace(SMALL.waveform, window=window))
+    radar = RadarSystem(cfg, np.random.default_rng(5))
+    assert radar._noise_rate == rate
     cfg = radar.config
     n, z = cfg.waveform.samples, cfg.waveform.zero_pad
     w2 = make_window(cfg.waveform.window, n).astype(float) ** 2
@@ -131,3 +135,16 @@ def test_range_fidelity_point_clouds_equal_the_iq_path_on_200_scenes():
         print(f"{k}: iq {a:.4g} +- {Z95 * sa:.2g}, range {b:.4g} +- {Z95 * sb:.2g}")
         assert abs(a - b) <= Z95 * np.hypot(sa, sb), k
     assert 0.6 < iq["detection_rate"][0] < 0.97  # the scenes are seen, many targets near the threshold
+
+
+def test_noise_decimation_bounds_the_alias_term():
+    """Half rate only where the alias term R(d + Z N / 2) is negligible on the searched bins."""
+    from rhs_env.point_cloud import noise_decimation
+
+    hann = make_window("hann", 400)
+    assert noise_decimation(hann, 2, 334) == 2  # the default waveform and range
+    assert noise_decimation(hann, 2, 400) == 1  # the searched band reaches the half-rate FFT's length
+    assert noise_decimation(make_window("boxcar", 400), 2, 334) == 1  # slow sidelobes alias
+    assert noise_decimation(make_window("hann", 401), 2, 334) == 1  # odd N
+    r = np.abs(np.fft.fft(hann.astype(float) ** 2, 800))
+    assert r[400 - 334 + 1 : 400 + 334].max() < 1e-4 * r[0]
