@@ -22,16 +22,22 @@ rows (x forward, y left, vehicle frame, m); highway-env's lateral axis points ri
 so a vehicle at highway offset (dx, dy) from the ego lies at (dx, -dy) in that frame
 (both rotated by the ego heading).
 
-    OMP_NUM_THREADS=1 python scripts/crash_analysis.py                   # the shipped student, seeds 1000-1049 and 2000-2049
+Several ``--policy`` are replayed on the same seeds, the first being the reference
+(default: the shipped student and the same recipe at half its budget,
+``agents/data/budget/``: the budget ablation of issue 12); the collision counts of
+each against the first's are compared with Fisher's exact test (two-sided).
+
+    OMP_NUM_THREADS=1 python scripts/crash_analysis.py                   # shipped + budget ablation, seeds 1000-1049 and 2000-2049
     python scripts/crash_analysis.py --policy agents/data/dagger_rhs_highway_slam.zip --seeds 2000 --episodes 20
 
-Writes ``results/crash_analysis.json`` (every episode's decisions summary and every
-crash) and ``results/crash_analysis.md`` (the README table).
+Writes ``results/crash_analysis.json`` (per policy: every episode's decisions summary and
+every crash) and ``results/crash_analysis.md`` (the README tables).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -45,6 +51,8 @@ sys.path.insert(0, str(ROOT / "scripts"))
 from _provenance import write_json
 
 DEFAULT_POLICY = "agents/data/dagger_rhs_highway_slam.zip"
+#: the same recipe (agents/hyperparams/dagger.yml, FINE_SPEEDS, 5-degree grid) at half the shipped student's env steps
+BUDGET_ABLATION = "agents/data/budget/dagger_rhs_highway_slam_40k.zip"
 DEFAULT_SEEDS = (1000, 2000)
 CATEGORIES = ("seen, student disagreed", "not seen", "expert too")
 #: vehicles within this distance of the ego are kept at each decision (the hit one is among them), m
@@ -208,27 +216,66 @@ def summarize(runs: list[dict]) -> dict[str, Any]:
             "agreement_crash_episodes": float(np.mean(agree_crash)) if agree_crash else None}
 
 
-def markdown(result: dict) -> str:
-    s = result["summary"]
+def training_steps(policy: str) -> int | None:
+    """The env steps a policy was trained with (``timesteps`` of the JSON beside its zip), None if unknown."""
+    from agents.run_setup import metadata_path
+
+    meta = metadata_path(policy)
+    return json.loads(meta.read_text()).get("timesteps") if meta.exists() else None
+
+
+def fisher_p(a: dict[str, Any], b: dict[str, Any]) -> float:
+    """Two-sided Fisher exact p of two summaries' collision counts (collided / not, in their episodes)."""
+    from scipy.stats import fisher_exact
+
+    table = [[a["collisions"], a["episodes"] - a["collisions"]], [b["collisions"], b["episodes"] - b["collisions"]]]
+    return float(fisher_exact(table).pvalue)
+
+
+def _blocks(result: dict) -> list[tuple[int, int]]:
     n = result["episodes"]
-    seeds = ", ".join(f"{a}-{a + n - 1}" if n > 1 else str(a) for a in result["seed_starts"])
-    lines = [f"`{result['policy']}` on seeds {seeds}: {s['collisions']} collision{'s' * (s['collisions'] != 1)} in "
-             f"{s['episodes']} episodes; "
-             f"its decisions match the expert's on {100 * s['agreement']:.1f} % of its own states "
-             + (f"({100 * s['agreement_crash_episodes']:.1f} % in the episodes that crash)." if s["collisions"] else "."),
-             "", f"Per crash, the student's last {result['window']} decisions against the expert's "
-             "labels; the decision that counts is the first where they differ (else the last).", "",
-             "| seed | student, last decisions | expert | decision (env step) | hit vehicle then (x, y m) "
-             f"| radar points on it (box + {result['margin_m']:g} m) | category |", "|---:|---|---|---:|---|---:|---|"]
-    for r in result["runs"]:
-        if not r["crashed"]:
-            continue
-        c = r["crash"]
-        xy = "-" if c["hazard_xy"] is None else f"({c['hazard_xy'][0]:.1f}, {c['hazard_xy'][1]:.1f})"
-        pts = "-" if c["hazard_points"] is None else str(c["hazard_points"])
-        lines.append(f"| {r['seed']} | {', '.join(c['student_window'])} | {', '.join(c['expert_window'])} | "
-                     f"{c['decision_step']} | {xy} | {pts} | {c['category']} |")
-    lines += ["", "Crashes per category: " + ", ".join(f"{k} {v}" for k, v in s["categories"].items()) + "."]
+    return [(a, a + n - 1) for a in result["seed_starts"]]
+
+
+def _block_text(lo: int, hi: int) -> str:
+    return f"{lo}-{hi}" if hi > lo else str(lo)
+
+
+def markdown(result: dict) -> str:
+    """The README text: one summary row per policy, then every crash with the student's and expert's decisions."""
+    blocks = _blocks(result)
+    lines = [f"Seeds {', '.join(_block_text(*b) for b in blocks)}; agreement: the share of the student's decisions "
+             "that match the expert's label, on its own states (in the episodes that crash).", "",
+             "| policy | training env steps | " + " | ".join(f"collisions, seeds {_block_text(*b)}" for b in blocks)
+             + " | collisions, all | Fisher p vs first | agreement | categories (seen, student disagreed / not seen / expert too) |",
+             "|---|---:|" + "---:|" * len(blocks) + "---:|---:|---|---|"]
+    first = result["policies"][0]["summary"]
+    for i, pol in enumerate(result["policies"]):
+        s, runs = pol["summary"], pol["runs"]
+        per_block = [sum(r["crashed"] for r in runs if lo <= r["seed"] <= hi) for lo, hi in blocks]
+        agree = f"{100 * s['agreement']:.1f} %" if s["agreement"] is not None else "-"
+        if s["agreement_crash_episodes"] is not None:
+            agree += f" ({100 * s['agreement_crash_episodes']:.1f} %)"
+        steps = "-" if pol["timesteps"] is None else str(pol["timesteps"])
+        p = "-" if i == 0 else f"{fisher_p(first, s):.3f}"
+        lines.append(f"| `{pol['policy']}` | {steps} | " + " | ".join(f"{k}/{result['episodes']}" for k in per_block)
+                     + f" | {s['collisions']}/{s['episodes']} | {p} | {agree} | "
+                     + " / ".join(str(v) for v in s["categories"].values()) + " |")
+    lines += ["", f"Per crash, the student's last {result['window']} decisions against the expert's labels; the "
+              "decision that counts is the first where they differ (else the last).", "",
+              "| policy (training env steps) | seed | student, last decisions | expert | decision (env step) "
+              f"| hit vehicle then (x, y m) | radar points on it (box + {result['margin_m']:g} m) | category |",
+              "|---|---:|---|---|---:|---|---:|---|"]
+    for pol in result["policies"]:
+        name = f"{Path(pol['policy']).stem} ({pol['timesteps'] if pol['timesteps'] is not None else '?'})"
+        for r in pol["runs"]:
+            if not r["crashed"]:
+                continue
+            c = r["crash"]
+            xy = "-" if c["hazard_xy"] is None else f"({c['hazard_xy'][0]:.1f}, {c['hazard_xy'][1]:.1f})"
+            pts = "-" if c["hazard_points"] is None else str(c["hazard_points"])
+            lines.append(f"| {name} | {r['seed']} | {', '.join(c['student_window'])} | {', '.join(c['expert_window'])} | "
+                         f"{c['decision_step']} | {xy} | {pts} | {c['category']} |")
     return "\n".join(lines) + "\n"
 
 
@@ -243,7 +290,8 @@ def fingerprint() -> list[float]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--policy", default=DEFAULT_POLICY)
+    ap.add_argument("--policy", nargs="+", default=[DEFAULT_POLICY, BUDGET_ABLATION],
+                    help="policies replayed on the same seeds, the first the reference (default: %(default)s)")
     ap.add_argument("--seeds", type=int, nargs="+", default=list(DEFAULT_SEEDS),
                     help="first seed of each block of --episodes seeds")
     ap.add_argument("--episodes", type=int, default=50, help="episodes per seed block")
@@ -260,13 +308,18 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"--window must be >= 1, got {args.window}")
     if args.margin_m < 0:
         raise SystemExit(f"--margin-m must be >= 0, got {args.margin_m}")
-    if not Path(args.policy).exists():
-        raise SystemExit(f"policy not found: {args.policy}")
+    missing = [p for p in args.policy if not Path(p).exists()]
+    if missing:
+        raise SystemExit(f"policy not found: {', '.join(missing)}")
     started = time.time()
     seeds = [a + k for a in args.seeds for k in range(args.episodes)]
-    runs = run_seeds(args.policy, seeds, args.margin_m, args.window, args.workers)
-    result = {"policy": args.policy, "seed_starts": args.seeds, "episodes": args.episodes, "margin_m": args.margin_m, "window": args.window,
-              "summary": summarize(runs), "runs": runs}
+    policies = []
+    for policy in args.policy:
+        print(f"crash_analysis: {policy} on {len(seeds)} seeds", file=sys.stderr)
+        runs = run_seeds(policy, seeds, args.margin_m, args.window, args.workers)
+        policies.append({"policy": policy, "timesteps": training_steps(policy), "summary": summarize(runs), "runs": runs})
+    result = {"seed_starts": args.seeds, "episodes": args.episodes, "margin_m": args.margin_m, "window": args.window,
+              "policies": policies}
     out = Path(args.out)
     write_json(out, result, __file__, args, started, fingerprint, argv)
     out.with_suffix(".md").write_text(markdown(result))

@@ -53,7 +53,16 @@ def test_summary_and_markdown():
     s = ca.summarize(runs)
     assert s["collisions"] == 1 and s["categories"]["seen, student disagreed"] == 1
     assert s["agreement"] == pytest.approx(0.8) and s["agreement_crash_episodes"] == pytest.approx(0.7)
-    md = ca.markdown({"policy": "p.zip", "seed_starts": [2000], "episodes": 2, "margin_m": 1.0, "window": 2,
-                      "summary": s, "runs": runs})
-    assert "seeds 2000-2001: 1 collision in 2 episodes" in md
-    assert "| 2001 | IDLE, LANE_LEFT | IDLE, SLOWER | 85 | (6.5, 4.0) | 2 | seen, student disagreed |" in md
+    clean = [{"seed": 2000, "crashed": False, "agreement": 0.95}, {"seed": 2001, "crashed": False, "agreement": 0.9}]
+    md = ca.markdown({"seed_starts": [2000], "episodes": 2, "margin_m": 1.0, "window": 2,
+                      "policies": [{"policy": "p.zip", "timesteps": 40000, "summary": s, "runs": runs},
+                                   {"policy": "q.zip", "timesteps": None, "summary": ca.summarize(clean), "runs": clean}]})
+    assert "| `p.zip` | 40000 | 1/2 | 1/2 | - | 80.0 % (70.0 %) | 1 / 0 / 0 |" in md
+    assert "| `q.zip` | - | 0/2 | 0/2 | 1.000 | 92.5 % | 0 / 0 / 0 |" in md
+    assert "| p (40000) | 2001 | IDLE, LANE_LEFT | IDLE, SLOWER | 85 | (6.5, 4.0) | 2 | seen, student disagreed |" in md
+
+
+def test_fisher_p_separates_9_from_1_in_100():
+    a, b = {"collisions": 9, "episodes": 100}, {"collisions": 1, "episodes": 100}
+    assert ca.fisher_p(a, b) == pytest.approx(0.0183, abs=5e-4)
+    assert ca.fisher_p(a, a) == pytest.approx(1.0)
