@@ -38,10 +38,10 @@ from agents.expert import HeadwayDriver
 from rhs_env.registration import SLAM_ENV_SPECS
 
 DATA_DIR = Path(__file__).parent / "data"
-#: DAgger students of agents.expert.HeadwayDriver, 40k env steps each: on radar + SLAM (shipped) and ground truth
+#: DAgger students of agents.expert.HeadwayDriver, 80k env steps each: on radar + SLAM (shipped) and ground truth
 DAGGER_POLICY = DATA_DIR / "dagger_rhs_highway_slam.zip"
 DAGGER_TRUTH_POLICY = DATA_DIR / "dagger_rhs_highway_truth.zip"
-#: PPO with the same budget (agents/hyperparams/ppo.yml): results/policies.md compares
+#: PPO at its own budget (agents/hyperparams/ppo.yml, 40k env steps): results/policies.md compares
 PPO_POLICY = DATA_DIR / "ppo_rhs_highway_slam.zip"
 PPO_TRUTH_POLICY = DATA_DIR / "ppo_rhs_highway_truth.zip"
 #: the policy of ``rhs-slam demo`` / ``evaluate`` by default, and its ground-truth twin
