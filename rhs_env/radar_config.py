@@ -348,8 +348,10 @@ class RadarConfig:
         fidelity: synthesis path, "iq" (the reference: the dechirped samples and
             their windowed FFT) or "range" (the range spectrum written directly:
             each tone's windowed, zero-padded spectrum in closed form, the noise as
-            the windowed FFT of white noise, only the bins searched; the same
-            distribution at a fraction of the cost, :meth:`rhs_env.radar.RadarSystem.synthesize_spectrum`).
+            the windowed FFT of white noise drawn at half rate where the alias term
+            is negligible (:func:`rhs_env.point_cloud.noise_decimation`), only the bins
+            searched; the same distribution at a fraction of the cost,
+            :meth:`rhs_env.radar.RadarSystem.synthesize_spectrum`).
         waveform: :class:`WaveformConfig` (chirp, sampling, range FFT).
         link: :class:`LinkBudgetConfig` (Tx power, receiver noise).
         detection: :class:`DetectionConfig` (CFAR / fixed threshold).

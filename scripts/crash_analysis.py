@@ -1,7 +1,7 @@
 """Why a student crashes: its last decisions against the expert's, and whether the radar saw what it hit.
 
-Issue 12 asks what limits learning to drive on radar SLAM. This script replays a
-policy (default: the shipped radar + SLAM student) on held-out seeds with the
+Issue 12 asks what limits learning to drive on radar SLAM. This script replays
+policies (default: the shipped radar + SLAM student, then the budget ablation) on held-out seeds with the
 DAgger expert (:class:`agents.expert.HeadwayDriver`, on the simulator state)
 labelling every state it reaches. For each collision it takes the student's last
 ``--window`` decisions before the crash (decisions every ``decision_interval`` env
