@@ -144,6 +144,21 @@ def test_refine_passes_reach_the_omp_and_the_profiles_table_flags_a_quality_chan
     assert radar_profiles.same_quality(far, ref) == {k: k != "doppler_rmse_mps" for k in radar_profiles.QUALITY}
 
 
+def test_radar_quality_pools_noise_draws_of_the_same_scenes():
+    """evaluate(..., noise_draws=k) scans the same scenes k times with independent noise: k x the scenes and
+    targets, and its first draw is the single-draw evaluation."""
+    from radar_quality import evaluate
+
+    from rhs_env.antenna import ScanConfig
+    from rhs_env.radar import RadarConfig
+
+    cfg = RadarConfig(scan=ScanConfig(grid_deg=5.0))
+    one, two = evaluate(cfg, 2, 0), evaluate(cfg, 2, 0, noise_draws=2)
+    assert (one["detection_rate"]["n"], two["detection_rate"]["n"]) == (2, 4)
+    assert 1.5 * one["point_rmse_m"]["n"] <= two["point_rmse_m"]["n"] <= 2.5 * one["point_rmse_m"]["n"]
+    assert two != one
+
+
 def test_os_cfar_false_alarm_rate_matches_design():
     from rhs_env.point_cloud import os_cfar_alpha, os_cfar_threshold
 
