@@ -59,7 +59,9 @@ def evaluate(cfg: RadarConfig, scenes: int, seed: int, noise_draws: int = 1) -> 
     realizations (radar generators seeded ``seed``, ``seed + 1000``, ...) and pools
     them: the RMSEs are dominated by a few outlier points (the median error is ~30x
     smaller), so one realization's RMSE moves by more than its delta-method interval
-    says, and pooling draws steadies it.
+    says, and pooling draws steadies it. The pooled samples share their scenes, so the
+    intervals are somewhat narrow for the scene-level means; two configs compared on
+    the same scenes and seeds see the same scene effects.
     """
     from fig5b_pointcloud_vs_elements import landmark_scene
 
