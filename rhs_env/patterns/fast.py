@@ -256,17 +256,44 @@ def _score(delta: float, capped: bool) -> float:
     return delta if capped else UNCAPPED_WEIGHT * delta
 
 
+Point = tuple[float, float, float]  # (rho, G G' - rho, kappa G - rho)
+
+
+def _regula_falsi(lo: Point, hi: Point) -> float:
+    """The next rho once the root of ``F = min(f_opt, f_cap)`` is bracketed (``F(lo) > 0 >= F(hi)``).
+
+    The root of F is the smaller root of its two terms, so each term that is negative at ``hi``
+    (positive at ``lo``) gets the regula falsi step ``r_hi - f(r_hi) (r_hi - r_lo) / (f(r_hi) - f(r_lo))``
+    and the smallest one is taken: F itself is kinked where the terms cross, and G G' jumps
+    where G has a kink, where the secant through the last two points steps out of the bracket.
+    """
+    steps = [hi[0] - fh * (hi[0] - lo[0]) / (fh - fl) for fl, fh in zip(lo[1:], hi[1:]) if fh <= 0 < fl]
+    return min(steps) if steps else 0.5 * (lo[0] + hi[0])
+
+
+def _first_rho(rho: float, g: float, dg: float, kappa: float) -> float:
+    """The first step from ``rho0``: the root of F for the linearised model ``G(r) ~ G0 + G'(r - rho0)``."""
+    if g * dg - rho <= kappa * g - rho:  # stationary point of (G0 + G'(r - rho0))^2 - r^2
+        return dg * (g - dg * rho) / (1 - dg * dg) if dg < 1 else 2 * rho
+    return kappa * (g - dg * rho) / (1 - kappa * dg) if kappa * dg < 1 else 2 * rho  # r = kappa (G0 + G'(r - rho0))
+
+
 def _half_step(sv: _SideSOCP, rho0: float, evals: int, kappa: float) -> np.ndarray | None:
     """Maximise delta(rho) = G(rho)^2 - rho^2 subject to the sidelobe cap rho <= kappa G(rho).
 
     The optimum is the root of ``F(rho) = min(G G' - rho, kappa G - rho)`` (both
     terms are positive for small rho and negative for large rho: ``delta'/2`` and
-    the cap slack), found by a safeguarded secant search that starts at ``rho0``
-    with a step from the linearised model ``G(rho) ~ G0 + G'(rho - rho0)``.
+    the cap slack), found by a safeguarded search that starts at ``rho0`` with a step from the
+    linearised model (:func:`_first_rho`), extrapolates by the secant until the root is
+    bracketed and then takes Illinois regula falsi steps (:func:`_regula_falsi`; the end of the
+    bracket kept twice in a row has its F values halved). Steps leaving the bracket
+    ``(lo, hi)`` (``(lo, 4 rho)`` before a negative F) bisect it.
     Returns the psi of the best cap-feasible evaluation, else None.
     """
     best_d, best_x = -np.inf, None
-    lo, hi = 0.0, np.inf  # bracket on the root of F (F(lo) > 0 > F(hi))
+    lo: Point | None = None  # bracket ends (rho, f_opt, f_cap): F(lo) > 0 >= F(hi)
+    hi: Point | None = None
+    kept = 0  # > 0: lo was moved that many times in a row, < 0: hi
     pts: list[tuple[float, float]] = []
     rho = rho0
     for _ in range(evals):
@@ -277,24 +304,28 @@ def _half_step(sv: _SideSOCP, rho0: float, evals: int, kappa: float) -> np.ndarr
         d = g * g - rho * rho
         if rho <= kappa * g * (1 + 1e-9) and d > best_d:
             best_d, best_x = d, x
-        f_opt, f_cap = g * dg - rho, kappa * g - rho
-        f = min(f_opt, f_cap)
+        pt = (rho, g * dg - rho, kappa * g - rho)
+        f = min(pt[1], pt[2])
         if f > 0:
-            lo = max(lo, rho)
+            lo, kept = pt, max(kept, 0) + 1
+            if kept > 1 and hi is not None:
+                hi = (hi[0], 0.5 * hi[1], 0.5 * hi[2])
         else:
-            hi = min(hi, rho)
+            hi, kept = pt, min(kept, 0) - 1
+            if kept < -1 and lo is not None:
+                lo = (lo[0], 0.5 * lo[1], 0.5 * lo[2])
         pts.append((rho, f))
         if len(pts) == 1:
-            if f_opt <= f_cap:  # stationary point of (G0 + G'(r - rho0))^2 - r^2
-                nxt = dg * (g - dg * rho) / (1 - dg * dg) if dg < 1 else 2 * rho
-            else:  # r = kappa (G0 + G'(r - rho0))
-                nxt = kappa * (g - dg * rho) / (1 - kappa * dg) if kappa * dg < 1 else 2 * rho
+            nxt = _first_rho(rho, g, dg, kappa)
+        elif lo is not None and hi is not None:
+            nxt = _regula_falsi(lo, hi)
         else:
             (r1, f1), (r2, f2) = pts[-2], pts[-1]
             nxt = r2 - f2 * (r2 - r1) / (f2 - f1) if f2 != f1 else 0.5 * (r1 + r2)
-        upper = hi if np.isfinite(hi) else 4.0 * max(rho, 1e-12)
-        if not np.isfinite(nxt) or not (lo < nxt < upper):
-            nxt = 0.5 * (lo + upper)
+        low = lo[0] if lo is not None else 0.0
+        upper = hi[0] if hi is not None else 4.0 * max(rho, 1e-12)
+        if not np.isfinite(nxt) or not (low < nxt < upper):
+            nxt = 0.5 * (low + upper)
         if abs(nxt - rho) <= 1e-4 * max(rho, 1e-12):
             break
         rho = nxt
