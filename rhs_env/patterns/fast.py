@@ -217,8 +217,8 @@ class _SideSOCP:
         b[self.head] = rho
         self.solver = clarabel.DefaultSolver(sp.csc_matrix((m, m)), -self.c, sp.csc_matrix(a), b, cones, self.settings)
 
-    def solve(self, rho: float) -> tuple[float, float, np.ndarray] | None:
-        """Return (G(rho), G'(rho), psi) or None when the solver fails.
+    def solve(self, rho: float) -> tuple[float, float, np.ndarray, float] | None:
+        """Return (G(rho), G'(rho), psi, max_l sqrt(w_l) |b_l^T psi| on D) or None when the solver fails.
 
         Only ``b`` depends on rho, so a solver is updated in place; a direction added to the
         active set rebuilds it.
@@ -234,13 +234,14 @@ class _SideSOCP:
             if str(sol.status) not in ("Solved", "AlmostSolved"):
                 return None
             x = np.maximum(np.asarray(sol.x), 0.0)
-            viol = (np.abs(self.sd @ x) > rho * (1 + 1e-5)) & ~self.active
+            level = np.abs(self.sd @ x)
+            viol = (level > rho * (1 + 1e-5)) & ~self.active
             if not viol.any():
                 break
             self.active |= viol
             self.solver = None
         z = np.asarray(sol.z)
-        return float(self.c @ x), float(np.sum(z[self.head])), x
+        return float(self.c @ x), float(np.sum(z[self.head])), x, float(level.max(initial=0.0))
 
 
 UNCAPPED_WEIGHT = 0.5
@@ -257,6 +258,9 @@ def _score(delta: float, capped: bool) -> float:
 
 
 Point = tuple[float, float, float]  # (rho, G G' - rho, kappa G - rho)
+
+
+FLAT = 1e-6  # G'(rho) rho / G(rho) below which G counts as flat (no sidelobe dual is positive)
 
 
 def _regula_falsi(lo: Point, hi: Point) -> float:
@@ -285,22 +289,30 @@ def _half_step(sv: _SideSOCP, rho0: float, evals: int, kappa: float) -> np.ndarr
     terms are positive for small rho and negative for large rho: ``delta'/2`` and
     the cap slack), found by a safeguarded search that starts at ``rho0`` with a step from the
     linearised model (:func:`_first_rho`), extrapolates by the secant until the root is
-    bracketed and then takes Illinois regula falsi steps (:func:`_regula_falsi`; the end of the
-    bracket kept twice in a row has its F values halved). Steps leaving the bracket
-    ``(lo, hi)`` (``(lo, 4 rho)`` before a negative F) bisect it.
+    bracketed and then takes regula falsi steps (:func:`_regula_falsi`), or bisects the bracket
+    when the last two steps moved the same end (F far from linear: a kink or a jump). Steps
+    leaving the bracket ``(lo, hi)`` (``(lo, 4 rho)`` before a negative F) bisect it.
+
+    Where ``G'(rho) = 0`` (no sidelobe constraint binds: ``G(rho) = max G``) the solution ``x``
+    is also feasible, with the same objective, at its own sidelobe level ``r_x <= rho``, so
+    ``G(r) = G(rho)`` for ``r >= r_x``, ``F(r_x) = -r_x`` and ``x`` scores ``G^2 - r_x^2``: the
+    evaluation counts at ``r_x`` (otherwise regula falsi from the flat side, where
+    ``F = -rho``, creeps towards the kink of G).
     Returns the psi of the best cap-feasible evaluation, else None.
     """
     best_d, best_x = -np.inf, None
     lo: Point | None = None  # bracket ends (rho, f_opt, f_cap): F(lo) > 0 >= F(hi)
     hi: Point | None = None
-    kept = 0  # > 0: lo was moved that many times in a row, < 0: hi
+    kept = 0  # > 0: the last steps moved lo (that many in a row), < 0: hi
     pts: list[tuple[float, float]] = []
     rho = rho0
     for _ in range(evals):
         out = sv.solve(rho)
         if out is None:
             break
-        g, dg, x = out
+        g, dg, x, level = out
+        if dg * rho <= FLAT * g:  # G is flat from rho on, and from x's own sidelobe level on
+            rho = min(rho, level)
         d = g * g - rho * rho
         if rho <= kappa * g * (1 + 1e-9) and d > best_d:
             best_d, best_x = d, x
