@@ -170,6 +170,14 @@ class FastSettings:
         return asdict(self)
 
 
+def _csc(a: np.ndarray) -> sp.csc_matrix:
+    """``scipy.sparse.csc_matrix(a)`` of a dense ``a`` (zeros dropped, sorted indices), built directly."""
+    nz = a.T != 0  # column-major scan of a
+    indptr = np.zeros(a.shape[1] + 1, dtype=np.int32)
+    np.cumsum(nz.sum(axis=1), out=indptr[1:])
+    return sp.csc_matrix((a.T[nz], np.nonzero(nz)[1].astype(np.int32), indptr), shape=a.shape)
+
+
 class _SideSOCP:
     """The half-step SOCP of one side for fixed phase and weights; ``solve(rho)`` re-uses the solver.
 
@@ -215,7 +223,7 @@ class _SideSOCP:
         self.head = 2 * m + 1 + 3 * np.arange(L)
         b = self.b.copy()
         b[self.head] = rho
-        self.solver = clarabel.DefaultSolver(sp.csc_matrix((m, m)), -self.c, sp.csc_matrix(a), b, cones, self.settings)
+        self.solver = clarabel.DefaultSolver(sp.csc_matrix((m, m)), -self.c, _csc(a), b, cones, self.settings)
 
     def solve(self, rho: float) -> tuple[float, float, np.ndarray, float] | None:
         """Return (G(rho), G'(rho), psi, max_l sqrt(w_l) |b_l^T psi| on D) or None when the solver fails.
@@ -396,13 +404,22 @@ class _Grid:
                    side_matrix(self.config, self.s_k, f))
             for side, f in self.feeds.items()
         }
+        s = np.concatenate([self.si, self.s_d])
+        self.merit_mats = (side_matrix(self.config, s, self.config.tx_feed), side_matrix(self.config, s, self.config.rx_feed))
 
     def merit(self, p: Psi) -> Merit:
         """(score, delta, sidelobe cap met on D); candidates are compared by score (:func:`_score`)."""
-        pw = two_way_power(self.config, p["tx"], p["rx"], np.concatenate([self.si, self.s_d]))
+        pw = _two_way_power(p["tx"], p["rx"], *self.merit_mats)
         capped = bool(pw[1:].max() <= self.kappa**2 * pw[0] * (1 + 1e-6))
         delta = float(pw[0] - pw[1:].max())
         return _score(delta, capped), delta, capped
+
+
+def _two_way_power(tx: np.ndarray, rx: np.ndarray, bt: np.ndarray, br: np.ndarray) -> np.ndarray:
+    """:func:`two_way_power` with the side matrices given: ``|bt tx|^2 |br rx|^2 / (||tx||^2 ||rx||^2)``."""
+    t = np.einsum("...m,km->...k", tx, bt)
+    r = np.einsum("...m,km->...k", rx, br)
+    return np.abs(t) ** 2 * np.abs(r) ** 2 / (np.sum(tx**2, axis=-1)[..., None] * np.sum(rx**2, axis=-1)[..., None])
 
 
 def _search(g: _Grid, sv: _SideSOCP, rho0: float, evals: int) -> np.ndarray | None:
