@@ -178,20 +178,28 @@ def _csc(a: np.ndarray) -> sp.csc_matrix:
     return sp.csc_matrix((a.T[nz], np.nonzero(nz)[1].astype(np.int32), indptr), shape=a.shape)
 
 
+PRUNE = 8  # fewest directions dropped from the active set for a rebuild
+
+
 class _SideSOCP:
     """The half-step SOCP of one side for fixed phase and weights; ``solve(rho)`` re-uses the solver.
 
     Active set: only the sidelobe directions in ``active`` enter the SOCP; after each solve
     the full set D is checked and violated directions are added (and the SOCP re-solved),
-    so the returned optimum satisfies every constraint on D.
+    so the returned optimum satisfies every constraint on D. Directions added at a low rho
+    stay slack at a higher one but make every later solve dearer (the KKT system fills in
+    with the dense rows): before each solve the set goes back to ``active`` plus the directions
+    whose level at the last solution is at least ``keep * rho``, when that drops ``PRUNE`` or more.
     """
 
     def __init__(self, b_i: np.ndarray, b_d: np.ndarray, w_d: np.ndarray, b_k: np.ndarray, w_k: np.ndarray,
-                 phi: float, active: np.ndarray | None = None, tol: float = 1e-6) -> None:
+                 phi: float, active: np.ndarray | None = None, tol: float = 1e-6, keep: float = 0.5) -> None:
         self.c = np.real(np.exp(-1j * phi) * b_i)
         self.sd = np.sqrt(w_d)[:, None] * b_d
         self.sk = np.sqrt(w_k)[:, None] * b_k
         self.active = np.ones(b_d.shape[0], bool) if active is None else active.copy()
+        self.base, self.keep = self.active.copy(), keep
+        self.level: np.ndarray | None = None  # |sqrt(w_l) b_l^T psi| on D at the last solution
         settings = clarabel.DefaultSettings()
         settings.verbose = False
         settings.tol_gap_rel = tol
@@ -231,6 +239,10 @@ class _SideSOCP:
         Only ``b`` depends on rho, so a solver is updated in place; a direction added to the
         active set rebuilds it.
         """
+        if self.level is not None:
+            want = self.base | (self.level >= self.keep * rho)
+            if self.active.sum() - want.sum() >= PRUNE:
+                self.active, self.solver = want, None
         while True:
             if self.solver is None:
                 self._build(rho)
@@ -248,6 +260,7 @@ class _SideSOCP:
                 break
             self.active |= viol
             self.solver = None
+        self.level = level
         z = np.asarray(sol.z)
         return float(self.c @ x), float(np.sum(z[self.head])), x, float(level.max(initial=0.0))
 
@@ -451,7 +464,7 @@ def _side_step(g: _Grid, psi: Psi, cur: Merit, side: str, other: str, nphi: int)
     evals = st.rho_evals if nphi == 1 else min(st.sweep_evals, st.rho_evals)
     screened: list[tuple[Merit, _SideSOCP]] = []
     for phi in phi0 + 2 * np.pi * np.arange(nphi) / nphi:
-        sv = _SideSOCP(b_i, b_d, w_d, b_k, w_k, float(phi), active, st.socp_tol)
+        sv = _SideSOCP(b_i, b_d, w_d, b_k, w_k, float(phi), active, st.socp_tol, 10.0 ** (st.active_db / 20.0))
         x = _search(g, sv, rho0, evals)
         if x is None:
             continue
