@@ -296,6 +296,12 @@ def _regula_falsi(lo: Point, hi: Point) -> float:
     return min(steps) if steps else 0.5 * (lo[0] + hi[0])
 
 
+def _delta_bound(rho: float, g: float, dg: float) -> float:
+    """``max_r (a + G' r)^2 - r^2`` with ``a = G - G' rho`` (inf for ``G' >= 1``): a bound on delta(r) for every r."""
+    a = g - dg * rho
+    return a * a / (1.0 - dg * dg) if dg < 1.0 else np.inf
+
+
 def _first_rho(rho: float, g: float, dg: float, kappa: float) -> float:
     """The first step from ``rho0``: the root of F for the linearised model ``G(r) ~ G0 + G'(r - rho0)``."""
     if g * dg - rho <= kappa * g - rho:  # stationary point of (G0 + G'(r - rho0))^2 - r^2
@@ -303,7 +309,7 @@ def _first_rho(rho: float, g: float, dg: float, kappa: float) -> float:
     return kappa * (g - dg * rho) / (1 - kappa * dg) if kappa * dg < 1 else 2 * rho  # r = kappa (G0 + G'(r - rho0))
 
 
-def _half_step(sv: _SideSOCP, rho0: float, evals: int, kappa: float) -> np.ndarray | None:
+def _half_step(sv: _SideSOCP, rho0: float, evals: int, kappa: float, gain_tol: float = 0.0) -> np.ndarray | None:
     """Maximise delta(rho) = G(rho)^2 - rho^2 subject to the sidelobe cap rho <= kappa G(rho).
 
     The optimum is the root of ``F(rho) = min(G G' - rho, kappa G - rho)`` (both
@@ -319,9 +325,14 @@ def _half_step(sv: _SideSOCP, rho0: float, evals: int, kappa: float) -> np.ndarr
     ``G(r) = G(rho)`` for ``r >= r_x``, ``F(r_x) = -r_x`` and ``x`` scores ``G^2 - r_x^2``: the
     evaluation counts at ``r_x`` (otherwise regula falsi from the flat side, where
     ``F = -rho``, creeps towards the kink of G).
+
+    Every evaluation bounds delta everywhere: G is concave, so ``G(r) <= a + G' r`` with
+    ``a = G - G' rho``, and ``max_r (a + G' r)^2 - r^2 = a^2 / (1 - G'^2)`` for ``G' < 1``
+    (:func:`_delta_bound`). The search stops once the best cap-feasible delta is within
+    ``gain_tol`` (relative) of the smallest such bound: no rho can improve it by more.
     Returns the psi of the best cap-feasible evaluation, else None.
     """
-    best_d, best_x = -np.inf, None
+    best_d, best_x, bound = -np.inf, None, np.inf
     lo: Point | None = None  # bracket ends (rho, f_opt, f_cap): F(lo) > 0 >= F(hi)
     hi: Point | None = None
     kept = 0  # > 0: the last steps moved lo (that many in a row), < 0: hi
@@ -337,6 +348,9 @@ def _half_step(sv: _SideSOCP, rho0: float, evals: int, kappa: float) -> np.ndarr
         d = g * g - rho * rho
         if rho <= kappa * g * (1 + 1e-9) and d > best_d:
             best_d, best_x = d, x
+        bound = min(bound, _delta_bound(rho, g, dg))
+        if best_x is not None and bound - best_d <= gain_tol * abs(best_d):
+            break
         pt = (rho, g * dg - rho, kappa * g - rho)
         f = min(pt[1], pt[2])
         if f > 0:
@@ -435,11 +449,14 @@ def _two_way_power(tx: np.ndarray, rx: np.ndarray, bt: np.ndarray, br: np.ndarra
     return np.abs(t) ** 2 * np.abs(r) ** 2 / (np.sum(tx**2, axis=-1)[..., None] * np.sum(rx**2, axis=-1)[..., None])
 
 
+GAIN_TOL = 0.1  # a half-step's rho search stops within GAIN_TOL * settings.tol (relative) of its delta bound
+
+
 def _search(g: _Grid, sv: _SideSOCP, rho0: float, evals: int) -> np.ndarray | None:
     """:func:`_half_step` under the cap, else (cap unreachable from here) the plain delta step."""
-    x = _half_step(sv, rho0, evals, g.kappa)
+    x = _half_step(sv, rho0, evals, g.kappa, GAIN_TOL * g.settings.tol)
     if x is None and g.kappa < 1.0:
-        x = _half_step(sv, rho0, evals, np.inf)
+        x = _half_step(sv, rho0, evals, np.inf, GAIN_TOL * g.settings.tol)
     return x if x is not None and np.any(x > 0) else None
 
 
