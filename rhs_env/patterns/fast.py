@@ -315,7 +315,7 @@ def _half_step(sv: _SideSOCP, rho0: float, evals: int, kappa: float, gain_tol: f
     The optimum is the root of ``F(rho) = min(G G' - rho, kappa G - rho)`` (both
     terms are positive for small rho and negative for large rho: ``delta'/2`` and
     the cap slack), found by a safeguarded search that starts at ``rho0`` with a step from the
-    linearised model (:func:`_first_rho`), extrapolates by the secant until the root is
+    linearised model (:func:`_first_rho`, at least ``rho0 / 4``), extrapolates by the secant until the root is
     bracketed and then takes regula falsi steps (:func:`_regula_falsi`), or bisects the bracket
     when the last two steps moved the same end (F far from linear: a kink or a jump). Steps
     leaving the bracket ``(lo, hi)`` (``(lo, 4 rho)`` before a negative F) bisect it.
@@ -362,13 +362,14 @@ def _half_step(sv: _SideSOCP, rho0: float, evals: int, kappa: float, gain_tol: f
             if kept < -1 and lo is not None:
                 lo = (lo[0], 0.5 * lo[1], 0.5 * lo[2])
         pts.append((rho, f))
-        if len(pts) == 1:
-            nxt = _first_rho(rho, g, dg, kappa)
+        if len(pts) == 1:  # at most a factor 4 down (G' ~ 0 where G is flat would send it to ~0)
+            nxt = max(_first_rho(rho, g, dg, kappa), 0.25 * rho)
         elif lo is not None and hi is not None:
             nxt = _regula_falsi(lo, hi)
-        else:
+        else:  # secant; aimed 0.1 % below the root while no F > 0 is seen (the cap may never be met from above)
             (r1, f1), (r2, f2) = pts[-2], pts[-1]
             nxt = r2 - f2 * (r2 - r1) / (f2 - f1) if f2 != f1 else 0.5 * (r1 + r2)
+            nxt *= 1.0 - 1e-3 if lo is None else 1.0
         low = lo[0] if lo is not None else 0.0
         upper = hi[0] if hi is not None else 4.0 * max(rho, 1e-12)
         if not np.isfinite(nxt) or not (low < nxt < upper):
