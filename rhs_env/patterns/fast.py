@@ -25,7 +25,9 @@ Fix the main-lobe phase ``phi = angle(x_i(psi_cur))``. Because
 is convex, ``G`` is concave and nondecreasing in ``rho`` with
 ``G'(rho) = sum_l z_l`` (the dual of the sidelobe cones' heads), and
 ``delta(rho) = G(rho)^2 - rho^2`` is maximised over the scalar rho by a
-safeguarded secant search on ``delta'(rho)/2 = G G' - rho``. Evaluating at the
+safeguarded secant / regula falsi search on ``delta'(rho)/2 = G G' - rho``, which
+stops once no rho can beat the best delta by more than ``0.1 tol`` (relative): the
+tangents of the concave G bound delta everywhere (:func:`_half_step`). Evaluating at the
 current sidelobe level ``rho_cur`` reproduces ``psi_cur``'s delta, so every
 half-step is monotone. The set K (``theta_i +- 0.9 grid``, and points across
 the main lobe) keeps the two-way peak at the grid centre; the result is checked on
@@ -43,7 +45,8 @@ the current sidelobe level) and runs the full search only on the best screened p
 
 **Active set.** Most sidelobe directions are far below rho, so each SOCP starts with the
 directions within ``active_db`` of the current peak and adds any direction its solution
-violates (re-solving), which keeps the cones few without changing the optimum.
+violates (re-solving), which keeps the cones few without changing the optimum; directions
+added at a low rho are dropped again at a higher one (:class:`_SideSOCP`).
 
 **Sidelobe cap.** P1's delta is a difference of powers, so on some grids its optimum
 has a high PSLR. With ``max_sidelobe_db`` the rho search is limited to
@@ -92,7 +95,7 @@ class FastSettings:
         oversample: samples of D per main-lobe half-width ``lambda/(M d)`` (in sin theta), (0, 64].
         max_iter: maximum Tx+Rx alternations, [1, 1000].
         tol: stop when delta improves by less than ``tol`` (relative) over one alternation, (0, 1).
-        rho_evals: SOCP solves per half-step in the scalar rho search, [1, 50].
+        rho_evals: most SOCP solves per half-step in the scalar rho search, [1, 50].
         pointing: constrain the two-way main lobe to peak at the grid centre (set K).
         max_sidelobe_db: cap on the two-way sidelobe level on D relative to the main lobe,
             ``max_l |h(s_l)|^2 / |h(s_i)|^2 <= 10^(cap/10)``, dB in [-80, 0] (0: sidelobes only below the main lobe).
