@@ -83,7 +83,6 @@ from rhs_env.patterns.metrics import (
     pointing_error_deg,
     side_matrix,
     sidelobe_directions,
-    two_way_power,
 )
 
 
@@ -425,6 +424,7 @@ class _Grid:
         self.s_k = mainlobe_checks(config, angle_deg, grid_deg, near) if settings.pointing else np.zeros(0)
         self.feeds = {"tx": config.tx_feed, "rx": config.rx_feed}
         self.kappa = 10.0 ** (settings.max_sidelobe_db / 20.0)
+        self._fine: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.set_directions(sidelobe_directions(config, angle_deg, settings.oversample))
 
     def set_directions(self, s_d: np.ndarray) -> None:
@@ -438,6 +438,16 @@ class _Grid:
         s = np.concatenate([self.si, self.s_d])
         self.merit_mats = (side_matrix(self.config, s, self.config.tx_feed), side_matrix(self.config, s, self.config.rx_feed))
 
+    def fine_mats(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(s, Tx and Rx side matrices at ``[s_i, s]``) of the report's fine grid outside the main lobe (computed once)."""
+        if self._fine is None:
+            s = np.linspace(-1.0, 1.0, FINE_GRID_POINTS)
+            s = s[np.abs(s - self.si[0]) > self.config.mainlobe_halfwidth]
+            si_s = np.concatenate([self.si, s])
+            self._fine = (s, side_matrix(self.config, si_s, self.config.tx_feed),
+                          side_matrix(self.config, si_s, self.config.rx_feed))
+        return self._fine
+
     def merit(self, p: Psi) -> Merit:
         """(score, delta, sidelobe cap met on D); candidates are compared by score (:func:`_score`)."""
         pw = _two_way_power(p["tx"], p["rx"], *self.merit_mats)
@@ -447,7 +457,7 @@ class _Grid:
 
 
 def _two_way_power(tx: np.ndarray, rx: np.ndarray, bt: np.ndarray, br: np.ndarray) -> np.ndarray:
-    """:func:`two_way_power` with the side matrices given: ``|bt tx|^2 |br rx|^2 / (||tx||^2 ||rx||^2)``."""
+    """:func:`rhs_env.patterns.metrics.two_way_power` with the side matrices given: ``|bt tx|^2 |br rx|^2 / (||tx||^2 ||rx||^2)``."""
     t = np.einsum("...m,km->...k", tx, bt)
     r = np.einsum("...m,km->...k", rx, br)
     return np.abs(t) ** 2 * np.abs(r) ** 2 / (np.sum(tx**2, axis=-1)[..., None] * np.sum(rx**2, axis=-1)[..., None])
@@ -542,9 +552,8 @@ def _initial_points(g: _Grid, warm: list[tuple[np.ndarray, np.ndarray]] | None) 
 def _fine_sidelobes(g: _Grid, psi: Psi) -> tuple[np.ndarray, np.ndarray, float]:
     """Two-way power on the fine grid of :func:`pattern_report` (``FINE_GRID_POINTS`` in sin theta)
     outside the main lobe: (s, |h(s)|^2, |h(s_i)|^2)."""
-    s = np.linspace(-1.0, 1.0, FINE_GRID_POINTS)
-    s = s[np.abs(s - g.si[0]) > g.config.mainlobe_halfwidth]
-    p = two_way_power(g.config, psi["tx"], psi["rx"], np.concatenate([g.si, s]))
+    s, bt, br = g.fine_mats()
+    p = _two_way_power(psi["tx"], psi["rx"], bt, br)
     return s, p[1:], float(p[0])
 
 
