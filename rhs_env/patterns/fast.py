@@ -25,7 +25,9 @@ Fix the main-lobe phase ``phi = angle(x_i(psi_cur))``. Because
 is convex, ``G`` is concave and nondecreasing in ``rho`` with
 ``G'(rho) = sum_l z_l`` (the dual of the sidelobe cones' heads), and
 ``delta(rho) = G(rho)^2 - rho^2`` is maximised over the scalar rho by a
-safeguarded secant search on ``delta'(rho)/2 = G G' - rho``. Evaluating at the
+safeguarded secant / regula falsi search on ``delta'(rho)/2 = G G' - rho``, which
+stops once no rho can beat the best delta by more than ``0.1 tol`` (relative): the
+tangents of the concave G bound delta everywhere (:func:`_half_step`). Evaluating at the
 current sidelobe level ``rho_cur`` reproduces ``psi_cur``'s delta, so every
 half-step is monotone. The set K (``theta_i +- 0.9 grid``, and points across
 the main lobe) keeps the two-way peak at the grid centre; the result is checked on
@@ -43,7 +45,8 @@ the current sidelobe level) and runs the full search only on the best screened p
 
 **Active set.** Most sidelobe directions are far below rho, so each SOCP starts with the
 directions within ``active_db`` of the current peak and adds any direction its solution
-violates (re-solving), which keeps the cones few without changing the optimum.
+violates (re-solving), which keeps the cones few without changing the optimum; directions
+added at a low rho are dropped again at a higher one (:class:`_SideSOCP`).
 
 **Sidelobe cap.** P1's delta is a difference of powers, so on some grids its optimum
 has a high PSLR. With ``max_sidelobe_db`` the rho search is limited to
@@ -80,7 +83,6 @@ from rhs_env.patterns.metrics import (
     pointing_error_deg,
     side_matrix,
     sidelobe_directions,
-    two_way_power,
 )
 
 
@@ -92,7 +94,7 @@ class FastSettings:
         oversample: samples of D per main-lobe half-width ``lambda/(M d)`` (in sin theta), (0, 64].
         max_iter: maximum Tx+Rx alternations, [1, 1000].
         tol: stop when delta improves by less than ``tol`` (relative) over one alternation, (0, 1).
-        rho_evals: SOCP solves per half-step in the scalar rho search, [1, 50].
+        rho_evals: most SOCP solves per half-step in the scalar rho search, [1, 50].
         pointing: constrain the two-way main lobe to peak at the grid centre (set K).
         max_sidelobe_db: cap on the two-way sidelobe level on D relative to the main lobe,
             ``max_l |h(s_l)|^2 / |h(s_i)|^2 <= 10^(cap/10)``, dB in [-80, 0] (0: sidelobes only below the main lobe).
@@ -170,20 +172,36 @@ class FastSettings:
         return asdict(self)
 
 
+def _csc(a: np.ndarray) -> sp.csc_matrix:
+    """``scipy.sparse.csc_matrix(a)`` of a dense ``a`` (zeros dropped, sorted indices), built directly."""
+    nz = a.T != 0  # column-major scan of a
+    indptr = np.zeros(a.shape[1] + 1, dtype=np.int32)
+    np.cumsum(nz.sum(axis=1), out=indptr[1:])
+    return sp.csc_matrix((a.T[nz], np.nonzero(nz)[1].astype(np.int32), indptr), shape=a.shape)
+
+
+PRUNE = 8  # fewest directions dropped from the active set for a rebuild
+
+
 class _SideSOCP:
     """The half-step SOCP of one side for fixed phase and weights; ``solve(rho)`` re-uses the solver.
 
     Active set: only the sidelobe directions in ``active`` enter the SOCP; after each solve
     the full set D is checked and violated directions are added (and the SOCP re-solved),
-    so the returned optimum satisfies every constraint on D.
+    so the returned optimum satisfies every constraint on D. Directions added at a low rho
+    stay slack at a higher one but make every later solve dearer (the KKT system fills in
+    with the dense rows): before each solve the set goes back to ``active`` plus the directions
+    whose level at the last solution is at least ``keep * rho``, when that drops ``PRUNE`` or more.
     """
 
     def __init__(self, b_i: np.ndarray, b_d: np.ndarray, w_d: np.ndarray, b_k: np.ndarray, w_k: np.ndarray,
-                 phi: float, active: np.ndarray | None = None, tol: float = 1e-6) -> None:
+                 phi: float, active: np.ndarray | None = None, tol: float = 1e-6, keep: float = 0.5) -> None:
         self.c = np.real(np.exp(-1j * phi) * b_i)
         self.sd = np.sqrt(w_d)[:, None] * b_d
         self.sk = np.sqrt(w_k)[:, None] * b_k
         self.active = np.ones(b_d.shape[0], bool) if active is None else active.copy()
+        self.base, self.keep = self.active.copy(), keep
+        self.level: np.ndarray | None = None  # |sqrt(w_l) b_l^T psi| on D at the last solution
         settings = clarabel.DefaultSettings()
         settings.verbose = False
         settings.tol_gap_rel = tol
@@ -215,14 +233,18 @@ class _SideSOCP:
         self.head = 2 * m + 1 + 3 * np.arange(L)
         b = self.b.copy()
         b[self.head] = rho
-        self.solver = clarabel.DefaultSolver(sp.csc_matrix((m, m)), -self.c, sp.csc_matrix(a), b, cones, self.settings)
+        self.solver = clarabel.DefaultSolver(sp.csc_matrix((m, m)), -self.c, _csc(a), b, cones, self.settings)
 
-    def solve(self, rho: float) -> tuple[float, float, np.ndarray] | None:
-        """Return (G(rho), G'(rho), psi) or None when the solver fails.
+    def solve(self, rho: float) -> tuple[float, float, np.ndarray, float] | None:
+        """Return (G(rho), G'(rho), psi, max_l sqrt(w_l) |b_l^T psi| on D) or None when the solver fails.
 
         Only ``b`` depends on rho, so a solver is updated in place; a direction added to the
         active set rebuilds it.
         """
+        if self.level is not None:
+            want = self.base | (self.level >= self.keep * rho)
+            if self.active.sum() - want.sum() >= PRUNE:
+                self.active, self.solver = want, None
         while True:
             if self.solver is None:
                 self._build(rho)
@@ -234,13 +256,15 @@ class _SideSOCP:
             if str(sol.status) not in ("Solved", "AlmostSolved"):
                 return None
             x = np.maximum(np.asarray(sol.x), 0.0)
-            viol = (np.abs(self.sd @ x) > rho * (1 + 1e-5)) & ~self.active
+            level = np.abs(self.sd @ x)
+            viol = (level > rho * (1 + 1e-5)) & ~self.active
             if not viol.any():
                 break
             self.active |= viol
             self.solver = None
+        self.level = level
         z = np.asarray(sol.z)
-        return float(self.c @ x), float(np.sum(z[self.head])), x
+        return float(self.c @ x), float(np.sum(z[self.head])), x, float(level.max(initial=0.0))
 
 
 UNCAPPED_WEIGHT = 0.5
@@ -256,45 +280,102 @@ def _score(delta: float, capped: bool) -> float:
     return delta if capped else UNCAPPED_WEIGHT * delta
 
 
-def _half_step(sv: _SideSOCP, rho0: float, evals: int, kappa: float) -> np.ndarray | None:
+Point = tuple[float, float, float]  # (rho, G G' - rho, kappa G - rho)
+
+
+FLAT = 1e-6  # G'(rho) rho / G(rho) below which G counts as flat (no sidelobe dual is positive)
+
+
+def _regula_falsi(lo: Point, hi: Point) -> float:
+    """The next rho once the root of ``F = min(f_opt, f_cap)`` is bracketed (``F(lo) > 0 >= F(hi)``).
+
+    The root of F is the smaller root of its two terms, so each term that is negative at ``hi``
+    (positive at ``lo``) gets the regula falsi step ``r_hi - f(r_hi) (r_hi - r_lo) / (f(r_hi) - f(r_lo))``
+    and the smallest one is taken: F itself is kinked where the terms cross, and G G' jumps
+    where G has a kink, where the secant through the last two points steps out of the bracket.
+    """
+    steps = [hi[0] - fh * (hi[0] - lo[0]) / (fh - fl) for fl, fh in zip(lo[1:], hi[1:]) if fh <= 0 < fl]
+    return min(steps) if steps else 0.5 * (lo[0] + hi[0])
+
+
+def _delta_bound(rho: float, g: float, dg: float) -> float:
+    """``max_r (a + G' r)^2 - r^2`` with ``a = G - G' rho`` (inf for ``G' >= 1``): a bound on delta(r) for every r."""
+    a = g - dg * rho
+    return a * a / (1.0 - dg * dg) if dg < 1.0 else np.inf
+
+
+def _first_rho(rho: float, g: float, dg: float, kappa: float) -> float:
+    """The first step from ``rho0``: the root of F for the linearised model ``G(r) ~ G0 + G'(r - rho0)``."""
+    if g * dg - rho <= kappa * g - rho:  # stationary point of (G0 + G'(r - rho0))^2 - r^2
+        return dg * (g - dg * rho) / (1 - dg * dg) if dg < 1 else 2 * rho
+    return kappa * (g - dg * rho) / (1 - kappa * dg) if kappa * dg < 1 else 2 * rho  # r = kappa (G0 + G'(r - rho0))
+
+
+def _half_step(sv: _SideSOCP, rho0: float, evals: int, kappa: float, gain_tol: float = 0.0) -> np.ndarray | None:
     """Maximise delta(rho) = G(rho)^2 - rho^2 subject to the sidelobe cap rho <= kappa G(rho).
 
     The optimum is the root of ``F(rho) = min(G G' - rho, kappa G - rho)`` (both
     terms are positive for small rho and negative for large rho: ``delta'/2`` and
-    the cap slack), found by a safeguarded secant search that starts at ``rho0``
-    with a step from the linearised model ``G(rho) ~ G0 + G'(rho - rho0)``.
+    the cap slack), found by a safeguarded search that starts at ``rho0`` with a step from the
+    linearised model (:func:`_first_rho`, at least ``rho0 / 4``), extrapolates by the secant until the root is
+    bracketed and then takes regula falsi steps (:func:`_regula_falsi`), or bisects the bracket
+    when the last two steps moved the same end (F far from linear: a kink or a jump). Steps
+    leaving the bracket ``(lo, hi)`` (``(lo, 4 rho)`` before a negative F) bisect it.
+
+    Where ``G'(rho) = 0`` (no sidelobe constraint binds: ``G(rho) = max G``) the solution ``x``
+    is also feasible, with the same objective, at its own sidelobe level ``r_x <= rho``, so
+    ``G(r) = G(rho)`` for ``r >= r_x``, ``F(r_x) = -r_x`` and ``x`` scores ``G^2 - r_x^2``: the
+    evaluation counts at ``r_x`` (otherwise regula falsi from the flat side, where
+    ``F = -rho``, creeps towards the kink of G).
+
+    Every evaluation bounds delta everywhere: G is concave, so ``G(r) <= a + G' r`` with
+    ``a = G - G' rho``, and ``max_r (a + G' r)^2 - r^2 = a^2 / (1 - G'^2)`` for ``G' < 1``
+    (:func:`_delta_bound`). The search stops once the best cap-feasible delta is within
+    ``gain_tol`` (relative) of the smallest such bound: no rho can improve it by more.
     Returns the psi of the best cap-feasible evaluation, else None.
     """
-    best_d, best_x = -np.inf, None
-    lo, hi = 0.0, np.inf  # bracket on the root of F (F(lo) > 0 > F(hi))
+    best_d, best_x, bound = -np.inf, None, np.inf
+    lo: Point | None = None  # bracket ends (rho, f_opt, f_cap): F(lo) > 0 >= F(hi)
+    hi: Point | None = None
+    kept = 0  # > 0: the last steps moved lo (that many in a row), < 0: hi
     pts: list[tuple[float, float]] = []
     rho = rho0
     for _ in range(evals):
         out = sv.solve(rho)
         if out is None:
             break
-        g, dg, x = out
+        g, dg, x, level = out
+        if dg * rho <= FLAT * g:  # G is flat from rho on, and from x's own sidelobe level on
+            rho = min(rho, level)
         d = g * g - rho * rho
         if rho <= kappa * g * (1 + 1e-9) and d > best_d:
             best_d, best_x = d, x
-        f_opt, f_cap = g * dg - rho, kappa * g - rho
-        f = min(f_opt, f_cap)
+        bound = min(bound, _delta_bound(rho, g, dg))
+        if best_x is not None and bound - best_d <= gain_tol * abs(best_d):
+            break
+        pt = (rho, g * dg - rho, kappa * g - rho)
+        f = min(pt[1], pt[2])
         if f > 0:
-            lo = max(lo, rho)
+            lo, kept = pt, max(kept, 0) + 1
+            if kept > 1 and hi is not None:
+                hi = (hi[0], 0.5 * hi[1], 0.5 * hi[2])
         else:
-            hi = min(hi, rho)
+            hi, kept = pt, min(kept, 0) - 1
+            if kept < -1 and lo is not None:
+                lo = (lo[0], 0.5 * lo[1], 0.5 * lo[2])
         pts.append((rho, f))
-        if len(pts) == 1:
-            if f_opt <= f_cap:  # stationary point of (G0 + G'(r - rho0))^2 - r^2
-                nxt = dg * (g - dg * rho) / (1 - dg * dg) if dg < 1 else 2 * rho
-            else:  # r = kappa (G0 + G'(r - rho0))
-                nxt = kappa * (g - dg * rho) / (1 - kappa * dg) if kappa * dg < 1 else 2 * rho
-        else:
+        if len(pts) == 1:  # at most a factor 4 down (G' ~ 0 where G is flat would send it to ~0)
+            nxt = max(_first_rho(rho, g, dg, kappa), 0.25 * rho)
+        elif lo is not None and hi is not None:
+            nxt = _regula_falsi(lo, hi)
+        else:  # secant; aimed 0.1 % below the root while no F > 0 is seen (the cap may never be met from above)
             (r1, f1), (r2, f2) = pts[-2], pts[-1]
             nxt = r2 - f2 * (r2 - r1) / (f2 - f1) if f2 != f1 else 0.5 * (r1 + r2)
-        upper = hi if np.isfinite(hi) else 4.0 * max(rho, 1e-12)
-        if not np.isfinite(nxt) or not (lo < nxt < upper):
-            nxt = 0.5 * (lo + upper)
+            nxt *= 1.0 - 1e-3 if lo is None else 1.0
+        low = lo[0] if lo is not None else 0.0
+        upper = hi[0] if hi is not None else 4.0 * max(rho, 1e-12)
+        if not np.isfinite(nxt) or not (low < nxt < upper):
+            nxt = 0.5 * (low + upper)
         if abs(nxt - rho) <= 1e-4 * max(rho, 1e-12):
             break
         rho = nxt
@@ -343,6 +424,7 @@ class _Grid:
         self.s_k = mainlobe_checks(config, angle_deg, grid_deg, near) if settings.pointing else np.zeros(0)
         self.feeds = {"tx": config.tx_feed, "rx": config.rx_feed}
         self.kappa = 10.0 ** (settings.max_sidelobe_db / 20.0)
+        self._fine: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.set_directions(sidelobe_directions(config, angle_deg, settings.oversample))
 
     def set_directions(self, s_d: np.ndarray) -> None:
@@ -353,20 +435,42 @@ class _Grid:
                    side_matrix(self.config, self.s_k, f))
             for side, f in self.feeds.items()
         }
+        s = np.concatenate([self.si, self.s_d])
+        self.merit_mats = (side_matrix(self.config, s, self.config.tx_feed), side_matrix(self.config, s, self.config.rx_feed))
+
+    def fine_mats(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(s, Tx and Rx side matrices at ``[s_i, s]``) of the report's fine grid outside the main lobe (computed once)."""
+        if self._fine is None:
+            s = np.linspace(-1.0, 1.0, FINE_GRID_POINTS)
+            s = s[np.abs(s - self.si[0]) > self.config.mainlobe_halfwidth]
+            si_s = np.concatenate([self.si, s])
+            self._fine = (s, side_matrix(self.config, si_s, self.config.tx_feed),
+                          side_matrix(self.config, si_s, self.config.rx_feed))
+        return self._fine
 
     def merit(self, p: Psi) -> Merit:
         """(score, delta, sidelobe cap met on D); candidates are compared by score (:func:`_score`)."""
-        pw = two_way_power(self.config, p["tx"], p["rx"], np.concatenate([self.si, self.s_d]))
+        pw = _two_way_power(p["tx"], p["rx"], *self.merit_mats)
         capped = bool(pw[1:].max() <= self.kappa**2 * pw[0] * (1 + 1e-6))
         delta = float(pw[0] - pw[1:].max())
         return _score(delta, capped), delta, capped
 
 
+def _two_way_power(tx: np.ndarray, rx: np.ndarray, bt: np.ndarray, br: np.ndarray) -> np.ndarray:
+    """:func:`rhs_env.patterns.metrics.two_way_power` with the side matrices given: ``|bt tx|^2 |br rx|^2 / (||tx||^2 ||rx||^2)``."""
+    t = np.einsum("...m,km->...k", tx, bt)
+    r = np.einsum("...m,km->...k", rx, br)
+    return np.abs(t) ** 2 * np.abs(r) ** 2 / (np.sum(tx**2, axis=-1)[..., None] * np.sum(rx**2, axis=-1)[..., None])
+
+
+GAIN_TOL = 0.1  # a half-step's rho search stops within GAIN_TOL * settings.tol (relative) of its delta bound
+
+
 def _search(g: _Grid, sv: _SideSOCP, rho0: float, evals: int) -> np.ndarray | None:
     """:func:`_half_step` under the cap, else (cap unreachable from here) the plain delta step."""
-    x = _half_step(sv, rho0, evals, g.kappa)
+    x = _half_step(sv, rho0, evals, g.kappa, GAIN_TOL * g.settings.tol)
     if x is None and g.kappa < 1.0:
-        x = _half_step(sv, rho0, evals, np.inf)
+        x = _half_step(sv, rho0, evals, np.inf, GAIN_TOL * g.settings.tol)
     return x if x is not None and np.any(x > 0) else None
 
 
@@ -391,7 +495,7 @@ def _side_step(g: _Grid, psi: Psi, cur: Merit, side: str, other: str, nphi: int)
     evals = st.rho_evals if nphi == 1 else min(st.sweep_evals, st.rho_evals)
     screened: list[tuple[Merit, _SideSOCP]] = []
     for phi in phi0 + 2 * np.pi * np.arange(nphi) / nphi:
-        sv = _SideSOCP(b_i, b_d, w_d, b_k, w_k, float(phi), active, st.socp_tol)
+        sv = _SideSOCP(b_i, b_d, w_d, b_k, w_k, float(phi), active, st.socp_tol, 10.0 ** (st.active_db / 20.0))
         x = _search(g, sv, rho0, evals)
         if x is None:
             continue
@@ -448,9 +552,8 @@ def _initial_points(g: _Grid, warm: list[tuple[np.ndarray, np.ndarray]] | None) 
 def _fine_sidelobes(g: _Grid, psi: Psi) -> tuple[np.ndarray, np.ndarray, float]:
     """Two-way power on the fine grid of :func:`pattern_report` (``FINE_GRID_POINTS`` in sin theta)
     outside the main lobe: (s, |h(s)|^2, |h(s_i)|^2)."""
-    s = np.linspace(-1.0, 1.0, FINE_GRID_POINTS)
-    s = s[np.abs(s - g.si[0]) > g.config.mainlobe_halfwidth]
-    p = two_way_power(g.config, psi["tx"], psi["rx"], np.concatenate([g.si, s]))
+    s, bt, br = g.fine_mats()
+    p = _two_way_power(psi["tx"], psi["rx"], bt, br)
     return s, p[1:], float(p[0])
 
 
