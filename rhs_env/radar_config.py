@@ -345,13 +345,14 @@ class RadarConfig:
         min_range_m: nearest reported range, m, [0, ``max_range_m``).
         max_range_m: farthest range, m, [1, 0.95 x the waveform's unambiguous range]
             (field of view: the scan sector up to this range).
-        fidelity: synthesis path, "iq" (the reference: the dechirped samples and
-            their windowed FFT) or "range" (the range spectrum written directly:
+        fidelity: synthesis path, "range" (the default) or "iq" (the reference: the
+            dechirped samples and their windowed FFT). "range": the range spectrum written directly:
             each tone's windowed, zero-padded spectrum in closed form, the noise as
             the windowed FFT of white noise drawn at half rate where the alias term
             is negligible (:func:`rhs_env.point_cloud.noise_decimation`), only the bins
             searched; the same distribution at a fraction of the cost,
-            :meth:`rhs_env.radar.RadarSystem.synthesize_spectrum`).
+            :meth:`rhs_env.radar.RadarSystem.synthesize_spectrum` (tests/test_radar_fidelity.py,
+            scripts/radar_profiles.py).
         waveform: :class:`WaveformConfig` (chirp, sampling, range FFT).
         link: :class:`LinkBudgetConfig` (Tx power, receiver noise).
         detection: :class:`DetectionConfig` (CFAR / fixed threshold).
@@ -371,7 +372,7 @@ class RadarConfig:
     scan: ScanConfig = field(default_factory=ScanConfig)
     min_range_m: float = 1.0
     max_range_m: float = 100.0
-    fidelity: str = "iq"
+    fidelity: str = "range"
     waveform: WaveformConfig = field(default_factory=WaveformConfig)
     link: LinkBudgetConfig = field(default_factory=LinkBudgetConfig)
     detection: DetectionConfig = field(default_factory=DetectionConfig)

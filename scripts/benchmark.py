@@ -134,7 +134,7 @@ def bench_floor(grid_deg: float, seed: int, repeats: int = 30) -> dict:
     from rhs_env.radar import RadarConfig, RadarSystem
     from rhs_env.scatterers import Scatterers
 
-    cfg = RadarConfig(scan=ScanConfig(grid_deg=grid_deg))
+    cfg = RadarConfig(scan=ScanConfig(grid_deg=grid_deg), fidelity="iq")
     radar = RadarSystem(cfg, np.random.default_rng(seed))
     direct = RadarSystem(replace(cfg, fidelity="range"), np.random.default_rng(seed))
     empty = Scatterers(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0, int), np.zeros(0, bool))

@@ -30,7 +30,7 @@ FLAT_DEFAULTS = {
     "fixed_threshold_db": 15.0, "zero_pad": 2, "window": "hann", "omp_oversampling": 4, "omp_max_targets": 4,
     "omp_residual_pfa": 1e-3, "omp_residual_rel_db": -25.0, "omp_newton_steps": 2, "omp_min_snr_db": 15.0,
     "range_std_floor_m": 0.003, "angle_std_floor_deg": 0.003, "slot_doppler": True, "vehicle_length_m": 5.0,
-    "vehicle_width_m": 2.0, "fidelity": "iq",
+    "vehicle_width_m": 2.0, "fidelity": "range",
 }
 #: a cheap radar env (closed-form antenna, coarse grid): construction only, nothing is scanned
 CHEAP = {"antenna": "hologram", "vehicles_count": 2, "duration": 2}
