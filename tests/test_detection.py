@@ -109,16 +109,19 @@ def test_footprint_detects_weak_rhs_targets_the_summed_profile_misses():
     assert found["footprint"] >= found["summed"] + 0.3 * trials
 
 
-def test_footprint_scan_end_to_end():
-    """The full chain with the footprint detector: a weak target becomes a point; empty scenes stay empty."""
+@pytest.mark.parametrize("fidelity", ["iq", "range"])
+def test_footprint_scan_end_to_end(fidelity):
+    """The full chain with the footprint detector, on either synthesis path: a weak target becomes a point
+    in most scans (measured Pd over 100 scans: 0.85 IQ, 0.78 range), empty scenes stay empty. 40 scans, so
+    that a bar of 0.6 is ~3 standard deviations under Pd 0.8, not a coin toss over 5 scans."""
     cfg = RadarConfig(antenna="rhs", detection=DetectionConfig(statistic="footprint"),
-                      link=LinkBudgetConfig(tx_power_dbm=0.0), scan=ScanConfig(grid_deg=2.0))
+                      link=LinkBudgetConfig(tx_power_dbm=0.0), scan=ScanConfig(grid_deg=2.0), fidelity=fidelity)
     radar = RadarSystem(cfg, np.random.default_rng(3))
     th = np.deg2rad(12.0)
     xy = radar.positions[0] + 45.0 * np.array([np.cos(th), np.sin(th)])
-    hits = 0
-    for _ in range(5):
+    hits, scans = 0, 40
+    for _ in range(scans):
         cloud = radar.scan(Scatterers.static_points([xy]))
         hits += bool(len(cloud)) and np.min(np.hypot(*(cloud.xy - xy).T)) < 1.0
-    assert hits >= 4
-    assert sum(len(radar.scan(Scatterers.empty())) for _ in range(5)) <= 1
+    assert hits >= 0.6 * scans
+    assert sum(len(radar.scan(Scatterers.empty())) for _ in range(20)) <= 1
