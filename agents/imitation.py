@@ -44,6 +44,14 @@ weights and DAgger goes on with ``beta_0 < 1`` on fresh data, so the rounds labe
 the states the trained student itself reaches (where its mistakes are); the
 summary records the parent and the total budget, parent's env steps plus these.
 
+**Resume** (``resume``): after each round the run saves what the next round needs
+(:func:`save_round_state`: the aggregated data, the records, the generator, the
+student and its optimizer); a run stopped or killed between rounds continues from
+the last saved round with the same data and beta schedule. The envs start new
+episodes (their simulator state is not saved), so a resumed run is the same
+algorithm, not the same numbers. A student of many hours can so be trained in
+pieces.
+
 Hyperparameters come from ``agents/hyperparams/dagger.yml`` (per env id:
 ``policy``, ``policy_kwargs``, ``n_envs``, ``n_timesteps``, ``env_kwargs`` and
 the fields of :class:`DaggerConfig`, plus ``expert``: fields of
@@ -273,25 +281,29 @@ def fit(model, data: Dataset, config: DaggerConfig, rng: np.random.Generator, op
 
 def dagger_rounds(venv, model, config: DaggerConfig, decisions: int, rng: np.random.Generator,
                   progress: bool = True, on_round: Callable[[dict[str, Any]], None] | None = None,
-                  trained: bool = False) -> tuple[Dataset, list[dict[str, Any]]]:
+                  trained: bool = False, optimizer: Any = None, done_rounds: tuple[Dataset, list[dict]] | None = None,
+                  state_dir: Path | None = None) -> tuple[Dataset, list[dict[str, Any]]]:
     """The DAgger loop of the module docstring over ``decisions`` labelled decisions; the data and one record per round.
 
     ``on_round(record)`` is called after each round's fit (checkpoints, logs). ``trained``: the student
-    starts trained (a continuation), so its agreement is scored in round 0 as well.
+    starts trained (a continuation), so its agreement is scored in round 0 as well. ``done_rounds``: the data
+    and records of the rounds done already (:func:`load_round_state`); the loop goes on from the next
+    round. ``state_dir``: where :func:`save_round_state` writes after each round.
     """
     import torch
     from tqdm.auto import tqdm
 
-    optimizer = torch.optim.Adam(model.policy.parameters(), lr=config.learning_rate)
-    data, records = Dataset(), []
+    if optimizer is None:
+        optimizer = torch.optim.Adam(model.policy.parameters(), lr=config.learning_rate)
+    data, records = done_rounds if done_rounds is not None else (Dataset(), [])
     obs = venv.reset()
     labels = np.array([info[EXPERT_KEY] for info in venv.reset_infos], dtype=np.int64)
     if decisions < config.iterations:
         raise ValueError(f"DAgger needs at least one decision per round: {decisions} decisions for "
                          f"dagger.iterations = {config.iterations} (raise the timesteps or lower the iterations)")
-    bar = tqdm(total=decisions, desc="dagger", unit="decision", disable=not progress)
-    done = 0  # decisions so far (samples: more with label_between)
-    for i in range(config.iterations):
+    done = records[-1]["decisions"] if records else 0  # decisions so far (samples: more with label_between)
+    bar = tqdm(total=decisions, initial=done, desc="dagger", unit="decision", disable=not progress)
+    for i in range(len(records), config.iterations):
         beta = config.first_beta * config.beta_decay**i
         start = len(data)
         steps = decisions // config.iterations + (i < decisions % config.iterations)  # the decisions split evenly
@@ -303,10 +315,64 @@ def dagger_rounds(venv, model, config: DaggerConfig, decisions: int, rng: np.ran
                         "agreement_before_fit": agree, "fit_loss": loss, **stats})
         print(f"dagger: round {i}: beta {beta:.3f}, {len(data)} samples, agreement "
               f"{'-' if agree is None else f'{agree:.3f}'}, loss {loss:.3f}, episodes {stats}", file=sys.stderr)
+        if state_dir is not None:
+            save_round_state(state_dir, data, records, rng, model, optimizer, decisions)
         if on_round is not None:
             on_round(records[-1])
     bar.close()
     return data, records
+
+
+#: the files of :func:`save_round_state` in a run's output folder
+STATE_DATA, STATE_META, STATE_WEIGHTS = "dagger_state.npz", "dagger_state.json", "dagger_state.pt"
+
+
+def save_round_state(out: Path, data: Dataset, records: list[dict[str, Any]], rng: np.random.Generator, model,
+                     optimizer, decisions: int) -> None:
+    """After a round: the aggregated data (``dagger_state.npz``), the records, the generator state and the
+    planned decisions (``.json``), the student's and the optimizer's state (``.pt``). Each file is written
+    under a temporary name and renamed, the JSON last: a kill mid-save leaves the previous round's state."""
+    import os
+
+    import torch
+
+    obs, actions = data.arrays()
+    arrays = {f"obs.{k}": v for k, v in obs.items()} if isinstance(obs, dict) else {"obs": obs}
+    np.savez(out / "dagger_state.tmp.npz", actions=actions, **arrays)
+    torch.save({"policy": model.policy.state_dict(), "optimizer": optimizer.state_dict()}, out / "dagger_state.tmp.pt")
+    (out / "dagger_state.tmp.json").write_text(json.dumps(
+        {"rounds": len(records), "decisions": decisions, "records": records, "rng": rng.bit_generator.state}))
+    os.replace(out / "dagger_state.tmp.npz", out / STATE_DATA)
+    os.replace(out / "dagger_state.tmp.pt", out / STATE_WEIGHTS)
+    os.replace(out / "dagger_state.tmp.json", out / STATE_META)
+
+
+def load_round_state(out: Path, model, optimizer, rng: np.random.Generator,
+                     decisions: int) -> tuple[Dataset, list[dict[str, Any]]] | None:
+    """The state :func:`save_round_state` left in ``out`` (None when there is none): the data and the records;
+    the student, the optimizer and the generator are restored in place. ``ValueError`` when the run was
+    planned with another number of decisions (another ``timesteps`` or ``decision_interval``)."""
+    import torch
+
+    meta_path = out / STATE_META
+    if not meta_path.exists():
+        return None
+    meta = json.loads(meta_path.read_text())
+    if meta["decisions"] != decisions:
+        raise ValueError(f"resume: {out} holds a run of {meta['decisions']} decisions, this one plans {decisions} "
+                         "(the same timesteps and decision_interval are needed)")
+    with np.load(out / STATE_DATA) as z:
+        actions = z["actions"]
+        keys = [k for k in z.files if k.startswith("obs")]
+        obs: Any = {k[4:]: z[k] for k in keys} if keys != ["obs"] else z["obs"]
+    state = torch.load(out / STATE_WEIGHTS, weights_only=False)
+    model.policy.load_state_dict(state["policy"])
+    optimizer.load_state_dict(state["optimizer"])
+    rng.bit_generator.state = meta["rng"]
+    data = Dataset()
+    data.obs = [_row(obs, i) for i in range(len(actions))]
+    data.actions = [int(a) for a in actions]
+    return data, meta["records"]
 
 
 class RoundLog:
@@ -314,13 +380,13 @@ class RoundLog:
     scalars (SB3's logger: ``out/progress.csv`` and, with tensorboard installed, ``out/tb``) and
     ``out/iterations.json`` so far, so a long run in the background can be watched and stopped."""
 
-    def __init__(self, model, out: Path, k: int):
+    def __init__(self, model, out: Path, k: int, records: list[dict[str, Any]] | None = None):
         from stable_baselines3.common.logger import configure
 
         from agents.run_setup import _tensorboard_available
 
         self.model, self.out, self.k = model, out, k
-        self.records: list[dict[str, Any]] = []
+        self.records: list[dict[str, Any]] = list(records or [])  # a resumed run's earlier rounds
         formats = ["csv", "tensorboard"] if _tensorboard_available() else ["csv"]
         self.logger = configure(str(out / "tb") if "tensorboard" in formats else str(out), formats)
         (out / "checkpoints").mkdir(parents=True, exist_ok=True)
@@ -338,7 +404,7 @@ class RoundLog:
 def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int = 0, n_envs: int | None = None,
                  hyperparams: str | Path | None = None, env_kwargs: dict | None = None,
                  progress: bool = True, torch_threads: int | None = 1,
-                 init_policy: str | Path | None = None) -> dict[str, Any]:
+                 init_policy: str | Path | None = None, resume: bool = False) -> dict[str, Any]:
     """DAgger on ``env_id`` for ``timesteps`` env steps; writes ``out/model.zip``, ``model.json``, ``train.json``.
 
     Returns the summary (as in :func:`agents.train.train`, with ``algo: "dagger"``
@@ -346,7 +412,9 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
     on the new states before fitting, the fit loss and the episodes driven).
     ``init_policy``: a student zip to continue from (same observation space and
     network; ``ValueError`` otherwise); the summary then has ``init_policy`` and
-    ``total_timesteps`` (the parent's plus this run's env steps).
+    ``total_timesteps`` (the parent's plus this run's env steps). ``resume``: go on from the state the
+    last finished round left in ``out`` (:func:`load_round_state`; a fresh run when there is none); the
+    summary then has ``resumed_from_round``.
     """
     import torch
     from stable_baselines3 import PPO
@@ -373,18 +441,24 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
         model = PPO(run.policy, venv, seed=seed, device="cpu", verbose=0,
                     policy_kwargs=run.hp.get("policy_kwargs") or {})
         parent = None if init_policy is None else load_student(model, init_policy)
-        log = RoundLog(model, out, k)
+        optimizer = torch.optim.Adam(model.policy.parameters(), lr=config.learning_rate)
+        start = load_round_state(out, model, optimizer, rng, decisions) if resume else None
+        resumed = None if start is None else len(start[1])  # rounds done before (the list grows in dagger_rounds)
+        if resumed is not None:
+            print(f"dagger: resuming after round {resumed - 1} of {config.iterations} ({out})", file=sys.stderr)
+        log = RoundLog(model, out, k, records=None if start is None else start[1])
         data, records = dagger_rounds(venv, model, config, decisions, rng, progress, on_round=log,
-                                      trained=parent is not None)
+                                      trained=parent is not None, optimizer=optimizer, done_rounds=start, state_dir=out)
         log.logger.close()
         decided = records[-1]["decisions"]
         model.num_timesteps = decided
         model.save(out / "model.zip")
     finally:
         venv.close()
-    extra = {} if parent is None else {"init_policy": str(init_policy),
+    extra: dict[str, Any] = {} if resumed is None else {"resumed_from_round": resumed}
+    extra.update({} if parent is None else {"init_policy": str(init_policy),
                                        "total_timesteps": int(parent.get("total_timesteps", parent.get("timesteps", 0)))
-                                       + decided * k}
+                                       + decided * k})
     summary = run_summary("dagger", env_id, run, seed, decided, time.perf_counter() - t0, out,
                           dagger=asdict(config), expert=expert.to_dict(), iterations=records, interrupted=False,
                           **extra)

@@ -65,10 +65,9 @@ def _train_dagger(algo: str, env_id: str, timesteps: int | None, out: str | Path
 
     if algo != "dagger":
         raise ValueError(f"--init-policy continues a DAgger student; for {algo} use --resume")
-    if resume:
-        raise ValueError("--resume is for PPO / DQN; a DAgger run is short and starts over")
     return train_dagger(env_id, timesteps, out, seed=seed, n_envs=n_envs, hyperparams=hyperparams,
-                        env_kwargs=env_kwargs, progress=progress, torch_threads=torch_threads, init_policy=init_policy)
+                        env_kwargs=env_kwargs, progress=progress, torch_threads=torch_threads, init_policy=init_policy,
+                        resume=resume)
 
 
 def train(
@@ -96,7 +95,8 @@ def train(
     acts every k env steps (:class:`agents.decision.HoldAction`): ``timesteps`` stays
     the env-step budget, i.e. ``ceil(timesteps / k)`` decisions. ``resume`` continues from the checkpoint with the
     most steps in ``out/checkpoints`` (see :mod:`agents.resume`; SIGTERM / SIGINT
-    stop a run there, ``summary["interrupted"]`` is then True). ``torch_threads`` sets torch's intra-op
+    stop a run there, ``summary["interrupted"]`` is then True; DAgger: from the last finished round,
+    :func:`agents.imitation.load_round_state`). ``torch_threads`` sets torch's intra-op
     threads in this process (1 by default: the envs need the other cores);
     worker processes get ``OMP_NUM_THREADS=1`` unless it is set already. ``init_policy`` (DAgger only):
     continue from that student zip (:func:`agents.imitation.train_dagger`).
@@ -289,7 +289,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--init-policy", default=None,
                         help="dagger: continue from this student zip (first_beta / iterations of the YAML)")
     parser.add_argument("--resume", action="store_true",
-                        help="continue from the latest checkpoint in OUT/checkpoints (after SIGTERM / SIGINT / a crash)")
+                        help="continue from the latest checkpoint in OUT/checkpoints (after SIGTERM / SIGINT / a crash); "
+                        "dagger: from the state the last finished round left in OUT")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -180,6 +180,8 @@ class RadarSystem:
         self._bin_range = np.arange(self._bin_hi) / bins_per_m  # range of bin k (zero Doppler), m
         self._leak = window_leak_envelope(self._window, z, z * n // 2)
         self._noise_rate = noise_decimation(self._window, z, self._bin_hi)
+        # the range path's noise radius factor: sqrt(D) w[D m] sigma_n (:meth:`_noise_spectrum`)
+        self._noise_window = self._window[:: self._noise_rate] * np.float32(math.sqrt(self._noise_rate * config.noise_power_w))
         self._same_angle = 0.25 * np.deg2rad(config.scan.grid_deg)
         looks = config.scan.slots * wf.chirps_per_slot
         self._p_noise = looks * config.noise_power_w * self._win_energy  # mean of P per cell, pure noise
@@ -408,7 +410,7 @@ class RadarSystem:
         np.log1p(rad, out=rad)
         np.negative(rad, out=rad)
         np.sqrt(rad, out=rad)
-        rad *= self._window[::d] * np.float32(math.sqrt(d * cfg.noise_power_w))
+        rad *= self._noise_window
         ph *= np.float32(2 * np.pi)
         tmp = self._buffer("ntmp", (m, n), np.float32)
         np.cos(ph, out=tmp)

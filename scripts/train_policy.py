@@ -39,6 +39,12 @@ record keeps the parent and the total budget (``total_timesteps``):
 
     python scripts/train_policy.py --continue-from agents/data --only slam truth --data-dir runs/continued
 
+``--resume`` goes on from the state a stopped or killed run left in ``--work-dir``
+(DAgger: after its last finished round, :func:`agents.imitation.load_round_state`), so a
+student longer than a session is trained in pieces; rerun the same command with it:
+
+    python scripts/train_policy.py --only dense dense_phased --resume
+
 ``--slam-env-kwargs`` (JSON) trains the SLAM policy on a cheaper configuration
 of the same env id; it is saved beside the policy and used by default when the
 policy is evaluated or demonstrated.
@@ -132,7 +138,7 @@ def train_one(name: str, args: argparse.Namespace, env_kwargs: dict) -> dict:
     env_id = TARGETS[name][0]
     target = target_path(args.algo, name, Path(args.data_dir))
     work = Path(args.work_dir) / f"{args.algo}_{name}"
-    if work.exists():
+    if work.exists() and not args.resume:
         shutil.rmtree(work)
     print(
         f"train_policy: {name}: {args.algo} on {env_id}, {args.timesteps} steps, {args.n_envs} envs -> {target}",
@@ -153,6 +159,7 @@ def train_one(name: str, args: argparse.Namespace, env_kwargs: dict) -> dict:
         progress=not args.no_progress,
         hyperparams=args.hyperparams,
         init_policy=None if args.continue_from is None else target_path(args.algo, name, Path(args.continue_from)),
+        resume=args.resume,
     )
     total = time.perf_counter() - t0
     source = work / ("best_model.zip" if args.ship == "best" and (work / "best_model.zip").exists() else "model.zip")
@@ -219,6 +226,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="zoo-style YAML (default: agents/hyperparams/ALGO.yml; with --continue-from: dagger_continue.yml)")
     ap.add_argument("--continue-from", default=None,
                     help="dagger: continue every student from its zip in this data dir (e.g. agents/data)")
+    ap.add_argument("--resume", action="store_true",
+                    help="go on from each policy's state in --work-dir (DAgger: the last finished round; PPO: the "
+                    "latest checkpoint) instead of starting over: a long student trained over several sessions")
     ap.add_argument("--record", default=str(ROOT / "results" / "train_policy.json"))
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)

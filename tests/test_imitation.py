@@ -202,8 +202,44 @@ def test_rhs_slam_train_dagger_writes_a_policy_that_evaluate_loads(tmp_path):
     obs, _ = env.reset(seed=0)
     action, _ = policy.predict(obs, deterministic=True)
     assert int(action) in range(5) and policy.predict(obs)[0] == 1
-    with pytest.raises(ValueError, match="resume"):
-        train("dagger", TRUTH, None, tmp_path / "run", hyperparams=hp, resume=True, progress=False)
+
+
+def test_dagger_resume_goes_on_from_the_last_finished_round(tmp_path, monkeypatch):
+    """A run killed after round 1 of 3 resumes with round 2 only: the saved data, records and beta schedule go on,
+    the total decisions are the planned ones; a resume with another budget is refused."""
+    from agents import imitation
+    from agents.train import train
+
+    hp = tmp_path / "dagger.yml"
+    hp.write_text(
+        f"{TRUTH}:\n  policy: MlpPolicy\n  n_envs: 1\n  n_timesteps: 240\n  iterations: 3\n  beta_decay: 0.5\n"
+        "  decision_interval: 2\n  decision_mode: pulse\n"
+        "  epochs: 2\n  batch_size: 32\n  learning_rate: 1.0e-3\n  policy_kwargs:\n    net_arch: [16]\n"
+    )
+    kw, out = {"vehicles_count": 5, "duration": 4}, tmp_path / "run"
+    log_round = imitation.RoundLog.__call__
+
+    def killed_after_round_1(self, record):
+        log_round(self, record)
+        if record["iteration"] == 1:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(imitation.RoundLog, "__call__", killed_after_round_1)
+    with pytest.raises(KeyboardInterrupt):
+        train("dagger", TRUTH, None, out, hyperparams=hp, env_kwargs=kw, progress=False)
+    monkeypatch.undo()
+    first = json.loads((out / "iterations.json").read_text())
+    assert [r["iteration"] for r in first] == [0, 1] and not (out / "model.zip").exists()
+    with np.load(out / imitation.STATE_DATA) as z:
+        assert len(z["actions"]) == first[-1]["samples"] == 80
+    with pytest.raises(ValueError, match="resume"):  # another budget: another schedule
+        train("dagger", TRUTH, 200, out, hyperparams=hp, env_kwargs=kw, resume=True, progress=False)
+    summary = train("dagger", TRUTH, None, out, hyperparams=hp, env_kwargs=kw, resume=True, progress=False)
+    assert summary["resumed_from_round"] == 2 and summary["decisions"] == 120
+    assert summary["iterations"][:2] == first
+    assert [r["beta"] for r in summary["iterations"]] == [1.0, 0.5, 0.25]
+    assert summary["iterations"][2]["samples"] == 120 and summary["iterations"][2]["agreement_before_fit"] is not None
+    assert (out / "model.zip").exists() and len(json.loads((out / "iterations.json").read_text())) == 3
 
 
 def test_dagger_continuation_starts_from_the_parent_and_counts_its_budget(tmp_path):
