@@ -304,6 +304,7 @@ def dagger_rounds(venv, model, config: DaggerConfig, decisions: int, rng: np.ran
     done = records[-1]["decisions"] if records else 0  # decisions so far (samples: more with label_between)
     bar = tqdm(total=decisions, initial=done, desc="dagger", unit="decision", disable=not progress)
     for i in range(len(records), config.iterations):
+        t0 = time.perf_counter()
         beta = config.first_beta * config.beta_decay**i
         start = len(data)
         steps = decisions // config.iterations + (i < decisions % config.iterations)  # the decisions split evenly
@@ -312,7 +313,8 @@ def dagger_rounds(venv, model, config: DaggerConfig, decisions: int, rng: np.ran
         loss = fit(model, data, config, rng, optimizer)
         done += steps
         records.append({"iteration": i, "beta": beta, "decisions": done, "samples": len(data),
-                        "agreement_before_fit": agree, "fit_loss": loss, **stats})
+                        "agreement_before_fit": agree, "fit_loss": loss, **stats,
+                        "wall_s": round(time.perf_counter() - t0, 1)})
         print(f"dagger: round {i}: beta {beta:.3f}, {len(data)} samples, agreement "
               f"{'-' if agree is None else f'{agree:.3f}'}, loss {loss:.3f}, episodes {stats}", file=sys.stderr)
         if state_dir is not None:
@@ -455,11 +457,19 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
         model.save(out / "model.zip")
     finally:
         venv.close()
-    extra: dict[str, Any] = {} if resumed is None else {"resumed_from_round": resumed}
+    wall, timed = time.perf_counter() - t0, decided
+    extra: dict[str, Any] = {}
+    if resumed is not None:  # the wall time of every round, this process's and the earlier ones' (records' wall_s)
+        earlier = records[:resumed]
+        untimed = [r for r in earlier if "wall_s" not in r]  # rounds saved before records kept their time
+        wall += sum(r["wall_s"] for r in earlier if "wall_s" in r)
+        timed -= sum(r["decisions"] - (records[r["iteration"] - 1]["decisions"] if r["iteration"] else 0)
+                     for r in untimed)
+        extra = {"resumed_from_round": resumed, "untimed_rounds": [r["iteration"] for r in untimed]}
     extra.update({} if parent is None else {"init_policy": str(init_policy),
                                        "total_timesteps": int(parent.get("total_timesteps", parent.get("timesteps", 0)))
                                        + decided * k})
-    summary = run_summary("dagger", env_id, run, seed, decided, time.perf_counter() - t0, out,
+    summary = run_summary("dagger", env_id, run, seed, decided, wall, out, timed_decisions=timed,
                           dagger=asdict(config), expert=expert.to_dict(), iterations=records, interrupted=False,
                           **extra)
     write_summary(out, summary)

@@ -290,13 +290,15 @@ def run_settings(algo: str, env_id: str, timesteps: int | None, n_envs: int | No
 
 
 def run_summary(algo: str, env_id: str, run: RunSettings, seed: int, decisions: int, wall: float, out: Path,
-                **extra: Any) -> dict[str, Any]:
+                timed_decisions: int | None = None, **extra: Any) -> dict[str, Any]:
     """The record of a finished run that every trainer writes (``extra`` appended: the algorithm's own fields).
 
     ``timesteps`` counts env steps, ``decisions x decision_interval`` (an episode cut short by a crash
-    takes fewer); ``steps_per_s`` is timesteps over the wall time ``wall`` (s).
+    takes fewer); ``steps_per_s`` is timesteps over the wall time ``wall`` (s), or, where ``wall`` covers
+    only ``timed_decisions`` of them (a resumed run whose earlier parts were not timed), those over ``wall``.
     """
     wall = max(wall, 1e-9)
+    timed = decisions if timed_decisions is None else timed_decisions
     return {
         "algo": algo,
         "env_id": env_id.split(":", 1)[-1],
@@ -309,7 +311,7 @@ def run_summary(algo: str, env_id: str, run: RunSettings, seed: int, decisions: 
         "n_envs": run.n_envs,
         "seed": seed,
         "wall_time_s": round(wall, 1),
-        "steps_per_s": round(int(decisions) * run.decision_interval / wall, 2),
+        "steps_per_s": round(int(timed) * run.decision_interval / wall, 2),
         "hyperparams": run.hp_record,
         "model": str(out / "model.zip"),
         **extra,

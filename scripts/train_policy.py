@@ -257,7 +257,8 @@ def main(argv: list[str] | None = None) -> int:
             k: meta[k]
             for k in ("env_id", "env_kwargs", "timesteps", "n_envs", "seed", "wall_time_s", "total_wall_time_s",
                       "steps_per_s", "hyperparams", "recent_episodes", "best_eval_mean_return", "shipped",
-                      "model", "zip_bytes", "algo", "iterations", "init_policy", "total_timesteps")
+                      "model", "zip_bytes", "algo", "iterations", "init_policy", "total_timesteps",
+                      "resumed_from_round", "untimed_rounds")
             if k in meta
         }  # fmt: skip
         record.pop("provenance", None)  # the record of this run's (training itself: no fingerprint, minutes long)

@@ -234,9 +234,18 @@ def test_dagger_resume_goes_on_from_the_last_finished_round(tmp_path, monkeypatc
         assert len(z["actions"]) == first[-1]["samples"] == 80
     with pytest.raises(ValueError, match="resume"):  # another budget: another schedule
         train("dagger", TRUTH, 200, out, hyperparams=hp, env_kwargs=kw, resume=True, progress=False)
+    state = json.loads((out / imitation.STATE_META).read_text())  # round 0 as saved before records kept their time
+    del state["records"][0]["wall_s"]
+    (out / imitation.STATE_META).write_text(json.dumps(state))
     summary = train("dagger", TRUTH, None, out, hyperparams=hp, env_kwargs=kw, resume=True, progress=False)
     assert summary["resumed_from_round"] == 2 and summary["decisions"] == 120
-    assert summary["iterations"][:2] == first
+    assert summary["iterations"][1:2] == first[1:] and summary["iterations"][0]["fit_loss"] == first[0]["fit_loss"]
+    # the wall time counts the earlier process's timed rounds too (each record keeps its round's time);
+    # steps/s counts only the env steps of timed rounds: 80 decisions x 2 (round 0's 40 were not timed)
+    assert summary["untimed_rounds"] == [0] and all(r["wall_s"] > 0 for r in summary["iterations"][1:])
+    assert summary["wall_time_s"] >= sum(r["wall_s"] for r in summary["iterations"][1:]) - 0.1
+    wall = summary["wall_time_s"]  # rounded to 0.1 s
+    assert 160 / (wall + 0.05) <= summary["steps_per_s"] <= 160 / (wall - 0.05)
     assert [r["beta"] for r in summary["iterations"]] == [1.0, 0.5, 0.25]
     assert summary["iterations"][2]["samples"] == 120 and summary["iterations"][2]["agreement_before_fit"] is not None
     assert (out / "model.zip").exists() and len(json.loads((out / "iterations.json").read_text())) == 3
