@@ -45,6 +45,13 @@ student longer than a session is trained in pieces; rerun the same command with 
 
     python scripts/train_policy.py --only dense dense_phased --resume
 
+``--adopt RECORD`` ships what a run with its own ``--data-dir`` / ``--record`` made (a long run kept
+apart until it finished): each entry of RECORD (``--only``: those policies) has its zip and metadata
+copied to where this script ships them (:func:`target_path`) and its record merged into ``--record``,
+with ``run`` naming the command and commit that made it. Nothing is trained:
+
+    python scripts/train_policy.py --adopt runs/antenna_dense/train_policy.json --only dense dense_phased
+
 ``--slam-env-kwargs`` (JSON) trains the SLAM policy on a cheaper configuration
 of the same env id; it is saved beside the policy and used by default when the
 policy is evaluated or demonstrated.
@@ -191,6 +198,41 @@ def _display(path: Path) -> str:
         return str(path)
 
 
+def adopt(source: Path, names: list[str] | None, algo: str, record_path: Path, data_dir: Path = DATA,
+          argv: list[str] | None = None) -> list[str]:
+    """Copy the policies recorded in the train_policy record ``source`` (``names``: only these) to ``data_dir``
+    and merge their entries into ``record_path``, each with ``run`` (the source's provenance: command, commit,
+    start); returns the keys adopted. ``ValueError`` for a name the source has not, or a zip missing."""
+    from agents.train import metadata_path
+
+    src = _read_record(source)
+    prov = src.get("provenance") or {}
+    keys = [f"{algo}_{n}" for n in names] if names else [k for k in src if k.startswith(f"{algo}_")]
+    missing = [k for k in keys if k not in src]
+    if missing or not keys:
+        raise ValueError(f"--adopt: {source} has no entries {missing or keys} (it has {sorted(src)})")
+    record = _read_record(record_path)
+    for key in keys:
+        entry, name = dict(src[key]), key[len(algo) + 1 :]
+        zip_path = Path(entry["model"]) if Path(entry["model"]).is_absolute() else ROOT / entry["model"]
+        if not zip_path.exists():
+            raise ValueError(f"--adopt: {key}: no policy at {zip_path}")
+        target = target_path(algo, name, data_dir)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(zip_path, target)
+        meta = json.loads(metadata_path(zip_path).read_text())
+        metadata_path(target).write_text(json.dumps({**meta, "model": _display(target)}, indent=2) + "\n")
+        entry["model"] = _display(target)
+        entry["run"] = {k: prov[k] for k in ("commit", "command", "started_utc") if k in prov}
+        record[key] = entry
+        print(f"train_policy: adopted {key}: {zip_path} -> {target}", file=sys.stderr)
+    record.setdefault("machine", src.get("machine"))
+    record.pop("provenance", None)
+    config = {"adopt": _display(source), "only": names, "algo": algo, "data_dir": _display(data_dir)}
+    write_json(record_path, record, __file__, config, time.time(), argv=argv)
+    return keys
+
+
 def _read_record(path: Path) -> dict:
     """The training record; entries of before the algorithms were named (``slam``, ``truth``) were PPO's."""
     record = json.loads(path.read_text()) if path.exists() else {}
@@ -230,10 +272,19 @@ def main(argv: list[str] | None = None) -> int:
                     help="go on from each policy's state in --work-dir (DAgger: the last finished round; PPO: the "
                     "latest checkpoint) instead of starting over: a long student trained over several sessions")
     ap.add_argument("--record", default=str(ROOT / "results" / "train_policy.json"))
+    ap.add_argument("--adopt", default=None, metavar="RECORD",
+                    help="train nothing: ship the policies of another run's record (--only: these) into --data-dir "
+                    "and merge their entries into --record")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
     started = time.time()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    if args.adopt is not None:
+        try:
+            adopt(Path(args.adopt), args.only, args.algo, Path(args.record), Path(args.data_dir), argv)
+        except ValueError as exc:
+            ap.error(str(exc))
+        return 0
 
     slam_kwargs, env_kwargs = json.loads(args.slam_env_kwargs), json.loads(args.env_kwargs)
     for flag, value in (("--slam-env-kwargs", slam_kwargs), ("--env-kwargs", env_kwargs)):

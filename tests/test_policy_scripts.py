@@ -174,3 +174,38 @@ def test_ablations_train_and_evaluate_each_algorithm_into_a_table_with_provenanc
     env = gym.make("rhs-highway-v0", vehicles_count=2, **ablate_policy.FINE_SPEEDS)
     env.reset(seed=0)
     assert list(env.unwrapped.vehicle.target_speeds) == [10, 15, 20, 25, 30]  # the ego's SLOWER goes below 20 m/s
+
+
+def test_adopt_ships_another_runs_policies_and_merges_their_records(tmp_path):
+    """--adopt: a run kept apart (its own --data-dir / --record) is shipped as it is: zip and metadata copied where
+    train_policy ships them, its record merged with ``run`` naming the command and commit; nothing is trained."""
+    import json
+    import shutil
+
+    from agents.train import metadata_path
+
+    shipped = train_policy.target_path("dagger", "slam_rhs")
+    run_zip = tmp_path / "run" / "antenna" / "dagger_rhs_highway_dense.zip"
+    run_zip.parent.mkdir(parents=True)
+    shutil.copyfile(shipped, run_zip)
+    metadata_path(run_zip).write_text(json.dumps({"env_id": "rhs-dense-v0", "model": str(run_zip)}))
+    source = tmp_path / "run" / "train_policy.json"
+    run = {"commit": "abc123", "command": ["python", "scripts/train_policy.py", "--only", "dense"]}
+    source.write_text(json.dumps({"dagger_dense": {"env_id": "rhs-dense-v0", "timesteps": 40000, "model": str(run_zip)},
+                                  "machine": {"cpus": 2}, "provenance": run}))
+    record = tmp_path / "record.json"
+    record.write_text(json.dumps({"dagger_slam": {"timesteps": 80000}}))
+    ship = tmp_path / "data"
+
+    assert train_policy.main(["--adopt", str(source), "--only", "dense", "--record", str(record),
+                              "--data-dir", str(ship)]) == 0
+    target = ship / "antenna" / "dagger_rhs_highway_dense.zip"
+    assert target.read_bytes() == shipped.read_bytes()
+    assert json.loads(metadata_path(target).read_text())["model"] == str(target)
+    merged = json.loads(record.read_text())
+    assert merged["dagger_slam"] == {"timesteps": 80000}  # the other entries stay
+    assert merged["dagger_dense"]["model"] == str(target) and merged["dagger_dense"]["timesteps"] == 40000
+    assert merged["dagger_dense"]["run"] == run and merged["provenance"]["config"]["adopt"] == str(source)
+    with pytest.raises(SystemExit):  # a policy the run did not train
+        train_policy.main(["--adopt", str(source), "--only", "dense_phased", "--record", str(record),
+                           "--data-dir", str(ship)])
