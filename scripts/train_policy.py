@@ -223,7 +223,7 @@ def adopt(source: Path, names: list[str] | None, algo: str, record_path: Path, d
         meta = json.loads(metadata_path(zip_path).read_text())
         metadata_path(target).write_text(json.dumps({**meta, "model": _display(target)}, indent=2) + "\n")
         entry["model"] = _display(target)
-        entry["run"] = {k: prov[k] for k in ("commit", "command", "started_utc") if k in prov}
+        entry.setdefault("run", _run_of(prov))  # an entry stamped by its own training run keeps that
         record[key] = entry
         print(f"train_policy: adopted {key}: {zip_path} -> {target}", file=sys.stderr)
     record.setdefault("machine", src.get("machine"))
@@ -231,6 +231,11 @@ def adopt(source: Path, names: list[str] | None, algo: str, record_path: Path, d
     config = {"adopt": _display(source), "only": names, "algo": algo, "data_dir": _display(data_dir)}
     write_json(record_path, record, __file__, config, time.time(), argv=argv)
     return keys
+
+
+def _run_of(prov: dict) -> dict:
+    """The run that made an entry: command, commit and start of the provenance block ``prov``."""
+    return {k: prov[k] for k in ("commit", "command", "started_utc") if k in prov}
 
 
 def _read_record(path: Path) -> dict:
@@ -313,7 +318,9 @@ def main(argv: list[str] | None = None) -> int:
             if k in meta
         }  # fmt: skip
         record.pop("provenance", None)  # the record of this run's (training itself: no fingerprint, minutes long)
-        write_json(record_path, record, __file__, args, started, argv=argv)
+        prov = write_json(record_path, record, __file__, args, started, argv=argv)
+        record[f"{args.algo}_{name}"]["run"] = _run_of(prov)  # the entry keeps its run when a later --only run
+        write_json(record_path, record, __file__, args, started, argv=argv)  # rewrites the record's provenance
     print(json.dumps(record, indent=2))
     return 0
 

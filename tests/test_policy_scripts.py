@@ -206,6 +206,30 @@ def test_adopt_ships_another_runs_policies_and_merges_their_records(tmp_path):
     assert merged["dagger_slam"] == {"timesteps": 80000}  # the other entries stay
     assert merged["dagger_dense"]["model"] == str(target) and merged["dagger_dense"]["timesteps"] == 40000
     assert merged["dagger_dense"]["run"] == run and merged["provenance"]["config"]["adopt"] == str(source)
+    own = {"commit": "def456", "command": ["python", "scripts/train_policy.py", "--only", "dense"]}
+    source.write_text(json.dumps({"dagger_dense": {"model": str(run_zip), "run": own}, "provenance": run}))
+    train_policy.main(["--adopt", str(source), "--only", "dense", "--record", str(record), "--data-dir", str(ship)])
+    assert json.loads(record.read_text())["dagger_dense"]["run"] == own  # stamped by its training run: kept
     with pytest.raises(SystemExit):  # a policy the run did not train
         train_policy.main(["--adopt", str(source), "--only", "dense_phased", "--record", str(record),
                            "--data-dir", str(ship)])
+
+
+def test_each_trained_entry_keeps_the_run_that_made_it(tmp_path, monkeypatch):
+    """A run with --only writes its entry stamped with its own command and commit (``run``); a later --only run
+    rewrites the record's provenance but not the earlier entry's ``run``, and --adopt keeps that stamp."""
+    import json
+
+    monkeypatch.setattr(train_policy, "train_one", lambda name, args, kwargs: {"env_id": name, "timesteps": 7,
+                                                                              "model": f"{name}.zip"})
+    monkeypatch.setattr(train_policy, "_registration_weights", lambda: {})
+    record = tmp_path / "record.json"
+    common = ["--timesteps", "7", "--record", str(record), "--no-progress"]
+    assert train_policy.main(["--only", "dense", *common]) == 0
+    first = json.loads(record.read_text())
+    assert first["dagger_dense"]["run"]["command"][-len(common) - 2 :][:2] == ["--only", "dense"]
+    assert train_policy.main(["--only", "dense_phased", *common]) == 0
+    both = json.loads(record.read_text())
+    assert both["dagger_dense"]["run"] == first["dagger_dense"]["run"]  # not re-attributed to the later run
+    assert "dense_phased" in both["dagger_dense_phased"]["run"]["command"]
+    assert "dense_phased" in both["provenance"]["command"]
