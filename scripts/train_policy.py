@@ -179,7 +179,7 @@ def train_one(name: str, args: argparse.Namespace, env_kwargs: dict) -> dict:
         **summary,
         "shipped": args.ship if source.name != "model.zip" else "final",
         "model": _display(target),
-        "total_wall_time_s": round(total, 1),
+        "total_wall_time_s": round(total, 1),  # this process, setup and evaluations included (a resumed run: its part)
         "trained_by": "scripts/train_policy.py",
         "zip_bytes": size,
     }

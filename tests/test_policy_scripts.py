@@ -80,7 +80,7 @@ def test_intervals():
 def test_antenna_table_states_the_paired_verdict():
     row = {"env_id": "rhs-highway-slam-v0", "timesteps": 40000, "return_ci": (150.0, 3.0), "collision_ci": (0.0, 0.07),
            "summary": {"collision_rate": 0.0, "collisions": 0, "episodes": 50, "mean_speed_mps": {"mean": 23.0, "std": 1.0},
-                       "position_rmse_m": {"mean": 0.2, "std": 0.1}}}  # fmt: skip
+                       "position_rmse_m": {"mean": 0.2, "std": 0.1, "max": 104.23}}}  # fmt: skip
     fine = {"env_kwargs": train_policy.FINE_SPEEDS}
     study = {"episodes": 50, "seeds": list(range(1000, 1050)), "missing": ["dense"],
              "rows": [{**row, "antenna": "rhs", "env_kwargs": {}}, {**row, "antenna": "phased", **fine}],
@@ -88,6 +88,7 @@ def test_antenna_table_states_the_paired_verdict():
     text = evaluate_policies.antenna_markdown(study)
     assert "| `rhs-highway-slam-v0` | rhs | 20, 25, 30 | 40000 | 150.0 ± 3.0 | 0.00 (0/50; 0.00-0.07)" in text
     assert "| phased | 10, 15, 20, 25, 30 | 40000 |" in text  # the action set each student drove with
+    assert "| 0.20 ± 0.10 | 104.23 |" in text  # a lost track shows in the worst episode, not in the mean's spread
     assert "+4.0 ± 1.0 (RHS higher)" in text and "Not trained yet" in text and "dense" in text
 
 
