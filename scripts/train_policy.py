@@ -70,7 +70,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
-from _provenance import write_json
+from _provenance import provenance, write_json
 
 DATA = ROOT / "agents" / "data"
 SLAM_ID, TRUTH_ID, DENSE_ID = "rhs-highway-slam-v0", "rhs-highway-v0", "rhs-dense-v0"
@@ -317,10 +317,10 @@ def main(argv: list[str] | None = None) -> int:
                       "resumed_from_round", "untimed_rounds")
             if k in meta
         }  # fmt: skip
+        # the entry keeps the run that made it; the record's provenance is the latest run's (a later --only run)
+        record[f"{args.algo}_{name}"]["run"] = _run_of(provenance(__file__, args, started, argv))
         record.pop("provenance", None)  # the record of this run's (training itself: no fingerprint, minutes long)
-        prov = write_json(record_path, record, __file__, args, started, argv=argv)
-        record[f"{args.algo}_{name}"]["run"] = _run_of(prov)  # the entry keeps its run when a later --only run
-        write_json(record_path, record, __file__, args, started, argv=argv)  # rewrites the record's provenance
+        write_json(record_path, record, __file__, args, started, argv=argv)
     print(json.dumps(record, indent=2))
     return 0
 

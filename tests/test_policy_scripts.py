@@ -218,7 +218,7 @@ def test_adopt_ships_another_runs_policies_and_merges_their_records(tmp_path):
 
 def test_each_trained_entry_keeps_the_run_that_made_it(tmp_path, monkeypatch):
     """A run with --only writes its entry stamped with its own command and commit (``run``); a later --only run
-    rewrites the record's provenance but not the earlier entry's ``run``, and --adopt keeps that stamp."""
+    rewrites the record's provenance but not the earlier entry's ``run`` (--adopt keeps it: the test above)."""
     import json
 
     monkeypatch.setattr(train_policy, "train_one", lambda name, args, kwargs: {"env_id": name, "timesteps": 7,
