@@ -201,8 +201,9 @@ def _display(path: Path) -> str:
 def adopt(source: Path, names: list[str] | None, algo: str, record_path: Path, data_dir: Path = DATA,
           argv: list[str] | None = None) -> list[str]:
     """Copy the policies recorded in the train_policy record ``source`` (``names``: only these) to ``data_dir``
-    and merge their entries into ``record_path``, each with ``run`` (the source's provenance: command, commit,
-    start); returns the keys adopted. ``ValueError`` for a name the source has not, or a zip missing."""
+    and merge their entries into ``record_path``, each with ``run`` (command, commit, start: the entry's own, stamped
+    by its training run, else the source's provenance); returns the keys adopted. ``ValueError`` for a name the
+    source has not, or a zip missing."""
     from agents.train import metadata_path
 
     src = _read_record(source)
