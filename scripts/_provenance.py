@@ -8,7 +8,7 @@ that commit is an ancestor of the commit adding it), ``dirty`` and ``dirty_files
 (tracked files modified at start, outside ``results/`` and ``README.md``, so a run on
 uncommitted code says so), ``command`` (the script and its arguments), ``config``
 (every parsed option, i.e. the full configuration of the run), the versions of
-python / numpy, the start time (UTC) and ``wall_s`` (run time, used by
+python / numpy and of every package that can move a result (``packages``), the start time (UTC) and ``wall_s`` (run time, used by
 ``scripts/reproduce.py`` to estimate how long a regeneration takes).
 
 **Fingerprints.** A script whose numbers come from the code (not from timing) defines
@@ -24,7 +24,23 @@ on a tiny, fixed config, seconds long. :func:`digest` rounds the numbers to
 
 ``tests/test_results_fresh.py`` reruns every ``fingerprint()`` and fails with
 "results/X.json is stale: rerun scripts/X.py" when the code's output differs from
-``fingerprints.json``. There are then two honest ways out:
+``fingerprints.json`` by more than the step's *tolerance*. The comparison is value by value,
+not by hash: the same code gives last-digit differences on another CPU (AVX-512 against AVX2
+kernels in numpy, OpenBLAS, torch), with another release of a dependency or of a conic solver,
+and a closed-loop episode can turn such a difference into one flipped discrete decision. Each
+entry of ``fingerprints.json`` therefore carries a ``tolerance`` measured by
+``scripts/fingerprint_tolerance.py``: the spread of every value over BLAS / SIMD / thread
+settings and the oldest and newest allowed dependencies, and from it
+
+* ``rtol`` and ``atol``: value ``i`` matches when ``|now_i - recorded_i| <= atol + rtol |recorded_i|``
+  (``SAFETY`` times the largest spread of the values that moved by less than ``FLIP_REL``,
+  both defined in that script);
+* ``max_outside``: how many values may miss that bound (twice the largest number of
+  "flipped" values, those that moved by more than ``FLIP_REL`` in one setting; zero for all
+  but closed-loop driving episodes).
+
+A real change of the code's output moves many values by more than that, and still fails
+(the test shows it by changing the code for two of the steps). There are then two honest ways out:
 
 1. rerun the script (``python scripts/reproduce.py --only NAME``): new numbers, both
    records agree again;
@@ -59,7 +75,9 @@ from typing import Any
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "results"
 FINGERPRINTS = RESULTS / "fingerprints.json"
-SIGNIFICANT = 6  # significant digits kept before hashing (robust to last-bit noise, sensitive to any real change)
+SIGNIFICANT = 6  # significant digits kept before hashing (the hash names a run; matching uses the tolerance)
+#: the rounding of the recorded values alone: a value kept to 6 digits is off by up to 5e-6 relative
+ROUNDING_RTOL = 5e-6
 #: paths whose modification does not make a run "dirty": they are the runs' outputs
 OUTPUT_PATHS = ("results/", "README.md")
 
@@ -130,6 +148,24 @@ def command_line(script: str | Path, argv: list[str] | None = None) -> list[str]
     return ["python", f"scripts/{Path(script).name}", *map(str, sys.argv[1:] if argv is None else argv)]
 
 
+#: the installed distributions whose releases can move a result (``constraints/base.txt`` pins them all)
+RESULT_PACKAGES = ("numpy", "scipy", "cvxpy", "clarabel", "scs", "torch", "gymnasium", "highway-env",
+                   "stable-baselines3", "numba", "ray")
+
+
+def package_versions(names: Iterable[str] = RESULT_PACKAGES) -> dict[str, str]:
+    """``{distribution: version}`` of those of ``names`` that are installed (a results file's environment)."""
+    from importlib import metadata
+
+    out = {}
+    for name in names:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            continue
+    return out
+
+
 def provenance(script: str | Path, config: Any, started: float, argv: list[str] | None = None) -> dict[str, Any]:
     """The provenance block of a run of ``script`` that began at ``time.time() == started``."""
     import numpy as np
@@ -141,6 +177,7 @@ def provenance(script: str | Path, config: Any, started: float, argv: list[str] 
         "config": jsonable(config),
         "python": platform.python_version(),
         "numpy": np.__version__,
+        "packages": package_versions(),
         "started_utc": datetime.fromtimestamp(started, timezone.utc).isoformat(timespec="seconds"),
         "wall_s": round(time.time() - started, 2),
     }
@@ -184,6 +221,40 @@ def compute_fingerprint(fn) -> dict[str, Any]:
     return {"hash": h, "values": values, "seconds": round(time.perf_counter() - t0, 2)}
 
 
+def values_outside(recorded: list[float | None], now: list[float | None],
+                   tolerance: dict[str, Any] | None) -> list[tuple[int, float | None, float | None]]:
+    """The values of ``now`` that miss ``recorded`` by more than ``atol + rtol |recorded|``: (index, recorded, now).
+
+    ``None`` (a NaN or inf in the fingerprint) matches only ``None``. Without a measured
+    ``tolerance`` only the rounding of the recorded digits is allowed (``ROUNDING_RTOL``).
+    """
+    tol = tolerance or {}
+    rtol = max(float(tol.get("rtol", 0.0)), ROUNDING_RTOL)
+    atol = float(tol.get("atol", 0.0))
+    out = []
+    for i, (a, b) in enumerate(zip(recorded, now)):
+        if a is None or b is None:
+            if a is not b:
+                out.append((i, a, b))
+        elif not abs(b - a) <= atol + rtol * abs(a):
+            out.append((i, a, b))
+    return out
+
+
+def fingerprint_matches(entry: dict[str, Any], now: list[float | None]) -> tuple[bool, str]:
+    """(matches, why not): ``now`` against the recorded ``entry`` of ``fingerprints.json``, within its tolerance."""
+    recorded = entry["values"]
+    if len(recorded) != len(now):
+        return False, f"{len(recorded)} values recorded, {len(now)} now"
+    tol = entry.get("tolerance") or {}
+    outside = values_outside(recorded, now, tol)
+    allowed = int(tol.get("max_outside", 0))
+    if len(outside) <= allowed:
+        return True, f"{len(outside)} of {len(now)} values outside rtol {tol.get('rtol', 0):.1e} / atol {tol.get('atol', 0):.1e}"
+    return False, (f"{len(outside)} of {len(now)} values outside rtol {tol.get('rtol', 0):.1e} / atol {tol.get('atol', 0):.1e} "
+                   f"(at most {allowed} allowed); first (index, recorded, now): {outside[:5]}")
+
+
 def load_fingerprints(path: Path = FINGERPRINTS) -> dict[str, Any]:
     return json.loads(path.read_text()) if path.exists() else {}
 
@@ -192,7 +263,10 @@ def record_fingerprint(name: str, fp: dict[str, Any], results: list[str], note: 
                        path: Path = FINGERPRINTS) -> None:
     """Store ``fp`` as the current fingerprint of script ``name`` in ``fingerprints.json``."""
     data = load_fingerprints(path)
+    tolerance = data.get(name, {}).get("tolerance")  # measured for the step, not for one run: kept
     data[name] = {**fp, "results": sorted(results), "note": note, **STATE_AT_START}
+    if tolerance is not None:
+        data[name]["tolerance"] = tolerance
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(dict(sorted(data.items())), indent=1) + "\n")
 

@@ -36,6 +36,7 @@ from _provenance import (
     RESULTS,
     ROOT,
     compute_fingerprint,
+    fingerprint_matches,
     load_fingerprints,
     record_fingerprint,
     script_name,
@@ -221,10 +222,11 @@ def refresh_fingerprints(steps: list[Step], reason: str | None) -> int:
             continue
         fp = compute_fingerprint(fn)
         key = script_name(s.script)
-        old = fps.get(key, {}).get("hash")
-        state = "unchanged" if old == fp["hash"] else f"CHANGED ({old} -> {fp['hash']})"
+        entry = fps.get(key)
+        same, why = fingerprint_matches(entry, fp["values"]) if entry else (False, "none recorded")
+        state = f"within tolerance ({why})" if same else f"CHANGED ({why})"
         print(f"{s.name:22s} {fp['seconds']:6.1f} s  {state}")
-        if old != fp["hash"]:
+        if not same:
             changed.append(s.name)
             if reason:
                 record_fingerprint(key, fp, list(s.results), f"refreshed without rerun: {reason}")

@@ -14,6 +14,7 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
@@ -44,16 +45,59 @@ def test_fingerprint_matches_the_code(step):
     recorded = prov.load_fingerprints().get(prov.script_name(step.script))
     files = ", ".join(f"results/{r}" for r in step.results)
     assert recorded is not None, f"{files}: no fingerprint recorded: rerun scripts/{step.script}"
+    assert recorded.get("tolerance"), f"no measured tolerance: python scripts/fingerprint_tolerance.py --only {step.name}"
     now = prov.compute_fingerprint(reproduce.fingerprint_fn(step))
-    if now["hash"] != recorded["hash"]:
-        diff = [(k, a, b) for k, (a, b) in enumerate(zip(recorded["values"], now["values"])) if a != b][:5]
+    ok, why = prov.fingerprint_matches(recorded, now["values"])
+    if not ok:
         pytest.fail(
             f"{files} is stale: rerun scripts/{step.script} (python scripts/reproduce.py --only {step.name}); "
-            f"the code's output on the fingerprint config changed (first differences, index/recorded/now: {diff}; "
-            f"{len(recorded['values'])} -> {len(now['values'])} values). If the full rerun must wait, record it: "
+            f"the code's output on the fingerprint config changed beyond the tolerance measured across machines "
+            f"and dependency versions ({why}). If the full rerun must wait, record it: "
             f"python scripts/reproduce.py --fingerprints-only --only {step.name} --reason '...' "
             "(the README then marks these results unverified)."
         )
+
+
+def _odometry_bias(monkeypatch):
+    """A real change of the SLAM: the filter's motion prediction takes the registration motion 1 % long."""
+    from slam.rbpf import RBPFSlam
+
+    predict = RBPFSlam._predict
+
+    def biased(self, motion, dt):
+        predict(self, None if motion is None else 1.01 * np.asarray(motion, dtype=float), dt)
+
+    monkeypatch.setattr(RBPFSlam, "_predict", biased)
+
+
+def _noisier_receiver(monkeypatch):
+    """A real change of the radar: the receiver noise power kT F B one dB higher (k scaled by 10^0.1)."""
+    import rhs_env.radar_config as rc
+
+    monkeypatch.setattr(rc, "BOLTZMANN", rc.BOLTZMANN * 10 ** 0.1)
+
+
+@pytest.mark.parametrize(("name", "change"), [("fig5c", _odometry_bias), ("radar_quality", _noisier_receiver)])
+def test_a_real_change_of_the_output_fails_the_tolerance(monkeypatch, name, change):
+    """The tolerance absorbs what another machine changes, not what another code computes."""
+    step = reproduce.BY_NAME[name]
+    entry = prov.load_fingerprints()[prov.script_name(step.script)]
+    change(monkeypatch)
+    now = prov.compute_fingerprint(reproduce.fingerprint_fn(step))["values"]
+    ok, why = prov.fingerprint_matches(entry, now)
+    assert not ok, f"{name}: a changed code still matched its fingerprint ({why})"
+
+
+def test_every_tolerance_was_measured_and_is_tight():
+    """Each fingerprinted step carries the tolerance and spread measured by scripts/fingerprint_tolerance.py;
+    only closed-loop driving steps may let values flip, and no step allows more than a few percent."""
+    fps = prov.load_fingerprints()
+    for s in _fingerprinted():
+        tol = fps[prov.script_name(s.script)].get("tolerance")
+        assert tol and {"rtol", "atol", "max_outside", "spread"} <= set(tol), f"{s.name}: no measured tolerance"
+        assert {"native", "avx2-machine"} <= set(tol["spread"]), f"{s.name}: spread not measured across CPUs"
+        assert tol["rtol"] <= 0.05, f"{s.name}: rtol {tol['rtol']} is too loose to catch a real change"
+        assert tol["max_outside"] <= len(fps[prov.script_name(s.script)]["values"]) // 3, s.name
 
 
 def test_every_results_file_has_a_step_and_provenance_or_is_flagged():
@@ -94,6 +138,28 @@ def test_readme_is_up_to_date_with_results_and_their_verification():
 
 
 # --------------------------------------------------------------------------- the mechanism
+def test_values_outside_the_tolerance():
+    tol = {"rtol": 1e-3, "atol": 1e-6, "max_outside": 1}
+    assert prov.values_outside([1.0, 0.0, None], [1.0009, 5e-7, None], tol) == []
+    assert prov.values_outside([1.0, 0.0, None], [1.0011, 2e-6, 3.0], tol) == [(0, 1.0, 1.0011), (1, 0.0, 2e-6), (2, None, 3.0)]
+    entry = {"values": [1.0, 2.0, 3.0], "tolerance": tol}
+    assert prov.fingerprint_matches(entry, [1.0, 2.0, 3.5])[0]  # one flipped value allowed
+    assert not prov.fingerprint_matches(entry, [1.1, 2.0, 3.5])[0]
+    assert not prov.fingerprint_matches(entry, [1.0, 2.0])[0]  # a value fewer
+    assert prov.fingerprint_matches({"values": [1.0]}, [1.000004])[0]  # no tolerance: only the rounding
+
+
+def test_the_tolerance_rule_on_measured_spreads():
+    import fingerprint_tolerance as ft
+
+    recorded = [1.0, 2.0, 1e-9, 10.0]
+    runs = {"native": [1.0, 2.0, 1e-9, 10.0], "avx2-machine": [1.00001, 2.0, 3e-9, 12.0]}
+    tol = ft.tolerance(recorded, runs)
+    assert tol["spread"]["avx2-machine"] == {"max_rel": 1e-05, "flipped": 1}  # 10 -> 12 flipped
+    assert tol["rtol"] == pytest.approx(ft.SAFETY * 1e-5) and tol["max_outside"] == 2
+    assert prov.fingerprint_matches({"values": recorded, "tolerance": tol}, runs["avx2-machine"])[0]
+
+
 def test_digest_rounds_to_significant_digits_and_detects_changes():
     h1, v1 = prov.digest([1.0, 0.123456789, None, float("nan"), 3])
     assert v1 == [1.0, 0.123457, None, None, 3.0]
