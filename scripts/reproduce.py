@@ -85,15 +85,15 @@ STEPS: tuple[Step, ...] = (
     Step("radar_quality", "radar_quality.py", ("--out", "results/radar_quality_after.json"),
          ("radar_quality_after.json",), 300),
     Step("radar_profiles", "radar_profiles.py", ("--no-progress", "--out", "results/radar_profiles.json"),
-         ("radar_profiles.json",), 900, "speed against quality of the processing settings (issue 9)"),
+         ("radar_profiles.json",), 900, "speed against quality of the processing settings"),
     Step("radar_quality_before", "radar_quality.py", ("--fidelity", "iq", "--out", "results/radar_quality_before.json"),
-         ("radar_quality_before.json",), 600, on_request=True, no_fingerprint="the 'before' record of the radar change (issue 9), kept "
+         ("radar_quality_before.json",), 600, on_request=True, no_fingerprint="the 'before' record of the radar change, kept "
          "for comparison: measured on the code before it; the command is its closest equivalent at HEAD"),
     Step("slam_accuracy", "slam_accuracy.py", ("--no-progress",), ("slam_accuracy.json",), 1800),
     Step("slam_accuracy_before", "slam_accuracy.py",
          ("--slam", '{"variant": "fastslam1", "association": "nearest", "measurement_noise": "fixed"}',
           "--out", "results/slam_accuracy_before", "--no-progress"),
-         ("slam_accuracy_before.json",), 1800, on_request=True, no_fingerprint="the 'before' record of the SLAM change (issue 10), "
+         ("slam_accuracy_before.json",), 1800, on_request=True, no_fingerprint="the 'before' record of the SLAM change, "
          "kept for comparison: measured on the code before it; the command is the first-round model at HEAD"),
     Step("train_policy", "train_policy.py", ("--no-progress", "--algo", "dagger", "--only", "slam", "truth",
                                              "truth_all_around", "slam_rhs", "slam_phased", "dense", "dense_phased"),
