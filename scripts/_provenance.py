@@ -5,7 +5,7 @@ Every script that writes ``results/*.json`` imports this module (``from _provena
 **Provenance.** :func:`write_json` adds a ``"provenance"`` block to the result:
 ``commit`` (``git rev-parse HEAD`` when the script started; once the results file is committed,
 that commit is an ancestor of the commit adding it), ``dirty`` and ``dirty_files``
-(tracked files modified at start, outside ``results/`` and ``README.md``, so a run on
+(tracked files modified at start, outside ``results/``, ``docs/results/`` and ``README.md``, so a run on
 uncommitted code says so), ``command`` (the script and its arguments), ``config``
 (every parsed option, i.e. the full configuration of the run), the versions of
 python / numpy, the start time (UTC) and ``wall_s`` (run time, used by
@@ -61,7 +61,7 @@ RESULTS = ROOT / "results"
 FINGERPRINTS = RESULTS / "fingerprints.json"
 SIGNIFICANT = 6  # significant digits kept before hashing (robust to last-bit noise, sensitive to any real change)
 #: paths whose modification does not make a run "dirty": they are the runs' outputs
-OUTPUT_PATHS = ("results/", "README.md")
+OUTPUT_PATHS = ("results/", "README.md", "docs/results/")
 
 
 def _git(*args: str) -> str | None:

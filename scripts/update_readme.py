@@ -127,7 +127,7 @@ def _policies(d: dict) -> tuple[str, str]:
 
 def _benchmark(d: dict) -> tuple[str, str]:
     e = d["envs"]
-    return ("Env steps per second, radar + SLAM env (ground-truth env), one core",
+    return ("Env steps per second, radar + SLAM env (ground-truth env), single env, one BLAS thread",
             f"{e['rhs-highway-slam-v0']['steps_per_s']:.1f} ({e['rhs-highway-v0']['steps_per_s']:.1f})")
 
 
