@@ -33,9 +33,10 @@ on a tiny, fixed config, seconds long. :func:`digest` rounds the numbers to
    "..."`` records the new fingerprint in ``fingerprints.json`` only. The results file
    still carries the old hash, so it is *unverified*: :func:`verification` says so,
    ``scripts/update_readme.py`` puts a visible warning (with the reason) in the
-   README block of that result, and the test checks that the README carries it.
+   block of that result on its documentation page (and in the README's headline table
+   when it feeds it), and the test checks that the pages carry it.
 
-So a stale number is either caught by the test or shown as unverified in the README,
+So a stale number is either caught by the test or shown as unverified where it is shown,
 never silent. Results files written before provenance existed have no fingerprint
 and count as unverified in the same way.
 """
