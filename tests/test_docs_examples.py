@@ -127,3 +127,34 @@ def test_code_block_runs_verbatim(block, tmp_path):
     )
     new = set(_git_status().splitlines()) - set(before.splitlines())
     assert not new, f"{block.id}: the example wrote into the repository: {sorted(new)}"
+
+
+def _load(path: Path):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_api_reference_lists_every_module_of_each_package():
+    """The API pages are built from the package folders (docs/hooks/site.py), so a new module appears."""
+    pytest.importorskip("mkdocs")
+    site = _load(ROOT / "docs" / "hooks" / "site.py")
+    for page in sorted((ROOT / "docs" / "api").glob("*.md")):
+        package = page.stem
+        assert f"<!-- api: {package} -->" in page.read_text()
+        names = site.modules(package)
+        files = [p for p in (ROOT / package).rglob("*.py") if p.name == "__init__.py" or not p.name.startswith("_")]
+        assert names[0] == package and len(names) == len(files), (package, names)
+    text = site.on_page_markdown("# x\n\n<!-- api: rhs_slam -->\n", None, None, None)
+    assert "::: rhs_slam\n\n::: rhs_slam.cli" in text
+
+
+def test_sphinx_roles_become_inline_code():
+    pytest.importorskip("griffe")
+    roles = _load(ROOT / "docs" / "hooks" / "griffe_roles.py")
+    assert roles.plain(":func:`~agents.evaluate.run_episode` and :class:`slam.rbpf.RBPFSlam`. Input::\n\n    {}") == (
+        "`run_episode` and `slam.rbpf.RBPFSlam`. Input:\n\n    {}")
+    assert roles.plain("a :: b, x::y") == "a :: b, x::y"
