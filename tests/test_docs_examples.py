@@ -158,3 +158,20 @@ def test_sphinx_roles_become_inline_code():
     assert roles.plain(":func:`~agents.evaluate.run_episode` and :class:`slam.rbpf.RBPFSlam`. Input::\n\n    {}") == (
         "`run_episode` and `slam.rbpf.RBPFSlam`. Input:\n\n    {}")
     assert roles.plain("a :: b, x::y") == "a :: b, x::y"
+
+
+def test_readme_links_point_at_files_that_exist():
+    """The README is read on its own (not built by MkDocs): its relative links must resolve in the repository."""
+    text = (ROOT / "README.md").read_text()
+    links = re.findall(r"\]\((?!https?://|#)(?P<target>[^)\s#]+)", text)
+    assert any(t.startswith("docs/") for t in links)
+    missing = [t for t in links if not (ROOT / t).exists()]
+    assert not missing, f"README.md links to files that do not exist: {missing}"
+
+
+def test_readme_is_a_front_page():
+    """At most 250 lines: what it is, the two commands, a tour, the headline table, the layout, links."""
+    text = (ROOT / "README.md").read_text()
+    assert len(text.splitlines()) <= 250
+    for marker in ("<!-- main-command -->", "<!-- test-command -->", "<!-- results:headline -->"):
+        assert text.count(marker) == 1, marker
