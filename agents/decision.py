@@ -1,4 +1,4 @@
-"""A decision interval: the agent decides every ``k`` env steps (issue 12, goal 1).
+"""A decision interval: the agent decides every ``k`` env steps.
 
 The envs step at 5 Hz (one radar scan and SLAM cycle per step, 200 steps per
 40 s episode), five times highway-env's usual 1 Hz decision rate. Meta-actions

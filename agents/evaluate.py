@@ -6,7 +6,7 @@ spread (standard deviation, and standard error of the mean) over episodes:
 return, collision rate, mean speed, episode length and, on envs with the SLAM
 wrapper, the position RMSE of the estimated trajectory (sqrt of the mean
 squared per-step position error, no alignment: the map frame is the start
-pose), the heading RMSE and the final map RMSE (Hungarian matching, SPEC 9).
+pose), the heading RMSE and the final map RMSE (Hungarian matching).
 On ``rhs-highway-v0`` (ground truth) the SLAM fields are ``null``.
 
 Env and env kwargs: a policy zip written by ``rhs-slam train`` has a JSON

@@ -1,6 +1,6 @@
 """Linear antenna arrays of the radar: the RHS and its same-interface baselines.
 
-Azimuth-plane model (SPEC section 2). Elements lie on a line along the vehicle
+Azimuth-plane model. Elements lie on a line along the vehicle
 side at ``x_m = m d`` (m = 0..M-1, metres); ``theta`` is measured from the
 radar's boresight (normal to the side), positive toward increasing m.
 
@@ -14,7 +14,7 @@ Every antenna here is an :class:`ArrayAntenna`: element positions plus one
 complex weight vector per beam slot for Tx and Rx, so the radar and the point
 cloud code swap antennas by name (:func:`make_antenna`). Gains are returned
 power-normalised per slot, ``t / ||w_T||`` and ``r / ||w_R||``: ``|t|^2`` is the
-Tx array gain for a fixed radiated power (SPEC: Tx power fixed by the power
+Tx array gain for a fixed radiated power (the Tx power is fixed by the power
 constraint) and ``|r|^2`` the Rx array SNR gain, since the Rx noise
 ``w_R^T eps`` has variance ``||w_R||^2 sigma^2``. Both are at most M.
 
@@ -126,7 +126,7 @@ MAX_SLOTS = 360
 class ScanConfig:
     """The beam sweep of one radar: I slots of width ``grid_deg`` covering ``sector_deg``.
 
-    Grid centres: ``-sector/2 + grid/2 + k grid`` degrees, k = 0..I-1 (SPEC section 4).
+    Grid centres: ``-sector/2 + grid/2 + k grid`` degrees, k = 0..I-1.
     """
 
     grid_deg: float = 1.0

@@ -7,7 +7,7 @@
   20 m landmark spacing, so consecutive point clouds overlap strongly and data
   association is not aliased by the landmark period (1 Hz would move it 25 m,
   more than a spacing).
-* :class:`RHSPaperEnv`: the paper's Fig. 5c layout (SPEC section 7). The
+* :class:`RHSPaperEnv`: the paper's Fig. 5c layout. The
   obstacles are at (10, 65), (25, 10), (30, 65), (35, 10), (50, 65) m and the
   vehicle starts at (0, 37.5) heading +x, in the **world frame** (y up, see
   :mod:`rhs_env.scene`). highway-env's y axis points down, so the road is built
@@ -46,7 +46,7 @@ from rhs_env.scene import (
     world_pose,
 )
 
-#: the paper's obstacles (world frame, m) and start pose (SPEC section 7)
+#: the paper's obstacles (world frame, m) and start pose
 PAPER_OBSTACLES = ((10.0, 65.0), (25.0, 10.0), (30.0, 65.0), (35.0, 10.0), (50.0, 65.0))
 PAPER_START = (0.0, 37.5)
 

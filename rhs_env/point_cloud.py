@@ -1,4 +1,4 @@
-"""Point-cloud generation from swept-beam FMCW echoes (paper section VI, SPEC section 5).
+"""Point-cloud generation from swept-beam FMCW echoes (paper section VI).
 
 Processing chain for one radar with I beam slots and C chirps per slot; the
 dechirped samples ``y[i, c, n]`` (n = 0..N-1 at ``f_s``) are already the sum of
@@ -833,7 +833,7 @@ def range_crb(snr_per_sample: np.ndarray | float, samples: int, sample_rate_hz: 
 # --------------------------------------------------------------------------- metrics
 def pointcloud_metrics(points_xy: np.ndarray, truth_xy: np.ndarray, gate_m: float = 1.0,
                        truth_object: np.ndarray | None = None) -> dict:
-    """Point-cloud metrics of one cycle (SPEC section 9).
+    """Point-cloud metrics of one cycle.
 
     Each true scatterer in view is matched to its nearest point; it is detected
     when that point lies within ``gate_m``. ``rmse_m`` is over detected

@@ -1,6 +1,6 @@
 """Four swept-beam FMCW radars on the ego vehicle: echo synthesis and point clouds.
 
-Waveform (SPEC section 4): a linear chirp over ``B`` = 250 MHz in ``T_c`` = 20 us,
+Waveform: a linear chirp over ``B`` = 250 MHz in ``T_c`` = 20 us,
 slope ``S = B / T_c``, complex baseband sampling at ``f_s`` = 20 MHz (``N = f_s T_c``
 = 400 samples, range bin ``c0 / (2 B)`` = 0.6 m, unambiguous range
 ``c0 f_s / (2 S)`` = 240 m). Each radar sweeps I beam slots (one grid per slot),
@@ -620,7 +620,7 @@ class RadarSystem:
 
     def point_errors(self, cloud: PointCloud, scatterers: Scatterers, occluders: Occluders | None = None,
                      gate_m: float = 1.0) -> dict[str, Any]:
-        """Per-target errors of ``cloud`` against the scatterers in view (SPEC 9 matching).
+        """Per-target errors of ``cloud`` against the scatterers in view.
 
         Each scatterer in view is matched to its nearest point; it is detected when
         that point lies within ``gate_m``. For the detected ones, the errors of the
@@ -650,7 +650,7 @@ class RadarSystem:
 
     def metrics(self, cloud: PointCloud, scatterers: Scatterers, occluders: Occluders | None = None,
                 gate_m: float = 1.0, per_object: bool = False) -> dict:
-        """SPEC 9 point-cloud metrics of ``cloud`` against the scatterers in view."""
+        """Point-cloud metrics of ``cloud`` against the scatterers in view."""
         view = self.in_view(scatterers, occluders)
         return pointcloud_metrics(cloud.xy, scatterers.xy[view], gate_m,
                                   scatterers.object_id[view] if per_object else None)

@@ -74,7 +74,7 @@ CFAR_METHODS = ("os", "ca")
 
 @dataclass(frozen=True)
 class WaveformConfig:
-    """FMCW chirp, sampling and range FFT of each radar (SPEC section 4).
+    """FMCW chirp, sampling and range FFT of each radar.
 
     A linear chirp over B in T_c, slope ``S = B / T_c``; complex baseband
     sampling at f_s, ``N = f_s T_c`` samples per chirp (a whole number >= 16);
@@ -139,7 +139,7 @@ class WaveformConfig:
 
 @dataclass(frozen=True)
 class LinkBudgetConfig:
-    """Transmit power and receiver noise (radar equation, SPEC section 4).
+    """Transmit power and receiver noise (radar equation).
 
     Echo power at unit two-way gain ``P_t sigma lambda^2 / ((4 pi)^3 R^4)``;
     receiver noise ``sigma_n^2 = k T0 F f_s`` per complex sample

@@ -1,6 +1,6 @@
 """``rhs-slam scan SCENE.json --out CLOUD.json``: one radar cycle on targets from a file.
 
-Scene (vehicle frame, the ego at the origin heading +x)::
+Scene (vehicle frame, the ego at the origin heading +x; ``examples/scene.json`` in the repository is one)::
 
     {"targets": [[x, y, rcs_m2], ...],          # or [x, y, rcs_m2, vx, vy] (relative velocity, m/s)
      "occluders": [[x0, y0, x1, y1], ...],      # optional opaque segments

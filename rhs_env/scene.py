@@ -77,7 +77,7 @@ class LandmarkConfig:
             The right side is staggered by half a spacing.
         lateral_offset_m: distance of the landmarks from the road edge (the outer
             edge of the outermost lane), [0, 100] m.
-        rcs_m2: radar cross-section of each landmark, (0, 1e4] m^2 (SPEC: 5 m^2).
+        rcs_m2: radar cross-section of each landmark, (0, 1e4] m^2 (the paper's scene: 5 m^2).
         jitter_m: uniform longitudinal jitter +-jitter_m, [0, spacing_m / 2) m,
             so the landmark pattern is not periodic (periodic maps alias in SLAM).
         lateral_jitter_m: uniform lateral jitter, outward only, [0, 50] m (landmarks
@@ -88,7 +88,7 @@ class LandmarkConfig:
             offset, same RCS. Two poles g m apart seen from lateral distance d at
             longitudinal distance x subtend about ``g d / (x^2 + d^2)`` rad: 2 m pairs
             at 8 m lateral are 2-5 deg apart at 15-25 m, between one RHS beamwidth and
-            one phased-array beamwidth (SPEC 11).
+            one phased-array beamwidth.
         post_spacing_m: 0 (none) or the spacing [1, 100] m of guard-rail posts along
             the chosen side(s), with +-10 % uniform jitter of the spacing.
         post_offset_m: distance of the posts from the road edge, [0, 100] m.
@@ -152,7 +152,7 @@ class ScatterConfig:
         max_range_m: only objects within this distance of the ego centre are
             returned (bounded work), (0, 1000] m. Keep it at or above the radar's range.
         vehicle_rcs_m2: total RCS of a vehicle, spread over its visible faces in
-            proportion to their apparent (projected) width, (0, 1e4] m^2 (SPEC: about 10).
+            proportion to their apparent (projected) width, (0, 1e4] m^2 (about 10 for a car).
         points_per_face: scattering points per visible face, [1, 16].
         include_obstacles: also treat solid highway-env road objects (``Obstacle``)
             as extended static scatterers.
@@ -374,7 +374,7 @@ def _half_width(lane) -> float:
     return float(lane.width_at(0.0)) / 2
 
 
-#: ``rhs-dense-v0``'s scene (SPEC 11: where the antenna matters): paired poles every
+#: ``rhs-dense-v0``'s scene (where the antenna matters): paired poles every
 #: 20 m (2 m apart, RCS 5 m^2), guard-rail posts every 2.5 m on both sides 1 m off the
 #: road edge (RCS 0.5 m^2 each: small steel posts), sign gantries every 150 m (legs of
 #: 20 m^2). Within the radar's 100 m reach that is ~160 posts, ~20 poles and a gantry or

@@ -1,4 +1,4 @@
-"""Per-detection measurement uncertainty: range and angle standard deviations (SPEC section 11).
+"""Per-detection measurement uncertainty: range and angle standard deviations.
 
 Each point of a :class:`rhs_env.point_cloud.PointCloud` is measured in its radar's
 polar frame (range R from the radar, angle theta from its boresight). Its error

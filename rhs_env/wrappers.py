@@ -1,7 +1,7 @@
 """Gymnasium wrappers that put the RHS radar on any highway-env environment.
 
 :class:`RadarObservation` replaces the observation with the point cloud of the
-ego vehicle's four RHS radars (SPEC sections 4, 5 and 7):
+ego vehicle's four RHS radars:
 
 ``Dict(points=Box((N_max, 7), float32), points_mask=MultiBinary(N_max))``
 

@@ -5,7 +5,7 @@ Every script that writes ``results/*.json`` imports this module (``from _provena
 **Provenance.** :func:`write_json` adds a ``"provenance"`` block to the result:
 ``commit`` (``git rev-parse HEAD`` when the script started; once the results file is committed,
 that commit is an ancestor of the commit adding it), ``dirty`` and ``dirty_files``
-(tracked files modified at start, outside ``results/`` and ``README.md``, so a run on
+(tracked files modified at start, outside ``results/``, ``docs/results/`` and ``README.md``, so a run on
 uncommitted code says so), ``command`` (the script and its arguments), ``config``
 (every parsed option, i.e. the full configuration of the run), the versions of
 python / numpy and of every package that can move a result (``packages``), the start time (UTC) and ``wall_s`` (run time, used by
@@ -49,9 +49,10 @@ A real change of the code's output moves many values by more than that, and stil
    "..."`` records the new fingerprint in ``fingerprints.json`` only. The results file
    still carries the old hash, so it is *unverified*: :func:`verification` says so,
    ``scripts/update_readme.py`` puts a visible warning (with the reason) in the
-   README block of that result, and the test checks that the README carries it.
+   block of that result on its documentation page (and in the README's headline table
+   when it feeds it), and the test checks that the pages carry it.
 
-So a stale number is either caught by the test or shown as unverified in the README,
+So a stale number is either caught by the test or shown as unverified where it is shown,
 never silent. Results files written before provenance existed have no fingerprint
 and count as unverified in the same way.
 """
@@ -79,7 +80,7 @@ SIGNIFICANT = 6  # significant digits kept before hashing (the hash names a run;
 #: the rounding of the recorded values alone: a value kept to 6 digits is off by up to 5e-6 relative
 ROUNDING_RTOL = 5e-6
 #: paths whose modification does not make a run "dirty": they are the runs' outputs
-OUTPUT_PATHS = ("results/", "README.md")
+OUTPUT_PATHS = ("results/", "README.md", "docs/results/")
 
 
 def _git(*args: str) -> str | None:

@@ -1,4 +1,4 @@
-"""Short, measured ablations of what limits learning to drive (issue 12, goal 1).
+"""Short, measured ablations of what limits learning to drive.
 
 Each named variant trains PPO or a DAgger student (stable-baselines3 backend,
 ``agents/hyperparams/ppo.yml`` or ``dagger.yml`` with the variant's overrides) for

@@ -412,7 +412,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _goals(result: dict) -> dict:
-    """Each issue-9 ratio present in the result, its goal and whether it is met."""
+    """Each speed ratio present in the result, its goal and whether it is met."""
     found = {}
     for sec in ("envs", "load", "vec", "training"):
         for k, goal in GOALS.items():

@@ -3,7 +3,7 @@
     .venv-rllib/bin/python scripts/benchmark_rllib.py [--env rhs-highway-slam-v0] [--iterations 4]
         [--runners 1 2] [--out results/benchmark_rllib.json]
 
-Needs the ``rllib`` extra (its own environment, see the README). For each number
+Needs the ``rllib`` extra (its own environment, see docs/installation.md). For each number
 of env runners R, ``rhs-slam train --backend rllib`` runs PPO from the shipped
 ``agents/hyperparams/ppo.yml`` entry (train batch ``n_steps x n_envs`` = 256 env
 steps, whatever R) for ``--iterations`` iterations; the first iteration (Ray

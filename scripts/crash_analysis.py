@@ -1,6 +1,6 @@
 """Why a student crashes: its last decisions against the expert's, and whether the radar saw what it hit.
 
-Issue 12 asks what limits learning to drive on radar SLAM. This script replays
+What limits learning to drive on radar SLAM? This script replays
 policies (default: the shipped radar + SLAM student, then the budget ablation) on held-out seeds with the
 DAgger expert (:class:`agents.expert.HeadwayDriver`, on the simulator state)
 labelling every state it reaches. For each collision it takes the student's last
@@ -24,7 +24,7 @@ so a vehicle at highway offset (dx, dy) from the ego lies at (dx, -dy) in that f
 
 Several ``--policy`` are replayed on the same seeds, the first being the reference
 (default: the shipped student and the same recipe at half its budget,
-``agents/data/budget/``: the budget ablation of issue 12); the collision counts of
+``agents/data/budget/``: the budget ablation); the collision counts of
 each against the first's are compared with Fisher's exact test (two-sided).
 
     OMP_NUM_THREADS=1 python scripts/crash_analysis.py                   # shipped + budget ablation, seeds 1000-1049 and 2000-2049

@@ -17,7 +17,7 @@ Rows (every policy meets the same traffic: episode k uses seed ``--seed + k``):
   (``headway:<k>``, k the students' decision interval);
 * ``always SLOWER``: a scripted reference, action 4 (SLOWER) at every step, i.e.
   the lowest target speed (20 m/s) in the current lane, on ``rhs-highway-v0`` with
-  highway-env's action set as issue 12 set the goal (the students' env kwargs may
+  highway-env's action set, as the driving targets were set (the students' env kwargs may
   widen the target speeds, ``train_policy.FINE_SPEEDS``: the reference does not);
 * ``IDM + MOBIL``: a strong scripted reference, highway-env's own ``IDMVehicle``
   (IDM car following, MOBIL lane changes, desired speed 30 m/s) in the ego's
@@ -31,7 +31,7 @@ second); a collision (``info["crashed"]``) ends the episode. Writes
 ``results/policies.json`` (every episode) and ``results/policies.md`` (the
 README table), and checks the aim: SLAM policy >= 80 % of the ground-truth
 policy's mean return with a collision rate <= 1.5x its rate, and the goal of
-issue 12: SLAM policy >= 1.1x the always-SLOWER return, collision rate <= 4 %,
+the driving targets: SLAM policy >= 1.1x the always-SLOWER return, collision rate <= 4 %,
 a higher mean speed than always-SLOWER, and within 10 % of the ground-truth
 policy's return.
 
@@ -56,7 +56,7 @@ from _provenance import write_json
 from train_policy import ANTENNA_STUDY, TARGETS, target_path
 
 REWARD_AIM, COLLISION_AIM = 0.8, 1.5
-#: issue 12, goal 1: return vs always-SLOWER, collision rate, return vs the ground-truth policy
+#: the driving targets: return vs always-SLOWER, collision rate, return vs the ground-truth policy
 GOAL_VS_SLOWER, GOAL_COLLISIONS, GOAL_VS_TRUTH = 1.1, 0.04, 0.9
 
 
@@ -113,7 +113,7 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
 
 
 def antenna_study(episodes: int, seed: int, workers: int, done: dict[str, list[dict]] | None = None) -> dict:
-    """Issue 12 goal 2: DAgger students on RHS and phased-array observations, same budget, same seeds.
+    """The antenna study: DAgger students on RHS and phased-array observations, same budget, same seeds.
 
     For each env (highway, dense roadside) both policies drive the same seeds; the RHS - phased return
     difference is paired over seeds (95 % t-interval), collision rates get Wilson intervals. ``done``
@@ -225,7 +225,7 @@ def learned_specs(slam_policy: str, truth_policy: str, shipped_only: bool = Fals
 
 
 def goal_of(by: dict[str, dict], key: str) -> dict:
-    """Issue 12 goal 1 for the SLAM policy ``key``: against always-SLOWER and the better ground-truth policy of the
+    """The driving targets for the SLAM policy ``key``: against always-SLOWER and the better ground-truth policy of the
     same algorithm (PPO: ``ppo_truth``; DAgger: ``truth`` or the all-around one, whichever returns more)."""
     truths = ["ppo_truth"] if key == "ppo_slam" else [k for k in ("truth", "truth_all_around") if k in by]
     ref = max(truths, key=lambda k: by[k]["return"]["mean"])
@@ -307,7 +307,7 @@ def markdown(result: dict) -> str:
             "",
             f"The learned policies and the HeadwayDriver rows choose among target speeds [{speeds_text(speeds)}] m/s "
             f"(env kwargs `action`); always SLOWER and IDM + MOBIL keep highway-env's [{speeds_text(default)}], the "
-            f"set issue 12 set its goal against (on the wider set, always SLOWER would hold {speeds[0]:g} m/s and "
+            f"set the driving targets are set against (on the wider set, always SLOWER would hold {speeds[0]:g} m/s and "
             "return less).",
         ]
     aim = result["aim"]
@@ -331,7 +331,7 @@ def markdown(result: dict) -> str:
         lines += [
             "",
             (
-                f"Issue 12 goal ({label}, radar + SLAM): return / always-SLOWER **{goal['return_vs_slower']:.2f}** "
+                f"Driving target ({label}, radar + SLAM): return / always-SLOWER **{goal['return_vs_slower']:.2f}** "
                 f"(aim >= {GOAL_VS_SLOWER}), collision rate **{goal['collision_rate']:.2f}** (aim <= {GOAL_COLLISIONS}), "
                 f"mean speed {goal['speed_gain_mps']:+.2f} m/s vs always-SLOWER (aim > 0), return / ground-truth "
                 f"policy **{goal.get('return_vs_best_truth', goal.get('return_vs_truth', float('nan'))):.2f}** "
@@ -374,7 +374,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--slam-policy", default=None, help="default: agents/data/dagger_rhs_highway_slam.zip (shipped)")
     ap.add_argument("--truth-policy", default=None, help="default: agents/data/dagger_rhs_highway_truth.zip")
     ap.add_argument("--shipped-only", action="store_true", help="skip the all-around and PPO rows")
-    ap.add_argument("--no-antenna", action="store_true", help="skip the antenna study (issue 12 goal 2)")
+    ap.add_argument("--no-antenna", action="store_true", help="skip the antenna study (RHS vs phased-array students)")
     ap.add_argument("--antenna-episodes", type=int, default=50, help="seeds per policy in the antenna study")
     ap.add_argument("--out-dir", default=str(ROOT / "results"))
     ap.add_argument("--render-only", action="store_true", help="rewrite policies.md from policies.json, no runs")

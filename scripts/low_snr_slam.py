@@ -5,7 +5,7 @@
 One ``rhs-paper-v0`` episode (the paper's Fig. 5c scene, IDLE driving, default
 radar at 30 dBm, ICP registration) per antenna, detector and seed, with the
 obstacles' RCS ``--rcs`` m^2 (default 0.005: 30 dB below the scene's 5 m^2, the
-issue's low-SNR case). Vehicle ATE: position RMSE of the SLAM pose over the cycles
+low-SNR case). Vehicle ATE: position RMSE of the SLAM pose over the cycles
 (map frame = start pose, no alignment); also the final error, the map matched /
 missed / spurious counts (Hungarian, 2 m gate) and the points per cycle. Writes
 ``low_snr_slam.json`` (every episode, with the provenance of

@@ -1,4 +1,4 @@
-"""Speed against point-cloud quality of the radar's processing settings (issue 9, goal 1).
+"""Speed against point-cloud quality of the radar's processing settings.
 
 Each profile (``PROFILES``: radar kwargs over the default, exactly as ``gym.make(...,
 radar=...)`` takes them) is measured two ways, on the default antenna and 1-degree grid:
@@ -15,7 +15,7 @@ radar=...)`` takes them) is measured two ways, on the default antenna and 1-degr
   when every metric differs from the default's by less than the two-sample 95 %
   interval, ``|m - m_0| <= sqrt(h^2 + h_0^2)`` with ``h`` the metrics' 95 % half-widths.
 
-What issue 9 asks of the default path is the scan at a third of a highway-env step
+What the speed target asks of the default path is the scan at a third of a highway-env step
 with unchanged quality; this table says which settings buy how much of it, and at what
 cost. The default stays the reference until a profile keeps the quality and the
 results are rerun on it.

@@ -1,10 +1,11 @@
-"""Regenerate every file in ``results/`` and the README blocks, or only some of them.
+"""Regenerate every file in ``results/`` and the pages that show them, or only some of them.
 
 Each step runs one script (a subprocess, single-threaded BLAS) with the options that
-made the README's numbers, then ``scripts/update_readme.py`` copies the tables into
-the README. The run-time estimate comes from the ``provenance.wall_s`` each results
-file recorded (``STEPS[*].guess_s`` where none is recorded yet); the progress bar
-advances in estimated seconds.
+made the published numbers, then ``scripts/update_readme.py`` copies the tables into
+the documentation's results pages (``docs/results/``) and the README's headline table.
+The run-time estimate comes from the ``provenance.wall_s`` each results file recorded
+(``STEPS[*].guess_s`` where none is recorded yet); the progress bar advances in
+estimated seconds.
 
     python scripts/reproduce.py --list                     # steps, their state and estimated time
     python scripts/reproduce.py                            # everything (hours: trains the CNN and the policies)
@@ -15,7 +16,7 @@ advances in estimated seconds.
 ``--fingerprints-only`` reruns only the small-config fingerprints (seconds each) and,
 with ``--reason``, records those that changed in ``results/fingerprints.json``. That
 does not make the old numbers fresh: their results files keep the fingerprint of the
-code that produced them, so they show as *unverified* (with the reason) in the README
+code that produced them, so they show as *unverified* (with the reason) on their pages
 until the step is rerun. See ``scripts/_provenance.py`` for the design.
 """
 
@@ -86,15 +87,15 @@ STEPS: tuple[Step, ...] = (
     Step("radar_quality", "radar_quality.py", ("--out", "results/radar_quality_after.json"),
          ("radar_quality_after.json",), 300),
     Step("radar_profiles", "radar_profiles.py", ("--no-progress", "--out", "results/radar_profiles.json"),
-         ("radar_profiles.json",), 900, "speed against quality of the processing settings (issue 9)"),
+         ("radar_profiles.json",), 900, "speed against quality of the processing settings"),
     Step("radar_quality_before", "radar_quality.py", ("--fidelity", "iq", "--out", "results/radar_quality_before.json"),
-         ("radar_quality_before.json",), 600, on_request=True, no_fingerprint="the 'before' record of the radar change (issue 9), kept "
+         ("radar_quality_before.json",), 600, on_request=True, no_fingerprint="the 'before' record of the radar change, kept "
          "for comparison: measured on the code before it; the command is its closest equivalent at HEAD"),
     Step("slam_accuracy", "slam_accuracy.py", ("--no-progress",), ("slam_accuracy.json",), 1800),
     Step("slam_accuracy_before", "slam_accuracy.py",
          ("--slam", '{"variant": "fastslam1", "association": "nearest", "measurement_noise": "fixed"}',
           "--out", "results/slam_accuracy_before", "--no-progress"),
-         ("slam_accuracy_before.json",), 1800, on_request=True, no_fingerprint="the 'before' record of the SLAM change (issue 10), "
+         ("slam_accuracy_before.json",), 1800, on_request=True, no_fingerprint="the 'before' record of the SLAM change, "
          "kept for comparison: measured on the code before it; the command is the first-round model at HEAD"),
     Step("train_policy", "train_policy.py", ("--no-progress", "--algo", "dagger", "--only", "slam", "truth",
                                              "truth_all_around", "slam_rhs", "slam_phased", "dense", "dense_phased"),
@@ -118,7 +119,7 @@ STEPS: tuple[Step, ...] = (
     Step("benchmark", "benchmark.py", ("--out", "results/benchmark.json"), ("benchmark.json",), 900, "timings",
          no_fingerprint="timings"),
     Step("benchmark_rllib", "benchmark_rllib.py", (), ("benchmark_rllib.json",), 300,
-         "timings; in the rllib environment (README: Training beyond one machine)", no_fingerprint="timings",
+         "timings; in the rllib environment (docs/usage/training.md: Ray RLlib)", no_fingerprint="timings",
          python=".venv-rllib/bin/python"),
 )
 BY_NAME = {s.name: s for s in STEPS}

@@ -1,4 +1,4 @@
-"""SLAM accuracy against the issue-10 targets: highway, paper scene at 30 dBm, dense landmark pairs.
+"""SLAM accuracy against its targets: highway, paper scene at 30 dBm, dense landmark pairs.
 
 Writes ``results/slam_accuracy.json`` (per-seed figures, means with 95 % confidence
 intervals, commit, command line, full SLAM config) and ``results/slam_accuracy.md``.
@@ -357,7 +357,7 @@ def _fmt(s: dict) -> str:
 
 
 def markdown(doc: dict) -> str:
-    lines = [f"# SLAM accuracy (issue 10 targets)\n\nCommand: `{doc['command']}`  \nCommit: `{doc['commit']}`  \n"
+    lines = [f"# SLAM accuracy against its targets\n\nCommand: `{doc['command']}`  \nCommit: `{doc['commit']}`  \n"
              f"Seeds: {doc['seeds']} (evaluation seeds; the filter was tuned on 0..4). Mean +- 95 % CI over seeds.\n",
              "| scene | metric | value | target | met |", "|---|---|---|---|---|"]
     for part, res in doc["parts"].items():
@@ -382,8 +382,8 @@ def _notes(doc: dict) -> list[str]:
         hidden = sum(r.get("unmatched_never_in_view", 0) for r in runs)
         out.append(f"\nHighway: constant meta-action {hw.get('action', IDLE)} (4 = SLOWER, 20 m/s, no lane change; "
                    f"IDLE crashed into traffic on each of the seeds 0..4 and 100..104), {crashed} of {len(runs)} runs crashed. "
-                   "`matched_fraction` counts every landmark that has been within the radar's 100 m range (the "
-                   "issue's 'seen'); `measured_matched_fraction` only those the radar measured (a point within "
+                   "`matched_fraction` counts every landmark that has been within the radar's 100 m range; "
+                   "`measured_matched_fraction` only those the radar measured (a point within "
                    "1 m in >= 2 scans, `slam.metrics`); `visible_matched_fraction` those in its unoccluded view "
                    f">= 2 cycles. Unmatched seen landmarks, all seeds, by scans with a point within 1 m: "
                    f"0: {by['0']}, 1: {by['1']}, >= 2: {by['>=2']} ({hidden} never in the unoccluded view).")

@@ -83,7 +83,7 @@ TARGETS: dict[str, tuple] = {
     "slam": (SLAM_ID, {}),
     "truth": (TRUTH_ID, None),
     "truth_all_around": (TRUTH_ID, None, KINEMATICS_ALL_AROUND),
-    # issue 12 goal 2, does the antenna matter for driving: the same student on the RHS and on a phased array,
+    # the antenna study, does the antenna matter for driving: the same student on the RHS and on a phased array,
     # and both on the dense roadside
     "slam_rhs": (SLAM_ID, {"antenna": "rhs"}),
     "slam_phased": (SLAM_ID, {"antenna": "phased"}),

@@ -7,7 +7,7 @@ frame in the previous one (metres, radians). Training minimises the paper's loss
 
     L = mean_n( ||t_hat_n - t_n||^2 + gamma_r ||r_hat_n - r_n||^2 ).
 
-Design decision (documented in the README): the previous cloud is first moved
+Design decision (docs/design/physics.md, registration): the previous cloud is first moved
 into the current frame with a motion *prior* (constant velocity from the last
 estimate), so the network regresses the residual motion, a bounded quantity,
 whatever the vehicle speed and cycle length. With a zero prior this is exactly

@@ -1,4 +1,4 @@
-"""SLAM metrics (SPEC section 9). SI units: m, rad.
+"""SLAM metrics. SI units: m, rad.
 
 - :func:`position_rmse`: ``sqrt(mean_t |p_hat_t - p_t|^2)`` over the run, no
   alignment (the map frame is the start pose).

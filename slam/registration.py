@@ -299,9 +299,9 @@ class OdometryRegistration:
 
 
 REGISTRATIONS = ("cnn", "icp", "odometry")
-#: Default registration, chosen by measurement (README, "Registration"): on held-out
-#: simulator pairs ICP's translation RMSE is 0.05 m against the CNN's 0.36 m, and in
-#: the loop on the paper scene 0.10 m against 2.7 m. The trained CNN stays available.
+#: Default registration, chosen by measurement (docs/results/registration.md): ICP is more
+#: accurate than the CNN on held-out simulator pairs and in the loop on the paper scene.
+#: The trained CNN stays available.
 DEFAULT_REGISTRATION = "icp"
 
 

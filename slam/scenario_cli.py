@@ -1,6 +1,6 @@
 """``rhs-slam scenario SCENARIO.json --out RESULT.json``: SLAM on a scripted run.
 
-Input JSON (SPEC section 8)::
+Input JSON (``examples/scenario.json`` in the repository is one)::
 
     {"landmarks": [[x, y], ...],          # world frame, m
      "poses": [[x, y, heading], ...],     # true pose per cycle (m, m, rad); the first is the map origin

@@ -6,7 +6,7 @@ through :class:`slam.pipeline.SlamPipeline` (the same code as ``rhs-slam
 scenario``). The SLAM state lives here, not in highway-env's observation
 object, which highway-env rebuilds at every reset.
 
-Observation (SPEC section 7), adding to the radar's keys:
+Observation, adding to the radar's keys:
 
 * ``pose`` (3,): estimated x, y (m), heading (rad) in the map frame (the start pose is the origin);
 * ``pose_std`` (3,): the particles' weighted standard deviation;

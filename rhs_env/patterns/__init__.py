@@ -1,4 +1,4 @@
-"""Holographic pattern optimisation for the RHS (SPEC section 3).
+"""Holographic pattern optimisation for the RHS.
 
 * :mod:`~rhs_env.patterns.metrics`: sidelobe set D, P1 delta, per-grid report (gain, PSLR, pointing).
 * :mod:`~rhs_env.patterns.fast`: alternating phase-fixed SOCPs (default, fast).

@@ -1,6 +1,6 @@
 """Pattern geometry and quality metrics shared by the optimizers and the reports.
 
-Notation (SPEC section 2, paper eq. 3). ``s = sin(theta)``; element positions
+Notation (paper eq. 3). ``s = sin(theta)``; element positions
 ``x_m = m d`` in wavelengths; feed phase ``q_m``; amplitude ``psi_m``.
 
 * side-X one-way gain   ``x(s) = sum_m psi_m q_m exp(j 2 pi x_m s) = b(s)^T psi``
