@@ -173,7 +173,23 @@ def unverified_list(results_dir: Path, fingerprints: dict) -> str:
     return "\n".join(rows) if rows else "Every result is verified against the code."
 
 
-GENERATED: dict[str, Callable[[Path, dict], str | None]] = {"headline": headline, "unverified": unverified_list}
+def tolerance_table(results_dir: Path, fingerprints: dict) -> str | None:
+    """Each fingerprint's measured spread and tolerance (``scripts/fingerprint_tolerance.py``), one row a step."""
+    rows = ["| fingerprint | values | largest round-off spread | rtol | atol | values allowed to flip |",
+            "|---|---:|---:|---:|---:|---:|"]
+    for name, fp in sorted(fingerprints.items()):
+        tol = fp.get("tolerance")
+        if not tol:
+            rows.append(f"| `{name}` | {len(fp['values'])} | not measured | | | |")
+            continue
+        spread = max(v["max_rel"] for v in tol["spread"].values())
+        rows.append(f"| `{name}` | {len(fp['values'])} | {spread:.1e} | {tol['rtol']:.1e} | {tol['atol']:.1e} "
+                    f"| {tol['max_outside']} |")
+    return "\n".join(rows) if fingerprints else None
+
+
+GENERATED: dict[str, Callable[[Path, dict], str | None]] = {"headline": headline, "unverified": unverified_list,
+                                                             "tolerances": tolerance_table}
 
 
 def figure_links(md: str, page: Path | None) -> str:
