@@ -24,8 +24,9 @@ from __future__ import annotations
 import numpy as np
 
 from rhs_common.jit import njit
+from rhs_env.point_cloud import TAYLOR_ORDER
 
-__all__ = ["footprint_detections"]
+__all__ = ["footprint_detections", "newton_refine", "taylor_atoms", "taylor_tables"]
 
 
 # --------------------------------------------------------------------------- detection
@@ -142,3 +143,162 @@ def footprint_detections(stat: np.ndarray, in_range: np.ndarray, alpha: np.ndarr
             keep[a] = strength[a] >= margin * worst
         rd, kd, strength = rd[keep], kd[keep], strength[keep]
     return rd, kd, strength
+
+
+# --------------------------------------------------------------------------- atoms (Taylor tables)
+def taylor_tables(w2: np.ndarray, x: np.ndarray, candidates: np.ndarray,
+                  order: int = TAYLOR_ORDER) -> tuple[np.ndarray, np.ndarray, float]:
+    """Taylor coefficients of the centred one-way gains ``[t~ | r~]`` in u = sin(theta) at every candidate.
+
+    ``t_i(u) = sum_m w_T,im exp(j x_m u) = exp(j x_c u) t~_i(u)`` with ``x~_m = x_m - x_c`` (x_c the
+    middle of the aperture: the series converges over the half aperture only), and around
+    ``u_c = sin(theta_c)``
+
+        t~_i(u_c + delta) = sum_n T[c, n, i] delta^n,   T[c, n, i] = sum_m w_T,im (j x~_m)^n exp(j x~_m u_c) / n!,
+
+    the same for r with w_R (the columns of ``w2 = [w_T | w_R]`` (M, 2 I)). Returns the table
+    (I_c, N + 1, 2 I) complex128, ``u_c`` (I_c,) and ``x_c``.
+    """
+    x_c = 0.5 * (float(x.min()) + float(x.max()))
+    xt = x - x_c
+    u_c = np.sin(candidates)
+    fact = np.cumprod(np.concatenate([[1.0], np.arange(1, order + 1)]))
+    powers = (1j * xt[None, :]) ** np.arange(order + 1)[:, None] / fact[:, None]  # (N + 1, M)
+    a = np.exp(1j * np.outer(u_c, xt))  # (I_c, M)
+    table = (a[:, None, :] * powers[None]) @ w2  # (I_c, N + 1, 2 I)
+    return np.ascontiguousarray(table), u_c, x_c
+
+
+@njit
+def _atom_at(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray, x: np.ndarray,
+             th: float, order: int, f0: np.ndarray, f1: np.ndarray, f2: np.ndarray, h: np.ndarray) -> None:
+    """h (order + 1, I) at one angle th: :func:`taylor_atoms` for one angle (f0, f1, f2: (2 I,) work arrays)."""
+    n_c, n_n, n_i2 = table.shape
+    n_i = n_i2 // 2
+    u = np.sin(th)
+    cos_t = np.cos(th)
+    c = int(np.floor((th - lo) / step + 0.5))
+    if -1 <= c <= n_c:
+        c = min(max(c, 0), n_c - 1)
+        delta = u - u_c[c]
+        # Horner in delta for the value and its first two derivatives (vectorised over the gains i)
+        f0[:] = table[c, n_n - 1]
+        f1[:] = 0
+        f2[:] = 0
+        for n in range(n_n - 2, -1, -1):
+            row = table[c, n]
+            if order >= 2:
+                for i in range(n_i2):
+                    f2[i] = f2[i] * delta + 2.0 * f1[i]
+            if order >= 1:
+                for i in range(n_i2):
+                    f1[i] = f1[i] * delta + f0[i]
+            for i in range(n_i2):
+                f0[i] = f0[i] * delta + row[i]
+        ph = np.exp(1j * x_c * u)
+        jx = 1j * x_c
+        for i in range(n_i2):
+            g0 = f0[i]
+            g1 = jx * g0 + f1[i]
+            g2 = -x_c * x_c * g0 + 2.0 * jx * f1[i] + f2[i]
+            f0[i], f1[i], f2[i] = ph * g0, ph * g1, ph * g2
+    else:
+        f0[:] = 0
+        f1[:] = 0
+        f2[:] = 0
+        for m in range(x.size):
+            a = np.exp(1j * x[m] * u)
+            jx = 1j * x[m]
+            for i in range(n_i2):
+                wa = w2[m, i] * a
+                f0[i] += wa
+                f1[i] += jx * wa
+                f2[i] += jx * jx * wa
+    for i in range(n_i):  # u -> theta, then h = r t and its derivatives
+        t0, r0 = f0[i], f0[n_i + i]
+        h[0, i] = r0 * t0
+        if order >= 1:
+            t1, r1 = cos_t * f1[i], cos_t * f1[n_i + i]
+            h[1, i] = r1 * t0 + r0 * t1
+            if order >= 2:
+                t2 = cos_t * cos_t * f2[i] - u * f1[i]
+                r2 = cos_t * cos_t * f2[n_i + i] - u * f1[n_i + i]
+                h[2, i] = r2 * t0 + 2.0 * r1 * t1 + r0 * t2
+
+
+@njit
+def taylor_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
+                 x: np.ndarray, theta: np.ndarray, order: int) -> np.ndarray:
+    """``[h, dh/dtheta, d2h/dtheta2][:order + 1]`` (order + 1, T, I) of :meth:`rhs_env.point_cloud.AngleDictionary.atoms`.
+
+    ``h_i = r_i t_i``; t, r and their u-derivatives from the series of :func:`taylor_tables` at the
+    nearest candidate ``c`` (``delta = sin(theta) - u_c``): ``t~ = sum_n T_n delta^n``,
+    ``t~' = sum_n n T_n delta^(n-1)``, ``t~'' = sum_n n (n-1) T_n delta^(n-2)``; with the centring
+    phase ``p = exp(j x_c u)``: ``t = p t~``, ``dt/du = p (j x_c t~ + t~')``,
+    ``d2t/du2 = p (-x_c^2 t~ + 2 j x_c t~' + t~'')``; in theta ``t' = cos(theta) dt/du``,
+    ``t'' = cos(theta)^2 d2t/du2 - sin(theta) dt/du``; then ``h' = r' t + r t'``,
+    ``h'' = r'' t + 2 r' t' + r t''``. An angle more than one candidate outside the table is
+    summed directly, ``t_i = sum_m w_T,im exp(j x_m u)`` (``w2 = [w_T | w_R]``, x in radians per unit u).
+    """
+    n_i2 = table.shape[2]
+    out = np.empty((order + 1, theta.size, n_i2 // 2), np.complex128)
+    f0 = np.empty(n_i2, np.complex128)
+    f1 = np.empty(n_i2, np.complex128)
+    f2 = np.empty(n_i2, np.complex128)
+    h = np.empty((order + 1, n_i2 // 2), np.complex128)
+    for q in range(theta.size):
+        _atom_at(table, u_c, x_c, lo, step, w2, x, theta[q], order, f0, f1, f2, h)
+        out[:, q] = h
+    return out
+
+
+@njit
+def newton_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
+                  x: np.ndarray, theta: np.ndarray, resid: np.ndarray, steps: int) -> np.ndarray:
+    """:func:`rhs_env.point_cloud._newton_refine` per row: Newton steps maximising ``f = |h^H r|^2 / ||h||^2``.
+
+    With ``g = h^H r``, ``G = |g|^2``, ``n = ||h||^2`` and their theta derivatives from h', h''
+    (:func:`taylor_atoms`): ``G' = 2 Re(g* g')``, ``G'' = 2 |g'|^2 + 2 Re(g* g'')``, ``n' = 2 Re(h'^H h)``,
+    ``n'' = 2 Re(h''^H h) + 2 ||h'||^2``; ``f' = (G' n - G n') / n^2``,
+    ``f'' = (G'' n^2 - G n n'' - 2 G' n n' + 2 G n'^2) / n^3``; the step ``-f' / f''`` where f'' < 0,
+    clipped to half a candidate spacing. theta (D,), resid (D, I).
+    """
+    half = 0.5 * step
+    n_i2 = table.shape[2]
+    n_i = n_i2 // 2
+    f0 = np.empty(n_i2, np.complex128)
+    f1 = np.empty(n_i2, np.complex128)
+    f2 = np.empty(n_i2, np.complex128)
+    h = np.empty((3, n_i), np.complex128)
+    out = theta.copy()
+    for d in range(theta.size):
+        th = theta[d]
+        for _ in range(steps):
+            _atom_at(table, u_c, x_c, lo, step, w2, x, th, 2, f0, f1, f2, h)
+            g = 0j
+            g1 = 0j
+            g2 = 0j
+            n = 0.0
+            n1 = 0.0
+            n2a = 0.0
+            n2b = 0.0
+            for i in range(n_i):
+                r = resid[d, i]
+                h0c, h1c, h2c = np.conj(h[0, i]), np.conj(h[1, i]), np.conj(h[2, i])
+                g += h0c * r
+                g1 += h1c * r
+                g2 += h2c * r
+                n += (h0c * h[0, i]).real
+                n1 += (h1c * h[0, i]).real
+                n2a += (h2c * h[0, i]).real
+                n2b += (h1c * h[1, i]).real
+            n1, n2 = 2 * n1, 2 * n2a + 2 * n2b
+            G = g.real ** 2 + g.imag ** 2
+            G1 = 2 * (np.conj(g) * g1).real
+            G2 = 2 * (g1.real ** 2 + g1.imag ** 2) + 2 * (np.conj(g) * g2).real
+            fd1 = (G1 * n - G * n1) / n ** 2
+            fd2 = (G2 * n ** 2 - G * n * n2 - 2 * G1 * n * n1 + 2 * G * n1 ** 2) / n ** 3
+            delta = -fd1 / fd2 if fd2 < 0 else 0.0
+            th = th + min(max(delta, -half), half)
+        out[d] = th
+    return out

@@ -162,7 +162,8 @@ class RadarSystem:
         for r, a in enumerate(ants):
             if id(a) not in seen:
                 seen[id(a)] = len(self._groups)
-                dic = AngleDictionary(a, config.scan.grid_deg, config.scan.sector_deg, config.estimation.oversampling)
+                dic = AngleDictionary(a, config.scan.grid_deg, config.scan.sector_deg,
+                                      config.estimation.oversampling).use_kernels(config.kernels)
                 self._groups.append((dic, []))
             radar_group[r] = seen[id(a)]
         self.dictionaries = [self._groups[radar_group[r]][0] for r in range(4)]
