@@ -133,6 +133,18 @@ class ICPConfig:
         check_int("min_pairs", self.min_pairs, 2, 1_000_000)
 
 
+class _BruteNeighbours:
+    """``cKDTree``'s ``query(x, k=1, distance_upper_bound=...)`` by compiled brute force (the same pairs)."""
+
+    def __init__(self, ref: np.ndarray) -> None:
+        self.ref = np.ascontiguousarray(ref, dtype=float)
+
+    def query(self, x: np.ndarray, k: int = 1, distance_upper_bound: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+        from slam.kernels import nearest_neighbours
+
+        return nearest_neighbours(np.ascontiguousarray(x, dtype=float), self.ref, float(distance_upper_bound))
+
+
 class ICPRegistration:
     """Point-to-point ICP in the plane.
 
@@ -173,6 +185,9 @@ class ICPRegistration:
         self.min_pairs = cfg.min_pairs
         self.amplitude_weights = cfg.amplitude_weights
         self.constant_velocity = cfg.constant_velocity
+        #: "numba": nearest neighbours by the compiled brute force (:func:`slam.kernels.nearest_neighbours`,
+        #: the clouds hold tens of points), "numpy": cKDTree; set from the SLAM config by the pipeline
+        self.kernels = "numba"
         self.reset()
 
     def reset(self) -> None:
@@ -198,7 +213,7 @@ class ICPRegistration:
         if prev.ndim != 2 or cur.ndim != 2 or len(prev) < self.min_pairs or len(cur) < self.min_pairs:
             self.last_estimate = guess
             return guess.copy()
-        tree = cKDTree(prev[:, :2])
+        tree = _BruteNeighbours(prev[:, :2]) if self.kernels == "numba" else cKDTree(prev[:, :2])
         src = cur[:, :2]
         if self.amplitude_weights and prev.shape[1] >= 4 and cur.shape[1] >= 4:
             amp_p = np.maximum(prev[:, 3], 1e-12)
