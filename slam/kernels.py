@@ -1,8 +1,8 @@
-"""Compiled kernels of the SLAM (numba): the RBPF's Mahalanobis association and the ICP's nearest neighbours.
+"""Compiled kernels of the SLAM (numba): the RBPF's Mahalanobis association and the ICP (neighbours and fit).
 
 Each kernel computes what the numpy reference computes (:func:`slam.association.mahalanobis_associate`
-with the distances of :meth:`slam.rbpf.RBPFSlam._associate`; ``cKDTree.query`` in
-:class:`slam.registration.ICPRegistration`), with the same variable names and floating-point
+with the distances of :meth:`slam.rbpf.RBPFSlam._associate`; the fit of
+:class:`slam.registration.ICPRegistration` with its ``cKDTree`` queries), with the same variable names and floating-point
 order, per particle instead of on P x M x L tensors. ``SlamConfig(kernels="numpy")``
 (``gym.make(..., slam={"kernels": "numpy"})``) selects the reference; the costs of numba are
 listed in :mod:`rhs_env.kernels`.
@@ -14,7 +14,7 @@ import numpy as np
 
 from rhs_common.jit import njit
 
-__all__ = ["mahalanobis_association", "nearest_neighbours"]
+__all__ = ["icp_fit", "mahalanobis_association"]
 
 NEW = -1  # slam.association.NEW
 DROPPED = -2  # slam.association.DROPPED
@@ -93,25 +93,100 @@ def mahalanobis_association(obs_map: np.ndarray, a00: np.ndarray, a01: np.ndarra
 
 
 @njit
-def nearest_neighbours(query: np.ndarray, ref: np.ndarray, upper_bound: float) -> tuple[np.ndarray, np.ndarray]:
-    """``cKDTree(ref).query(query, k=1, distance_upper_bound=upper_bound)`` by brute force (small clouds).
+def _nearest(src: np.ndarray, prev: np.ndarray, motion: np.ndarray, upper_bound: float,
+             d: np.ndarray, j: np.ndarray) -> None:
+    """``cKDTree(prev).query(R(dth) src + t, k=1, distance_upper_bound=upper_bound)`` by brute force (small clouds).
 
-    ``d_q = min_r sqrt((x_q - x_r)^2 + (y_q - y_r)^2)`` and its index (the first of equal distances);
-    ``(inf, len(ref))`` where no point is nearer than ``upper_bound``.
+    ``d_q = min_r sqrt((x_q - x_r)^2 + (y_q - y_r)^2)`` of the moved point and its index (the first of equal
+    distances); ``(inf, len(prev))`` where no point is nearer than ``upper_bound``. Written into d, j.
     """
-    n_q, n_r = query.shape[0], ref.shape[0]
-    d = np.full(n_q, np.inf)
-    j = np.full(n_q, n_r, np.int64)
-    for q in range(n_q):
+    c, s = np.cos(motion[2]), np.sin(motion[2])
+    n_r = prev.shape[0]
+    for q in range(src.shape[0]):
+        mx = c * src[q, 0] - s * src[q, 1] + motion[0]
+        my = s * src[q, 0] + c * src[q, 1] + motion[1]
         best = np.inf
         arg = n_r
         for r in range(n_r):
-            dx = query[q, 0] - ref[r, 0]
-            dy = query[q, 1] - ref[r, 1]
+            dx = mx - prev[r, 0]
+            dy = my - prev[r, 1]
             d2 = dx * dx + dy * dy
             if d2 < best:
                 best, arg = d2, r
         dist = np.sqrt(best)
         if dist < upper_bound:
             d[q], j[q] = dist, arg
-    return d, j
+        else:
+            d[q], j[q] = np.inf, n_r
+
+
+@njit
+def icp_fit(src: np.ndarray, prev: np.ndarray, guess: np.ndarray, amp_p: np.ndarray, amp_c: np.ndarray,
+            use_amp: bool, max_iterations: int, max_gate_m: float, min_gate_m: float, outlier_factor: float,
+            tol_m: float, tol_rad: float, min_pairs: int) -> tuple[np.ndarray, int, float, int]:
+    """:meth:`slam.registration.ICPRegistration._fit` from one start, and the score of its result.
+
+    Each iteration: the nearest previous point of every moved point (within ``max_gate_m``), the pairs
+    within ``gate = max(min_gate_m, outlier_factor median(d))``, then the weighted 2-D Procrustes fit
+    (weights ``w = sqrt(a_c a_p)`` or 1): with ``ws = w / sum w``, centroids ``mu_s = ws . src``,
+    ``mu_d = ws . dst`` and centred ``a, b``, ``th = atan2(sum ws (a_x b_y - a_y b_x), sum ws (a_x b_x + a_y b_y))``,
+    ``t = mu_d - R(th) mu_s``; stop when the update is below ``tol_m`` / ``tol_rad``.
+    Returns the estimate (tx, ty, th), the pairs of the last fit, the RMS distance of the final
+    neighbours and the number of points within ``min_gate_m`` of a previous point (the yaw search's score).
+    """
+    n = src.shape[0]
+    d = np.empty(n)
+    j = np.empty(n, np.int64)
+    ok = np.empty(n, np.bool_)
+    est = guess.copy()
+    last_pairs = 0
+    for _ in range(max_iterations):
+        _nearest(src, prev, est, max_gate_m, d, j)
+        finite = d[np.isfinite(d)]
+        if finite.size < min_pairs:
+            break
+        gate = max(min_gate_m, outlier_factor * np.median(finite))
+        n_ok = 0
+        for q in range(n):
+            ok[q] = np.isfinite(d[q]) and d[q] <= gate
+            n_ok += ok[q]
+        if n_ok < min_pairs:
+            break
+        w = np.empty(n_ok)
+        a = np.empty((n_ok, 2))
+        b = np.empty((n_ok, 2))
+        k = 0
+        for q in range(n):
+            if ok[q]:
+                w[k] = np.sqrt(amp_c[q] * amp_p[j[q]]) if use_amp else 1.0
+                a[k, 0], a[k, 1] = src[q, 0], src[q, 1]
+                b[k, 0], b[k, 1] = prev[j[q], 0], prev[j[q], 1]
+                k += 1
+        ws = w / w.sum()
+        mu_s = ws @ a
+        mu_d = ws @ b
+        sxy = 0.0
+        sxx = 0.0
+        for k in range(n_ok):
+            ax, ay = a[k, 0] - mu_s[0], a[k, 1] - mu_s[1]
+            bx, by = b[k, 0] - mu_d[0], b[k, 1] - mu_d[1]
+            sxy += ws[k] * (ax * by - ay * bx)
+            sxx += ws[k] * (ax * bx + ay * by)
+        th = np.arctan2(sxy, sxx)
+        c, s = np.cos(th), np.sin(th)
+        new = np.array([mu_d[0] - (c * mu_s[0] - s * mu_s[1]), mu_d[1] - (s * mu_s[0] + c * mu_s[1]), th])
+        step = np.abs(new - est)
+        est = new
+        last_pairs = n_ok
+        if step[0] < tol_m and step[1] < tol_m and step[2] < tol_rad:
+            break
+    rmse = np.nan
+    score = 0
+    if last_pairs:
+        _nearest(src, prev, est, max_gate_m, d, j)
+        finite = d[np.isfinite(d)]
+        if finite.size:
+            rmse = np.sqrt(np.mean(finite ** 2))
+        for q in range(n):
+            score += d[q] <= min_gate_m
+    return est, last_pairs, rmse, score

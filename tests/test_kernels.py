@@ -129,18 +129,30 @@ def test_compiled_slam_matches_numpy_over_an_episode(slam):
     assert worst < 1e-6
 
 
-def test_brute_force_neighbours_equal_ckdtree():
-    from scipy.spatial import cKDTree
-
-    from slam.kernels import nearest_neighbours
+def test_compiled_icp_equals_the_numpy_fit():
+    """The compiled ICP (brute-force neighbours, fused iterations) gives the cKDTree / numpy estimate."""
+    from rhs_common.geometry import apply_motion
+    from slam.registration import ICPRegistration
 
     rng = np.random.default_rng(3)
-    ref, query = rng.uniform(-50, 50, (60, 2)), rng.uniform(-50, 50, (45, 2))
-    for bound in (np.inf, 4.0):
-        d0, j0 = cKDTree(ref).query(query, k=1, distance_upper_bound=bound)
-        d1, j1 = nearest_neighbours(query, ref, bound)
-        np.testing.assert_array_equal(j0, j1)
-        np.testing.assert_allclose(d0, d1, rtol=1e-15)
+    for trial in range(20):
+        prev = np.column_stack([rng.uniform(-60, 60, (50, 2)), np.zeros(50), rng.uniform(1, 30, 50)])
+        motion = np.array([rng.uniform(3, 6), rng.normal(0, 0.2), rng.normal(0, 0.02)])
+        keep = rng.random(50) < 0.8
+        cur = prev[keep].copy()
+        # current-frame points: the previous ones seen after the motion, with noise and a few outliers
+        c, s = np.cos(motion[2]), np.sin(motion[2])
+        rel = cur[:, :2] - motion[:2]
+        cur[:, :2] = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
+        cur[:, :2] += rng.normal(0, 0.05, (len(cur), 2))
+        cur[:3, :2] += rng.uniform(-20, 20, (3, 2))
+        regs = [ICPRegistration(amplitude_weights=bool(trial % 2)) for _ in range(2)]
+        regs[0].kernels = "numpy"
+        est = [r.estimate(prev, cur, prior=np.array([4.5, 0.0, 0.0])) for r in regs]
+        np.testing.assert_allclose(est[0], est[1], atol=1e-9)
+        assert regs[0].last_pairs == regs[1].last_pairs
+        np.testing.assert_allclose(regs[0].last_rmse, regs[1].last_rmse, rtol=1e-9)
+        assert np.abs(apply_motion(cur[3:, :2], est[1]) - prev[keep][3:, :2]).max() < 0.5  # it does register
 
 
 def _run(code: str, **env: str) -> subprocess.CompletedProcess:
@@ -156,7 +168,7 @@ def test_kernels_as_python_under_disable_jit():
         assert config.DISABLE_JIT
         from rhs_env.radar import RadarConfig, RadarSystem
         from rhs_env.scatterers import Scatterers
-        from slam import kernels
+        from slam.registration import ICPRegistration
         radars = {k: RadarSystem(RadarConfig(kernels=k), np.random.default_rng(1)) for k in ("numpy", "numba")}
         scene = Scatterers.static_points([[30.0, 10.0], [-45.0, -11.0], [60.0, -9.0]], rcs=8.0)
         spec = radars["numpy"].synthesize_spectrum(scene)
@@ -165,8 +177,14 @@ def test_kernels_as_python_under_disable_jit():
         radars = {k: RadarSystem(RadarConfig(kernels=k), np.random.default_rng(2)) for k in ("numpy", "numba")}
         s1, s2 = (r.synthesize_spectrum(scene).copy() for r in radars.values())
         assert np.abs(s1 - s2).max() <= 1e-6 * np.abs(s1).max()
-        d, j = kernels.nearest_neighbours(np.array([[0.0, 0.0], [5.0, 5.0]]), np.array([[1.0, 0.0], [5.0, 4.0]]), 2.0)
-        assert list(j) == [0, 1] and abs(d[0] - 1.0) < 1e-15
+        rng = np.random.default_rng(0)
+        prev = np.column_stack([rng.uniform(-30, 30, (12, 2)), np.zeros(12), np.ones(12)])
+        cur = prev.copy()
+        cur[:, 0] -= 2.0
+        regs = [ICPRegistration(yaw_search_rad=0.0) for _ in range(2)]
+        regs[0].kernels = "numpy"
+        e0, e1 = (r.estimate(prev, cur, prior=np.array([1.8, 0.0, 0.0])) for r in regs)
+        assert np.abs(e0 - e1).max() < 1e-9 and abs(e1[0] - 2.0) < 1e-6
         print("ok")
     """
     res = _run(code, NUMBA_DISABLE_JIT="1")
@@ -177,9 +195,9 @@ def test_cache_notice_once_then_silent(tmp_path):
     """A fresh cache compiles with the one-line notice; the next process loads the cache silently."""
     code = """
         import numpy as np
-        from slam.kernels import nearest_neighbours
-        nearest_neighbours(np.zeros((3, 2)), np.ones((4, 2)), 1.0)
-        nearest_neighbours(np.zeros((5, 2)), np.ones((2, 2)), 2.0)
+        from rhs_env.kernels import tone_spectra
+        tone_spectra(np.zeros(1), np.ones(1, complex), 8, 2, 4, np.array([0.1]))
+        tone_spectra(np.zeros(2), np.ones(2, complex), 8, 2, 4, np.array([0.2, 0.3]))
     """
     first = _run(code, NUMBA_CACHE_DIR=str(tmp_path))
     assert first.returncode == 0, first.stderr[-3000:]
