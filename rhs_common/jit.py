@@ -66,7 +66,7 @@ def _configure_cache() -> None:
     if "numba" in sys.modules:  # imported before us: its config is read, tell it too
         from numba.core import config
 
-        config.CACHE_DIR = str(path)
+        config.CACHE_DIR = str(path)  # type: ignore[attr-defined]
 
 
 _NUMBA: Any = None

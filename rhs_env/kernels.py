@@ -26,7 +26,7 @@ import numpy as np
 from rhs_common.jit import njit
 from rhs_env.point_cloud import TAYLOR_ORDER
 
-__all__ = ["footprint_detections", "newton_refine", "taylor_atoms", "taylor_tables"]
+__all__ = ["footprint_detections", "newton_refine", "taylor_atoms", "taylor_tables", "tone_operands", "tone_spectra"]
 
 
 # --------------------------------------------------------------------------- detection
@@ -302,3 +302,73 @@ def newton_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, ste
             th = th + min(max(delta, -half), half)
         out[d] = th
     return out
+
+
+# --------------------------------------------------------------------------- signal synthesis
+@njit
+def tone_spectra(mu: np.ndarray, coef: np.ndarray, n: int, zero_pad: int, n_bins: int, freq: np.ndarray) -> np.ndarray:
+    """:func:`rhs_env.point_cloud.tone_spectra`: windowed, zero-padded spectra of unit tones (P, n_bins) complex128.
+
+    ``S_p[k] = sum_m c_m D(k / (Z N) - f_p - mu_m)``, ``D(x) = exp(-j pi x (N - 1)) sin(pi N x) / sin(pi x)``
+    (``N cos(pi N x) / cos(pi x)`` where ``sin(pi x) = 0``), with ``e(x) = exp(j pi x) = e(k / (Z N)) e(-f_p - mu_m)``:
+    ``e1 = e(x)``, ``en = e(N x)``, ``D = conj(en) e1 sin(pi N x) / sin(pi x)``.
+    """
+    n_p, n_m = freq.size, mu.size
+    out = np.empty((n_p, n_bins), np.complex128)
+    ek1 = np.empty(n_bins, np.complex128)
+    ekn = np.empty(n_bins, np.complex128)
+    for k in range(n_bins):
+        kf = k / (zero_pad * n)
+        ek1[k] = np.exp(1j * np.pi * kf)
+        ekn[k] = np.exp(1j * np.pi * n * kf)
+    ef1 = np.empty(n_m, np.complex128)
+    efn = np.empty(n_m, np.complex128)
+    for p in range(n_p):
+        for m in range(n_m):
+            fm = freq[p] + mu[m]
+            ef1[m] = np.exp(-1j * np.pi * fm)
+            efn[m] = np.exp(-1j * np.pi * n * fm)
+        for k in range(n_bins):
+            acc = 0j
+            for m in range(n_m):
+                e1 = ek1[k] * ef1[m]
+                en = ekn[k] * efn[m]
+                s1 = e1.imag
+                if abs(s1) < 1e-12:
+                    ratio = n * en.real / e1.real
+                else:
+                    ratio = en.imag / s1
+                acc += coef[m] * np.conj(en) * e1 * ratio
+            out[p, k] = acc
+    return out
+
+
+@njit
+def tone_operands(rr: np.ndarray, g_mat: np.ndarray, omega: np.ndarray, wk: np.ndarray, chirps: int,
+                  n_radars: int) -> tuple[np.ndarray, np.ndarray]:
+    """The operands of ``Y_s[r] = G_r @ E_r`` (:meth:`rhs_env.radar.RadarSystem._mix`), complex64, rr sorted.
+
+    ``G_r[i, q] = G[i, p]`` and ``E_r[q, (c, k)] = exp(j omega_p c) W_p[k]`` for the q-th tone p of radar r
+    (zero-padded to the largest count; the product is formed in complex128 and rounded once, as numpy does).
+    Returns gp (R, I, Q) and ep (R, Q, C K).
+    """
+    n_p = rr.size
+    n_i, n_k = g_mat.shape[0], wk.shape[1]
+    counts = np.zeros(n_radars, np.int64)
+    for p in range(n_p):
+        counts[rr[p]] += 1
+    width = max(counts.max(), 1)
+    gp = np.zeros((n_radars, n_i, width), np.complex64)
+    ep = np.zeros((n_radars, width, chirps * n_k), np.complex64)
+    slot = np.zeros(n_radars, np.int64)
+    for p in range(n_p):
+        r = rr[p]
+        q = slot[r]
+        slot[r] += 1
+        for i in range(n_i):
+            gp[r, i, q] = g_mat[i, p]
+        for c in range(chirps):
+            ph = np.exp(1j * omega[p] * c)
+            for k in range(n_k):
+                ep[r, q, c * n_k + k] = ph * wk[p, k]
+    return gp, ep

@@ -396,10 +396,11 @@ class AngleDictionary:
         With ``kernels="numba"`` (:meth:`use_kernels`): the Taylor series of :func:`rhs_env.kernels.taylor_atoms`
         (the same values to ~1e-15 relative, 13x less arithmetic than the product with ``[w_T | w_R]``).
         """
-        if getattr(self, "_taylor", None) is not None and self.kernels == "numba":
+        taylor = getattr(self, "_taylor", None)  # (absent on the bare dictionaries of angle_crb)
+        if taylor is not None and self.kernels == "numba":
             from rhs_env.kernels import taylor_atoms
 
-            table, u_c, x_c = self._taylor
+            table, u_c, x_c = taylor
             return list(taylor_atoms(table, u_c, x_c, float(self.candidates[0]), float(self.step), self._w2, self._x,
                                      np.ascontiguousarray(th, dtype=float), order))
         n_t, n_i = th.size, self._w2.shape[1] // 2
@@ -428,10 +429,11 @@ def _newton_refine(dic: AngleDictionary, theta: np.ndarray, resid: np.ndarray, s
     ``-f' / f''`` where f is concave, clipped to half a candidate spacing. Compiled with the
     dictionary's ``kernels="numba"`` (:func:`rhs_env.kernels.newton_refine`, the same equations per row).
     """
-    if getattr(dic, "_taylor", None) is not None and dic.kernels == "numba":
+    taylor = getattr(dic, "_taylor", None)
+    if taylor is not None and dic.kernels == "numba":
         from rhs_env.kernels import newton_refine
 
-        table, u_c, x_c = dic._taylor
+        table, u_c, x_c = taylor
         return newton_refine(table, u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2, dic._x,
                              np.ascontiguousarray(theta, dtype=float), np.ascontiguousarray(resid, dtype=complex), steps)
     half = 0.5 * dic.step

@@ -214,6 +214,7 @@ class ICPRegistration:
             if self.kernels == "numba":  # the same iterations and score, compiled (slam.kernels.icp_fit)
                 est, pairs, rmse, near = self._fit_compiled(src, prev, start, amp_p, amp_c)
             else:
+                assert tree is not None
                 est, pairs, rmse = self._fit(tree, src, prev, start, amp_p, amp_c)
                 if pairs:
                     d, _ = tree.query(apply_motion(src, est), k=1, distance_upper_bound=self.max_gate_m)
