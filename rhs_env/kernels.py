@@ -24,12 +24,94 @@ from __future__ import annotations
 import numpy as np
 
 from rhs_common.jit import njit
-from rhs_env.point_cloud import TAYLOR_ORDER
 
-__all__ = ["footprint_detections", "newton_refine", "taylor_atoms", "taylor_tables", "tone_operands", "tone_spectra"]
+__all__ = ["TAYLOR_ORDER", "footprint_detections", "newton_refine", "taylor_atoms", "taylor_tables", "tone_operands", "tone_spectra"]
 
 
 # --------------------------------------------------------------------------- detection
+@njit
+def _peaks(stat: np.ndarray, in_range: np.ndarray, lo32: np.ndarray) -> np.ndarray:
+    """Flat indices (radar, hypothesis, bin) of ``T_j(k) > T_j(k - 1)``, ``T_j(k) >= T_j(k + 1)``, ``T_j(k) > lo_j``.
+
+    In np.nonzero order; branch-free (each cell written, the count advanced by the test): most cells are no peak.
+    """
+    n_r, n_j, n = stat.shape
+    cand = np.empty(n_r * n_j * n + 1, np.int64)
+    c = 0
+    for rr in range(n_r):
+        for jj in range(n_j):
+            line = stat[rr, jj]
+            base = (rr * n_j + jj) * n
+            lo_j = lo32[jj]
+            for kk in range(1, n - 1):
+                t = line[kk]
+                cand[c] = base + kk
+                c += (t > line[kk - 1]) & (t >= line[kk + 1]) & (t > lo_j) & in_range[kk]
+    return cand[:c]
+
+
+@njit
+def _cfar_level(line: np.ndarray, cells: np.ndarray, method: int, rank: int, vals: np.ndarray) -> float:
+    """Z of the training cells ``line[cells]``: the rank-th smallest (method 0, OS) or the mean (1, CA)."""
+    n_train = cells.size
+    for q in range(n_train):
+        vals[q] = float(line[cells[q]])
+    if method == 1:
+        return np.mean(vals)
+    for q in range(1, n_train):  # insertion sort of the few training cells
+        x = vals[q]
+        p = q - 1
+        while p >= 0 and vals[p] > x:
+            vals[p + 1] = vals[p]
+            p -= 1
+        vals[p + 1] = x
+    return vals[rank - 1]
+
+
+@njit
+def _sidelobe_keep(stat: np.ndarray, r: np.ndarray, j: np.ndarray, k: np.ndarray, val: np.ndarray,
+                   leak: np.ndarray, margin: float) -> np.ndarray:
+    """``T_j(k) >= margin max_{k'} T_j(k') leak(|k - k'|)`` over the detected bins k' of the radar with ``T_j(k') > T_j(k)``."""
+    n_r, _, n = stat.shape
+    m = r.size
+    bins = np.empty((n_r, n), np.int64)  # the detected bins of each radar, ascending
+    n_bins = np.zeros(n_r, np.int64)
+    detected = np.zeros((n_r, n), np.bool_)
+    for d in range(m):
+        detected[r[d], k[d]] = True
+    for rr in range(n_r):
+        for kk in range(n):
+            if detected[rr, kk]:
+                bins[rr, n_bins[rr]] = kk
+                n_bins[rr] += 1
+    keep = np.ones(m, np.bool_)
+    for d in range(m):
+        worst = 0.0
+        for q in range(n_bins[r[d]]):
+            kk = bins[r[d], q]
+            sv = float(stat[r[d], j[d], kk])
+            if sv > val[d]:
+                worst = max(worst, sv * leak[min(abs(k[d] - kk), leak.size - 1)])
+        keep[d] = val[d] >= margin * worst
+    return keep
+
+
+@njit
+def _mainlobe_keep(rd: np.ndarray, kd: np.ndarray, strength: np.ndarray, leak: np.ndarray, margin: float,
+                   null: int) -> np.ndarray:
+    """``strength >= margin strength' leak(|k - k'|)`` over the stronger pairs of the radar within ``null`` bins."""
+    n_d = rd.size
+    keep = np.ones(n_d, np.bool_)
+    for a in range(n_d):
+        worst = 0.0
+        for b in range(n_d):
+            dk = abs(kd[a] - kd[b])
+            if rd[a] == rd[b] and dk < null and strength[b] > strength[a]:
+                worst = max(worst, strength[b] * leak[min(dk, leak.size - 1)])
+        keep[a] = strength[a] >= margin * worst
+    return keep
+
+
 @njit
 def footprint_detections(stat: np.ndarray, in_range: np.ndarray, alpha: np.ndarray, floor: np.ndarray,
                          cap: np.ndarray, train_cells: np.ndarray, method: int, rank: int, leak: np.ndarray,
@@ -48,104 +130,48 @@ def footprint_detections(stat: np.ndarray, in_range: np.ndarray, alpha: np.ndarr
     ``train_cells`` (K, 2 train) the training-cell bins of every bin; ``leak`` the window's power-leak envelope.
     Returns rd, kd, strength.
     """
-    n_r, n_j, n = stat.shape
-    n_leak = leak.size
-    lo32 = (alpha * floor).astype(np.float32)
-    # 1. local maxima above the lowest threshold, in np.nonzero order (radar, hypothesis, bin);
-    # branch-free (each cell written, the count advanced by the test): most cells are no peak
-    n_cells = n_r * n_j * n
-    cand = np.empty(n_cells + 1, np.int64)
-    c = 0
-    for rr in range(n_r):
-        for jj in range(n_j):
-            line = stat[rr, jj]
-            base = (rr * n_j + jj) * n
-            lo_j = lo32[jj]
-            for kk in range(1, n - 1):
-                t = line[kk]
-                cand[c] = base + kk
-                c += (t > line[kk - 1]) & (t >= line[kk + 1]) & (t > lo_j) & in_range[kk]
-    # 2. the CFAR threshold at the peaks
-    r = np.empty(c, np.int64)
-    j = np.empty(c, np.int64)
-    k = np.empty(c, np.int64)
-    val = np.empty(c)
+    _, n_j, n = stat.shape
+    cand = _peaks(stat, in_range, (alpha * floor).astype(np.float32))
+    r = np.empty(cand.size, np.int64)
+    j = np.empty(cand.size, np.int64)
+    k = np.empty(cand.size, np.int64)
+    val = np.empty(cand.size)
+    vals = np.empty(train_cells.shape[1])
     m = 0
-    n_train = train_cells.shape[1]
-    vals = np.empty(n_train)
-    for q0 in range(c):
-        rr, rest = divmod(cand[q0], n_j * n)
+    for flat in cand:
+        rr, rest = divmod(flat, n_j * n)
         jj, kk = divmod(rest, n)
-        line = stat[rr, jj]
-        v = float(line[kk])
+        v = float(stat[rr, jj, kk])
         if method == 2:
             thr = alpha[jj] * floor[jj]
         else:
-            for q in range(n_train):
-                vals[q] = float(line[train_cells[kk, q]])
-            if method == 0:  # the rank-th smallest (insertion sort of the few training cells)
-                for q in range(1, n_train):
-                    x = vals[q]
-                    p = q - 1
-                    while p >= 0 and vals[p] > x:
-                        vals[p + 1] = vals[p]
-                        p -= 1
-                    vals[p + 1] = x
-                z = vals[rank - 1]
-            else:
-                z = np.mean(vals)
+            z = _cfar_level(stat[rr, jj], train_cells[kk], method, rank, vals)
             thr = alpha[jj] * min(max(z, floor[jj]), cap[jj])
         if v > thr:
             r[m], j[m], k[m], val[m] = rr, jj, kk, v
             m += 1
     r, j, k, val = r[:m], j[:m], k[:m], val[:m]
-    # 3. window sidelobe of a stronger detected bin of the same radar, on this hypothesis' line
     if m > 1:
-        detected = np.zeros((n_r, n), np.bool_)
-        for d in range(m):
-            detected[r[d], k[d]] = True
-        bins = np.empty((n_r, n), np.int64)  # the detected bins of each radar, ascending
-        n_bins = np.zeros(n_r, np.int64)
-        for rr in range(n_r):
-            for kk in range(n):
-                if detected[rr, kk]:
-                    bins[rr, n_bins[rr]] = kk
-                    n_bins[rr] += 1
-        keep = np.ones(m, np.bool_)
-        for d in range(m):
-            worst = 0.0
-            for q in range(n_bins[r[d]]):
-                kk = bins[r[d], q]
-                sv = float(stat[r[d], j[d], kk])
-                if sv > val[d]:
-                    worst = max(worst, sv * leak[min(abs(k[d] - kk), n_leak - 1)])
-            keep[d] = val[d] >= margin * worst
+        keep = _sidelobe_keep(stat, r, j, k, val, leak, margin)
         r, j, k, val = r[keep], j[keep], k[keep], val[keep]
-        m = r.size
-    # 4. union over hypotheses
     key = r * n + k
     uniq = np.unique(key)
     strength = np.zeros(uniq.size)
-    for d in range(m):
+    for d in range(r.size):
         u = np.searchsorted(uniq, key[d])
         strength[u] = max(strength[u], val[d] / floor[j[d]])
     rd, kd = uniq // n, uniq % n
-    # 5. inside the window main lobe of a stronger pair (any hypothesis)
-    n_d = rd.size
-    if n_d > 1:
-        keep = np.ones(n_d, np.bool_)
-        for a in range(n_d):
-            worst = 0.0
-            for b in range(n_d):
-                dk = abs(kd[a] - kd[b])
-                if rd[a] == rd[b] and dk < null and strength[b] > strength[a]:
-                    worst = max(worst, strength[b] * leak[min(dk, n_leak - 1)])
-            keep[a] = strength[a] >= margin * worst
+    if rd.size > 1:
+        keep = _mainlobe_keep(rd, kd, strength, leak, margin, null)
         rd, kd, strength = rd[keep], kd[keep], strength[keep]
     return rd, kd, strength
 
 
 # --------------------------------------------------------------------------- atoms (Taylor tables)
+#: order of the Taylor series of the one-way gains in u = sin(theta): the error term
+#: ``(|x - x_c| du)^(N + 1) / (N + 1)!`` is ~1e-19 for the 60-element RHS at the default candidate spacing
+TAYLOR_ORDER = 10
+
 def taylor_tables(w2: np.ndarray, x: np.ndarray, candidates: np.ndarray,
                   order: int = TAYLOR_ORDER) -> tuple[np.ndarray, np.ndarray, float]:
     """Taylor coefficients of the centred one-way gains ``[t~ | r~]`` in u = sin(theta) at every candidate.

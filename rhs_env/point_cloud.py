@@ -72,9 +72,6 @@ from scipy.signal import get_window
 
 from rhs_env.antenna import ArrayAntenna, steering
 
-#: order of the Taylor series of the compiled atoms (:func:`rhs_env.kernels.taylor_tables`)
-TAYLOR_ORDER = 10
-
 WINDOWS = ("hann", "hamming", "blackman", "boxcar", "taylor")
 
 
@@ -333,10 +330,11 @@ class AngleDictionary:
         smaller array (the 10-element phased array) keeps the direct product.
         """
         self.kernels = kernels
-        if kernels == "numba" and self._taylor is None and self._x.size > 2 * (TAYLOR_ORDER + 1):
-            from rhs_env.kernels import taylor_tables
+        if kernels == "numba" and self._taylor is None:
+            from rhs_env.kernels import TAYLOR_ORDER, taylor_tables
 
-            self._taylor = taylor_tables(self._w2, self._x, self.candidates)
+            if self._x.size > 2 * (TAYLOR_ORDER + 1):
+                self._taylor = taylor_tables(self._w2, self._x, self.candidates)
         return self
 
     @property
