@@ -1,4 +1,4 @@
-"""Compiled kernels of the SLAM (numba): the RBPF's Mahalanobis association and the ICP (neighbours and fit).
+"""Compiled kernels of the SLAM (numba): the RBPF's Mahalanobis association and FastSLAM 2.0 proposal sums, the ICP.
 
 Each kernel computes what the numpy reference computes (:func:`slam.association.mahalanobis_associate`
 with the distances of :meth:`slam.rbpf.RBPFSlam._associate`; the fit of
@@ -14,7 +14,7 @@ import numpy as np
 
 from rhs_common.jit import njit
 
-__all__ = ["icp_fit", "mahalanobis_association"]
+__all__ = ["icp_fit", "mahalanobis_association", "proposal_information"]
 
 NEW = -1  # slam.association.NEW
 DROPPED = -2  # slam.association.DROPPED
@@ -190,3 +190,28 @@ def icp_fit(src: np.ndarray, prev: np.ndarray, guess: np.ndarray, amp_p: np.ndar
         for q in range(n):
             score += d[q] <= min_gate_m
     return est, last_pairs, rmse, score
+
+
+@njit
+def proposal_information(pp: np.ndarray, H: np.ndarray, Si: np.ndarray, nu: np.ndarray, ok: np.ndarray,
+                         n_particles: int) -> tuple[np.ndarray, np.ndarray]:
+    """Information matrix and vector of the FastSLAM 2.0 pose proposal, summed per particle over its matched pairs.
+
+    ``info_p = sum_{k of p, ok_k} H_k^T S_k^-1 H_k`` (P, 3, 3) and ``g_p = sum_{k of p, ok_k} H_k^T S_k^-1 nu_k`` (P, 3),
+    H (K, 2, 3), Si = S^-1 (K, 2, 2), nu (K, 2), the pairs in the order of ``pp`` (the particle of each pair);
+    :meth:`slam.rbpf.RBPFSlam._sample_proposal`'s einsums and ``np.add.at``, term by term.
+    """
+    info = np.zeros((n_particles, 3, 3))
+    g = np.zeros((n_particles, 3))
+    hts = np.empty((3, 2))
+    for q in range(pp.size):
+        p = pp[q]
+        w = 1.0 if ok[q] else 0.0
+        for a in range(3):
+            for j in range(2):
+                hts[a, j] = (H[q, 0, a] * Si[q, 0, j] + H[q, 1, a] * Si[q, 1, j]) * w
+        for a in range(3):
+            for b in range(3):
+                info[p, a, b] += hts[a, 0] * H[q, 0, b] + hts[a, 1] * H[q, 1, b]
+            g[p, a] += hts[a, 0] * nu[q, 0] + hts[a, 1] * nu[q, 1]
+    return info, g

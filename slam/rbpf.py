@@ -156,9 +156,9 @@ class SlamConfig:
     holding it is at least this. dynamic_threshold_mps: moving-point filter
     threshold (m/s). min_range_m: observations closer than this are ignored (m).
     max_retired: cap on archived landmarks. retire_min_hits: updates needed to
-    archive a pruned landmark. kernels: "numba" (default: the Mahalanobis association and
-    the ICP's nearest neighbours compiled, :mod:`slam.kernels`) | "numpy" (the reference; the
-    same results to round-off).
+    archive a pruned landmark. kernels: "numba" (default: the Mahalanobis association, the
+    FastSLAM 2.0 proposal sums and the ICP fit compiled, :mod:`slam.kernels`) | "numpy" (the
+    reference; the same results to round-off).
     """
 
     n_particles: int = 100
@@ -520,12 +520,17 @@ class RBPFSlam:
         prior_var = np.maximum(self.pose_var, 1e-18)
         ok = np.ones(pp.size, dtype=bool)
         for attempt in range(2 if c.joint_compatibility else 1):
-            HtSi = np.einsum("kia,kij->kaj", H, Si) * ok[:, None, None]  # (K, 3, 2)
-            info = np.zeros((P, 3, 3))
-            np.add.at(info, pp, np.einsum("kaj,kjb->kab", HtSi, H))
+            if c.kernels == "numba":  # the same sums per particle, compiled
+                from slam.kernels import proposal_information
+
+                info, g = proposal_information(pp, H, Si, nu, ok, P)
+            else:
+                HtSi = np.einsum("kia,kij->kaj", H, Si) * ok[:, None, None]  # (K, 3, 2)
+                info = np.zeros((P, 3, 3))
+                np.add.at(info, pp, np.einsum("kaj,kjb->kab", HtSi, H))
+                g = np.zeros((P, 3))
+                np.add.at(g, pp, np.einsum("kaj,kj->ka", HtSi, nu))
             info += np.diag(1.0 / prior_var)
-            g = np.zeros((P, 3))
-            np.add.at(g, pp, np.einsum("kaj,kj->ka", HtSi, nu))
             cov = np.linalg.inv(info)
             delta = np.einsum("pab,pb->pa", cov, g)
             if attempt == 1 or not c.joint_compatibility:
