@@ -154,13 +154,13 @@ def footprint_detections(stat: np.ndarray, in_range: np.ndarray, alpha: np.ndarr
     if m > 1:
         keep = _sidelobe_keep(stat, r, j, k, val, leak, margin)
         r, j, k, val = r[keep], j[keep], k[keep], val[keep]
-    key = r * n + k
-    uniq = np.unique(key)
-    strength = np.zeros(uniq.size)
+    n_r = stat.shape[0]
+    best = np.zeros(n_r * n)  # max_j T_j / floor_j per (radar, bin); 0: not detected (T > 0 where detected)
     for d in range(r.size):
-        u = np.searchsorted(uniq, key[d])
-        strength[u] = max(strength[u], val[d] / floor[j[d]])
-    rd, kd = uniq // n, uniq % n
+        best[r[d] * n + k[d]] = max(best[r[d] * n + k[d]], val[d] / floor[j[d]])
+    key = np.flatnonzero(best > 0)  # sorted by radar then bin
+    strength = best[key]
+    rd, kd = key // n, key % n
     if rd.size > 1:
         keep = _mainlobe_keep(rd, kd, strength, leak, margin, null)
         rd, kd, strength = rd[keep], kd[keep], strength[keep]
@@ -208,9 +208,10 @@ def _atom_at(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: fl
         c = min(max(c, 0), n_c - 1)
         delta = u - u_c[c]
         # Horner in delta for the value and its first two derivatives (vectorised over the gains i)
-        f0[:] = table[c, n_n - 1]
-        f1[:] = 0
-        f2[:] = 0
+        for i in range(n_i2):
+            f0[i] = table[c, n_n - 1, i]
+            f1[i] = 0
+            f2[i] = 0
         for n in range(n_n - 2, -1, -1):
             row = table[c, n]
             if order >= 2:
@@ -229,9 +230,10 @@ def _atom_at(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: fl
             g2 = -x_c * x_c * g0 + 2.0 * jx * f1[i] + f2[i]
             f0[i], f1[i], f2[i] = ph * g0, ph * g1, ph * g2
     else:
-        f0[:] = 0
-        f1[:] = 0
-        f2[:] = 0
+        for i in range(n_i2):
+            f0[i] = 0
+            f1[i] = 0
+            f2[i] = 0
         for m in range(x.size):
             a = np.exp(1j * x[m] * u)
             jx = 1j * x[m]
@@ -274,7 +276,9 @@ def taylor_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step
     h = np.empty((order + 1, n_i2 // 2), np.complex128)
     for q in range(theta.size):
         _atom_at(table, u_c, x_c, lo, step, w2, x, theta[q], order, f0, f1, f2, h)
-        out[:, q] = h
+        for o in range(order + 1):
+            for i in range(n_i2 // 2):
+                out[o, q, i] = h[o, i]
     return out
 
 

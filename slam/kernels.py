@@ -121,6 +121,21 @@ def _nearest(src: np.ndarray, prev: np.ndarray, motion: np.ndarray, upper_bound:
 
 
 @njit
+def _median(x: np.ndarray) -> float:
+    """``np.median`` of a short 1-D array: the middle of the sorted values, or the mean of the two middle ones."""
+    v = x.copy()
+    for q in range(1, v.size):  # insertion sort (tens of values)
+        y = v[q]
+        p = q - 1
+        while p >= 0 and v[p] > y:
+            v[p + 1] = v[p]
+            p -= 1
+        v[p + 1] = y
+    h = v.size // 2
+    return v[h] if v.size % 2 else (v[h - 1] + v[h]) / 2
+
+
+@njit
 def icp_fit(src: np.ndarray, prev: np.ndarray, guess: np.ndarray, amp_p: np.ndarray, amp_c: np.ndarray,
             use_amp: bool, max_iterations: int, max_gate_m: float, min_gate_m: float, outlier_factor: float,
             tol_m: float, tol_rad: float, min_pairs: int) -> tuple[np.ndarray, int, float, int]:
@@ -145,7 +160,7 @@ def icp_fit(src: np.ndarray, prev: np.ndarray, guess: np.ndarray, amp_p: np.ndar
         finite = d[np.isfinite(d)]
         if finite.size < min_pairs:
             break
-        gate = max(min_gate_m, outlier_factor * np.median(finite))
+        gate = max(min_gate_m, outlier_factor * _median(finite))
         n_ok = 0
         for q in range(n):
             ok[q] = np.isfinite(d[q]) and d[q] <= gate
