@@ -198,8 +198,14 @@ def taylor_tables(w2: np.ndarray, x: np.ndarray, candidates: np.ndarray,
 @njit
 def _atom_at(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray, x: np.ndarray,
              th: float, order: int, f0: np.ndarray, f1: np.ndarray, f2: np.ndarray, h: np.ndarray) -> None:
-    """h (order + 1, I) at one angle th: :func:`taylor_atoms` for one angle (f0, f1, f2: (2 I,) work arrays)."""
-    n_c, n_n, n_i2 = table.shape
+    """h (order + 1, I) at one angle th: :func:`taylor_atoms` for one angle (f0, f1, f2: (2 I,) complex work arrays).
+
+    ``table``: the coefficients of :func:`taylor_tables` viewed as float64, (I_c, N + 1, 4 I) with re, im
+    interleaved: delta is real, so the Horner steps act on the real and imaginary parts alike (the same
+    values as in complex arithmetic, in vectorisable loops).
+    """
+    n_c, n_n, n_f = table.shape
+    n_i2 = n_f // 2
     n_i = n_i2 // 2
     u = np.sin(th)
     cos_t = np.cos(th)
@@ -207,21 +213,24 @@ def _atom_at(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: fl
     if -1 <= c <= n_c:
         c = min(max(c, 0), n_c - 1)
         delta = u - u_c[c]
-        # Horner in delta for the value and its first two derivatives (vectorised over the gains i)
-        for i in range(n_i2):
-            f0[i] = table[c, n_n - 1, i]
-            f1[i] = 0
-            f2[i] = 0
+        # Horner in delta for the value and its first two derivatives, on re / im alike
+        p0 = table[c, n_n - 1].copy()
+        p1 = np.zeros(n_f)
+        p2 = np.zeros(n_f)
         for n in range(n_n - 2, -1, -1):
             row = table[c, n]
             if order >= 2:
-                for i in range(n_i2):
-                    f2[i] = f2[i] * delta + 2.0 * f1[i]
+                for i in range(n_f):
+                    p2[i] = p2[i] * delta + 2.0 * p1[i]
             if order >= 1:
-                for i in range(n_i2):
-                    f1[i] = f1[i] * delta + f0[i]
-            for i in range(n_i2):
-                f0[i] = f0[i] * delta + row[i]
+                for i in range(n_f):
+                    p1[i] = p1[i] * delta + p0[i]
+            for i in range(n_f):
+                p0[i] = p0[i] * delta + row[i]
+        for i in range(n_i2):
+            f0[i] = complex(p0[2 * i], p0[2 * i + 1])
+            f1[i] = complex(p1[2 * i], p1[2 * i + 1])
+            f2[i] = complex(p2[2 * i], p2[2 * i + 1])
         ph = np.exp(1j * x_c * u)
         jx = 1j * x_c
         for i in range(n_i2):
@@ -267,8 +276,9 @@ def taylor_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step
     ``t'' = cos(theta)^2 d2t/du2 - sin(theta) dt/du``; then ``h' = r' t + r t'``,
     ``h'' = r'' t + 2 r' t' + r t''``. An angle more than one candidate outside the table is
     summed directly, ``t_i = sum_m w_T,im exp(j x_m u)`` (``w2 = [w_T | w_R]``, x in radians per unit u).
+    ``table``: the coefficients of :func:`taylor_tables` viewed as float64 (re, im interleaved).
     """
-    n_i2 = table.shape[2]
+    n_i2 = table.shape[2] // 2
     out = np.empty((order + 1, theta.size, n_i2 // 2), np.complex128)
     f0 = np.empty(n_i2, np.complex128)
     f1 = np.empty(n_i2, np.complex128)
@@ -294,7 +304,7 @@ def newton_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, ste
     clipped to half a candidate spacing. theta (D,), resid (D, I).
     """
     half = 0.5 * step
-    n_i2 = table.shape[2]
+    n_i2 = table.shape[2] // 2
     n_i = n_i2 // 2
     f0 = np.empty(n_i2, np.complex128)
     f1 = np.empty(n_i2, np.complex128)

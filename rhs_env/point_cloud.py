@@ -334,7 +334,8 @@ class AngleDictionary:
             from rhs_env.kernels import TAYLOR_ORDER, taylor_tables
 
             if self._x.size > 2 * (TAYLOR_ORDER + 1):
-                self._taylor = taylor_tables(self._w2, self._x, self.candidates)
+                table, u_c, x_c = taylor_tables(self._w2, self._x, self.candidates)
+                self._taylor = (table.view(np.float64), u_c, x_c)  # re, im interleaved: the kernels' layout
         return self
 
     @property
