@@ -12,11 +12,17 @@ thousands of interpreter-level calls per scan, several times the arithmetic.
 The noise generator stays in numpy (its transcendental functions are SIMD there; numba's
 wheels have no SVML).
 
-Costs of the dependency (numba 0.68.1, measured on the development machine, x86-64, Python 3.11):
-installed size ~15 MB for numba plus ~130 MB for llvmlite; numba 0.68 supports numpy < 2.5 (each numba
-release caps numpy: a numpy newer than the cap waits for a numba release); first compile of
-every kernel of this module and :mod:`slam.kernels` ~20 s (once per machine, cached on disk,
-:mod:`rhs_common.jit`); loading them from the cache ~0.5 s.
+Costs of the dependency (numba 0.68.1 / llvmlite 0.50, measured on the development machine, x86-64,
+Python 3.11, 2 cores shared with other jobs, load average 5-8):
+
+* installed size: numba 33 MB + llvmlite 180 MB (llvmlite carries a static LLVM);
+* numpy upper bound: every numba release caps numpy (0.68.1: numpy < 2.6); a numpy newer than the
+  cap waits for a numba release (pyproject asks numba >= 0.60, pip picks the one matching numpy);
+* no SVML in the wheels: transcendental loops are not vectorised, so the noise generator stays numpy;
+* first compile of every kernel here and in :mod:`slam.kernels`: ~13 s (footprint detector ~3 s,
+  ICP ~2.5 s, the atoms and Newton steps ~3 s, the rest ~1 s each or less), once per machine; a new
+  process then loads them from the cache (:mod:`rhs_common.jit`): the first SLAM-env step of a new
+  process took 38 s with an empty cache and 3.0 s with it (load 7.5).
 """
 
 from __future__ import annotations
