@@ -31,7 +31,10 @@ import numpy as np
 
 from rhs_common.jit import njit
 
-__all__ = ["TAYLOR_ORDER", "footprint_detections", "newton_refine", "taylor_atoms", "taylor_tables", "tone_operands", "tone_spectra"]
+__all__ = [
+    "TAYLOR_ORDER", "footprint_detections", "newton_refine", "phasors", "taylor_atoms", "taylor_tables", "tone_operands",
+    "tone_spectra",
+]
 
 
 # --------------------------------------------------------------------------- detection
@@ -418,3 +421,23 @@ def tone_operands(rr: np.ndarray, g_mat: np.ndarray, omega: np.ndarray, wk: np.n
             for k in range(n_k):
                 ep[r, q, c * n_k + k] = ph * wk[p, k]
     return gp, ep
+
+
+# --------------------------------------------------------------------------- OMP phases
+@njit
+def phasors(w: np.ndarray, tgrid: np.ndarray, sign: float) -> np.ndarray:
+    """``exp(sign j w_p t_ic)`` (P, I, C) for w (P,) rad per chirp and chirp times tgrid (I, C), sign +-1.
+
+    ``cos(x) + j sin(x)`` with ``x = (sign w) t``: the values numpy's complex exp gives for
+    ``np.exp(sign * 1j * w[:, None, None] * tgrid[None])`` (bit for bit), without its complex temporaries.
+    """
+    n_p = w.size
+    n_i, n_c = tgrid.shape
+    out = np.empty((n_p, n_i, n_c), np.complex128)
+    for p in range(n_p):
+        sw = sign * w[p]
+        for i in range(n_i):
+            for c in range(n_c):
+                x = sw * tgrid[i, c]
+                out[p, i, c] = complex(np.cos(x), np.sin(x))
+    return out

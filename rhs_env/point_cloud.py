@@ -650,6 +650,16 @@ def _joint_grid_search(dic: AngleDictionary, r: np.ndarray, w0: np.ndarray, span
     return om[rows, hbest], dic.candidates[j] + off * dic.step
 
 
+def _phasors(dic: AngleDictionary, w: np.ndarray, tgrid: np.ndarray, sign: float = -1.0) -> np.ndarray:
+    """``exp(sign j w t)`` (P, I, C) for w (P,) and tgrid (I, C); compiled with the dictionary's ``kernels="numba"``
+    (:func:`rhs_env.kernels.phasors`, the same values)."""
+    if dic.kernels == "numba":
+        from rhs_env.kernels import phasors
+
+        return phasors(np.ascontiguousarray(w, dtype=float), np.ascontiguousarray(tgrid, dtype=float), float(sign))
+    return np.exp((-1j if sign < 0 else 1j) * w[:, None, None] * tgrid[None])
+
+
 def _doppler_atoms(dic: AngleDictionary, theta: np.ndarray, omega: np.ndarray, tgrid: np.ndarray,
                    phase: np.ndarray | None = None) -> np.ndarray:
     """Atoms ``a_i,c = h_i(theta) exp(j omega t_ic)`` over slots x chirps, (P, I C) for theta, omega (P,).
@@ -659,7 +669,7 @@ def _doppler_atoms(dic: AngleDictionary, theta: np.ndarray, omega: np.ndarray, t
     """
     h = dic.atoms(theta)[0].T  # (P, I)
     if phase is None:
-        phase = np.exp(1j * omega[:, None, None] * tgrid[None])
+        phase = _phasors(dic, omega, tgrid, 1.0)
     return (h[:, :, None] * phase).reshape(theta.size, -1)
 
 
@@ -694,11 +704,11 @@ def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, thet
         fit = np.einsum("dkl,dl->dk", a, s)
         part = (flat[dd] - fit[dd] + a[dd, :, kk] * s[dd, kk][:, None]).reshape(-1, i, c)
         if base is None:
-            base = np.exp(-1j * domega[dd, kk][:, None, None] * tgrid[None])
+            base = _phasors(dic, domega[dd, kk], tgrid)
         h = a[dd, :, kk].reshape(-1, i, c)[:, :, 0] * base[:, :, 0]  # h(theta) of the current atom, (P, I)
         dw = domega[dd, kk] + _doppler_grid_refine(h, part * base, tgrid, span[dd])
         th = theta[dd, kk]
-        base = np.exp(-1j * dw[:, None, None] * tgrid[None])
+        base = _phasors(dic, dw, tgrid)
         if newton_steps:
             rho = np.sum(part * base, axis=2)
             th = _newton_refine(dic, th, rho, newton_steps)
@@ -733,7 +743,7 @@ def _new_atom(dic: AngleDictionary, res: np.ndarray, tgrid: np.ndarray, noise_va
     t_span = float(tgrid.max() + 1)
     reach = max(1, round(dic.H.shape[1] / max(i, 1)))
     w0 = np.angle(np.einsum("dic,dic->d", res[:, :, 1:], res[:, :, :-1].conj()))
-    rc = res * np.exp(-1j * w0[:, None, None] * tgrid[None])
+    rc = res * _phasors(dic, w0, tgrid)
     th = _grid_refine(dic, rc.sum(axis=2), None, reach)
     p_res = np.abs(res) ** 2
     snr = np.maximum(np.sum(p_res, axis=(1, 2)) / noise_var - i * c, 1.0)
@@ -748,12 +758,12 @@ def _new_atom(dic: AngleDictionary, res: np.ndarray, tgrid: np.ndarray, noise_va
         sub = np.flatnonzero(wide)
         w_s, th_s = _joint_grid_search(dic, res[sub], w0[sub], span[sub], dwell[sub], tgrid)
         w0[sub], th[sub] = w_s, th_s
-        rc[sub] = res[sub] * np.exp(-1j * w_s[:, None, None] * tgrid[None])
+        rc[sub] = res[sub] * _phasors(dic, w_s, tgrid)
         span[sub] = np.minimum(span[sub], np.pi / dwell[sub])
     w = w0 + _doppler_grid_refine(dic.atoms(th)[0].T, rc, tgrid, span)
     phase = None
     if newton_steps:
-        comp = np.exp(-1j * w[:, None, None] * tgrid[None])
+        comp = _phasors(dic, w, tgrid)
         rho = np.sum(res * comp, axis=2)
         th = _newton_refine(dic, th, rho, newton_steps)
         phase = np.conj(comp, out=comp)
