@@ -32,7 +32,7 @@ import numpy as np
 from rhs_common.jit import njit
 
 __all__ = [
-    "TAYLOR_ORDER", "footprint_detections", "newton_refine", "phasors", "taylor_atoms", "taylor_tables", "tone_operands",
+    "TAYLOR_ORDER", "footprint_detections", "joint_rho", "newton_refine", "phasors", "taylor_atoms", "taylor_tables", "tone_operands",
     "tone_spectra",
 ]
 
@@ -441,3 +441,28 @@ def phasors(w: np.ndarray, tgrid: np.ndarray, sign: float) -> np.ndarray:
                 x = sw * tgrid[i, c]
                 out[p, i, c] = complex(np.cos(x), np.sin(x))
     return out
+
+
+@njit
+def joint_rho(r: np.ndarray, om: np.ndarray, t_chirp: np.ndarray, t_slot: np.ndarray) -> np.ndarray:
+    """Doppler-compensated slot vectors of :func:`rhs_env.point_cloud._joint_grid_search`, complex64 (D, H, I).
+
+    ``rho[d, h, i] = exp(-j omega_dh t_i) sum_c r[d, i, c] exp(-j omega_dh t_c)`` for separable chirp times
+    ``t_ic = t_i + t_c`` (``t_slot`` (I,) holds t_i including the first chirp's time, ``t_chirp`` (C,) t_c).
+    """
+    n_d, n_i, n_c = r.shape
+    n_h = om.shape[1]
+    rho = np.empty((n_d, n_h, n_i), np.complex64)
+    ec = np.empty(n_c, np.complex128)
+    for d in range(n_d):
+        for h in range(n_h):
+            w = -om[d, h]
+            for c in range(n_c):
+                ec[c] = complex(np.cos(w * t_chirp[c]), np.sin(w * t_chirp[c]))
+            for i in range(n_i):
+                acc = 0j
+                for c in range(n_c):
+                    acc += r[d, i, c] * ec[c]
+                x = w * t_slot[i]
+                rho[d, h, i] = acc * complex(np.cos(x), np.sin(x))
+    return rho

@@ -633,7 +633,13 @@ def _joint_grid_search(dic: AngleDictionary, r: np.ndarray, w0: np.ndarray, span
     u = np.linspace(-1.0, 1.0, n_h)
     om = w0[:, None] + span[:, None] * u[None, :]  # (D, H)
     t_slot, t_chirp = tgrid[:, :1] - tgrid[0, 0], tgrid[0] - tgrid[0, 0]
-    if np.array_equal(tgrid, tgrid[0, 0] + t_slot + t_chirp[None, :]):  # t_ic = t_i + t_c: separable phase
+    separable = np.array_equal(tgrid, tgrid[0, 0] + t_slot + t_chirp[None, :])  # t_ic = t_i + t_c
+    if separable and dic.kernels == "numba":  # the same sums and phases, compiled, rounded to complex64 once
+        from rhs_env.kernels import joint_rho
+
+        rho = joint_rho(np.ascontiguousarray(r, dtype=complex), np.ascontiguousarray(om), t_chirp.astype(float),
+                        (tgrid[0, 0] + t_slot[:, 0]).astype(float))
+    elif separable:
         rho = np.einsum("dic,dhc->dhi", r, np.exp(-1j * om[:, :, None] * t_chirp))
         rho *= np.exp(-1j * om[:, :, None] * (tgrid[0, 0] + t_slot[:, 0]))
     else:
