@@ -185,6 +185,28 @@ def test_kernels_as_python_under_disable_jit():
         regs[0].kernels = "numpy"
         e0, e1 = (r.estimate(prev, cur, prior=np.array([1.8, 0.0, 0.0])) for r in regs)
         assert np.abs(e0 - e1).max() < 1e-9 and abs(e1[0] - 2.0) < 1e-6
+        from slam.association import mahalanobis_associate
+        from slam.kernels import mahalanobis_association, proposal_information
+        P, M, L = 3, 4, 5
+        obs, mean = rng.uniform(0, 6, (P, M, 2)), rng.uniform(0, 6, (P, L, 2))
+        a00, a11, a01 = rng.uniform(0.5, 1, (P, M)), rng.uniform(0.5, 1, (P, M)), rng.uniform(-0.1, 0.1, (P, M))
+        cov = np.tile(np.eye(2) * 0.2, (P, L, 1, 1))
+        active, used = np.ones((P, L), bool), np.arange(L)
+        s00, s11, s01 = a00[:, :, None] + 0.2, a11[:, :, None] + 0.2, a01[:, :, None] + 0.0
+        det = s00 * s11 - s01 * s01
+        nx, ny = obs[:, :, None, 0] - mean[:, None, :, 0], obs[:, :, None, 1] - mean[:, None, :, 1]
+        d2 = (s11 * nx * nx - 2 * s01 * nx * ny + s00 * ny * ny) / det
+        want = mahalanobis_associate(d2, 3.5**2, 6.0**2, 3)
+        got = mahalanobis_association(obs, a00, a01, a11, mean, cov, active, used, 3.5**2, 6.0**2, 3)
+        assert np.array_equal(want, got)
+        pp = np.array([0, 0, 1, 2, 2, 2])
+        H, Si, nu, ok = rng.normal(size=(6, 2, 3)), rng.normal(size=(6, 2, 2)), rng.normal(size=(6, 2)), rng.random(6) < 0.7
+        info, g = proposal_information(pp, H, Si, nu, ok, P)
+        HtSi = np.einsum("kia,kij->kaj", H, Si) * ok[:, None, None]
+        info0, g0 = np.zeros((P, 3, 3)), np.zeros((P, 3))
+        np.add.at(info0, pp, np.einsum("kaj,kjb->kab", HtSi, H))
+        np.add.at(g0, pp, np.einsum("kaj,kj->ka", HtSi, nu))
+        assert np.allclose(info, info0, rtol=1e-13, atol=1e-13) and np.allclose(g, g0, rtol=1e-13, atol=1e-13)
         print("ok")
     """
     res = _run(code, NUMBA_DISABLE_JIT="1")
