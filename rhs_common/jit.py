@@ -27,12 +27,11 @@ from __future__ import annotations
 
 import os
 import sys
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["KERNELS", "NOTICE", "cache_dir", "njit"]
+__all__ = ["KERNELS", "NOTICE", "njit"]
 
 #: the kernel implementations a config may choose: compiled (default) or the numpy reference
 KERNELS = ("numba", "numpy")
@@ -41,17 +40,9 @@ _PACKAGE_ROOT = Path(__file__).resolve().parent.parent
 
 
 def _writable(path: Path) -> bool:
-    """Whether numba can write its cache next to the sources under ``path`` (a probe file, removed)."""
-    try:
-        with tempfile.NamedTemporaryFile(dir=path, prefix=".rhs-write-probe-"):
-            return True
-    except OSError:
-        return False
-
-
-def cache_dir() -> str | None:
-    """The directory numba caches the kernels in when it is not next to the sources (None: next to them)."""
-    return os.environ.get("NUMBA_CACHE_DIR") or None
+    """Whether numba can write its cache next to the sources under ``path`` (``__pycache__`` there, or the folder)."""
+    cache = path / "__pycache__"
+    return os.access(cache if cache.is_dir() else path, os.W_OK)
 
 
 def _configure_cache() -> None:
