@@ -32,8 +32,8 @@ import numpy as np
 from rhs_common.jit import njit
 
 __all__ = [
-    "TAYLOR_ORDER", "footprint_detections", "joint_rho", "newton_refine", "phasors", "taylor_atoms", "taylor_tables", "tone_operands",
-    "tone_spectra",
+    "TAYLOR_ORDER", "atom_norms", "footprint_detections", "joint_rho", "newton_refine", "phasors", "taylor_atoms",
+    "taylor_tables", "tone_operands", "tone_spectra",
 ]
 
 
@@ -466,3 +466,17 @@ def joint_rho(r: np.ndarray, om: np.ndarray, t_chirp: np.ndarray, t_slot: np.nda
                 x = w * t_slot[i]
                 rho[d, h, i] = acc * complex(np.cos(x), np.sin(x))
     return rho
+
+
+@njit
+def atom_norms(a: np.ndarray) -> np.ndarray:
+    """``||a_dl|| = sqrt(sum_q |a[d, q, l]|^2)`` (D, L) of atoms a (D, Q, L): ``np.linalg.norm(a, axis=1)`` (its order of
+    summation over q; the last bit may differ where the compiler fuses a multiply-add)."""
+    n_d, n_q, n_l = a.shape
+    out = np.zeros((n_d, n_l))
+    for d in range(n_d):
+        for q in range(n_q):
+            for l in range(n_l):
+                v = a[d, q, l]
+                out[d, l] += v.real * v.real + v.imag * v.imag
+    return np.sqrt(out)

@@ -666,6 +666,15 @@ def _phasors(dic: AngleDictionary, w: np.ndarray, tgrid: np.ndarray, sign: float
     return np.exp((-1j if sign < 0 else 1j) * w[:, None, None] * tgrid[None])
 
 
+def atom_norms(atoms: np.ndarray, kernels: str = "numpy") -> np.ndarray:
+    """``np.linalg.norm(atoms, axis=1)`` of atoms (D, Q, L); compiled with ``kernels="numba"`` (:func:`rhs_env.kernels.atom_norms`)."""
+    if kernels == "numba":
+        from rhs_env.kernels import atom_norms as compiled
+
+        return compiled(np.ascontiguousarray(atoms, dtype=complex))
+    return np.linalg.norm(atoms, axis=1)
+
+
 def _doppler_atoms(dic: AngleDictionary, theta: np.ndarray, omega: np.ndarray, tgrid: np.ndarray,
                    phase: np.ndarray | None = None) -> np.ndarray:
     """Atoms ``a_i,c = h_i(theta) exp(j omega t_ic)`` over slots x chirps, (P, I C) for theta, omega (P,).
@@ -824,13 +833,13 @@ def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_t
         th_r[:, l], om_r[:, l], val_r[:, l] = th, w, True
         a[:, :, l] = _doppler_atoms(dic, th, w, tgrid, phase)
         s = _lstsq(a, data[rows].reshape(rows.size, -1, 1))[..., 0] * val_r
-        ok = np.all((np.abs(s) * np.linalg.norm(a, axis=1) >= min_amplitude) | ~val_r, axis=1) | (detected and l == 0)
+        ok = np.all((np.abs(s) * atom_norms(a, dic.kernels) >= min_amplitude) | ~val_r, axis=1) | (detected and l == 0)
         if l > 0 and cycles and np.any(ok):  # joint refinement of the rows that keep the new atom
             k = np.flatnonzero(ok)
             th_r[k], om_r[k], s[k], a[k] = joint_refine(dic, data[rows[k]], tgrid, th_r[k], om_r[k], val_r[k],
                                                         np.full(k.size, fine_span), passes=cycles,
                                                         newton_steps=newton_steps, atoms=a[k], amp=s[k])
-            ok &= np.all((np.abs(s) * np.linalg.norm(a, axis=1) >= min_amplitude) | ~val_r, axis=1)
+            ok &= np.all((np.abs(s) * atom_norms(a, dic.kernels) >= min_amplitude) | ~val_r, axis=1)
         good = rows[ok]
         theta[good], omega[good], valid[good], amp[good], atoms[good] = th_r[ok], om_r[ok], val_r[ok], s[ok], a[ok]
         resid[good] = data[good] - np.einsum("dkl,dl->dk", a[ok], s[ok]).reshape(-1, i, c)

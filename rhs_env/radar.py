@@ -58,6 +58,7 @@ from rhs_env.point_cloud import (
     PointCloud,
     _lstsq,
     angle_crb,
+    atom_norms,
     ca_cfar_threshold,
     cfar_alpha,
     local_maxima,
@@ -544,7 +545,7 @@ class RadarSystem:
                               cycles=cfg.estimation.refine_passes,
                               detected=bool(self._detectors))
             est.theta[sel], est.amp[sel], est.valid[sel], est.omega[sel] = res.theta, res.amp, res.valid, res.omega
-            est.anorm[sel] = np.linalg.norm(res.atoms, axis=1)
+            est.anorm[sel] = atom_norms(res.atoms, cfg.kernels)
             est.tfrac[sel] = self._target_bins(spec, rd[sel], kd[sel], res.atoms)
         return est
 
