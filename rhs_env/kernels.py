@@ -21,8 +21,9 @@ Python 3.11, 2 cores shared with other jobs, load average 5-8):
 * no SVML in the wheels: transcendental loops are not vectorised, so the noise generator stays numpy;
 * first compile of every kernel here and in :mod:`slam.kernels`: ~13 s (footprint detector ~3 s,
   ICP ~2.5 s, the atoms and Newton steps ~3 s, the rest ~1 s each or less), once per machine; a new
-  process then loads them from the cache (:mod:`rhs_common.jit`): the first SLAM-env step of a new
-  process took 38 s with an empty cache and 3.0 s with it (load 7.5).
+  process then loads them from the cache (:mod:`rhs_common.jit`): imports, ``gym.make``, reset and
+  the first step of the SLAM env in a new process took 18.5 s with an empty cache and 2.6 s with it
+  (load 3.7; ``python scripts/benchmark.py --sections start``).
 """
 
 from __future__ import annotations
