@@ -314,7 +314,7 @@ def flat_dict(config: Any) -> dict[str, Any]:
     moved: Mapping[str, str] = getattr(type(config), "MOVED_FIELDS", {})
     by_new = {new: old for old, new in moved.items()}
     groups = {new.split(".")[0] for new in moved.values()}
-    out = {k: v for k, v in tree.items() if k not in groups}
+    out = {k: v for k, v in tree.items() if k not in groups and not (k in added and v == added[k])}
 
     def walk(node: dict[str, Any], prefix: str) -> None:
         for k, v in node.items():

@@ -281,6 +281,7 @@ class FootprintDetector:
         resp = np.abs(np.fft.fft(np.asarray(window, float), cfg.waveform.zero_pad * window.size)) ** 2
         self._null = int(np.argmax(np.diff(resp[: resp.size // 2]) > 0))  # first null of the main lobe, padded bins
         self._margin = 10 ** (cfg.detection.sidelobe_margin_db / 10)
+        self.kernels = getattr(cfg, "kernels", "numpy")
 
     def _training_cells(self, n: int) -> np.ndarray:
         """(n, 2 train) training-cell indices of each of n cells (cached per profile length).
@@ -337,9 +338,18 @@ class FootprintDetector:
         """Detected (radar, bin) pairs of spectra (R, I, C, K); ``in_range`` (K,) bool bins allowed.
 
         Returns rd, kd (sorted by radar then bin, as ``np.nonzero``) and the peak
-        statistic ``max_j T_j / floor_j`` of each pair (noise-mean units).
+        statistic ``max_j T_j / floor_j`` of each pair (noise-mean units). With the config's
+        ``kernels="numba"`` everything after the statistic runs compiled
+        (:func:`rhs_env.kernels.footprint_detections`, the same steps).
         """
         stat = self.statistic(spec)
+        if self.kernels == "numba":
+            from rhs_env.kernels import footprint_detections
+
+            method = {"os": 0, "ca": 1}.get(self.method, 2)
+            return footprint_detections(stat, np.ascontiguousarray(in_range, dtype=bool), self.alpha, self.floor,
+                                        self.cap, self._training_cells(stat.shape[-1]), method, self.rank,
+                                        self._leak, self._margin, self._null)
         t = stat[:, :, 1:-1]
         lo = (self.alpha * self.floor).astype(np.float32)[None, :, None]  # no threshold is lower
         peak = np.zeros(stat.shape, bool)

@@ -58,6 +58,7 @@ from rhs_env.point_cloud import (
     PointCloud,
     _lstsq,
     angle_crb,
+    atom_norms,
     ca_cfar_threshold,
     cfar_alpha,
     local_maxima,
@@ -162,7 +163,8 @@ class RadarSystem:
         for r, a in enumerate(ants):
             if id(a) not in seen:
                 seen[id(a)] = len(self._groups)
-                dic = AngleDictionary(a, config.scan.grid_deg, config.scan.sector_deg, config.estimation.oversampling)
+                dic = AngleDictionary(a, config.scan.grid_deg, config.scan.sector_deg,
+                                      config.estimation.oversampling).use_kernels(config.kernels)
                 self._groups.append((dic, []))
             radar_group[r] = seen[id(a)]
         self.dictionaries = [self._groups[radar_group[r]][0] for r in range(4)]
@@ -360,12 +362,26 @@ class RadarSystem:
         * noise: the windowed, zero-padded FFT of CN(0, sigma_n^2) white noise
           (:meth:`_noise_spectrum`), whose covariance over the bins is exactly the
           IQ path's, ``sigma_n^2 sum_n w[n]^2 exp(-j 2 pi (k - l) n / (Z N))``.
+
+        With ``kernels="numba"`` the tone spectra and the operands of the product are built compiled
+        (:func:`rhs_env.kernels.tone_spectra`, :func:`rhs_env.kernels.tone_operands`); the noise stays numpy.
         """
         cfg = self.config
         i_slots, c, n, z, kb = cfg.scan.slots, cfg.waveform.chirps_per_slot, cfg.waveform.samples, cfg.waveform.zero_pad, self._bin_hi
         spec = self._noise_spectrum((4, i_slots, c))
         tones = self._echoes(scatterers, occluders)
-        if tones is not None:
+        if tones is not None and cfg.kernels == "numba":
+            from rhs_env import kernels
+            from rhs_env.point_cloud import window_exponentials
+
+            rr, g_mat, omega, f_tot = tones
+            mu, coef = window_exponentials(cfg.waveform.window, n)
+            wk = kernels.tone_spectra(mu, coef, n, z, kb, np.ascontiguousarray(f_tot / cfg.waveform.sample_rate_hz))
+            gp, ep = kernels.tone_operands(rr, g_mat, omega, wk, c, 4)
+            sig = self._buffer("sig", (4, i_slots, c * kb), np.complex64)
+            np.matmul(gp, ep, out=sig)
+            spec += sig.reshape(spec.shape)
+        elif tones is not None:
             rr, g_mat, omega, f_tot = tones
             wk = tone_spectra(cfg.waveform.window, n, z, kb, f_tot / cfg.waveform.sample_rate_hz)  # (P, K_b)
             e_mat = (np.exp(1j * omega[:, None] * np.arange(c))[:, :, None] * wk[:, None, :]).reshape(rr.size, c * kb)
@@ -529,7 +545,7 @@ class RadarSystem:
                               cycles=cfg.estimation.refine_passes,
                               detected=bool(self._detectors))
             est.theta[sel], est.amp[sel], est.valid[sel], est.omega[sel] = res.theta, res.amp, res.valid, res.omega
-            est.anorm[sel] = np.linalg.norm(res.atoms, axis=1)
+            est.anorm[sel] = atom_norms(res.atoms, cfg.kernels)
             est.tfrac[sel] = self._target_bins(spec, rd[sel], kd[sel], res.atoms)
         return est
 

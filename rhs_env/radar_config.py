@@ -40,6 +40,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from rhs_common.jit import KERNELS
 from rhs_common.validation import (
     check_bool,
     check_choice,
@@ -359,13 +360,17 @@ class RadarConfig:
         estimation: :class:`AngleEstimationConfig` (OMP per detection).
         uncertainty: :class:`UncertaintyConfig` (per-point std floors).
         mounting: :class:`MountingConfig` (vehicle box of the mounts).
+        kernels: implementation of the inner loops (detector, OMP, signal mixing, points): "numba"
+            (the default: compiled, :mod:`rhs_env.kernels`) or "numpy" (the reference); the same
+            results to round-off. Left out of :meth:`flat_dict` at its default.
     """
 
     #: flat names of before the grouping, mapped by :func:`rhs_common.validation.build` with a DeprecationWarning
     MOVED_FIELDS: ClassVar[MappingProxyType[str, str]] = MappingProxyType(_MOVED)
     #: fields added since the grouping -> the value that does what the code did before them (left out of
     #: :meth:`flat_dict` at that value: cache keys and seeds derived from it stay as they were)
-    ADDED_FIELDS: ClassVar[MappingProxyType[str, Any]] = MappingProxyType({"estimation.refine_passes": 2})
+    ADDED_FIELDS: ClassVar[MappingProxyType[str, Any]] = MappingProxyType({"estimation.refine_passes": 2,
+                                                                                     "kernels": "numba"})
 
     antenna: str = "rhs"
     rhs: RHSConfig = field(default_factory=RHSConfig)
@@ -379,11 +384,13 @@ class RadarConfig:
     estimation: AngleEstimationConfig = field(default_factory=AngleEstimationConfig)
     uncertainty: UncertaintyConfig = field(default_factory=UncertaintyConfig)
     mounting: MountingConfig = field(default_factory=MountingConfig)
+    kernels: str = "numba"
 
     def __post_init__(self) -> None:
         check_types(self)  # every group an instance of its class (each validated itself)
         check_choice("antenna", self.antenna, ANTENNA_KINDS)
         check_choice("fidelity", self.fidelity, FIDELITIES)
+        check_choice("kernels", self.kernels, KERNELS)
         check_range("max_range_m", self.max_range_m, 1.0, 0.95 * self.waveform.unambiguous_range_m)
         check_range("min_range_m", self.min_range_m, 0.0, self.max_range_m, high_open=True)
 

@@ -84,6 +84,8 @@ class SlamPipeline:
         self.options = options if options is not None else PipelineConfig()
         self.max_accel_mps2 = self.options.max_accel_mps2
         self.config = config if config is not None else SlamConfig()
+        if hasattr(registration, "kernels"):  # the ICP fit follows the SLAM's kernels (slam.kernels.icp_fit)
+            registration.kernels = self.config.kernels
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         self.use_doppler = self.options.use_doppler
         self.slam = RBPFSlam(self.config, self.rng)

@@ -93,6 +93,7 @@ import numpy as np
 from scipy.special import logsumexp
 
 from rhs_common.geometry import circular_mean, wrap_angle
+from rhs_common.jit import KERNELS
 from rhs_common.timing import StageTimer
 from rhs_common.validation import check_bool, check_choice, check_int, check_range, check_types
 from slam.association import (
@@ -155,7 +156,9 @@ class SlamConfig:
     holding it is at least this. dynamic_threshold_mps: moving-point filter
     threshold (m/s). min_range_m: observations closer than this are ignored (m).
     max_retired: cap on archived landmarks. retire_min_hits: updates needed to
-    archive a pruned landmark.
+    archive a pruned landmark. kernels: "numba" (default: the Mahalanobis association, the
+    FastSLAM 2.0 proposal sums and the ICP fit compiled, :mod:`slam.kernels`) | "numpy" (the
+    reference; the same results to round-off).
     """
 
     n_particles: int = 100
@@ -190,6 +193,7 @@ class SlamConfig:
     min_range_m: float = 0.5
     max_retired: int = 100_000
     retire_min_hits: int = 3
+    kernels: str = "numba"
 
     def __post_init__(self) -> None:
         check_types(self)
@@ -216,6 +220,7 @@ class SlamConfig:
         check_range("yaw_accel_std_radps2", self.yaw_accel_std_radps2, 0.0, None)
         check_range("resample_threshold", self.resample_threshold, 0.0, 1.0)
         check_choice("weighting", self.weighting, ("likelihood", "amplitude"))
+        check_choice("kernels", self.kernels, KERNELS)
         if self.weighting == "amplitude" and self.variant != "fastslam1":
             raise ValueError("weighting='amplitude' needs variant='fastslam1' (per-observation likelihoods)")
         check_range("new_landmark_mahalanobis", self.new_landmark_mahalanobis, 0.0, None, low_open=True)
@@ -451,6 +456,12 @@ class RBPFSlam:
         else:
             cth, sth = np.cos(self.pose[:, 2])[:, None], np.sin(self.pose[:, 2])[:, None]
             a00, a01, a11 = rotate_sym2(cth, sth, *self._observation_with_pose(obs))  # (P, M)
+            if c.kernels == "numba":  # the same distances and rounds per particle, compiled
+                from slam.kernels import mahalanobis_association
+
+                sub = mahalanobis_association(obs_map, a00, a01, a11, self.mean, self.cov, self.active, used,
+                                              c.gate_mahalanobis**2, c.new_gate_mahalanobis**2, c.association_rounds)
+                return np.where(sub >= 0, used[np.maximum(sub, 0)], sub)
             lam = self.cov[:, used]  # (P, L, 2, 2)
             s00 = a00[:, :, None] + lam[:, None, :, 0, 0]
             s01 = a01[:, :, None] + lam[:, None, :, 0, 1]
@@ -509,12 +520,17 @@ class RBPFSlam:
         prior_var = np.maximum(self.pose_var, 1e-18)
         ok = np.ones(pp.size, dtype=bool)
         for attempt in range(2 if c.joint_compatibility else 1):
-            HtSi = np.einsum("kia,kij->kaj", H, Si) * ok[:, None, None]  # (K, 3, 2)
-            info = np.zeros((P, 3, 3))
-            np.add.at(info, pp, np.einsum("kaj,kjb->kab", HtSi, H))
+            if c.kernels == "numba":  # the same sums per particle, compiled
+                from slam.kernels import proposal_information
+
+                info, g = proposal_information(pp, H, Si, nu, ok, P)
+            else:
+                HtSi = np.einsum("kia,kij->kaj", H, Si) * ok[:, None, None]  # (K, 3, 2)
+                info = np.zeros((P, 3, 3))
+                np.add.at(info, pp, np.einsum("kaj,kjb->kab", HtSi, H))
+                g = np.zeros((P, 3))
+                np.add.at(g, pp, np.einsum("kaj,kj->ka", HtSi, nu))
             info += np.diag(1.0 / prior_var)
-            g = np.zeros((P, 3))
-            np.add.at(g, pp, np.einsum("kaj,kj->ka", HtSi, nu))
             cov = np.linalg.inv(info)
             delta = np.einsum("pab,pb->pa", cov, g)
             if attempt == 1 or not c.joint_compatibility:

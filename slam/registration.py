@@ -173,6 +173,9 @@ class ICPRegistration:
         self.min_pairs = cfg.min_pairs
         self.amplitude_weights = cfg.amplitude_weights
         self.constant_velocity = cfg.constant_velocity
+        #: "numba": the fit compiled with brute-force nearest neighbours (:func:`slam.kernels.icp_fit`, the
+        #: clouds hold tens of points), "numpy": cKDTree and numpy; set from the SLAM config by the pipeline
+        self.kernels = "numba"
         self.reset()
 
     def reset(self) -> None:
@@ -198,7 +201,7 @@ class ICPRegistration:
         if prev.ndim != 2 or cur.ndim != 2 or len(prev) < self.min_pairs or len(cur) < self.min_pairs:
             self.last_estimate = guess
             return guess.copy()
-        tree = cKDTree(prev[:, :2])
+        tree = None if self.kernels == "numba" else cKDTree(prev[:, :2])
         src = cur[:, :2]
         if self.amplitude_weights and prev.shape[1] >= 4 and cur.shape[1] >= 4:
             amp_p = np.maximum(prev[:, 3], 1e-12)
@@ -208,10 +211,16 @@ class ICPRegistration:
         best = None
         for offset in np.concatenate([[0.0], self.yaw_offsets[self.yaw_offsets != 0.0]]):
             start = guess + np.array([0.0, 0.0, offset])
-            est, pairs, rmse = self._fit(tree, src, prev, start, amp_p, amp_c)
+            if self.kernels == "numba":  # the same iterations and score, compiled (slam.kernels.icp_fit)
+                est, pairs, rmse, near = self._fit_compiled(src, prev, start, amp_p, amp_c)
+            else:
+                assert tree is not None
+                est, pairs, rmse = self._fit(tree, src, prev, start, amp_p, amp_c)
+                if pairs:
+                    d, _ = tree.query(apply_motion(src, est), k=1, distance_upper_bound=self.max_gate_m)
+                    near = int(np.sum(d <= self.min_gate_m))
             if pairs:
-                d, _ = tree.query(apply_motion(src, est), k=1, distance_upper_bound=self.max_gate_m)
-                score = (int(np.sum(d <= self.min_gate_m)), -rmse)
+                score = (near, -rmse)
                 if best is None or score > best[0]:
                     best = (score, est, pairs, rmse)
         if best is None:
@@ -221,6 +230,19 @@ class ICPRegistration:
         est[2] = wrap_angle(est[2])
         self.last_estimate = est.copy()
         return est
+
+    def _fit_compiled(self, src, prev, guess, amp_p, amp_c) -> tuple[np.ndarray, int, float, int]:
+        """:meth:`_fit` and the yaw-search score by :func:`slam.kernels.icp_fit`."""
+        from slam.kernels import icp_fit
+
+        use_amp = amp_p is not None
+        ones = np.ones(1)
+        est, pairs, rmse, near = icp_fit(
+            np.ascontiguousarray(src, dtype=float), np.ascontiguousarray(prev[:, :2], dtype=float), guess,
+            amp_p if use_amp else ones, amp_c if use_amp else ones, use_amp, self.max_iterations,
+            float(self.max_gate_m), float(self.min_gate_m), float(self.outlier_factor), float(self.tol_m),
+            float(self.tol_rad), int(self.min_pairs))
+        return est, int(pairs), float(rmse), int(near)
 
     def _fit(self, tree, src, prev, guess, amp_p, amp_c) -> tuple[np.ndarray, int, float]:
         """ICP iterations from ``guess``; returns (estimate, pairs, RMS distance of the final fit)."""

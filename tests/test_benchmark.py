@@ -49,3 +49,24 @@ def test_markdown_sets_the_floor_beside_the_budget():
     res["floor"]["range_noise_ms"] = 2.5
     assert "at half rate) 2.5 ms. The goals leave" in benchmark.markdown(res)
     assert f"leave the radar {20.0 / 0.75 - 20.0:.1f} ms" in text
+
+
+def test_budget_counts_the_observation_the_radar_envs_skip():
+    res = _result(20.0, {"update": 2.0, "registration": 1.0})
+    res["envs"]["kinematics_observation_ms"] = 3.5
+    b = benchmark.radar_budget(res)
+    assert b["radar_budget_ms"] == pytest.approx(20.0 / benchmark.GOALS["radar_env_over_base"] - 20.0 + 3.5)
+    assert b["radar_budget_with_slam_ms"] == pytest.approx(20.0 / benchmark.GOALS["slam_env_over_base"] - 20.0 + 3.5 - 3.0)
+
+
+def test_stage_table_and_start_line():
+    envs = {"rhs-highway-slam-v0": {"radar_stage_ms": {"omp": 10.0}, "slam_stage_ms": {"associate": 0.5}},
+            "rhs-highway-slam-v0 (numpy kernels)": {"radar_stage_ms": {"omp": 20.0}, "slam_stage_ms": {"associate": 2.0}}}
+    table = benchmark.stages_before_after(envs)
+    assert table == {"radar.omp": {"numpy": 20.0, "compiled": 10.0}, "slam.associate": {"numpy": 2.0, "compiled": 0.5}}
+    start = {"cold_s": 12.0, "warm_s": 4.0, "cold_process_s": 13.0, "warm_process_s": 4.5, "load_average_start": [1.0, 1, 1]}
+    text = "\n".join(benchmark._md_start({"start": start}))
+    assert "12.0 s with an empty kernel cache" in text and "4.0 s with the cache" in text
+    goals = benchmark._goals({"start": start})
+    assert goals["start_cold_s"]["met"] and goals["start_warm_s"]["met"]
+    assert not benchmark._goals({"start": {**start, "warm_s": 6.0}})["start_warm_s"]["met"]

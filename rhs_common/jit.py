@@ -1,0 +1,101 @@
+"""Compiled kernels: numba's ``njit`` with an on-disk cache that works on any install.
+
+The radar's and the SLAM's inner loops (:mod:`rhs_env.kernels`, :mod:`slam.kernels`)
+run on arrays of 30-300 rows, where numpy pays more in interpreter overhead than in
+arithmetic; compiled with numba they compute the same equations in the same order
+(the numpy code stays the reference, ``kernels="numpy"`` in the radar and SLAM
+configs selects it).
+
+Cache. Every kernel is compiled with ``cache=True``: the machine code is written
+once per machine (and numba / numpy / CPU) and loaded by later processes, so
+subprocess vector envs, async workers and RLlib env runners load it instead of
+compiling again. Where numba keeps it: ``NUMBA_CACHE_DIR`` when the user sets it;
+else next to the source (``__pycache__``) when the package directory is writable;
+else (a read-only install: a system site-packages, a container layer) this module
+points ``NUMBA_CACHE_DIR`` at the user cache directory
+(``platformdirs.user_cache_dir("rhs-slam")/numba``) before numba is imported.
+
+Notice. The first compile of a kernel in a process prints one line to stderr
+(:data:`NOTICE`), once per process: a new install compiles every kernel once
+(seconds, see :mod:`rhs_env.kernels` for the measured cost).
+
+``NUMBA_DISABLE_JIT=1`` runs the kernels as the plain Python functions they are
+(the tests use it to cover their source).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+__all__ = ["KERNELS", "NOTICE", "njit"]
+
+#: the kernel implementations a config may choose: compiled (default) or the numpy reference
+KERNELS = ("numba", "numpy")
+NOTICE = "rhs-slam: compiling the radar / SLAM kernels (first run on this machine, cached afterwards) ..."
+_PACKAGE_ROOT = Path(__file__).resolve().parent.parent
+
+
+def _writable(path: Path) -> bool:
+    """Whether numba can write its cache next to the sources under ``path`` (``__pycache__`` there, or the folder)."""
+    cache = path / "__pycache__"
+    return os.access(cache if cache.is_dir() else path, os.W_OK)
+
+
+def _configure_cache() -> None:
+    """Point ``NUMBA_CACHE_DIR`` at the user cache directory when the package directory is read-only."""
+    if os.environ.get("NUMBA_CACHE_DIR") or _writable(_PACKAGE_ROOT / "rhs_env"):
+        return
+    import platformdirs
+
+    path = Path(platformdirs.user_cache_dir("rhs-slam")) / "numba"
+    path.mkdir(parents=True, exist_ok=True)
+    os.environ["NUMBA_CACHE_DIR"] = str(path)
+    if "numba" in sys.modules:  # imported before us: its config is read, tell it too
+        from numba.core import config
+
+        config.CACHE_DIR = str(path)  # type: ignore[attr-defined]
+
+
+_NUMBA: Any = None
+
+
+def _numba() -> Any:
+    """numba, imported on first use (after the cache directory is chosen, with the compile notice registered)."""
+    global _NUMBA
+    if _NUMBA is None:
+        _configure_cache()
+        import numba
+        from numba.core import event
+
+        class _CompileNotice(event.Listener):
+            """Prints :data:`NOTICE` once per process when one of the project's kernels starts compiling."""
+
+            announced = False
+
+            def on_start(self, ev: Any) -> None:
+                if _CompileNotice.announced:
+                    return
+                disp = (ev.data or {}).get("dispatcher")
+                module = getattr(getattr(disp, "py_func", None), "__module__", "") or ""
+                if module.split(".")[0] in ("rhs_env", "slam", "rhs_common"):
+                    _CompileNotice.announced = True
+                    print(NOTICE, file=sys.stderr, flush=True)
+
+            def on_end(self, ev: Any) -> None:
+                pass
+
+        event.register("numba:compile", _CompileNotice())
+        _NUMBA = numba
+    return _NUMBA
+
+
+def njit(func: Callable | None = None, **options: Any) -> Any:
+    """``numba.njit`` with the project's defaults: ``cache=True``, ``error_model="numpy"`` (x / 0 -> inf, as numpy)."""
+    options = {"cache": True, "error_model": "numpy", **options}
+    if func is None:
+        return lambda f: _numba().njit(**options)(f)
+    return _numba().njit(**options)(func)

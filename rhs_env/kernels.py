@@ -1,0 +1,483 @@
+"""Compiled kernels of the radar's processing chain (numba), the numpy code's equations in loops.
+
+Each kernel computes what a numpy function of :mod:`rhs_env.detection` /
+:mod:`rhs_env.point_cloud` / :mod:`rhs_env.radar` computes, with its variable names and
+in the same floating-point order where the numpy code fixes one (comparisons of
+float32 statistics stay float32), so the compiled path reproduces the numpy
+reference to round-off. The numpy path stays selectable: ``RadarConfig(kernels="numpy")``
+(``gym.make(..., radar={"kernels": "numpy"})``).
+
+Why compiled. The stages work on arrays of 30-300 rows: the numpy reference pays
+thousands of interpreter-level calls per scan, several times the arithmetic.
+The noise generator stays in numpy (its transcendental functions are SIMD there; numba's
+wheels have no SVML).
+
+Costs of the dependency (numba 0.68.1 / llvmlite 0.50, measured on the development machine, x86-64,
+Python 3.11, 2 cores shared with other jobs, load average 5-8):
+
+* installed size: numba 33 MB + llvmlite 180 MB (llvmlite carries a static LLVM);
+* numpy upper bound: every numba release caps numpy (0.68.1: numpy < 2.6); a numpy newer than the
+  cap waits for a numba release (pyproject asks numba >= 0.60, pip picks the one matching numpy);
+* no SVML in the wheels: transcendental loops are not vectorised, so the noise generator stays numpy;
+* first compile of every kernel here and in :mod:`slam.kernels`: ~13 s (footprint detector ~3 s,
+  ICP ~2.5 s, the atoms and Newton steps ~3 s, the rest ~1 s each or less), once per machine; a new
+  process then loads them from the cache (:mod:`rhs_common.jit`): imports, ``gym.make``, reset and
+  the first step of the SLAM env in a new process took 18.5 s with an empty cache and 2.6 s with it
+  (load 3.7; ``python scripts/benchmark.py --sections start``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rhs_common.jit import njit
+
+__all__ = [
+    "TAYLOR_ORDER", "atom_norms", "footprint_detections", "joint_rho", "newton_refine", "phasors", "taylor_atoms",
+    "taylor_tables", "tone_operands", "tone_spectra",
+]
+
+
+# --------------------------------------------------------------------------- detection
+@njit
+def _peaks(stat: np.ndarray, in_range: np.ndarray, lo32: np.ndarray) -> np.ndarray:
+    """Flat indices (radar, hypothesis, bin) of ``T_j(k) > T_j(k - 1)``, ``T_j(k) >= T_j(k + 1)``, ``T_j(k) > lo_j``.
+
+    In np.nonzero order; branch-free (each cell written, the count advanced by the test): most cells are no peak.
+    """
+    n_r, n_j, n = stat.shape
+    cand = np.empty(n_r * n_j * n + 1, np.int64)
+    c = 0
+    for rr in range(n_r):
+        for jj in range(n_j):
+            line = stat[rr, jj]
+            base = (rr * n_j + jj) * n
+            lo_j = lo32[jj]
+            for kk in range(1, n - 1):
+                t = line[kk]
+                cand[c] = base + kk
+                c += (t > line[kk - 1]) & (t >= line[kk + 1]) & (t > lo_j) & in_range[kk]
+    return cand[:c]
+
+
+@njit
+def _cfar_level(line: np.ndarray, cells: np.ndarray, method: int, rank: int, vals: np.ndarray) -> float:
+    """Z of the training cells ``line[cells]``: the rank-th smallest (method 0, OS) or the mean (1, CA)."""
+    n_train = cells.size
+    for q in range(n_train):
+        vals[q] = float(line[cells[q]])
+    if method == 1:
+        return np.mean(vals)
+    for q in range(1, n_train):  # insertion sort of the few training cells
+        x = vals[q]
+        p = q - 1
+        while p >= 0 and vals[p] > x:
+            vals[p + 1] = vals[p]
+            p -= 1
+        vals[p + 1] = x
+    return vals[rank - 1]
+
+
+@njit
+def _sidelobe_keep(stat: np.ndarray, r: np.ndarray, j: np.ndarray, k: np.ndarray, val: np.ndarray,
+                   leak: np.ndarray, margin: float) -> np.ndarray:
+    """``T_j(k) >= margin max_{k'} T_j(k') leak(|k - k'|)`` over the detected bins k' of the radar with ``T_j(k') > T_j(k)``."""
+    n_r, _, n = stat.shape
+    m = r.size
+    bins = np.empty((n_r, n), np.int64)  # the detected bins of each radar, ascending
+    n_bins = np.zeros(n_r, np.int64)
+    detected = np.zeros((n_r, n), np.bool_)
+    for d in range(m):
+        detected[r[d], k[d]] = True
+    for rr in range(n_r):
+        for kk in range(n):
+            if detected[rr, kk]:
+                bins[rr, n_bins[rr]] = kk
+                n_bins[rr] += 1
+    keep = np.ones(m, np.bool_)
+    for d in range(m):
+        worst = 0.0
+        for q in range(n_bins[r[d]]):
+            kk = bins[r[d], q]
+            sv = float(stat[r[d], j[d], kk])
+            if sv > val[d]:
+                worst = max(worst, sv * leak[min(abs(k[d] - kk), leak.size - 1)])
+        keep[d] = val[d] >= margin * worst
+    return keep
+
+
+@njit
+def _mainlobe_keep(rd: np.ndarray, kd: np.ndarray, strength: np.ndarray, leak: np.ndarray, margin: float,
+                   null: int) -> np.ndarray:
+    """``strength >= margin strength' leak(|k - k'|)`` over the stronger pairs of the radar within ``null`` bins."""
+    n_d = rd.size
+    keep = np.ones(n_d, np.bool_)
+    for a in range(n_d):
+        worst = 0.0
+        for b in range(n_d):
+            dk = abs(kd[a] - kd[b])
+            if rd[a] == rd[b] and dk < null and strength[b] > strength[a]:
+                worst = max(worst, strength[b] * leak[min(dk, leak.size - 1)])
+        keep[a] = strength[a] >= margin * worst
+    return keep
+
+
+@njit
+def footprint_detections(stat: np.ndarray, in_range: np.ndarray, alpha: np.ndarray, floor: np.ndarray,
+                         cap: np.ndarray, train_cells: np.ndarray, method: int, rank: int, leak: np.ndarray,
+                         margin: float, null: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The detections of :meth:`rhs_env.detection.FootprintDetector.detect` from the statistic T (R, J, K) float32.
+
+    1. peaks: ``T_j(k) > T_j(k - 1)``, ``T_j(k) >= T_j(k + 1)``, ``T_j(k) > alpha_j floor_j`` (float32), k in range;
+    2. CFAR: keep ``T_j(k) > alpha_j clip(Z, floor_j, cap_j)``, Z the ``rank``-th smallest training cell
+       (``method`` 0, OS), their mean (1, CA), or ``Z = floor_j`` (2, fixed);
+    3. window sidelobe on the hypothesis' own line: drop ``T_j(k) < margin max_{k'} T_j(k') leak(|k - k'|)``
+       over the detected bins k' of the same radar with ``T_j(k') > T_j(k)``;
+    4. union over hypotheses per (radar, bin), ``strength = max_j T_j(k) / floor_j``, sorted by radar then bin;
+    5. main lobe: drop a pair within ``null`` bins of a stronger pair of its radar with
+       ``strength < margin strength' leak(|k - k'|)``.
+
+    ``train_cells`` (K, 2 train) the training-cell bins of every bin; ``leak`` the window's power-leak envelope.
+    Returns rd, kd, strength.
+    """
+    _, n_j, n = stat.shape
+    cand = _peaks(stat, in_range, (alpha * floor).astype(np.float32))
+    r = np.empty(cand.size, np.int64)
+    j = np.empty(cand.size, np.int64)
+    k = np.empty(cand.size, np.int64)
+    val = np.empty(cand.size)
+    vals = np.empty(train_cells.shape[1])
+    m = 0
+    for flat in cand:
+        rr, rest = divmod(flat, n_j * n)
+        jj, kk = divmod(rest, n)
+        v = float(stat[rr, jj, kk])
+        if method == 2:
+            thr = alpha[jj] * floor[jj]
+        else:
+            z = _cfar_level(stat[rr, jj], train_cells[kk], method, rank, vals)
+            thr = alpha[jj] * min(max(z, floor[jj]), cap[jj])
+        if v > thr:
+            r[m], j[m], k[m], val[m] = rr, jj, kk, v
+            m += 1
+    r, j, k, val = r[:m], j[:m], k[:m], val[:m]
+    if m > 1:
+        keep = _sidelobe_keep(stat, r, j, k, val, leak, margin)
+        r, j, k, val = r[keep], j[keep], k[keep], val[keep]
+    n_r = stat.shape[0]
+    best = np.zeros(n_r * n)  # max_j T_j / floor_j per (radar, bin); 0: not detected (T > 0 where detected)
+    for d in range(r.size):
+        best[r[d] * n + k[d]] = max(best[r[d] * n + k[d]], val[d] / floor[j[d]])
+    key = np.flatnonzero(best > 0)  # sorted by radar then bin
+    strength = best[key]
+    rd, kd = key // n, key % n
+    if rd.size > 1:
+        keep = _mainlobe_keep(rd, kd, strength, leak, margin, null)
+        rd, kd, strength = rd[keep], kd[keep], strength[keep]
+    return rd, kd, strength
+
+
+# --------------------------------------------------------------------------- atoms (Taylor tables)
+#: order of the Taylor series of the one-way gains in u = sin(theta): the error term
+#: ``(|x - x_c| du)^(N + 1) / (N + 1)!`` is ~1e-19 for the 60-element RHS at the default candidate spacing
+TAYLOR_ORDER = 10
+
+def taylor_tables(w2: np.ndarray, x: np.ndarray, candidates: np.ndarray,
+                  order: int = TAYLOR_ORDER) -> tuple[np.ndarray, np.ndarray, float]:
+    """Taylor coefficients of the centred one-way gains ``[t~ | r~]`` in u = sin(theta) at every candidate.
+
+    ``t_i(u) = sum_m w_T,im exp(j x_m u) = exp(j x_c u) t~_i(u)`` with ``x~_m = x_m - x_c`` (x_c the
+    middle of the aperture: the series converges over the half aperture only), and around
+    ``u_c = sin(theta_c)``
+
+        t~_i(u_c + delta) = sum_n T[c, n, i] delta^n,   T[c, n, i] = sum_m w_T,im (j x~_m)^n exp(j x~_m u_c) / n!,
+
+    the same for r with w_R (the columns of ``w2 = [w_T | w_R]`` (M, 2 I)). Returns the table
+    (I_c, N + 1, 2 I) complex128, ``u_c`` (I_c,) and ``x_c``.
+    """
+    x_c = 0.5 * (float(x.min()) + float(x.max()))
+    xt = x - x_c
+    u_c = np.sin(candidates)
+    fact = np.cumprod(np.concatenate([[1.0], np.arange(1, order + 1)]))
+    powers = (1j * xt[None, :]) ** np.arange(order + 1)[:, None] / fact[:, None]  # (N + 1, M)
+    a = np.exp(1j * np.outer(u_c, xt))  # (I_c, M)
+    table = (a[:, None, :] * powers[None]) @ w2  # (I_c, N + 1, 2 I)
+    return np.ascontiguousarray(table), u_c, x_c
+
+
+@njit
+def _atom_at(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray, x: np.ndarray,
+             th: float, order: int, f0: np.ndarray, f1: np.ndarray, f2: np.ndarray, h: np.ndarray) -> None:
+    """h (order + 1, I) at one angle th: :func:`taylor_atoms` for one angle (f0, f1, f2: (2 I,) complex work arrays).
+
+    ``table``: the coefficients of :func:`taylor_tables` viewed as float64, (I_c, N + 1, 4 I) with re, im
+    interleaved: delta is real, so the Horner steps act on the real and imaginary parts alike (the same
+    values as in complex arithmetic, in vectorisable loops).
+    """
+    n_c, n_n, n_f = table.shape
+    n_i2 = n_f // 2
+    n_i = n_i2 // 2
+    u = np.sin(th)
+    cos_t = np.cos(th)
+    c = int(np.floor((th - lo) / step + 0.5))
+    if -1 <= c <= n_c:
+        c = min(max(c, 0), n_c - 1)
+        delta = u - u_c[c]
+        # Horner in delta for the value and its first two derivatives, on re / im alike
+        p0 = table[c, n_n - 1].copy()
+        p1 = np.zeros(n_f)
+        p2 = np.zeros(n_f)
+        for n in range(n_n - 2, -1, -1):
+            row = table[c, n]
+            if order >= 2:
+                for i in range(n_f):
+                    p2[i] = p2[i] * delta + 2.0 * p1[i]
+            if order >= 1:
+                for i in range(n_f):
+                    p1[i] = p1[i] * delta + p0[i]
+            for i in range(n_f):
+                p0[i] = p0[i] * delta + row[i]
+        for i in range(n_i2):
+            f0[i] = complex(p0[2 * i], p0[2 * i + 1])
+            f1[i] = complex(p1[2 * i], p1[2 * i + 1])
+            f2[i] = complex(p2[2 * i], p2[2 * i + 1])
+        ph = np.exp(1j * x_c * u)
+        jx = 1j * x_c
+        for i in range(n_i2):
+            g0 = f0[i]
+            g1 = jx * g0 + f1[i]
+            g2 = -x_c * x_c * g0 + 2.0 * jx * f1[i] + f2[i]
+            f0[i], f1[i], f2[i] = ph * g0, ph * g1, ph * g2
+    else:
+        for i in range(n_i2):
+            f0[i] = 0
+            f1[i] = 0
+            f2[i] = 0
+        for m in range(x.size):
+            a = np.exp(1j * x[m] * u)
+            jx = 1j * x[m]
+            for i in range(n_i2):
+                wa = w2[m, i] * a
+                f0[i] += wa
+                f1[i] += jx * wa
+                f2[i] += jx * jx * wa
+    for i in range(n_i):  # u -> theta, then h = r t and its derivatives
+        t0, r0 = f0[i], f0[n_i + i]
+        h[0, i] = r0 * t0
+        if order >= 1:
+            t1, r1 = cos_t * f1[i], cos_t * f1[n_i + i]
+            h[1, i] = r1 * t0 + r0 * t1
+            if order >= 2:
+                t2 = cos_t * cos_t * f2[i] - u * f1[i]
+                r2 = cos_t * cos_t * f2[n_i + i] - u * f1[n_i + i]
+                h[2, i] = r2 * t0 + 2.0 * r1 * t1 + r0 * t2
+
+
+@njit
+def taylor_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
+                 x: np.ndarray, theta: np.ndarray, order: int) -> np.ndarray:
+    """``[h, dh/dtheta, d2h/dtheta2][:order + 1]`` (order + 1, T, I) of :meth:`rhs_env.point_cloud.AngleDictionary.atoms`.
+
+    ``h_i = r_i t_i``; t, r and their u-derivatives from the series of :func:`taylor_tables` at the
+    nearest candidate ``c`` (``delta = sin(theta) - u_c``): ``t~ = sum_n T_n delta^n``,
+    ``t~' = sum_n n T_n delta^(n-1)``, ``t~'' = sum_n n (n-1) T_n delta^(n-2)``; with the centring
+    phase ``p = exp(j x_c u)``: ``t = p t~``, ``dt/du = p (j x_c t~ + t~')``,
+    ``d2t/du2 = p (-x_c^2 t~ + 2 j x_c t~' + t~'')``; in theta ``t' = cos(theta) dt/du``,
+    ``t'' = cos(theta)^2 d2t/du2 - sin(theta) dt/du``; then ``h' = r' t + r t'``,
+    ``h'' = r'' t + 2 r' t' + r t''``. An angle more than one candidate outside the table is
+    summed directly, ``t_i = sum_m w_T,im exp(j x_m u)`` (``w2 = [w_T | w_R]``, x in radians per unit u).
+    ``table``: the coefficients of :func:`taylor_tables` viewed as float64 (re, im interleaved).
+    """
+    n_i2 = table.shape[2] // 2
+    out = np.empty((order + 1, theta.size, n_i2 // 2), np.complex128)
+    f0 = np.empty(n_i2, np.complex128)
+    f1 = np.empty(n_i2, np.complex128)
+    f2 = np.empty(n_i2, np.complex128)
+    h = np.empty((order + 1, n_i2 // 2), np.complex128)
+    for q in range(theta.size):
+        _atom_at(table, u_c, x_c, lo, step, w2, x, theta[q], order, f0, f1, f2, h)
+        for o in range(order + 1):
+            for i in range(n_i2 // 2):
+                out[o, q, i] = h[o, i]
+    return out
+
+
+@njit
+def newton_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
+                  x: np.ndarray, theta: np.ndarray, resid: np.ndarray, steps: int) -> np.ndarray:
+    """:func:`rhs_env.point_cloud._newton_refine` per row: Newton steps maximising ``f = |h^H r|^2 / ||h||^2``.
+
+    With ``g = h^H r``, ``G = |g|^2``, ``n = ||h||^2`` and their theta derivatives from h', h''
+    (:func:`taylor_atoms`): ``G' = 2 Re(g* g')``, ``G'' = 2 |g'|^2 + 2 Re(g* g'')``, ``n' = 2 Re(h'^H h)``,
+    ``n'' = 2 Re(h''^H h) + 2 ||h'||^2``; ``f' = (G' n - G n') / n^2``,
+    ``f'' = (G'' n^2 - G n n'' - 2 G' n n' + 2 G n'^2) / n^3``; the step ``-f' / f''`` where f'' < 0,
+    clipped to half a candidate spacing. theta (D,), resid (D, I).
+    """
+    half = 0.5 * step
+    n_i2 = table.shape[2] // 2
+    n_i = n_i2 // 2
+    f0 = np.empty(n_i2, np.complex128)
+    f1 = np.empty(n_i2, np.complex128)
+    f2 = np.empty(n_i2, np.complex128)
+    h = np.empty((3, n_i), np.complex128)
+    out = theta.copy()
+    for d in range(theta.size):
+        th = theta[d]
+        for _ in range(steps):
+            _atom_at(table, u_c, x_c, lo, step, w2, x, th, 2, f0, f1, f2, h)
+            g = 0j
+            g1 = 0j
+            g2 = 0j
+            n = 0.0
+            n1 = 0.0
+            n2a = 0.0
+            n2b = 0.0
+            for i in range(n_i):
+                r = resid[d, i]
+                h0c, h1c, h2c = np.conj(h[0, i]), np.conj(h[1, i]), np.conj(h[2, i])
+                g += h0c * r
+                g1 += h1c * r
+                g2 += h2c * r
+                n += (h0c * h[0, i]).real
+                n1 += (h1c * h[0, i]).real
+                n2a += (h2c * h[0, i]).real
+                n2b += (h1c * h[1, i]).real
+            n1, n2 = 2 * n1, 2 * n2a + 2 * n2b
+            G = g.real ** 2 + g.imag ** 2
+            G1 = 2 * (np.conj(g) * g1).real
+            G2 = 2 * (g1.real ** 2 + g1.imag ** 2) + 2 * (np.conj(g) * g2).real
+            fd1 = (G1 * n - G * n1) / n ** 2
+            fd2 = (G2 * n ** 2 - G * n * n2 - 2 * G1 * n * n1 + 2 * G * n1 ** 2) / n ** 3
+            delta = -fd1 / fd2 if fd2 < 0 else 0.0
+            th = th + min(max(delta, -half), half)
+        out[d] = th
+    return out
+
+
+# --------------------------------------------------------------------------- signal synthesis
+@njit
+def tone_spectra(mu: np.ndarray, coef: np.ndarray, n: int, zero_pad: int, n_bins: int, freq: np.ndarray) -> np.ndarray:
+    """:func:`rhs_env.point_cloud.tone_spectra`: windowed, zero-padded spectra of unit tones (P, n_bins) complex128.
+
+    ``S_p[k] = sum_m c_m D(k / (Z N) - f_p - mu_m)``, ``D(x) = exp(-j pi x (N - 1)) sin(pi N x) / sin(pi x)``
+    (``N cos(pi N x) / cos(pi x)`` where ``sin(pi x) = 0``), with ``e(x) = exp(j pi x) = e(k / (Z N)) e(-f_p - mu_m)``:
+    ``e1 = e(x)``, ``en = e(N x)``, ``D = conj(en) e1 sin(pi N x) / sin(pi x)``.
+    """
+    n_p, n_m = freq.size, mu.size
+    out = np.empty((n_p, n_bins), np.complex128)
+    ek1 = np.empty(n_bins, np.complex128)
+    ekn = np.empty(n_bins, np.complex128)
+    for k in range(n_bins):
+        kf = k / (zero_pad * n)
+        ek1[k] = np.exp(1j * np.pi * kf)
+        ekn[k] = np.exp(1j * np.pi * n * kf)
+    ef1 = np.empty(n_m, np.complex128)
+    efn = np.empty(n_m, np.complex128)
+    for p in range(n_p):
+        for m in range(n_m):
+            fm = freq[p] + mu[m]
+            ef1[m] = np.exp(-1j * np.pi * fm)
+            efn[m] = np.exp(-1j * np.pi * n * fm)
+        for k in range(n_bins):
+            acc = 0j
+            for m in range(n_m):
+                e1 = ek1[k] * ef1[m]
+                en = ekn[k] * efn[m]
+                s1 = e1.imag
+                if abs(s1) < 1e-12:
+                    ratio = n * en.real / e1.real
+                else:
+                    ratio = en.imag / s1
+                acc += coef[m] * np.conj(en) * e1 * ratio
+            out[p, k] = acc
+    return out
+
+
+@njit
+def tone_operands(rr: np.ndarray, g_mat: np.ndarray, omega: np.ndarray, wk: np.ndarray, chirps: int,
+                  n_radars: int) -> tuple[np.ndarray, np.ndarray]:
+    """The operands of ``Y_s[r] = G_r @ E_r`` (:meth:`rhs_env.radar.RadarSystem._mix`), complex64, rr sorted.
+
+    ``G_r[i, q] = G[i, p]`` and ``E_r[q, (c, k)] = exp(j omega_p c) W_p[k]`` for the q-th tone p of radar r
+    (zero-padded to the largest count; the product is formed in complex128 and rounded once, as numpy does).
+    Returns gp (R, I, Q) and ep (R, Q, C K).
+    """
+    n_p = rr.size
+    n_i, n_k = g_mat.shape[0], wk.shape[1]
+    counts = np.zeros(n_radars, np.int64)
+    for p in range(n_p):
+        counts[rr[p]] += 1
+    width = max(counts.max(), 1)
+    gp = np.zeros((n_radars, n_i, width), np.complex64)
+    ep = np.zeros((n_radars, width, chirps * n_k), np.complex64)
+    slot = np.zeros(n_radars, np.int64)
+    for p in range(n_p):
+        r = rr[p]
+        q = slot[r]
+        slot[r] += 1
+        for i in range(n_i):
+            gp[r, i, q] = g_mat[i, p]
+        for c in range(chirps):
+            ph = np.exp(1j * omega[p] * c)
+            for k in range(n_k):
+                ep[r, q, c * n_k + k] = ph * wk[p, k]
+    return gp, ep
+
+
+# --------------------------------------------------------------------------- OMP phases
+@njit
+def phasors(w: np.ndarray, tgrid: np.ndarray, sign: float) -> np.ndarray:
+    """``exp(sign j w_p t_ic)`` (P, I, C) for w (P,) rad per chirp and chirp times tgrid (I, C), sign +-1.
+
+    ``cos(x) + j sin(x)`` with ``x = (sign w) t``: the values numpy's complex exp gives for
+    ``np.exp(sign * 1j * w[:, None, None] * tgrid[None])`` (bit for bit), without its complex temporaries.
+    """
+    n_p = w.size
+    n_i, n_c = tgrid.shape
+    out = np.empty((n_p, n_i, n_c), np.complex128)
+    for p in range(n_p):
+        sw = sign * w[p]
+        for i in range(n_i):
+            for c in range(n_c):
+                x = sw * tgrid[i, c]
+                out[p, i, c] = complex(np.cos(x), np.sin(x))
+    return out
+
+
+@njit
+def joint_rho(r: np.ndarray, om: np.ndarray, t_chirp: np.ndarray, t_slot: np.ndarray) -> np.ndarray:
+    """Doppler-compensated slot vectors of :func:`rhs_env.point_cloud._joint_grid_search`, complex64 (D, H, I).
+
+    ``rho[d, h, i] = exp(-j omega_dh t_i) sum_c r[d, i, c] exp(-j omega_dh t_c)`` for separable chirp times
+    ``t_ic = t_i + t_c`` (``t_slot`` (I,) holds t_i including the first chirp's time, ``t_chirp`` (C,) t_c).
+    """
+    n_d, n_i, n_c = r.shape
+    n_h = om.shape[1]
+    rho = np.empty((n_d, n_h, n_i), np.complex64)
+    ec = np.empty(n_c, np.complex128)
+    for d in range(n_d):
+        for h in range(n_h):
+            w = -om[d, h]
+            for c in range(n_c):
+                ec[c] = complex(np.cos(w * t_chirp[c]), np.sin(w * t_chirp[c]))
+            for i in range(n_i):
+                acc = 0j
+                for c in range(n_c):
+                    acc += r[d, i, c] * ec[c]
+                x = w * t_slot[i]
+                rho[d, h, i] = acc * complex(np.cos(x), np.sin(x))
+    return rho
+
+
+@njit
+def atom_norms(a: np.ndarray) -> np.ndarray:
+    """``||a_dl|| = sqrt(sum_q |a[d, q, l]|^2)`` (D, L) of atoms a (D, Q, L): ``np.linalg.norm(a, axis=1)`` (its order of
+    summation over q; the last bit may differ where the compiler fuses a multiply-add)."""
+    n_d, n_q, n_l = a.shape
+    out = np.zeros((n_d, n_l))
+    for d in range(n_d):
+        for q in range(n_q):
+            for l in range(n_l):
+                v = a[d, q, l]
+                out[d, l] += v.real * v.real + v.imag * v.imag
+    return np.sqrt(out)

@@ -1,0 +1,232 @@
+"""Compiled kernels of the SLAM (numba): the RBPF's Mahalanobis association and FastSLAM 2.0 proposal sums, the ICP.
+
+Each kernel computes what the numpy reference computes (:func:`slam.association.mahalanobis_associate`
+with the distances of :meth:`slam.rbpf.RBPFSlam._associate`; the fit of
+:class:`slam.registration.ICPRegistration` with its ``cKDTree`` queries), with the same variable names and floating-point
+order, per particle instead of on P x M x L tensors. ``SlamConfig(kernels="numpy")``
+(``gym.make(..., slam={"kernels": "numpy"})``) selects the reference; the costs of numba are
+listed in :mod:`rhs_env.kernels`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rhs_common.jit import njit
+
+__all__ = ["icp_fit", "mahalanobis_association", "proposal_information"]
+
+NEW = -1  # slam.association.NEW
+DROPPED = -2  # slam.association.DROPPED
+
+
+@njit
+def mahalanobis_association(obs_map: np.ndarray, a00: np.ndarray, a01: np.ndarray, a11: np.ndarray,
+                            mean: np.ndarray, cov: np.ndarray, active: np.ndarray, used: np.ndarray,
+                            gate2: float, new_gate2: float, rounds: int) -> np.ndarray:
+    """Gated mutual-nearest association per particle on the squared Mahalanobis distances (P, M) -> sub-index.
+
+    For particle p, observation m (map frame ``obs_map[p, m]``, covariance ``A = [[a00, a01], [a01, a11]]``)
+    and used landmark slot ``l = used[q]`` (mean mu, covariance Lambda):
+    ``S = A + Lambda``, ``S^-1 = [[s11, -s01], [-s01, s00]] / max(det S, 1e-300)``, ``nu = z - mu``,
+
+        d2 = i00 nx nx + 2 i01 nx ny + i11 ny ny     (inf for an inactive landmark).
+
+    Then :func:`slam.association.mahalanobis_associate`: ``rounds`` rounds accepting the pairs that are each
+    other's nearest among the free observations and landmarks within ``gate2``; a free observation
+    is DROPPED when some landmark is within ``new_gate2``, else NEW. Returns idx (P, M) into ``used``.
+    """
+    n_p, n_m = a00.shape
+    n_l = used.size
+    idx = np.full((n_p, n_m), NEW, np.int64)
+    cost = np.empty((n_m, n_l))
+    near = np.empty(n_m, np.bool_)
+    best_l = np.empty(n_m, np.int64)
+    best_c = np.empty(n_m)
+    best_m = np.empty(n_l, np.int64)
+    best_mc = np.empty(n_l)
+    for p in range(n_p):
+        for m in range(n_m):
+            lowest = np.inf
+            for q in range(n_l):
+                l = used[q]
+                if not active[p, l]:
+                    cost[m, q] = np.inf
+                    continue
+                s00 = a00[p, m] + cov[p, l, 0, 0]
+                s01 = a01[p, m] + cov[p, l, 0, 1]
+                s11 = a11[p, m] + cov[p, l, 1, 1]
+                det = max(s00 * s11 - s01 * s01, 1e-300)
+                i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+                nx = obs_map[p, m, 0] - mean[p, l, 0]
+                ny = obs_map[p, m, 1] - mean[p, l, 1]
+                d2 = i00 * nx * nx + 2.0 * i01 * nx * ny + i11 * ny * ny
+                lowest = min(lowest, d2)
+                cost[m, q] = d2 if d2 <= gate2 else np.inf
+            near[m] = lowest <= new_gate2
+        for _ in range(rounds):
+            for m in range(n_m):  # argmin over landmarks (first of equal minima, as np.argmin)
+                best_l[m], best_c[m] = 0, cost[m, 0]
+                for q in range(1, n_l):
+                    if cost[m, q] < best_c[m]:
+                        best_l[m], best_c[m] = q, cost[m, q]
+            for q in range(n_l):  # argmin over observations
+                best_m[q], best_mc[q] = 0, cost[0, q]
+                for m in range(1, n_m):
+                    if cost[m, q] < best_mc[q]:
+                        best_m[q], best_mc[q] = m, cost[m, q]
+            found = False
+            for m in range(n_m):
+                if np.isfinite(best_c[m]) and best_m[best_l[m]] == m:
+                    idx[p, m] = best_l[m]
+                    found = True
+                    for q in range(n_l):
+                        cost[m, q] = np.inf
+                    for k in range(n_m):
+                        cost[k, best_l[m]] = np.inf
+            if not found:
+                break
+        for m in range(n_m):
+            if idx[p, m] == NEW and near[m]:
+                idx[p, m] = DROPPED
+    return idx
+
+
+@njit
+def _nearest(src: np.ndarray, prev: np.ndarray, motion: np.ndarray, upper_bound: float,
+             d: np.ndarray, j: np.ndarray) -> None:
+    """``cKDTree(prev).query(R(dth) src + t, k=1, distance_upper_bound=upper_bound)`` by brute force (small clouds).
+
+    ``d_q = min_r sqrt((x_q - x_r)^2 + (y_q - y_r)^2)`` of the moved point and its index (the first of equal
+    distances); ``(inf, len(prev))`` where no point is nearer than ``upper_bound``. Written into d, j.
+    """
+    c, s = np.cos(motion[2]), np.sin(motion[2])
+    n_r = prev.shape[0]
+    for q in range(src.shape[0]):
+        mx = c * src[q, 0] - s * src[q, 1] + motion[0]
+        my = s * src[q, 0] + c * src[q, 1] + motion[1]
+        best = np.inf
+        arg = n_r
+        for r in range(n_r):
+            dx = mx - prev[r, 0]
+            dy = my - prev[r, 1]
+            d2 = dx * dx + dy * dy
+            if d2 < best:
+                best, arg = d2, r
+        dist = np.sqrt(best)
+        if dist < upper_bound:
+            d[q], j[q] = dist, arg
+        else:
+            d[q], j[q] = np.inf, n_r
+
+
+@njit
+def _median(x: np.ndarray) -> float:
+    """``np.median`` of a short 1-D array: the middle of the sorted values, or the mean of the two middle ones."""
+    v = x.copy()
+    for q in range(1, v.size):  # insertion sort (tens of values)
+        y = v[q]
+        p = q - 1
+        while p >= 0 and v[p] > y:
+            v[p + 1] = v[p]
+            p -= 1
+        v[p + 1] = y
+    h = v.size // 2
+    return v[h] if v.size % 2 else (v[h - 1] + v[h]) / 2
+
+
+@njit
+def icp_fit(src: np.ndarray, prev: np.ndarray, guess: np.ndarray, amp_p: np.ndarray, amp_c: np.ndarray,
+            use_amp: bool, max_iterations: int, max_gate_m: float, min_gate_m: float, outlier_factor: float,
+            tol_m: float, tol_rad: float, min_pairs: int) -> tuple[np.ndarray, int, float, int]:
+    """:meth:`slam.registration.ICPRegistration._fit` from one start, and the score of its result.
+
+    Each iteration: the nearest previous point of every moved point (within ``max_gate_m``), the pairs
+    within ``gate = max(min_gate_m, outlier_factor median(d))``, then the weighted 2-D Procrustes fit
+    (weights ``w = sqrt(a_c a_p)`` or 1): with ``ws = w / sum w``, centroids ``mu_s = ws . src``,
+    ``mu_d = ws . dst`` and centred ``a, b``, ``th = atan2(sum ws (a_x b_y - a_y b_x), sum ws (a_x b_x + a_y b_y))``,
+    ``t = mu_d - R(th) mu_s``; stop when the update is below ``tol_m`` / ``tol_rad``.
+    Returns the estimate (tx, ty, th), the pairs of the last fit, the RMS distance of the final
+    neighbours and the number of points within ``min_gate_m`` of a previous point (the yaw search's score).
+    """
+    n = src.shape[0]
+    d = np.empty(n)
+    j = np.empty(n, np.int64)
+    ok = np.empty(n, np.bool_)
+    est = guess.copy()
+    last_pairs = 0
+    for _ in range(max_iterations):
+        _nearest(src, prev, est, max_gate_m, d, j)
+        finite = d[np.isfinite(d)]
+        if finite.size < min_pairs:
+            break
+        gate = max(min_gate_m, outlier_factor * _median(finite))
+        n_ok = 0
+        for q in range(n):
+            ok[q] = np.isfinite(d[q]) and d[q] <= gate
+            n_ok += ok[q]
+        if n_ok < min_pairs:
+            break
+        w = np.empty(n_ok)
+        a = np.empty((n_ok, 2))
+        b = np.empty((n_ok, 2))
+        k = 0
+        for q in range(n):
+            if ok[q]:
+                w[k] = np.sqrt(amp_c[q] * amp_p[j[q]]) if use_amp else 1.0
+                a[k, 0], a[k, 1] = src[q, 0], src[q, 1]
+                b[k, 0], b[k, 1] = prev[j[q], 0], prev[j[q], 1]
+                k += 1
+        ws = w / w.sum()
+        mu_s = ws @ a
+        mu_d = ws @ b
+        sxy = 0.0
+        sxx = 0.0
+        for k in range(n_ok):
+            ax, ay = a[k, 0] - mu_s[0], a[k, 1] - mu_s[1]
+            bx, by = b[k, 0] - mu_d[0], b[k, 1] - mu_d[1]
+            sxy += ws[k] * (ax * by - ay * bx)
+            sxx += ws[k] * (ax * bx + ay * by)
+        th = np.arctan2(sxy, sxx)
+        c, s = np.cos(th), np.sin(th)
+        new = np.array([mu_d[0] - (c * mu_s[0] - s * mu_s[1]), mu_d[1] - (s * mu_s[0] + c * mu_s[1]), th])
+        step = np.abs(new - est)
+        est = new
+        last_pairs = n_ok
+        if step[0] < tol_m and step[1] < tol_m and step[2] < tol_rad:
+            break
+    rmse = np.nan
+    score = 0
+    if last_pairs:
+        _nearest(src, prev, est, max_gate_m, d, j)
+        finite = d[np.isfinite(d)]
+        if finite.size:
+            rmse = np.sqrt(np.mean(finite ** 2))
+        for q in range(n):
+            score += d[q] <= min_gate_m
+    return est, last_pairs, rmse, score
+
+
+@njit
+def proposal_information(pp: np.ndarray, H: np.ndarray, Si: np.ndarray, nu: np.ndarray, ok: np.ndarray,
+                         n_particles: int) -> tuple[np.ndarray, np.ndarray]:
+    """Information matrix and vector of the FastSLAM 2.0 pose proposal, summed per particle over its matched pairs.
+
+    ``info_p = sum_{k of p, ok_k} H_k^T S_k^-1 H_k`` (P, 3, 3) and ``g_p = sum_{k of p, ok_k} H_k^T S_k^-1 nu_k`` (P, 3),
+    H (K, 2, 3), Si = S^-1 (K, 2, 2), nu (K, 2), the pairs in the order of ``pp`` (the particle of each pair);
+    :meth:`slam.rbpf.RBPFSlam._sample_proposal`'s einsums and ``np.add.at``, term by term.
+    """
+    info = np.zeros((n_particles, 3, 3))
+    g = np.zeros((n_particles, 3))
+    hts = np.empty((3, 2))
+    for q in range(pp.size):
+        p = pp[q]
+        w = 1.0 if ok[q] else 0.0
+        for a in range(3):
+            for j in range(2):
+                hts[a, j] = (H[q, 0, a] * Si[q, 0, j] + H[q, 1, a] * Si[q, 1, j]) * w
+        for a in range(3):
+            for b in range(3):
+                info[p, a, b] += hts[a, 0] * H[q, 0, b] + hts[a, 1] * H[q, 1, b]
+            g[p, a] += hts[a, 0] * nu[q, 0] + hts[a, 1] * nu[q, 1]
+    return info, g

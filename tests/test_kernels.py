@@ -1,0 +1,249 @@
+"""The compiled kernels (rhs_env.kernels, slam.kernels) against the numpy reference, and their cache / notice."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rhs_common.jit import NOTICE
+from rhs_env.radar import DetectionConfig, RadarConfig, RadarSystem
+from rhs_env.scatterers import Occluders, Scatterers
+from slam.rbpf import SlamConfig
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _scene(rng: np.random.Generator) -> tuple[Scatterers, Occluders]:
+    """A small random road scene in the vehicle frame: roadside landmarks and a few moving vehicles (points)."""
+    n_static, n_cars = int(rng.integers(2, 9)), int(rng.integers(0, 4))
+    xs = rng.uniform(-90.0, 90.0, n_static)
+    ys = rng.choice([-1.0, 1.0], n_static) * rng.uniform(8.0, 14.0, n_static)
+    car = np.stack([rng.uniform(-60.0, 60.0, n_cars), rng.choice([-4.0, 0.0, 4.0], n_cars)], 1)
+    xy = np.concatenate([np.stack([xs, ys], 1), car])
+    vel = np.concatenate([np.tile([-25.0, 0.0], (n_static, 1)), np.stack([rng.uniform(-8, 8, n_cars), np.zeros(n_cars)], 1)])
+    rcs = np.concatenate([rng.uniform(0.5, 10.0, n_static), rng.uniform(5.0, 30.0, n_cars)])
+    sc = Scatterers(xy, vel, rcs, np.arange(len(xy)), np.arange(len(xy)) < n_static)
+    return sc, Occluders.empty()
+
+
+def _compare_clouds(a, b) -> None:
+    assert len(a) == len(b)
+    np.testing.assert_array_equal(a.radar, b.radar)
+    assert np.abs(a.points[:, :2] - b.points[:, :2]).max(initial=0.0) < 1e-3  # positions within 1 mm
+    assert np.abs(a.points[:, 2] - b.points[:, 2]).max(initial=0.0) < 1e-2  # Doppler within 1 cm/s
+
+
+def _pair(**kw) -> dict[str, RadarSystem]:
+    return {k: RadarSystem(RadarConfig(kernels=k, **kw), np.random.default_rng(7)) for k in ("numpy", "numba")}
+
+
+def test_kernels_field_is_validated():
+    with pytest.raises(ValueError, match="kernels"):
+        RadarConfig(kernels="cython")
+    with pytest.raises(ValueError, match="kernels"):
+        SlamConfig(kernels="fortran")
+    assert "kernels" not in RadarConfig().flat_dict()  # the default leaves the config's identity as it was
+    assert RadarConfig(kernels="numpy").flat_dict()["kernels"] == "numpy"
+
+
+def test_compiled_radar_matches_numpy_on_120_scenes():
+    """Same detections, same point count, positions within 1 mm and Doppler within 1 cm/s on every scene."""
+    radars = _pair()
+    rng = np.random.default_rng(2024)
+    n_points = 0
+    for _ in range(120):
+        spec = radars["numpy"].synthesize_spectrum(*_scene(rng))
+        det = {k: r._detect(spec) for k, r in radars.items()}
+        np.testing.assert_array_equal(det["numpy"][0], det["numba"][0])
+        np.testing.assert_array_equal(det["numpy"][1], det["numba"][1])
+        clouds = {k: r.process_spectrum(spec)[0] for k, r in radars.items()}
+        _compare_clouds(clouds["numpy"], clouds["numba"])
+        n_points += len(clouds["numpy"])
+    assert n_points > 300  # the scenes do produce points
+
+
+def test_compiled_synthesis_matches_numpy():
+    """The compiled tone spectra and product operands give the numpy spectrum (the same noise draws)."""
+    radars = _pair()
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        scene = _scene(rng)
+        a, b = (r.synthesize_spectrum(*scene).copy() for r in radars.values())
+        assert np.abs(a - b).max() <= 1e-6 * np.abs(a).max()
+
+
+@pytest.mark.parametrize("kw", [
+    {"detection": DetectionConfig(statistic="summed")},
+    {"detection": DetectionConfig(method="ca")},
+    {"detection": DetectionConfig(mode="fixed")},
+    {"antenna": "phased"},
+    {"antenna": "random"},
+    {"antenna": "hologram"},
+    {"fidelity": "iq"},
+], ids=["summed", "ca", "fixed", "phased", "random", "hologram", "iq"])
+def test_non_default_paths_match_numpy(kw):
+    """Every non-default path runs with kernels="numba" (compiled or the numpy fallback) and gives the numpy clouds."""
+    radars = _pair(**kw)
+    rng = np.random.default_rng(11)
+    for _ in range(4):
+        scene = _scene(rng)
+        clouds = [r.scan(*scene) for r in radars.values()]
+        _compare_clouds(*clouds)
+
+
+def test_taylor_atoms_match_the_direct_product():
+    """The compiled atoms (series in sin(theta)) equal the product with [w_T | w_R] to ~1e-13, inside and past the grid."""
+    dic = RadarSystem(RadarConfig(kernels="numpy"), np.random.default_rng(0)).dictionaries[0]
+    th = np.random.default_rng(1).uniform(dic.candidates[0] - 3 * dic.step, dic.candidates[-1] + 3 * dic.step, 500)
+    ref = dic._atom_rows(th, 2)
+    dic.use_kernels("numba")
+    new = dic._atom_rows(th, 2)
+    for o in range(3):
+        scale = np.abs(ref[o]).max(axis=1, keepdims=True)
+        assert (np.abs(new[o] - ref[o]) / scale).max() < 1e-12, o
+
+
+@pytest.mark.parametrize("slam", [{}, {"variant": "fastslam1"}, {"association": "nearest"}], ids=["default", "fastslam1", "nearest"])
+def test_compiled_slam_matches_numpy_over_an_episode(slam):
+    """The SLAM env with compiled and numpy kernels: estimated poses within 1e-6 m over 25 steps."""
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+
+    envs = [gym.make("rhs-highway-slam-v0", slam={**slam, "kernels": k}) for k in ("numpy", "numba")]
+    for e in envs:
+        e.reset(seed=4)
+    worst = 0.0
+    for a in np.random.default_rng(4).choice([1, 1, 1, 3, 4], size=25):
+        out = [e.step(int(a)) for e in envs]
+        worst = max(worst, float(np.abs(out[0][4]["estimated_pose"][:2] - out[1][4]["estimated_pose"][:2]).max()))
+        np.testing.assert_allclose(out[0][4]["estimated_pose"][2], out[1][4]["estimated_pose"][2], atol=1e-8)
+        if out[0][2] or out[0][3]:
+            break
+    assert worst < 1e-6
+
+
+def test_compiled_icp_equals_the_numpy_fit():
+    """The compiled ICP (brute-force neighbours, fused iterations) gives the cKDTree / numpy estimate."""
+    from rhs_common.geometry import apply_motion
+    from slam.registration import ICPRegistration
+
+    rng = np.random.default_rng(3)
+    for trial in range(20):
+        prev = np.column_stack([rng.uniform(-60, 60, (50, 2)), np.zeros(50), rng.uniform(1, 30, 50)])
+        motion = np.array([rng.uniform(3, 6), rng.normal(0, 0.2), rng.normal(0, 0.02)])
+        keep = rng.random(50) < 0.8
+        cur = prev[keep].copy()
+        # current-frame points: the previous ones seen after the motion, with noise and a few outliers
+        c, s = np.cos(motion[2]), np.sin(motion[2])
+        rel = cur[:, :2] - motion[:2]
+        cur[:, :2] = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
+        cur[:, :2] += rng.normal(0, 0.05, (len(cur), 2))
+        cur[:3, :2] += rng.uniform(-20, 20, (3, 2))
+        regs = [ICPRegistration(amplitude_weights=bool(trial % 2)) for _ in range(2)]
+        regs[0].kernels = "numpy"
+        est = [r.estimate(prev, cur, prior=np.array([4.5, 0.0, 0.0])) for r in regs]
+        np.testing.assert_allclose(est[0], est[1], atol=1e-9)
+        assert regs[0].last_pairs == regs[1].last_pairs
+        np.testing.assert_allclose(regs[0].last_rmse, regs[1].last_rmse, rtol=1e-9)
+        assert np.abs(apply_motion(cur[3:, :2], est[1]) - prev[keep][3:, :2]).max() < 0.5  # it does register
+
+
+def _run(code: str, **env: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=ROOT, capture_output=True, text=True,
+                          env={**os.environ, "OMP_NUM_THREADS": "1", **env}, timeout=600)
+
+
+def test_kernels_as_python_under_disable_jit():
+    """NUMBA_DISABLE_JIT=1 runs the kernels' Python source: the same detections and points as numpy on small cases."""
+    code = """
+        import numpy as np
+        from numba import config
+        assert config.DISABLE_JIT
+        from rhs_env.radar import RadarConfig, RadarSystem
+        from rhs_env.scatterers import Scatterers
+        from slam.registration import ICPRegistration
+        radars = {k: RadarSystem(RadarConfig(kernels=k), np.random.default_rng(1)) for k in ("numpy", "numba")}
+        scene = Scatterers.static_points([[30.0, 10.0], [-45.0, -11.0], [60.0, -9.0]], rcs=8.0)
+        spec = radars["numpy"].synthesize_spectrum(scene)
+        a, b = (r.process_spectrum(spec)[0] for r in radars.values())
+        assert len(a) == len(b) > 0 and np.abs(a.points[:, :3] - b.points[:, :3]).max() < 1e-3
+        radars = {k: RadarSystem(RadarConfig(kernels=k), np.random.default_rng(2)) for k in ("numpy", "numba")}
+        s1, s2 = (r.synthesize_spectrum(scene).copy() for r in radars.values())
+        assert np.abs(s1 - s2).max() <= 1e-6 * np.abs(s1).max()
+        rng = np.random.default_rng(0)
+        prev = np.column_stack([rng.uniform(-30, 30, (12, 2)), np.zeros(12), np.ones(12)])
+        cur = prev.copy()
+        cur[:, 0] -= 2.0
+        regs = [ICPRegistration(yaw_search_rad=0.0) for _ in range(2)]
+        regs[0].kernels = "numpy"
+        e0, e1 = (r.estimate(prev, cur, prior=np.array([1.8, 0.0, 0.0])) for r in regs)
+        assert np.abs(e0 - e1).max() < 1e-9 and abs(e1[0] - 2.0) < 1e-6
+        from slam.association import mahalanobis_associate
+        from slam.kernels import mahalanobis_association, proposal_information
+        P, M, L = 3, 4, 5
+        obs, mean = rng.uniform(0, 6, (P, M, 2)), rng.uniform(0, 6, (P, L, 2))
+        a00, a11, a01 = rng.uniform(0.5, 1, (P, M)), rng.uniform(0.5, 1, (P, M)), rng.uniform(-0.1, 0.1, (P, M))
+        cov = np.tile(np.eye(2) * 0.2, (P, L, 1, 1))
+        active, used = np.ones((P, L), bool), np.arange(L)
+        s00, s11, s01 = a00[:, :, None] + 0.2, a11[:, :, None] + 0.2, a01[:, :, None] + 0.0
+        det = s00 * s11 - s01 * s01
+        nx, ny = obs[:, :, None, 0] - mean[:, None, :, 0], obs[:, :, None, 1] - mean[:, None, :, 1]
+        d2 = (s11 * nx * nx - 2 * s01 * nx * ny + s00 * ny * ny) / det
+        want = mahalanobis_associate(d2, 3.5**2, 6.0**2, 3)
+        got = mahalanobis_association(obs, a00, a01, a11, mean, cov, active, used, 3.5**2, 6.0**2, 3)
+        assert np.array_equal(want, got)
+        pp = np.array([0, 0, 1, 2, 2, 2])
+        H, Si, nu, ok = rng.normal(size=(6, 2, 3)), rng.normal(size=(6, 2, 2)), rng.normal(size=(6, 2)), rng.random(6) < 0.7
+        info, g = proposal_information(pp, H, Si, nu, ok, P)
+        HtSi = np.einsum("kia,kij->kaj", H, Si) * ok[:, None, None]
+        info0, g0 = np.zeros((P, 3, 3)), np.zeros((P, 3))
+        np.add.at(info0, pp, np.einsum("kaj,kjb->kab", HtSi, H))
+        np.add.at(g0, pp, np.einsum("kaj,kj->ka", HtSi, nu))
+        assert np.allclose(info, info0, rtol=1e-13, atol=1e-13) and np.allclose(g, g0, rtol=1e-13, atol=1e-13)
+        print("ok")
+    """
+    res = _run(code, NUMBA_DISABLE_JIT="1")
+    assert res.returncode == 0 and res.stdout.strip().endswith("ok"), res.stderr[-3000:]
+
+
+def test_cache_notice_once_then_silent(tmp_path):
+    """A fresh cache compiles with the one-line notice; the next process loads the cache silently."""
+    code = """
+        import numpy as np
+        from rhs_env.kernels import tone_spectra
+        tone_spectra(np.zeros(1), np.ones(1, complex), 8, 2, 4, np.array([0.1]))
+        tone_spectra(np.zeros(2), np.ones(2, complex), 8, 2, 4, np.array([0.2, 0.3]))
+    """
+    first = _run(code, NUMBA_CACHE_DIR=str(tmp_path))
+    assert first.returncode == 0, first.stderr[-3000:]
+    assert first.stderr.count(NOTICE) == 1
+    assert any(tmp_path.rglob("*.nbi"))  # the index of the cached machine code
+    second = _run(code, NUMBA_CACHE_DIR=str(tmp_path))
+    assert second.returncode == 0 and NOTICE not in second.stderr
+
+
+def test_read_only_install_caches_in_the_user_directory(tmp_path):
+    """Where the package directory is not writable, the cache goes to the user cache directory."""
+    code = f"""
+        import os
+        os.environ.pop("NUMBA_CACHE_DIR", None)
+        import platformdirs
+        platformdirs.user_cache_dir = lambda name: os.path.join({str(tmp_path)!r}, name)
+        from rhs_common import jit
+        jit._writable = lambda path: False
+        jit._numba()
+        from numba.core import config
+        assert os.environ["NUMBA_CACHE_DIR"] == config.CACHE_DIR == os.path.join({str(tmp_path)!r}, "rhs-slam", "numba")
+        print("ok")
+    """
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    res = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=ROOT, capture_output=True, text=True, env=env,
+                         timeout=300)
+    assert res.returncode == 0 and "ok" in res.stdout, res.stderr[-3000:]
