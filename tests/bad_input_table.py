@@ -4,13 +4,14 @@ Not a test module itself: ``tests/test_fuzz_inputs.py`` runs every row, and
 ``python tests/bad_input_table.py`` prints the tally by class (each case in a forked child
 with a time limit, so a hang is counted as one instead of stopping the count)::
 
-    tried / clean / accepted / traceback / silent / hang / wrongly-rejected
+    tried / clean / accepted / unnamed / traceback / silent / hang / wrongly-rejected
 
 A row is ``Case(name, kind, given, expect, fragments)``:
 
 * ``expect="refuse"``: a clean error whose message holds every fragment (the field, flag or
   file): ``ValueError`` / ``TypeError`` from the library, exit status 2 and one line on stderr
-  (no traceback) from the command line. Anything else raised is a *traceback*; success is *silent*.
+  (no traceback) from the command line. Such a refusal that does not name them is *unnamed*;
+  anything else raised is a *traceback*; success is *silent*.
 * ``expect="accept"``: works and gives finite numbers (a reset and two steps for an env).
   Refused is *wrongly-rejected*.
 * ``expect="note"``: works, and says so: the fragments appear in what it prints (or in the
@@ -50,9 +51,9 @@ SCENARIO = {"landmarks": [[10.0, 5.0]], "poses": [[0.0, 0.0, 0.0], [1.0, 0.0, 0.
             "grid_deg": 5.0, "registration": "odometry", "particles": 5}
 STUDENT = "agents/data/dagger_rhs_highway_truth.zip"  # a DAgger student on rhs-highway-v0, target speeds 10..30
 #: a train run of seconds: the ground-truth env, one env, no evaluation or checkpoints
-TRAIN_FAST = ["--env", HW, "--n-envs", "1", "--eval-freq", "0", "--checkpoint-freq", "0", "--no-progress"]
+TRAIN_FAST = ["--env", HW, "--timesteps", "64", "--n-envs", "1", "--eval-freq", "0", "--checkpoint-freq", "0", "--no-progress"]
 
-CLASSES = ("tried", "clean", "accepted", "traceback", "silent", "hang", "wrongly-rejected")
+CLASSES = ("tried", "clean", "accepted", "unnamed", "traceback", "silent", "hang", "wrongly-rejected")
 
 
 @dataclass(frozen=True)
@@ -254,15 +255,14 @@ CASES: list[Case] = [
          fragments=("unknown env id", "rhs-highway-v0")),
     Case("evaluate 100000 episodes", "cli", ["evaluate", "--out", "OUT", "--episodes", "100000", "--no-progress"],
          fragments=("--episodes", "--yes")),
-    Case("train --resume on an empty folder", "cli", ["train", *TRAIN_FAST, "--timesteps", "64", "--out", "OUTDIR",
-                                                       "--resume"], fragments=("--resume",)),
-    Case("train --algo ppo --timesteps 64", "cli", ["train", *TRAIN_FAST, "--timesteps", "64", "--out", "OUTDIR"],
+    Case("train --resume on an empty folder", "cli", ["train", *TRAIN_FAST, "--out", "OUTDIR", "--resume"], fragments=("--resume",)),
+    Case("train --algo ppo --timesteps 64", "cli", ["train", *TRAIN_FAST, "--out", "OUTDIR"],
          "note", ("64", "128")),
     Case("train --init-policy without --env-kwargs", "cli",
-         ["train", "--algo", "dagger", *TRAIN_FAST, "--timesteps", "40", "--out", "OUTDIR", "--init-policy", STUDENT],
+         ["train", "--algo", "dagger", *TRAIN_FAST, "--out", "OUTDIR", "--init-policy", STUDENT],
          "note", ("target_speeds",)),
     Case("train --init-policy, other target speeds", "cli",
-         ["train", "--algo", "dagger", *TRAIN_FAST, "--timesteps", "40", "--out", "OUTDIR", "--init-policy", STUDENT,
+         ["train", "--algo", "dagger", *TRAIN_FAST, "--out", "OUTDIR", "--init-policy", STUDENT,
           "--env-kwargs", '{"action": {"type": "DiscreteMetaAction", "target_speeds": [5, 10, 15]}}'],
          fragments=("--init-policy", "target_speeds")),
 ]
@@ -390,7 +390,9 @@ def classify(case: Case, outcome: Outcome | None, error: BaseException | None = 
     if case.expect == "refuse":
         if outcome.ok:
             return "silent"
-        return "clean" if outcome.clean and named else "traceback"
+        if outcome.clean:
+            return "clean" if named else "unnamed"
+        return "traceback"
     if not outcome.ok:
         return "wrongly-rejected" if outcome.clean else "traceback"
     if not outcome.finite:
