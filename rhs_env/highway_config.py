@@ -76,26 +76,26 @@ def check_numbers(field: str, value: Any, count: int | None = None, low: float |
     return [float(v) for v in value]
 
 
-def _increasing(field: str, values: list[float], what: str) -> None:
+def _check_increasing(field: str, values: list[float], what: str) -> None:
     if any(b <= a for a, b in zip(values, values[1:], strict=False)):
         raise ValueError(f"{field} must be strictly increasing ({what}), got {values!r}")
 
 
-def _mapping(field: str, value: Any) -> Mapping[str, Any]:
+def _check_mapping(field: str, value: Any) -> Mapping[str, Any]:
     if not isinstance(value, Mapping):
         raise TypeError(f"{field} must be a dict with a 'type', got {value!r} ({type(value).__name__})")
     return value
 
 
 # --------------------------------------------------------------------------- the checks, one per key
-def _action(c: MutableMapping[str, Any]) -> None:
-    a = _mapping("action", c["action"])
+def _check_action(c: MutableMapping[str, Any]) -> None:
+    a = _check_mapping("action", c["action"])
     check_choice("action.type", a.get("type"), ACTION_TYPES)
     if a["type"] == "DiscreteMetaAction" and a.get("target_speeds") is not None:
         speeds = check_numbers("action.target_speeds", a["target_speeds"], None, 0.0, MAX_SPEED_MPS)
         if not speeds:
             raise ValueError("action.target_speeds must hold at least one speed (m/s), got []")
-        _increasing("action.target_speeds", speeds, "the meta-actions FASTER / SLOWER step through them in order")
+        _check_increasing("action.target_speeds", speeds, "the meta-actions FASTER / SLOWER step through them in order")
         if isinstance(a["target_speeds"], np.ndarray) or any(isinstance(v, np.generic) for v in a["target_speeds"]):
             c["action"] = {**a, "target_speeds": plain(a["target_speeds"])}
     for key in ("longitudinal", "lateral"):
@@ -103,8 +103,8 @@ def _action(c: MutableMapping[str, Any]) -> None:
             raise TypeError(f"action.{key} must be True or False, got {a[key]!r} ({type(a[key]).__name__})")
 
 
-def _observation(c: MutableMapping[str, Any]) -> None:
-    o = _mapping("observation", c["observation"])
+def _check_observation(c: MutableMapping[str, Any]) -> None:
+    o = _check_mapping("observation", c["observation"])
     check_choice("observation.type", o.get("type"), OBSERVATION_TYPES)
     if o["type"] in ("Kinematics", "KinematicsGoal"):
         if "vehicles_count" in o:
@@ -120,13 +120,13 @@ def _observation(c: MutableMapping[str, Any]) -> None:
                                  f"allowed: {', '.join(KINEMATICS_FEATURES)}")
 
 
-def _reward_speed_range(c: MutableMapping[str, Any]) -> None:
+def _check_reward_speed_range(c: MutableMapping[str, Any]) -> None:
     lo_hi = check_numbers("reward_speed_range", c["reward_speed_range"], 2, 0.0, MAX_SPEED_MPS)
-    _increasing("reward_speed_range", lo_hi, "[low, high] m/s: the speed reward rises from low to high")
+    _check_increasing("reward_speed_range", lo_hi, "[low, high] m/s: the speed reward rises from low to high")
     c["reward_speed_range"] = plain(c["reward_speed_range"])
 
 
-def _other_vehicles_type(c: MutableMapping[str, Any]) -> None:
+def _check_other_vehicles_type(c: MutableMapping[str, Any]) -> None:
     from highway_env.vehicle.kinematics import Vehicle
 
     path = c["other_vehicles_type"]
@@ -143,7 +143,7 @@ def _other_vehicles_type(c: MutableMapping[str, Any]) -> None:
         raise ValueError(f"other_vehicles_type {path!r} is not a highway-env Vehicle class")  # noqa: TRY004  (a value)
 
 
-def _initial_lane_id(c: MutableMapping[str, Any]) -> None:
+def _check_initial_lane_id(c: MutableMapping[str, Any]) -> None:
     lane = c["initial_lane_id"]
     if lane is None:
         return
@@ -156,12 +156,12 @@ def _initial_lane_id(c: MutableMapping[str, Any]) -> None:
     c["initial_lane_id"] = int(lane)
 
 
-def _centering_position(c: MutableMapping[str, Any]) -> None:
+def _check_centering_position(c: MutableMapping[str, Any]) -> None:
     check_numbers("centering_position", c["centering_position"], 2, 0.0, 1.0)
     c["centering_position"] = plain(c["centering_position"])
 
 
-def _policy_frequency(c: MutableMapping[str, Any]) -> None:
+def _check_policy_frequency(c: MutableMapping[str, Any]) -> None:
     sim, pol = float(c["simulation_frequency"]), float(c["policy_frequency"])
     ratio = sim / pol
     if abs(ratio - round(ratio)) > 1e-9 * ratio:
@@ -171,31 +171,31 @@ def _policy_frequency(c: MutableMapping[str, Any]) -> None:
             + ", ".join(f"{sim / k:g}" for k in range(1, 6) if sim / k >= 1))
 
 
-def _offscreen_rendering(c: MutableMapping[str, Any]) -> None:
+def _check_offscreen_rendering(c: MutableMapping[str, Any]) -> None:
     v = c["offscreen_rendering"]
     if v is not None and not isinstance(v, (bool, np.bool_)):
         raise TypeError(f"offscreen_rendering must be None, True or False, got {v!r} ({type(v).__name__})")
 
 
-def _screen(key: str) -> Callable[[MutableMapping[str, Any]], None]:
-    def check(c: MutableMapping[str, Any]) -> None:
+def _check_screen(key: str) -> Callable[[MutableMapping[str, Any]], None]:
+    def check_pixels(c: MutableMapping[str, Any]) -> None:
         check_int(key, c[key], 1, 4096)  # pixels
 
-    return check
+    return check_pixels
 
 
 #: key -> check of the config (in this order: ``initial_lane_id`` after ``lanes_count`` is known valid)
 CHECKS: dict[str, Callable[[MutableMapping[str, Any]], None]] = {
-    "action": _action,
-    "observation": _observation,
-    "reward_speed_range": _reward_speed_range,
-    "other_vehicles_type": _other_vehicles_type,
-    "initial_lane_id": _initial_lane_id,
-    "centering_position": _centering_position,
-    "policy_frequency": _policy_frequency,
-    "offscreen_rendering": _offscreen_rendering,
-    "screen_width": _screen("screen_width"),
-    "screen_height": _screen("screen_height"),
+    "action": _check_action,
+    "observation": _check_observation,
+    "reward_speed_range": _check_reward_speed_range,
+    "other_vehicles_type": _check_other_vehicles_type,
+    "initial_lane_id": _check_initial_lane_id,
+    "centering_position": _check_centering_position,
+    "policy_frequency": _check_policy_frequency,
+    "offscreen_rendering": _check_offscreen_rendering,
+    "screen_width": _check_screen("screen_width"),
+    "screen_height": _check_screen("screen_height"),
 }
 
 
