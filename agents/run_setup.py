@@ -72,8 +72,10 @@ def check_hyperparams(hp: dict[str, Any], where: str) -> None:
     from rhs_common.validation import check_int, check_range
 
     for key, (integer, low, high) in HP_NUMBERS.items():
-        if key in hp:
-            (check_int if integer else check_range)(f"{where}.{key}", hp[key], low, high)
+        if key in hp and integer:
+            check_int(f"{where}.{key}", hp[key], int(low), int(high))
+        elif key in hp:
+            check_range(f"{where}.{key}", hp[key], low, high)
     for key, high in HP_SCHEDULES.items():
         value = hp.get(key)
         if isinstance(value, str) and value.startswith("lin_"):

@@ -107,15 +107,12 @@ def train(
                              torch_threads, resume, init_policy)
     from stable_baselines3.common.callbacks import CallbackList
 
-    from agents.resume import StopOnSignal, latest_checkpoint, save_checkpoint
+    from agents.resume import StopOnSignal, save_checkpoint
 
     run = run_settings(algo, env_id, timesteps, n_envs, hyperparams, env_kwargs)
     check_train_args(run.timesteps, run.n_envs, seed, eval_freq, eval_episodes, checkpoint_freq)
     out = Path(out)
-    if resume and latest_checkpoint(out, algo) is None:
-        raise ValueError(f"--resume: no checkpoint {algo}_<steps>_steps.zip in {out / 'checkpoints'} to continue "
-                         "from; run without --resume to start a new run")
-    _note_rollout_rounding(algo, run)
+    _check_start(algo, run, out, resume)
     out.mkdir(parents=True, exist_ok=True)
     limit_threads(torch_threads)
     if run.n_envs > 1:
@@ -155,8 +152,14 @@ def train(
     return summary
 
 
-def _note_rollout_rounding(algo: str, run: RunSettings) -> None:
-    """Say so when PPO will train more steps than asked: it collects whole rollouts of ``n_steps * n_envs``."""
+def _check_start(algo: str, run: RunSettings, out: Path, resume: bool) -> None:
+    """Before any work: ``resume`` needs a checkpoint in ``out`` (``ValueError`` naming ``--resume`` otherwise);
+    say so when PPO will train more steps than asked (it collects whole rollouts of ``n_steps * n_envs``)."""
+    from agents.resume import latest_checkpoint
+
+    if resume and latest_checkpoint(out, algo) is None:
+        raise ValueError(f"--resume: no checkpoint {algo}_<steps>_steps.zip in {out / 'checkpoints'} to continue "
+                         "from; run without --resume to start a new run")
     if algo != "ppo":
         return
     rollout = int(run.hp.get("n_steps", 2048)) * run.n_envs  # stable-baselines3's default n_steps: 2048

@@ -324,6 +324,28 @@ def _run_env(env_id: str, kwargs: dict, seed: Any = 0, after_end: str | None = N
         env.close()
 
 
+def _step_with(action: Any) -> Outcome:
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+
+    env = gym.make(HW, **SMALL)
+    try:
+        env.reset(seed=0)
+        obs, reward, *_ = env.step(action)
+        return Outcome(True, finite=_finite(obs) and math.isfinite(float(reward)))
+    finally:
+        env.close()
+
+
+def table_rows() -> list[Case]:
+    """The rows of ``tests/test_bad_inputs.py`` (every one a refusal naming its fragment) as cases."""
+    from test_bad_inputs import CASES as ROWS
+
+    kinds = {"make": "make", "action": "action", "cli": "oldcli"}
+    return [Case(f"[table] {name}", kinds[kind], given, "refuse", (fragment,)) for name, kind, given, _, fragment in ROWS]
+
+
 def _cli(args: list[str], folder: Path, files: dict[str, bytes]) -> Outcome:
     from rhs_slam.cli import main
 
@@ -351,10 +373,9 @@ def _cli(args: list[str], folder: Path, files: dict[str, bytes]) -> Outcome:
         note = summary.read_text() if summary.exists() else ""
         return Outcome(True, text=out.getvalue() + text + note)
     last = lines[-1] if lines else ""
-    clean = code == 2 and "Traceback" not in text and bool(lines) and ("error" in last)
-    # argparse prints usage then the error line; everything else must be one line
-    one_line = len(lines) == 1 or (len(lines) >= 2 and lines[0].startswith("usage:"))
-    return Outcome(False, message=last, clean=clean and one_line, text=text)
+    # a refusal: exit 2, the error on the last line, no traceback (tests/test_fuzz_inputs.py checks one line)
+    clean = code == 2 and "Traceback" not in text and "error" in last
+    return Outcome(False, message=last, clean=clean, text=text)
 
 
 def run_case(case: Case, folder: Path) -> Outcome:
@@ -371,6 +392,12 @@ def run_case(case: Case, folder: Path) -> Outcome:
             return _run_env(env_id, kwargs, after_end=how)
         if case.kind == "cli":
             return _cli(case.given, folder, case.files)
+        if case.kind == "action":  # a step with this action on a fresh rhs-highway-v0
+            return _step_with(case.given)
+        if case.kind == "oldcli":  # a row of tests/test_bad_inputs.py's table
+            from test_bad_inputs import _cli_args
+
+            return _cli([str(a) for a in _cli_args(case.given, folder)], folder, {})
         if case.kind == "call":
             fn: Callable[[], Any] = case.given
             return Outcome(True, finite=_finite(fn()))
@@ -452,6 +479,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--timeout", type=float, default=90.0, help="seconds before a case counts as a hang")
     p.add_argument("--json", default=None, help="write the counts here")
     p.add_argument("--only", default=None, help="cases whose name contains this")
+    p.add_argument("--no-table-rows", action="store_true", help="leave out the rows of tests/test_bad_inputs.py")
     a = p.parse_args(argv)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import gymnasium  # noqa: F401  (imported once, before the children fork)
@@ -460,7 +488,7 @@ def main(argv: list[str] | None = None) -> int:
     import rhs_slam.cli  # noqa: F401
 
     print(f"rhs_env from {Path(rhs_env.__file__).parent}", flush=True)
-    cases = [c for c in CASES if a.only is None or a.only in c.name]
+    cases = [c for c in CASES + ([] if a.no_table_rows else table_rows()) if a.only is None or a.only in c.name]
     counts = tally(cases, a.timeout)
     print(json.dumps(counts))
     if a.json:

@@ -41,6 +41,8 @@ def test_every_tried_input_has_its_class_of_outcome(case, tmp_path, monkeypatch)
     monkeypatch.delenv("RHS_SLAM_BUILD_PATTERNS", raising=False)
     outcome = run_case(case, tmp_path)
     assert classify(case, outcome) == expected_class(case), (outcome.message or outcome.text)[-1500:]
+    if case.kind == "cli" and case.expect == "refuse":  # one line on stderr, naming what is wrong
+        assert len([ln for ln in outcome.text.splitlines() if ln.strip()]) == 1, outcome.text
 
 #: a valid, cheap radar/SLAM configuration: every leaf is a field the fuzzer mutates (the
 #: closed-form hologram antenna: a valid mutation never starts a pattern-library build)
