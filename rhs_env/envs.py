@@ -18,7 +18,11 @@
 
 Both take their highway-env config as ``config={...}`` and/or as keyword
 arguments (``gym.make("rhs-highway-v0", lanes_count=3, landmarks={"spacing_m": 10})``);
-unknown keys and out-of-range values raise ``ValueError`` naming the field.
+unknown keys and out-of-range values raise ``ValueError`` naming the field, highway-env's own
+keys included (:mod:`rhs_env.highway_config`: target speeds, lane ids against ``lanes_count``,
+``policy_frequency`` dividing ``simulation_frequency``, ...), and a key given both ways with
+different values (``config={"lanes_count": 2}, lanes_count=3``) names both. ``reset`` takes numpy
+integer seeds (as stable-baselines3 passes them); a ``step`` after the episode ended warns once.
 Landmarks are arrays on the env (``env.unwrapped.landmarks``, a
 :class:`rhs_env.scene.Landmarks`), never highway-env road objects, so they do
 not appear in the Kinematics observation and cannot end an episode. ``info``
