@@ -21,6 +21,10 @@ action between, so every policy is scored per env step on the same seeds. The de
 ``agents/data/dagger_rhs_highway_slam.zip`` (with ``dagger_rhs_highway_slam.json``), a DAgger student of
 :class:`agents.expert.HeadwayDriver` (:mod:`agents.imitation`); ``ppo_rhs_highway_slam.zip`` beside it is PPO
 with the same budget (it learned always-SLOWER).
+
+An evaluation estimated above an hour (:func:`estimate_hours`, from the measured steps/s) needs
+``--yes``. SIGTERM or Ctrl-C stop it at once: the finished episodes are written (``interrupted``
+names the signal) and the command exits 128 + the signal number, as ``rhs-slam train`` does.
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ import numpy as np
 
 from agents.decision import held
 from agents.expert import HeadwayDriver
+from agents.run_setup import parse_env_kwargs
 from rhs_env.registration import SLAM_ENV_SPECS
 
 DATA_DIR = Path(__file__).parent / "data"
@@ -162,6 +167,10 @@ def resolve_env(
     """
     if not is_scripted(policy) and not Path(policy).exists():
         raise FileNotFoundError(f"policy file not found: {policy}")
+    from rhs_env.registration import check_env_id
+
+    if env_id is not None:
+        check_env_id(env_id)
     meta = policy_metadata(policy)
     meta_env = meta.get("env_id")
     env_id = env_id or meta_env or DEFAULT_ENV
@@ -436,6 +445,32 @@ def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+#: env steps per second on the project's 2-core machine (results/benchmark.md, default radar): the
+#: ground-truth env, and any env with the radar (the SLAM envs are a little slower still)
+STEPS_PER_S = {"rhs-highway-v0": 44.6}
+RADAR_STEPS_PER_S = 15.7
+#: longest evaluation (estimated, hours) started without ``max_hours=None`` (``--yes``)
+MAX_UNCONFIRMED_HOURS = 1.0
+
+
+def estimate_hours(env_id: str, episodes: int, steps_per_episode: int | None) -> float:
+    """Rough wall time of ``episodes`` full episodes (hours), at :data:`STEPS_PER_S` / :data:`RADAR_STEPS_PER_S`."""
+    rate = STEPS_PER_S.get(env_id.split(":")[-1], RADAR_STEPS_PER_S)
+    return episodes * (steps_per_episode or 200) / rate / 3600
+
+
+class Interrupted(Exception):
+    """SIGTERM or SIGINT arrived during :func:`evaluate` (raised by its handler, caught by it)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _raise_interrupted(signum, frame) -> None:
+    raise Interrupted(signum)
+
+
 def evaluate(
     policy: str | Path,
     env_id: str | None = None,
@@ -444,11 +479,18 @@ def evaluate(
     env_kwargs: dict | None = None,
     progress: bool = True,
     deterministic: bool = True,
+    max_hours: float | None = MAX_UNCONFIRMED_HOURS,
 ) -> dict[str, Any]:
     """Evaluate ``policy`` on ``episodes`` seeded episodes; returns the JSON-ready summary.
 
     ``env_id`` / ``env_kwargs`` default to the ones saved beside the policy (:func:`resolve_env`).
+    An evaluation estimated (:func:`estimate_hours`) longer than ``max_hours`` is refused with a
+    ``ValueError`` before any episode (``None``: no limit). SIGTERM / SIGINT (Ctrl-C) stop it at
+    once (from the main thread): the episode under way is dropped, the summary covers the finished
+    ones and has ``interrupted`` (the signal's name); otherwise ``interrupted`` is None.
     """
+    import signal
+
     from tqdm.auto import tqdm
 
     import rhs_env  # noqa: F401
@@ -456,25 +498,44 @@ def evaluate(
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
     env_id, kwargs = resolve_env(policy, env_id, env_kwargs)
-    env = make_env(env_id, kwargs)
+    previous = {}
+    interrupted = None
+    runs: list[dict[str, Any]] = []
+    env = None
     try:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            try:
+                previous[sig] = signal.signal(sig, _raise_interrupted)
+            except ValueError:  # not the main thread: the default handling stays
+                pass
+        env = make_env(env_id, kwargs)
         model = load_policy(policy, env, seed)
         per_episode = episode_steps(env)
+        hours = estimate_hours(env_id, episodes, per_episode)
+        if max_hours is not None and hours > max_hours:
+            raise ValueError(f"--episodes {episodes}: {episodes} x {per_episode or 'about 200'} env steps on {env_id} "
+                             f"take about {hours:.1f} h ({hours / 24:.1f} days) at the measured speed; pass --yes "
+                             f"(evaluate(max_hours=None)) to run it, or evaluate fewer episodes")
         with tqdm(total=episodes * per_episode if per_episode else None, desc="evaluate", unit="step",
                   disable=not progress) as bar:
-            runs = []
             for k in range(episodes):
                 bar.set_postfix(episode=f"{k + 1}/{episodes}")
                 runs.append(run_episode(env, model, seed + k, deterministic=deterministic, bar=bar))
+    except Interrupted as exc:
+        interrupted = signal.Signals(exc.signum).name
     finally:
-        env.close()
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+        if env is not None:
+            env.close()
     return {
         "policy": str(policy),
         "env_id": env_id,
         "env_kwargs": kwargs,
         "seed": seed,
-        "seeds": [seed + k for k in range(episodes)],
+        "seeds": [seed + k for k in range(len(runs))],
         "deterministic": deterministic,
+        "interrupted": interrupted,
         **summarize(runs),
         "runs": runs,
     }
@@ -527,16 +588,6 @@ def plot_summary(summary: dict[str, Any], path: str | Path) -> None:
     plt.close(fig)
 
 
-def parse_env_kwargs(text: str | None) -> dict[str, Any] | None:
-    """``--env-kwargs`` JSON -> dict (``None`` when not given)."""
-    if text is None:
-        return None
-    value = json.loads(text)
-    if not isinstance(value, dict):
-        raise ValueError("--env-kwargs must be a JSON object")  # noqa: TRY004  (reported as a usage error)
-    return value
-
-
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--policy",
@@ -554,6 +605,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, help="output JSON file")
     parser.add_argument("--figure", default=None, help="output PNG (default: the --out path with .png)")
     parser.add_argument("--no-progress", action="store_true")
+    parser.add_argument("--yes", action="store_true",
+                        help=f"run an evaluation estimated above {MAX_UNCONFIRMED_HOURS:g} h (refused otherwise)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -574,6 +627,7 @@ def run(args: argparse.Namespace) -> int:
             parse_env_kwargs(args.env_kwargs),
             progress=not args.no_progress,
             deterministic=not args.stochastic,
+            max_hours=None if args.yes else MAX_UNCONFIRMED_HOURS,
         )
     except (ValueError, TypeError, FileNotFoundError, json.JSONDecodeError) as exc:
         print(f"rhs-slam evaluate: error: {exc}", file=sys.stderr)
@@ -587,6 +641,12 @@ def run(args: argparse.Namespace) -> int:
     plot_summary(summary, figure)
     brief = {k: v for k, v in summary.items() if k != "runs"}
     print(json.dumps(brief, indent=2, default=_json_default))
+    if summary["interrupted"]:
+        import signal
+
+        print(f"rhs-slam evaluate: interrupted ({summary['interrupted']}) after {summary['episodes']} of "
+              f"{args.episodes} episodes; wrote them to {out}", file=sys.stderr)
+        return 128 + int(signal.Signals[summary["interrupted"]])
     return 0
 
 

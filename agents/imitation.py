@@ -423,7 +423,12 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
 
     from agents.run_setup import check_train_args, limit_threads, make_vec_env, run_settings, run_summary, write_summary
 
+    if init_policy is not None:
+        env_kwargs = continued_env_kwargs(env_id, env_kwargs, init_policy)
     run = run_settings("dagger", env_id, timesteps, n_envs, hyperparams, env_kwargs)
+    if resume and not (Path(out) / STATE_META).exists():
+        raise ValueError(f"--resume: no finished DAgger round in {out} to continue from (no {STATE_META}); run "
+                         "without --resume to start a new run")
     expert = build(HeadwayDriverConfig, run.hp.get("expert"), "expert")
     config = build(DaggerConfig, {k: v for k, v in run.hp.items() if k not in ("policy_kwargs", "expert")}, "dagger")
     check_train_args(run.timesteps, run.n_envs, seed, 0, 1, 0)
@@ -474,6 +479,31 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
                           **extra)
     write_summary(out, summary)
     return summary
+
+
+def continued_env_kwargs(env_id: str, env_kwargs: dict[str, Any] | None, init_policy: str | Path) -> dict | None:
+    """The env kwargs to continue the student ``init_policy`` on, as ``rhs-slam evaluate`` chooses them.
+
+    On the env id it was trained on (its JSON beside the zip), its saved ``env_kwargs`` are the
+    base and ``env_kwargs`` is merged over them, key by key; its action indices mean the target
+    speeds it was trained with, so another ``action`` is a ``ValueError`` naming ``--init-policy``.
+    On another env id, or without a JSON, ``env_kwargs`` as given. Says on stderr what it reused.
+    """
+    from agents.evaluate import policy_metadata
+
+    meta = policy_metadata(init_policy)
+    if meta.get("env_id") != env_id.split(":", 1)[-1]:
+        return env_kwargs
+    saved = dict(meta.get("env_kwargs") or {})
+    merged = {**saved, **(env_kwargs or {})}
+    if "action" in saved and merged["action"] != saved["action"]:
+        raise ValueError(f"--init-policy {init_policy} was trained with action={saved['action']} (its action indices "
+                         f"mean those target_speeds), --env-kwargs gives action={merged['action']}; continue it "
+                         "with the same action, or train a new student")
+    if saved and env_kwargs is None:
+        print(f"dagger: continuing {init_policy} on the env kwargs it was trained on "
+              f"({Path(init_policy).with_suffix('.json').name}): {json.dumps(saved)}", file=sys.stderr)
+    return merged
 
 
 def load_student(model, path: str | Path) -> dict[str, Any]:

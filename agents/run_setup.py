@@ -18,8 +18,6 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 ALGOS = ("ppo", "dqn", "dagger")
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 #: keys of a hyperparameter entry that are not arguments of the algorithm class
@@ -28,19 +26,79 @@ META_KEYS = ("policy", "n_envs", "n_timesteps", "env_kwargs", "decision_interval
 
 def load_hyperparams(algo: str, env_id: str, path: str | Path | None = None) -> dict[str, Any]:
     """Hyperparameters for ``env_id`` from a zoo-style YAML file (default: the shipped one for ``algo``)."""
+    from rhs_common.input_files import read_yaml
+    from rhs_env.registration import check_env_id
+
     if algo not in ALGOS:
         raise ValueError(f"algo must be one of {ALGOS}, got {algo!r}")
+    check_env_id(env_id)
     path = Path(path) if path else HYPERPARAMS_DIR / f"{algo}.yml"
     if not path.exists():
         raise ValueError(f"hyperparameter file not found: {path}")
-    table = yaml.safe_load(path.read_text()) or {}
+    table = read_yaml(path) or {}
+    if not isinstance(table, dict):
+        raise ValueError(f"{path}: must map env ids to hyperparameter entries, got a {type(table).__name__}")  # noqa: TRY004
     key = env_id.split(":", 1)[-1]
     if key not in table:
-        raise ValueError(f"{path} has no hyperparameters for env {key!r} (has: {', '.join(table)})")
+        raise ValueError(f"{path} has no hyperparameters for env {key!r} (has: {', '.join(map(str, table))})")
+    if not isinstance(table[key], dict):
+        raise ValueError(f"{path}: entry {key!r} must be a mapping of hyperparameters, got {table[key]!r}")  # noqa: TRY004
     hp = dict(table[key])
     if "policy" not in hp:
         raise ValueError(f"{path}: entry {key!r} has no 'policy'")
+    check_hyperparams(hp, f"{path}: {key}")
     return hp
+
+
+#: the numeric hyperparameters (stable-baselines3's PPO / DQN, DAgger's, this project's): integer or not,
+#: and the allowed range; a string or a boolean there would fail deep inside the algorithm
+HP_NUMBERS: dict[str, tuple[bool, float, float]] = {
+    "n_timesteps": (True, 1, 10**9), "n_envs": (True, 1, 256), "n_steps": (True, 1, 10**6),
+    "batch_size": (True, 1, 10**6), "n_epochs": (True, 1, 10_000), "gamma": (False, 0.0, 1.0),
+    "gae_lambda": (False, 0.0, 1.0), "ent_coef": (False, 0.0, 1.0), "vf_coef": (False, 0.0, 100.0),
+    "max_grad_norm": (False, 0.0, 1e6), "buffer_size": (True, 1, 10**9), "learning_starts": (True, 0, 10**9),
+    "gradient_steps": (True, -1, 10**6), "target_update_interval": (True, 1, 10**9),
+    "exploration_fraction": (False, 0.0, 1.0), "exploration_initial_eps": (False, 0.0, 1.0),
+    "exploration_final_eps": (False, 0.0, 1.0), "tau": (False, 0.0, 1.0), "decision_interval": (True, 1, 10_000),
+    "iterations": (True, 1, 10_000), "beta_decay": (False, 0.0, 1.0), "epochs": (True, 1, 100_000),
+    "class_weight_power": (False, 0.0, 100.0),
+}
+#: numbers that may also be written ``lin_<number>`` (a linear schedule down to 0)
+HP_SCHEDULES = {"learning_rate": 1.0, "clip_range": 100.0}
+
+
+def check_hyperparams(hp: dict[str, Any], where: str) -> None:
+    """``TypeError`` / ``ValueError`` naming ``where.key`` for a numeric hyperparameter of the wrong type or range."""
+    from rhs_common.validation import check_int, check_range
+
+    for key, (integer, low, high) in HP_NUMBERS.items():
+        if key in hp and integer:
+            check_int(f"{where}.{key}", hp[key], int(low), int(high))
+        elif key in hp:
+            check_range(f"{where}.{key}", hp[key], low, high)
+    for key, high in HP_SCHEDULES.items():
+        value = hp.get(key)
+        if isinstance(value, str) and value.startswith("lin_"):
+            try:
+                value = float(value[4:])
+            except ValueError:
+                raise ValueError(f"{where}.{key} must be a number or 'lin_<number>', got {hp[key]!r}") from None
+        if key in hp:
+            if isinstance(value, str):
+                raise TypeError(f"{where}.{key} must be a number or 'lin_<number>', got {value!r}")
+            check_range(f"{where}.{key}", value, 0.0, high, low_open=True)
+
+
+def parse_env_kwargs(text: str | None) -> dict[str, Any] | None:
+    """``--env-kwargs`` JSON -> dict (``None`` when not given); ``ValueError`` naming ``--env-kwargs``."""
+    from rhs_common.input_files import parse_json
+
+    if text is None:
+        return None
+    value = parse_json(text, "--env-kwargs")
+    if not isinstance(value, dict):
+        raise ValueError(f"--env-kwargs must be a JSON object, got {type(value).__name__}")  # noqa: TRY004
+    return value
 
 
 def metadata_path(policy: str | Path) -> Path:

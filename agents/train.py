@@ -50,6 +50,7 @@ from agents.run_setup import (  # noqa: F401  (re-exported: the names users of a
     load_hyperparams,
     make_vec_env,
     metadata_path,
+    parse_env_kwargs,
     run_settings,
     run_summary,
     worker_env_id,
@@ -111,6 +112,7 @@ def train(
     run = run_settings(algo, env_id, timesteps, n_envs, hyperparams, env_kwargs)
     check_train_args(run.timesteps, run.n_envs, seed, eval_freq, eval_episodes, checkpoint_freq)
     out = Path(out)
+    _check_start(algo, run, out, resume)
     out.mkdir(parents=True, exist_ok=True)
     limit_threads(torch_threads)
     if run.n_envs > 1:
@@ -148,6 +150,24 @@ def train(
     if not stopper.stopped:
         write_summary(out, summary)
     return summary
+
+
+def _check_start(algo: str, run: RunSettings, out: Path, resume: bool) -> None:
+    """Before any work: ``resume`` needs a checkpoint in ``out`` (``ValueError`` naming ``--resume`` otherwise);
+    say so when PPO will train more steps than asked (it collects whole rollouts of ``n_steps * n_envs``)."""
+    from agents.resume import latest_checkpoint
+
+    if resume and latest_checkpoint(out, algo) is None:
+        raise ValueError(f"--resume: no checkpoint {algo}_<steps>_steps.zip in {out / 'checkpoints'} to continue "
+                         "from; run without --resume to start a new run")
+    if algo != "ppo":
+        return
+    rollout = int(run.hp.get("n_steps", 2048)) * run.n_envs  # stable-baselines3's default n_steps: 2048
+    decisions = -(-run.timesteps // run.decision_interval)
+    rounded = -(-decisions // rollout) * rollout * run.decision_interval
+    if rounded != run.timesteps:
+        print(f"rhs-slam train: PPO collects whole rollouts of n_steps x n_envs = {rollout} decisions: "
+              f"--timesteps {run.timesteps} is rounded up to {rounded} env steps", file=sys.stderr)
 
 
 def _new_or_resumed_model(algo: str, run: RunSettings, venv: Any, seed: int, out: Path, resume: bool) -> Any:
@@ -273,7 +293,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--n-envs", type=int, default=None, help="subprocess envs (default: from the YAML)")
     parser.add_argument("--hyperparams", default=None, help="zoo-style YAML (default: agents/hyperparams/ALGO.yml)")
-    parser.add_argument("--env-kwargs", default="{}", help="JSON dict passed to gym.make (merged over the YAML's)")
+    parser.add_argument("--env-kwargs", default=None,
+                        help="JSON dict passed to gym.make (merged over the YAML's; with --init-policy, over the "
+                        "env kwargs the policy was trained on)")
     parser.add_argument("--eval-freq", type=int, default=2000, help="env steps between evaluations (0: none)")
     parser.add_argument("--eval-episodes", type=int, default=3)
     parser.add_argument("--checkpoint-freq", type=int, default=5000, help="env steps between checkpoints (0: none)")
@@ -298,9 +320,7 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         check_output_path("--out", args.out, directory=True)
-        env_kwargs = json.loads(args.env_kwargs)
-        if not isinstance(env_kwargs, dict):
-            raise ValueError("--env-kwargs must be a JSON object")  # noqa: TRY004  (reported as a usage error)
+        env_kwargs = parse_env_kwargs(args.env_kwargs)
         if args.backend == "rllib":
             if args.algo != "ppo":
                 raise ValueError(f"the rllib backend trains PPO only, got --algo {args.algo}")

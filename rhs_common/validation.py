@@ -183,8 +183,9 @@ def _type_error(field: str, value: Any, hint: Any) -> str | None:
 def check_types(config: Any) -> None:
     """``TypeError`` naming the first field of a config dataclass whose value does not fit its type hint.
 
-    An integer given for a ``float`` field is stored as a float, so equal configs compare
-    and hash equal (``grid_deg=5`` and ``grid_deg=5.0`` name the same pattern library).
+    An integer or a numpy number given for a ``float`` field is stored as a Python float, a
+    numpy integer for an ``int`` field as a Python int, so equal configs compare and hash
+    equal and serialise (``grid_deg=5``, ``5.0`` and ``np.float32(5.0)`` name the same pattern library).
     """
     hints = _hints(type(config))
     for f in dataclasses.fields(config):
@@ -193,8 +194,10 @@ def check_types(config: Any) -> None:
         reason = _type_error(f.name, value, hint)
         if reason:
             raise TypeError(f"{reason}, got {value!r} ({type(value).__name__})")
-        if hint is float and _is_int(value):
+        if hint is float and not isinstance(value, float):  # an int or a numpy scalar: the Python float
             object.__setattr__(config, f.name, float(value))
+        elif hint is int and isinstance(value, np.integer):
+            object.__setattr__(config, f.name, int(value))
 
 
 # --------------------------------------------------------------------------- building

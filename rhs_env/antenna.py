@@ -289,8 +289,17 @@ def phased_array(config: RHSConfig, angles_deg: np.ndarray, elements: int | None
 
 
 def config_json(*parts: dict[str, Any]) -> str:
-    """Canonical JSON of merged config dicts (sorted keys), the input of config hashes."""
+    """Canonical JSON of merged config dicts (sorted keys), the input of config hashes.
+
+    A numpy scalar is written as the Python number of the same value (``np.float32(5.0)`` as ``5.0``).
+    """
     merged: dict[str, Any] = {}
     for p in parts:
         merged.update(p)
-    return json.dumps(merged, sort_keys=True, separators=(",", ":"))
+    return json.dumps(merged, sort_keys=True, separators=(",", ":"), default=_json_number)
+
+
+def _json_number(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"Object of type {type(value).__name__} is not JSON serializable")

@@ -18,7 +18,11 @@
 
 Both take their highway-env config as ``config={...}`` and/or as keyword
 arguments (``gym.make("rhs-highway-v0", lanes_count=3, landmarks={"spacing_m": 10})``);
-unknown keys and out-of-range values raise ``ValueError`` naming the field.
+unknown keys and out-of-range values raise ``ValueError`` naming the field, highway-env's own
+keys included (:mod:`rhs_env.highway_config`: target speeds, lane ids against ``lanes_count``,
+``policy_frequency`` dividing ``simulation_frequency``, ...), and a key given both ways with
+different values (``config={"lanes_count": 2}, lanes_count=3``) names both. ``reset`` takes numpy
+integer seeds (as stable-baselines3 passes them); a ``step`` after the episode ended warns once.
 Landmarks are arrays on the env (``env.unwrapped.landmarks``, a
 :class:`rhs_env.scene.Landmarks`), never highway-env road objects, so they do
 not appear in the Kinematics observation and cannot end an episode. ``info``
@@ -27,6 +31,7 @@ gets ``world_pose`` = (x, y, heading) of the ego in the world frame.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from typing import Any
 
@@ -38,8 +43,10 @@ from highway_env.road.lane import LineType, StraightLane
 from highway_env.road.road import Road, RoadNetwork
 
 from rhs_common.validation import check_bool, check_choice, check_int, check_range
+from rhs_env.highway_config import check_highway_config, check_numbers, merge_config, plain
 from rhs_env.scene import (
     DENSE_LANDMARKS,
+    MAX_SCATTER_RANGE_M,
     LandmarkConfig,
     Landmarks,
     place_roadside_landmarks,
@@ -49,6 +56,8 @@ from rhs_env.scene import (
 #: the paper's obstacles (world frame, m) and start pose
 PAPER_OBSTACLES = ((10.0, 65.0), (25.0, 10.0), (30.0, 65.0), (35.0, 10.0), (50.0, 65.0))
 PAPER_START = (0.0, 37.5)
+#: bound of the paper scene's coordinates, m (that of ``road_start_m``): doubles keep 1e-11 m there
+MAX_WORLD_M = 1e5
 
 LANDMARK_COLOR = (60, 220, 60)
 
@@ -134,13 +143,38 @@ class RHSHighwayEnv(HighwayEnv):
             check_choice("render_mode", render_mode, tuple(self.metadata["render_modes"]))
         if config is not None and not isinstance(config, Mapping):
             raise TypeError(f"config must be a dict of config keys, got {config!r} ({type(config).__name__})")
-        merged = dict(config or {})
-        merged.update(kwargs)
-        super().__init__(merged, render_mode)
+        self._ended = self._warned_after_end = False
+        super().__init__(merge_config(config, kwargs), render_mode)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """highway-env's reset. ``seed``: None or an integer >= 0; a numpy integer (``np.int64(5)``, as
+        stable-baselines3 and ``np.random`` hand them out) is taken as the Python int of the same
+        value (gymnasium itself accepts only ``int``). Other types raise ``TypeError``, negative
+        seeds ``ValueError``, both naming ``seed``."""
+        if seed is not None:
+            if not isinstance(seed, (int, np.integer)) or isinstance(seed, (bool, np.bool_)):
+                raise TypeError(f"seed must be None or an integer >= 0, got {seed!r} ({type(seed).__name__})")
+            if seed < 0:
+                raise ValueError(f"seed must be None or an integer >= 0, got {seed!r}")
+            seed = int(seed)
+        self._ended = self._warned_after_end = False
+        return super().reset(seed=seed, options=options)
 
     def step(self, action: Any):
-        """highway-env's step after :func:`check_action` (a clear error naming the action space)."""
-        return super().step(check_action(self.action_space, action))
+        """highway-env's step after :func:`check_action` (a clear error naming the action space).
+
+        A step after the episode ended (``terminated`` or ``truncated`` returned, no ``reset()``
+        since) warns once per episode, as gymnasium's order checks do, and is then carried out
+        (highway-env keeps simulating).
+        """
+        action = check_action(self.action_space, action)
+        if self._ended and not self._warned_after_end:
+            self._warned_after_end = True
+            warnings.warn("step() called after the episode ended (terminated or truncated); call reset() to start "
+                          "a new episode: the steps after the end are not part of it", UserWarning, stacklevel=2)
+        result = super().step(action)
+        self._ended = self._ended or bool(result[2] or result[3])
+        return result
 
     # ---- configuration
     def configure(self, config: dict | None) -> None:
@@ -181,6 +215,7 @@ class RHSHighwayEnv(HighwayEnv):
         check_range("policy_frequency", c["policy_frequency"], 0.0, c["simulation_frequency"], low_open=True)
         check_range("vehicles_density", c["vehicles_density"], 0.0, 100.0, low_open=True)
         check_range("ego_spacing", c["ego_spacing"], 0.0, 100.0, low_open=True)
+        check_highway_config(c)
         self.landmark_config = LandmarkConfig.make(c["landmarks"])
         c["landmarks"] = self.landmark_config.to_dict()
 
@@ -266,9 +301,13 @@ class RHSPaperEnv(RHSHighwayEnv):
     """The paper's Fig. 5c scenario: five obstacles beside a straight road, 50 cycles.
 
     Extra config keys:
-        obstacles: list of (x, y) obstacle positions in the world frame (m).
+        obstacles: list of [x, y] obstacle positions in the world frame (m); a flat list of
+            numbers is refused. Each within the road's x extent +- 1000 m and within 1000 m of
+            the start y (:data:`rhs_env.scene.MAX_SCATTER_RANGE_M`: nothing farther is ever
+            handed to the radar, so such an obstacle could never be seen).
         obstacle_rcs_m2: their RCS (m^2).
-        start: (x, y) start position of the ego in the world frame, heading +x.
+        start: [x, y] start position of the ego in the world frame, heading +x; finite, x on the
+            road, |y| <= 1e5 m (:data:`MAX_WORLD_M`).
         ego_speed: ego speed (m/s); the action's target speeds are built around it.
         road_start_m, road_length_m: extent of the road along x.
     The ``landmarks`` (roadside) are disabled by default; the obstacles are the map.
@@ -309,22 +348,33 @@ class RHSPaperEnv(RHSHighwayEnv):
         check_range("obstacle_rcs_m2", c["obstacle_rcs_m2"], 0.0, 1e4, low_open=True)
         check_range("road_length_m", c["road_length_m"], 10.0, 1e5)
         check_range("road_start_m", c["road_start_m"], -1e5, 1e5)
-        try:
-            obs = np.asarray(c["obstacles"], dtype=float).reshape(-1, 2)
-        except (TypeError, ValueError):
-            raise ValueError(f"obstacles must be a list of (x, y) pairs in metres, got {c['obstacles']!r}") from None
-        if not np.all(np.isfinite(obs)):
-            raise ValueError("obstacles must be finite (x, y) pairs in metres")
-        try:
-            start = np.asarray(c["start"], dtype=float).reshape(2)
-        except (TypeError, ValueError):
-            raise ValueError(f"start must be an (x, y) pair in metres, got {c['start']!r}") from None
+        start = check_numbers("start", c["start"], 2, -MAX_WORLD_M, MAX_WORLD_M)
+        c["start"] = plain(c["start"])
         x0, length = float(c["road_start_m"]), float(c["road_length_m"])
         if not x0 < start[0] < x0 + length:
             raise ValueError(
                 f"start x must lie on the road, in ({x0}, {x0 + length}) (road_start_m, road_start_m + road_length_m), "
                 f"got {start[0]}"
             )
+        obstacles = c["obstacles"]
+        if isinstance(obstacles, np.ndarray):
+            obstacles = obstacles.tolist()
+        if not isinstance(obstacles, (list, tuple)):
+            raise TypeError(f"obstacles must be a list of [x, y] pairs in metres, got {obstacles!r} "
+                            f"({type(obstacles).__name__})")
+        if any(not isinstance(p, (list, tuple, np.ndarray)) for p in obstacles):
+            raise TypeError(f"obstacles must be a list of [x, y] pairs in metres (e.g. [[10, 65], [25, 10]]), "
+                            f"not a flat list of numbers; got {c['obstacles']!r}")
+        reach = MAX_SCATTER_RANGE_M
+        for i, p in enumerate(obstacles):
+            x, y = check_numbers(f"obstacles[{i}]", p, 2)
+            if not (x0 - reach <= x <= x0 + length + reach and abs(y - start[1]) <= reach):
+                raise ValueError(
+                    f"obstacles[{i}] = [{x:g}, {y:g}] is beyond what the radar can see from the road: x must be in "
+                    f"[{x0 - reach:g}, {x0 + length + reach:g}] (the road, road_start_m .. road_start_m + "
+                    f"road_length_m, +-{reach:g} m) and y within +-{reach:g} m of start y = {start[1]:g} "
+                    f"({reach:g} m: the farthest any object is handed to the radar)")
+        c["obstacles"] = plain(c["obstacles"])
 
     def _create_road(self) -> None:
         """Straight lanes along +x centred on the start y (world), i.e. highway-env y = -start_y."""

@@ -33,6 +33,7 @@ pools, see :mod:`rhs_common.threads`) for both wrappers.
 
 from __future__ import annotations
 
+import importlib
 import inspect
 from typing import Any
 
@@ -93,6 +94,23 @@ SLAM_ENV_SPECS: tuple[tuple[str, str], ...] = (
     (PAPER_ID, "slam.envs:make_paper_slam"),
     (DENSE_ID, "slam.envs:make_dense_slam"),
 )
+
+
+def check_env_id(env_id: str) -> None:
+    """``ValueError`` saying "unknown env id" with the registered rhs ids, unless gymnasium knows ``env_id``.
+
+    ``"module:id"`` imports the module first, as ``gym.make`` does.
+    """
+    ours = ", ".join(env_id for env_id, _ in ENV_SPECS + SLAM_ENV_SPECS)
+    if not isinstance(env_id, str):
+        raise TypeError(f"env id must be a string such as {HIGHWAY_SLAM_ID!r}, got {env_id!r}")
+    try:
+        module, _, name = env_id.rpartition(":")
+        if module:
+            importlib.import_module(module)
+        gym.spec(name)
+    except (gym.error.Error, ImportError) as exc:
+        raise ValueError(f"unknown env id {env_id!r} ({exc}); this package registers {ours}") from None
 
 
 def register_envs() -> None:

@@ -9,7 +9,9 @@ Scene (vehicle frame, the ego at the origin heading +x; ``examples/scene.json`` 
 
 Output: ``{"points": [[x, y, radial_velocity, amplitude], ...], "radar": [...],
 "stage_times": {...}, "antenna": ..., "seed": ...}``. A malformed scene is
-refused with a one-line message on stderr and exit status 2.
+refused with a one-line message on stderr naming the file and exit status 2: bytes that are
+not UTF-8, nesting, integers of many digits (:mod:`rhs_common.input_files`), strings or
+booleans where numbers go, values out of their bounds.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from rhs_common.input_files import InputError, read_json
 from rhs_common.validation import check_output_path
 from rhs_env.antenna import ANTENNA_KINDS
 
@@ -111,13 +114,9 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         return _fail(str(exc))
     try:
-        text = Path(args.scene).read_text()
-    except OSError as exc:
-        return _fail(f"cannot read {args.scene}: {exc.strerror or exc}")
-    try:
-        data = json.loads(text, parse_constant=lambda c: float("nan"))
-    except json.JSONDecodeError as exc:
-        return _fail(f"{args.scene} is not valid JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})")
+        data = read_json(args.scene)
+    except InputError as exc:
+        return _fail(str(exc))
     try:
         scene = parse_scene(data)
     except SceneError as exc:

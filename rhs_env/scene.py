@@ -54,6 +54,8 @@ VEHICLE_ID_OFFSET = 1_000_000
 OBJECT_ID_OFFSET = 2_000_000
 
 LANDMARK_SIDES = ("both", "left", "right")
+#: the farthest any object is handed to the radar, m (the bound of ``ScatterConfig.max_range_m``)
+MAX_SCATTER_RANGE_M = 1000.0
 
 
 # --------------------------------------------------------------------------- configs
@@ -165,7 +167,7 @@ class ScatterConfig:
 
     def __post_init__(self) -> None:
         check_types(self)
-        check_range("max_range_m", self.max_range_m, 0.0, 1000.0, low_open=True)
+        check_range("max_range_m", self.max_range_m, 0.0, MAX_SCATTER_RANGE_M, low_open=True)
         check_range("vehicle_rcs_m2", self.vehicle_rcs_m2, 0.0, 1e4, low_open=True)
         check_int("points_per_face", self.points_per_face, 1, 16)
 

@@ -70,7 +70,8 @@ def make_radar_config(radar: Any = None, antenna: str | None = None):
     ``{"scan": {"grid_deg": 5}, "max_range_m": 80, "detection": {"pfa": 1e-5}}`` (the groups of
     :mod:`rhs_env.radar_config`; the former flat names, ``{"cfar_pfa": 1e-5}``, still work with a
     ``DeprecationWarning``); ``antenna`` (rhs | phased |
-    random | hologram) overrides the antenna kind. Errors name the field path
+    random | hologram) overrides the antenna kind of a ``RadarConfig``; given beside a dict that
+    names another ``antenna`` it is a ``ValueError`` naming both. Errors name the field path
     (``radar.scan.grid_deg must be ...``): ``ValueError`` for unknown fields and
     out-of-range values, ``TypeError`` for wrong types.
     """
@@ -80,6 +81,9 @@ def make_radar_config(radar: Any = None, antenna: str | None = None):
         check_choice("antenna", antenna, ANTENNA_KINDS)
         if isinstance(radar, RadarConfig):
             return replace(radar, antenna=antenna)
+        if isinstance(radar, Mapping) and "antenna" in radar and radar["antenna"] != antenna:
+            raise ValueError(f"antenna={antenna!r} conflicts with radar.antenna={radar['antenna']!r}; "
+                             "give the antenna once")
         radar = {**(radar or {}), "antenna": antenna} if radar is None or isinstance(radar, Mapping) else radar
     return build(RadarConfig, radar, "radar")
 

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from rhs_common.input_files import read_json
 from rhs_common.validation import check_choice, check_int, check_output_path
 
 OPTIONAL = {"antenna", "seed", "dt", "registration", "rcs_m2", "grid_deg", "particles"}
@@ -37,6 +38,8 @@ OPTIONAL = {"antenna", "seed", "dt", "registration", "rcs_m2", "grid_deg", "part
 MAX_CYCLES = 100_000
 MAX_LANDMARKS = 100_000
 MAX_COORD_M = 1e6
+#: headings may be unwrapped (the turns summed), up to this many radians: 100 000 cycles of 10 s at 1 rad/s
+MAX_HEADING_RAD = 1e6
 MAX_SPEED_MPS = 100.0
 MAX_DT_S = 10.0
 MAX_RCS_M2 = 1e4
@@ -45,24 +48,34 @@ REGISTRATIONS = ("cnn", "icp", "odometry")
 
 
 def _array(doc: dict, key: str, cols: int, min_rows: int, max_rows: int) -> np.ndarray:
+    """``doc[key]`` as a (rows, cols) float array: a list of rows of ``cols`` numbers each (no strings or
+    booleans), finite, x and y within ``MAX_COORD_M``, a third column (headings) within ``MAX_HEADING_RAD``."""
     if key not in doc:
         raise ValueError(f"missing key {key!r}")
-    try:
-        a = np.asarray(doc[key], dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{key!r} must be a list of [{', '.join(['number'] * cols)}] rows") from None
-    if a.size == 0 and min_rows == 0:
-        return a.reshape(0, cols)
-    if a.ndim != 2 or a.shape[1] != cols:
-        raise ValueError(f"{key!r} must be a list of rows with {cols} numbers each, got shape {a.shape}")
-    if len(a) < min_rows:
-        raise ValueError(f"{key!r} needs at least {min_rows} rows, got {len(a)}")
+    rows = doc[key]
+    rows = rows.tolist() if isinstance(rows, np.ndarray) else rows
+    shape = f"[{', '.join(['number'] * cols)}]"
+    if not isinstance(rows, (list, tuple)):
+        raise TypeError(f"{key!r} must be a list of {shape} rows, got {type(rows).__name__}")
+    if len(rows) > max_rows:
+        raise ValueError(f"{key!r} must have at most {max_rows} rows, got {len(rows)}")
+    if len(rows) < min_rows:
+        raise ValueError(f"{key!r} needs at least {min_rows} rows, got {len(rows)}")
+    for n, row in enumerate(rows):
+        if not isinstance(row, (list, tuple)) or len(row) != cols:
+            raise ValueError(f"{key!r}[{n}] must be a row of {cols} numbers {shape}, got {row!r}")
+        for v in row:
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+                raise TypeError(f"{key!r}[{n}] must hold numbers, got {v!r} ({type(v).__name__}) in {row!r}")
+    a = np.asarray(rows, dtype=float).reshape(len(rows), cols)
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{key!r} must contain only finite numbers (no NaN or inf)")
-    if len(a) > max_rows:
-        raise ValueError(f"{key!r} must have at most {max_rows} rows, got {len(a)}")
     if np.abs(a[:, :2]).max(initial=0.0) > MAX_COORD_M:
         raise ValueError(f"{key!r} x, y must be within +-{MAX_COORD_M:g} m")
+    if cols == 3 and np.abs(a[:, 2]).max(initial=0.0) > MAX_HEADING_RAD:
+        k = int(np.argmax(np.abs(a[:, 2])))
+        raise ValueError(f"{key!r}[{k}] heading must be within +-{MAX_HEADING_RAD:g} rad, got {a[k, 2]:g} (a "
+                         "double resolves 1e-10 rad at 1e6 rad, only 1e-4 rad at 1e12)")
     return a
 
 
@@ -165,15 +178,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     try:
         check_output_path("--out", args.out)
+        doc = read_json(args.scenario)
         try:
-            doc = json.loads(Path(args.scenario).read_text())
-        except FileNotFoundError:
-            raise ValueError(f"no such file: {args.scenario}") from None
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{args.scenario} is not valid JSON: {exc}") from None
-        except OSError as exc:  # a directory, no permission, ...
-            raise ValueError(f"cannot read {args.scenario}: {exc.strerror or exc}") from None
-        spec = parse_scenario(doc)
+            spec = parse_scenario(doc)
+        except (TypeError, ValueError) as exc:
+            raise type(exc)(f"{args.scenario}: {exc}") from None
         try:
             result = run_scripted(spec, progress=not args.no_progress)
         except FileNotFoundError as exc:  # e.g. the CNN registration weights are not there

@@ -117,6 +117,33 @@ def test_get_library_builds_once_then_uses_cache(tmp_path: Path, monkeypatch: py
     assert lib2.path == path
 
 
+def test_a_build_of_minutes_needs_confirmation(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A lookup does not start a build estimated above MAX_IMPLICIT_BUILD_S: the error names the fields, the
+    estimate and the two ways on; RHS_SLAM_BUILD_PATTERNS=1 or max_build_s=None start it."""
+    monkeypatch.setenv(L.CACHE_ENV, str(tmp_path))
+    monkeypatch.delenv(L.BUILD_ENV, raising=False)
+    started = []
+
+    def build(config, scan, *args, **kwargs):
+        started.append((config.elements, scan.grid_deg))
+        raise RuntimeError("build started")
+
+    monkeypatch.setattr(L, "build_library", build)
+    fine, big = (RHSConfig(), ScanConfig(grid_deg=0.25)), (RHSConfig(elements=4096), ScanConfig(grid_deg=10.0))
+    assert L.estimate_build_s(*fine) > 240 and L.estimate_build_s(*big) > 240  # measured: ~5 min each, or more
+    assert L.estimate_build_s(RHSConfig(), ScanConfig(grid_deg=1.0)) < 60  # the shipped 1-degree library: 26 s
+    for config, scan in (fine, big):
+        with pytest.raises(ValueError, match="radar.rhs.elements.*radar.scan.grid_deg.*min.*rhs-slam patterns"):
+            L.get_library(config, scan)
+    assert started == []
+    with pytest.raises(RuntimeError, match="build started"):
+        L.get_library(*big, max_build_s=None)
+    monkeypatch.setenv(L.BUILD_ENV, "1")
+    with pytest.raises(RuntimeError, match="build started"):
+        L.get_library(*fine)
+    assert started == [(4096, 10.0), (60, 0.25)]
+
+
 def test_build_script_small_config(tmp_path: Path) -> None:
     out = subprocess.run(
         [sys.executable, str(ROOT / "scripts" / "build_patterns.py"), "--elements", "8", "--grids", "30",

@@ -46,7 +46,7 @@ def _table(rows: list[dict[str, float]]) -> str:
 def run(args: argparse.Namespace) -> int:
     from rhs_common.validation import check_output_path
     from rhs_env.antenna import RHSConfig, ScanConfig
-    from rhs_env.patterns.library import build_library, get_library, load
+    from rhs_env.patterns.library import build_library, estimate_build_s, get_library, load
     from rhs_env.patterns.metrics import pattern_report
 
     try:
@@ -68,10 +68,15 @@ def run(args: argparse.Namespace) -> int:
             scan = ScanConfig(grid_deg=args.grid_deg, sector_deg=args.sector_deg)
             if args.workers < 1:
                 raise ValueError(f"workers must be >= 1, got {args.workers}")
+            if not args.quiet:
+                estimate = estimate_build_s(config, scan, args.method, args.workers)
+                print(f"rhs-slam patterns: {scan.slots} grids, M={config.elements}; a build (when not shipped or "
+                      f"cached) takes about {estimate:.0f} s on 2 cores", file=sys.stderr)
             if args.no_cache:
                 lib = build_library(config, scan, args.method, workers=args.workers, progress=not args.quiet)
             else:
-                lib = get_library(config, scan, args.method, workers=args.workers, progress=not args.quiet)
+                lib = get_library(config, scan, args.method, workers=args.workers, progress=not args.quiet,
+                                  max_build_s=None)
         if args.out is not None:
             lib.save(args.out)
         settings = lib.config.get("settings", {})

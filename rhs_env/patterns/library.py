@@ -10,6 +10,13 @@ whose fields differ from the expected ones, is refused with a ``ValueError`` nam
 Lookup order of :func:`get_library`: the libraries shipped in ``rhs_env/patterns/data``,
 then the user cache (``platformdirs.user_cache_dir("rhs-slam")`` or ``$RHS_SLAM_CACHE``),
 else the library is built (progress bar) and written to the cache.
+
+A build that :func:`estimate_build_s` puts above :data:`MAX_IMPLICIT_BUILD_S` is not started
+by a lookup (``gym.make`` with a fine grid or many elements would otherwise block for minutes
+to hours without having been asked to): :func:`get_library` raises a ``ValueError`` naming the
+radar's fields and the estimate, unless ``max_build_s=None`` (``rhs-slam patterns``, which
+builds on purpose, prints the estimate first and caches the library) or the environment
+variable ``RHS_SLAM_BUILD_PATTERNS=1`` confirms it.
 """
 
 from __future__ import annotations
@@ -29,6 +36,10 @@ from rhs_env.antenna import RHSConfig, ScanConfig, check_amplitudes, config_json
 METHODS = ("fast", "sdr")
 DATA_DIR = Path(__file__).resolve().parent / "data"
 CACHE_ENV = "RHS_SLAM_CACHE"
+#: set to 1 to let a lookup start a build longer than MAX_IMPLICIT_BUILD_S
+BUILD_ENV = "RHS_SLAM_BUILD_PATTERNS"
+#: longest build (estimated, s) a lookup starts without being asked to
+MAX_IMPLICIT_BUILD_S = 180.0
 FORMAT_VERSION = 1
 
 
@@ -210,17 +221,39 @@ def build_library(
     return PatternLibrary(scan.angles_deg, np.clip(tx, 0.0, 1.0), np.clip(rx, 0.0, 1.0), fields)
 
 
+def estimate_build_s(config: RHSConfig, scan: ScanConfig, method: str = "fast", workers: int = 2) -> float:
+    """Rough wall time (s) of :func:`build_library` with the ``fast`` method on a 2-core machine.
+
+    ``6 + I * 0.3 s * (M / 60)^1.1 * max(1, 1 deg / dtheta)^0.75 * 2 / workers`` for I grids of
+    dtheta degrees and M elements, fitted to builds measured on the project's 2-core machine
+    (M = 24..960 at 10 deg: 6.5..55 s; M = 60 at 1 deg: 26 s, at 0.25 deg: about 5 min); the
+    ``sdr`` method is taken as 10 times slower. A guide for refusing hours, not a benchmark.
+    """
+    per_grid = 0.3 * (config.elements / 60) ** 1.1 * max(1.0, 1.0 / scan.grid_deg) ** 0.75
+    seconds = 6.0 + scan.slots * per_grid * 2.0 / max(1, workers)
+    return seconds * (10.0 if method == "sdr" else 1.0)
+
+
+def _duration(seconds: float) -> str:
+    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.0f} min" if seconds < 7200 else \
+        f"{seconds / 3600:.1f} h"
+
+
 def get_library(
     config: RHSConfig | None = None,
     scan: ScanConfig | None = None,
     method: str = "fast",
     workers: int = 2,
     progress: bool = True,
+    max_build_s: float | None = MAX_IMPLICIT_BUILD_S,
     **settings: Any,
 ) -> PatternLibrary:
     """The library of (config, scan, method, settings): shipped, cached, or built once and cached.
 
     A cached file that fails verification raises ``ValueError`` naming it (delete it to rebuild).
+    A build estimated (:func:`estimate_build_s`) above ``max_build_s`` seconds raises ``ValueError``
+    naming ``radar.rhs.elements`` and ``radar.scan.grid_deg`` with the estimate, unless
+    ``max_build_s`` is None or ``$RHS_SLAM_BUILD_PATTERNS`` is 1.
     """
     config = config or RHSConfig()
     scan = scan or ScanConfig()
@@ -231,6 +264,14 @@ def get_library(
     path = cache_path(fields)
     if path.exists():
         return load(path, fields)
+    estimate = estimate_build_s(config, scan, method, workers)
+    if max_build_s is not None and estimate > max_build_s and os.environ.get(BUILD_ENV) != "1":
+        raise ValueError(
+            f"radar.rhs.elements={config.elements} with radar.scan.grid_deg={scan.grid_deg:g}: the RHS pattern "
+            f"library of this radar ({scan.slots} grids) is not built yet, and building it takes about "
+            f"{_duration(estimate)} (estimated for 2 cores); build it once with `rhs-slam patterns --elements "
+            f"{config.elements} --grid-deg {scan.grid_deg:g}` (cached for every later run), or set {BUILD_ENV}=1 to "
+            f"build it here, or choose fewer elements / a coarser grid")
     lib = build_library(config, scan, method, workers=workers, progress=progress, **settings)
     lib.save(path)
     return lib
