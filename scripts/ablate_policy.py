@@ -216,10 +216,10 @@ def _scripted(r: dict) -> str:
 
 def markdown(table: dict) -> str:
     """The README table of every record: greedy evaluation on the default reward, mean +- 95 % t-interval."""
-    from scipy import stats
+    from rhs_common.stats import t_quantile
 
     def ci(s: dict) -> str:
-        half = stats.t.ppf(0.975, s["n"] - 1) * s["sem"] if s.get("n", 0) > 1 else float("nan")
+        half = t_quantile(s.get("n", 0)) * s["sem"] if s.get("n", 0) > 1 else float("nan")
         return f"{s['mean']:.1f} ± {half:.1f}"
 
     rows = ["| record | algorithm | env | training env kwargs / scripted policy | hyperparameters changed | env steps | "

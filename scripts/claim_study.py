@@ -70,9 +70,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats
 from scipy.optimize import linear_sum_assignment
 
+from rhs_common.stats import mean_interval, ratio_bootstrap, wilson_interval
 from rhs_common.validation import check_int, check_range
 from rhs_env.antenna import ANTENNA_KINDS, ArrayAntenna
 from rhs_env.point_cloud import angle_crb, pointcloud_metrics
@@ -156,46 +156,6 @@ SMALL = StudyConfig(
     slam_groups=((2, 6.0),), slam_extra_antennas=(), slam_extra_groups=(), slam_snr_db=(28.0,),
     slam_seeds=2, slam_cycles=6, slam_grid_deg=5.0,
 )
-
-
-# --------------------------------------------------------------------------- statistics
-def t_ci(x: np.ndarray) -> tuple[float, float, float]:
-    """Mean and 95 % t-interval (ddof=1) of the finite values of x; NaNs when fewer than 2."""
-    v = np.asarray(x, float)
-    v = v[np.isfinite(v)]
-    if v.size == 0:
-        return float("nan"), float("nan"), float("nan")
-    m = float(v.mean())
-    if v.size < 2:
-        return m, float("nan"), float("nan")
-    h = float(stats.t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size))
-    return m, m - h, m + h
-
-
-def wilson_ci(k: int, n: int) -> tuple[float, float, float]:
-    """Proportion k / n and its 95 % Wilson score interval."""
-    if n == 0:
-        return float("nan"), float("nan"), float("nan")
-    z = stats.norm.ppf(0.975)
-    p = k / n
-    den = 1 + z * z / n
-    c = (p + z * z / (2 * n)) / den
-    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
-    return p, max(0.0, c - h), min(1.0, c + h)
-
-
-def ratio_ci(a: np.ndarray, b: np.ndarray, rng: np.random.Generator, n_boot: int) -> tuple[float, float, float]:
-    """mean(a) / mean(b) and its 95 % percentile bootstrap interval (a and b resampled independently)."""
-    a = np.asarray(a, float)
-    b = np.asarray(b, float)
-    a, b = a[np.isfinite(a)], b[np.isfinite(b)]
-    if a.size < 2 or b.size < 2 or b.mean() <= 0:
-        return float("nan"), float("nan"), float("nan")
-    ra = a[rng.integers(0, a.size, (n_boot, a.size))].mean(axis=1)
-    rb = b[rng.integers(0, b.size, (n_boot, b.size))].mean(axis=1)
-    r = ra / np.where(rb > 0, rb, np.nan)
-    lo, hi = np.nanpercentile(r, [2.5, 97.5])
-    return float(a.mean() / b.mean()), float(lo), float(hi)
 
 
 # --------------------------------------------------------------------------- antennas and bounds
@@ -406,12 +366,13 @@ def summarize_pointcloud(res: dict[str, Any]) -> dict[str, Any]:
     """Cell summary with 95 % intervals from the raw trials."""
     tr = res["trials"]
     n = len(tr)
-    p, plo, phi = wilson_ci(sum(t["resolved"] for t in tr), n)
+    resolved = sum(t["resolved"] for t in tr)
+    p, (plo, phi) = (resolved / n if n else float("nan")), wilson_interval(resolved, n)
     sq = np.array([e for t in tr for e in t["sq_err_deg2"]])
-    mse, mlo, mhi = t_ci(sq) if sq.size else (float("nan"),) * 3
-    o, olo, ohi = t_ci([t["ospa_deg"] for t in tr])
-    d, dlo, dhi = np.clip(t_ci([t["detection_rate"] for t in tr]), 0.0, 1.0).tolist()
-    f, flo, fhi = t_ci([t["false_points"] for t in tr])
+    mse, mlo, mhi = mean_interval(sq).mean_low_high()
+    o, olo, ohi = mean_interval([t["ospa_deg"] for t in tr]).mean_low_high()
+    d, dlo, dhi = np.clip(mean_interval([t["detection_rate"] for t in tr]).mean_low_high(), 0.0, 1.0).tolist()
+    f, flo, fhi = mean_interval([t["false_points"] for t in tr]).mean_low_high()
     olo, flo = max(olo, 0.0), max(flo, 0.0)
     rmse = math.sqrt(mse) if np.isfinite(mse) else float("nan")
     return {
@@ -493,11 +454,11 @@ def run_slam_unit(radar: RadarSystem, k: int, sep_deg: float, snr_db: float, see
 
 def summarize_slam(units: list[dict[str, Any]], regs: tuple[str, ...]) -> dict[str, Any]:
     """Per registration: ATE, map RMSE, spurious and missed landmarks, mean and 95 % t-interval over seeds."""
-    out: dict[str, Any] = {"n": len(units), "points_per_cycle": t_ci([u["points_per_cycle"] for u in units]),
+    out: dict[str, Any] = {"n": len(units), "points_per_cycle": mean_interval([u["points_per_cycle"] for u in units]).mean_low_high(),
                            "wall_s": float(np.mean([u["wall_s"] for u in units]))}
     for reg in regs:
         rows = [u[reg] for u in units]
-        out[reg] = {m: list(t_ci([r[m] for r in rows]))
+        out[reg] = {m: list(mean_interval([r[m] for r in rows]).mean_low_high())
                     for m in ("ate_m", "map_rmse_m", "map_spurious", "map_missed", "heading_rmse_deg")}
         out[reg]["registration"] = rows[0]["registration"] if rows else None
         out[reg]["map_failed"] = int(sum(not np.isfinite(r["map_rmse_m"]) for r in rows))
@@ -624,10 +585,10 @@ def _ratio_rows(cells: list[dict[str, Any]], raw: dict[tuple[Any, ...], dict[str
         own = raw.get((c["antenna"],) + gk)
         if ref is None or own is None:
             continue
-        o = ratio_ci([t["ospa_deg"] for t in own["trials"]], [t["ospa_deg"] for t in ref["trials"]], rng, cfg.bootstrap)
+        o = ratio_bootstrap([t["ospa_deg"] for t in own["trials"]], [t["ospa_deg"] for t in ref["trials"]], rng, cfg.bootstrap)
         sq_a = [e for t in own["trials"] for e in t["sq_err_deg2"]]
         sq_b = [e for t in ref["trials"] for e in t["sq_err_deg2"]]
-        r2 = ratio_ci(sq_a, sq_b, rng, cfg.bootstrap)  # MSE ratio -> RMSE ratio by sqrt
+        r2 = ratio_bootstrap(sq_a, sq_b, rng, cfg.bootstrap)  # MSE ratio -> RMSE ratio by sqrt
         rows.append({**{k: c[k] for k in ("antenna",) + group_keys},
                      "ospa_ratio": list(o),
                      "angle_rmse_ratio": [math.sqrt(x) if np.isfinite(x) and x >= 0 else float("nan") for x in r2],
@@ -670,7 +631,7 @@ def aggregate_slam(units: list[dict[str, Any]], cache: dict[str, Any], cfg: Stud
         row: dict[str, Any] = {"antenna": a, "k": k, "sep_deg": s, "snr_db": snr}
         for reg in cfg.slam_registrations:
             for m in ("ate_m", "map_rmse_m"):
-                row[f"{m}_ratio_{reg}"] = list(ratio_ci([x[reg][m] for x in v], [x[reg][m] for x in ref], rng,
+                row[f"{m}_ratio_{reg}"] = list(ratio_bootstrap([x[reg][m] for x in v], [x[reg][m] for x in ref], rng,
                                                         cfg.bootstrap))
         ratios.append(row)
     units_done = [x for v in by_cell.values() for x in v]

@@ -48,7 +48,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-import numpy as np
+from rhs_common.stats import mean_interval, paired_difference, wilson_interval
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
@@ -95,23 +95,6 @@ def fingerprint() -> list[float]:
     return out
 
 
-def mean_ci(values: list[float]) -> tuple[float, float]:
-    """Mean and the half-width of its 95 % Student-t interval."""
-    from scipy.stats import t
-
-    v = np.asarray(values, dtype=float)
-    half = float(t.ppf(0.975, v.size - 1) * v.std(ddof=1) / np.sqrt(v.size)) if v.size > 1 else float("nan")
-    return float(v.mean()), half
-
-
-def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
-    """95 % Wilson score interval of a rate k / n."""
-    p = k / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return float(max(0.0, centre - half)), float(min(1.0, centre + half))
-
-
 def antenna_study(episodes: int, seed: int, workers: int, done: dict[str, list[dict]] | None = None) -> dict:
     """The antenna study: DAgger students on RHS and phased-array observations, same budget, same seeds.
 
@@ -139,15 +122,15 @@ def antenna_study(episodes: int, seed: int, workers: int, done: dict[str, list[d
         summary = summarize(runs)
         rows.append({"name": name, "policy": str(policy.relative_to(ROOT)), "env_id": env_id, "env_kwargs": kwargs,
                      "antenna": antenna, "timesteps": meta.get("timesteps"), "wall_s": round(time.perf_counter() - t0, 1),
-                     "summary": summary, "return_ci": mean_ci([r["return"] for r in runs]),
-                     "collision_ci": wilson(summary["collisions"], len(runs)),
+                     "summary": summary, "return_ci": mean_interval([r["return"] for r in runs]).mean_and_half(),
+                     "collision_ci": wilson_interval(summary["collisions"], len(runs)),
                      "returns": [r["return"] for r in runs]})  # fmt: skip
     for env_id in dict.fromkeys(r["env_id"] for r in rows):
         rhs = next((r for r in rows if r["env_id"] == env_id and r["antenna"] == "rhs"), None)
         phased = next((r for r in rows if r["env_id"] == env_id and r["antenna"] == "phased"), None)
         if rhs is None or phased is None:
             continue
-        diff = mean_ci([a - b for a, b in zip(rhs["returns"], phased["returns"])])
+        diff = paired_difference(rhs["returns"], phased["returns"]).mean_and_half()
         pairs.append({"env_id": env_id, "return_diff_rhs_minus_phased": diff})
     return {"episodes": episodes, "seeds": seeds, "targets": {n: TARGETS[n][0] for n in ANTENNA_STUDY},
             "rows": rows, "pairs": pairs, "missing": missing}

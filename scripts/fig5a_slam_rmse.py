@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
@@ -52,6 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from rhs_common.geometry import wrap_angle
+from rhs_common.stats import mean_interval
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _provenance import jsonable, write_json
@@ -100,26 +100,6 @@ def run_episode(
     }
 
 
-def _stats(values: list) -> dict:
-    """Mean, sample std (ddof=1) and the t-distribution 95 % CI of the mean over the finite values."""
-    from scipy.stats import t as student_t
-
-    v = np.array([np.nan if x is None else x for x in values], dtype=float)
-    ok = v[np.isfinite(v)]
-    n = int(ok.size)
-    mean = float(ok.mean()) if n else None
-    std = float(ok.std(ddof=1)) if n > 1 else None
-    half = float(student_t.ppf(0.975, n - 1) * std / math.sqrt(n)) if n > 1 else None
-    return {
-        "mean": mean,
-        "std": std,
-        "ci95": None if half is None else [mean - half, mean + half],
-        "ci95_half_width": half,
-        "n": n,
-        "n_failed": int(v.size - n),
-    }
-
-
 def aggregate(
     episodes: list[dict], antennas: list[str], powers: list[float]
 ) -> list[dict]:
@@ -134,9 +114,9 @@ def aggregate(
                     "antenna": a,
                     "tx_power_dbm": p,
                     "seeds": len(eps),
-                    "vehicle_rmse_m": _stats([e["vehicle_rmse_m"] for e in eps]),
-                    "obstacle_rmse_m": _stats([e["obstacle_rmse_m"] for e in eps]),
-                    "heading_rmse_rad": _stats([e["heading_rmse_rad"] for e in eps]),
+                    "vehicle_rmse_m": mean_interval([e["vehicle_rmse_m"] for e in eps]).to_dict(),
+                    "obstacle_rmse_m": mean_interval([e["obstacle_rmse_m"] for e in eps]).to_dict(),
+                    "heading_rmse_rad": mean_interval([e["heading_rmse_rad"] for e in eps]).to_dict(),
                     "map_matched_mean": float(np.mean([e["map_matched"] for e in eps])),
                     "map_missed_mean": float(np.mean([e["map_missed"] for e in eps])),
                     "map_spurious_mean": float(

@@ -6,9 +6,9 @@ landmark has a radial velocity), default radar unless told. Per scene: the
 detection rate and the false points; per detected landmark: the point error
 (m), and the range, angle and Doppler (radial velocity) errors of the point
 against the truth seen from its radar (:meth:`rhs_env.radar.RadarSystem.point_errors`).
-Means over scenes and RMSEs over targets come with normal-approximation 95 %
-intervals (RMSE: delta method on the mean squared error), so two runs (before
-and after a change, or ``--fidelity iq`` against ``range``) compare directly.
+Means over scenes and RMSEs over targets come with Student-t 95 % intervals
+(:mod:`rhs_common.stats`; RMSE: delta method on the mean squared error), so two runs
+(before and after a change, or ``--fidelity iq`` against ``range``) compare directly.
 
     OMP_NUM_THREADS=1 python scripts/radar_quality.py [--scenes 100] [--fidelity range] [--out results/radar_quality.json]
 """
@@ -29,27 +29,9 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
 from _provenance import command_line, numbers, write_json
 
+from rhs_common.stats import mean_half_record, rmse_interval
 from rhs_env.antenna import ScanConfig
 from rhs_env.radar import RadarConfig, RadarSystem
-
-Z95 = 1.959963984540054
-
-
-def mean_ci(x: np.ndarray) -> dict:
-    """Mean and 95 % interval half-width of i.i.d. samples."""
-    x = np.asarray(x, float)
-    half = Z95 * x.std(ddof=1) / np.sqrt(x.size) if x.size > 1 else float("nan")
-    return {"mean": float(x.mean()) if x.size else float("nan"), "ci95": float(half), "n": int(x.size)}
-
-
-def rmse_ci(err: np.ndarray) -> dict:
-    """RMSE and its 95 % half-width from the delta method: se(sqrt(m)) = se(m) / (2 sqrt(m)), m = mean(e^2)."""
-    e2 = np.asarray(err, float) ** 2
-    if e2.size < 2:
-        return {"rmse": float("nan"), "ci95": float("nan"), "n": int(e2.size)}
-    m = e2.mean()
-    half = Z95 * e2.std(ddof=1) / np.sqrt(e2.size) / (2 * np.sqrt(m))
-    return {"rmse": float(np.sqrt(m)), "ci95": float(half), "n": int(e2.size)}
 
 
 def evaluate(cfg: RadarConfig, scenes: int, seed: int, noise_draws: int = 1) -> dict:
@@ -79,12 +61,11 @@ def evaluate(cfg: RadarConfig, scenes: int, seed: int, noise_draws: int = 1) -> 
                 errs[k].append(e[k])
     cat = {k: np.concatenate(v) for k, v in errs.items()}
     return {
-        "detection_rate": mean_ci(det),
-        "false_points_per_scan": mean_ci(false_pts),
-        "point_rmse_m": rmse_ci(cat["xy"]),
-        "range_rmse_m": rmse_ci(cat["range"]),
-        "angle_rmse_deg": rmse_ci(np.rad2deg(cat["angle"])),
-        "doppler_rmse_mps": rmse_ci(cat["doppler"]),
+        "detection_rate": mean_half_record(det),
+        "false_points_per_scan": mean_half_record(false_pts),
+        **{name: dict(zip(("rmse", "ci95", "n"), rmse_interval(e))) for name, e in (
+            ("point_rmse_m", cat["xy"]), ("range_rmse_m", cat["range"]),
+            ("angle_rmse_deg", np.rad2deg(cat["angle"])), ("doppler_rmse_mps", cat["doppler"]))},
     }
 
 

@@ -31,9 +31,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _provenance import write_json
-from fig5a_slam_rmse import _fmt, _stats, run_episode
+from fig5a_slam_rmse import _fmt, run_episode
 from paper_episode import ANTENNAS, add_episode_args
 
+from rhs_common.stats import mean_interval
 from slam.registration import REGISTRATIONS
 
 METRICS = ("vehicle_rmse_m", "final_position_error_m", "heading_rmse_rad", "obstacle_rmse_m")
@@ -56,7 +57,7 @@ def summarize(episodes: list[dict], registrations: list[str]) -> list[dict]:
     rows = []
     for reg in registrations:
         eps = [e for e in episodes if e["registration"] == reg]
-        rows.append({"registration": reg, "seeds": len(eps), **{m: _stats([e[m] for e in eps]) for m in METRICS},
+        rows.append({"registration": reg, "seeds": len(eps), **{m: mean_interval([e[m] for e in eps]).to_dict() for m in METRICS},
                      "map_matched_mean": sum(e["map_matched"] for e in eps) / len(eps),
                      "map_spurious_mean": sum(e["map_spurious"] for e in eps) / len(eps)})
     icp = next((r for r in rows if r["registration"] == "icp"), None)

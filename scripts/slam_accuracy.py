@@ -51,7 +51,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import subprocess
 import sys
 import time
@@ -60,6 +59,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from rhs_common.stats import mean_half_record as ci95
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _provenance import numbers, write_json
@@ -85,17 +86,6 @@ def _commit() -> str:
         return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
-
-
-def ci95(values: list[float]) -> dict[str, Any]:
-    """Mean and the half-width of its 95 % Student-t confidence interval over seeds."""
-    from scipy import stats
-
-    v = np.asarray([x for x in values if x is not None and np.isfinite(x)], dtype=float)
-    if v.size == 0:
-        return {"mean": None, "ci95": None, "n": 0}
-    half = float(stats.t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size)) if v.size > 1 else None
-    return {"mean": float(v.mean()), "ci95": half, "n": int(v.size)}
 
 
 def _visible_landmarks(env) -> np.ndarray:
