@@ -48,6 +48,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from agents.decision import SLOWER
 from rhs_common.stats import mean_interval, paired_difference, wilson_interval
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -398,7 +399,7 @@ def main(argv: list[str] | None = None) -> int:
          truth_kwargs),
         ("headway_teacher", f"HeadwayDriver every {teacher_k} steps, IDLE between (as it taught)", "(simulator state)",
          f"headway:{teacher_k}", truth_env, truth_kwargs),
-        ("slower", "always SLOWER (scripted)", "(none)", "constant:4", truth_env, issued_kwargs),
+        ("slower", "always SLOWER (scripted)", "(none)", f"constant:{SLOWER}", truth_env, issued_kwargs),
         ("idm", "IDM + MOBIL (highway-env, scripted)", "(simulator state)", "idm", truth_env, issued_kwargs),
     ]
     rows = []

@@ -50,12 +50,13 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.decision import IDLE
 from rhs_common.geometry import wrap_angle
 from rhs_common.stats import mean_interval
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _provenance import jsonable, write_json
-from paper_episode import ANTENNAS, IDLE, add_episode_args, make_paper_env
+from paper_episode import ANTENNAS, add_episode_args, make_paper_env
 
 PAPER_RATIO = 1.0 / 3.0  # "RHS about a third of the phased array's error"
 PAPER_CLAIM = "RHS about a third of the phased array's error (ratio ~0.33)"
@@ -153,7 +154,7 @@ def ratios(rows: list[dict]) -> list[dict]:
     return out
 
 
-def _fmt(s: dict, digits: int = 3) -> str:
+def fmt_stats(s: dict, digits: int = 3) -> str:
     """``mean [lo, hi]`` (95 % CI), or the mean alone for one seed."""
     if s["mean"] is None:
         return "n/a"
@@ -206,7 +207,7 @@ def markdown(result: dict) -> str:
             else _ratio_txt(q and q["obstacle_rmse_ratio"])
         )
         lines.append(
-            f"| {r['tx_power_dbm']:g} | {r['antenna']} | {_fmt(r['vehicle_rmse_m'])} | {_fmt(r['obstacle_rmse_m'])} | "
+            f"| {r['tx_power_dbm']:g} | {r['antenna']} | {fmt_stats(r['vehicle_rmse_m'])} | {fmt_stats(r['obstacle_rmse_m'])} | "
             f"{r['map_matched_mean']:.1f} / {r['map_missed_mean']:.1f} / {r['map_spurious_mean']:.1f} | {vr} | {orr} |"
         )
     rhs = [x for x in result["ratios"] if x["antenna"] == "rhs"]

@@ -28,11 +28,12 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.decision import IDLE
 from rhs_common.geometry import wrap_angle
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _provenance import write_json
-from paper_episode import ANTENNAS, IDLE, add_episode_args, make_paper_env
+from paper_episode import ANTENNAS, add_episode_args, make_paper_env
 
 
 def run(args: argparse.Namespace) -> dict:

@@ -22,12 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.decision import IDLE
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _provenance import write_json
 
 POLICY_HZ = 5
-IDLE = 1
 ANTENNAS = ("rhs", "phased")
 DETECTORS = ("summed", "footprint")
 

@@ -15,7 +15,6 @@ from rhs_env.antenna import ANTENNA_KINDS
 from slam.registration import DEFAULT_REGISTRATION, REGISTRATIONS
 
 POLICY_HZ = 5  # rhs-paper-v0: one SLAM cycle per 0.2 s
-IDLE = 1  # DiscreteMetaAction: keep lane and speed
 ANTENNAS = ANTENNA_KINDS
 
 

@@ -60,13 +60,12 @@ from typing import Any
 
 import numpy as np
 
+from agents.decision import IDLE, SLOWER
 from rhs_common.stats import mean_half_record as ci95
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _provenance import numbers, write_json
 
-IDLE = 1
-SLOWER = 4  # highway-env DiscreteMetaAction: the lowest target speed (20 m/s), no lane change
 POLICY_HZ = 5
 TARGETS = {
     "highway": {"position_rmse_m": ("<=", 0.5), "final_error_m": ("<=", 1.0),

@@ -11,12 +11,12 @@ import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
 import rhs_env  # noqa: F401  (registers the ids)
+from agents.decision import IDLE
 from rhs_env.wrappers import RadarObservation
 from slam.wrapper import SlamObservation
 
 HIGHWAY_SLAM = "rhs-highway-slam-v0"
 PAPER = "rhs-paper-v0"
-IDLE = 1  # DiscreteMetaAction: keep lane and speed
 
 # Small and fast: a coarse 5-degree scan (I = 18 slots) of a short closed-form RHS, few
 # vehicles, ICP registration (the CNN weights are trained separately).
