@@ -70,6 +70,7 @@ import scipy.fft as sfft
 from scipy import stats
 from scipy.signal import get_window
 
+from rhs_common.linalg import batched_lstsq as _lstsq
 from rhs_env.antenna import ArrayAntenna, steering
 
 WINDOWS = ("hann", "hamming", "blackman", "boxcar", "taylor")
@@ -436,13 +437,6 @@ def _grid_refine(dic: AngleDictionary, resid: np.ndarray, center: np.ndarray | N
     off = parabolic_offset(lg[:, 0], lg[:, 1], lg[:, 2])
     off = np.where((j == 0) | (j == n_c - 1), 0.0, off)
     return dic.candidates[j] + off * dic.step
-
-
-def _lstsq(atoms: np.ndarray, iota: np.ndarray) -> np.ndarray:
-    """Batched least squares: atoms (D, I, L), iota (D, I, ...) -> (D, L, ...)."""
-    ah = np.conj(np.swapaxes(atoms, 1, 2))
-    gram = ah @ atoms + 1e-12 * np.eye(atoms.shape[2])[None]
-    return np.linalg.solve(gram, ah @ iota)
 
 
 @dataclass

@@ -119,11 +119,11 @@ class LabelledPolicy:
             self.model.reset()
 
     def predict(self, obs, deterministic: bool = True):
-        from agents.evaluate import _action
+        from agents.evaluate import env_action
 
         action, state = self.model.predict(obs, deterministic=deterministic)
         if self._t % self.k == 0:
-            self.decisions.append({"step": self._t, "student": int(_action(action)), "expert": int(self.expert.act()),
+            self.decisions.append({"step": self._t, "student": int(env_action(action)), "expert": int(self.expert.act()),
                                    "points": _observed_points(obs), "near": _neighbours(self.env)})
         self._t += 1
         return action, state

@@ -31,7 +31,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _provenance import write_json
-from fig5a_slam_rmse import _fmt, run_episode
+from fig5a_slam_rmse import fmt_stats, run_episode
 from paper_episode import ANTENNAS, add_episode_args
 
 from rhs_common.stats import mean_interval
@@ -89,8 +89,8 @@ def markdown(result: dict) -> str:
         head = _scaled(r["heading_rmse_rad"], math.degrees(1.0))
         ratio = r["vehicle_rmse_ratio_to_icp"]
         lines.append(
-            f"| {r['registration']} | {_fmt(r['vehicle_rmse_m'], 3)} | {_fmt(r['final_position_error_m'], 3)} "
-            f"| {_fmt(head, 3)} | {_fmt(r['obstacle_rmse_m'], 3)} | {r['map_matched_mean']:.1f} / "
+            f"| {r['registration']} | {fmt_stats(r['vehicle_rmse_m'], 3)} | {fmt_stats(r['final_position_error_m'], 3)} "
+            f"| {fmt_stats(head, 3)} | {fmt_stats(r['obstacle_rmse_m'], 3)} | {r['map_matched_mean']:.1f} / "
             f"{r['map_spurious_mean']:.1f} | {'n/a' if ratio is None else f'{ratio:.1f}'} |"
         )
     return "\n".join(lines) + "\n"

@@ -171,15 +171,15 @@ def test_hyperparams_and_worker_ids():
             assert hp["policy"] in ("MultiInputPolicy", "MlpPolicy")
             assert hp["n_envs"] >= 1
     # the shipped YAML writes policy_kwargs as the Python expression rl-baselines3-zoo evals
-    from agents.train import _resolve_policy_kwargs
+    from agents.run_setup import resolve_policy_kwargs
 
-    pk = _resolve_policy_kwargs(load_hyperparams("ppo", SLAM)["policy_kwargs"])
+    pk = resolve_policy_kwargs(load_hyperparams("ppo", SLAM)["policy_kwargs"])
     assert pk["features_extractor_class"] is PointSetExtractor
     assert pk["features_extractor_kwargs"] == {"point_dim": 64, "box_dim": 32} and pk["net_arch"] == [64, 64]
-    assert _resolve_policy_kwargs({"features_extractor_class": "point_set"})["features_extractor_class"] is (
+    assert resolve_policy_kwargs({"features_extractor_class": "point_set"})["features_extractor_class"] is (
         PointSetExtractor)  # the short name still works in hand-written YAML
     with pytest.raises(ValueError, match="policy_kwargs"):
-        _resolve_policy_kwargs("__import__('os').system('true')")  # no builtins in scope
+        resolve_policy_kwargs("__import__('os').system('true')")  # no builtins in scope
     # subprocess workers import rhs_env through the id's module prefix
     assert worker_env_id(SLAM) == f"rhs_env:{SLAM}"
     assert worker_env_id(TRUTH) == f"rhs_env:{TRUTH}"
@@ -463,12 +463,12 @@ def test_rllib_backend_without_ray_says_how_to_install(tmp_path, capsys):
 def test_rllib_backend_reads_the_shipped_yaml_policy_kwargs():
     """The shipped ppo.yml writes policy_kwargs as rl-baselines3-zoo's expression; the RLlib backend takes the
     extractor by name (``rhs-slam train --backend rllib --env rhs-highway-slam-v0`` with the shipped YAML)."""
-    from agents.train import _policy_kwargs_by_name, load_hyperparams
+    from agents.train import load_hyperparams, policy_kwargs_by_name
 
     hp = load_hyperparams("ppo", "rhs-highway-slam-v0")
     assert isinstance(hp["policy_kwargs"], str)
-    kw = _policy_kwargs_by_name(hp["policy_kwargs"])
+    kw = policy_kwargs_by_name(hp["policy_kwargs"])
     assert kw["features_extractor_class"] == "point_set" and kw["net_arch"] == [64, 64]
-    assert _policy_kwargs_by_name({"features_extractor_class": "grid"})["features_extractor_class"] == "grid"
+    assert policy_kwargs_by_name({"features_extractor_class": "grid"})["features_extractor_class"] == "grid"
     with pytest.raises(ValueError, match="features_extractor_class"):
-        _policy_kwargs_by_name({"features_extractor_class": dict})
+        policy_kwargs_by_name({"features_extractor_class": dict})

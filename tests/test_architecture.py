@@ -124,6 +124,30 @@ def test_slam_core_imports_without_gymnasium():
     assert out.stdout.strip() == "[]"
 
 
+def _private_imports(path: Path) -> list[str]:
+    """``from m import _name`` statements: a private name used outside the module that defines it."""
+    return [
+        f"{path.relative_to(ROOT) if path.is_relative_to(ROOT) else path.name}:{node.lineno} "
+        f"from {'.' * node.level}{node.module or ''} import {a.name}"
+        for node in ast.walk(ast.parse(path.read_text()))
+        if isinstance(node, ast.ImportFrom)
+        for a in node.names
+        if a.name.startswith("_") and not a.name.startswith("__")
+    ]
+
+
+def test_the_private_import_check_sees_one(tmp_path):
+    src = tmp_path / "x.py"
+    src.write_text("from a import b, _c\ndef f():\n    from .d import _e as e\n    from f import __version__\n")
+    assert _private_imports(src) == ["x.py:1 from a import _c", "x.py:3 from .d import _e"]
+
+
+def test_no_private_name_imported_across_modules():
+    """A name with a leading underscore is its module's own; what another module needs is public (and documented)."""
+    files = [path for pkg in (*LAYERS, "scripts") for path in sorted((ROOT / pkg).rglob("*.py"))]
+    assert [f for path in files for f in _private_imports(path)] == []
+
+
 def _long_functions(path: Path, limit: int) -> list[str]:
     tree = ast.parse(path.read_text())
     return [
