@@ -59,6 +59,7 @@ Example:
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import numbers
 import sys
@@ -398,3 +399,11 @@ def check_output_path(field: str, path: Any, directory: bool = False) -> None:
             p.unlink()
     except OSError as exc:
         raise ValueError(f"{field}: cannot write {p}: {exc.strerror or exc}") from None
+
+
+def config_json(*parts: dict[str, Any]) -> str:
+    """Canonical JSON of merged config dicts (sorted keys), the input of config hashes."""
+    merged: dict[str, Any] = {}
+    for p in parts:
+        merged.update(p)
+    return json.dumps(merged, sort_keys=True, separators=(",", ":"))

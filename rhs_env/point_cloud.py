@@ -68,12 +68,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.fft as sfft
 from scipy import stats
-from scipy.signal import get_window
 
 from rhs_common.linalg import batched_lstsq as _lstsq
-from rhs_env.antenna import ArrayAntenna, steering
-
-WINDOWS = ("hann", "hamming", "blackman", "boxcar", "taylor")
+from rhs_env.array_models import ArrayAntenna, steering
+from rhs_env.windows import make_window
 
 
 # --------------------------------------------------------------------------- output
@@ -110,15 +108,6 @@ class PointCloud:
 
 
 # --------------------------------------------------------------------------- range
-def make_window(name: str, n: int) -> np.ndarray:
-    """Real taper of length n, float32 (``taylor``: 4 nearly equal sidelobes at -35 dB)."""
-    if name == "taylor":
-        w = get_window(("taylor", 4, 35), n, fftbins=False)
-    else:
-        w = get_window(name, n, fftbins=False)
-    return np.asarray(w, dtype=np.float32)
-
-
 def range_fft(y: np.ndarray, window: np.ndarray, zero_pad: int, bins: slice | None = None) -> np.ndarray:
     """Windowed, zero-padded FFT over the last axis (the FMCW matched filter).
 
@@ -134,7 +123,7 @@ def range_fft(y: np.ndarray, window: np.ndarray, zero_pad: int, bins: slice | No
 def window_exponentials(name: str, n: int) -> tuple[np.ndarray, np.ndarray]:
     """The window as a short sum of complex exponentials, ``w[n] = sum_m c_m exp(j 2 pi mu_m n)``.
 
-    Every window of :data:`WINDOWS` is a cosine sum: hann, hamming and blackman
+    Every window of :data:`rhs_env.windows.WINDOWS` is a cosine sum: hann, hamming and blackman
     (scipy's symmetric forms) with period N - 1, taylor with period N, boxcar a
     constant; the coefficients are fitted by least squares on the frequencies
     ``mu = m / (N - 1)`` (else ``m / N``), |m| <= 4, and the fit is checked exact

@@ -51,8 +51,8 @@ import numpy as np
 import scipy.fft as sfft
 
 from rhs_common.linalg import batched_lstsq
-from rhs_env.antenna import SPEED_OF_LIGHT, ArrayAntenna
-from rhs_env.antennas import make_antenna
+from rhs_env.antenna_factory import make_antenna
+from rhs_env.array_models import SPEED_OF_LIGHT, ArrayAntenna
 from rhs_env.detection import FootprintDetector
 from rhs_env.point_cloud import (
     AngleDictionary,
@@ -61,7 +61,6 @@ from rhs_env.point_cloud import (
     ca_cfar_threshold,
     cfar_alpha,
     local_maxima,
-    make_window,
     noise_decimation,
     omp_doppler,
     os_cfar_alpha,
@@ -84,6 +83,7 @@ from rhs_env.radar_config import (
 )
 from rhs_env.scatterers import Occluders, Scatterers, visible_mask
 from rhs_env.uncertainty import attach_uncertainty
+from rhs_env.windows import make_window
 
 __all__ = [
     "BOLTZMANN",

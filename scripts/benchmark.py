@@ -131,7 +131,7 @@ def bench_floor(grid_deg: float, seed: int, repeats: int = 30) -> dict:
     (``fidelity="range"``, :meth:`RadarSystem.synthesize_spectrum`: the searched bins' noise, drawn
     at half rate), that path's floor.
     """
-    from rhs_env.antenna import ScanConfig
+    from rhs_env.array_models import ScanConfig
     from rhs_env.radar import RadarConfig, RadarSystem
     from rhs_env.scatterers import Scatterers
 

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from rhs_env.antenna import RHSConfig, ScanConfig
+from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.patterns.fast import FastSettings, build_fast
 from rhs_env.patterns.metrics import pattern_report
 from rhs_env.patterns.sdr import SDRSettings, build_sdr

@@ -23,7 +23,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _provenance import write_json
 
-from rhs_env.antenna import ScanConfig
+from rhs_env.array_models import ScanConfig
 from rhs_env.radar import RadarConfig, RadarSystem
 from rhs_env.scatterers import Occluders, Scatterers
 

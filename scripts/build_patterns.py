@@ -21,7 +21,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _provenance import write_json
 
-from rhs_env.antenna import RHSConfig, ScanConfig
+from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.patterns.library import DATA_DIR, build_library
 from rhs_env.patterns.metrics import pattern_report
 

@@ -74,7 +74,7 @@ from scipy.optimize import linear_sum_assignment
 
 from rhs_common.stats import mean_interval, ratio_bootstrap, wilson_interval
 from rhs_common.validation import check_int, check_range
-from rhs_env.antenna import ANTENNA_KINDS, ArrayAntenna
+from rhs_env.array_models import ANTENNA_KINDS, ArrayAntenna
 from rhs_env.point_cloud import angle_crb, pointcloud_metrics
 from rhs_env.radar import RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rhs_env.antenna import RHSConfig, ScanConfig
+from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.patterns.fast import FastSettings, build_fast, optimize_grid_fast
 from rhs_env.patterns.metrics import pattern_report
 from rhs_env.patterns.sdr import SDRSettings, build_sdr

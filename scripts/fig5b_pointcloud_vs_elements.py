@@ -31,7 +31,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _provenance import write_json
 
-from rhs_env.antenna import RHSConfig, ScanConfig
+from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.radar import RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers
 

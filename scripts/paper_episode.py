@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from rhs_env.antenna import ANTENNA_KINDS
+from rhs_env.array_models import ANTENNA_KINDS
 from slam.registration import DEFAULT_REGISTRATION, REGISTRATIONS
 
 POLICY_HZ = 5  # rhs-paper-v0: one SLAM cycle per 0.2 s

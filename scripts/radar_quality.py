@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT / "scripts"))
 from _provenance import command_line, numbers, write_json
 
 from rhs_common.stats import mean_half_record, rmse_interval
-from rhs_env.antenna import ScanConfig
+from rhs_env.array_models import ScanConfig
 from rhs_env.radar import RadarConfig, RadarSystem
 
 

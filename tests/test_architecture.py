@@ -148,6 +148,14 @@ def test_no_private_name_imported_across_modules():
     assert [f for path in files for f in _private_imports(path)] == []
 
 
+def test_configs_do_not_import_what_they_configure():
+    """rhs_env.radar_config holds the radar's settings; the modules that use them import it, not the reverse."""
+    graph = _graph()
+    configured = {"rhs_env.radar", "rhs_env.point_cloud", "rhs_env.detection", "rhs_env.antenna_factory"}
+    assert graph["rhs_env.radar_config"] & configured == set()
+    assert graph["rhs_env.radar_config"] <= {"rhs_common.validation", "rhs_env.array_models", "rhs_env.windows"}
+
+
 def _long_functions(path: Path, limit: int) -> list[str]:
     tree = ast.parse(path.read_text())
     return [
@@ -169,6 +177,6 @@ def test_no_function_over_80_lines():
 
 
 def test_an_integer_for_a_float_field_names_the_same_config():
-    from rhs_env.antenna import ScanConfig
+    from rhs_env.array_models import ScanConfig
 
     assert ScanConfig(grid_deg=5) == ScanConfig(grid_deg=5.0) and isinstance(ScanConfig(grid_deg=5).grid_deg, float)

@@ -14,7 +14,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
 
 import claim_study as cs
 
-from rhs_env.antennas import make_antenna
+from rhs_env.antenna_factory import make_antenna
 from rhs_env.point_cloud import angle_crb
 
 

@@ -8,10 +8,10 @@ with (``scripts/refresh_constraints.py`` refreshes them).
 from __future__ import annotations
 
 import re
-import tomllib
 from pathlib import Path
 
 import pytest
+import tomllib
 from packaging.requirements import Requirement
 from packaging.version import Version
 

@@ -8,21 +8,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rhs_env.antenna import RHSConfig, ScanConfig
-from rhs_env.antennas import make_antenna
+from rhs_env.antenna_factory import make_antenna
+from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.point_cloud import (
     AngleDictionary,
     angle_crb,
     ca_cfar_threshold,
     cfar_alpha,
     local_maxima,
-    make_window,
     omp_angles,
     pointcloud_metrics,
     range_fft,
 )
 from rhs_env.radar import LinkBudgetConfig, RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers
+from rhs_env.windows import make_window
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
 
@@ -149,7 +149,7 @@ def test_radar_quality_pools_noise_draws_of_the_same_scenes():
     targets, and its first draw is the single-draw evaluation."""
     from radar_quality import evaluate
 
-    from rhs_env.antenna import ScanConfig
+    from rhs_env.array_models import ScanConfig
     from rhs_env.radar import RadarConfig
 
     cfg = RadarConfig(scan=ScanConfig(grid_deg=5.0))

@@ -14,10 +14,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from rhs_env.antenna import RHSConfig, ScanConfig
-from rhs_env.point_cloud import WINDOWS, make_window, tone_spectra, window_exponentials
+from rhs_env.array_models import RHSConfig, ScanConfig
+from rhs_env.point_cloud import tone_spectra, window_exponentials
 from rhs_env.radar import DetectionConfig, LinkBudgetConfig, RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers
+from rhs_env.windows import WINDOWS, make_window
 
 SMALL = RadarConfig(antenna="hologram", scan=ScanConfig(grid_deg=5.0), rhs=RHSConfig(elements=24), max_range_m=60.0)
 Z95 = 1.959963984540054
