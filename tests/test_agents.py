@@ -19,6 +19,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from conftest import small_env_kwargs
 
 import rhs_env  # noqa: F401  (registers the ids)
 from agents.evaluate import (
@@ -37,16 +38,7 @@ from rhs_slam.cli import main as cli_main
 SLAM = "rhs-highway-slam-v0"
 TRUTH = "rhs-highway-v0"
 # small and fast: I = 18 beam slots of a 24-element closed-form RHS, 5 vehicles, 4 s episodes
-SMALL = {
-    "antenna": "hologram",
-    "radar": {"scan": {"grid_deg": 5.0}, "rhs": {"elements": 24}, "max_range_m": 80.0},
-    "max_points": 64,
-    "max_landmarks": 16,
-    "registration": "icp",
-    "vehicles_count": 5,
-    "lanes_count": 3,
-    "duration": 4,
-}
+SMALL = small_env_kwargs(vehicles_count=5, lanes_count=3, duration=4)
 TINY_PPO = """
 rhs-highway-slam-v0:
   policy: MultiInputPolicy

@@ -14,6 +14,7 @@ import traceback
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import SMALL_RADAR
 
 import rhs_env  # noqa: F401
 from rhs_env.scan_cli import SceneError, parse_scene
@@ -22,7 +23,7 @@ from slam.scenario_cli import parse_scenario
 #: a valid, cheap radar/SLAM configuration: every leaf is a field the fuzzer mutates (the
 #: closed-form hologram antenna: a valid mutation never starts a pattern-library build)
 BASE = {
-    "radar": {"scan": {"grid_deg": 5.0}, "rhs": {"elements": 24}, "max_range_m": 60.0, "antenna": "hologram",
+    "radar": {**SMALL_RADAR, "antenna": "hologram",
               "link": {"tx_power_dbm": 30.0, "add_noise": True}, "detection": {"pfa": 1e-6},
               "estimation": {"max_targets": 4}},
     "max_points": 32,

@@ -16,6 +16,7 @@ import json
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import small_env_kwargs
 
 pytest.importorskip("ray.rllib", reason="Ray RLlib is an optional extra: pip install -e '.[rllib]'")
 torch = pytest.importorskip("torch")
@@ -26,16 +27,7 @@ from agents.rllib import CHECKPOINT_DIR, RLlibPolicy, is_rllib_checkpoint  # noq
 from rhs_slam.cli import main as cli_main  # noqa: E402
 
 SLAM = "rhs-highway-slam-v0"
-SMALL = {
-    "antenna": "hologram",
-    "radar": {"scan": {"grid_deg": 5.0}, "rhs": {"elements": 24}, "max_range_m": 80.0},
-    "max_points": 64,
-    "max_landmarks": 16,
-    "registration": "icp",
-    "vehicles_count": 5,
-    "lanes_count": 3,
-    "duration": 4,
-}
+SMALL = small_env_kwargs(vehicles_count=5, lanes_count=3, duration=4)
 TINY = """
 rhs-highway-slam-v0:
   policy: MultiInputPolicy
