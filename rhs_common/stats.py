@@ -35,6 +35,7 @@ import numpy as np
 
 __all__ = [
     "MeanInterval",
+    "format_record",
     "mean_half_record",
     "mean_interval",
     "paired_difference",
@@ -137,6 +138,17 @@ def mean_interval(values: Iterable[float | None], level: float = 0.95) -> MeanIn
 def mean_half_record(values: Iterable[float | None], level: float = 0.95) -> dict[str, Any]:
     """:meth:`MeanInterval.to_mean_half` of :func:`mean_interval`: ``{"mean", "ci95": half-width, "n"}``."""
     return mean_interval(values, level).to_mean_half()
+
+
+def format_record(record: dict[str, Any], digits: int = 3) -> str:
+    """A :meth:`MeanInterval.to_dict` record as ``mean [low, high]`` (the mean alone from one value), ``n/a``
+    without one, and how many values were left out."""
+    if record["mean"] is None:
+        return "n/a"
+    txt = f"{record['mean']:.{digits}f}"
+    if record["ci95"] is not None:
+        txt += f" [{record['ci95'][0]:.{digits}f}, {record['ci95'][1]:.{digits}f}]"
+    return txt + (f" ({record['n_failed']} unmatched)" if record["n_failed"] else "")
 
 
 def paired_difference(a: Iterable[float], b: Iterable[float], level: float = 0.95) -> MeanInterval:

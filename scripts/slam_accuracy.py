@@ -62,9 +62,7 @@ import numpy as np
 
 from agents.decision import IDLE, SLOWER
 from rhs_common.stats import mean_half_record as ci95
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _provenance import numbers, write_json
+from rhs_studies.provenance import numbers, write_json
 
 POLICY_HZ = 5
 TARGETS = {

@@ -16,6 +16,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 LAYERS = ("rhs_common", "rhs_env", "slam", "agents", "rhs_slam")
+#: the research kit on top (the studies behind results/; scripts/ launches them)
+STUDIES = "rhs_studies"
 
 
 def _modules() -> dict[str, Path]:
@@ -144,8 +146,34 @@ def test_the_private_import_check_sees_one(tmp_path):
 
 def test_no_private_name_imported_across_modules():
     """A name with a leading underscore is its module's own; what another module needs is public (and documented)."""
-    files = [path for pkg in (*LAYERS, "scripts") for path in sorted((ROOT / pkg).rglob("*.py"))]
+    files = [path for pkg in (*LAYERS, STUDIES, "scripts") for path in sorted((ROOT / pkg).rglob("*.py"))]
     assert [f for path in files for f in _private_imports(path)] == []
+
+
+def test_the_studies_are_the_top_layer_and_edit_no_import_path():
+    """rhs_studies (the research kit behind results/) imports the packages; no package imports it, and neither the
+    kit nor scripts/ edits sys.path: the studies import each other as modules of one package."""
+    upward = [
+        f"{path.relative_to(ROOT)}: {a}"
+        for pkg in LAYERS
+        for path in sorted((ROOT / pkg).rglob("*.py"))
+        for a in _imported_names(path)
+        if a.split(".")[0] == STUDIES
+    ]
+    assert upward == []
+    edits = [str(path.relative_to(ROOT)) for pkg in (STUDIES, "scripts") for path in sorted((ROOT / pkg).glob("*.py"))
+             if "sys.path.insert" in path.read_text() or "sys.path.append" in path.read_text()]
+    assert edits == []
+
+
+def _imported_names(path: Path) -> list[str]:
+    out = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            out += [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and not node.level:
+            out.append(node.module or "")
+    return out
 
 
 def test_configs_do_not_import_what_they_configure():

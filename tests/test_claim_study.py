@@ -4,18 +4,13 @@ from __future__ import annotations
 
 import json
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
-
-import claim_study as cs
-
 from rhs_env.antenna_factory import make_antenna
 from rhs_env.point_cloud import angle_crb
+from rhs_studies import claim_study as cs
 
 
 def test_group_crb_reduces_to_the_single_target_crb_and_grows_as_targets_close_in():

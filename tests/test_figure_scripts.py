@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import importlib.util
+import importlib
 import json
 import math
 import os
@@ -35,12 +35,8 @@ def run_script(name: str, *args: str) -> subprocess.CompletedProcess:
 
 
 def load_script(name: str):
-    spec = importlib.util.spec_from_file_location(
-        name.removesuffix(".py"), SCRIPTS / name
-    )
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    """The study module that ``scripts/<name>`` runs."""
+    return importlib.import_module(f"rhs_studies.{name.removesuffix('.py')}")
 
 
 def check_png(path: Path) -> None:

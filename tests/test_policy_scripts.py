@@ -2,16 +2,13 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import pytest
 
-SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
-sys.path.insert(0, str(SCRIPTS))
+from rhs_studies import evaluate_policies, train_policy
 
-import evaluate_policies  # noqa: E402
-import train_policy  # noqa: E402
+SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
 
 
 def test_targets_merge_the_radar_settings_and_ship_where_evaluate_looks():
@@ -130,7 +127,7 @@ def test_ablations_train_and_evaluate_each_algorithm_into_a_table_with_provenanc
     carries the run's provenance, the table names the algorithm and how decisions are filled; --fresh starts over."""
     import json
 
-    import ablate_policy
+    from rhs_studies import ablate_policy
 
     assert set(ablate_policy.REPRODUCE) <= {*ablate_policy.VARIANTS, *ablate_policy.DAGGER_VARIANTS,
                                             *ablate_policy.REFERENCES}
