@@ -132,27 +132,33 @@ def run_variant(name: str, timesteps: int, seed: int, episodes: int, eval_seed: 
 
 
 def _action_histogram(policy: Path, env_id: str, kwargs: dict, seed: int) -> dict[str, int]:
-    """How often each meta-action is chosen greedily in the first evaluation episode."""
+    """How often each meta-action is chosen greedily in the first evaluation episode
+    (:func:`agents.evaluate.run_episode` driving the policy, its choices counted)."""
     import gymnasium as gym
     import numpy as np
 
     import rhs_env  # noqa: F401
-    from agents.evaluate import load_policy
+    from agents.evaluate import load_policy, run_episode
 
     env = gym.make(env_id, **kwargs)
     model = load_policy(policy, env)  # a HeldPolicy for a decision_interval > 1
-    if callable(getattr(model, "reset", None)):
-        model.reset()
-    obs, _ = env.reset(seed=seed)
     names = env.unwrapped.action_type.actions
     counts: dict[str, int] = {}
-    done = False
-    while not done:
-        a, _ = model.predict(obs, deterministic=True)
-        a = int(np.asarray(a))
-        counts[names[a]] = counts.get(names[a], 0) + 1
-        obs, _, term, trunc, _ = env.step(a)
-        done = term or trunc
+
+    class Counted:
+        """The policy, counting its actions."""
+
+        def reset(self) -> None:
+            if callable(getattr(model, "reset", None)):
+                model.reset()
+
+        def predict(self, obs, deterministic: bool = True):
+            a, state = model.predict(obs, deterministic=deterministic)
+            name = names[int(np.asarray(a))]
+            counts[name] = counts.get(name, 0) + 1
+            return a, state
+
+    run_episode(env, Counted(), seed)
     env.close()
     return counts
 

@@ -12,7 +12,10 @@
 from __future__ import annotations
 
 import argparse
+import os
 import time
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -111,3 +114,15 @@ def paper_slam_episode(antenna: str, seed: int, tx_power_dbm: float, args: argpa
         "slam_stage_times_ms": {k: 1e3 * v / n for k, v in stages.items()},
         "wall_s": time.perf_counter() - t0,
     }
+
+
+def start_study(parse_args: Callable[[list[str] | None], argparse.Namespace],
+                argv: list[str] | None) -> tuple[argparse.Namespace, float, Path]:
+    """A paper-figure study's start: headless rendering, its options, the start time (s) and its output folder
+    (``--out-dir``, created)."""
+    os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+    a = parse_args(argv)
+    started = time.time()
+    out = Path(a.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    return a, started, out

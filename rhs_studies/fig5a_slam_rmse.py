@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -51,7 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from rhs_common.stats import format_record, mean_interval
-from rhs_studies.episodes import ANTENNAS, add_episode_args, paper_slam_episode
+from rhs_studies.episodes import ANTENNAS, add_episode_args, paper_slam_episode, start_study
 from rhs_studies.provenance import jsonable, write_json
 
 PAPER_RATIO = 1.0 / 3.0  # "RHS about a third of the phased array's error"
@@ -323,11 +322,7 @@ def fingerprint() -> list[float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
-    a = parse_args(argv)
-    started = time.time()
-    out = Path(a.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    a, started, out = start_study(parse_args, argv)
     antennas = list(dict.fromkeys(a.antennas))
     powers = list(dict.fromkeys(a.powers))
     jobs = [(ant, p, s) for p in powers for ant in antennas for s in range(a.seeds)]

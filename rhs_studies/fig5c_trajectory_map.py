@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
 import time
 from pathlib import Path
@@ -29,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from rhs_common.geometry import wrap_angle
-from rhs_studies.episodes import ANTENNAS, add_episode_args, drive, make_paper_env
+from rhs_studies.episodes import ANTENNAS, add_episode_args, drive, make_paper_env, start_study
 from rhs_studies.provenance import write_json
 
 
@@ -270,11 +269,7 @@ def fingerprint() -> list[float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
-    a = parse_args(argv)
-    started = time.time()
-    out = Path(a.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    a, started, out = start_study(parse_args, argv)
     try:
         result = run(a)
     except ValueError as exc:

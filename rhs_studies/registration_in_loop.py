@@ -24,13 +24,10 @@ import argparse
 import copy
 import json
 import math
-import os
 import sys
-import time
-from pathlib import Path
 
 from rhs_common.stats import format_record, mean_interval
-from rhs_studies.episodes import ANTENNAS, add_episode_args, paper_slam_episode
+from rhs_studies.episodes import ANTENNAS, add_episode_args, paper_slam_episode, start_study
 from rhs_studies.provenance import write_json
 from slam.registration import REGISTRATIONS
 
@@ -118,11 +115,7 @@ def fingerprint() -> list[float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
-    a = parse_args(argv)
-    started = time.time()
-    out = Path(a.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    a, started, out = start_study(parse_args, argv)
     if a.render_only:
         md = markdown(json.loads((out / "registration_in_loop.json").read_text()))
         (out / "registration_in_loop.md").write_text(md)

@@ -29,6 +29,22 @@ SMALL_RADAR_ENV: dict[str, Any] = {"antenna": "hologram", "radar": SMALL_RADAR, 
 SMALL_SLAM_ENV: dict[str, Any] = {**SMALL_RADAR_ENV, "registration": "icp", "max_landmarks": 16}
 
 
+#: the point-set policy of the tiny training runs (16-unit layers: seconds per update)
+TINY_POLICY_KWARGS: dict[str, Any] = {
+    "features_extractor_class": "point_set",
+    "features_extractor_kwargs": {"point_dim": 16, "box_dim": 8},
+    "net_arch": [16],
+}
+
+
+def tiny_hyperparams(env_id: str, **fields: Any) -> str:
+    """A hyperparameter file (rl-zoo YAML) for ``env_id``: ``MultiInputPolicy``, ``fields``, the tiny policy."""
+    import yaml
+
+    entry = {"policy": "MultiInputPolicy", **fields, "policy_kwargs": copy.deepcopy(TINY_POLICY_KWARGS)}
+    return yaml.safe_dump({env_id: entry}, sort_keys=False)
+
+
 def small_env_kwargs(slam: bool = True, **overrides: Any) -> dict[str, Any]:
     """A fresh copy of the small env's kwargs (SLAM or radar only) with ``overrides`` on top."""
     return {**copy.deepcopy(SMALL_SLAM_ENV if slam else SMALL_RADAR_ENV), **overrides}

@@ -19,7 +19,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from conftest import small_env_kwargs
+from conftest import small_env_kwargs, tiny_hyperparams
 
 import rhs_env  # noqa: F401  (registers the ids)
 from agents.evaluate import (
@@ -39,35 +39,10 @@ SLAM = "rhs-highway-slam-v0"
 TRUTH = "rhs-highway-v0"
 # small and fast: I = 18 beam slots of a 24-element closed-form RHS, 5 vehicles, 4 s episodes
 SMALL = small_env_kwargs(vehicles_count=5, lanes_count=3, duration=4)
-TINY_PPO = """
-rhs-highway-slam-v0:
-  policy: MultiInputPolicy
-  n_envs: 2
-  n_timesteps: 256
-  n_steps: 64
-  batch_size: 32
-  n_epochs: 2
-  learning_rate: lin_3.0e-4
-  gamma: 0.9
-  policy_kwargs:
-    features_extractor_class: point_set
-    features_extractor_kwargs: {point_dim: 16, box_dim: 8}
-    net_arch: [16]
-"""
-TINY_DQN = """
-rhs-highway-slam-v0:
-  policy: MultiInputPolicy
-  n_envs: 1
-  buffer_size: 500
-  learning_starts: 32
-  batch_size: 16
-  train_freq: 4
-  target_update_interval: 32
-  policy_kwargs:
-    features_extractor_class: point_set
-    features_extractor_kwargs: {point_dim: 16, box_dim: 8}
-    net_arch: [16]
-"""
+TINY_PPO = tiny_hyperparams(SLAM, n_envs=2, n_timesteps=256, n_steps=64, batch_size=32, n_epochs=2,
+                            learning_rate="lin_3.0e-4", gamma=0.9)
+TINY_DQN = tiny_hyperparams(SLAM, n_envs=1, buffer_size=500, learning_starts=32, batch_size=16, train_freq=4,
+                            target_update_interval=32)
 POLICY_KEYS = {"points", "points_mask", "pose", "pose_std", "landmarks", "landmarks_mask"}
 
 

@@ -16,7 +16,7 @@ import json
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import small_env_kwargs
+from conftest import small_env_kwargs, tiny_hyperparams
 
 pytest.importorskip("ray.rllib", reason="Ray RLlib is an optional extra: pip install -e '.[rllib]'")
 torch = pytest.importorskip("torch")
@@ -28,21 +28,8 @@ from rhs_slam.cli import main as cli_main  # noqa: E402
 
 SLAM = "rhs-highway-slam-v0"
 SMALL = small_env_kwargs(vehicles_count=5, lanes_count=3, duration=4)
-TINY = """
-rhs-highway-slam-v0:
-  policy: MultiInputPolicy
-  n_envs: 1
-  n_timesteps: 64
-  n_steps: 64
-  batch_size: 32
-  n_epochs: 2
-  learning_rate: 3.0e-4
-  gamma: 0.9
-  policy_kwargs:
-    features_extractor_class: point_set
-    features_extractor_kwargs: {point_dim: 16, box_dim: 8}
-    net_arch: [16]
-"""
+TINY = tiny_hyperparams(SLAM, n_envs=1, n_timesteps=64, n_steps=64, batch_size=32, n_epochs=2, learning_rate=3.0e-4,
+                        gamma=0.9)
 
 
 @pytest.fixture(scope="module")
