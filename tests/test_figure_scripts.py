@@ -46,19 +46,8 @@ def check_png(path: Path) -> None:
 
 def test_fig5a_quick(tmp_path):
     # phased and random need no pattern library; hologram stands in for a surface antenna
-    proc = run_script(
-        "fig5a_slam_rmse.py",
-        "--quick",
-        "--antennas",
-        "phased",
-        "random",
-        "hologram",
-        "--registration",
-        "icp",
-        "--out-dir",
-        str(tmp_path),
-        "--no-progress",
-    )
+    proc = run_script("fig5a_slam_rmse.py", "--quick", "--antennas", "phased", "random", "hologram", "--registration", "icp", "--out-dir",
+                      str(tmp_path), "--no-progress")
     assert proc.returncode == 0, proc.stderr[-3000:]
     check_png(tmp_path / "fig5a.png")
     res = json.loads((tmp_path / "fig5a.json").read_text())
@@ -101,17 +90,8 @@ def test_fig5a_quick(tmp_path):
 
 
 def test_fig5c_quick(tmp_path):
-    proc = run_script(
-        "fig5c_trajectory_map.py",
-        "--quick",
-        "--antenna",
-        "phased",
-        "--registration",
-        "icp",
-        "--out-dir",
-        str(tmp_path),
-        "--no-progress",
-    )
+    proc = run_script("fig5c_trajectory_map.py", "--quick", "--antenna", "phased", "--registration", "icp", "--out-dir", str(tmp_path),
+                      "--no-progress")
     assert proc.returncode == 0, proc.stderr[-3000:]
     check_png(tmp_path / "fig5c.png")
     res = json.loads((tmp_path / "fig5c.json").read_text())
