@@ -59,11 +59,7 @@ def run(args: argparse.Namespace) -> dict:
         if len(pts):
             clouds.append(apply_motion(pts, np.asarray(i["world_pose"], dtype=float)))
 
-    true, est, std = (
-        np.asarray(true, float),
-        np.asarray(est, float),
-        np.asarray(std, float),
-    )
+    true, est, std = (np.asarray(true, float), np.asarray(est, float), np.asarray(std, float))
     to_world = lambda xy: apply_motion(np.asarray(xy, float).reshape(-1, 2), origin)
     true_lm = np.asarray(info["true_landmarks"], float).reshape(-1, 2)
     est_lm = np.asarray(info["estimated_landmarks"], float).reshape(-1, 2)
@@ -77,9 +73,7 @@ def run(args: argparse.Namespace) -> dict:
             {
                 "true_xy": tw[k].round(4).tolist(),
                 "estimated_xy": None if e is None else ew[e].round(4).tolist(),
-                "error_m": None
-                if e is None
-                else float(np.hypot(*(est_lm[e] - true_lm[k]))),
+                "error_m": None if e is None else float(np.hypot(*(est_lm[e] - true_lm[k]))),
             }
         )
     pos_err = np.hypot(est[1:, 0] - true[1:, 0], est[1:, 1] - true[1:, 1])
@@ -103,23 +97,15 @@ def run(args: argparse.Namespace) -> dict:
             "quick": bool(args.quick),
         },
         "start_pose_world": origin.round(6).tolist(),
-        "true_trajectory": np.column_stack([to_world(true[:, :2]), world_heading(true)])
-        .round(4)
-        .tolist(),
-        "estimated_trajectory": np.column_stack(
-            [to_world(est[:, :2]), world_heading(est)]
-        )
-        .round(4)
-        .tolist(),
+        "true_trajectory": np.column_stack([to_world(true[:, :2]), world_heading(true)]).round(4).tolist(),
+        "estimated_trajectory": np.column_stack([to_world(est[:, :2]), world_heading(est)]).round(4).tolist(),
         "pose_std": std.round(5).tolist(),
         "true_obstacles": tw.round(4).tolist(),
         "estimated_map": ew.round(4).tolist(),
         "matches": matches,
         "vehicle_rmse_m": float(np.sqrt(np.mean(pos_err**2))) if len(pos_err) else None,
         "final_position_error_m": float(pos_err[-1]) if len(pos_err) else None,
-        "heading_rmse_rad": float(np.sqrt(np.mean(head_err**2)))
-        if len(head_err)
-        else None,
+        "heading_rmse_rad": float(np.sqrt(np.mean(head_err**2))) if len(head_err) else None,
         "obstacle_rmse_m": None if not np.isfinite(mm["rmse"]) else float(mm["rmse"]),
         "map_matched": int(mm["matched"]),
         "map_missed": int(mm["missed"]),
@@ -139,59 +125,18 @@ def plot(result: dict, path: Path) -> None:
     fig, ax = plt.subplots(figsize=(9, 6))
     cloud = result["_cloud"]
     if len(cloud):
-        ax.scatter(
-            cloud[:, 0],
-            cloud[:, 1],
-            s=2,
-            c="0.75",
-            label="radar points (true pose)",
-            zorder=1,
-        )
-    t, e = (
-        np.asarray(result["true_trajectory"]),
-        np.asarray(result["estimated_trajectory"]),
-    )
+        ax.scatter(cloud[:, 0], cloud[:, 1], s=2, c="0.75", label="radar points (true pose)", zorder=1)
+    t, e = (np.asarray(result["true_trajectory"]), np.asarray(result["estimated_trajectory"]))
     ax.plot(t[:, 0], t[:, 1], "k-", lw=2, label="true trajectory", zorder=3)
-    ax.plot(
-        e[:, 0],
-        e[:, 1],
-        "--",
-        color="tab:orange",
-        lw=2,
-        label="estimated trajectory",
-        zorder=4,
-    )
+    ax.plot(e[:, 0], e[:, 1], "--", color="tab:orange", lw=2, label="estimated trajectory", zorder=4)
     ob = np.asarray(result["true_obstacles"]).reshape(-1, 2)
     em = np.asarray(result["estimated_map"]).reshape(-1, 2)
-    ax.scatter(
-        ob[:, 0],
-        ob[:, 1],
-        s=120,
-        marker="s",
-        facecolors="none",
-        edgecolors="k",
-        lw=1.5,
-        label="true obstacles",
-        zorder=5,
-    )
+    ax.scatter(ob[:, 0], ob[:, 1], s=120, marker="s", facecolors="none", edgecolors="k", lw=1.5, label="true obstacles", zorder=5)
     if len(em):
-        ax.scatter(
-            em[:, 0],
-            em[:, 1],
-            s=40,
-            marker="x",
-            c="tab:red",
-            label="estimated map",
-            zorder=6,
-        )
+        ax.scatter(em[:, 0], em[:, 1], s=40, marker="x", c="tab:red", label="estimated map", zorder=6)
     for m in result["matches"]:
         if m["estimated_xy"] is not None:
-            ax.plot(
-                [m["true_xy"][0], m["estimated_xy"][0]],
-                [m["true_xy"][1], m["estimated_xy"][1]],
-                "r-",
-                lw=0.8,
-            )
+            ax.plot([m["true_xy"][0], m["estimated_xy"][0]], [m["true_xy"][1], m["estimated_xy"][1]], "r-", lw=0.8)
     s = result["settings"]
     ov = result["obstacle_rmse_m"]
     ax.set_title(
@@ -234,14 +179,8 @@ def markdown(result: dict) -> str:
         "|---|---|---:|",
     ]
     for m in result["matches"]:
-        est = (
-            "missed"
-            if m["estimated_xy"] is None
-            else f"({m['estimated_xy'][0]:.2f}, {m['estimated_xy'][1]:.2f})"
-        )
-        lines.append(
-            f"| ({m['true_xy'][0]:.1f}, {m['true_xy'][1]:.1f}) | {est} | {f(m['error_m'])} |"
-        )
+        est = "missed" if m["estimated_xy"] is None else f"({m['estimated_xy'][0]:.2f}, {m['estimated_xy'][1]:.2f})"
+        lines.append(f"| ({m['true_xy'][0]:.1f}, {m['true_xy'][1]:.1f}) | {est} | {f(m['error_m'])} |")
     return "\n".join(lines) + "\n"
 
 
