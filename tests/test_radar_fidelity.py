@@ -14,7 +14,6 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from rhs_common.stats import mean_interval, rmse_interval
 from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.point_cloud import tone_spectra, window_exponentials
 from rhs_env.radar import DetectionConfig, LinkBudgetConfig, RadarConfig, RadarSystem
@@ -106,21 +105,13 @@ def _scene(rng: np.random.Generator, radar: RadarSystem, n: int = 6) -> Scattere
 
 
 def _scan_metrics(fidelity: str, scenes: int = 200) -> dict[str, tuple[float, float]]:
-    """(estimate, 95 % half-width) per metric over ``scenes`` random scenes (same scenes for both fidelities)."""
-    radar = RadarSystem(replace(SMALL, fidelity=fidelity), np.random.default_rng(21))
-    scene_rng = np.random.default_rng(22)
-    det, false_pts, errs = [], [], {"range": [], "angle": [], "doppler": []}
-    for _ in range(scenes):
-        scene = _scene(scene_rng, radar)
-        e = radar.point_errors(radar.scan(scene), scene, gate_m=1.0)
-        det.append(e["n_detected"] / max(e["n_true"], 1))
-        false_pts.append(e["false_points"])
-        for k in errs:
-            errs[k].append(e[k])
-    out = {name: mean_interval(x).mean_and_half() for name, x in (("detection_rate", det), ("false_points", false_pts))}
-    for k, v in errs.items():
-        out[f"{k}_rmse"] = rmse_interval(np.concatenate(v))[:2]
-    return out
+    """(estimate, 95 % half-width) per metric of :func:`rhs_studies.radar_quality.evaluate` over ``scenes`` random
+    scenes (the same scenes for both fidelities)."""
+    from rhs_studies.radar_quality import evaluate
+
+    metrics = evaluate(replace(SMALL, fidelity=fidelity), scenes, seed=21, scene=_scene)
+    compared = ("detection_rate", "false_points_per_scan", "range_rmse_m", "angle_rmse_deg", "doppler_rmse_mps")
+    return {k: (metrics[k]["rmse"] if "rmse" in metrics[k] else metrics[k]["mean"], metrics[k]["ci95"]) for k in compared}
 
 
 def test_range_fidelity_point_clouds_equal_the_iq_path_on_200_scenes():
