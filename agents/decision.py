@@ -43,8 +43,10 @@ import gymnasium as gym
 MAX_DECISION_INTERVAL = 1000
 #: how the steps between decisions are filled: the action repeated, or IDLE after it
 DECISION_MODES = ("hold", "pulse")
-#: highway-env's DiscreteMetaAction IDLE (ACTIONS_ALL = LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER)
-IDLE = 1
+#: highway-env's DiscreteMetaAction indices (``DiscreteMetaAction.ACTIONS_ALL``): the one definition the
+#: package, the scripts and the tests use. IDLE keeps lane and target speed; FASTER and SLOWER step the
+#: target speed up or down one entry of ``target_speeds``; the lane changes move one lane.
+LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = 0, 1, 2, 3, 4
 
 
 def check_decision_mode(value: Any) -> str:

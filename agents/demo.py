@@ -25,8 +25,8 @@ import numpy as np
 from agents.evaluate import (
     DEFAULT_ENV,
     SHIPPED_POLICY,
-    _json_default,
     episode_steps,
+    json_default,
     load_policy,
     make_env,
     parse_env_kwargs,
@@ -131,8 +131,8 @@ def run(args: argparse.Namespace) -> int:
             duration = max(20, round(1000.0 / max(args.fps, 0.1)))
             images[0].save(gif, save_all=True, append_images=images[1:], duration=duration, loop=0)
             summary["animation"] = str(gif)
-    (out / "demo.json").write_text(json.dumps(summary, indent=2, default=_json_default))
-    print(json.dumps(summary, indent=2, default=_json_default))
+    (out / "demo.json").write_text(json.dumps(summary, indent=2, default=json_default))
+    print(json.dumps(summary, indent=2, default=json_default))
     return 0
 
 

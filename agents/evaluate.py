@@ -348,7 +348,7 @@ def _stats(values: list[float | None]) -> dict[str, float | int | None]:
     }
 
 
-def _action(action) -> Any:
+def env_action(action) -> Any:
     """A predicted action as the env takes it (a numpy scalar array -> int)."""
     a = np.asarray(action)
     return int(a) if a.ndim == 0 and np.issubdtype(a.dtype, np.integer) else action
@@ -390,7 +390,7 @@ def run_episode(
     crashed, done = False, False
     while not done:
         action, _ = policy.predict(obs, deterministic=deterministic)
-        obs, reward, terminated, truncated, info = env.step(_action(action))
+        obs, reward, terminated, truncated, info = env.step(env_action(action))
         total += float(reward)
         steps += 1
         crashed = crashed or bool(info.get("crashed", False))
@@ -637,10 +637,10 @@ def run(args: argparse.Namespace) -> int:
     figure = Path(args.figure) if args.figure else out.with_suffix(".png")
     figure.parent.mkdir(parents=True, exist_ok=True)
     summary["figure"] = str(figure)
-    out.write_text(json.dumps(summary, indent=2, default=_json_default))
+    out.write_text(json.dumps(summary, indent=2, default=json_default))
     plot_summary(summary, figure)
     brief = {k: v for k, v in summary.items() if k != "runs"}
-    print(json.dumps(brief, indent=2, default=_json_default))
+    print(json.dumps(brief, indent=2, default=json_default))
     if summary["interrupted"]:
         import signal
 
@@ -650,7 +650,8 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _json_default(value: Any) -> Any:
+def json_default(value: Any) -> Any:
+    """``json.dumps(..., default=json_default)``: numpy scalars and arrays as Python numbers and lists."""
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, np.ndarray):

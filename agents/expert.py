@@ -51,10 +51,8 @@ from typing import Any
 
 import numpy as np
 
+from agents.decision import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER
 from rhs_common.validation import build, check_range, check_types
-
-# highway-env's DiscreteMetaAction indices (ACTIONS_ALL)
-LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = 0, 1, 2, 3, 4
 
 
 @dataclass(frozen=True)

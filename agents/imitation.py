@@ -385,11 +385,11 @@ class RoundLog:
     def __init__(self, model, out: Path, k: int, records: list[dict[str, Any]] | None = None):
         from stable_baselines3.common.logger import configure
 
-        from agents.run_setup import _tensorboard_available
+        from agents.run_setup import tensorboard_available
 
         self.model, self.out, self.k = model, out, k
         self.records: list[dict[str, Any]] = list(records or [])  # a resumed run's earlier rounds
-        formats = ["csv", "tensorboard"] if _tensorboard_available() else ["csv"]
+        formats = ["csv", "tensorboard"] if tensorboard_available() else ["csv"]
         self.logger = configure(str(out / "tb") if "tensorboard" in formats else str(out), formats)
         (out / "checkpoints").mkdir(parents=True, exist_ok=True)
 

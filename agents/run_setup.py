@@ -146,7 +146,7 @@ def eval_policy_kwargs(text: str) -> dict[str, Any]:
     return value
 
 
-def _resolve_policy_kwargs(kwargs: dict[str, Any] | str) -> dict[str, Any]:
+def resolve_policy_kwargs(kwargs: dict[str, Any] | str) -> dict[str, Any]:
     from agents.features import FEATURE_EXTRACTORS
 
     if isinstance(kwargs, str):
@@ -160,7 +160,7 @@ def _resolve_policy_kwargs(kwargs: dict[str, Any] | str) -> dict[str, Any]:
     return kwargs
 
 
-def _policy_kwargs_by_name(kwargs: dict[str, Any] | str) -> dict[str, Any]:
+def policy_kwargs_by_name(kwargs: dict[str, Any] | str) -> dict[str, Any]:
     """``policy_kwargs`` with the extractor by its registered name (``"point_set"``), as the RLlib backend takes it.
 
     The shipped YAML writes it as rl-baselines3-zoo's Python expression naming the class.
@@ -280,7 +280,7 @@ def _apply_all(chain: list[Callable[[Any], Any]], env: Any) -> Any:
     return env
 
 
-def _check_env_kwargs(env_id: str, env_kwargs: dict[str, Any]) -> None:
+def check_env_kwargs(env_id: str, env_kwargs: dict[str, Any]) -> None:
     """Build and close one env here, so bad ``env_kwargs`` raise a readable error before workers start."""
     import gymnasium as gym
 
@@ -293,7 +293,7 @@ def _check_env_kwargs(env_id: str, env_kwargs: dict[str, Any]) -> None:
     env.close()
 
 
-def _tensorboard_available() -> bool:
+def tensorboard_available() -> bool:
     try:
         import tensorboard  # noqa: F401
     except ImportError:
@@ -342,7 +342,7 @@ def run_settings(algo: str, env_id: str, timesteps: int | None, n_envs: int | No
     if envs < 1:
         raise ValueError(f"n_envs must be >= 1, got {envs}")
     kwargs = {**(hp.pop("env_kwargs", None) or {}), **(env_kwargs or {})}
-    hp["policy_kwargs"] = _resolve_policy_kwargs(hp.get("policy_kwargs", {}))
+    hp["policy_kwargs"] = resolve_policy_kwargs(hp.get("policy_kwargs", {}))
     record = {k: v for k, v in load_hyperparams(algo, env_id, hyperparams).items() if k not in META_KEYS}
     return RunSettings(policy, steps, envs, kwargs, _resolve_schedules(hp), record, k, mode)
 

@@ -40,10 +40,7 @@ from agents.run_setup import (  # noqa: F401  (re-exported: the names users of a
     HYPERPARAMS_DIR,
     META_KEYS,
     RunSettings,
-    _check_env_kwargs,
-    _policy_kwargs_by_name,
-    _resolve_policy_kwargs,
-    _tensorboard_available,
+    check_env_kwargs,
     check_train_args,
     eval_policy_kwargs,
     limit_threads,
@@ -51,8 +48,11 @@ from agents.run_setup import (  # noqa: F401  (re-exported: the names users of a
     make_vec_env,
     metadata_path,
     parse_env_kwargs,
+    policy_kwargs_by_name,
+    resolve_policy_kwargs,
     run_settings,
     run_summary,
+    tensorboard_available,
     worker_env_id,
     write_summary,
 )
@@ -116,7 +116,7 @@ def train(
     out.mkdir(parents=True, exist_ok=True)
     limit_threads(torch_threads)
     if run.n_envs > 1:
-        _check_env_kwargs(env_id, run.env_kwargs)
+        check_env_kwargs(env_id, run.env_kwargs)
     k = run.decision_interval
     venv = make_vec_env(env_id, run.n_envs, seed, run.env_kwargs, monitor_dir=out / "monitor", decision_interval=k,
                         decision_mode=run.decision_mode)
@@ -177,7 +177,7 @@ def _new_or_resumed_model(algo: str, run: RunSettings, venv: Any, seed: int, out
     from agents.resume import latest_checkpoint, load_checkpoint
 
     cls = {"ppo": PPO, "dqn": DQN}[algo]
-    tb = str(out / "tb") if _tensorboard_available() else None
+    tb = str(out / "tb") if tensorboard_available() else None
     if tb is None:
         print("rhs-slam train: tensorboard is not installed; no TensorBoard logs", file=sys.stderr)
     found = latest_checkpoint(out, algo) if resume else None
@@ -262,7 +262,7 @@ def train_rllib_backend(
 
     hp = load_hyperparams("ppo", env_id, hyperparams)
     hp.pop("policy")
-    hp["policy_kwargs"] = _policy_kwargs_by_name(hp.get("policy_kwargs") or {})
+    hp["policy_kwargs"] = policy_kwargs_by_name(hp.get("policy_kwargs") or {})
     check_decision_mode(hp.pop("decision_mode", "hold"))
     if check_decision_interval(hp.pop("decision_interval", 1)) != 1:
         raise ValueError("decision_interval > 1 is for the sb3 backend; the rllib backend decides every env step")
@@ -275,7 +275,7 @@ def train_rllib_backend(
     env_kwargs = {**(hp.pop("env_kwargs", None) or {}), **(env_kwargs or {})}
     runners = n_envs if num_env_runners is None else int(num_env_runners)
     bare_id = env_id.split(":", 1)[-1]
-    _check_env_kwargs(bare_id, env_kwargs)
+    check_env_kwargs(bare_id, env_kwargs)
     return train_rllib(bare_id, timesteps, out, hp, env_kwargs, n_envs, runners, address=address, seed=seed,
                        eval_freq=eval_freq, eval_episodes=eval_episodes, checkpoint_freq=checkpoint_freq,
                        progress=progress)  # fmt: skip

@@ -59,6 +59,7 @@ Example:
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import numbers
 import sys
@@ -401,3 +402,22 @@ def check_output_path(field: str, path: Any, directory: bool = False) -> None:
             p.unlink()
     except OSError as exc:
         raise ValueError(f"{field}: cannot write {p}: {exc.strerror or exc}") from None
+
+
+def config_json(*parts: dict[str, Any]) -> str:
+    """Canonical JSON of merged config dicts (sorted keys), the input of config hashes.
+
+    A numpy scalar is written as the Python number of the same value (``np.float32(5.0)`` as ``5.0``).
+    """
+    merged: dict[str, Any] = {}
+    for p in parts:
+        merged.update(p)
+    return json.dumps(merged, sort_keys=True, separators=(",", ":"), default=_json_number)
+
+
+def _json_number(value: Any) -> Any:
+    """``json.dumps``'s fallback: numpy scalars as Python numbers, anything else refused as json does."""
+    item = getattr(value, "item", None)
+    if item is not None and getattr(value, "shape", None) == ():
+        return item()
+    raise TypeError(f"Object of type {type(value).__name__} is not JSON serializable")

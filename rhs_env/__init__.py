@@ -1,7 +1,7 @@
 """RHS radar simulation on highway-env: antennas, patterns, radar, point clouds, envs."""
 
-from rhs_env.antenna import ANTENNA_KINDS, ArrayAntenna, RHSConfig, ScanConfig
-from rhs_env.antennas import make_antenna
+from rhs_env.antenna_factory import make_antenna
+from rhs_env.array_models import ANTENNA_KINDS, ArrayAntenna, RHSConfig, ScanConfig
 from rhs_env.registration import register_envs
 
 __all__ = ["ANTENNA_KINDS", "ArrayAntenna", "RHSConfig", "ScanConfig", "make_antenna", "register_envs"]

@@ -80,10 +80,10 @@ import numpy as np
 from scipy import special, stats
 
 from rhs_env.point_cloud import AngleDictionary, cfar_alpha
+from rhs_env.radar_config import DETECTORS
 
 __all__ = ["DETECTORS", "FootprintDetector", "beam_footprints", "os_alpha_fast", "training_step", "union_false_alarm"]
 
-DETECTORS = ("footprint", "summed")
 
 
 def beam_footprints(dic: AngleDictionary, sector_deg: float) -> tuple[np.ndarray, np.ndarray]:

@@ -68,11 +68,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.fft as sfft
 from scipy import stats
-from scipy.signal import get_window
 
-from rhs_env.antenna import ArrayAntenna, steering
-
-WINDOWS = ("hann", "hamming", "blackman", "boxcar", "taylor")
+from rhs_common.linalg import batched_lstsq as _lstsq
+from rhs_env.array_models import ArrayAntenna, steering
+from rhs_env.windows import make_window
 
 
 # --------------------------------------------------------------------------- output
@@ -109,15 +108,6 @@ class PointCloud:
 
 
 # --------------------------------------------------------------------------- range
-def make_window(name: str, n: int) -> np.ndarray:
-    """Real taper of length n, float32 (``taylor``: 4 nearly equal sidelobes at -35 dB)."""
-    if name == "taylor":
-        w = get_window(("taylor", 4, 35), n, fftbins=False)
-    else:
-        w = get_window(name, n, fftbins=False)
-    return np.asarray(w, dtype=np.float32)
-
-
 def range_fft(y: np.ndarray, window: np.ndarray, zero_pad: int, bins: slice | None = None) -> np.ndarray:
     """Windowed, zero-padded FFT over the last axis (the FMCW matched filter).
 
@@ -133,7 +123,7 @@ def range_fft(y: np.ndarray, window: np.ndarray, zero_pad: int, bins: slice | No
 def window_exponentials(name: str, n: int) -> tuple[np.ndarray, np.ndarray]:
     """The window as a short sum of complex exponentials, ``w[n] = sum_m c_m exp(j 2 pi mu_m n)``.
 
-    Every window of :data:`WINDOWS` is a cosine sum: hann, hamming and blackman
+    Every window of :data:`rhs_env.windows.WINDOWS` is a cosine sum: hann, hamming and blackman
     (scipy's symmetric forms) with period N - 1, taylor with period N, boxcar a
     constant; the coefficients are fitted by least squares on the frequencies
     ``mu = m / (N - 1)`` (else ``m / N``), |m| <= 4, and the fit is checked exact
@@ -472,13 +462,6 @@ def _grid_refine(dic: AngleDictionary, resid: np.ndarray, center: np.ndarray | N
     off = parabolic_offset(lg[:, 0], lg[:, 1], lg[:, 2])
     off = np.where((j == 0) | (j == n_c - 1), 0.0, off)
     return dic.candidates[j] + off * dic.step
-
-
-def _lstsq(atoms: np.ndarray, iota: np.ndarray) -> np.ndarray:
-    """Batched least squares: atoms (D, I, L), iota (D, I, ...) -> (D, L, ...)."""
-    ah = np.conj(np.swapaxes(atoms, 1, 2))
-    gram = ah @ atoms + 1e-12 * np.eye(atoms.shape[2])[None]
-    return np.linalg.solve(gram, ah @ iota)
 
 
 @dataclass

@@ -50,19 +50,18 @@ from typing import Any
 import numpy as np
 import scipy.fft as sfft
 
-from rhs_env.antenna import SPEED_OF_LIGHT, ArrayAntenna
-from rhs_env.antennas import make_antenna
+from rhs_common.linalg import batched_lstsq
+from rhs_env.antenna_factory import make_antenna
+from rhs_env.array_models import SPEED_OF_LIGHT, ArrayAntenna
 from rhs_env.detection import FootprintDetector
 from rhs_env.point_cloud import (
     AngleDictionary,
     PointCloud,
-    _lstsq,
     angle_crb,
     atom_norms,
     ca_cfar_threshold,
     cfar_alpha,
     local_maxima,
-    make_window,
     noise_decimation,
     omp_doppler,
     os_cfar_alpha,
@@ -85,6 +84,7 @@ from rhs_env.radar_config import (
 )
 from rhs_env.scatterers import Occluders, Scatterers, visible_mask
 from rhs_env.uncertainty import attach_uncertainty
+from rhs_env.windows import make_window
 
 __all__ = [
     "BOLTZMANN",
@@ -559,7 +559,7 @@ class RadarSystem:
         half = 2 * self.config.waveform.zero_pad + 1
         kk = np.clip(kd[:, None] + np.arange(-half, half + 1)[None, :], 0, spec.shape[-1] - 1)
         nb = spec[rd[:, None], :, :, kk].reshape(rd.size, 2 * half + 1, -1)  # (D, W, I C)
-        s_nb = _lstsq(atoms, np.swapaxes(nb, 1, 2).astype(complex))  # (D, L, W)
+        s_nb = batched_lstsq(atoms, np.swapaxes(nb, 1, 2).astype(complex))  # (D, L, W)
         pw = np.log(np.abs(s_nb) ** 2 + 1e-300)
         j = 1 + np.argmax(pw[:, :, 1:-1], axis=2)  # interior peak
         lm = np.take_along_axis(pw, (j - 1)[..., None], 2)[..., 0]

@@ -49,9 +49,8 @@ from rhs_common.validation import (
     check_types,
     flat_dict,
 )
-from rhs_env.antenna import ANTENNA_KINDS, SPEED_OF_LIGHT, RHSConfig, ScanConfig
-from rhs_env.detection import DETECTORS
-from rhs_env.point_cloud import WINDOWS, make_window
+from rhs_env.array_models import ANTENNA_KINDS, SPEED_OF_LIGHT, RHSConfig, ScanConfig
+from rhs_env.windows import WINDOWS, make_window
 
 __all__ = [
     "BOLTZMANN",
@@ -170,6 +169,10 @@ class LinkBudgetConfig:
     def tx_power_w(self) -> float:
         """P_t = 10^((P_dBm - 30) / 10), W."""
         return 10 ** ((self.tx_power_dbm - 30) / 10)
+
+
+#: the detector statistics (:class:`DetectionConfig` ``statistic``; :mod:`rhs_env.detection` implements them)
+DETECTORS = ("footprint", "summed")
 
 
 @dataclass(frozen=True)
@@ -340,9 +343,9 @@ class RadarConfig:
     """The four radars: antenna, field of view, synthesis fidelity and the groups of settings.
 
     Attributes:
-        antenna: antenna kind, rhs | phased | random | hologram (:func:`rhs_env.antennas.make_antenna`).
-        rhs: :class:`rhs_env.antenna.RHSConfig`, the RHS geometry (and carrier, lambda).
-        scan: :class:`rhs_env.antenna.ScanConfig`, the beam grid of the sweep.
+        antenna: antenna kind, rhs | phased | random | hologram (:func:`rhs_env.antenna_factory.make_antenna`).
+        rhs: :class:`rhs_env.array_models.RHSConfig`, the RHS geometry (and carrier, lambda).
+        scan: :class:`rhs_env.array_models.ScanConfig`, the beam grid of the sweep.
         min_range_m: nearest reported range, m, [0, ``max_range_m``).
         max_range_m: farthest range, m, [1, 0.95 x the waveform's unambiguous range]
             (field of view: the scan sector up to this range).

@@ -27,7 +27,7 @@ import numpy as np
 
 from rhs_common.input_files import InputError, read_json
 from rhs_common.validation import check_output_path
-from rhs_env.antenna import ANTENNA_KINDS
+from rhs_env.array_models import ANTENNA_KINDS
 
 #: bounds that keep one scan's work and arithmetic finite: an RCS of 1e300 m^2 overflows the
 #: echo power (and its sidelobes wipe out every other target); 10 000 targets is ~100x a highway scene
@@ -124,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
     antenna = args.antenna or scene["antenna"]
     seed = scene["seed"] if args.seed is None else args.seed
 
-    from rhs_env.antenna import ScanConfig
+    from rhs_env.array_models import ScanConfig
     from rhs_env.radar import RadarConfig, RadarSystem
     from rhs_env.scatterers import Occluders, Scatterers
 

@@ -42,7 +42,7 @@ from gymnasium import spaces
 
 from rhs_common.threads import blas_threads_limit, check_blas_threads
 from rhs_common.validation import build, check_bool, check_choice, check_int
-from rhs_env.antenna import ANTENNA_KINDS
+from rhs_env.array_models import ANTENNA_KINDS
 from rhs_env.scene import (
     ScatterConfig,
     draw_disks,

@@ -51,9 +51,9 @@ from pathlib import Path
 
 import numpy as np
 
+from rhs_studies.provenance import command_line, write_json
+
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "scripts"))
-from _provenance import command_line, write_json
 
 SECTIONS = ("envs", "start", "floor", "load", "vec", "radar", "patterns", "training")
 GOALS = {"radar_env_over_base": 0.75, "slam_env_over_base": 0.67, "loaded_over_quiet": 0.85,
@@ -233,7 +233,7 @@ def bench_floor(grid_deg: float, seed: int, repeats: int = 30) -> dict:
     (``fidelity="range"``, :meth:`RadarSystem.synthesize_spectrum`: the searched bins' noise, drawn
     at half rate), that path's floor.
     """
-    from rhs_env.antenna import ScanConfig
+    from rhs_env.array_models import ScanConfig
     from rhs_env.radar import RadarConfig, RadarSystem
     from rhs_env.scatterers import Scatterers
 
@@ -486,12 +486,12 @@ def _run_section(sec: str, args: argparse.Namespace) -> dict:
     if sec == "vec":
         return bench_vec(args.steps, args.seed, args.grid_deg)
     if sec == "radar":
-        from benchmark_radar import benchmark_radar
+        from rhs_studies.benchmark_radar import benchmark_radar
 
         return {f"{a}_{f}": benchmark_radar(antenna=a, grid_deg=args.grid_deg, fidelity=f)
                 for a in ("rhs", "phased") for f in ("iq", "range")}
     if sec == "patterns":
-        from benchmark_patterns import benchmark_patterns
+        from rhs_studies.benchmark_patterns import benchmark_patterns
 
         return benchmark_patterns(grid_deg=1.0)
     return bench_training(args.train_steps, args.seed)

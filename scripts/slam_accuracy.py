@@ -51,7 +51,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import subprocess
 import sys
 import time
@@ -61,11 +60,10 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _provenance import numbers, write_json
+from agents.decision import IDLE, SLOWER
+from rhs_common.stats import mean_half_record as ci95
+from rhs_studies.provenance import numbers, write_json
 
-IDLE = 1
-SLOWER = 4  # highway-env DiscreteMetaAction: the lowest target speed (20 m/s), no lane change
 POLICY_HZ = 5
 TARGETS = {
     "highway": {"position_rmse_m": ("<=", 0.5), "final_error_m": ("<=", 1.0),
@@ -85,17 +83,6 @@ def _commit() -> str:
         return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
-
-
-def ci95(values: list[float]) -> dict[str, Any]:
-    """Mean and the half-width of its 95 % Student-t confidence interval over seeds."""
-    from scipy import stats
-
-    v = np.asarray([x for x in values if x is not None and np.isfinite(x)], dtype=float)
-    if v.size == 0:
-        return {"mean": None, "ci95": None, "n": 0}
-    half = float(stats.t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size)) if v.size > 1 else None
-    return {"mean": float(v.mean()), "ci95": half, "n": int(v.size)}
 
 
 def _visible_landmarks(env) -> np.ndarray:

@@ -105,7 +105,7 @@ def parse_scenario(doc: Any) -> dict[str, Any]:
     unknown = sorted(set(doc) - OPTIONAL - {"landmarks", "poses"})
     if unknown:
         raise ValueError(f"unknown key(s) {', '.join(map(repr, unknown))}")
-    from rhs_env.antenna import ScanConfig
+    from rhs_env.array_models import ScanConfig
     from slam.rbpf import SlamConfig
 
     out: dict[str, Any] = {"landmarks": _array(doc, "landmarks", 2, 0, MAX_LANDMARKS),
@@ -133,7 +133,7 @@ def parse_scenario(doc: Any) -> dict[str, Any]:
 
 def run_scripted(spec: dict[str, Any], progress: bool = False) -> dict[str, Any]:
     """Run the radar + SLAM on a parsed scenario; returns the JSON-ready result."""
-    from rhs_env.antenna import ScanConfig
+    from rhs_env.array_models import ScanConfig
     from rhs_env.radar import RadarConfig, RadarSystem
     from slam.rbpf import SlamConfig
     from slam.registration import make_registration

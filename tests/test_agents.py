@@ -19,6 +19,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from conftest import small_env_kwargs, tiny_hyperparams
 
 import rhs_env  # noqa: F401  (registers the ids)
 from agents.evaluate import (
@@ -37,45 +38,11 @@ from rhs_slam.cli import main as cli_main
 SLAM = "rhs-highway-slam-v0"
 TRUTH = "rhs-highway-v0"
 # small and fast: I = 18 beam slots of a 24-element closed-form RHS, 5 vehicles, 4 s episodes
-SMALL = {
-    "antenna": "hologram",
-    "radar": {"scan": {"grid_deg": 5.0}, "rhs": {"elements": 24}, "max_range_m": 80.0},
-    "max_points": 64,
-    "max_landmarks": 16,
-    "registration": "icp",
-    "vehicles_count": 5,
-    "lanes_count": 3,
-    "duration": 4,
-}
-TINY_PPO = """
-rhs-highway-slam-v0:
-  policy: MultiInputPolicy
-  n_envs: 2
-  n_timesteps: 256
-  n_steps: 64
-  batch_size: 32
-  n_epochs: 2
-  learning_rate: lin_3.0e-4
-  gamma: 0.9
-  policy_kwargs:
-    features_extractor_class: point_set
-    features_extractor_kwargs: {point_dim: 16, box_dim: 8}
-    net_arch: [16]
-"""
-TINY_DQN = """
-rhs-highway-slam-v0:
-  policy: MultiInputPolicy
-  n_envs: 1
-  buffer_size: 500
-  learning_starts: 32
-  batch_size: 16
-  train_freq: 4
-  target_update_interval: 32
-  policy_kwargs:
-    features_extractor_class: point_set
-    features_extractor_kwargs: {point_dim: 16, box_dim: 8}
-    net_arch: [16]
-"""
+SMALL = small_env_kwargs(vehicles_count=5, lanes_count=3, duration=4)
+TINY_PPO = tiny_hyperparams(SLAM, n_envs=2, n_timesteps=256, n_steps=64, batch_size=32, n_epochs=2,
+                            learning_rate="lin_3.0e-4", gamma=0.9)
+TINY_DQN = tiny_hyperparams(SLAM, n_envs=1, buffer_size=500, learning_starts=32, batch_size=16, train_freq=4,
+                            target_update_interval=32)
 POLICY_KEYS = {"points", "points_mask", "pose", "pose_std", "landmarks", "landmarks_mask"}
 
 
@@ -171,15 +138,15 @@ def test_hyperparams_and_worker_ids():
             assert hp["policy"] in ("MultiInputPolicy", "MlpPolicy")
             assert hp["n_envs"] >= 1
     # the shipped YAML writes policy_kwargs as the Python expression rl-baselines3-zoo evals
-    from agents.train import _resolve_policy_kwargs
+    from agents.run_setup import resolve_policy_kwargs
 
-    pk = _resolve_policy_kwargs(load_hyperparams("ppo", SLAM)["policy_kwargs"])
+    pk = resolve_policy_kwargs(load_hyperparams("ppo", SLAM)["policy_kwargs"])
     assert pk["features_extractor_class"] is PointSetExtractor
     assert pk["features_extractor_kwargs"] == {"point_dim": 64, "box_dim": 32} and pk["net_arch"] == [64, 64]
-    assert _resolve_policy_kwargs({"features_extractor_class": "point_set"})["features_extractor_class"] is (
+    assert resolve_policy_kwargs({"features_extractor_class": "point_set"})["features_extractor_class"] is (
         PointSetExtractor)  # the short name still works in hand-written YAML
     with pytest.raises(ValueError, match="policy_kwargs"):
-        _resolve_policy_kwargs("__import__('os').system('true')")  # no builtins in scope
+        resolve_policy_kwargs("__import__('os').system('true')")  # no builtins in scope
     # subprocess workers import rhs_env through the id's module prefix
     assert worker_env_id(SLAM) == f"rhs_env:{SLAM}"
     assert worker_env_id(TRUTH) == f"rhs_env:{TRUTH}"
@@ -463,12 +430,12 @@ def test_rllib_backend_without_ray_says_how_to_install(tmp_path, capsys):
 def test_rllib_backend_reads_the_shipped_yaml_policy_kwargs():
     """The shipped ppo.yml writes policy_kwargs as rl-baselines3-zoo's expression; the RLlib backend takes the
     extractor by name (``rhs-slam train --backend rllib --env rhs-highway-slam-v0`` with the shipped YAML)."""
-    from agents.train import _policy_kwargs_by_name, load_hyperparams
+    from agents.train import load_hyperparams, policy_kwargs_by_name
 
     hp = load_hyperparams("ppo", "rhs-highway-slam-v0")
     assert isinstance(hp["policy_kwargs"], str)
-    kw = _policy_kwargs_by_name(hp["policy_kwargs"])
+    kw = policy_kwargs_by_name(hp["policy_kwargs"])
     assert kw["features_extractor_class"] == "point_set" and kw["net_arch"] == [64, 64]
-    assert _policy_kwargs_by_name({"features_extractor_class": "grid"})["features_extractor_class"] == "grid"
+    assert policy_kwargs_by_name({"features_extractor_class": "grid"})["features_extractor_class"] == "grid"
     with pytest.raises(ValueError, match="features_extractor_class"):
-        _policy_kwargs_by_name({"features_extractor_class": dict})
+        policy_kwargs_by_name({"features_extractor_class": dict})

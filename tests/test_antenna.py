@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rhs_env.antenna import (
+from rhs_env.array_models import (
     RHSConfig,
     ScanConfig,
     hologram_pattern,

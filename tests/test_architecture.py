@@ -16,6 +16,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 LAYERS = ("rhs_common", "rhs_env", "slam", "agents", "rhs_slam")
+#: the research kit on top (the studies behind results/; scripts/ launches them)
+STUDIES = "rhs_studies"
 
 
 def _modules() -> dict[str, Path]:
@@ -124,6 +126,64 @@ def test_slam_core_imports_without_gymnasium():
     assert out.stdout.strip() == "[]"
 
 
+def _private_imports(path: Path) -> list[str]:
+    """``from m import _name`` statements: a private name used outside the module that defines it."""
+    return [
+        f"{path.relative_to(ROOT) if path.is_relative_to(ROOT) else path.name}:{node.lineno} "
+        f"from {'.' * node.level}{node.module or ''} import {a.name}"
+        for node in ast.walk(ast.parse(path.read_text()))
+        if isinstance(node, ast.ImportFrom)
+        for a in node.names
+        if a.name.startswith("_") and not a.name.startswith("__")
+    ]
+
+
+def test_the_private_import_check_sees_one(tmp_path):
+    src = tmp_path / "x.py"
+    src.write_text("from a import b, _c\ndef f():\n    from .d import _e as e\n    from f import __version__\n")
+    assert _private_imports(src) == ["x.py:1 from a import _c", "x.py:3 from .d import _e"]
+
+
+def test_no_private_name_imported_across_modules():
+    """A name with a leading underscore is its module's own; what another module needs is public (and documented)."""
+    files = [path for pkg in (*LAYERS, STUDIES, "scripts") for path in sorted((ROOT / pkg).rglob("*.py"))]
+    assert [f for path in files for f in _private_imports(path)] == []
+
+
+def test_the_studies_are_the_top_layer_and_edit_no_import_path():
+    """rhs_studies (the research kit behind results/) imports the packages; no package imports it, and neither the
+    kit nor scripts/ edits sys.path: the studies import each other as modules of one package."""
+    upward = [
+        f"{path.relative_to(ROOT)}: {a}"
+        for pkg in LAYERS
+        for path in sorted((ROOT / pkg).rglob("*.py"))
+        for a in _imported_names(path)
+        if a.split(".")[0] == STUDIES
+    ]
+    assert upward == []
+    edits = [str(path.relative_to(ROOT)) for pkg in (STUDIES, "scripts") for path in sorted((ROOT / pkg).glob("*.py"))
+             if "sys.path.insert" in path.read_text() or "sys.path.append" in path.read_text()]
+    assert edits == []
+
+
+def _imported_names(path: Path) -> list[str]:
+    out = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            out += [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and not node.level:
+            out.append(node.module or "")
+    return out
+
+
+def test_configs_do_not_import_what_they_configure():
+    """rhs_env.radar_config holds the radar's settings; the modules that use them import it, not the reverse."""
+    graph = _graph()
+    configured = {"rhs_env.radar", "rhs_env.point_cloud", "rhs_env.detection", "rhs_env.antenna_factory"}
+    assert graph["rhs_env.radar_config"] & configured == set()
+    assert graph["rhs_env.radar_config"] <= {"rhs_common.validation", "rhs_env.array_models", "rhs_env.windows"}
+
+
 def _long_functions(path: Path, limit: int) -> list[str]:
     tree = ast.parse(path.read_text())
     return [
@@ -145,6 +205,6 @@ def test_no_function_over_80_lines():
 
 
 def test_an_integer_for_a_float_field_names_the_same_config():
-    from rhs_env.antenna import ScanConfig
+    from rhs_env.array_models import ScanConfig
 
     assert ScanConfig(grid_deg=5) == ScanConfig(grid_deg=5.0) and isinstance(ScanConfig(grid_deg=5).grid_deg, float)

@@ -4,18 +4,13 @@ from __future__ import annotations
 
 import json
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
-
-import claim_study as cs
-
-from rhs_env.antennas import make_antenna
+from rhs_env.antenna_factory import make_antenna
 from rhs_env.point_cloud import angle_crb
+from rhs_studies import claim_study as cs
 
 
 def test_group_crb_reduces_to_the_single_target_crb_and_grows_as_targets_close_in():
@@ -43,18 +38,12 @@ def test_antenna_properties_show_the_aperture_trade():
     assert pa["pslr_median_db"] == pytest.approx(-26.5, abs=1.0)  # uniform array: -13.26 dB one-way, twice
 
 
-def test_ospa_and_intervals():
+def test_ospa():
     c = 5.0
     assert cs.ospa(np.array([1.0, 2.0]), np.array([2.0, 1.0]), c) == 0.0
     assert cs.ospa(np.array([1.0, 2.0]), np.array([]), c) == c
     assert cs.ospa(np.array([0.0, 3.0]), np.array([1.5]), c) == pytest.approx(math.sqrt((1.5 ** 2 + c ** 2) / 2))
-    m, lo, hi = cs.t_ci(np.array([1.0, 2.0, 3.0, 4.0]))
-    assert m == 2.5 and lo < m < hi and hi - m == pytest.approx(3.182446 * np.std([1, 2, 3, 4], ddof=1) / 2, rel=1e-5)
-    p, lo, hi = cs.wilson_ci(0, 20)
-    assert p == 0.0 and lo == 0.0 and 0.1 < hi < 0.2
-    rng = np.random.default_rng(1)
-    r, lo, hi = cs.ratio_ci(rng.normal(1.0, 0.1, 200), rng.normal(3.0, 0.3, 200), rng, 500)
-    assert lo < 1 / 3 < hi and r == pytest.approx(1 / 3, rel=0.05)
+    # the intervals themselves: tests/test_stats.py (rhs_common.stats, against scipy)
 
 
 def test_groups_share_a_range_cell_and_stay_in_their_radar():

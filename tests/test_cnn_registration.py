@@ -17,7 +17,6 @@ from slam.cnn_registration import (
 from slam.registration import compose, points_in_frame, relative_motion
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "scripts"))
 
 
 def test_grid_map_keeps_mass_and_subcell_position():
@@ -55,7 +54,7 @@ def test_missing_weights_and_grid_mismatch_are_refused(tmp_path):
 def test_shipped_weights_beat_the_prior_on_fresh_simulator_pairs():
     """Quality bar of the shipped artifact: on clouds from unseen episodes the CNN
     must remove at least 30 % of the prior's translation error (measured: ~50 %)."""
-    from train_registration import collect_pairs
+    from rhs_studies.train_registration import collect_pairs
 
     prev, cur, motions = collect_pairs(1, 16, seed=5000, env_kwargs={"vehicles_count": 10}, progress=False)
     assert len(motions) >= 10

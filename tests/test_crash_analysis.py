@@ -2,16 +2,12 @@
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
-
-import crash_analysis as ca
+from rhs_studies import crash_analysis as ca
 
 
 def test_ego_frame_puts_highway_left_on_positive_y():

@@ -4,26 +4,17 @@ from __future__ import annotations
 
 import warnings
 
-import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from highway_env.road.road import RoadNetwork
 
 import rhs_env  # noqa: F401  (registers the ids)
+from agents.decision import IDLE
 from rhs_env.scene import DENSE_LANDMARKS, LandmarkConfig, get_landmarks, place_roadside_landmarks
 
 DENSE = "rhs-dense-v0"
-SMALL = {  # a coarse scan of a short closed-form surface: seconds, not minutes
-    "antenna": "hologram",
-    "radar": {"scan": {"grid_deg": 5.0}, "rhs": {"elements": 24}, "max_range_m": 60.0},
-    "max_points": 64,
-    "registration": "icp",
-    "max_landmarks": 16,
-    "vehicles_count": 4,
-    "lanes_count": 3,
-    "duration": 4,
-}
+SCENE = {"vehicles_count": 4, "lanes_count": 3, "duration": 4}
 
 
 def _place(config: LandmarkConfig, lanes: int = 3, seed: int = 0):
@@ -65,9 +56,9 @@ def test_defaults_unchanged_and_new_fields_validated():
             LandmarkConfig(**{field: bad})
 
 
-def test_dense_env_registered_with_the_slam_observation():
-    env = gym.make(DENSE, **SMALL)
-    ref = gym.make("rhs-highway-slam-v0", **SMALL)
+def test_dense_env_registered_with_the_slam_observation(small_env):
+    env = small_env(DENSE, **SCENE)
+    ref = small_env("rhs-highway-slam-v0", **SCENE)
     assert env.observation_space == ref.observation_space and env.action_space == ref.action_space
     obs, info = env.reset(seed=0)
     assert env.observation_space.contains(obs)
@@ -75,23 +66,19 @@ def test_dense_env_registered_with_the_slam_observation():
     assert len(get_landmarks(env)) > 5 * len(get_landmarks(ref))
     assert env.unwrapped.landmark_config == DENSE_LANDMARKS
     for _ in range(3):
-        obs, _, _, _, info = env.step(1)
+        obs, _, _, _, info = env.step(IDLE)
     assert env.observation_space.contains(obs) and obs["points_mask"].sum() > 20  # a dense roadside, many points
     assert np.isfinite(info["position_error_m"])
-    env.close()
-    ref.close()
-    over = gym.make(DENSE, **SMALL, landmarks={"post_spacing_m": 5.0})  # merged onto the preset
+    over = small_env(DENSE, **SCENE, landmarks={"post_spacing_m": 5.0})  # merged onto the preset
     over.reset(seed=0)
     assert over.unwrapped.landmark_config == LandmarkConfig(**{**DENSE_LANDMARKS.to_dict(), "post_spacing_m": 5.0})
-    over.close()
 
 
-def test_dense_env_passes_gymnasium_and_sb3_checkers():
+def test_dense_env_passes_gymnasium_and_sb3_checkers(small_env):
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
-    env = gym.make(DENSE, **SMALL)
+    env = small_env(DENSE, **SCENE)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # "env is wrapped", "unconventional shape" notes
         gym_check_env(env)
         sb3_check_env(env, warn=False)
-    env.close()

@@ -7,11 +7,12 @@ import pytest
 import scipy.fft as sfft
 from scipy import stats
 
-from rhs_env.antenna import ScanConfig
+from rhs_env.array_models import ScanConfig
 from rhs_env.detection import beam_footprints, os_alpha_fast, training_step, union_false_alarm
-from rhs_env.point_cloud import make_window, os_cfar_alpha
+from rhs_env.point_cloud import os_cfar_alpha
 from rhs_env.radar import DetectionConfig, LinkBudgetConfig, RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers
+from rhs_env.windows import make_window
 
 
 def _spectra(radar: RadarSystem, scatterers: Scatterers) -> np.ndarray:

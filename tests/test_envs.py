@@ -7,6 +7,7 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import small_env_kwargs
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
 import rhs_env  # noqa: F401  (registers the ids)
@@ -14,11 +15,7 @@ from rhs_env.wrappers import RadarObservation
 
 # Small, fast settings: little traffic, a coarse 5-degree scan of a short RHS.
 SMALL_ENV = {"vehicles_count": 8, "lanes_count": 3, "duration": 20}
-SMALL_RADAR = {
-    "antenna": "hologram",  # closed-form RHS patterns: no pattern library to build
-    "radar": {"scan": {"grid_deg": 5.0}, "rhs": {"elements": 24}, "max_range_m": 80.0},
-    "max_points": 64,
-}
+SMALL_RADAR = small_env_kwargs(slam=False)
 
 
 def make_highway(**kw):

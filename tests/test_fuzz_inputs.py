@@ -24,6 +24,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from bad_input_table import CASES, HW, PAPER, PAPER_KW, SMALL, classify, expected_class, run_case
+from conftest import SMALL_RADAR
 
 import rhs_env  # noqa: F401
 from rhs_env.scan_cli import SceneError, parse_scene
@@ -47,7 +48,7 @@ def test_every_tried_input_has_its_class_of_outcome(case, tmp_path, monkeypatch)
 #: a valid, cheap radar/SLAM configuration: every leaf is a field the fuzzer mutates (the
 #: closed-form hologram antenna: a valid mutation never starts a pattern-library build)
 BASE = {
-    "radar": {"scan": {"grid_deg": 5.0}, "rhs": {"elements": 24}, "max_range_m": 60.0, "antenna": "hologram",
+    "radar": {**SMALL_RADAR, "antenna": "hologram",
               "link": {"tx_power_dbm": 30.0, "add_noise": True}, "detection": {"pfa": 1e-6},
               "estimation": {"max_targets": 4}},
     "max_points": 32,

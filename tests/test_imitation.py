@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 import rhs_env  # noqa: F401  (registers the ids)
+from agents.decision import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER
 from agents.evaluate import evaluate, load_policy, policy_metadata
-from agents.expert import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER, HeadwayDriver, HeadwayDriverConfig
+from agents.expert import HeadwayDriver, HeadwayDriverConfig
 from agents.imitation import EXPERT_KEY, DaggerConfig, Dataset, ExpertActionInfo, agreement, fit
 
 TRUTH = "rhs-highway-v0"

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rhs_env.antenna import RHSConfig, ScanConfig
-from rhs_env.antennas import make_antenna
+from rhs_env.antenna_factory import make_antenna
+from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.patterns import library as L
 from rhs_env.patterns.fast import FastSettings
 from rhs_env.patterns.metrics import pattern_report, sidelobe_directions
@@ -209,7 +209,7 @@ def test_settings_validation_names_field() -> None:
 
 def _side_problem(angle_deg: float = 20.0) -> tuple:
     """Tx half-step data of the default radar at ``angle_deg`` with the Rx hologram fixed."""
-    from rhs_env.antenna import hologram_pattern
+    from rhs_env.array_models import hologram_pattern
     from rhs_env.patterns.metrics import side_matrix
 
     cfg = RHSConfig()

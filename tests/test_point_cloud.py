@@ -2,29 +2,25 @@
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-from rhs_env.antenna import RHSConfig, ScanConfig
-from rhs_env.antennas import make_antenna
+from rhs_env.antenna_factory import make_antenna
+from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.point_cloud import (
     AngleDictionary,
     angle_crb,
     ca_cfar_threshold,
     cfar_alpha,
     local_maxima,
-    make_window,
     omp_angles,
     pointcloud_metrics,
     range_fft,
 )
 from rhs_env.radar import LinkBudgetConfig, RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+from rhs_env.windows import make_window
+from rhs_studies.scenes import landmark_scene
 
 
 def test_range_fft_peak_at_beat_bin():
@@ -80,17 +76,6 @@ def test_pointcloud_metrics():
     assert m2["n_true"] == 2 and m2["n_detected"] == 1
 
 
-def _landmark_scene(rng, n=24):
-    """Static landmarks 10-60 m from the vehicle in every radar's sector, ego moving at 20 m/s."""
-    radar_pos = np.array([[2.5, 0.0], [0.0, 1.0], [-2.5, 0.0], [0.0, -1.0]])
-    bore = np.deg2rad([0.0, 90.0, 180.0, -90.0])
-    r = rng.integers(0, 4, n)
-    rng_m = rng.uniform(10, 60, n)
-    th = bore[r] + np.deg2rad(rng.uniform(-42, 42, n))
-    xy = radar_pos[r] + rng_m[:, None] * np.column_stack([np.cos(th), np.sin(th)])
-    return Scatterers(xy, np.tile([-20.0, 0.0], (n, 1)), np.full(n, 5.0), np.arange(n), np.ones(n, bool))
-
-
 @pytest.mark.parametrize("kind", ["rhs", "phased", "hologram"])
 def test_accuracy_static_landmarks_default_config(kind):
     cfg = RadarConfig() if kind == "rhs" else RadarConfig(antenna=kind)
@@ -98,7 +83,7 @@ def test_accuracy_static_landmarks_default_config(kind):
     scene_rng = np.random.default_rng(11)
     det, sq, false_pts = [], [], []
     for _ in range(6):
-        scene = _landmark_scene(scene_rng)
+        scene = landmark_scene(scene_rng, radar)  # 24 landmarks 10-60 m in the sectors, ego at 20 m/s
         cloud = radar.scan(scene)
         m = radar.metrics(cloud, scene, gate_m=1.0)
         det.append(m["detection_rate"])
@@ -113,7 +98,7 @@ def test_accuracy_static_landmarks_default_config(kind):
 
 
 def test_typical_scene_benchmark_runs(tmp_path):
-    from benchmark_radar import benchmark_radar
+    from rhs_studies.benchmark_radar import benchmark_radar
 
     res = benchmark_radar("hologram", repeats=2, out=tmp_path / "b.json")
     assert (tmp_path / "b.json").exists()
@@ -124,10 +109,9 @@ def test_typical_scene_benchmark_runs(tmp_path):
 def test_refine_passes_reach_the_omp_and_the_profiles_table_flags_a_quality_change(tmp_path):
     """estimation.refine_passes is the OMP's re-refinement count (2, the default, is the former fixed value; 0 gives
     another point cloud of the same echoes); radar_profiles marks a metric outside the two-sample 95 % interval."""
-    import radar_profiles
-    from benchmark_radar import typical_scene
-
     from rhs_env.radar import RadarSystem
+    from rhs_studies import radar_profiles
+    from rhs_studies.scenes import typical_scene
 
     scene, occ = typical_scene(np.random.default_rng(1))
     clouds = {}
@@ -147,10 +131,9 @@ def test_refine_passes_reach_the_omp_and_the_profiles_table_flags_a_quality_chan
 def test_radar_quality_pools_noise_draws_of_the_same_scenes():
     """evaluate(..., noise_draws=k) scans the same scenes k times with independent noise: k x the scenes and
     targets, and its first draw is the single-draw evaluation."""
-    from radar_quality import evaluate
-
-    from rhs_env.antenna import ScanConfig
+    from rhs_env.array_models import ScanConfig
     from rhs_env.radar import RadarConfig
+    from rhs_studies.radar_quality import evaluate
 
     cfg = RadarConfig(scan=ScanConfig(grid_deg=5.0))
     one, two = evaluate(cfg, 2, 0), evaluate(cfg, 2, 0, noise_draws=2)

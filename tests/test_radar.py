@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rhs_env.antenna import RHSConfig, ScanConfig
+from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.radar import DetectionConfig, LinkBudgetConfig, RadarConfig, RadarSystem, WaveformConfig
 from rhs_env.scatterers import Occluders, Scatterers, visible_mask
 

@@ -8,6 +8,7 @@ import warnings
 
 import gymnasium as gym
 import pytest
+from conftest import small_env_kwargs
 
 import rhs_env  # noqa: F401  (registers the ids)
 from rhs_common.validation import build, flat_dict
@@ -34,7 +35,7 @@ FLAT_DEFAULTS = {
 }
 #: a cheap radar env (closed-form antenna, coarse grid): construction only, nothing is scanned
 CHEAP = {"antenna": "hologram", "vehicles_count": 2, "duration": 2}
-CHEAP_RADAR = {"scan": {"grid_deg": 5.0}, "rhs": {"elements": 24}, "max_range_m": 60.0}
+CHEAP_RADAR = small_env_kwargs(slam=False)["radar"]
 
 
 def _build(value, path="radar"):

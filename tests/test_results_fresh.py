@@ -1,4 +1,4 @@
-"""Results cannot silently disagree with the code (``scripts/_provenance.py`` explains the design).
+"""Results cannot silently disagree with the code (``rhs_studies/provenance.py`` explains the design).
 
 * every script's small-config ``fingerprint()`` still gives the hash recorded in
   ``results/fingerprints.json``; if not, the results it guards are stale;
@@ -11,18 +11,15 @@
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
-sys.path.insert(0, str(SCRIPTS))
+from rhs_studies import provenance as prov
+from rhs_studies import reproduce, update_readme
 
-import _provenance as prov  # noqa: E402
-import reproduce  # noqa: E402
-import update_readme  # noqa: E402
+SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
 
 RESULTS = prov.RESULTS
 OUTPUTS = ("fingerprints.json",)
@@ -161,7 +158,7 @@ def test_values_outside_the_tolerance():
 
 
 def test_the_tolerance_rule_on_measured_spreads():
-    import fingerprint_tolerance as ft
+    from rhs_studies import fingerprint_tolerance as ft
 
     recorded = [1.0, 2.0, 1e-9, 10.0]
     runs = {"native": [1.0, 2.0, 1e-9, 10.0], "avx2-machine": [1.00001, 2.0, 3e-9, 12.0]}

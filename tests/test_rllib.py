@@ -16,6 +16,7 @@ import json
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import small_env_kwargs, tiny_hyperparams
 
 pytest.importorskip("ray.rllib", reason="Ray RLlib is an optional extra: pip install -e '.[rllib]'")
 torch = pytest.importorskip("torch")
@@ -26,31 +27,9 @@ from agents.rllib import CHECKPOINT_DIR, RLlibPolicy, is_rllib_checkpoint  # noq
 from rhs_slam.cli import main as cli_main  # noqa: E402
 
 SLAM = "rhs-highway-slam-v0"
-SMALL = {
-    "antenna": "hologram",
-    "radar": {"scan": {"grid_deg": 5.0}, "rhs": {"elements": 24}, "max_range_m": 80.0},
-    "max_points": 64,
-    "max_landmarks": 16,
-    "registration": "icp",
-    "vehicles_count": 5,
-    "lanes_count": 3,
-    "duration": 4,
-}
-TINY = """
-rhs-highway-slam-v0:
-  policy: MultiInputPolicy
-  n_envs: 1
-  n_timesteps: 64
-  n_steps: 64
-  batch_size: 32
-  n_epochs: 2
-  learning_rate: 3.0e-4
-  gamma: 0.9
-  policy_kwargs:
-    features_extractor_class: point_set
-    features_extractor_kwargs: {point_dim: 16, box_dim: 8}
-    net_arch: [16]
-"""
+SMALL = small_env_kwargs(vehicles_count=5, lanes_count=3, duration=4)
+TINY = tiny_hyperparams(SLAM, n_envs=1, n_timesteps=64, n_steps=64, batch_size=32, n_epochs=2, learning_rate=3.0e-4,
+                        gamma=0.9)
 
 
 @pytest.fixture(scope="module")

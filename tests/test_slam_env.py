@@ -8,25 +8,20 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import small_env_kwargs
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
 import rhs_env  # noqa: F401  (registers the ids)
+from agents.decision import IDLE
 from rhs_env.wrappers import RadarObservation
 from slam.wrapper import SlamObservation
 
 HIGHWAY_SLAM = "rhs-highway-slam-v0"
 PAPER = "rhs-paper-v0"
-IDLE = 1  # DiscreteMetaAction: keep lane and speed
 
 # Small and fast: a coarse 5-degree scan (I = 18 slots) of a short closed-form RHS, few
 # vehicles, ICP registration (the CNN weights are trained separately).
-SMALL = {
-    "antenna": "hologram",
-    "radar": {"scan": {"grid_deg": 5.0}, "rhs": {"elements": 24}, "max_range_m": 80.0},
-    "max_points": 64,
-    "registration": "icp",
-    "max_landmarks": 16,
-}
+SMALL = small_env_kwargs()
 SMALL_SCENE = {
     HIGHWAY_SLAM: {"vehicles_count": 6, "lanes_count": 3, "duration": 20},
     PAPER: {},

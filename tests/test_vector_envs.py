@@ -16,13 +16,13 @@ import time
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import small_env_kwargs
 
 import rhs_env  # noqa: F401  (registers the ids)
 
 IDS = ("rhs-highway-v0", "rhs-highway-radar-v0", "rhs-highway-slam-v0", "rhs-paper-v0")
 STEPS_PER_EPISODE = 2
-RADAR = {"radar": {"scan": {"grid_deg": 5.0}, "rhs": {"elements": 24}, "max_range_m": 60.0}, "antenna": "hologram",
-         "max_points": 32}
+RADAR = small_env_kwargs(slam=False, max_points=32)
 SLAM = {"slam": {"n_particles": 8}, "max_landmarks": 8}
 
 

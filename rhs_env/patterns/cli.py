@@ -45,7 +45,7 @@ def _table(rows: list[dict[str, float]]) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from rhs_common.validation import check_output_path
-    from rhs_env.antenna import RHSConfig, ScanConfig
+    from rhs_env.array_models import RHSConfig, ScanConfig
     from rhs_env.patterns.library import build_library, estimate_build_s, get_library, load
     from rhs_env.patterns.metrics import pattern_report
 

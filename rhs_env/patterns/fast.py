@@ -75,7 +75,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from rhs_common.validation import check_bool, check_int, check_range, check_types
-from rhs_env.antenna import RHSConfig, ScanConfig, hologram_pattern
+from rhs_env.array_models import RHSConfig, ScanConfig, hologram_pattern
 from rhs_env.parallel import parallel_map
 from rhs_env.patterns.metrics import (
     FINE_GRID_POINTS,

@@ -30,8 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from rhs_common.validation import check_choice
-from rhs_env.antenna import RHSConfig, ScanConfig, check_amplitudes, config_json
+from rhs_common.validation import check_choice, config_json
+from rhs_env.array_models import RHSConfig, ScanConfig, check_amplitudes
 
 METHODS = ("fast", "sdr")
 DATA_DIR = Path(__file__).resolve().parent / "data"

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rhs_env.antenna import RHSConfig, rhs_antenna
+from rhs_env.array_models import RHSConfig, rhs_antenna
 
 FINE_GRID_POINTS = 8001  # points in sin(theta) over [-1, 1] for PSLR / pointing
 
@@ -158,7 +158,7 @@ def pattern_report(
     """Evaluate every grid: main-lobe gain, PSLR and pointing error on a fine sin(theta) grid.
 
     The fine grid has ``fine_points`` uniform samples of ``s`` in [-1, 1] plus every
-    grid centre; gains come from :class:`rhs_env.antenna.ArrayAntenna` (normalised).
+    grid centre; gains come from :class:`rhs_env.array_models.ArrayAntenna` (normalised).
     ``delta`` is evaluated on the optimisation set D of :func:`sidelobe_directions`.
     """
     angles_deg = np.atleast_1d(np.asarray(angles_deg, dtype=float))

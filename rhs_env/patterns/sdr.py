@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from rhs_common.validation import check_choice, check_int, check_range, check_types
-from rhs_env.antenna import RHSConfig, ScanConfig
+from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.parallel import parallel_map
 from rhs_env.patterns.metrics import side_matrix, sidelobe_directions
 

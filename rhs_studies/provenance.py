@@ -1,6 +1,6 @@
 """Provenance and fingerprints of everything under ``results/``: a results file cannot silently disagree with the code.
 
-Every script that writes ``results/*.json`` imports this module (``from _provenance import ...``).
+Every script that writes ``results/*.json`` imports this module (``from rhs_studies.provenance import ...``).
 
 **Provenance.** :func:`write_json` adds a ``"provenance"`` block to the result:
 ``commit`` (``git rev-parse HEAD`` when the script started; once the results file is committed,

@@ -26,7 +26,6 @@ twins in different directions, so the two-way pattern can suppress both.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -286,20 +285,3 @@ def phased_array(config: RHSConfig, angles_deg: np.ndarray, elements: int | None
     pos = 0.5 * np.arange(m_pa)
     w = np.conj(steering(pos, np.deg2rad(angles_deg)))
     return ArrayAntenna("phased", pos, w, w.copy(), angles_deg, config.wavelength, meta={"elements": m_pa})
-
-
-def config_json(*parts: dict[str, Any]) -> str:
-    """Canonical JSON of merged config dicts (sorted keys), the input of config hashes.
-
-    A numpy scalar is written as the Python number of the same value (``np.float32(5.0)`` as ``5.0``).
-    """
-    merged: dict[str, Any] = {}
-    for p in parts:
-        merged.update(p)
-    return json.dumps(merged, sort_keys=True, separators=(",", ":"), default=_json_number)
-
-
-def _json_number(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    raise TypeError(f"Object of type {type(value).__name__} is not JSON serializable")

@@ -1,6 +1,6 @@
 """The antenna kinds a radar can carry, built by name: ``rhs`` | ``phased`` | ``random`` | ``hologram``.
 
-Sits above :mod:`rhs_env.antenna` (the array models) and :mod:`rhs_env.patterns`
+Sits above :mod:`rhs_env.array_models` (the array models) and :mod:`rhs_env.patterns`
 (the optimised RHS patterns, which need the array models), so neither imports the other's user.
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from rhs_common.validation import check_choice
-from rhs_env.antenna import (
+from rhs_env.array_models import (
     ANTENNA_KINDS,
     ArrayAntenna,
     RHSConfig,

@@ -1,0 +1,23 @@
+"""The range tapers of the FMCW matched filter, by name.
+
+``WINDOWS`` are the names a :class:`rhs_env.radar_config.WaveformConfig` accepts;
+:func:`make_window` builds one (scipy's symmetric forms). Both the config (its
+processing gain, :meth:`rhs_env.radar_config.RadarConfig.unit_gain_snr`) and the
+point-cloud code (the range FFT) use them, so they sit below both.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import get_window
+
+WINDOWS = ("hann", "hamming", "blackman", "boxcar", "taylor")
+
+
+def make_window(name: str, n: int) -> np.ndarray:
+    """Real taper of length n, float32 (``taylor``: 4 nearly equal sidelobes at -35 dB)."""
+    if name == "taylor":
+        w = get_window(("taylor", 4, 35), n, fftbins=False)
+    else:
+        w = get_window(name, n, fftbins=False)
+    return np.asarray(w, dtype=np.float32)

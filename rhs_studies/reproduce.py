@@ -1,0 +1,265 @@
+"""Regenerate every file in ``results/`` and the pages that show them, or only some of them.
+
+Each step runs one script (a subprocess, single-threaded BLAS) with the options that
+made the published numbers, then ``scripts/update_readme.py`` copies the tables into
+the documentation's results pages (``docs/results/``) and the README's headline table.
+The run-time estimate comes from the ``provenance.wall_s`` each results file recorded
+(``STEPS[*].guess_s`` where none is recorded yet); the progress bar advances in
+estimated seconds.
+
+    python scripts/reproduce.py --list                     # steps, their state and estimated time
+    python scripts/reproduce.py                            # everything (hours: trains the CNN and the policies)
+    python scripts/reproduce.py --only fig5b fig5c         # some steps
+    python scripts/reproduce.py --only slam_accuracy_before   # 'before' records run only when named
+    python scripts/reproduce.py --fingerprints-only --only fig5a --reason "SLAM proposal changed; full rerun at the end"
+
+``--fingerprints-only`` reruns only the small-config fingerprints (seconds each) and,
+with ``--reason``, records those that changed in ``results/fingerprints.json``. That
+does not make the old numbers fresh: their results files keep the fingerprint of the
+code that produced them, so they show as *unverified* (with the reason) on their pages
+until the step is rerun. See ``rhs_studies/provenance.py`` for the design.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+import json
+import os
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from rhs_studies.provenance import (
+    RESULTS,
+    ROOT,
+    compute_fingerprint,
+    fingerprint_matches,
+    load_fingerprints,
+    record_fingerprint,
+    script_name,
+    verification,
+)
+
+SCRIPTS = ROOT / "scripts"
+
+
+@dataclass(frozen=True)
+class Step:
+    """One script run: ``python scripts/<script> <args>`` writing ``results/<results>``."""
+
+    name: str
+    script: str
+    args: tuple[str, ...] = ()
+    results: tuple[str, ...] = ()
+    guess_s: float = 600.0  # estimate (s, quiet 2-core machine) when no results file recorded a run time
+    note: str = ""
+    env: dict = field(default_factory=dict)
+    #: why the script has no ``fingerprint()`` (timings, or a training run that takes minutes even when tiny)
+    no_fingerprint: str = ""
+    #: run only when named with ``--only`` (historical 'before' records of a change)
+    on_request: bool = False
+    #: another environment's Python, relative to the repository (an optional extra that conflicts with the base pins)
+    python: str = ""
+
+
+#: every results file and the step that writes it, in dependency order (libraries and weights first)
+STEPS: tuple[Step, ...] = (
+    Step("patterns_build", "build_patterns.py", ("--json", "results/patterns_build.json"),
+         ("patterns_build.json",), 200, "rebuilds the shipped pattern libraries"),
+    Step("patterns_sidelobe_limits", "pattern_sidelobe_limits.py",
+         ("--caps", "-16.5", "-18", "-20", "--angles", "12.5", "13.5", "17.5", "18.5", "25.5", "36.5", "37.5", "38.5",
+          "39.5", "40.5", "41.5", "42.5", "43.5", "44.5"), ("patterns_sidelobe_limits.json",), 1200,
+         "the 14 one-degree grids worse than -20 dB, optimised under tighter caps"),
+    Step("patterns_sdr_vs_fast", "compare_pattern_methods.py", (), ("patterns_sdr_vs_fast.json",), 260),
+    Step("registration", "train_registration.py", ("--no-progress",), ("registration.json",), 400,
+         "retrains the shipped CNN weights"),
+    Step("fig5a", "fig5a_slam_rmse.py", ("--seeds", "20", "--powers", "30", "20", "10", "0", "-10", "--workers", "2",
+                                   "--no-progress"),
+         ("fig5a.json",), 900),
+    Step("fig5b", "fig5b_pointcloud_vs_elements.py", ("--elements", "20", "40", "60", "80", "--grids", "1", "2", "5"),
+         ("fig5b.json",), 1800),
+    Step("fig5c", "fig5c_trajectory_map.py", ("--no-progress",), ("fig5c.json",), 60),
+    Step("registration_in_loop", "registration_in_loop.py", ("--no-progress",), ("registration_in_loop.json",), 900),
+    Step("radar_quality", "radar_quality.py", ("--out", "results/radar_quality_after.json"),
+         ("radar_quality_after.json",), 300),
+    Step("radar_profiles", "radar_profiles.py", ("--no-progress", "--out", "results/radar_profiles.json"),
+         ("radar_profiles.json",), 900, "speed against quality of the processing settings"),
+    Step("radar_quality_before", "radar_quality.py", ("--fidelity", "iq", "--out", "results/radar_quality_before.json"),
+         ("radar_quality_before.json",), 600, on_request=True, no_fingerprint="the 'before' record of the radar change, kept "
+         "for comparison: measured on the code before it; the command is its closest equivalent at HEAD"),
+    Step("slam_accuracy", "slam_accuracy.py", ("--no-progress",), ("slam_accuracy.json",), 1800),
+    Step("slam_accuracy_before", "slam_accuracy.py",
+         ("--slam", '{"variant": "fastslam1", "association": "nearest", "measurement_noise": "fixed"}',
+          "--out", "results/slam_accuracy_before", "--no-progress"),
+         ("slam_accuracy_before.json",), 1800, on_request=True, no_fingerprint="the 'before' record of the SLAM change, "
+         "kept for comparison: measured on the code before it; the command is the first-round model at HEAD"),
+    Step("train_policy", "train_policy.py", ("--no-progress", "--algo", "dagger", "--only", "slam", "truth",
+                                             "truth_all_around", "slam_rhs", "slam_phased", "dense", "dense_phased"),
+         ("train_policy.json",), 7200,
+         "trains the DAgger policies (PPO: --algo ppo)", no_fingerprint="a record of training runs (timesteps, wall time); "
+         "what the policies do is fingerprinted by the policies step"),
+    Step("policies", "evaluate_policies.py", (), ("policies.json",), 220),
+    Step("crash_analysis", "crash_analysis.py", (), ("crash_analysis.json",), 700,
+         "the shipped radar + SLAM student's crashes against the expert's labels"),
+    Step("detection_curves", "detection_curves.py", (), ("detection_curves.json",), 600),
+    Step("low_snr_slam", "low_snr_slam.py", ("--seeds", "100", "101", "102", "103", "104", "105", "106", "107"),
+         ("low_snr_slam.json",), 900),
+    Step("claim_study", "claim_study.py", (), ("claim_study.json",), 3600,
+         "point-cloud, element and SLAM levels; resumes from results/claim_study_cache_*.jsonl"),
+    Step("ablations", "ablate_policy.py", ("--fresh",), ("ablations.json",), 4500,
+         "short PPO and DAgger ablations (ablate_policy.REPRODUCE)",
+         no_fingerprint="a record of training runs (minutes each even when tiny); "
+         "the policies they make are evaluated on the same seeds as the policies step"),
+    Step("benchmark_radar", "benchmark_radar.py", (), ("benchmark_radar.json",), 60, "timings",
+         no_fingerprint="timings"),
+    Step("benchmark", "benchmark.py", ("--out", "results/benchmark.json"), ("benchmark.json",), 900, "timings",
+         no_fingerprint="timings"),
+    Step("benchmark_rllib", "benchmark_rllib.py", (), ("benchmark_rllib.json",), 300,
+         "timings; in the rllib environment (docs/usage/training.md: Ray RLlib)", no_fingerprint="timings",
+         python=".venv-rllib/bin/python"),
+)
+BY_NAME = {s.name: s for s in STEPS}
+
+
+def step_for_result(result_name: str) -> Step | None:
+    """The step that writes ``results/<result_name>`` (``fig5a.json`` or ``fig5a``)."""
+    stem = Path(result_name).stem
+    return next((s for s in STEPS if any(Path(r).stem == stem for r in s.results)), None)
+
+
+def load_script(script: str):
+    """The module of ``scripts/<script>``: :mod:`rhs_studies.<name>` for the studies the script launches, else the
+    script file itself imported as a module (the scripts that are not yet in the kit)."""
+    name = Path(script).stem
+    if importlib.util.find_spec(f"rhs_studies.{name}") is not None:
+        return importlib.import_module(f"rhs_studies.{name}")
+    if name in sys.modules:
+        return sys.modules[name]
+    spec = importlib.util.spec_from_file_location(name, SCRIPTS / script)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod  # dataclasses resolve their annotations through sys.modules
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def fingerprint_fn(step: Step):
+    """The step's ``fingerprint()`` function, or None (timings have none)."""
+    return getattr(load_script(step.script), "fingerprint", None)
+
+
+def recorded_seconds(step: Step) -> float | None:
+    """Run time recorded by the step's last run (``provenance.wall_s``), or None."""
+    for r in step.results:
+        try:
+            data = json.loads((RESULTS / r).read_text())
+        except (OSError, ValueError):
+            continue
+        prov = (data.get("provenance") if isinstance(data, dict) else None) or {}
+        if (prov.get("config") or {}).get("report_only"):
+            continue  # written from a cache: its wall time is not the step's
+        if prov.get("wall_s") is not None:
+            return float(prov["wall_s"])
+    return None
+
+
+def estimate(step: Step) -> float:
+    return recorded_seconds(step) or step.guess_s
+
+
+def _hms(s: float) -> str:
+    return f"{int(s // 3600)}h{int(s % 3600 // 60):02d}m" if s >= 3600 else f"{int(s // 60)}m{int(s % 60):02d}s"
+
+
+def list_steps(steps: list[Step]) -> None:
+    fps = load_fingerprints()
+    for s in steps:
+        state = "; ".join(f"{r}: {'verified' if ok else 'UNVERIFIED'} ({why})"
+                          for r in s.results for ok, why in [verification(RESULTS / r, fps)])
+        src = "recorded" if recorded_seconds(s) else "guess"
+        print(f"{s.name:22s} ~{_hms(estimate(s)):>8s} ({src})  scripts/{s.script} {' '.join(s.args)}\n"
+              f"{'':24s}{state}" + (f"  [{s.note}]" if s.note else ""))
+    print(f"total estimate: {_hms(sum(estimate(s) for s in steps))}")
+
+
+def run_steps(steps: list[Step], progress: bool) -> int:
+    from tqdm import tqdm
+
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+           "MPLBACKEND": "Agg", "SDL_VIDEODRIVER": "dummy",
+           "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
+    total = sum(estimate(s) for s in steps)
+    print(f"reproduce: {len(steps)} step(s), estimated {_hms(total)}", flush=True)
+    failed = []
+    with tqdm(total=round(total), unit="s", desc="reproduce (estimated s)", disable=not progress) as bar:
+        for s in steps:
+            bar.set_postfix_str(s.name)
+            t0 = time.time()
+            python = str(ROOT / s.python) if s.python else sys.executable
+            if not Path(python).exists():
+                failed.append(s.name)
+                tqdm.write(f"reproduce: {s.name} needs {s.python} (see its note: {s.note}); skipped")
+                continue
+            cmd = [python, str(SCRIPTS / s.script), *s.args]
+            proc = subprocess.run(cmd, cwd=ROOT, env={**env, **s.env}, check=False)
+            bar.update(round(estimate(s)))
+            if proc.returncode != 0:
+                failed.append(s.name)
+                tqdm.write(f"reproduce: {s.name} failed (exit {proc.returncode}) after {_hms(time.time() - t0)}")
+    subprocess.run([sys.executable, str(SCRIPTS / "update_readme.py")], cwd=ROOT, check=False)
+    if failed:
+        print(f"reproduce: failed steps: {', '.join(failed)}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def refresh_fingerprints(steps: list[Step], reason: str | None) -> int:
+    """Recompute the fingerprints; with ``reason``, record the changed ones (their results become unverified)."""
+    fps = load_fingerprints()
+    changed = []
+    for s in steps:
+        fn = None if s.no_fingerprint else fingerprint_fn(s)
+        if fn is None:
+            continue
+        fp = compute_fingerprint(fn)
+        key = script_name(s.script)
+        entry = fps.get(key)
+        same, why = fingerprint_matches(entry, fp["values"]) if entry else (False, "none recorded")
+        state = f"within tolerance ({why})" if same else f"CHANGED ({why})"
+        print(f"{s.name:22s} {fp['seconds']:6.1f} s  {state}")
+        if not same:
+            changed.append(s.name)
+            if reason:
+                record_fingerprint(key, fp, list(s.results), f"refreshed without rerun: {reason}")
+    if changed and not reason:
+        print("fingerprints changed: rerun those steps (python scripts/reproduce.py --only "
+              f"{' '.join(changed)}) or record the change with --reason", file=sys.stderr)
+        return 1
+    if changed:
+        subprocess.run([sys.executable, str(SCRIPTS / "update_readme.py")], cwd=ROOT, check=False)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--only", nargs="+", choices=tuple(BY_NAME), help="run these steps only")
+    ap.add_argument("--skip", nargs="+", choices=tuple(BY_NAME), default=[], help="leave these steps out")
+    ap.add_argument("--list", action="store_true", help="list the steps, their state and estimated time")
+    ap.add_argument("--fingerprints-only", action="store_true", help="recompute the small-config fingerprints only")
+    ap.add_argument("--reason", default=None, help="with --fingerprints-only: record changed fingerprints, why")
+    ap.add_argument("--no-progress", action="store_true")
+    a = ap.parse_args(argv)
+    steps = [s for s in STEPS if (s.name in a.only if a.only else not s.on_request) and s.name not in a.skip]
+    if a.list:
+        list_steps(steps)
+        return 0
+    if a.fingerprints_only:
+        return refresh_fingerprints(steps, a.reason)
+    return run_steps(steps, not a.no_progress)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,249 @@
+"""Copy measured results from ``results/`` into README.md and the documentation pages.
+
+Each block between ``<!-- results:NAME -->`` and ``<!-- /results:NAME -->`` in README.md
+or in a page under ``docs/`` is replaced by ``results/NAME.md`` (written by the script that
+measured it), so every number shown comes from a script a user can run. A heading on the
+file's first line is dropped: the page around the block has its own. Blocks whose file
+does not exist are left as they are.
+
+Two blocks are built here from the results JSONs instead of copied: ``headline`` (the
+README's short table of headline results, each row linking to its results page) and
+``unverified`` (the list of results not verified against the code).
+
+When ``results/NAME.json`` is not verified against the code (written before provenance
+existed, or the code's fingerprint changed since the run, see ``rhs_studies/provenance.py``),
+the block ends with a visible warning saying why and which step to rerun.
+
+    python scripts/update_readme.py            # rewrite README.md and docs/**/*.md in place
+    python scripts/update_readme.py --check    # exit 1 if any of them is out of date
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+from rhs_studies.provenance import load_fingerprints, verification
+
+ROOT = Path(__file__).resolve().parent.parent
+
+DOCS = ROOT / "docs"
+BLOCK = re.compile(r"(<!-- results:(?P<name>[\w.-]+) -->\n)(?P<body>.*?)(<!-- /results:(?P=name) -->)", re.DOTALL)
+
+
+def pages(root: Path = ROOT) -> list[Path]:
+    """The files whose result blocks this script fills: README.md and every page under docs/."""
+    return [root / "README.md", *sorted((root / "docs").rglob("*.md"))]
+
+
+def warning(name: str, results_dir: Path, fingerprints: dict) -> str:
+    """A warning line when ``results/NAME.json`` is unverified, else ``""``."""
+    from rhs_studies.reproduce import step_for_result
+
+    f = results_dir / f"{name}.json"
+    if not f.exists():
+        return ""
+    ok, why = verification(f, fingerprints)
+    if ok:
+        return ""
+    step = step_for_result(name)
+    rerun = f"python scripts/reproduce.py --only {step.name}" if step else "its script"
+    return f"\n> **Unverified:** {why}. These numbers may not match the code; rerun `{rerun}`.\n"
+
+
+HEADING = re.compile(r"\A#{1,6} [^\n]*\n+")
+
+
+def block_text(md: str) -> str:
+    """A results ``.md`` as a page block: without its leading heading (the page's section has one)."""
+    return HEADING.sub("", md.strip(), count=1).rstrip()
+
+
+# --------------------------------------------------------------------------- the headline table
+#: the docs page of each study, relative to the repository root (the README links to them)
+PAGE = {
+    "fig5a": "docs/results/fig5a.md",
+    "slam_accuracy": "docs/results/slam-accuracy.md",
+    "registration": "docs/results/registration.md",
+    "policies": "docs/results/driving.md",
+    "benchmark": "docs/results/speed.md",
+    "detection_curves": "docs/results/detection.md",
+}
+
+
+def _load(results_dir: Path, name: str) -> dict:
+    return json.loads((results_dir / f"{name}.json").read_text())
+
+
+def _fig5a(d: dict) -> tuple[str, str]:
+    r = next(x for x in d["ratios"] if x["antenna"] == "rhs" and x["tx_power_dbm"] == max(d["settings"]["powers_dbm"]))
+    return (f"SLAM vehicle RMSE, RHS / same-cost phased array (paper scene, {r['tx_power_dbm']:g} dBm)",
+            f"{r['vehicle_rmse_ratio']:.2f} (paper: {d['paper_ratio']:.2f})")
+
+
+def _dense(d: dict) -> tuple[str, str]:
+    s = d["parts"]["dense"]["summary"]
+    return ("SLAM trajectory error, RHS / phased array, landmark pairs a few degrees apart",
+            f"{s['ratio_rhs_phased']['mean']:.3f} ± {s['ratio_rhs_phased']['ci95']:.3f} "
+            f"({s['rhs_ate_m']['mean']:.3f} m vs {s['phased_ate_m']['mean']:.2f} m)")
+
+
+def _highway(d: dict) -> tuple[str, str]:
+    s = d["parts"]["highway"]["summary"]
+    n = d["parts"]["highway"]["summary"]["position_rmse_m"]["n"]
+    return (f"SLAM position RMSE on the highway env ({s['cycles']['mean']:.0f} cycles, {n} seeds)",
+            f"{s['position_rmse_m']['mean']:.3f} ± {s['position_rmse_m']['ci95']:.3f} m")
+
+
+def _registration(d: dict) -> tuple[str, str]:
+    return ("Scan registration on held-out pairs, translation RMSE: ICP / the paper's CNN",
+            f"{d['icp']['translation_rmse_m']:.3f} m / {d['cnn']['translation_rmse_m']:.3f} m")
+
+
+def _detection(d: dict) -> tuple[str, str]:
+    import numpy as np
+
+    from rhs_studies.detection_curves import snr_at
+
+    def snr(detector: str) -> str:
+        v = snr_at(d["measured"]["rhs"][detector], np.asarray(d["snr_db"], float), 0.9)
+        return "n/a" if v is None else f"{v:.1f} dB"
+
+    return ("SNR for 90 % detection (RHS): beam-matched vs the paper's slot-summed detector",
+            f"{snr('footprint')} vs {snr('summed')}")
+
+
+def _policies(d: dict) -> tuple[str, str]:
+    rows = {r["key"]: r["summary"] for r in d["rows"]}
+    s, slower = rows["slam"], rows["slower"]
+    return (f"Driving on radar + SLAM (shipped DAgger student, {s['episodes']} seeds): return, collisions",
+            f"{s['return']['mean']:.1f}, {s['collisions']}/{s['episodes']} "
+            f"(always-SLOWER: {slower['return']['mean']:.1f}, {slower['collisions']}/{slower['episodes']})")
+
+
+def _benchmark(d: dict) -> tuple[str, str]:
+    e = d["envs"]
+    return ("Env steps per second, radar + SLAM env (ground-truth env), single env, one BLAS thread",
+            f"{e['rhs-highway-slam-v0']['steps_per_s']:.1f} ({e['rhs-highway-v0']['steps_per_s']:.1f})")
+
+
+#: (results file, row builder): the rows of the README's headline table, in order
+HEADLINE: tuple[tuple[str, Callable[[dict], tuple[str, str]]], ...] = (
+    ("fig5a", _fig5a),
+    ("slam_accuracy", _dense),
+    ("slam_accuracy", _highway),
+    ("registration", _registration),
+    ("detection_curves", _detection),
+    ("policies", _policies),
+    ("benchmark", _benchmark),
+)
+
+
+def headline(results_dir: Path, fingerprints: dict) -> str | None:
+    """The README's headline table from the results JSONs (None when one is missing)."""
+    lines = ["| result | measured | details |", "|---|---|---|"]
+    unverified = []
+    for name, row in HEADLINE:
+        if not (results_dir / f"{name}.json").exists():
+            return None
+        what, value = row(_load(results_dir, name))
+        lines.append(f"| {what} | {value} | [{Path(PAGE[name]).stem}]({PAGE[name]}) |")
+        ok, why = verification(results_dir / f"{name}.json", fingerprints)
+        if not ok and name not in unverified:
+            unverified.append(name)
+    text = "\n".join(lines)
+    for name in unverified:
+        text += warning(name, results_dir, fingerprints)
+    return text
+
+
+def unverified_list(results_dir: Path, fingerprints: dict) -> str:
+    """Every results JSON that is not verified against the code, with the reason."""
+    rows = []
+    for f in sorted(results_dir.glob("*.json")):
+        if f.name == "fingerprints.json" or f.name.endswith(".partial.json"):
+            continue
+        ok, why = verification(f, fingerprints)
+        if not ok:
+            rows.append(f"- `results/{f.name}`: {why}.")
+    return "\n".join(rows) if rows else "Every result is verified against the code."
+
+
+def tolerance_table(results_dir: Path, fingerprints: dict) -> str | None:
+    """Each fingerprint's measured spread and tolerance (``scripts/fingerprint_tolerance.py``), one row a step."""
+    rows = ["| fingerprint | values | largest round-off spread | rtol | atol | values allowed to flip |",
+            "|---|---:|---:|---:|---:|---:|"]
+    for name, fp in sorted(fingerprints.items()):
+        tol = fp.get("tolerance")
+        if not tol:
+            rows.append(f"| `{name}` | {len(fp['values'])} | not measured | | | |")
+            continue
+        spread = max(v["max_rel"] for v in tol["spread"].values())
+        rows.append(f"| `{name}` | {len(fp['values'])} | {spread:.1e} | {tol['rtol']:.1e} | {tol['atol']:.1e} "
+                    f"| {tol['max_outside']} |")
+    return "\n".join(rows) if fingerprints else None
+
+
+GENERATED: dict[str, Callable[[Path, dict], str | None]] = {"headline": headline, "unverified": unverified_list,
+                                                             "tolerances": tolerance_table}
+
+
+def figure_links(md: str, page: Path | None) -> str:
+    """``md`` with its links to ``results/NAME.png`` made relative to ``page``.
+
+    A results ``.md`` links its figures from the repository root (``results/NAME.png``), as
+    README.md does. On the documentation site those figures are served as
+    ``results/NAME.png`` beside the results pages (``docs/hooks/site.py``), so a page under
+    ``docs/`` links them relative to its own folder.
+    """
+    if page is None or DOCS not in page.parents:
+        return md
+    rel = Path(os.path.relpath(DOCS / "results", page.parent)).as_posix()
+    return md.replace("](results/", "](" + ("" if rel == "." else rel + "/"))
+
+
+def render(text: str, results_dir: Path, page: Path | None = None) -> str:
+    """``text`` (the contents of ``page``) with every results block filled from ``results_dir``."""
+    fingerprints = load_fingerprints(results_dir / "fingerprints.json")
+
+    def sub(m: re.Match) -> str:
+        name = m.group("name")
+        if name in GENERATED:
+            body = GENERATED[name](results_dir, fingerprints)
+            return m.group(0) if body is None else f"{m.group(1)}{body.rstrip()}\n{m.group(4)}"
+        f = results_dir / f"{name}.md"
+        if not f.exists():
+            return m.group(0)
+        warn = warning(name, results_dir, fingerprints)
+        return f"{m.group(1)}{figure_links(block_text(f.read_text()), page)}\n{warn}{m.group(4)}"
+
+    return BLOCK.sub(sub, text)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--check", action="store_true", help="only check that the pages are up to date")
+    args = ap.parse_args()
+    stale = []
+    for page in pages():
+        old = page.read_text()
+        new = render(old, ROOT / "results", page)
+        if new == old:
+            continue
+        stale.append(page.relative_to(ROOT))
+        if not args.check:
+            page.write_text(new)
+            print(f"updated {page.relative_to(ROOT)}")
+    if args.check and stale:
+        print(f"{', '.join(map(str, stale))} out of date with results/: run python scripts/update_readme.py", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
