@@ -26,7 +26,9 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
+from rhs_common.geometry import apply_motion
 from rhs_common.validation import check_int, check_range, check_types
 from slam.association import estimate_ego_velocity, point_covariance, static_mask
 from slam.rbpf import RBPFSlam, SlamConfig, SlamEstimate
@@ -44,16 +46,70 @@ class PipelineConfig:
     bound), after this many consecutive cycles without such a fit the fit is re-acquired
     without the bound; until then the last velocity holds (an unconstrained fit in dense
     traffic can lock onto a platoon of vehicles). Without a track it re-acquires at once.
+    ``doppler_gate_m`` (0, 1000]: a registration whose translation departs from the Doppler
+    displacement ``R(dpsi / 2) v dt`` by more than this (m) is inconsistent with the odometry
+    (an aliased fit, e.g. guard-rail posts one spacing apart): the Doppler displacement replaces
+    its translation. ``retry_fit_fraction`` [0, 1]: when fewer than this fraction of the current
+    static points lie within the registration's ``min_gate_m`` of a previous point after the fit,
+    the registration is tried again from the heading increments 0 and ``-dpsi_last`` (the turn
+    rate reversed, as in a lane change's second half), and the best fit is kept; 0 disables it.
     """
 
     use_doppler: bool = True
     max_accel_mps2: float = 10.0
     reacquire_after_cycles: int = 5
+    doppler_gate_m: float = 1.0
+    retry_fit_fraction: float = 0.5
 
     def __post_init__(self) -> None:
         check_types(self)
         check_range("max_accel_mps2", self.max_accel_mps2, 0.0, 100.0)
         check_int("reacquire_after_cycles", self.reacquire_after_cycles, 0, 1000)
+        check_range("doppler_gate_m", self.doppler_gate_m, 0.0, 1e3, low_open=True)
+        check_range("retry_fit_fraction", self.retry_fit_fraction, 0.0, 1.0)
+
+
+def forward_speed_fit(points: np.ndarray, threshold: float, min_inliers: int = 2, min_cos: float = 0.3) -> np.ndarray | None:
+    """Ego velocity ``(vx, 0)`` (m/s) from the Doppler of a few points, for a car that moves along its heading.
+
+    A static point at bearing ``b`` has ``vr = -vx cos b`` when the lateral velocity is zero
+    (a car's side slip is small), so each point with ``|cos b| >= min_cos`` proposes
+    ``vx = -vr / cos b``; the proposal that most points fit within ``threshold`` (m/s) wins and is
+    refined by least squares on its inliers. Needs ``min_inliers`` agreeing points (two: the
+    full 2-D fit of :func:`slam.association.estimate_ego_velocity` needs three, and a few
+    landmarks at the start of a drive give fewer). ``None`` without such a consensus.
+    """
+    pts = np.asarray(points, dtype=float)
+    if len(pts) < min_inliers:
+        return None
+    cb = np.cos(np.arctan2(pts[:, 1], pts[:, 0]))
+    use = np.abs(cb) >= min_cos
+    if use.sum() < min_inliers:
+        return None
+    cb, vr = cb[use], pts[use, 2]
+    cand = -vr / cb
+    res = np.abs(vr[None, :] + cand[:, None] * cb[None, :])  # (candidates, points)
+    count = (res <= threshold).sum(axis=1)
+    best = int(np.argmax(count))
+    if count[best] < min_inliers:
+        return None
+    inl = res[best] <= threshold
+    vx = float(-np.sum(vr[inl] * cb[inl]) / np.sum(cb[inl] ** 2))
+    return np.array([vx, 0.0])
+
+
+def doppler_displacement(velocity: np.ndarray, dpsi: float, dt: float) -> np.ndarray:
+    """Motion ``(dx, dy, dpsi)`` over a cycle of ``dt`` s at the vehicle-frame velocity ``velocity`` (m/s).
+
+    Turning by ``dpsi`` at a constant rate with the velocity fixed in the vehicle frame, the
+    displacement in the previous frame is ``(2 sin(dpsi / 2) / dpsi) R(dpsi / 2) v dt``: the
+    chord of the arc, along the mean heading.
+    """
+    half = 0.5 * dpsi
+    chord = 1.0 if abs(half) < 1e-9 else math.sin(half) / half
+    c, s = math.cos(half), math.sin(half)
+    vx, vy = float(velocity[0]) * dt * chord, float(velocity[1]) * dt * chord
+    return np.array([c * vx - s * vy, s * vx + c * vy, dpsi])
 
 
 @dataclass
@@ -105,11 +161,73 @@ class SlamPipeline:
         self.prev_static: np.ndarray | None = None
         self.velocity: np.ndarray | None = None  # (vx, vy, yaw rate), current vehicle frame
         self.last_motion: np.ndarray | None = None
+        self.registration_retried = False  # this cycle's registration was tried from other headings
+        self.registration_gated = False  # this cycle's registration translation failed the Doppler gate
 
-    def _static(self, pts: np.ndarray) -> np.ndarray:
+    def _fit_fraction(self, tree: cKDTree | None, cur: np.ndarray, motion: np.ndarray) -> float:
+        """Fraction of the current points within the registration's ``min_gate_m`` of a previous point."""
+        if tree is None or not len(cur):
+            return 0.0
+        gate = float(getattr(self.registration, "min_gate_m", 0.5))
+        d, _ = tree.query(apply_motion(cur[:, :2], motion), k=1, distance_upper_bound=gate)
+        return float(np.mean(d <= gate))
+
+    def _register(
+        self, prev: np.ndarray, cur: np.ndarray, prior: np.ndarray | None, v_dop: np.ndarray | None, dth: float,
+        dt: float,
+    ) -> tuple[np.ndarray, int]:
+        """Registration motion with the heading retry and the Doppler gate (:class:`PipelineConfig`).
+
+        Returns the motion and the registration's point pairs (``last_pairs``; 1 for a registration
+        that does not report them).
+        """
+        reg = self.registration
+        opts = self.options
+
+        def run(guess: np.ndarray | None) -> tuple[np.ndarray, int]:
+            m = np.asarray(reg.estimate(prev, cur, prior=guess), dtype=np.float64).reshape(3)
+            if not np.all(np.isfinite(m)):
+                m = np.zeros(3)
+            return m, int(getattr(reg, "last_pairs", 1))
+
+        motion, pairs = run(prior)
+        self.registration_retried = False
+        self.registration_gated = False
+        icp_like = hasattr(reg, "last_pairs")
+        if icp_like and prior is not None and opts.retry_fit_fraction > 0 and len(prev) >= 3 and len(cur) >= 3:
+            tree = cKDTree(prev[:, :2])
+            best = self._fit_fraction(tree, cur, motion)
+            if best < opts.retry_fit_fraction:
+                self.registration_retried = True
+                for yaw in (0.0, -dth):
+                    if abs(yaw - prior[2]) < 0.05:
+                        continue
+                    guess = doppler_displacement(v_dop, yaw, dt) if v_dop is not None else np.array([*prior[:2], yaw])
+                    m2, p2 = run(guess)
+                    f2 = self._fit_fraction(tree, cur, m2)
+                    if f2 > best:
+                        motion, pairs, best = m2, p2, f2
+        if v_dop is not None and icp_like:
+            expected = doppler_displacement(v_dop, float(motion[2]), dt)
+            if math.hypot(*(motion[:2] - expected[:2])) > opts.doppler_gate_m:
+                self.registration_gated = True
+                motion = np.array([expected[0], expected[1], motion[2] if pairs > 0 else expected[2]])
+        return motion, pairs
+
+    def _static_mask(self, pts: np.ndarray, sensors: np.ndarray | None) -> np.ndarray:
+        """Points that fit a static scatterer at the current velocity and yaw rate, seen from their radar."""
         if self.use_doppler and self.velocity is not None:
-            return pts[static_mask(pts, self.velocity[:2], self.config.dynamic_threshold_mps)]
-        return pts
+            return static_mask(
+                pts, self.velocity[:2], self.config.dynamic_threshold_mps, yaw_rate=float(self.velocity[2]),
+                sensor_xy=sensors,
+            )
+        return np.ones(len(pts), dtype=bool)
+
+    def _sensors(self, rows: np.ndarray) -> np.ndarray | None:
+        """Each point's radar position (N, 2) in the vehicle frame, or None (every radar at the origin)."""
+        if self.sensor_xy is None or rows.shape[1] < 7 or not len(self.sensor_xy):
+            return None
+        return self.sensor_xy[np.clip(rows[:, 6].astype(int), 0, len(self.sensor_xy) - 1)]
 
     def step(self, points: np.ndarray, dt: float) -> CycleResult:
         """Process cloud ``points`` (N, 4) or (N, 7) (with stds and radar) of a cycle of length ``dt`` (s)."""
@@ -117,13 +235,17 @@ class SlamPipeline:
         rows = rows.reshape(-1, rows.shape[-1] if rows.ndim == 2 and rows.shape[-1] >= 7 else 4)
         cov = point_covariance(rows, self.sensor_xy) if rows.shape[1] >= 7 else None
         pts = rows[:, :4]
+        sensors = self._sensors(rows)
+        # the Doppler model vr = -v . u holds along each radar's own line of sight: fit on the points
+        # seen from their radar (a translation changes no radial velocity)
+        dop = pts if sensors is None else np.column_stack([pts[:, :2] - sensors, pts[:, 2:]])
         thr = self.config.dynamic_threshold_mps
         v_dop = None
         if self.use_doppler:
             # bounded acceleration: the new velocity lies within max_accel * dt of the last one
             prior_v = None if self.velocity is None else self.velocity[:2]
             v_dop = estimate_ego_velocity(
-                pts, 0.5 * thr, self.ransac_rng, prior=prior_v, max_change=self.max_accel_mps2 * dt + thr
+                dop, 0.5 * thr, self.ransac_rng, prior=prior_v, max_change=self.max_accel_mps2 * dt + thr
             )
             self.velocity_misses = 0 if v_dop is not None else self.velocity_misses + 1
             self.velocity_track = self.velocity_track + 1 if v_dop is not None else self.velocity_track
@@ -131,8 +253,19 @@ class SlamPipeline:
             if v_dop is None and prior_v is not None and not established:
                 # no track yet, or lost for a while: re-acquire without the prior (an established track
                 # holds its velocity first: an unconstrained fit in traffic can lock onto a platoon)
-                v_dop = estimate_ego_velocity(pts, 0.5 * thr, self.ransac_rng)
+                v_dop = estimate_ego_velocity(dop, 0.5 * thr, self.ransac_rng)
                 self.velocity_track = 0
+            if v_dop is None:
+                # fewer than three points agree (a few landmarks): a car moves along its heading, so two
+                # points that agree on the forward speed give it, near the last velocity when there is one;
+                # with no velocity at all yet (the first cycles of a sparse scene) one point is taken
+                v_fwd = forward_speed_fit(dop, 0.5 * thr, min_inliers=1 if prior_v is None else 2)
+                near = prior_v is None or (
+                    v_fwd is not None and math.hypot(*(v_fwd - prior_v)) <= self.max_accel_mps2 * dt + thr
+                )
+                if v_fwd is not None and near:
+                    v_dop = v_fwd
+                    self.velocity_misses = 0
         if v_dop is not None:
             self.velocity = np.array([v_dop[0], v_dop[1], 0.0 if self.velocity is None else self.velocity[2]])
         reg_time = 0.0
@@ -140,29 +273,35 @@ class SlamPipeline:
             motion = np.zeros(3)
         else:
             prior = None
+            dth = 0.0 if self.last_motion is None else float(self.last_motion[2])
             if v_dop is not None:  # displacement over the cycle from the Doppler velocity
-                dth = 0.0 if self.last_motion is None else self.last_motion[2]
-                c, s = math.cos(dth), math.sin(dth)
-                prior = np.array([(c * v_dop[0] - s * v_dop[1]) * dt, (s * v_dop[0] + c * v_dop[1]) * dt, dth])
+                prior = doppler_displacement(v_dop, dth, dt)
             elif self.last_motion is not None:
                 prior = self.last_motion.copy()
             t0 = time.perf_counter()
             prev = self.prev_static if self.prev_static is not None else np.zeros((0, 4))
-            motion = np.asarray(self.registration.estimate(prev, self._static(pts), prior=prior), dtype=np.float64).reshape(3)
+            cur = pts[self._static_mask(pts, sensors)]
+            motion, pairs = self._register(prev, cur, prior, v_dop, dth, dt)
             reg_time = time.perf_counter() - t0
-            if not np.all(np.isfinite(motion)):
-                motion = np.zeros(3)
             self.last_motion = motion
             c, s = math.cos(motion[2]), math.sin(motion[2])
-            if v_dop is None:
+            # a registration without point pairs returned its initial guess: it measured nothing, so the
+            # velocity holds (constant velocity) rather than being set from the guess (zero without a prior)
+            measured = pairs > 0
+            if v_dop is None and not measured:
+                pass
+            elif v_dop is None:
                 self.velocity = np.array(
                     [(c * motion[0] + s * motion[1]) / dt, (-s * motion[0] + c * motion[1]) / dt, motion[2] / dt]
                 )
             else:
                 self.velocity = np.array([v_dop[0], v_dop[1], motion[2] / dt])
-        est = self.slam.update(pts, motion, dt, ego_velocity=self.velocity if self.use_doppler else None, cov=cov)
+        # the moving-point filter runs here, with each point's radar (the filter's own one assumes the origin)
+        static = self._static_mask(pts, sensors)
+        est = self.slam.update(pts[static], motion, dt, cov=None if cov is None else cov[static])
+        est.n_static_points = int(static.sum())
         est.stage_times["registration"] = reg_time
-        self.prev_static = self._static(pts)
+        self.prev_static = pts[static]
         self.cycle += 1
         vel = None if self.velocity is None else self.velocity.copy()
         return CycleResult(est, motion, vel, reg_time)
