@@ -28,11 +28,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from rhs_common.geometry import apply_motion
+from rhs_common.geometry import apply_motion, points_in_frame
 from rhs_common.validation import check_int, check_range, check_types
 from slam.association import estimate_ego_velocity, point_covariance, static_mask
+from slam.health import HealthConfig, TrackHealth
 from slam.rbpf import RBPFSlam, SlamConfig, SlamEstimate
-from slam.registration import Registration
+from slam.registration import ICPRegistration, Registration
 
 
 @dataclass(frozen=True)
@@ -53,6 +54,9 @@ class PipelineConfig:
     static points lie within the registration's ``min_gate_m`` of a previous point after the fit,
     the registration is tried again from the heading increments 0 and ``-dpsi_last`` (the turn
     rate reversed, as in a lane change's second half), and the best fit is kept; 0 disables it.
+    ``new_map_after_cycles`` [1, 10^6]: after a loss (:mod:`slam.health`) the filter tries each cycle
+    to relocalise against the map built before it; after this many lost cycles without success it
+    starts a new map at its estimate (a break in the map frame).
     """
 
     use_doppler: bool = True
@@ -60,6 +64,7 @@ class PipelineConfig:
     reacquire_after_cycles: int = 5
     doppler_gate_m: float = 1.0
     retry_fit_fraction: float = 0.5
+    new_map_after_cycles: int = 10
 
     def __post_init__(self) -> None:
         check_types(self)
@@ -67,6 +72,39 @@ class PipelineConfig:
         check_int("reacquire_after_cycles", self.reacquire_after_cycles, 0, 1000)
         check_range("doppler_gate_m", self.doppler_gate_m, 0.0, 1e3, low_open=True)
         check_range("retry_fit_fraction", self.retry_fit_fraction, 0.0, 1.0)
+        check_int("new_map_after_cycles", self.new_map_after_cycles, 1, 1_000_000)
+
+
+#: relocalisation after a loss (:meth:`SlamPipeline._relocalise`): ICP gate (m), heading search (rad)
+#: and its steps, landmarks considered (m from the estimate), points that must fit and their fraction
+RELOC_GATE_M = 5.0
+RELOC_YAW_RAD = 0.6
+RELOC_YAW_STEPS = 24
+RELOC_REACH_M = 100.0
+RELOC_MIN_POINTS = 5
+RELOC_MIN_FRACTION = 0.5
+#: the coarse grid of the relocalisation: along and across the heading (m), heading (rad); cell (m)
+RELOC_GRID = (np.arange(-60.0, 60.5, 1.0), np.arange(-4.0, 4.5, 1.0), np.linspace(-0.4, 0.4, 17))
+RELOC_CELL_M = 0.7
+
+
+def _coarse_search(tree: cKDTree, xy: np.ndarray) -> np.ndarray:
+    """The pose correction ``(dx, dy, dpsi)`` on a grid (``RELOC_GRID``) that puts the most points
+    ``xy`` (N, 2) within ``RELOC_CELL_M`` of a map landmark (``tree``); the start of the ICP refinement."""
+    dxs, dys, yaws = RELOC_GRID
+    best, best_m = -1, np.zeros(3)
+    tx, ty = np.meshgrid(dxs, dys, indexing="ij")
+    tx, ty = tx.ravel(), ty.ravel()
+    for yaw in yaws:
+        c, s = math.cos(yaw), math.sin(yaw)
+        rx, ry = c * xy[:, 0] - s * xy[:, 1], s * xy[:, 0] + c * xy[:, 1]
+        moved = np.stack([rx[None, :] + tx[:, None], ry[None, :] + ty[:, None]], axis=-1)  # (K, N, 2)
+        d, _ = tree.query(moved.reshape(-1, 2), k=1, distance_upper_bound=RELOC_CELL_M)
+        score = (d.reshape(len(tx), len(xy)) <= RELOC_CELL_M).sum(axis=1)
+        k = int(np.argmax(score))
+        if score[k] > best:
+            best, best_m = int(score[k]), np.array([tx[k], ty[k], yaw])
+    return best_m
 
 
 def forward_speed_fit(points: np.ndarray, threshold: float, min_inliers: int = 2, min_cos: float = 0.3) -> np.ndarray | None:
@@ -132,9 +170,11 @@ class SlamPipeline:
         rng: np.random.Generator | None = None,
         options: PipelineConfig | None = None,
         sensor_xy: np.ndarray | None = None,
+        health: HealthConfig | None = None,
     ) -> None:
         """``sensor_xy`` (S, 2): radar positions in the vehicle frame (m) indexed by column 6 of
-        (N, 7) clouds; ``None`` puts every sensor at the vehicle origin."""
+        (N, 7) clouds; ``None`` puts every sensor at the vehicle origin. ``health``: the thresholds of
+        the track-health signal (:mod:`slam.health`)."""
         self.registration = registration
         self.sensor_xy = None if sensor_xy is None else np.asarray(sensor_xy, dtype=float).reshape(-1, 2)
         self.options = options if options is not None else PipelineConfig()
@@ -143,6 +183,10 @@ class SlamPipeline:
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         self.use_doppler = self.options.use_doppler
         self.slam = RBPFSlam(self.config, self.rng)
+        self.health = TrackHealth(health)
+        self._reloc_icp = ICPRegistration(
+            max_gate_m=RELOC_GATE_M, yaw_search_rad=RELOC_YAW_RAD, yaw_search_steps=RELOC_YAW_STEPS
+        )
         self.reset()
 
     def reset(self, rng: np.random.Generator | None = None) -> None:
@@ -163,6 +207,11 @@ class SlamPipeline:
         self.last_motion: np.ndarray | None = None
         self.registration_retried = False  # this cycle's registration was tried from other headings
         self.registration_gated = False  # this cycle's registration translation failed the Doppler gate
+        self.fit_fraction: float | None = None  # current static points near a previous one after the fit
+        self.health.reset()
+        self.distance_since_loss = 0.0  # m driven since the current loss started
+        self.relocalisations = 0
+        self.map_breaks = 0
 
     def _fit_fraction(self, tree: cKDTree | None, cur: np.ndarray, motion: np.ndarray) -> float:
         """Fraction of the current points within the registration's ``min_gate_m`` of a previous point."""
@@ -194,10 +243,11 @@ class SlamPipeline:
         self.registration_retried = False
         self.registration_gated = False
         icp_like = hasattr(reg, "last_pairs")
-        if icp_like and prior is not None and opts.retry_fit_fraction > 0 and len(prev) >= 3 and len(cur) >= 3:
+        self.fit_fraction = None
+        if icp_like and len(prev) >= 3 and len(cur) >= 3:
             tree = cKDTree(prev[:, :2])
-            best = self._fit_fraction(tree, cur, motion)
-            if best < opts.retry_fit_fraction:
+            best = self.fit_fraction = self._fit_fraction(tree, cur, motion)
+            if prior is not None and best < opts.retry_fit_fraction:
                 self.registration_retried = True
                 for yaw in (0.0, -dth):
                     if abs(yaw - prior[2]) < 0.05:
@@ -207,12 +257,69 @@ class SlamPipeline:
                     f2 = self._fit_fraction(tree, cur, m2)
                     if f2 > best:
                         motion, pairs, best = m2, p2, f2
+                self.fit_fraction = best
         if v_dop is not None and icp_like:
             expected = doppler_displacement(v_dop, float(motion[2]), dt)
             if math.hypot(*(motion[:2] - expected[:2])) > opts.doppler_gate_m:
                 self.registration_gated = True
                 motion = np.array([expected[0], expected[1], motion[2] if pairs > 0 else expected[2]])
         return motion, pairs
+
+    def honest_pose_std(self) -> np.ndarray:
+        """The particles' pose std (3,), and while lost at least the loss's spread plus the distance
+        driven since the loss in position (m) and ``pi / 4`` in heading (the offset is unknown)."""
+        est = self.slam.last_estimate
+        std = np.zeros(3) if est is None else np.asarray(est.pose_std, dtype=float).copy()
+        if self.health.lost:
+            floor = self.health.config.spread_lost_m + self.distance_since_loss
+            std = np.maximum(std, [floor, floor, math.pi / 4])
+        return std
+
+    def _relocalise(self, est: SlamEstimate, static_pts: np.ndarray) -> np.ndarray | None:
+        """Correction of the pose that fits the current static points to the map built before the loss.
+
+        The landmarks mapped before the loss (archived ones included) within the radar's reach
+        are moved into the estimated vehicle frame and registered with the points by ICP started
+        from the best cell of a coarse grid search (:func:`_coarse_search`) with a heading search over
+        +-``RELOC_YAW_RAD``; the fit counts when at least
+        ``RELOC_MIN_POINTS`` points and ``RELOC_MIN_FRACTION`` of them lie within 0.5 m of such a
+        landmark. Returns the correction (a motion in the estimated vehicle frame) or None.
+        """
+        xy, ids = self.slam.full_map()
+        old = xy[ids < self.health.loss_landmark_id]
+        if len(old) < RELOC_MIN_POINTS or len(static_pts) < RELOC_MIN_POINTS:
+            return None
+        local = points_in_frame(old, est.pose)
+        local = local[np.hypot(local[:, 0], local[:, 1]) <= RELOC_REACH_M]
+        if len(local) < RELOC_MIN_POINTS:
+            return None
+        prev = np.column_stack([local, np.zeros((len(local), 2))])
+        tree = cKDTree(local)
+        m = np.asarray(self._reloc_icp.estimate(prev, static_pts, prior=_coarse_search(tree, static_pts[:, :2])))
+        d, _ = tree.query(apply_motion(static_pts[:, :2], m), k=1, distance_upper_bound=0.5)
+        near = int(np.sum(d <= 0.5))
+        if near >= RELOC_MIN_POINTS and near >= RELOC_MIN_FRACTION * len(static_pts):
+            return m
+        return None
+
+    def _recover(self, est: SlamEstimate, static_pts: np.ndarray) -> SlamEstimate:
+        """While lost: relocalise against the map built before the loss, else after
+        ``new_map_after_cycles`` lost cycles start a new map at the estimate (a break)."""
+        correction = self._relocalise(est, static_pts)
+        if correction is not None:
+            self.slam.relocalise(correction, self.health.loss_landmark_id)
+            self.relocalisations += 1
+            self.health.relocalised()
+            new = self.slam._estimate()
+            new.ess, new.n_static_points, new.n_observations = est.ess, est.n_static_points, est.n_observations
+            new.n_matched, new.stage_times = est.n_matched, est.stage_times
+            self.slam.last_estimate = new
+            return new
+        if self.health.lost_cycles >= self.options.new_map_after_cycles:
+            self.slam.restart_at(est.pose)
+            self.map_breaks += 1
+            self.health.new_map()
+        return est
 
     def _static_mask(self, pts: np.ndarray, sensors: np.ndarray | None) -> np.ndarray:
         """Points that fit a static scatterer at the current velocity and yaw rate, seen from their radar."""
@@ -301,6 +408,14 @@ class SlamPipeline:
         est = self.slam.update(pts[static], motion, dt, cov=None if cov is None else cov[static])
         est.n_static_points = int(static.sum())
         est.stage_times["registration"] = reg_time
+        was_lost = self.health.lost
+        self.health.update(
+            est.n_observations, est.n_matched, len(est.landmarks), self.fit_fraction if self.cycle > 0 else None,
+            self.registration_gated, math.hypot(est.pose_std[0], est.pose_std[1]), self.slam.next_id,
+        )
+        if self.health.lost:
+            self.distance_since_loss = 0.0 if not was_lost else self.distance_since_loss + math.hypot(*motion[:2])
+            est = self._recover(est, pts[static])
         self.prev_static = pts[static]
         self.cycle += 1
         vel = None if self.velocity is None else self.velocity.copy()
