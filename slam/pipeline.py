@@ -405,13 +405,14 @@ class SlamPipeline:
                 self.velocity = np.array([v_dop[0], v_dop[1], motion[2] / dt])
         # the moving-point filter runs here, with each point's radar (the filter's own one assumes the origin)
         static = self._static_mask(pts, sensors)
+        first_new_id = self.slam.next_id  # landmarks this cycle adds get this id and above
         est = self.slam.update(pts[static], motion, dt, cov=None if cov is None else cov[static])
         est.n_static_points = int(static.sum())
         est.stage_times["registration"] = reg_time
         was_lost = self.health.lost
         self.health.update(
             est.n_observations, est.n_matched, len(est.landmarks), self.fit_fraction if self.cycle > 0 else None,
-            self.registration_gated, math.hypot(est.pose_std[0], est.pose_std[1]), self.slam.next_id,
+            self.registration_gated, math.hypot(est.pose_std[0], est.pose_std[1]), first_new_id,
         )
         if self.health.lost:
             self.distance_since_loss = 0.0 if not was_lost else self.distance_since_loss + math.hypot(*motion[:2])
