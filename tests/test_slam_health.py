@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -12,7 +13,7 @@ import rhs_env  # noqa: F401
 from slam.health import HealthConfig, TrackHealth
 from slam.pipeline import PipelineConfig, doppler_displacement, forward_speed_fit
 
-CHEAP = {"radar": {"scan": {"grid_deg": 5}}, "vehicles_count": 3}
+CHEAP: dict[str, Any] = {"radar": {"scan": {"grid_deg": 5}}, "vehicles_count": 3}
 
 
 def _drive(jump_m: float, cycles: int = 50, at: int = 25, **kw):
@@ -22,7 +23,8 @@ def _drive(jump_m: float, cycles: int = 50, at: int = 25, **kw):
     infos = []
     for t in range(cycles):
         if t == at:
-            env.unwrapped.vehicle.position = env.unwrapped.vehicle.position + np.array([jump_m, 0.0])
+            base: Any = env.unwrapped
+            base.vehicle.position = base.vehicle.position + np.array([jump_m, 0.0])
         _, _, term, trunc, info = env.step(4)
         infos.append(info)
         if term or trunc:
