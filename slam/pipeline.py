@@ -208,6 +208,7 @@ class SlamPipeline:
         self.registration_retried = False  # this cycle's registration was tried from other headings
         self.registration_gated = False  # this cycle's registration translation failed the Doppler gate
         self.fit_fraction: float | None = None  # current static points near a previous one after the fit
+        self.registration_pairs = 0  # the kept registration's point pairs (0: it returned its guess)
         self.health.reset()
         self.distance_since_loss = 0.0  # m driven since the current loss started
         self.relocalisations = 0
@@ -239,30 +240,39 @@ class SlamPipeline:
                 m = np.zeros(3)
             return m, int(getattr(reg, "last_pairs", 1))
 
+        def consistent(m: np.ndarray) -> bool:
+            if v_dop is None:
+                return True
+            expected = doppler_displacement(v_dop, float(m[2]), dt)
+            return math.hypot(*(m[:2] - expected[:2])) <= opts.doppler_gate_m
+
         motion, pairs = run(prior)
         self.registration_retried = False
         self.registration_gated = False
-        icp_like = hasattr(reg, "last_pairs")
         self.fit_fraction = None
-        if icp_like and len(prev) >= 3 and len(cur) >= 3:
-            tree = cKDTree(prev[:, :2])
-            best = self.fit_fraction = self._fit_fraction(tree, cur, motion)
-            if prior is not None and best < opts.retry_fit_fraction:
-                self.registration_retried = True
-                for yaw in (0.0, -dth):
-                    if abs(yaw - prior[2]) < 0.05:
-                        continue
-                    guess = doppler_displacement(v_dop, yaw, dt) if v_dop is not None else np.array([*prior[:2], yaw])
-                    m2, p2 = run(guess)
-                    f2 = self._fit_fraction(tree, cur, m2)
-                    if f2 > best:
-                        motion, pairs, best = m2, p2, f2
-                self.fit_fraction = best
-        if v_dop is not None and icp_like:
-            expected = doppler_displacement(v_dop, float(motion[2]), dt)
-            if math.hypot(*(motion[:2] - expected[:2])) > opts.doppler_gate_m:
-                self.registration_gated = True
-                motion = np.array([expected[0], expected[1], motion[2] if pairs > 0 else expected[2]])
+        self.registration_pairs = pairs
+        if not hasattr(reg, "last_pairs"):  # a registration that reports no fit (the oracle, the CNN)
+            return motion, pairs
+        tree = cKDTree(prev[:, :2]) if len(prev) >= 3 and len(cur) >= 3 else None
+        # candidates (fit fraction, consistent with the Doppler, motion, pairs); the first start is the prior
+        cands = [(self._fit_fraction(tree, cur, motion), consistent(motion), motion, pairs)]
+        if tree is not None and prior is not None and (cands[0][0] < opts.retry_fit_fraction or not cands[0][1]):
+            self.registration_retried = opts.retry_fit_fraction > 0
+            for yaw in (0.0, -dth) if self.registration_retried else ():
+                if abs(yaw - prior[2]) < 0.05:
+                    continue
+                guess = doppler_displacement(v_dop, yaw, dt) if v_dop is not None else np.array([*prior[:2], yaw])
+                m2, p2 = run(guess)
+                cands.append((self._fit_fraction(tree, cur, m2), consistent(m2), m2, p2))
+        # the best fit among those consistent with the Doppler displacement, else the best fit
+        ok = [c for c in cands if c[1]] or cands
+        fit, good, motion, pairs = max(ok, key=lambda c: c[0])
+        self.registration_pairs = pairs if tree is not None else 0
+        self.fit_fraction = fit if tree is not None else None
+        if not good and v_dop is not None:  # no start fits consistently with the Doppler: its displacement wins
+            self.registration_gated = True
+            yaw = motion[2] if pairs > 0 or prior is None else prior[2]
+            motion = doppler_displacement(v_dop, float(yaw), dt)
         return motion, pairs
 
     def honest_pose_std(self) -> np.ndarray:
@@ -409,14 +419,17 @@ class SlamPipeline:
         est = self.slam.update(pts[static], motion, dt, cov=None if cov is None else cov[static])
         est.n_static_points = int(static.sum())
         est.stage_times["registration"] = reg_time
+        t_health = time.perf_counter()
         was_lost = self.health.lost
         self.health.update(
             est.n_observations, est.n_matched, len(est.landmarks), self.fit_fraction if self.cycle > 0 else None,
-            self.registration_gated, math.hypot(est.pose_std[0], est.pose_std[1]), first_new_id,
+            self.cycle == 0 or self.registration_pairs > 0, self.registration_gated,
+            math.hypot(est.pose_std[0], est.pose_std[1]), first_new_id,
         )
         if self.health.lost:
             self.distance_since_loss = 0.0 if not was_lost else self.distance_since_loss + math.hypot(*motion[:2])
             est = self._recover(est, pts[static])
+        est.stage_times["health"] = time.perf_counter() - t_health
         self.prev_static = pts[static]
         self.cycle += 1
         vel = None if self.velocity is None else self.velocity.copy()

@@ -55,14 +55,18 @@ def test_doppler_displacement_is_the_chord_along_the_mean_heading():
 
 def test_health_latches_a_loss_until_relocalised():
     h = TrackHealth(HealthConfig())
-    h.update(20, 15.0, 50, 0.9, False, 0.05, 100)
+    h.update(20, 15.0, 50, 0.9, True, False, 0.05, 100)
     assert h.health == 1.0 and not h.lost
-    h.update(20, 0.0, 50, 0.9, False, 0.05, 120)  # nothing matches a map of 50 landmarks
+    h.update(20, 0.0, 50, 0.9, True, False, 0.05, 120)  # nothing matches a map of 50 landmarks
     assert h.lost and h.losses == 1 and h.loss_landmark_id == 120
-    h.update(20, 18.0, 50, 0.9, False, 0.05, 140)  # self-consistent again, around the wrong pose
+    h.update(20, 18.0, 50, 0.9, True, False, 0.05, 140)  # self-consistent again, around the wrong pose
     assert h.lost and h.lost_cycles == 2
     h.relocalised()
     assert not h.lost and h.losses == 1
+    h.update(2, 0.0, 50, None, False, False, 0.05, 150)  # one cycle without a registration fit: fine
+    assert not h.lost
+    h.update(2, 0.0, 50, None, False, False, 0.05, 150)  # two: the heading is a guess
+    assert h.h_blind == 0.0 and h.lost and h.losses == 2
 
 
 @pytest.mark.parametrize(("field", "value"), [("match_ok", 0.05), ("spread_lost_m", 0.5), ("lost_below", 1.5)])
