@@ -9,14 +9,23 @@ Per cycle, with cloud ``A_z`` (N, 4) in the vehicle frame and cycle length dt (s
 index: their vehicle-frame covariance, :func:`slam.association.point_covariance`
 with the radars at ``sensor_xy``, goes to the RBPF):
 
-1. ego velocity ``v`` from the Doppler of static points (RANSAC fit of
-   ``vr = -v . u`` scored by bearing coverage, within ``max_accel * dt`` of the
-   last velocity, else unconstrained, :func:`slam.association.estimate_ego_velocity`);
-   when the fit fails, the last registration motion over dt (constant velocity);
-2. static points: ``|vr + v . u| <= threshold`` (:func:`slam.association.static_mask`);
-3. registration of the static points of ``A_{z-1}`` and ``A_z`` with the prior
-   displacement ``v dt`` (rotated by the last yaw increment) -> motion ``(dx, dy, dpsi)``;
-4. RBPF update (:class:`slam.rbpf.RBPFSlam`).
+1. ego velocity ``v`` from the Doppler of static points, each seen along its own radar's
+   line of sight ``u`` (RANSAC fit of ``vr = -v . u`` scored by bearing coverage, within
+   ``max_accel * dt`` of the last velocity, else unconstrained,
+   :func:`slam.association.estimate_ego_velocity`); with fewer than three agreeing points
+   the forward speed of two (:func:`forward_speed_fit`; one while no velocity is known);
+   when every fit fails, the last registration motion over dt (constant velocity), and the
+   velocity holds when the registration measured nothing either;
+2. static points: ``|vr - vr_static| <= threshold`` with the yaw rate and each point's radar
+   (:func:`slam.association.static_mask`);
+3. registration of the static points of ``A_{z-1}`` and ``A_z`` from the Doppler displacement
+   (:func:`doppler_displacement`, the last yaw increment); when few points fit it is tried again
+   from the headings 0 and ``-dpsi_last``; the best fit whose translation agrees with the Doppler
+   displacement within ``doppler_gate_m`` wins, else the Doppler displacement replaces the
+   translation -> motion ``(dx, dy, dpsi)``;
+4. RBPF update (:class:`slam.rbpf.RBPFSlam`);
+5. track health (:mod:`slam.health`); while lost, relocalisation against the map built before
+   the loss, else after ``new_map_after_cycles`` a new map at the estimate.
 """
 
 from __future__ import annotations
@@ -346,6 +355,35 @@ class SlamPipeline:
             return None
         return self.sensor_xy[np.clip(rows[:, 6].astype(int), 0, len(self.sensor_xy) - 1)]
 
+    def _doppler_velocity(self, dop: np.ndarray, dt: float) -> np.ndarray | None:
+        """The ego velocity (2,) from the Doppler of points seen from their radar, or None (no fit)."""
+        thr = self.config.dynamic_threshold_mps
+        # bounded acceleration: the new velocity lies within max_accel * dt of the last one
+        prior_v = None if self.velocity is None else self.velocity[:2]
+        v_dop = estimate_ego_velocity(
+            dop, 0.5 * thr, self.ransac_rng, prior=prior_v, max_change=self.max_accel_mps2 * dt + thr
+        )
+        self.velocity_misses = 0 if v_dop is not None else self.velocity_misses + 1
+        self.velocity_track = self.velocity_track + 1 if v_dop is not None else self.velocity_track
+        established = self.velocity_track >= 3 and self.velocity_misses <= self.options.reacquire_after_cycles
+        if v_dop is None and prior_v is not None and not established:
+            # no track yet, or lost for a while: re-acquire without the prior (an established track
+            # holds its velocity first: an unconstrained fit in traffic can lock onto a platoon)
+            v_dop = estimate_ego_velocity(dop, 0.5 * thr, self.ransac_rng)
+            self.velocity_track = 0
+        if v_dop is None:
+            # fewer than three points agree (a few landmarks): a car moves along its heading, so two
+            # points that agree on the forward speed give it, near the last velocity when there is one;
+            # with no velocity at all yet (the first cycles of a sparse scene) one point is taken
+            v_fwd = forward_speed_fit(dop, 0.5 * thr, min_inliers=1 if prior_v is None else 2)
+            near = prior_v is None or (
+                v_fwd is not None and math.hypot(*(v_fwd - prior_v)) <= self.max_accel_mps2 * dt + thr
+            )
+            if v_fwd is not None and near:
+                v_dop = v_fwd
+                self.velocity_misses = 0
+        return v_dop
+
     def step(self, points: np.ndarray, dt: float) -> CycleResult:
         """Process cloud ``points`` (N, 4) or (N, 7) (with stds and radar) of a cycle of length ``dt`` (s)."""
         rows = np.asarray(points, dtype=float)
@@ -356,33 +394,7 @@ class SlamPipeline:
         # the Doppler model vr = -v . u holds along each radar's own line of sight: fit on the points
         # seen from their radar (a translation changes no radial velocity)
         dop = pts if sensors is None else np.column_stack([pts[:, :2] - sensors, pts[:, 2:]])
-        thr = self.config.dynamic_threshold_mps
-        v_dop = None
-        if self.use_doppler:
-            # bounded acceleration: the new velocity lies within max_accel * dt of the last one
-            prior_v = None if self.velocity is None else self.velocity[:2]
-            v_dop = estimate_ego_velocity(
-                dop, 0.5 * thr, self.ransac_rng, prior=prior_v, max_change=self.max_accel_mps2 * dt + thr
-            )
-            self.velocity_misses = 0 if v_dop is not None else self.velocity_misses + 1
-            self.velocity_track = self.velocity_track + 1 if v_dop is not None else self.velocity_track
-            established = self.velocity_track >= 3 and self.velocity_misses <= self.options.reacquire_after_cycles
-            if v_dop is None and prior_v is not None and not established:
-                # no track yet, or lost for a while: re-acquire without the prior (an established track
-                # holds its velocity first: an unconstrained fit in traffic can lock onto a platoon)
-                v_dop = estimate_ego_velocity(dop, 0.5 * thr, self.ransac_rng)
-                self.velocity_track = 0
-            if v_dop is None:
-                # fewer than three points agree (a few landmarks): a car moves along its heading, so two
-                # points that agree on the forward speed give it, near the last velocity when there is one;
-                # with no velocity at all yet (the first cycles of a sparse scene) one point is taken
-                v_fwd = forward_speed_fit(dop, 0.5 * thr, min_inliers=1 if prior_v is None else 2)
-                near = prior_v is None or (
-                    v_fwd is not None and math.hypot(*(v_fwd - prior_v)) <= self.max_accel_mps2 * dt + thr
-                )
-                if v_fwd is not None and near:
-                    v_dop = v_fwd
-                    self.velocity_misses = 0
+        v_dop = self._doppler_velocity(dop, dt) if self.use_doppler else None
         if v_dop is not None:
             self.velocity = np.array([v_dop[0], v_dop[1], 0.0 if self.velocity is None else self.velocity[2]])
         reg_time = 0.0
