@@ -62,7 +62,8 @@ class PipelineConfig:
     its translation. ``retry_fit_fraction`` [0, 1]: when fewer than this fraction of the current
     static points lie within the registration's ``min_gate_m`` of a previous point after the fit,
     the registration is tried again from the heading increments 0 and ``-dpsi_last`` (the turn
-    rate reversed, as in a lane change's second half), and the best fit is kept; 0 disables it.
+    rate reversed, as in a lane change's second half), then, if still no start fits, from
+    ``WIDE_YAW_STARTS``; the best fit is kept; 0 disables it.
     ``new_map_after_cycles`` [1, 10^6]: after a loss (:mod:`slam.health`) the filter tries each cycle
     to relocalise against the map built before it; after this many lost cycles without success it
     starts a new map at its estimate (a break in the map frame).
@@ -83,6 +84,15 @@ class PipelineConfig:
         check_range("retry_fit_fraction", self.retry_fit_fraction, 0.0, 1.0)
         check_int("new_map_after_cycles", self.new_map_after_cycles, 1, 1_000_000)
 
+
+#: yaw rate (rad/s) from which the Doppler fit with the turn (:func:`doppler_ego_motion`) replaces the
+#: velocity fit: 0.4 rad/s moves a point seen by a radar 2.5 m off the origin by 1 m/s, the
+#: moving-point threshold
+TURN_RATE_MIN = 0.4
+
+#: heading starts (rad) of the registration when neither the last turn, straight on nor the reversed turn
+#: fits: a lane change at 10 m/s turns by up to 0.5 rad in a 0.2 s cycle (ICP searches +-0.2 rad around each)
+WIDE_YAW_STARTS = (-0.6, -0.4, -0.2, 0.2, 0.4, 0.6)
 
 #: relocalisation after a loss (:meth:`SlamPipeline._relocalise`): ICP gate (m), heading search (rad)
 #: and its steps, landmarks considered (m from the estimate), points that must fit and their fraction
@@ -114,6 +124,65 @@ def _coarse_search(tree: cKDTree, xy: np.ndarray) -> np.ndarray:
         if score[k] > best:
             best, best_m = int(score[k]), np.array([tx[k], ty[k], yaw])
     return best_m
+
+
+def doppler_ego_motion(
+    points: np.ndarray,
+    sensors: np.ndarray,
+    threshold: float,
+    rng: np.random.Generator,
+    prior: np.ndarray | None = None,
+    max_change: float = np.inf,
+    max_yaw_rate: float = 3.0,
+    n_hypotheses: int = 64,
+    min_inliers: int = 5,
+    angular_bins: int = 24,
+) -> np.ndarray | None:
+    """Ego velocity and yaw rate ``(vx, vy, w)`` (m/s, m/s, rad/s) from the Doppler of static points seen by
+    radars off the vehicle's origin.
+
+    A static point at ``r`` seen from the radar at ``s`` along ``u = (r - s) / |r - s|`` moves by
+    ``-(v + w z x r)`` relative to the vehicle, so ``vr = -(u . v + w (s x u)_z)`` (``r x u = s x u``):
+    linear in ``(vx, vy, w)``, the yaw rate seen through the radars' lever arms (a front radar 2.5 m
+    ahead sees a 2 rad/s turn as 5 m/s across its line of sight, which a fit of ``v`` alone takes for
+    motion or for moving points). RANSAC over ``n_hypotheses`` triples, scored by the bearing sectors
+    holding an inlier (within ``threshold`` m/s), then the inlier count; with ``prior`` (2,) the
+    velocity within ``max_change`` of it; ``|w| <= max_yaw_rate``; least squares on the inliers.
+    ``None`` with fewer than ``min_inliers`` inliers or a degenerate geometry.
+    """
+    pts = np.asarray(points, dtype=float)
+    n = len(pts)
+    if n < max(3, min_inliers):
+        return None
+    d = pts[:, :2] - sensors
+    u = d / np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)[:, None]
+    A = -np.column_stack([u[:, 0], u[:, 1], sensors[:, 0] * u[:, 1] - sensors[:, 1] * u[:, 0]])  # vr = A x
+    vr = pts[:, 2]
+    idx = rng.integers(0, n, (n_hypotheses, 3))
+    M = A[idx]  # (H, 3, 3)
+    good = np.abs(np.linalg.det(M)) > 1e-3
+    if not good.any():
+        return None
+    X = np.linalg.solve(M[good], vr[idx[good]][..., None])[..., 0]  # (H', 3)
+    ok = np.abs(X[:, 2]) <= max_yaw_rate
+    if prior is not None:
+        ok &= np.hypot(*(X[:, :2] - np.asarray(prior, float)[:2]).T) <= max_change
+    if not ok.any():
+        return None
+    X = X[ok]
+    inliers = np.abs(vr[None, :] - X @ A.T) <= threshold  # (H, N)
+    b = np.arctan2(pts[:, 1], pts[:, 0])
+    sector = np.floor((b + np.pi) / (2 * np.pi) * angular_bins).astype(int) % angular_bins
+    onehot = np.zeros((n, angular_bins))
+    onehot[np.arange(n), sector] = 1.0
+    score = ((inliers.astype(float) @ onehot) > 0).sum(axis=1) * (n + 1) + inliers.sum(axis=1)
+    inl = inliers[int(np.argmax(score))]
+    if inl.sum() < min_inliers or np.linalg.matrix_rank(A[inl]) < 3:
+        return None
+    sol, *_ = np.linalg.lstsq(A[inl], vr[inl], rcond=None)
+    if abs(sol[2]) > max_yaw_rate:
+        return None
+    return sol
 
 
 def forward_speed_fit(points: np.ndarray, threshold: float, min_inliers: int = 2, min_cos: float = 0.3) -> np.ndarray | None:
@@ -267,12 +336,19 @@ class SlamPipeline:
         cands = [(self._fit_fraction(tree, cur, motion), consistent(motion), motion, pairs)]
         if tree is not None and prior is not None and (cands[0][0] < opts.retry_fit_fraction or not cands[0][1]):
             self.registration_retried = opts.retry_fit_fraction > 0
-            for yaw in (0.0, -dth) if self.registration_retried else ():
-                if abs(yaw - prior[2]) < 0.05:
-                    continue
-                guess = doppler_displacement(v_dop, yaw, dt) if v_dop is not None else np.array([*prior[:2], yaw])
-                m2, p2 = run(guess)
-                cands.append((self._fit_fraction(tree, cur, m2), consistent(m2), m2, p2))
+            tried = [float(prior[2])]
+            # the likely headings first (straight on, the turn reversed), then a sweep over a sharp turn's range
+            for sweep in ((0.0, -dth), WIDE_YAW_STARTS) if self.registration_retried else ():
+                best_fit = max((c[0] for c in cands if c[1]), default=0.0)
+                if sweep is WIDE_YAW_STARTS and best_fit >= opts.retry_fit_fraction:
+                    break
+                for yaw in sweep:
+                    if min(abs(yaw - t) for t in tried) < 0.05:
+                        continue
+                    tried.append(yaw)
+                    guess = doppler_displacement(v_dop, yaw, dt) if v_dop is not None else np.array([*prior[:2], yaw])
+                    m2, p2 = run(guess)
+                    cands.append((self._fit_fraction(tree, cur, m2), consistent(m2), m2, p2))
         # the best fit among those consistent with the Doppler displacement, else the best fit
         ok = [c for c in cands if c[1]] or cands
         fit, good, motion, pairs = max(ok, key=lambda c: c[0])
@@ -355,6 +431,17 @@ class SlamPipeline:
             return None
         return self.sensor_xy[np.clip(rows[:, 6].astype(int), 0, len(self.sensor_xy) - 1)]
 
+    def _doppler_turn(self, pts: np.ndarray, sensors: np.ndarray | None, dt: float) -> np.ndarray | None:
+        """``(vx, vy, w)`` from :func:`doppler_ego_motion` when it finds a yaw rate of at least
+        ``TURN_RATE_MIN`` (rad/s), else None (the velocity fit alone stands: its yaw-rate error is small)."""
+        if sensors is None or not self.use_doppler or not np.any(sensors):
+            return None
+        prior_v = None if self.velocity is None else self.velocity[:2]
+        thr = self.config.dynamic_threshold_mps
+        fit = doppler_ego_motion(pts, sensors, 0.5 * thr, self.ransac_rng, prior=prior_v,
+                                 max_change=self.max_accel_mps2 * dt + thr)
+        return fit if fit is not None and abs(fit[2]) >= TURN_RATE_MIN else None
+
     def _doppler_velocity(self, dop: np.ndarray, dt: float) -> np.ndarray | None:
         """The ego velocity (2,) from the Doppler of points seen from their radar, or None (no fit)."""
         thr = self.config.dynamic_threshold_mps
@@ -395,14 +482,20 @@ class SlamPipeline:
         # seen from their radar (a translation changes no radial velocity)
         dop = pts if sensors is None else np.column_stack([pts[:, :2] - sensors, pts[:, 2:]])
         v_dop = self._doppler_velocity(dop, dt) if self.use_doppler else None
+        turn = self._doppler_turn(pts, sensors, dt)
+        if turn is not None:  # turning fast: the velocity and yaw rate of the fit that models the turn
+            v_dop = turn[:2]
         if v_dop is not None:
-            self.velocity = np.array([v_dop[0], v_dop[1], 0.0 if self.velocity is None else self.velocity[2]])
+            yaw_rate = turn[2] if turn is not None else (0.0 if self.velocity is None else self.velocity[2])
+            self.velocity = np.array([v_dop[0], v_dop[1], yaw_rate])
         reg_time = 0.0
         if self.cycle == 0:
             motion = np.zeros(3)
         else:
             prior = None
             dth = 0.0 if self.last_motion is None else float(self.last_motion[2])
+            if turn is not None:  # the measured yaw rate, not the last cycle's turn
+                dth = float(turn[2]) * dt
             if v_dop is not None:  # displacement over the cycle from the Doppler velocity
                 prior = doppler_displacement(v_dop, dth, dt)
             elif self.last_motion is not None:

@@ -11,7 +11,7 @@ import pytest
 
 import rhs_env  # noqa: F401
 from slam.health import HealthConfig, TrackHealth
-from slam.pipeline import PipelineConfig, doppler_displacement, forward_speed_fit
+from slam.pipeline import PipelineConfig, doppler_displacement, doppler_ego_motion, forward_speed_fit
 
 CHEAP: dict[str, Any] = {"radar": {"scan": {"grid_deg": 5}}, "vehicles_count": 3}
 
@@ -42,6 +42,24 @@ def test_forward_speed_fit_two_points_and_a_mover():
     np.testing.assert_allclose(forward_speed_fit(pts, 0.5), [v, 0.0], atol=1e-9)
     assert forward_speed_fit(pts[[0, 2]], 0.5) is None  # two points that disagree: no consensus
     assert forward_speed_fit(pts[[0]], 0.5, min_inliers=1)[0] == pytest.approx(v)
+
+
+def test_doppler_ego_motion_sees_the_turn_through_the_lever_arms():
+    rng = np.random.default_rng(1)
+    mounts = np.array([[2.5, 0.0], [0.0, 1.0], [-2.5, 0.0], [0.0, -1.0]])
+    xy = rng.uniform(-60, 60, (40, 2))
+    radar = rng.integers(0, 4, 40)
+    s = mounts[radar]
+    v, w = np.array([12.0, 0.3]), 2.0  # a sharp lane change at 12 m/s
+    u = (xy - s) / np.hypot(*(xy - s).T)[:, None]
+    rel = -(v[None, :] + w * np.stack([-xy[:, 1], xy[:, 0]], axis=1))  # a static point relative to the car
+    vr = np.sum(rel * u, axis=1)
+    vr[:5] += 7.0  # five points on a vehicle
+    pts = np.column_stack([xy, vr, np.ones(40)])
+    fit = doppler_ego_motion(pts, s, 0.5, rng, n_hypotheses=128)
+    np.testing.assert_allclose(fit, [12.0, 0.3, 2.0], atol=1e-6)
+    # the velocity-only model is off by the lever arms' w |s| (2.5 m x 2 rad/s = 5 m/s across the front radar)
+    assert doppler_ego_motion(pts, s, 0.5, rng, prior=np.array([0.0, 0.0]), max_change=5.0) is None
 
 
 def test_doppler_displacement_is_the_chord_along_the_mean_heading():
