@@ -135,6 +135,8 @@ def test_health_in_the_observation_is_opt_in():
     assert env.observation_space.contains(obs)
     assert obs["slam_health"].tolist() == [1.0] and obs["slam_lost"].tolist() == [0]
     env.close()
+    with pytest.raises((TypeError, ValueError), match="health_in_obs"):
+        gym.make("rhs-highway-slam-v0", health_in_obs="yes", **CHEAP)
 
 
 @pytest.mark.parametrize("speed", [15.0, 25.0])
