@@ -89,6 +89,8 @@ class PipelineConfig:
 #: velocity fit: 0.4 rad/s moves a point seen by a radar 2.5 m off the origin by 1 m/s, the
 #: moving-point threshold
 TURN_RATE_MIN = 0.4
+#: ... and when its inliers outnumber those of the best turn-free fit by this factor
+TURN_GAIN = 1.15
 
 #: heading starts (rad) of the registration when neither the last turn, straight on nor the reversed turn
 #: fits: a lane change at 10 m/s turns by up to 0.5 rad in a 0.2 s cycle (ICP searches +-0.2 rad around each)
@@ -337,11 +339,13 @@ class SlamPipeline:
         if tree is not None and prior is not None and (cands[0][0] < opts.retry_fit_fraction or not cands[0][1]):
             self.registration_retried = opts.retry_fit_fraction > 0
             tried = [float(prior[2])]
+            n_first: int | None = None  # the wide starts' candidates follow the first n_first
             # the likely headings first (straight on, the turn reversed), then a sweep over a sharp turn's range
             for sweep in ((0.0, -dth), WIDE_YAW_STARTS) if self.registration_retried else ():
                 best_fit = max((c[0] for c in cands if c[1]), default=0.0)
                 if sweep is WIDE_YAW_STARTS and best_fit >= opts.retry_fit_fraction:
                     break
+                n_first = len(cands) if sweep is WIDE_YAW_STARTS else n_first
                 for yaw in sweep:
                     if min(abs(yaw - t) for t in tried) < 0.05:
                         continue
@@ -349,6 +353,9 @@ class SlamPipeline:
                     guess = doppler_displacement(v_dop, yaw, dt) if v_dop is not None else np.array([*prior[:2], yaw])
                     m2, p2 = run(guess)
                     cands.append((self._fit_fraction(tree, cur, m2), consistent(m2), m2, p2))
+            # a wide start counts only with a good fit (a few points fit some heading by chance)
+            if n_first is not None:
+                cands = cands[:n_first] + [c for c in cands[n_first:] if c[0] >= opts.retry_fit_fraction]
         # the best fit among those consistent with the Doppler displacement, else the best fit
         ok = [c for c in cands if c[1]] or cands
         fit, good, motion, pairs = max(ok, key=lambda c: c[0])
@@ -431,16 +438,27 @@ class SlamPipeline:
             return None
         return self.sensor_xy[np.clip(rows[:, 6].astype(int), 0, len(self.sensor_xy) - 1)]
 
-    def _doppler_turn(self, pts: np.ndarray, sensors: np.ndarray | None, dt: float) -> np.ndarray | None:
+    def _doppler_turn(
+        self, pts: np.ndarray, sensors: np.ndarray | None, dt: float, v_flat: np.ndarray | None
+    ) -> np.ndarray | None:
         """``(vx, vy, w)`` from :func:`doppler_ego_motion` when it finds a yaw rate of at least
-        ``TURN_RATE_MIN`` (rad/s), else None (the velocity fit alone stands: its yaw-rate error is small)."""
+        ``TURN_RATE_MIN`` (rad/s) and fits ``TURN_GAIN`` times the points that the turn-free velocity
+        ``v_flat`` fits, else None (the velocity fit alone stands: its yaw-rate error is small)."""
         if sensors is None or not self.use_doppler or not np.any(sensors):
             return None
         prior_v = None if self.velocity is None else self.velocity[:2]
         thr = self.config.dynamic_threshold_mps
         fit = doppler_ego_motion(pts, sensors, 0.5 * thr, self.ransac_rng, prior=prior_v,
                                  max_change=self.max_accel_mps2 * dt + thr)
-        return fit if fit is not None and abs(fit[2]) >= TURN_RATE_MIN else None
+        if fit is None or abs(fit[2]) < TURN_RATE_MIN:
+            return None
+        # the turn must explain the Doppler better than the best turn-free fit (noisy points can fake a turn)
+        d = pts[:, :2] - sensors
+        u = d / np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)[:, None]
+        A = -np.column_stack([u[:, 0], u[:, 1], sensors[:, 0] * u[:, 1] - sensors[:, 1] * u[:, 0]])
+        with_turn = int(np.sum(np.abs(pts[:, 2] - A @ fit) <= 0.5 * thr))
+        without = 0 if v_flat is None else int(np.sum(np.abs(pts[:, 2] - A[:, :2] @ v_flat[:2]) <= 0.5 * thr))
+        return fit if with_turn >= TURN_GAIN * max(without, 1) else None
 
     def _doppler_velocity(self, dop: np.ndarray, dt: float) -> np.ndarray | None:
         """The ego velocity (2,) from the Doppler of points seen from their radar, or None (no fit)."""
@@ -482,7 +500,7 @@ class SlamPipeline:
         # seen from their radar (a translation changes no radial velocity)
         dop = pts if sensors is None else np.column_stack([pts[:, :2] - sensors, pts[:, 2:]])
         v_dop = self._doppler_velocity(dop, dt) if self.use_doppler else None
-        turn = self._doppler_turn(pts, sensors, dt)
+        turn = self._doppler_turn(pts, sensors, dt, v_dop)
         if turn is not None:  # turning fast: the velocity and yaw rate of the fit that models the turn
             v_dop = turn[:2]
         if v_dop is not None:
