@@ -183,9 +183,11 @@ def plot_demo(trace: list, env_id: str, seed: int, path: str | Path, dt: float, 
     the radar point cloud of that cycle placed with the SLAM pose, the estimated map
     (all landmarks so far), the true landmarks seen so far, the true and estimated
     trajectory up to that instant (120 x 60 m window, 84 m ahead of the car). Bottom: the position error ``||p_hat - p||`` over
-    time against the filter's own 2-sigma band ``2 sqrt(sx^2 + sy^2)`` (``pose_std``
-    of the observation): dead reckoning between landmark fixes drifts, and the band
-    says how much drift the filter admits to. Legends sit outside the axes.
+    time against the filter's own 2-sigma band ``2 sqrt(sx^2 + sy^2)`` (``slam_pose_std``
+    of ``info``, else ``pose_std`` of the observation): dead reckoning between landmark fixes
+    drifts, and the band says how much drift the filter admits to; the track health
+    (``slam_health``, right axis) and the cycles the filter says it is lost (``slam_lost``,
+    shaded). Legends sit outside the axes.
     """
     import matplotlib
 
@@ -197,7 +199,11 @@ def plot_demo(trace: list, env_id: str, seed: int, path: str | Path, dt: float, 
     true_p = np.array([np.asarray(i["true_pose"], float) for i in info])
     est_p = np.array([np.asarray(i["estimated_pose"], float) for i in info])
     err = np.array([float(i["position_error_m"]) for i in info])
-    band = np.array([2.0 * float(np.hypot(*np.asarray(o["pose_std"], float)[:2])) for o in obs])
+    # the filter's std: the info's slam_pose_std (which admits a loss) where the env reports it, else pose_std
+    band = np.array([2.0 * float(np.hypot(*np.asarray(i.get("slam_pose_std", o["pose_std"]), float)[:2]))
+                     for o, i in zip(obs, info)])
+    health = np.array([float(i.get("slam_health", np.nan)) for i in info])
+    lost = np.array([bool(i.get("slam_lost", False)) for i in info])
     t = dt * np.arange(len(trace))
     picks = np.unique(np.linspace(len(trace) // snapshots, len(trace) - 1, snapshots).round().astype(int))
     fig = plt.figure(figsize=(5.2 * len(picks), 6.4))
@@ -225,14 +231,22 @@ def plot_demo(trace: list, env_id: str, seed: int, path: str | Path, dt: float, 
     handles, labels = ax.get_legend_handles_labels()
     fig.legend(handles, labels, loc="upper center", ncol=len(labels), frameon=False, fontsize=9)
     ax = fig.add_subplot(grid[1, :])
-    ax.fill_between(t, 0.0, band, color="C0", alpha=0.2, lw=0, label="filter's 2-sigma (from pose_std)")
+    ax.fill_between(t, 0.0, band, color="C0", alpha=0.2, lw=0, label="filter's 2-sigma (slam_pose_std)")
     ax.plot(t, err, "C3-", lw=1.5, label="position error ||p_hat - p||")
+    if lost.any():
+        ax.fill_between(t, 0.0, 1.0, where=lost, transform=ax.get_xaxis_transform(), color="C3", alpha=0.12, lw=0,
+                        label="filter says lost (slam_lost)")
+    if np.isfinite(health).any():
+        hx = ax.twinx()
+        hx.plot(t, health, "C2-", lw=1.0, alpha=0.8)
+        hx.set(ylim=(0.0, 1.05), ylabel="track health (green)")
     for k in picks:
         ax.axvline(t[k], color="0.6", lw=0.8, ls=":")
     ax.set(xlabel="time (s)", ylabel="m", xlim=(0, t[-1] if len(t) > 1 else 1.0), ylim=(0, None),
            title=f"{env_id}, seed {seed}: position error against the filter's own uncertainty "
            f"(final {err[-1]:.2f} m over {np.hypot(*(true_p[-1, :2] - true_p[0, :2])):.0f} m driven)")
-    ax.legend(loc="upper left", bbox_to_anchor=(1.005, 1.0), fontsize=9, frameon=False)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.05 if np.isfinite(health).any() else 1.005, 1.0), fontsize=9,
+              frameon=False)
     fig.tight_layout(rect=(0, 0, 1, 0.95))
     fig.savefig(path, dpi=100)
     plt.close(fig)

@@ -330,6 +330,146 @@ def run_dense(args, slam: dict) -> dict[str, Any]:
             "cycles": args.dense_cycles, "spacing_m": args.dense_spacing}
 
 
+#: the drivers part: env id -> the shipped DAgger student driving it (agents/data); every driver on an env
+#: runs with that policy's env kwargs (its radar grid and target speeds), so the drivers see one env
+DRIVER_ENVS = {"rhs-highway-slam-v0": "dagger_rhs_highway_slam.zip", "rhs-dense-v0": "antenna/dagger_rhs_highway_dense.zip"}
+DRIVERS = ("idm", "policy", "random")
+LOST_M = 5.0  # an error above this is a lost car
+GOOD_M = 0.5  # below this the health signal must stay quiet
+RECOVER_CYCLES = 10
+RECOVERED_M = 1.0
+
+
+def nees_interval(dof: int = 3, level: float = 0.95) -> tuple[float, float]:
+    """The two-sided ``level`` interval of the chi-square distribution with ``dof`` degrees of freedom."""
+    from scipy import stats
+
+    return float(stats.chi2.ppf((1 - level) / 2, dof)), float(stats.chi2.ppf((1 + level) / 2, dof))
+
+
+def pose_nees(err_xy: np.ndarray, err_heading: float, std: np.ndarray) -> float:
+    """3-dof NEES ``e^T P^-1 e`` with ``P = diag(std^2)`` (``std`` (3,): x, y (m), heading (rad); floored at
+    1 mm / 0.1 mrad so a collapsed particle set does not divide by zero)."""
+    s = np.maximum(np.asarray(std, dtype=float), [1e-3, 1e-3, 1e-4])
+    e = np.array([err_xy[0], err_xy[1], err_heading])
+    return float(np.sum((e / s) ** 2))
+
+
+def driver_episode(env, policy, seed: int) -> dict[str, Any]:
+    """One episode under ``policy`` until it ends; per-cycle errors, health, NEES and the loss events.
+
+    A *loss* is a cycle where the health signal's ``slam_losses`` count rises; it is *recovered* when
+    within ``RECOVER_CYCLES`` cycles the flag clears (relocalised or a new map) and the error in the
+    current map is below ``RECOVERED_M``. Errors are in the current map (after a map break the truth
+    is re-anchored at the break, :class:`slam.metrics_info.SlamMetricsInfo`); ``episode_rmse_m`` is
+    against the episode's start.
+    """
+    from rhs_common.geometry import wrap_angle
+
+    if callable(getattr(policy, "reset", None)):
+        policy.reset()
+    obs, info = env.reset(seed=seed)
+    err, err_ep, lost, nees, losses, done = [], [], [], [], [], False
+    crashed, last_losses = False, 0
+    while not done:
+        action, _ = policy.predict(obs, deterministic=True)
+        a = np.asarray(action)
+        obs, _, term, trunc, info = env.step(int(a) if a.ndim == 0 else action)
+        done = term or trunc
+        crashed = crashed or bool(info.get("crashed", False))
+        e = np.asarray(info["estimated_pose"], dtype=float) - np.asarray(info["true_pose"], dtype=float)
+        err.append(float(info["position_error_m"]))
+        err_ep.append(float(info["position_error_episode_m"]))
+        lost.append(bool(info["slam_lost"]))
+        nees.append(pose_nees(e[:2], float(wrap_angle(e[2])), np.asarray(info["slam_pose_std"], dtype=float)))
+        if int(info["slam_losses"]) > last_losses:
+            losses.append(len(err) - 1)
+        last_losses = int(info["slam_losses"])
+    e_arr, l_arr = np.asarray(err), np.asarray(lost)
+    recovered = 0
+    for t0 in losses:
+        win = range(t0, min(t0 + RECOVER_CYCLES + 1, len(err)))
+        recovered += any(not lost[t] and err[t] < RECOVERED_M for t in win)
+    lo, hi = nees_interval()
+    nees_arr = np.asarray(nees)
+    return {
+        "seed": seed, "cycles": len(err), "crashed": crashed,
+        "position_rmse_m": float(np.sqrt(np.mean(e_arr**2))),
+        "episode_rmse_m": float(np.sqrt(np.mean(np.square(err_ep)))),
+        "max_error_m": float(e_arr.max()),
+        "lost_episode": bool(e_arr.max() > LOST_M),
+        "cycles_above_lost": int((e_arr > LOST_M).sum()),
+        "cycles_above_lost_flagged": int(((e_arr > LOST_M) & l_arr).sum()),
+        "cycles_below_good": int((e_arr < GOOD_M).sum()),
+        "cycles_below_good_flagged": int(((e_arr < GOOD_M) & l_arr).sum()),
+        "nees_cycles": len(nees), "nees_inside": int(((nees_arr >= lo) & (nees_arr <= hi)).sum()),
+        "nees_below": int((nees_arr < lo).sum()), "nees_above": int((nees_arr > hi).sum()),
+        "losses": len(losses), "losses_recovered": int(recovered),
+        "relocalised": int(info.get("slam_relocalised", 0)), "map_breaks": int(info.get("slam_map_breaks", 0)),
+    }
+
+
+def _ratio(num: int, den: int) -> float | None:
+    return num / den if den else None
+
+
+def summarize_driver(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Mean, worst episode and lost fraction of the position RMSE; health hit / false-alarm rates; NEES coverage;
+    losses recovered within ``RECOVER_CYCLES`` cycles."""
+    tot = {k: sum(int(r[k]) for r in runs) for k in (
+        "cycles_above_lost", "cycles_above_lost_flagged", "cycles_below_good", "cycles_below_good_flagged",
+        "nees_cycles", "nees_inside", "nees_below", "nees_above", "losses", "losses_recovered", "map_breaks",
+        "relocalised")}
+    rmse = [r["position_rmse_m"] for r in runs]
+    return {
+        "episodes": len(runs),
+        "position_rmse_m": ci95(rmse),
+        "worst_rmse_m": float(max(rmse)) if rmse else None,
+        "worst_seed": runs[int(np.argmax(rmse))]["seed"] if rmse else None,
+        "lost_fraction": _ratio(sum(r["lost_episode"] for r in runs), len(runs)),
+        "crashed_fraction": _ratio(sum(r["crashed"] for r in runs), len(runs)),
+        "episode_rmse_m": ci95([r["episode_rmse_m"] for r in runs]),
+        "cycles": int(sum(r["cycles"] for r in runs)),
+        "health_hit_rate": _ratio(tot["cycles_above_lost_flagged"], tot["cycles_above_lost"]),
+        "health_false_alarm_rate": _ratio(tot["cycles_below_good_flagged"], tot["cycles_below_good"]),
+        "nees_coverage": _ratio(tot["nees_inside"], tot["nees_cycles"]),
+        "nees_below_fraction": _ratio(tot["nees_below"], tot["nees_cycles"]),
+        "nees_above_fraction": _ratio(tot["nees_above"], tot["nees_cycles"]),
+        "recovered_fraction": _ratio(tot["losses_recovered"], tot["losses"]),
+        **{k: tot[k] for k in ("cycles_above_lost", "cycles_below_good", "losses", "losses_recovered", "map_breaks",
+                               "relocalised")},
+    }
+
+
+def run_drivers(args, slam: dict) -> dict[str, Any]:
+    """Every driver of ``--drivers`` on every env of ``--driver-envs`` over ``--driver-seeds``, until each episode ends."""
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+    from agents.evaluate import DATA_DIR, load_policy, policy_metadata
+
+    out: dict[str, Any] = {}
+    for env_id in args.driver_envs:
+        zip_path = DATA_DIR / DRIVER_ENVS[env_id]
+        kw = {**policy_metadata(zip_path).get("env_kwargs", {}), "duration": args.driver_cycles / POLICY_HZ}
+        if slam:
+            kw["slam"] = slam
+        for driver in args.drivers:
+            env = gym.make(env_id, **kw)
+            runs = []
+            for seed in args.driver_seeds:
+                policy = load_policy(str(zip_path) if driver == "policy" else driver, env, seed=seed)
+                t0 = time.perf_counter()
+                runs.append({**driver_episode(env, policy, seed), "wall_s": time.perf_counter() - t0})
+                _log(args, f"drivers {env_id} {driver}", runs[-1])
+            env.close()
+            out[f"{env_id}/{driver}"] = {"env": env_id, "driver": driver, "env_kwargs": kw,
+                                         "policy": str(zip_path.relative_to(DATA_DIR.parent.parent)) if driver == "policy"
+                                         else driver, "runs": runs, "summary": summarize_driver(runs)}
+    return {"combos": out, "seeds": list(args.driver_seeds), "lost_m": LOST_M, "good_m": GOOD_M,
+            "nees_interval": nees_interval(), "recover_cycles": RECOVER_CYCLES, "recovered_m": RECOVERED_M}
+
+
 def _log(args, part: str, row: dict) -> None:
     if not args.no_progress:
         short = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in row.items()
@@ -343,11 +483,39 @@ def _fmt(s: dict) -> str:
     return f"{s['mean']:.3f}" + (f" +- {s['ci95']:.3f}" if s.get("ci95") is not None else "")
 
 
+def _pct(x: float | None) -> str:
+    return "n/a" if x is None else f"{100 * x:.1f} %"
+
+
+def drivers_markdown(res: dict) -> list[str]:
+    """The drivers table: per env and driver, the mean / worst RMSE, lost episodes, health rates, NEES, recovery."""
+    lo, hi = res["nees_interval"]
+    lines = [f"\n## Drivers (seeds {res['seeds'][0]}..{res['seeds'][-1]}, {len(res['seeds'])} per row, each episode until "
+             "it ends)\n",
+             f"Lost episode: position error above {res['lost_m']:g} m in some cycle. Health hit rate: cycles with an "
+             f"error above {res['lost_m']:g} m where `slam_lost` is set; false alarms: cycles with an error below "
+             f"{res['good_m']:g} m where it is set. NEES: 3-dof from `slam_pose_std`, inside [{lo:.3f}, {hi:.2f}] "
+             f"(95 %). Recovered: the flag clears with the error below {res['recovered_m']:g} m within "
+             f"{res['recover_cycles']} cycles of a loss. Errors in the current map (a map break re-anchors the truth).\n",
+             "| env | driver | RMSE mean (m) | worst (m) | lost episodes | crashed | hit rate | false alarms | "
+             "NEES inside | losses (recovered) | map breaks |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for combo in res["combos"].values():
+        sm = combo["summary"]
+        lines.append(f"| {combo['env']} | {combo['driver']} | {_fmt(sm['position_rmse_m'])} | {sm['worst_rmse_m']:.3f} "
+                     f"(seed {sm['worst_seed']}) | {_pct(sm['lost_fraction'])} | {_pct(sm['crashed_fraction'])} | "
+                     f"{_pct(sm['health_hit_rate'])} of {sm['cycles_above_lost']} | {_pct(sm['health_false_alarm_rate'])} "
+                     f"of {sm['cycles_below_good']} | {_pct(sm['nees_coverage'])} | {sm['losses']} "
+                     f"({_pct(sm['recovered_fraction'])}) | {sm['map_breaks']} |")
+    return lines
+
+
 def markdown(doc: dict) -> str:
     lines = [f"# SLAM accuracy against its targets\n\nCommand: `{doc['command']}`  \nCommit: `{doc['commit']}`  \n"
              f"Seeds: {doc['seeds']} (evaluation seeds; the filter was tuned on 0..4). Mean +- 95 % CI over seeds.\n",
              "| scene | metric | value | target | met |", "|---|---|---|---|---|"]
     for part, res in doc["parts"].items():
+        if part == "drivers":
+            continue
         for key, (op, val) in TARGETS[part].items():
             s = res["summary"][key]
             met = None if s["mean"] is None else (s["mean"] <= val if op == "<=" else s["mean"] >= val)
@@ -355,7 +523,8 @@ def markdown(doc: dict) -> str:
         for key in EXTRA.get(part, ()):
             if key in res["summary"]:
                 lines.append(f"| {part} | {key} | {_fmt(res['summary'][key])} | - | - |")
-    return "\n".join(lines + _notes(doc)) + "\n"
+    drivers = doc["parts"].get("drivers")
+    return "\n".join(lines + _notes(doc) + (drivers_markdown(drivers) if drivers else [])) + "\n"
 
 
 def _notes(doc: dict) -> list[str]:
@@ -390,7 +559,14 @@ def _notes(doc: dict) -> list[str]:
 def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, dict]:
     """The options and the SlamConfig overrides (``--quick`` applied)."""
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--parts", nargs="+", choices=("highway", "paper", "dense"), default=["highway", "paper", "dense"])
+    p.add_argument("--parts", nargs="+", choices=("highway", "paper", "dense", "drivers"),
+                   default=["highway", "paper", "dense"])
+    p.add_argument("--drivers", nargs="+", choices=DRIVERS, default=list(DRIVERS),
+                   help="drivers part: highway-env's IDM + MOBIL, the shipped DAgger student, uniformly random actions")
+    p.add_argument("--driver-envs", nargs="+", choices=tuple(DRIVER_ENVS), default=list(DRIVER_ENVS))
+    p.add_argument("--driver-seeds", type=int, nargs="+", default=list(range(1000, 1100)),
+                   help="drivers part: held-out seeds (default 1000..1099, 100 per env and driver)")
+    p.add_argument("--driver-cycles", type=int, default=200, help="drivers part: episode length bound (cycles)")
     p.add_argument("--seeds", type=int, nargs="+", default=[100, 101, 102, 103, 104])
     p.add_argument("--cycles", type=int, default=200, help="highway cycles")
     p.add_argument("--highway-action", type=int, default=SLOWER,
@@ -407,6 +583,7 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, dict]:
     slam = json.loads(args.slam) if args.slam else {}
     if args.quick:
         args.seeds, args.cycles, args.paper_cycles, args.dense_cycles = args.seeds[:1], 10, 6, 8
+        args.driver_seeds, args.driver_cycles = args.driver_seeds[:1], 10
         slam = {"n_particles": 10, **slam}
     return args, slam
 
@@ -420,7 +597,7 @@ def fingerprint() -> list[float]:
 def main(argv: list[str] | None = None) -> int:
     started = time.time()
     args, slam = parse_args(argv)
-    runners = {"highway": run_highway, "paper": run_paper, "dense": run_dense}
+    runners = {"highway": run_highway, "paper": run_paper, "dense": run_dense, "drivers": run_drivers}
     doc = {"command": " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])]),
            "commit": _commit(), "seeds": args.seeds, "slam_overrides": slam, "parts": {}}
     for part in args.parts:

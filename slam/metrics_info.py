@@ -15,6 +15,11 @@
   ``info["_map_rmse_m"]`` mask says where it is defined), ``map_matched``, ``map_missed``, ``map_spurious``;
 * ``registration_motion`` (3,): the registration's motion estimate of the cycle.
 
+After a loss the filter may start a new map (``slam_map_breaks`` in ``info``): from then on
+the truth is re-anchored so that it coincides with the estimate at the break, and
+``position_error_m`` / ``heading_error_rad`` measure the error accumulated in the current map;
+``position_error_episode_m`` keeps measuring against the episode's start (it counts the loss).
+
 With ``landmarks_in_info=True`` (off by default: their number changes from
 env to env, which vector envs cannot stack) ``info`` also gets
 ``true_landmarks`` and ``estimated_landmarks`` (map frame, variable length).
@@ -27,7 +32,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from rhs_common.geometry import points_in_frame, wrap_angle
+from rhs_common.geometry import compose, points_in_frame, relative_motion, wrap_angle
 from rhs_common.validation import check_bool, check_range
 from rhs_env.scene import get_landmarks, world_pose
 from slam.metrics import map_metrics
@@ -57,6 +62,8 @@ class SlamMetricsInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.map_gate_m = float(map_gate_m)
         self.landmarks_in_info = bool(landmarks_in_info)
         self.seen_ids: set[int] = set()
+        self.anchor = np.zeros(3)  # the current map's truth: anchor (+) true pose (after a map break)
+        self.breaks = 0
 
     @property
     def _base(self) -> Any:
@@ -66,27 +73,35 @@ class SlamMetricsInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         obs, info = self.env.reset(seed=seed, options=options)
         self.seen_ids = set()
-        return obs, {**info, **self.metrics()}
+        self.anchor, self.breaks = np.zeros(3), 0
+        return obs, {**info, **self.metrics(int(info.get("slam_map_breaks", 0)))}
 
     def step(self, action):
         obs, reward, terminated, truncated, info = self.env.step(action)
-        return obs, reward, terminated, truncated, {**info, **self.metrics()}
+        return obs, reward, terminated, truncated, {**info, **self.metrics(int(info.get("slam_map_breaks", 0)))}
 
-    def metrics(self) -> dict[str, Any]:
-        """Truth and errors of the current SLAM estimate."""
+    def metrics(self, map_breaks: int = 0) -> dict[str, Any]:
+        """Truth and errors of the current SLAM estimate (``map_breaks``: new maps the filter started so far)."""
         slam = self.env.get_wrapper_attr("pipeline")
         origin = self.env.get_wrapper_attr("origin")
         est = self.env.get_wrapper_attr("estimate")
-        true_pose = self.env.get_wrapper_attr("true_pose")()
+        episode_pose = self.env.get_wrapper_attr("true_pose")()
+        est_pose = np.asarray(est.pose, dtype=float)
+        if map_breaks > self.breaks:  # a new map starts at the estimate: re-anchor the truth there
+            self.anchor = compose(est_pose, relative_motion(episode_pose, np.zeros(3)))
+            self.breaks = map_breaks
+        true_pose = compose(self.anchor, episode_pose)
         true_lm = self._seen_landmarks(origin)
         est_lm, _ = slam.slam.full_map()
         mm = map_metrics(est_lm, true_lm, self.map_gate_m)
-        err = np.asarray(est.pose, dtype=float) - true_pose
+        err = est_pose - true_pose
+        err_episode = est_pose - episode_pose
         rmse = mm["rmse"]
         out: dict[str, Any] = {
             "true_pose": true_pose,
-            "estimated_pose": np.asarray(est.pose, dtype=float),
+            "estimated_pose": est_pose,
             "position_error_m": float(np.hypot(err[0], err[1])),
+            "position_error_episode_m": float(np.hypot(err_episode[0], err_episode[1])),
             "heading_error_rad": float(abs(wrap_angle(err[2]))),
             "map_matched": int(mm["matched"]),
             "map_missed": int(mm["missed"]),

@@ -9,14 +9,23 @@ Per cycle, with cloud ``A_z`` (N, 4) in the vehicle frame and cycle length dt (s
 index: their vehicle-frame covariance, :func:`slam.association.point_covariance`
 with the radars at ``sensor_xy``, goes to the RBPF):
 
-1. ego velocity ``v`` from the Doppler of static points (RANSAC fit of
-   ``vr = -v . u`` scored by bearing coverage, within ``max_accel * dt`` of the
-   last velocity, else unconstrained, :func:`slam.association.estimate_ego_velocity`);
-   when the fit fails, the last registration motion over dt (constant velocity);
-2. static points: ``|vr + v . u| <= threshold`` (:func:`slam.association.static_mask`);
-3. registration of the static points of ``A_{z-1}`` and ``A_z`` with the prior
-   displacement ``v dt`` (rotated by the last yaw increment) -> motion ``(dx, dy, dpsi)``;
-4. RBPF update (:class:`slam.rbpf.RBPFSlam`).
+1. ego velocity ``v`` from the Doppler of static points, each seen along its own radar's
+   line of sight ``u`` (RANSAC fit of ``vr = -v . u`` scored by bearing coverage, within
+   ``max_accel * dt`` of the last velocity, else unconstrained,
+   :func:`slam.association.estimate_ego_velocity`); with fewer than three agreeing points
+   the forward speed of two (:func:`forward_speed_fit`; one while no velocity is known);
+   when every fit fails, the last registration motion over dt (constant velocity), and the
+   velocity holds when the registration measured nothing either;
+2. static points: ``|vr - vr_static| <= threshold`` with the yaw rate and each point's radar
+   (:func:`slam.association.static_mask`);
+3. registration of the static points of ``A_{z-1}`` and ``A_z`` from the Doppler displacement
+   (:func:`doppler_displacement`, the last yaw increment); when few points fit it is tried again
+   from the headings 0 and ``-dpsi_last``; the best fit whose translation agrees with the Doppler
+   displacement within ``doppler_gate_m`` wins, else the Doppler displacement replaces the
+   translation -> motion ``(dx, dy, dpsi)``;
+4. RBPF update (:class:`slam.rbpf.RBPFSlam`);
+5. track health (:mod:`slam.health`); while lost, relocalisation against the map built before
+   the loss, else after ``new_map_after_cycles`` a new map at the estimate.
 """
 
 from __future__ import annotations
@@ -26,11 +35,14 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
+from rhs_common.geometry import apply_motion, points_in_frame
 from rhs_common.validation import check_int, check_range, check_types
 from slam.association import estimate_ego_velocity, point_covariance, static_mask
+from slam.health import HealthConfig, TrackHealth
 from slam.rbpf import RBPFSlam, SlamConfig, SlamEstimate
-from slam.registration import Registration
+from slam.registration import ICPRegistration, Registration
 
 
 @dataclass(frozen=True)
@@ -44,16 +56,178 @@ class PipelineConfig:
     bound), after this many consecutive cycles without such a fit the fit is re-acquired
     without the bound; until then the last velocity holds (an unconstrained fit in dense
     traffic can lock onto a platoon of vehicles). Without a track it re-acquires at once.
+    ``doppler_gate_m`` (0, 1000]: a registration whose translation departs from the Doppler
+    displacement ``R(dpsi / 2) v dt`` by more than this (m) is inconsistent with the odometry
+    (an aliased fit, e.g. guard-rail posts one spacing apart): the Doppler displacement replaces
+    its translation. ``retry_fit_fraction`` [0, 1]: when fewer than this fraction of the current
+    static points lie within the registration's ``min_gate_m`` of a previous point after the fit,
+    the registration is tried again from the heading increments 0 and ``-dpsi_last`` (the turn
+    rate reversed, as in a lane change's second half), then, if still no start fits, from
+    ``WIDE_YAW_STARTS``; the best fit is kept; 0 disables it.
+    ``new_map_after_cycles`` [1, 10^6]: after a loss (:mod:`slam.health`) the filter tries each cycle
+    to relocalise against the map built before it; after this many lost cycles without success it
+    starts a new map at its estimate (a break in the map frame).
     """
 
     use_doppler: bool = True
     max_accel_mps2: float = 10.0
     reacquire_after_cycles: int = 5
+    doppler_gate_m: float = 1.0
+    retry_fit_fraction: float = 0.5
+    new_map_after_cycles: int = 10
 
     def __post_init__(self) -> None:
         check_types(self)
         check_range("max_accel_mps2", self.max_accel_mps2, 0.0, 100.0)
         check_int("reacquire_after_cycles", self.reacquire_after_cycles, 0, 1000)
+        check_range("doppler_gate_m", self.doppler_gate_m, 0.0, 1e3, low_open=True)
+        check_range("retry_fit_fraction", self.retry_fit_fraction, 0.0, 1.0)
+        check_int("new_map_after_cycles", self.new_map_after_cycles, 1, 1_000_000)
+
+
+#: yaw rate (rad/s) from which the Doppler fit with the turn (:func:`doppler_ego_motion`) replaces the
+#: velocity fit: 0.4 rad/s moves a point seen by a radar 2.5 m off the origin by 1 m/s, the
+#: moving-point threshold
+TURN_RATE_MIN = 0.4
+#: ... and when its inliers outnumber those of the best turn-free fit by this factor
+TURN_GAIN = 1.15
+
+#: heading starts (rad) of the registration when neither the last turn, straight on nor the reversed turn
+#: fits: a lane change at 10 m/s turns by up to 0.5 rad in a 0.2 s cycle (ICP searches +-0.2 rad around each)
+WIDE_YAW_STARTS = (-0.6, -0.4, -0.2, 0.2, 0.4, 0.6)
+
+#: relocalisation after a loss (:meth:`SlamPipeline._relocalise`): ICP gate (m), heading search (rad)
+#: and its steps, landmarks considered (m from the estimate), points that must fit and their fraction
+RELOC_GATE_M = 5.0
+RELOC_YAW_RAD = 0.6
+RELOC_YAW_STEPS = 24
+RELOC_REACH_M = 100.0
+RELOC_MIN_POINTS = 5
+RELOC_MIN_FRACTION = 0.5
+#: the coarse grid of the relocalisation: along and across the heading (m), heading (rad); cell (m)
+RELOC_GRID = (np.arange(-60.0, 60.5, 1.0), np.arange(-4.0, 4.5, 1.0), np.linspace(-0.4, 0.4, 17))
+RELOC_CELL_M = 0.7
+
+
+def _coarse_search(tree: cKDTree, xy: np.ndarray) -> np.ndarray:
+    """The pose correction ``(dx, dy, dpsi)`` on a grid (``RELOC_GRID``) that puts the most points
+    ``xy`` (N, 2) within ``RELOC_CELL_M`` of a map landmark (``tree``); the start of the ICP refinement."""
+    dxs, dys, yaws = RELOC_GRID
+    best, best_m = -1, np.zeros(3)
+    tx, ty = np.meshgrid(dxs, dys, indexing="ij")
+    tx, ty = tx.ravel(), ty.ravel()
+    for yaw in yaws:
+        c, s = math.cos(yaw), math.sin(yaw)
+        rx, ry = c * xy[:, 0] - s * xy[:, 1], s * xy[:, 0] + c * xy[:, 1]
+        moved = np.stack([rx[None, :] + tx[:, None], ry[None, :] + ty[:, None]], axis=-1)  # (K, N, 2)
+        d, _ = tree.query(moved.reshape(-1, 2), k=1, distance_upper_bound=RELOC_CELL_M)
+        score = (d.reshape(len(tx), len(xy)) <= RELOC_CELL_M).sum(axis=1)
+        k = int(np.argmax(score))
+        if score[k] > best:
+            best, best_m = int(score[k]), np.array([tx[k], ty[k], yaw])
+    return best_m
+
+
+def doppler_ego_motion(
+    points: np.ndarray,
+    sensors: np.ndarray,
+    threshold: float,
+    rng: np.random.Generator,
+    prior: np.ndarray | None = None,
+    max_change: float = np.inf,
+    max_yaw_rate: float = 3.0,
+    n_hypotheses: int = 64,
+    min_inliers: int = 5,
+    angular_bins: int = 24,
+) -> np.ndarray | None:
+    """Ego velocity and yaw rate ``(vx, vy, w)`` (m/s, m/s, rad/s) from the Doppler of static points seen by
+    radars off the vehicle's origin.
+
+    A static point at ``r`` seen from the radar at ``s`` along ``u = (r - s) / |r - s|`` moves by
+    ``-(v + w z x r)`` relative to the vehicle, so ``vr = -(u . v + w (s x u)_z)`` (``r x u = s x u``):
+    linear in ``(vx, vy, w)``, the yaw rate seen through the radars' lever arms (a front radar 2.5 m
+    ahead sees a 2 rad/s turn as 5 m/s across its line of sight, which a fit of ``v`` alone takes for
+    motion or for moving points). RANSAC over ``n_hypotheses`` triples, scored by the bearing sectors
+    holding an inlier (within ``threshold`` m/s), then the inlier count; with ``prior`` (2,) the
+    velocity within ``max_change`` of it; ``|w| <= max_yaw_rate``; least squares on the inliers.
+    ``None`` with fewer than ``min_inliers`` inliers or a degenerate geometry.
+    """
+    pts = np.asarray(points, dtype=float)
+    n = len(pts)
+    if n < max(3, min_inliers):
+        return None
+    d = pts[:, :2] - sensors
+    u = d / np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)[:, None]
+    A = -np.column_stack([u[:, 0], u[:, 1], sensors[:, 0] * u[:, 1] - sensors[:, 1] * u[:, 0]])  # vr = A x
+    vr = pts[:, 2]
+    idx = rng.integers(0, n, (n_hypotheses, 3))
+    M = A[idx]  # (H, 3, 3)
+    good = np.abs(np.linalg.det(M)) > 1e-3
+    if not good.any():
+        return None
+    X = np.linalg.solve(M[good], vr[idx[good]][..., None])[..., 0]  # (H', 3)
+    ok = np.abs(X[:, 2]) <= max_yaw_rate
+    if prior is not None:
+        ok &= np.hypot(*(X[:, :2] - np.asarray(prior, float)[:2]).T) <= max_change
+    if not ok.any():
+        return None
+    X = X[ok]
+    inliers = np.abs(vr[None, :] - X @ A.T) <= threshold  # (H, N)
+    b = np.arctan2(pts[:, 1], pts[:, 0])
+    sector = np.floor((b + np.pi) / (2 * np.pi) * angular_bins).astype(int) % angular_bins
+    onehot = np.zeros((n, angular_bins))
+    onehot[np.arange(n), sector] = 1.0
+    score = ((inliers.astype(float) @ onehot) > 0).sum(axis=1) * (n + 1) + inliers.sum(axis=1)
+    inl = inliers[int(np.argmax(score))]
+    if inl.sum() < min_inliers or np.linalg.matrix_rank(A[inl]) < 3:
+        return None
+    sol, *_ = np.linalg.lstsq(A[inl], vr[inl], rcond=None)
+    if abs(sol[2]) > max_yaw_rate:
+        return None
+    return sol
+
+
+def forward_speed_fit(points: np.ndarray, threshold: float, min_inliers: int = 2, min_cos: float = 0.3) -> np.ndarray | None:
+    """Ego velocity ``(vx, 0)`` (m/s) from the Doppler of a few points, for a car that moves along its heading.
+
+    A static point at bearing ``b`` has ``vr = -vx cos b`` when the lateral velocity is zero
+    (a car's side slip is small), so each point with ``|cos b| >= min_cos`` proposes
+    ``vx = -vr / cos b``; the proposal that most points fit within ``threshold`` (m/s) wins and is
+    refined by least squares on its inliers. Needs ``min_inliers`` agreeing points (two: the
+    full 2-D fit of :func:`slam.association.estimate_ego_velocity` needs three, and a few
+    landmarks at the start of a drive give fewer). ``None`` without such a consensus.
+    """
+    pts = np.asarray(points, dtype=float)
+    if len(pts) < min_inliers:
+        return None
+    cb = np.cos(np.arctan2(pts[:, 1], pts[:, 0]))
+    use = np.abs(cb) >= min_cos
+    if use.sum() < min_inliers:
+        return None
+    cb, vr = cb[use], pts[use, 2]
+    cand = -vr / cb
+    res = np.abs(vr[None, :] + cand[:, None] * cb[None, :])  # (candidates, points)
+    count = (res <= threshold).sum(axis=1)
+    best = int(np.argmax(count))
+    if count[best] < min_inliers:
+        return None
+    inl = res[best] <= threshold
+    vx = float(-np.sum(vr[inl] * cb[inl]) / np.sum(cb[inl] ** 2))
+    return np.array([vx, 0.0])
+
+
+def doppler_displacement(velocity: np.ndarray, dpsi: float, dt: float) -> np.ndarray:
+    """Motion ``(dx, dy, dpsi)`` over a cycle of ``dt`` s at the vehicle-frame velocity ``velocity`` (m/s).
+
+    Turning by ``dpsi`` at a constant rate with the velocity fixed in the vehicle frame, the
+    displacement in the previous frame is ``(2 sin(dpsi / 2) / dpsi) R(dpsi / 2) v dt``: the
+    chord of the arc, along the mean heading.
+    """
+    half = 0.5 * dpsi
+    chord = 1.0 if abs(half) < 1e-9 else math.sin(half) / half
+    c, s = math.cos(half), math.sin(half)
+    vx, vy = float(velocity[0]) * dt * chord, float(velocity[1]) * dt * chord
+    return np.array([c * vx - s * vy, s * vx + c * vy, dpsi])
 
 
 @dataclass
@@ -76,9 +250,11 @@ class SlamPipeline:
         rng: np.random.Generator | None = None,
         options: PipelineConfig | None = None,
         sensor_xy: np.ndarray | None = None,
+        health: HealthConfig | None = None,
     ) -> None:
         """``sensor_xy`` (S, 2): radar positions in the vehicle frame (m) indexed by column 6 of
-        (N, 7) clouds; ``None`` puts every sensor at the vehicle origin."""
+        (N, 7) clouds; ``None`` puts every sensor at the vehicle origin. ``health``: the thresholds of
+        the track-health signal (:mod:`slam.health`)."""
         self.registration = registration
         self.sensor_xy = None if sensor_xy is None else np.asarray(sensor_xy, dtype=float).reshape(-1, 2)
         self.options = options if options is not None else PipelineConfig()
@@ -89,6 +265,10 @@ class SlamPipeline:
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         self.use_doppler = self.options.use_doppler
         self.slam = RBPFSlam(self.config, self.rng)
+        self.health = TrackHealth(health)
+        self._reloc_icp = ICPRegistration(
+            max_gate_m=RELOC_GATE_M, yaw_search_rad=RELOC_YAW_RAD, yaw_search_steps=RELOC_YAW_STEPS
+        )
         self.reset()
 
     def reset(self, rng: np.random.Generator | None = None) -> None:
@@ -107,11 +287,209 @@ class SlamPipeline:
         self.prev_static: np.ndarray | None = None
         self.velocity: np.ndarray | None = None  # (vx, vy, yaw rate), current vehicle frame
         self.last_motion: np.ndarray | None = None
+        self.registration_retried = False  # this cycle's registration was tried from other headings
+        self.registration_gated = False  # this cycle's registration translation failed the Doppler gate
+        self.fit_fraction: float | None = None  # current static points near a previous one after the fit
+        self.registration_pairs = 0  # the kept registration's point pairs (0: it returned its guess)
+        self.health.reset()
+        self.distance_since_loss = 0.0  # m driven since the current loss started
+        self.relocalisations = 0
+        self.map_breaks = 0
 
-    def _static(self, pts: np.ndarray) -> np.ndarray:
+    def _fit_fraction(self, tree: cKDTree | None, cur: np.ndarray, motion: np.ndarray) -> float:
+        """Fraction of the current points within the registration's ``min_gate_m`` of a previous point."""
+        if tree is None or not len(cur):
+            return 0.0
+        gate = float(getattr(self.registration, "min_gate_m", 0.5))
+        d, _ = tree.query(apply_motion(cur[:, :2], motion), k=1, distance_upper_bound=gate)
+        return float(np.mean(d <= gate))
+
+    def _register(
+        self, prev: np.ndarray, cur: np.ndarray, prior: np.ndarray | None, v_dop: np.ndarray | None, dth: float,
+        dt: float,
+    ) -> tuple[np.ndarray, int]:
+        """Registration motion with the heading retry and the Doppler gate (:class:`PipelineConfig`).
+
+        Returns the motion and the registration's point pairs (``last_pairs``; 1 for a registration
+        that does not report them).
+        """
+        reg = self.registration
+        opts = self.options
+
+        def run(guess: np.ndarray | None) -> tuple[np.ndarray, int]:
+            m = np.asarray(reg.estimate(prev, cur, prior=guess), dtype=np.float64).reshape(3)
+            if not np.all(np.isfinite(m)):
+                m = np.zeros(3)
+            return m, int(getattr(reg, "last_pairs", 1))
+
+        def consistent(m: np.ndarray) -> bool:
+            if v_dop is None:
+                return True
+            expected = doppler_displacement(v_dop, float(m[2]), dt)
+            return math.hypot(*(m[:2] - expected[:2])) <= opts.doppler_gate_m
+
+        motion, pairs = run(prior)
+        self.registration_retried = False
+        self.registration_gated = False
+        self.fit_fraction = None
+        self.registration_pairs = pairs
+        if not hasattr(reg, "last_pairs"):  # a registration that reports no fit (the oracle, the CNN)
+            return motion, pairs
+        tree = cKDTree(prev[:, :2]) if len(prev) >= 3 and len(cur) >= 3 else None
+        # candidates (fit fraction, consistent with the Doppler, motion, pairs); the first start is the prior
+        cands = [(self._fit_fraction(tree, cur, motion), consistent(motion), motion, pairs)]
+        if tree is not None and prior is not None and (cands[0][0] < opts.retry_fit_fraction or not cands[0][1]):
+            self.registration_retried = opts.retry_fit_fraction > 0
+            tried = [float(prior[2])]
+            n_first: int | None = None  # the wide starts' candidates follow the first n_first
+            # the likely headings first (straight on, the turn reversed), then a sweep over a sharp turn's range
+            for sweep in ((0.0, -dth), WIDE_YAW_STARTS) if self.registration_retried else ():
+                best_fit = max((c[0] for c in cands if c[1]), default=0.0)
+                if sweep is WIDE_YAW_STARTS and best_fit >= opts.retry_fit_fraction:
+                    break
+                n_first = len(cands) if sweep is WIDE_YAW_STARTS else n_first
+                for yaw in sweep:
+                    if min(abs(yaw - t) for t in tried) < 0.05:
+                        continue
+                    tried.append(yaw)
+                    guess = doppler_displacement(v_dop, yaw, dt) if v_dop is not None else np.array([*prior[:2], yaw])
+                    m2, p2 = run(guess)
+                    cands.append((self._fit_fraction(tree, cur, m2), consistent(m2), m2, p2))
+            # a wide start counts only with a good fit (a few points fit some heading by chance)
+            if n_first is not None:
+                cands = cands[:n_first] + [c for c in cands[n_first:] if c[0] >= opts.retry_fit_fraction]
+        # the best fit among those consistent with the Doppler displacement, else the best fit
+        ok = [c for c in cands if c[1]] or cands
+        fit, good, motion, pairs = max(ok, key=lambda c: c[0])
+        self.registration_pairs = pairs if tree is not None else 0
+        self.fit_fraction = fit if tree is not None else None
+        if not good and v_dop is not None:  # no start fits consistently with the Doppler: its displacement wins
+            self.registration_gated = True
+            yaw = motion[2] if pairs > 0 or prior is None else prior[2]
+            motion = doppler_displacement(v_dop, float(yaw), dt)
+        return motion, pairs
+
+    def honest_pose_std(self) -> np.ndarray:
+        """The particles' pose std (3,), and while lost at least the loss's spread plus the distance
+        driven since the loss in position (m) and ``pi / 4`` in heading (the offset is unknown)."""
+        est = self.slam.last_estimate
+        std = np.zeros(3) if est is None else np.asarray(est.pose_std, dtype=float).copy()
+        if self.health.lost:
+            floor = self.health.config.spread_lost_m + self.distance_since_loss
+            std = np.maximum(std, [floor, floor, math.pi / 4])
+        return std
+
+    def _relocalise(self, est: SlamEstimate, static_pts: np.ndarray) -> np.ndarray | None:
+        """Correction of the pose that fits the current static points to the map built before the loss.
+
+        The landmarks mapped before the loss (archived ones included) within the radar's reach
+        are moved into the estimated vehicle frame and registered with the points by ICP started
+        from the best cell of a coarse grid search (:func:`_coarse_search`) with a heading search over
+        +-``RELOC_YAW_RAD``; the fit counts when at least
+        ``RELOC_MIN_POINTS`` points and ``RELOC_MIN_FRACTION`` of them lie within 0.5 m of such a
+        landmark. Returns the correction (a motion in the estimated vehicle frame) or None.
+        """
+        xy, ids = self.slam.full_map()
+        old = xy[ids < self.health.loss_landmark_id]
+        if len(old) < RELOC_MIN_POINTS or len(static_pts) < RELOC_MIN_POINTS:
+            return None
+        local = points_in_frame(old, est.pose)
+        local = local[np.hypot(local[:, 0], local[:, 1]) <= RELOC_REACH_M]
+        if len(local) < RELOC_MIN_POINTS:
+            return None
+        prev = np.column_stack([local, np.zeros((len(local), 2))])
+        tree = cKDTree(local)
+        m = np.asarray(self._reloc_icp.estimate(prev, static_pts, prior=_coarse_search(tree, static_pts[:, :2])))
+        d, _ = tree.query(apply_motion(static_pts[:, :2], m), k=1, distance_upper_bound=0.5)
+        near = int(np.sum(d <= 0.5))
+        if near >= RELOC_MIN_POINTS and near >= RELOC_MIN_FRACTION * len(static_pts):
+            return m
+        return None
+
+    def _recover(self, est: SlamEstimate, static_pts: np.ndarray) -> SlamEstimate:
+        """While lost: relocalise against the map built before the loss, else after
+        ``new_map_after_cycles`` lost cycles start a new map at the estimate (a break)."""
+        correction = self._relocalise(est, static_pts)
+        if correction is not None:
+            self.slam.relocalise(correction, self.health.loss_landmark_id)
+            self.relocalisations += 1
+            self.health.relocalised()
+            new = self.slam._estimate()
+            new.ess, new.n_static_points, new.n_observations = est.ess, est.n_static_points, est.n_observations
+            new.n_matched, new.stage_times = est.n_matched, est.stage_times
+            self.slam.last_estimate = new
+            return new
+        if self.health.lost_cycles >= self.options.new_map_after_cycles:
+            self.slam.restart_at(est.pose)
+            self.map_breaks += 1
+            self.health.new_map()
+        return est
+
+    def _static_mask(self, pts: np.ndarray, sensors: np.ndarray | None) -> np.ndarray:
+        """Points that fit a static scatterer at the current velocity and yaw rate, seen from their radar."""
         if self.use_doppler and self.velocity is not None:
-            return pts[static_mask(pts, self.velocity[:2], self.config.dynamic_threshold_mps)]
-        return pts
+            return static_mask(
+                pts, self.velocity[:2], self.config.dynamic_threshold_mps, yaw_rate=float(self.velocity[2]),
+                sensor_xy=sensors,
+            )
+        return np.ones(len(pts), dtype=bool)
+
+    def _sensors(self, rows: np.ndarray) -> np.ndarray | None:
+        """Each point's radar position (N, 2) in the vehicle frame, or None (every radar at the origin)."""
+        if self.sensor_xy is None or rows.shape[1] < 7 or not len(self.sensor_xy):
+            return None
+        return self.sensor_xy[np.clip(rows[:, 6].astype(int), 0, len(self.sensor_xy) - 1)]
+
+    def _doppler_turn(
+        self, pts: np.ndarray, sensors: np.ndarray | None, dt: float, v_flat: np.ndarray | None
+    ) -> np.ndarray | None:
+        """``(vx, vy, w)`` from :func:`doppler_ego_motion` when it finds a yaw rate of at least
+        ``TURN_RATE_MIN`` (rad/s) and fits ``TURN_GAIN`` times the points that the turn-free velocity
+        ``v_flat`` fits, else None (the velocity fit alone stands: its yaw-rate error is small)."""
+        if sensors is None or not self.use_doppler or not np.any(sensors):
+            return None
+        prior_v = None if self.velocity is None else self.velocity[:2]
+        thr = self.config.dynamic_threshold_mps
+        fit = doppler_ego_motion(pts, sensors, 0.5 * thr, self.ransac_rng, prior=prior_v,
+                                 max_change=self.max_accel_mps2 * dt + thr)
+        if fit is None or abs(fit[2]) < TURN_RATE_MIN:
+            return None
+        # the turn must explain the Doppler better than the best turn-free fit (noisy points can fake a turn)
+        d = pts[:, :2] - sensors
+        u = d / np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)[:, None]
+        A = -np.column_stack([u[:, 0], u[:, 1], sensors[:, 0] * u[:, 1] - sensors[:, 1] * u[:, 0]])
+        with_turn = int(np.sum(np.abs(pts[:, 2] - A @ fit) <= 0.5 * thr))
+        without = 0 if v_flat is None else int(np.sum(np.abs(pts[:, 2] - A[:, :2] @ v_flat[:2]) <= 0.5 * thr))
+        return fit if with_turn >= TURN_GAIN * max(without, 1) else None
+
+    def _doppler_velocity(self, dop: np.ndarray, dt: float) -> np.ndarray | None:
+        """The ego velocity (2,) from the Doppler of points seen from their radar, or None (no fit)."""
+        thr = self.config.dynamic_threshold_mps
+        # bounded acceleration: the new velocity lies within max_accel * dt of the last one
+        prior_v = None if self.velocity is None else self.velocity[:2]
+        v_dop = estimate_ego_velocity(
+            dop, 0.5 * thr, self.ransac_rng, prior=prior_v, max_change=self.max_accel_mps2 * dt + thr
+        )
+        self.velocity_misses = 0 if v_dop is not None else self.velocity_misses + 1
+        self.velocity_track = self.velocity_track + 1 if v_dop is not None else self.velocity_track
+        established = self.velocity_track >= 3 and self.velocity_misses <= self.options.reacquire_after_cycles
+        if v_dop is None and prior_v is not None and not established:
+            # no track yet, or lost for a while: re-acquire without the prior (an established track
+            # holds its velocity first: an unconstrained fit in traffic can lock onto a platoon)
+            v_dop = estimate_ego_velocity(dop, 0.5 * thr, self.ransac_rng)
+            self.velocity_track = 0
+        if v_dop is None:
+            # fewer than three points agree (a few landmarks): a car moves along its heading, so two
+            # points that agree on the forward speed give it, near the last velocity when there is one;
+            # with no velocity at all yet (the first cycles of a sparse scene) one point is taken
+            v_fwd = forward_speed_fit(dop, 0.5 * thr, min_inliers=1 if prior_v is None else 2)
+            near = prior_v is None or (
+                v_fwd is not None and math.hypot(*(v_fwd - prior_v)) <= self.max_accel_mps2 * dt + thr
+            )
+            if v_fwd is not None and near:
+                v_dop = v_fwd
+                self.velocity_misses = 0
+        return v_dop
 
     def step(self, points: np.ndarray, dt: float) -> CycleResult:
         """Process cloud ``points`` (N, 4) or (N, 7) (with stds and radar) of a cycle of length ``dt`` (s)."""
@@ -119,52 +497,65 @@ class SlamPipeline:
         rows = rows.reshape(-1, rows.shape[-1] if rows.ndim == 2 and rows.shape[-1] >= 7 else 4)
         cov = point_covariance(rows, self.sensor_xy) if rows.shape[1] >= 7 else None
         pts = rows[:, :4]
-        thr = self.config.dynamic_threshold_mps
-        v_dop = None
-        if self.use_doppler:
-            # bounded acceleration: the new velocity lies within max_accel * dt of the last one
-            prior_v = None if self.velocity is None else self.velocity[:2]
-            v_dop = estimate_ego_velocity(
-                pts, 0.5 * thr, self.ransac_rng, prior=prior_v, max_change=self.max_accel_mps2 * dt + thr
-            )
-            self.velocity_misses = 0 if v_dop is not None else self.velocity_misses + 1
-            self.velocity_track = self.velocity_track + 1 if v_dop is not None else self.velocity_track
-            established = self.velocity_track >= 3 and self.velocity_misses <= self.options.reacquire_after_cycles
-            if v_dop is None and prior_v is not None and not established:
-                # no track yet, or lost for a while: re-acquire without the prior (an established track
-                # holds its velocity first: an unconstrained fit in traffic can lock onto a platoon)
-                v_dop = estimate_ego_velocity(pts, 0.5 * thr, self.ransac_rng)
-                self.velocity_track = 0
+        sensors = self._sensors(rows)
+        # the Doppler model vr = -v . u holds along each radar's own line of sight: fit on the points
+        # seen from their radar (a translation changes no radial velocity)
+        dop = pts if sensors is None else np.column_stack([pts[:, :2] - sensors, pts[:, 2:]])
+        v_dop = self._doppler_velocity(dop, dt) if self.use_doppler else None
+        turn = self._doppler_turn(pts, sensors, dt, v_dop)
+        if turn is not None:  # turning fast: the velocity and yaw rate of the fit that models the turn
+            v_dop = turn[:2]
         if v_dop is not None:
-            self.velocity = np.array([v_dop[0], v_dop[1], 0.0 if self.velocity is None else self.velocity[2]])
+            yaw_rate = turn[2] if turn is not None else (0.0 if self.velocity is None else self.velocity[2])
+            self.velocity = np.array([v_dop[0], v_dop[1], yaw_rate])
         reg_time = 0.0
         if self.cycle == 0:
             motion = np.zeros(3)
         else:
             prior = None
+            dth = 0.0 if self.last_motion is None else float(self.last_motion[2])
+            if turn is not None:  # the measured yaw rate, not the last cycle's turn
+                dth = float(turn[2]) * dt
             if v_dop is not None:  # displacement over the cycle from the Doppler velocity
-                dth = 0.0 if self.last_motion is None else self.last_motion[2]
-                c, s = math.cos(dth), math.sin(dth)
-                prior = np.array([(c * v_dop[0] - s * v_dop[1]) * dt, (s * v_dop[0] + c * v_dop[1]) * dt, dth])
+                prior = doppler_displacement(v_dop, dth, dt)
             elif self.last_motion is not None:
                 prior = self.last_motion.copy()
             t0 = time.perf_counter()
             prev = self.prev_static if self.prev_static is not None else np.zeros((0, 4))
-            motion = np.asarray(self.registration.estimate(prev, self._static(pts), prior=prior), dtype=np.float64).reshape(3)
+            cur = pts[self._static_mask(pts, sensors)]
+            motion, pairs = self._register(prev, cur, prior, v_dop, dth, dt)
             reg_time = time.perf_counter() - t0
-            if not np.all(np.isfinite(motion)):
-                motion = np.zeros(3)
             self.last_motion = motion
             c, s = math.cos(motion[2]), math.sin(motion[2])
-            if v_dop is None:
+            # a registration without point pairs returned its initial guess: it measured nothing, so the
+            # velocity holds (constant velocity) rather than being set from the guess (zero without a prior)
+            measured = pairs > 0
+            if v_dop is None and not measured:
+                pass
+            elif v_dop is None:
                 self.velocity = np.array(
                     [(c * motion[0] + s * motion[1]) / dt, (-s * motion[0] + c * motion[1]) / dt, motion[2] / dt]
                 )
             else:
                 self.velocity = np.array([v_dop[0], v_dop[1], motion[2] / dt])
-        est = self.slam.update(pts, motion, dt, ego_velocity=self.velocity if self.use_doppler else None, cov=cov)
+        # the moving-point filter runs here, with each point's radar (the filter's own one assumes the origin)
+        static = self._static_mask(pts, sensors)
+        first_new_id = self.slam.next_id  # landmarks this cycle adds get this id and above
+        est = self.slam.update(pts[static], motion, dt, cov=None if cov is None else cov[static])
+        est.n_static_points = int(static.sum())
         est.stage_times["registration"] = reg_time
-        self.prev_static = self._static(pts)
+        t_health = time.perf_counter()
+        was_lost = self.health.lost
+        self.health.update(
+            est.n_observations, est.n_matched, len(est.landmarks), self.fit_fraction if self.cycle > 0 else None,
+            self.cycle == 0 or self.registration_pairs > 0, self.registration_gated,
+            math.hypot(est.pose_std[0], est.pose_std[1]), first_new_id,
+        )
+        if self.health.lost:
+            self.distance_since_loss = 0.0 if not was_lost else self.distance_since_loss + math.hypot(*motion[:2])
+            est = self._recover(est, pts[static])
+        est.stage_times["health"] = time.perf_counter() - t_health
+        self.prev_static = pts[static]
         self.cycle += 1
         vel = None if self.velocity is None else self.velocity.copy()
         return CycleResult(est, motion, vel, reg_time)

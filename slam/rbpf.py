@@ -741,6 +741,29 @@ class RBPFSlam:
             landmark_cov=lcov,
         )
 
+    def relocalise(self, correction: np.ndarray, drop_from_id: int) -> None:
+        """Move every particle by ``correction`` (a motion in its own vehicle frame, ``p <- p (+) m``) and
+        drop the landmarks with an id >= ``drop_from_id`` (mapped from the wrong pose)."""
+        m = np.asarray(correction, dtype=float).reshape(3)
+        th = self.pose[:, 2]
+        cth, sth = np.cos(th), np.sin(th)
+        self.pose[:, 0] += cth * m[0] - sth * m[1]
+        self.pose[:, 1] += sth * m[0] + cth * m[1]
+        self.pose[:, 2] = wrap_angle(th + m[2])
+        wrong = self.slot_used & (self.slot_id >= drop_from_id)
+        self.active[:, wrong] = False
+        self.slot_used[wrong] = False
+        keep = self.retired_ids < drop_from_id
+        self.retired_xy, self.retired_ids = self.retired_xy[keep], self.retired_ids[keep]
+
+    def restart_at(self, pose: np.ndarray) -> None:
+        """A new, empty map; every particle at ``pose`` (map frame of the old map), the next
+        :meth:`update` applies its motion (the cycle count goes on)."""
+        cycle, next_id = self.cycle, self.next_id
+        self.reset()
+        self.pose[:] = np.asarray(pose, dtype=float).reshape(3)
+        self.cycle, self.next_id = max(cycle, 0), next_id
+
     # --------------------------------------------------------------- queries
     def full_map(self) -> tuple[np.ndarray, np.ndarray]:
         """All landmarks of the run: archived ones plus the current estimate.

@@ -11,7 +11,16 @@ Observation, adding to the radar's keys:
 * ``pose`` (3,): estimated x, y (m), heading (rad) in the map frame (the start pose is the origin);
 * ``pose_std`` (3,): the particles' weighted standard deviation;
 * ``landmarks`` (L_max, 2): estimated landmarks in the *estimated vehicle frame*, nearest first;
-* ``landmarks_mask`` (L_max,).
+* ``landmarks_mask`` (L_max,);
+* with ``health_in_obs=True`` (off by default: the shipped policies were trained without it)
+  ``slam_health`` (1,) and ``slam_lost`` (1,).
+
+``info`` always gets the track health (:mod:`slam.health`): ``slam_health`` in [0, 1],
+``slam_lost`` (the filter has lost the car since a loss it has not relocalised from),
+``slam_losses`` (losses so far in the episode), ``slam_relocalised`` (relocalisations so far)
+and ``slam_map_breaks`` (new maps started after a loss; the map frame restarts at the estimate
+of that cycle), and ``slam_pose_std`` (3,): the particles' std, and while lost at least the
+distance travelled since the loss (the loss's offset is unknown, the drive since bounds it).
 
 :meth:`SlamObservation.observation` is the map cloud -> SLAM estimate and
 nothing else: ground truth and errors are added to ``info`` by
@@ -59,6 +68,7 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         pipeline: a :class:`slam.pipeline.PipelineConfig` or a dict (Doppler use, acceleration bound).
         max_landmarks: L_max, rows of the ``landmarks`` observation, [1, 4096].
         stage_times_in_info: add ``slam_stage_times`` to ``info`` (non-deterministic values).
+        health_in_obs: add ``slam_health`` and ``slam_lost`` to the observation.
         blas_threads: BLAS / OpenMP threads inside ``step`` / ``reset``, restored after
             each call (:mod:`rhs_common.threads`); default 1, ``None`` leaves them alone.
 
@@ -82,10 +92,12 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         max_landmarks: int = 64,
         stage_times_in_info: bool = False,
         blas_threads: int | None = 1,
+        health_in_obs: bool = False,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self, slam=slam, registration=registration, icp=icp, pipeline=pipeline,
             max_landmarks=max_landmarks, stage_times_in_info=stage_times_in_info, blas_threads=blas_threads,
+            health_in_obs=health_in_obs,
         )
         gym.ObservationWrapper.__init__(self, env)
         space = env.observation_space
@@ -93,6 +105,8 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             raise ValueError("SlamObservation needs an env with 'points' and 'points_mask' observations")
         check_int("max_landmarks", max_landmarks, 1, 4096)
         check_bool("stage_times_in_info", stage_times_in_info)
+        check_bool("health_in_obs", health_in_obs)
+        self.health_in_obs = bool(health_in_obs)
         self.blas_threads = check_blas_threads(blas_threads)
         self.slam_config = build(SlamConfig, slam, "slam")
         self.icp_config = build(ICPConfig, icp, "icp")
@@ -115,6 +129,11 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
                 "pose_std": spaces.Box(0.0, big, (3,), np.float32),
                 "landmarks": spaces.Box(-big, big, (self.max_landmarks, 2), np.float32),
                 "landmarks_mask": spaces.MultiBinary(self.max_landmarks),
+                **(
+                    {"slam_health": spaces.Box(0.0, 1.0, (1,), np.float32), "slam_lost": spaces.MultiBinary(1)}
+                    if self.health_in_obs
+                    else {}
+                ),
             }
         )
         self._reset_state()
@@ -187,18 +206,34 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         lm_obs[: len(order)] = lv[order]
         lm_mask = np.zeros(self.max_landmarks, dtype=np.int8)
         lm_mask[: len(order)] = 1
-        return {
+        out = {
             **observation,
             "pose": np.asarray(est.pose, dtype=np.float32),
             "pose_std": np.asarray(est.pose_std, dtype=np.float32),
             "landmarks": lm_obs,
             "landmarks_mask": lm_mask,
         }
+        if self.health_in_obs:
+            health = self.pipeline.health
+            out["slam_health"] = np.array([health.health], dtype=np.float32)
+            out["slam_lost"] = np.array([int(health.lost)], dtype=np.int8)
+        return out
 
     def _with_info(self, info: dict[str, Any]) -> dict[str, Any]:
-        if not self.stage_times_in_info:
-            return info
-        return {**info, "slam_stage_times": dict(self.stage_times)}
+        pipe = self.pipeline
+        health = pipe.health
+        out = {
+            **info,
+            "slam_health": float(health.health),
+            "slam_lost": bool(health.lost),
+            "slam_losses": int(health.losses),
+            "slam_relocalised": int(pipe.relocalisations),
+            "slam_map_breaks": int(pipe.map_breaks),
+            "slam_pose_std": pipe.honest_pose_std(),
+        }
+        if self.stage_times_in_info:
+            out["slam_stage_times"] = dict(self.stage_times)
+        return out
 
     def render(self):
         """The radar frame plus the true (dark) and estimated (orange) trajectory and estimated map."""

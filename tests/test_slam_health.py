@@ -1,0 +1,156 @@
+"""Track health, loss detection, relocalisation and the few-landmark start of the SLAM pipeline."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import rhs_env  # noqa: F401
+from slam.health import HealthConfig, TrackHealth
+from slam.pipeline import PipelineConfig, doppler_displacement, doppler_ego_motion, forward_speed_fit
+
+CHEAP: dict[str, Any] = {"radar": {"scan": {"grid_deg": 5}}, "vehicles_count": 3}
+
+
+def _drive(jump_m: float, cycles: int = 50, at: int = 25, **kw):
+    """SLOWER on the highway; at cycle ``at`` the ego is teleported ``jump_m`` along the road."""
+    env = gym.make("rhs-highway-slam-v0", duration=cycles / 5, **CHEAP, **kw)
+    env.reset(seed=3)
+    infos = []
+    for t in range(cycles):
+        if t == at:
+            base: Any = env.unwrapped
+            base.vehicle.position = base.vehicle.position + np.array([jump_m, 0.0])
+        _, _, term, trunc, info = env.step(4)
+        infos.append(info)
+        if term or trunc:
+            break
+    env.close()
+    return infos
+
+
+def test_forward_speed_fit_two_points_and_a_mover():
+    v = 20.0
+    xy = np.array([[40.0, 5.0], [10.0, -8.0], [30.0, 3.0]])
+    vr = -v * xy[:, 0] / np.hypot(xy[:, 0], xy[:, 1])
+    vr[2] += 6.0  # a vehicle
+    pts = np.column_stack([xy, vr, np.ones(3)])
+    np.testing.assert_allclose(forward_speed_fit(pts, 0.5), [v, 0.0], atol=1e-9)
+    assert forward_speed_fit(pts[[0, 2]], 0.5) is None  # two points that disagree: no consensus
+    assert forward_speed_fit(pts[[0]], 0.5, min_inliers=1)[0] == pytest.approx(v)
+
+
+def test_doppler_ego_motion_sees_the_turn_through_the_lever_arms():
+    rng = np.random.default_rng(1)
+    mounts = np.array([[2.5, 0.0], [0.0, 1.0], [-2.5, 0.0], [0.0, -1.0]])
+    xy = rng.uniform(-60, 60, (40, 2))
+    radar = rng.integers(0, 4, 40)
+    s = mounts[radar]
+    v, w = np.array([12.0, 0.3]), 2.0  # a sharp lane change at 12 m/s
+    u = (xy - s) / np.hypot(*(xy - s).T)[:, None]
+    rel = -(v[None, :] + w * np.stack([-xy[:, 1], xy[:, 0]], axis=1))  # a static point relative to the car
+    vr = np.sum(rel * u, axis=1)
+    vr[:5] += 7.0  # five points on a vehicle
+    pts = np.column_stack([xy, vr, np.ones(40)])
+    fit = doppler_ego_motion(pts, s, 0.5, rng, n_hypotheses=128)
+    np.testing.assert_allclose(fit, [12.0, 0.3, 2.0], atol=1e-6)
+    # the velocity-only model is off by the lever arms' w |s| (2.5 m x 2 rad/s = 5 m/s across the front radar)
+    assert doppler_ego_motion(pts, s, 0.5, rng, prior=np.array([0.0, 0.0]), max_change=5.0) is None
+
+
+def test_doppler_displacement_is_the_chord_along_the_mean_heading():
+    m = doppler_displacement(np.array([20.0, 0.0]), 0.2, 0.2)
+    # a constant-rate turn: radius v / w, chord 2 r sin(dpsi / 2) at dpsi / 2
+    r = 20.0 / (0.2 / 0.2)
+    chord = 2 * r * math.sin(0.1)
+    np.testing.assert_allclose(m, [chord * math.cos(0.1), chord * math.sin(0.1), 0.2], atol=1e-12)
+    np.testing.assert_allclose(doppler_displacement(np.array([10.0, 1.0]), 0.0, 0.1), [1.0, 0.1, 0.0])
+
+
+def test_health_latches_a_loss_until_relocalised():
+    h = TrackHealth(HealthConfig())
+    h.update(20, 15.0, 50, 0.9, True, False, 0.05, 100)
+    assert h.health == 1.0 and not h.lost
+    h.update(20, 0.0, 50, 0.9, True, False, 0.05, 120)  # nothing matches a map of 50 landmarks
+    assert h.lost and h.losses == 1 and h.loss_landmark_id == 120
+    h.update(20, 18.0, 50, 0.9, True, False, 0.05, 140)  # self-consistent again, around the wrong pose
+    assert h.lost and h.lost_cycles == 2
+    h.relocalised()
+    assert not h.lost and h.losses == 1
+    h.update(2, 0.0, 50, None, False, False, 0.05, 150)  # one cycle without a registration fit: fine
+    assert not h.lost
+    h.update(2, 0.0, 50, None, False, False, 0.05, 150)  # two: the heading is a guess
+    assert h.h_blind == 0.0 and h.lost and h.losses == 2
+
+
+@pytest.mark.parametrize(("field", "value"), [("match_ok", 0.05), ("spread_lost_m", 0.5), ("lost_below", 1.5)])
+def test_health_config_rejects_bad_values(field, value):
+    with pytest.raises(ValueError, match=field):
+        HealthConfig(**{field: value})
+
+
+def test_pipeline_config_rejects_bad_values():
+    with pytest.raises(ValueError, match="doppler_gate_m"):
+        PipelineConfig(doppler_gate_m=0.0)
+    with pytest.raises(ValueError, match="new_map_after_cycles"):
+        PipelineConfig(new_map_after_cycles=0)
+
+
+def test_teleport_back_is_flagged_then_relocalised():
+    infos = _drive(-30.0)
+    before, after = infos[:25], infos[25:]
+    assert all(not i["slam_lost"] and i["slam_losses"] == 0 for i in before)
+    assert max(i["position_error_m"] for i in before) < 0.5
+    assert after[0]["slam_losses"] >= 1  # the jump is seen in its own cycle
+    assert after[-1]["slam_relocalised"] >= 1 and after[-1]["slam_map_breaks"] == 0
+    assert max(i["position_error_m"] for i in after[10:]) < 1.0  # back in the map within 10 cycles
+    assert not any(i["slam_lost"] for i in after[10:])
+
+
+def test_teleport_off_the_map_is_flagged_while_wrong_then_a_new_map():
+    # no relocalisation: the pre-loss map is too far to be found, 10 lost cycles start a new map
+    infos = _drive(400.0)
+    wrong = [i for i in infos if i["position_error_m"] > 5.0]
+    assert wrong, "the jump must put the estimate off"
+    assert all(i["slam_lost"] for i in wrong)
+    # while lost the reported std is at least the loss's spread and grows with the drive since the loss
+    lost_std = [float(i["slam_pose_std"][0]) for i in infos if i["slam_lost"]]
+    assert min(lost_std) >= 3.0 and np.all(np.diff(lost_std) > 0)
+    assert infos[-1]["slam_map_breaks"] == 1 and not infos[-1]["slam_lost"]
+    assert infos[-1]["position_error_m"] < 1.0  # measured in the new map
+    assert infos[-1]["position_error_episode_m"] > 100.0  # against the episode start, the loss remains
+
+
+def test_health_in_the_observation_is_opt_in():
+    env = gym.make("rhs-highway-slam-v0", **CHEAP)
+    obs, info = env.reset(seed=0)
+    assert "slam_health" not in obs and info["slam_health"] == 1.0 and info["slam_lost"] is False
+    env.close()
+    env = gym.make("rhs-highway-slam-v0", health_in_obs=True, **CHEAP)
+    obs, _ = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
+    assert obs["slam_health"].tolist() == [1.0] and obs["slam_lost"].tolist() == [0]
+    env.close()
+    with pytest.raises((TypeError, ValueError), match="health_in_obs"):
+        gym.make("rhs-highway-slam-v0", health_in_obs="yes", **CHEAP)
+
+
+@pytest.mark.parametrize("speed", [15.0, 25.0])
+def test_few_landmarks_at_speed_keep_the_start(speed):
+    """Three landmarks, straight at speed: the Doppler carries the first cycles (the first pose moves)."""
+    from rhs_env.radar import RadarConfig, RadarSystem
+    from slam.registration import make_registration
+    from slam.scenario import RadarCloud, run_scenario
+
+    dt, cycles = 0.2, 30
+    rng = np.random.default_rng(0)
+    poses = np.stack([speed * dt * np.arange(cycles), np.zeros(cycles), np.zeros(cycles)], 1)
+    lm = np.array([[10.0, 8.5], [poses[-1, 0] / 2 + 15.0, -8.9], [poses[-1, 0] + 20.0, 8.2]])
+    res = run_scenario(lm, poses, RadarCloud(lm, poses, dt, RadarSystem(RadarConfig(), rng)),
+                       make_registration("icp", rng), None, rng, dt=dt)
+    assert res["ate_rmse_m"] < 0.3
+    assert res["estimated_poses"][1, 0] == pytest.approx(speed * dt, abs=0.3)
