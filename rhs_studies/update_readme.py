@@ -185,7 +185,7 @@ def tolerance_table(results_dir: Path, fingerprints: dict) -> str | None:
             continue
         spread = max(v["max_rel"] for v in tol["spread"].values())
         rows.append(f"| `{name}` | {len(fp['values'])} | {spread:.1e} | {tol['rtol']:.1e} | {tol['atol']:.1e} "
-                    f"| {tol['max_outside']} |")
+                    f"| {len(tol['may_flip'])} |")
     return "\n".join(rows) if fingerprints else None
 
 
