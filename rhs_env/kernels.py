@@ -33,8 +33,8 @@ import numpy as np
 from rhs_common.jit import njit
 
 __all__ = [
-    "TAYLOR_ORDER", "atom_norms", "footprint_detections", "joint_rho", "newton_refine", "phasors", "taylor_atoms",
-    "taylor_tables", "tone_operands", "tone_spectra",
+    "TAYLOR_ORDER", "atom_norms", "doppler_dtft_refine", "footprint_detections", "joint_rho", "lstsq", "newton_refine",
+    "phasors", "taylor_atoms", "taylor_tables", "tone_operands", "tone_spectra",
 ]
 
 
@@ -481,3 +481,118 @@ def atom_norms(a: np.ndarray) -> np.ndarray:
                 v = a[d, q, l]
                 out[d, l] += v.real * v.real + v.imag * v.imag
     return np.sqrt(out)
+
+
+@njit
+def lstsq(a: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """:func:`rhs_env.point_cloud._lstsq` for one right-hand side: ``s_d = (A_d^H A_d + 1e-12 I)^-1 A_d^H y_d`` (D, L).
+
+    a (D, Q, L), y (D, Q) complex128. The Gram matrix ``G = A^H A + 1e-12 I`` (L x L, Hermitian positive
+    definite: the ridge keeps an unused, all-zero column at amplitude 0) is factored ``G = C C^H``
+    (Cholesky, C lower triangular), then ``C z = A^H y`` and ``C^H s = z`` by substitution.
+    """
+    n_d, n_q, n_l = a.shape
+    out = np.empty((n_d, n_l), np.complex128)
+    gram = np.empty((n_l, n_l), np.complex128)
+    chol = np.zeros((n_l, n_l), np.complex128)
+    rhs = np.empty(n_l, np.complex128)
+    for d in range(n_d):
+        gram[:] = 0
+        rhs[:] = 0
+        for q in range(n_q):
+            yq = y[d, q]
+            for l in range(n_l):
+                al = np.conj(a[d, q, l])
+                rhs[l] += al * yq
+                for m in range(l, n_l):
+                    gram[l, m] += al * a[d, q, m]
+        for l in range(n_l):
+            gram[l, l] += 1e-12
+        for l in range(n_l):  # G = C C^H: C[m, l] = (G[l, m]^* - sum_k C[m, k] C[l, k]^*) / C[l, l]
+            acc = gram[l, l].real
+            for k in range(l):
+                acc -= chol[l, k].real ** 2 + chol[l, k].imag ** 2
+            cll = np.sqrt(acc)
+            chol[l, l] = cll
+            for m in range(l + 1, n_l):
+                v = np.conj(gram[l, m])
+                for k in range(l):
+                    v -= chol[m, k] * np.conj(chol[l, k])
+                chol[m, l] = v / cll
+        for l in range(n_l):  # C z = A^H y
+            v = rhs[l]
+            for k in range(l):
+                v -= chol[l, k] * rhs[k]
+            rhs[l] = v / chol[l, l].real
+        for l in range(n_l - 1, -1, -1):  # C^H s = z
+            v = rhs[l]
+            for k in range(l + 1, n_l):
+                v -= np.conj(chol[k, l]) * out[d, k]
+            out[d, l] = v / chol[l, l].real
+    return out
+
+
+@njit(fastmath={"reassoc", "contract"})
+def doppler_dtft_refine(h: np.ndarray, r: np.ndarray, t: np.ndarray, n_t: int, kern_re: np.ndarray,
+                        kern_im: np.ndarray, w: np.ndarray, span: np.ndarray, nfft: int) -> np.ndarray:
+    """The narrow search of :func:`rhs_env.point_cloud._doppler_grid_refine`: d_omega (D,) rad per chirp.
+
+    ``q_t = sum_{t_ic = t} conj(h_i) r_ic`` (rounded to complex64, as the reference), its DTFT
+    ``V_j = |sum_t q_t exp(-j w_j t)|^2`` on the grid ``w_j = 2 pi j / nfft`` (``kern_re + j kern_im``
+    (J, n_t): the reference's complex64 ``exp(-j w_j t)``, transposed), the first maximum ``j*`` within
+    ``|w_j| <= span_d`` (clipped to 1..J-2), then the vertex of the parabola through
+    ``log V`` at ``j* - 1, j*, j* + 1``: ``w_j* + off 2 pi / nfft``. Real and imaginary parts are
+    separate float64 sums (vectorised; the sums' order is free, so V agrees with the reference's
+    float32 product to ~1e-6 relative).
+    """
+    n_d, n_i, n_c = r.shape
+    n_j = w.size
+    out = np.empty(n_d)
+    qr = np.empty(n_t)
+    qi = np.empty(n_t)
+    val = np.zeros(n_j)
+    for d in range(n_d):
+        qr[:] = 0.0
+        qi[:] = 0.0
+        for i in range(n_i):
+            hc = np.conj(h[d, i])
+            for c in range(n_c):
+                p = hc * r[d, i, c]
+                tt = t[i * n_c + c]
+                qr[tt] += p.real
+                qi[tt] += p.imag
+        for tt in range(n_t):
+            qr[tt] = np.float32(qr[tt])
+            qi[tt] = np.float32(qi[tt])
+        j_lo = n_j
+        j_hi = -1
+        for j in range(n_j):
+            if abs(w[j]) <= span[d]:
+                j_lo = min(j_lo, j)
+                j_hi = max(j_hi, j)
+        a = max(min(j_lo, n_j - 2) - 1, 0)
+        b = min(max(j_hi, 1) + 1, n_j - 1)
+        for j in range(a, b + 1):
+            kr = kern_re[j]
+            ki = kern_im[j]
+            sr = 0.0
+            si = 0.0
+            for tt in range(n_t):
+                sr += qr[tt] * kr[tt] - qi[tt] * ki[tt]
+                si += qr[tt] * ki[tt] + qi[tt] * kr[tt]
+            val[j] = sr * sr + si * si
+        best = -1.0
+        jb = 0
+        for j in range(n_j):
+            v = val[j] if j_lo <= j <= j_hi else -1.0
+            if v > best:
+                best = v
+                jb = j
+        jb = min(max(jb, 1), n_j - 2)
+        ym = np.log(max(val[jb - 1], 1e-300))
+        y0 = np.log(max(val[jb], 1e-300))
+        yp = np.log(max(val[jb + 1], 1e-300))
+        den = ym - 2.0 * y0 + yp
+        off = min(max(0.5 * (ym - yp) / den, -0.5), 0.5) if den < 0 else 0.0
+        out[d] = w[jb] + off * 2 * np.pi / nfft
+    return out

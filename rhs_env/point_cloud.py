@@ -474,8 +474,16 @@ def _grid_refine(dic: AngleDictionary, resid: np.ndarray, center: np.ndarray | N
     return dic.candidates[j] + off * dic.step
 
 
-def _lstsq(atoms: np.ndarray, iota: np.ndarray) -> np.ndarray:
-    """Batched least squares: atoms (D, I, L), iota (D, I, ...) -> (D, L, ...)."""
+def _lstsq(atoms: np.ndarray, iota: np.ndarray, kernels: str = "numpy") -> np.ndarray:
+    """Batched least squares: atoms (D, I, L), iota (D, I, ...) -> (D, L, ...).
+
+    ``s = (A^H A + 1e-12 I)^-1 A^H iota``; with ``kernels="numba"`` and one right-hand side
+    (iota (D, I, 1)) a compiled Cholesky solve (:func:`rhs_env.kernels.lstsq`, the same s to round-off).
+    """
+    if kernels == "numba" and iota.ndim == 3 and iota.shape[2] == 1:
+        from rhs_env.kernels import lstsq
+
+        return lstsq(np.ascontiguousarray(atoms, dtype=complex), np.ascontiguousarray(iota[..., 0], dtype=complex))[..., None]
     ah = np.conj(np.swapaxes(atoms, 1, 2))
     gram = ah @ atoms + 1e-12 * np.eye(atoms.shape[2])[None]
     return np.linalg.solve(gram, ah @ iota)
@@ -581,7 +589,16 @@ def _dtft_kernel(n_t: int, nfft: int, half: int) -> tuple[np.ndarray, np.ndarray
     return w, np.exp(-1j * np.outer(np.arange(n_t), w)).astype(np.complex64)
 
 
-def _doppler_grid_refine(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: np.ndarray) -> np.ndarray:
+@functools.lru_cache(maxsize=16)
+def _dtft_kernel_split(n_t: int, nfft: int, half: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_dtft_kernel` as the compiled search reads it: w, and the real and imaginary parts (2 half + 1, n_t) float64."""
+    w, kern = _dtft_kernel(n_t, nfft, half)
+    kt = kern.T.astype(complex)
+    return w, np.ascontiguousarray(kt.real), np.ascontiguousarray(kt.imag)
+
+
+def _doppler_grid_refine(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: np.ndarray,
+                         kernels: str = "numpy") -> np.ndarray:
     """Residual chirp-phase rate d_omega (D,) maximising ``|sum_ic conj(h_i) r_ic exp(-j d_omega t_ic)|``.
 
     h (D, I) atoms, r (D, I, C) Doppler-compensated data, tgrid (I, C) integer
@@ -591,18 +608,25 @@ def _doppler_grid_refine(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: 
     through the log-peak; the maximum is taken within ``|d_omega| <= span``. A
     narrow search (the refinements: a few dozen grid points) evaluates the DTFT
     directly on those points (one complex64 matrix product, the same samples as
-    the FFT); a wide one takes the zero-padded FFT.
+    the FFT); a wide one takes the zero-padded FFT. With ``kernels="numba"`` the narrow search is
+    compiled (:func:`rhs_env.kernels.doppler_dtft_refine`: the same samples, summed in float64).
     """
     d = h.shape[0]
     t, n_t, consecutive = _time_index(tgrid)
+    nfft = 1 << math.ceil(math.log2(max(4 * n_t, 64)))
+    half = 1 << math.ceil(math.log2(math.ceil(float(np.max(span)) * nfft / (2 * np.pi)) + 1))  # few kernels
+    if kernels == "numba" and 2 * half + 1 < nfft // 8:
+        from rhs_env.kernels import doppler_dtft_refine
+
+        w, kern_re, kern_im = _dtft_kernel_split(n_t, nfft, half)
+        return doppler_dtft_refine(np.ascontiguousarray(h, dtype=complex), np.ascontiguousarray(r, dtype=complex),
+                                   t, n_t, kern_re, kern_im, w, np.ascontiguousarray(span, dtype=float), nfft)
     prod = (h.conj()[:, :, None] * r).reshape(d, -1)
     if consecutive:
         q = prod  # every chirp has its own time (Doppler phase runs across slots)
     else:
         q = np.zeros((d, n_t), complex)
         np.add.at(q.T, t, prod.T)  # q[:, t] += prod, repeated t accumulated
-    nfft = 1 << math.ceil(math.log2(max(4 * n_t, 64)))
-    half = 1 << math.ceil(math.log2(math.ceil(float(np.max(span)) * nfft / (2 * np.pi)) + 1))  # few kernels
     if 2 * half + 1 < nfft // 8:
         w, kern = _dtft_kernel(n_t, nfft, half)
         val = np.abs(q.astype(np.complex64) @ kern).astype(float) ** 2  # (D, 2 half + 1)
@@ -713,7 +737,7 @@ def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, thet
         atoms = np.zeros((d, i * c, theta.shape[1]), complex)
         atoms[dd, :, kk] = _doppler_atoms(dic, theta[dd, kk], domega[dd, kk], tgrid)
     a = atoms.copy()
-    s = _lstsq(a, flat[..., None])[..., 0] if amp is None else amp.copy()
+    s = _lstsq(a, flat[..., None], dic.kernels)[..., 0] if amp is None else amp.copy()
     base = None  # exp(-j d_omega t) of the current d_omega, carried from the previous pass
     for _ in range(passes):
         fit = np.einsum("dkl,dl->dk", a, s)
@@ -721,7 +745,7 @@ def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, thet
         if base is None:
             base = _phasors(dic, domega[dd, kk], tgrid)
         h = a[dd, :, kk].reshape(-1, i, c)[:, :, 0] * base[:, :, 0]  # h(theta) of the current atom, (P, I)
-        dw = domega[dd, kk] + _doppler_grid_refine(h, part * base, tgrid, span[dd])
+        dw = domega[dd, kk] + _doppler_grid_refine(h, part * base, tgrid, span[dd], dic.kernels)
         th = theta[dd, kk]
         base = _phasors(dic, dw, tgrid)
         if newton_steps:
@@ -729,7 +753,7 @@ def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, thet
             th = _newton_refine(dic, th, rho, newton_steps)
         theta[dd, kk], domega[dd, kk] = th, dw
         a[dd, :, kk] = _doppler_atoms(dic, th, dw, tgrid, np.conj(base))
-        s = _lstsq(a, flat[..., None])[..., 0]
+        s = _lstsq(a, flat[..., None], dic.kernels)[..., 0]
     return theta, domega, s * valid, a
 
 
@@ -775,7 +799,7 @@ def _new_atom(dic: AngleDictionary, res: np.ndarray, tgrid: np.ndarray, noise_va
         w0[sub], th[sub] = w_s, th_s
         rc[sub] = res[sub] * _phasors(dic, w_s, tgrid)
         span[sub] = np.minimum(span[sub], np.pi / dwell[sub])
-    w = w0 + _doppler_grid_refine(dic.atoms(th)[0].T, rc, tgrid, span)
+    w = w0 + _doppler_grid_refine(dic.atoms(th)[0].T, rc, tgrid, span, dic.kernels)
     phase = None
     if newton_steps:
         comp = _phasors(dic, w, tgrid)
@@ -832,7 +856,7 @@ def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_t
         th_r, om_r, val_r, a = theta[rows], omega[rows], valid[rows], atoms[rows]
         th_r[:, l], om_r[:, l], val_r[:, l] = th, w, True
         a[:, :, l] = _doppler_atoms(dic, th, w, tgrid, phase)
-        s = _lstsq(a, data[rows].reshape(rows.size, -1, 1))[..., 0] * val_r
+        s = _lstsq(a, data[rows].reshape(rows.size, -1, 1), dic.kernels)[..., 0] * val_r
         ok = np.all((np.abs(s) * atom_norms(a, dic.kernels) >= min_amplitude) | ~val_r, axis=1) | (detected and l == 0)
         if l > 0 and cycles and np.any(ok):  # joint refinement of the rows that keep the new atom
             k = np.flatnonzero(ok)
