@@ -33,7 +33,7 @@ import numpy as np
 from rhs_common.jit import njit
 
 __all__ = [
-    "TAYLOR_ORDER", "atom_norms", "doppler_dtft_refine", "footprint_detections", "joint_rho", "lstsq", "newton_refine",
+    "TAYLOR_ORDER", "atom_norms", "doppler_dtft_refine", "footprint_detections", "joint_refine", "joint_rho", "lstsq", "newton_refine",
     "phasors", "taylor_atoms", "taylor_tables", "tone_operands", "tone_spectra",
 ]
 
@@ -596,3 +596,93 @@ def doppler_dtft_refine(h: np.ndarray, r: np.ndarray, t: np.ndarray, n_t: int, k
         off = min(max(0.5 * (ym - yp) / den, -0.5), 0.5) if den < 0 else 0.0
         out[d] = w[jb] + off * 2 * np.pi / nfft
     return out
+
+
+@njit
+def joint_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
+                 x: np.ndarray, flat: np.ndarray, tgrid: np.ndarray, t: np.ndarray, n_t: int, kern_re: np.ndarray,
+                 kern_im: np.ndarray, w: np.ndarray, nfft: int, theta: np.ndarray, domega: np.ndarray,
+                 valid: np.ndarray, span: np.ndarray, passes: int, newton_steps: int, a: np.ndarray,
+                 s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`rhs_env.point_cloud.joint_refine` in one call: ``passes`` Jacobi passes over every valid (row, target).
+
+    Per pass, for every pair (d, k) at once against the pass' atoms a (D, I C, L) and amplitudes s (D, L):
+    the partial residual ``part = data_d - sum_l a_l s_l + a_k s_k`` (I, C); with ``base = exp(-j omega_k t)``
+    (the previous pass' phases) and ``h_i = a_k[i, 0] base[i, 0]``, the Doppler step of
+    :func:`doppler_dtft_refine` on ``part base``; then ``base = exp(-j omega'_k t)``, Newton steps on the angle
+    (:func:`newton_refine`) with ``rho_i = sum_c part_ic base_ic``; then the new atoms
+    ``a_k = h(theta'_k) conj(base)`` and least squares for every amplitude (:func:`lstsq`). Returns theta,
+    d_omega, ``s * valid`` and a (updated copies). The narrow DTFT grid (w, kern) must cover ``span``.
+    """
+    n_d, n_q, n_l = a.shape
+    n_i, n_c = tgrid.shape
+    theta = theta.copy()
+    domega = domega.copy()
+    a = a.copy()
+    n_p = 0
+    for d in range(n_d):
+        for k in range(n_l):
+            n_p += valid[d, k]
+    dd = np.empty(n_p, np.int64)
+    kk = np.empty(n_p, np.int64)
+    p = 0
+    for d in range(n_d):
+        for k in range(n_l):
+            if valid[d, k]:
+                dd[p], kk[p] = d, k
+                p += 1
+    span_p = np.empty(n_p)
+    w_p = np.empty(n_p)
+    for p in range(n_p):
+        span_p[p] = span[dd[p]]
+        w_p[p] = domega[dd[p], kk[p]]
+    base = phasors(w_p, tgrid, -1.0)  # (P, I, C)
+    part = np.empty((n_p, n_i, n_c), np.complex128)
+    comp = np.empty((n_p, n_i, n_c), np.complex128)
+    h = np.empty((n_p, n_i), np.complex128)
+    rho = np.empty((n_p, n_i), np.complex128)
+    th = np.empty(n_p)
+    fit = np.empty(n_q, np.complex128)
+    for _ in range(passes):
+        for p in range(n_p):
+            d, k = dd[p], kk[p]
+            for q in range(n_q):
+                acc = 0j
+                for m in range(n_l):
+                    acc += a[d, q, m] * s[d, m]
+                fit[q] = acc
+            for i in range(n_i):
+                for c in range(n_c):
+                    q = i * n_c + c
+                    v = flat[d, q] - fit[q] + a[d, q, k] * s[d, k]
+                    part[p, i, c] = v
+                    comp[p, i, c] = v * base[p, i, c]
+                h[p, i] = a[d, i * n_c, k] * base[p, i, 0]
+            th[p] = theta[d, k]
+        dw = doppler_dtft_refine(h, comp, t, n_t, kern_re, kern_im, w, span_p, nfft)
+        for p in range(n_p):
+            dw[p] += domega[dd[p], kk[p]]
+        base = phasors(dw, tgrid, -1.0)
+        if newton_steps:
+            for p in range(n_p):
+                for i in range(n_i):
+                    acc = 0j
+                    for c in range(n_c):
+                        acc += part[p, i, c] * base[p, i, c]
+                    rho[p, i] = acc
+            th = newton_refine(table, u_c, x_c, lo, step, w2, x, th, rho, newton_steps)
+        hs = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, 0)[0]  # (P, I)
+        for p in range(n_p):
+            d, k = dd[p], kk[p]
+            theta[d, k] = th[p]
+            domega[d, k] = dw[p]
+            for i in range(n_i):
+                for c in range(n_c):
+                    a[d, i * n_c + c, k] = hs[p, i] * np.conj(base[p, i, c])
+        s = lstsq(a, flat)
+    out = s.copy()
+    for d in range(n_d):
+        for k in range(n_l):
+            if not valid[d, k]:
+                out[d, k] = 0
+    return theta, domega, out, a

@@ -597,6 +597,16 @@ def _dtft_kernel_split(n_t: int, nfft: int, half: int) -> tuple[np.ndarray, np.n
     return w, np.ascontiguousarray(kt.real), np.ascontiguousarray(kt.imag)
 
 
+def _narrow_dtft(tgrid: np.ndarray, span: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int] | None:
+    """The DTFT grid of :func:`_doppler_grid_refine`'s narrow search for ``span`` (w, kernel re / im, nfft), None if it takes the FFT."""
+    _, n_t, _ = _time_index(tgrid)
+    nfft = 1 << math.ceil(math.log2(max(4 * n_t, 64)))
+    half = 1 << math.ceil(math.log2(math.ceil(float(np.max(span)) * nfft / (2 * np.pi)) + 1))
+    if 2 * half + 1 >= nfft // 8:
+        return None
+    return (*_dtft_kernel_split(n_t, nfft, half), nfft)
+
+
 def _doppler_grid_refine(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: np.ndarray,
                          kernels: str = "numpy") -> np.ndarray:
     """Residual chirp-phase rate d_omega (D,) maximising ``|sum_ic conj(h_i) r_ic exp(-j d_omega t_ic)|``.
@@ -615,10 +625,11 @@ def _doppler_grid_refine(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: 
     t, n_t, consecutive = _time_index(tgrid)
     nfft = 1 << math.ceil(math.log2(max(4 * n_t, 64)))
     half = 1 << math.ceil(math.log2(math.ceil(float(np.max(span)) * nfft / (2 * np.pi)) + 1))  # few kernels
-    if kernels == "numba" and 2 * half + 1 < nfft // 8:
+    narrow = _narrow_dtft(tgrid, span) if kernels == "numba" else None
+    if narrow is not None:
         from rhs_env.kernels import doppler_dtft_refine
 
-        w, kern_re, kern_im = _dtft_kernel_split(n_t, nfft, half)
+        w, kern_re, kern_im, nfft = narrow
         return doppler_dtft_refine(np.ascontiguousarray(h, dtype=complex), np.ascontiguousarray(r, dtype=complex),
                                    t, n_t, kern_re, kern_im, w, np.ascontiguousarray(span, dtype=float), nfft)
     prod = (h.conj()[:, :, None] * r).reshape(d, -1)
@@ -728,6 +739,9 @@ def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, thet
     amplitudes with atoms ``a_k = h(theta_k) exp(j d_omega_k t)``. ``atoms`` /
     ``amp``: the current atoms (D, I C, L) and amplitudes, when the caller has them.
     Returns theta, d_omega, amplitudes (D, L) and atoms (D, I C, L).
+
+    With the dictionary's ``kernels="numba"`` (Taylor atoms, a narrow Doppler search) the passes run in
+    one compiled call (:func:`rhs_env.kernels.joint_refine`, the same steps).
     """
     d, i, c = data.shape
     flat = data.reshape(d, i * c)
@@ -738,6 +752,20 @@ def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, thet
         atoms[dd, :, kk] = _doppler_atoms(dic, theta[dd, kk], domega[dd, kk], tgrid)
     a = atoms.copy()
     s = _lstsq(a, flat[..., None], dic.kernels)[..., 0] if amp is None else amp.copy()
+    taylor = getattr(dic, "_taylor", None)
+    narrow = _narrow_dtft(tgrid, span) if taylor is not None and dic.kernels == "numba" and dd.size else None
+    if narrow is not None and taylor is not None:
+        from rhs_env import kernels
+
+        table, u_c, x_c = taylor
+        t, n_t, _ = _time_index(tgrid)
+        w, kern_re, kern_im, nfft = narrow
+        return kernels.joint_refine(table, u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2, dic._x,
+                                    np.ascontiguousarray(flat, dtype=complex), np.ascontiguousarray(tgrid, dtype=float),
+                                    t, n_t, kern_re, kern_im, w, nfft, np.ascontiguousarray(theta, dtype=float),
+                                    np.ascontiguousarray(domega, dtype=float), np.ascontiguousarray(valid),
+                                    np.ascontiguousarray(span, dtype=float), passes, newton_steps, a,
+                                    np.ascontiguousarray(s, dtype=complex))
     base = None  # exp(-j d_omega t) of the current d_omega, carried from the previous pass
     for _ in range(passes):
         fit = np.einsum("dkl,dl->dk", a, s)
