@@ -33,8 +33,8 @@ import numpy as np
 from rhs_common.jit import njit
 
 __all__ = [
-    "TAYLOR_ORDER", "atom_norms", "doppler_dtft_refine", "footprint_detections", "joint_refine", "joint_rho", "lstsq", "newton_refine",
-    "phasors", "taylor_atoms", "taylor_tables", "tone_operands", "tone_spectra",
+    "TAYLOR_ORDER", "atom_norms", "doppler_dtft_refine", "footprint_detections", "joint_refine", "joint_rho", "lstsq",
+    "newton_refine", "omp_doppler", "phasors", "taylor_atoms", "taylor_tables", "tone_operands", "tone_spectra",
 ]
 
 
@@ -707,3 +707,382 @@ def joint_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step
             if not valid[d, k]:
                 out[d, k] = 0
     return theta, domega, out, a
+
+
+# --------------------------------------------------------------------------- the OMP in one call
+@njit
+def _fft_pow2(re: np.ndarray, im: np.ndarray, e_re: np.ndarray, e_im: np.ndarray) -> None:
+    """In-place forward FFT ``X_k = sum_t x_t exp(-2 pi j k t / n)`` of ``re + j im`` (n a power of 2).
+
+    Iterative radix 2 (bit-reversed order, then log2 n butterfly stages); ``e_re + j e_im`` the twiddles
+    ``exp(-2 pi j m / n)``, m = 0..n-1.
+    """
+    n = re.size
+    j = 0
+    for i in range(1, n):
+        bit = n >> 1
+        while j & bit:
+            j ^= bit
+            bit >>= 1
+        j |= bit
+        if i < j:
+            re[i], re[j] = re[j], re[i]
+            im[i], im[j] = im[j], im[i]
+    size = 2
+    while size <= n:
+        half = size // 2
+        stride = n // size
+        for start in range(0, n, size):
+            for k in range(half):
+                wr = e_re[k * stride]
+                wi = e_im[k * stride]
+                a = start + k
+                b = a + half
+                tr = re[b] * wr - im[b] * wi
+                ti = re[b] * wi + im[b] * wr
+                re[b] = re[a] - tr
+                im[b] = im[a] - ti
+                re[a] += tr
+                im[a] += ti
+        size *= 2
+
+
+@njit
+def _dtft_at(q_re: np.ndarray, q_im: np.ndarray, jj: int, nfft: int, e_re: np.ndarray, e_im: np.ndarray) -> float:
+    """``|sum_t q_t exp(-2 pi j jj t / nfft)|^2`` (the twiddle table indexed by ``jj t mod nfft``)."""
+    sr = 0.0
+    si = 0.0
+    inc = jj % nfft
+    m = 0
+    for tt in range(q_re.size):  # m = jj tt mod nfft, advanced without a division
+        sr += q_re[tt] * e_re[m] - q_im[tt] * e_im[m]
+        si += q_re[tt] * e_im[m] + q_im[tt] * e_re[m]
+        m += inc
+        if m >= nfft:
+            m -= nfft
+    return sr * sr + si * si
+
+
+@njit
+def _doppler_peak(q_re: np.ndarray, q_im: np.ndarray, span: float, nfft: int, e_re: np.ndarray, e_im: np.ndarray,
+                  buf_re: np.ndarray, buf_im: np.ndarray) -> float:
+    """d_omega of one row of :func:`rhs_env.point_cloud._doppler_grid_refine` from its ``q_t`` (n_t,).
+
+    ``V(w) = |sum_t q_t exp(-j w t)|^2`` on ``w_k = 2 pi k / nfft``, the first maximum within ``|w| <= span``,
+    plus the log-parabola vertex. A narrow search (``2 half + 1 < nfft / 8``, ``half`` the reference's
+    power of two above ``span nfft / (2 pi)``) sums the few samples directly, q rounded to complex64 and the
+    peak clipped to ``|k| <= half - 1`` as the reference's matrix product; a wide one takes the FFT
+    (:func:`_fft_pow2`), neighbours wrapping around, frequencies in ``np.fft.fftfreq`` order.
+    """
+    n_t = q_re.size
+    two_pi = 2 * np.pi
+    half = 1 << int(np.ceil(np.log2(np.ceil(span * nfft / two_pi) + 1)))
+    if 2 * half + 1 < nfft // 8:
+        for tt in range(n_t):
+            q_re[tt] = np.float32(q_re[tt])
+            q_im[tt] = np.float32(q_im[tt])
+        best = -1.0
+        jb = -half
+        for jj in range(-half, half + 1):
+            if abs(two_pi * jj / nfft) <= span:
+                v = _dtft_at(q_re, q_im, jj, nfft, e_re, e_im)
+                if v > best:
+                    best = v
+                    jb = jj
+        jb = min(max(jb, -half + 1), half - 1)
+        vm = _dtft_at(q_re, q_im, jb - 1, nfft, e_re, e_im)
+        v0 = _dtft_at(q_re, q_im, jb, nfft, e_re, e_im)
+        vp = _dtft_at(q_re, q_im, jb + 1, nfft, e_re, e_im)
+        w_b = two_pi * jb / nfft
+    else:
+        buf_re[:] = 0.0
+        buf_im[:] = 0.0
+        buf_re[:n_t] = q_re
+        buf_im[:n_t] = q_im
+        _fft_pow2(buf_re, buf_im, e_re, e_im)
+        best = -1.0
+        kb = 0
+        inv = 1.0 / nfft
+        for k in range(nfft):
+            kf = k if k < (nfft - 1) // 2 + 1 else k - nfft
+            if abs(two_pi * (kf * inv)) <= span:
+                v = buf_re[k] ** 2 + buf_im[k] ** 2
+                if v > best:
+                    best = v
+                    kb = k
+        km, kp = (kb - 1) % nfft, (kb + 1) % nfft
+        vm = buf_re[km] ** 2 + buf_im[km] ** 2
+        v0 = buf_re[kb] ** 2 + buf_im[kb] ** 2
+        vp = buf_re[kp] ** 2 + buf_im[kp] ** 2
+        kf = kb if kb < (nfft - 1) // 2 + 1 else kb - nfft
+        w_b = two_pi * (kf * inv)
+    ym = np.log(max(vm, 1e-300))
+    y0 = np.log(max(v0, 1e-300))
+    yp = np.log(max(vp, 1e-300))
+    den = ym - 2.0 * y0 + yp
+    off = min(max(0.5 * (ym - yp) / den, -0.5), 0.5) if den < 0 else 0.0
+    return w_b + off * two_pi / nfft
+
+
+@njit
+def _angle_peak(corr: np.ndarray, candidates: np.ndarray, step: float) -> tuple[int, float]:
+    """Best candidate of one correlation line (I_c,) and the angle ``theta_j + off step`` (log-parabola; 0 at the ends)."""
+    n_c = corr.size
+    j = 0
+    for jj in range(1, n_c):
+        if corr[jj] > corr[j]:
+            j = jj
+    jm, jp = max(j - 1, 0), min(j + 1, n_c - 1)
+    ym = np.log(max(corr[jm], 1e-30))
+    y0 = np.log(max(corr[j], 1e-30))
+    yp = np.log(max(corr[jp], 1e-30))
+    den = ym - 2.0 * y0 + yp
+    off = min(max(0.5 * (ym - yp) / den, -0.5), 0.5) if den < 0 else 0.0
+    if j == 0 or j == n_c - 1:
+        off = 0.0
+    return j, candidates[j] + off * step
+
+
+@njit
+def _power(z: np.ndarray) -> np.ndarray:
+    """``|z|^2`` (float32) of complex64 correlations, as ``np.abs(z) ** 2``."""
+    out = np.empty(z.shape, np.float32)
+    zf = z.reshape(-1)
+    of = out.reshape(-1)
+    for n in range(zf.size):
+        a = np.float32(np.abs(zf[n]))
+        of[n] = a * a
+    return out
+
+
+@njit
+def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
+               x: np.ndarray, hn_conj: np.ndarray, candidates: np.ndarray, res: np.ndarray, tgrid: np.ndarray,
+               t: np.ndarray, n_t: int, nfft: int, e_re: np.ndarray, e_im: np.ndarray, noise_var: float,
+               newton_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`rhs_env.point_cloud._new_atom` of the residuals res (D, I, C): theta, omega (D,) and ``exp(j omega t)``.
+
+    Coarse Doppler ``w0 = arg sum R[i, c+1] R*[i, c]``; the best candidate of ``|H_n^H rho|^2`` with
+    ``rho_i = sum_c R_ic exp(-j w0 t_ic)`` (one complex64 product); ``snr = max(||R||^2 / sigma^2 - I C, 1)``,
+    ``span = clip(5 / sqrt(snr), min(pi, 8 pi / T), pi)``; the dwell ``C (sum_i e_i)^2 / sum_i e_i^2`` of the
+    slot energies ``e_i = max(sum_c |R_ic|^2 - C sigma^2, 0)``; the rows with ``5 dwell / sqrt(snr) > pi / 2``
+    take the joint angle x Doppler search (``n_h`` hypotheses over the batch, :func:`joint_rho`); the fine
+    Doppler (:func:`_doppler_peak`) on ``q_t = sum conj(h_i) rc_it``, Newton steps on the angle.
+    """
+    n_d, n_i, n_c = res.shape
+    t_span = float(n_t)
+    th = np.empty(n_d)
+    w0 = np.empty(n_d)
+    span = np.empty(n_d)
+    dwell = np.empty(n_d)
+    snr = np.empty(n_d)
+    wide = np.zeros(n_d, np.bool_)
+    for d in range(n_d):
+        acc = 0j
+        for i in range(n_i):
+            for c in range(n_c - 1):
+                acc += res[d, i, c + 1] * np.conj(res[d, i, c])
+        w0[d] = np.arctan2(acc.imag, acc.real)
+    rc = res * phasors(w0, tgrid, -1.0)
+    rho = np.empty((n_d, n_i), np.complex64)
+    for d in range(n_d):
+        for i in range(n_i):
+            acc = 0j
+            for c in range(n_c):
+                acc += rc[d, i, c]
+            rho[d, i] = acc
+    corr = _power(np.dot(rho, hn_conj))
+    floor_span = min(np.pi, 8 * np.pi / t_span)
+    for d in range(n_d):
+        th[d] = _angle_peak(corr[d], candidates, step)[1]
+        tot = 0.0
+        e_sum = 0.0
+        e_sq = 0.0
+        for i in range(n_i):
+            e = 0.0
+            for c in range(n_c):
+                v = res[d, i, c]
+                e += v.real ** 2 + v.imag ** 2
+            tot += e
+            e = max(e - n_c * noise_var, 0.0)
+            e_sum += e
+            e_sq += e * e
+        snr[d] = max(tot / noise_var - n_i * n_c, 1.0)
+        span[d] = min(max(5.0 / np.sqrt(snr[d]), floor_span), np.pi)
+        dw = e_sum ** 2 / max(e_sq, 1e-300) * n_c
+        dwell[d] = min(max(dw, n_c), t_span)
+        wide[d] = 5.0 / np.sqrt(snr[d]) * dwell[d] > 0.5 * np.pi
+    sub = np.flatnonzero(wide)
+    if sub.size:
+        top = 0.0
+        for d in sub:
+            top = max(top, span[d] * dwell[d])
+        n_h = int(min(33, 2 * np.ceil(top / 0.5) + 1))
+        u = np.linspace(-1.0, 1.0, n_h)
+        om = np.empty((sub.size, n_h))
+        for s_ in range(sub.size):
+            for hh in range(n_h):
+                om[s_, hh] = w0[sub[s_]] + span[sub[s_]] * u[hh]
+        t_chirp = tgrid[0] - tgrid[0, 0]
+        t_slot = tgrid[:, 0].copy()
+        rho_j = joint_rho(res[sub], om, t_chirp, t_slot)  # (S, H, I) complex64
+        cj = _power(np.dot(rho_j.reshape(sub.size * n_h, n_i), hn_conj)).reshape(sub.size, n_h, -1)
+        for s_ in range(sub.size):
+            d = sub[s_]
+            hb, jb = 0, 0
+            best = cj[s_, 0, 0]
+            for hh in range(n_h):
+                for jj in range(cj.shape[2]):
+                    if cj[s_, hh, jj] > best:
+                        best = cj[s_, hh, jj]
+                        hb, jb = hh, jj
+            n_cand = cj.shape[2]
+            jm, jp = max(jb - 1, 0), min(jb + 1, n_cand - 1)
+            ym = np.log(max(cj[s_, hb, jm], 1e-30))
+            y0 = np.log(max(cj[s_, hb, jb], 1e-30))
+            yp = np.log(max(cj[s_, hb, jp], 1e-30))
+            den = ym - 2.0 * y0 + yp
+            off = min(max(0.5 * (ym - yp) / den, -0.5), 0.5) if den < 0 else 0.0
+            w0[d] = om[s_, hb]
+            th[d] = candidates[jb] + off * step
+            span[d] = min(span[d], np.pi / dwell[d])
+        rc_s = res[sub] * phasors(w0[sub], tgrid, -1.0)
+        for s_ in range(sub.size):
+            rc[sub[s_]] = rc_s[s_]
+    h = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, 0)[0]
+    q_re = np.empty(n_t)
+    q_im = np.empty(n_t)
+    buf_re = np.empty(nfft)
+    buf_im = np.empty(nfft)
+    w = np.empty(n_d)
+    for d in range(n_d):
+        q_re[:] = 0.0
+        q_im[:] = 0.0
+        for i in range(n_i):
+            hc = np.conj(h[d, i])
+            for c in range(n_c):
+                p = hc * rc[d, i, c]
+                tt = t[i * n_c + c]
+                q_re[tt] += p.real
+                q_im[tt] += p.imag
+        w[d] = w0[d] + _doppler_peak(q_re, q_im, span[d], nfft, e_re, e_im, buf_re, buf_im)
+    comp = phasors(w, tgrid, -1.0)
+    if newton_steps:
+        rho_n = np.empty((n_d, n_i), np.complex128)
+        for d in range(n_d):
+            for i in range(n_i):
+                acc = 0j
+                for c in range(n_c):
+                    acc += res[d, i, c] * comp[d, i, c]
+                rho_n[d, i] = acc
+        th = newton_refine(table, u_c, x_c, lo, step, w2, x, th, rho_n, newton_steps)
+    return th, w, np.conj(comp)
+
+
+@njit
+def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
+                x: np.ndarray, hn_conj: np.ndarray, candidates: np.ndarray, data: np.ndarray, tgrid: np.ndarray,
+                t: np.ndarray, n_t: int, nfft: int, e_re: np.ndarray, e_im: np.ndarray, fine_re: np.ndarray,
+                fine_im: np.ndarray, fine_w: np.ndarray, max_targets: int, residual_threshold: np.ndarray,
+                noise_var: float, relative_threshold: float, min_amplitude: float, newton_steps: int, cycles: int,
+                detected: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`rhs_env.point_cloud.omp_doppler` in one call: theta, omega, amp, valid (D, L), atoms (D, I C, L), ``||R||^2``.
+
+    Per iteration l on the residuals R of the active rows: the next atom (:func:`_new_atoms`), its column
+    ``a_l = h(theta_l) exp(j omega_l t)``, least squares on the support (:func:`lstsq`), the amplitude test
+    ``|s_k| ||a_k|| >= min_amplitude`` on every atom (waived for the first atom of a detected row), then,
+    from the second atom on, ``cycles`` passes of :func:`joint_refine` (the fine DTFT grid ``fine_w``,
+    ``fine_re + j fine_im`` (J, n_t)) and the test again; a row that fails stops, the others keep the atom
+    and continue while ``||R||^2 >= max(delta_r, rel ||data||^2)``. ``e_re + j e_im`` the twiddles
+    ``exp(-2 pi j m / nfft)`` of the Doppler searches.
+    """
+    n_d, n_i, n_c = data.shape
+    n_q = n_i * n_c
+    n_l = max_targets
+    theta = np.zeros((n_d, n_l))
+    omega = np.zeros((n_d, n_l))
+    amp = np.zeros((n_d, n_l), np.complex128)
+    valid = np.zeros((n_d, n_l), np.bool_)
+    atoms = np.zeros((n_d, n_q, n_l), np.complex128)
+    flat = data.reshape(n_d, n_q)
+    resid = data.copy()
+    r2 = np.empty(n_d)
+    stop = np.empty(n_d)
+    active = np.empty(n_d, np.bool_)
+    for d in range(n_d):
+        acc = 0.0
+        for i in range(n_i):
+            for c in range(n_c):
+                acc += resid[d, i, c].real ** 2 + resid[d, i, c].imag ** 2
+        r2[d] = acc
+        stop[d] = max(residual_threshold[d], relative_threshold * acc)
+        active[d] = True if detected else acc >= stop[d]
+    fine_span = min(np.pi, 8 * np.pi / float(n_t))
+    for l in range(n_l):
+        rows = np.flatnonzero(active)
+        n_r = rows.size
+        if n_r == 0:
+            break
+        th, w, phase = _new_atoms(table, u_c, x_c, lo, step, w2, x, hn_conj, candidates, resid[rows], tgrid, t,
+                                  n_t, nfft, e_re, e_im, noise_var, newton_steps)
+        th_r = theta[rows]
+        om_r = omega[rows]
+        val_r = valid[rows]
+        a = atoms[rows]
+        h = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, 0)[0]
+        data_r = np.empty((n_r, n_q), np.complex128)
+        for rr in range(n_r):
+            th_r[rr, l], om_r[rr, l], val_r[rr, l] = th[rr], w[rr], True
+            for i in range(n_i):
+                for c in range(n_c):
+                    a[rr, i * n_c + c, l] = h[rr, i] * phase[rr, i, c]
+            data_r[rr] = flat[rows[rr]]
+        s = lstsq(a, data_r)
+        ok = np.empty(n_r, np.bool_)
+        for rr in range(n_r):
+            for k in range(n_l):
+                if not val_r[rr, k]:
+                    s[rr, k] = 0
+        norms = atom_norms(a)
+        for rr in range(n_r):
+            good = True
+            for k in range(n_l):
+                if val_r[rr, k] and not np.abs(s[rr, k]) * norms[rr, k] >= min_amplitude:
+                    good = False
+            ok[rr] = good or (detected and l == 0)
+        if l > 0 and cycles and ok.any():
+            kk = np.flatnonzero(ok)
+            th_k, om_k, s_k, a_k = joint_refine(table, u_c, x_c, lo, step, w2, x, data_r[kk], tgrid, t, n_t, fine_re,
+                                                fine_im, fine_w, nfft, th_r[kk], om_r[kk], val_r[kk],
+                                                np.full(kk.size, fine_span), cycles, newton_steps, a[kk], s[kk])
+            norms_k = atom_norms(a_k)
+            for m in range(kk.size):
+                rr = kk[m]
+                th_r[rr] = th_k[m]
+                om_r[rr] = om_k[m]
+                s[rr] = s_k[m]
+                a[rr] = a_k[m]
+                for k in range(n_l):
+                    if val_r[rr, k] and not np.abs(s_k[m, k]) * norms_k[m, k] >= min_amplitude:
+                        ok[rr] = False
+        for rr in range(n_r):
+            d = rows[rr]
+            if not ok[rr]:
+                active[d] = False
+                continue
+            theta[d] = th_r[rr]
+            omega[d] = om_r[rr]
+            valid[d] = val_r[rr]
+            amp[d] = s[rr]
+            atoms[d] = a[rr]
+            acc = 0.0
+            for q in range(n_q):
+                fit = 0j
+                for k in range(n_l):
+                    fit += a[rr, q, k] * s[rr, k]
+                v = flat[d, q] - fit
+                resid[d, q // n_c, q % n_c] = v
+                acc += v.real ** 2 + v.imag ** 2
+            r2[d] = acc
+            active[d] = acc >= stop[d]
+    return theta, omega, amp, valid, atoms, r2

@@ -837,6 +837,47 @@ def _new_atom(dic: AngleDictionary, res: np.ndarray, tgrid: np.ndarray, noise_va
     return th, w, phase
 
 
+@functools.lru_cache(maxsize=8)
+def _twiddles(nfft: int) -> tuple[np.ndarray, np.ndarray]:
+    """``exp(-2 pi j m / nfft)``, m = 0..nfft-1, as real and imaginary parts (the compiled Doppler searches' table)."""
+    e = np.exp(-2j * np.pi * np.arange(nfft) / nfft)
+    return np.ascontiguousarray(e.real), np.ascontiguousarray(e.imag)
+
+
+def _compiled_omp(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_targets: int,
+                  residual_threshold: np.ndarray, noise_var: float, relative_threshold: float, min_amplitude: float,
+                  newton_steps: int, cycles: int, detected: bool) -> DopplerOMPResult | None:
+    """:func:`omp_doppler` as one compiled call (:func:`rhs_env.kernels.omp_doppler`), or None where it does not apply.
+
+    It applies with the dictionary's ``kernels="numba"``, Taylor-table atoms, separable chirp times
+    (``t_ic = t_i + t_c``) and a narrow fine-Doppler grid; the other configurations keep the numpy steps.
+    """
+    taylor = getattr(dic, "_taylor", None)
+    if taylor is None or dic.kernels != "numba" or data.shape[0] == 0:
+        return None
+    t_slot, t_chirp = tgrid[:, :1] - tgrid[0, 0], tgrid[0] - tgrid[0, 0]
+    if not np.array_equal(tgrid, tgrid[0, 0] + t_slot + t_chirp[None, :]):
+        return None
+    fine = _narrow_dtft(tgrid, np.array([min(np.pi, 8 * np.pi / float(tgrid.max() + 1))]))
+    if fine is None:
+        return None
+    from rhs_env import kernels
+
+    table, u_c, x_c = taylor
+    t, n_t, _ = _time_index(tgrid)
+    fine_w, fine_re, fine_im, nfft = fine
+    e_re, e_im = _twiddles(nfft)
+    d = data.shape[0]
+    out = kernels.omp_doppler(table, u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2, dic._x, dic.Hn_conj,
+                              np.ascontiguousarray(dic.candidates, dtype=float), np.ascontiguousarray(data),
+                              np.ascontiguousarray(tgrid, dtype=float), t, n_t, nfft, e_re, e_im, fine_re, fine_im,
+                              fine_w, int(max_targets),
+                              np.ascontiguousarray(np.broadcast_to(np.asarray(residual_threshold, float), (d,))),
+                              float(noise_var), float(relative_threshold), float(min_amplitude), int(newton_steps),
+                              int(cycles), bool(detected))
+    return DopplerOMPResult(*out)
+
+
 def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_targets: int,
                 residual_threshold: np.ndarray, noise_var: float, relative_threshold: float = 0.0,
                 min_amplitude: float = 0.0, newton_steps: int = 2, cycles: int = 2,
@@ -865,6 +906,10 @@ def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_t
     slot-summed statistics, weaker than that detector); the later atoms keep them.
     """
     data = np.asarray(data, complex)
+    compiled = _compiled_omp(dic, data, tgrid, max_targets, residual_threshold, noise_var, relative_threshold,
+                             min_amplitude, newton_steps, cycles, detected)
+    if compiled is not None:
+        return compiled
     d, i, c = data.shape
     n_l = max_targets
     theta, omega = np.zeros((d, n_l)), np.zeros((d, n_l))
