@@ -297,3 +297,29 @@ def test_whole_omp_runs_compiled_on_the_default_radar(monkeypatch):
     assert len(used) and pc._compiled_omp(radars["numba"].dictionaries[0], np.ones((1, 90, 4), complex),
                                           radars["numba"]._chirp_index, 2, np.ones(1), 1.0, 0.0, 0.0, 2, 2, True) is not None
     _compare_clouds(a, b)
+
+
+def test_vector_env_workers_load_the_kernels_the_parent_compiled(tmp_path):
+    """On an empty cache, make_vec_env compiles in the parent once; its SubprocVecEnv workers compile nothing.
+
+    The workers inherit the parent's stderr: the compile notice appears once (the parent's warm-up) and a
+    second vector env on the same cache neither warms up again nor compiles.
+    """
+    code = """
+        import sys
+        import numpy as np
+        from agents.run_setup import make_vec_env, warm_kernels
+        vec = make_vec_env("rhs_env:rhs-highway-slam-v0", n_envs=2, seed=0)
+        print("parent warm-up done", file=sys.stderr, flush=True)
+        vec.reset()
+        for _ in range(25):
+            vec.step(np.ones(2, int))
+        vec.close()
+        print("again", warm_kernels("rhs-highway-slam-v0", {}))
+    """
+    first = _run(code, NUMBA_CACHE_DIR=str(tmp_path))
+    assert first.returncode == 0, first.stderr[-3000:]
+    before, _, after = first.stderr.partition("parent warm-up done")
+    assert before.count(NOTICE) == 1 and NOTICE not in after  # compiled in the parent only
+    assert first.stdout.strip().endswith("again False")
+    assert list(tmp_path.rglob("rhs-slam-warm-*"))
