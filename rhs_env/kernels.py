@@ -394,33 +394,25 @@ def tone_spectra(mu: np.ndarray, coef: np.ndarray, n: int, zero_pad: int, n_bins
 
 
 @njit
-def tone_operands(rr: np.ndarray, g_mat: np.ndarray, omega: np.ndarray, wk: np.ndarray, chirps: int,
-                  n_radars: int) -> tuple[np.ndarray, np.ndarray]:
-    """The operands of ``Y_s[r] = G_r @ E_r`` (:meth:`rhs_env.radar.RadarSystem._mix`), complex64, rr sorted.
+def tone_operands(g_mat: np.ndarray, omega: np.ndarray, wk: np.ndarray, chirps: int) -> tuple[np.ndarray, np.ndarray]:
+    """The operands of ``Y_s[r] = G_r @ E_r`` (:meth:`rhs_env.radar.RadarSystem._mix`), complex64, the tones in order.
 
-    ``G_r[i, q] = G[i, p]`` and ``E_r[q, (c, k)] = exp(j omega_p c) W_p[k]`` for the q-th tone p of radar r
-    (zero-padded to the largest count; the product is formed in complex128 and rounded once, as numpy does).
-    Returns gp (R, I, Q) and ep (R, Q, C K).
+    ``G[i, p]`` (I, P) and ``E[p, (c, k)] = exp(j omega_p c) W_p[k]`` (P, C K) (the product formed in
+    complex128 and rounded once, as numpy does). With the tones sorted by radar, radar r's operands are
+    the column block ``G[:, lo_r:hi_r]`` and the row block ``E[lo_r:hi_r]``: no padding to the largest count.
     """
-    n_p = rr.size
+    n_p = omega.size
     n_i, n_k = g_mat.shape[0], wk.shape[1]
-    counts = np.zeros(n_radars, np.int64)
+    gp = np.empty((n_i, n_p), np.complex64)
+    ep = np.empty((n_p, chirps * n_k), np.complex64)
+    for i in range(n_i):
+        for p in range(n_p):
+            gp[i, p] = g_mat[i, p]
     for p in range(n_p):
-        counts[rr[p]] += 1
-    width = max(counts.max(), 1)
-    gp = np.zeros((n_radars, n_i, width), np.complex64)
-    ep = np.zeros((n_radars, width, chirps * n_k), np.complex64)
-    slot = np.zeros(n_radars, np.int64)
-    for p in range(n_p):
-        r = rr[p]
-        q = slot[r]
-        slot[r] += 1
-        for i in range(n_i):
-            gp[r, i, q] = g_mat[i, p]
         for c in range(chirps):
             ph = np.exp(1j * omega[p] * c)
             for k in range(n_k):
-                ep[r, q, c * n_k + k] = ph * wk[p, k]
+                ep[p, c * n_k + k] = ph * wk[p, k]
     return gp, ep
 
 
