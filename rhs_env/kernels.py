@@ -755,9 +755,20 @@ def _dtft_at(q_re: np.ndarray, q_im: np.ndarray, jj: int, nfft: int, e_re: np.nd
     return sr * sr + si * si
 
 
+@njit(fastmath={"reassoc", "contract"})
+def _dtft_row(q_re: np.ndarray, q_im: np.ndarray, k_re: np.ndarray, k_im: np.ndarray) -> float:
+    """``|sum_t q_t k_t|^2`` for one row ``k = k_re + j k_im`` of a DTFT table (contiguous: vectorised sums)."""
+    sr = 0.0
+    si = 0.0
+    for tt in range(q_re.size):
+        sr += q_re[tt] * k_re[tt] - q_im[tt] * k_im[tt]
+        si += q_re[tt] * k_im[tt] + q_im[tt] * k_re[tt]
+    return sr * sr + si * si
+
+
 @njit
 def _doppler_peak(q_re: np.ndarray, q_im: np.ndarray, span: float, nfft: int, e_re: np.ndarray, e_im: np.ndarray,
-                  buf_re: np.ndarray, buf_im: np.ndarray) -> float:
+                  buf_re: np.ndarray, buf_im: np.ndarray, tab_re: np.ndarray, tab_im: np.ndarray) -> float:
     """d_omega of one row of :func:`rhs_env.point_cloud._doppler_grid_refine` from its ``q_t`` (n_t,).
 
     ``V(w) = |sum_t q_t exp(-j w t)|^2`` on ``w_k = 2 pi k / nfft``, the first maximum within ``|w| <= span``,
@@ -765,6 +776,8 @@ def _doppler_peak(q_re: np.ndarray, q_im: np.ndarray, span: float, nfft: int, e_
     power of two above ``span nfft / (2 pi)``) sums the few samples directly, q rounded to complex64 and the
     peak clipped to ``|k| <= half - 1`` as the reference's matrix product; a wide one takes the FFT
     (:func:`_fft_pow2`), neighbours wrapping around, frequencies in ``np.fft.fftfreq`` order.
+    ``tab_re + j tab_im`` (2 H + 1, n_t): the reference's complex64 samples ``exp(-j w_k t)``, k = -H..H,
+    read row by row where ``half <= H`` (else the twiddle table, indexed ``k t mod nfft``).
     """
     n_t = q_re.size
     two_pi = 2 * np.pi
@@ -773,18 +786,27 @@ def _doppler_peak(q_re: np.ndarray, q_im: np.ndarray, span: float, nfft: int, e_
         for tt in range(n_t):
             q_re[tt] = np.float32(q_re[tt])
             q_im[tt] = np.float32(q_im[tt])
+        tab_h = (tab_re.shape[0] - 1) // 2
         best = -1.0
         jb = -half
         for jj in range(-half, half + 1):
             if abs(two_pi * jj / nfft) <= span:
-                v = _dtft_at(q_re, q_im, jj, nfft, e_re, e_im)
+                if half <= tab_h:
+                    v = _dtft_row(q_re, q_im, tab_re[jj + tab_h], tab_im[jj + tab_h])
+                else:
+                    v = _dtft_at(q_re, q_im, jj, nfft, e_re, e_im)
                 if v > best:
                     best = v
                     jb = jj
         jb = min(max(jb, -half + 1), half - 1)
-        vm = _dtft_at(q_re, q_im, jb - 1, nfft, e_re, e_im)
-        v0 = _dtft_at(q_re, q_im, jb, nfft, e_re, e_im)
-        vp = _dtft_at(q_re, q_im, jb + 1, nfft, e_re, e_im)
+        if half <= tab_h:
+            vm = _dtft_row(q_re, q_im, tab_re[jb - 1 + tab_h], tab_im[jb - 1 + tab_h])
+            v0 = _dtft_row(q_re, q_im, tab_re[jb + tab_h], tab_im[jb + tab_h])
+            vp = _dtft_row(q_re, q_im, tab_re[jb + 1 + tab_h], tab_im[jb + 1 + tab_h])
+        else:
+            vm = _dtft_at(q_re, q_im, jb - 1, nfft, e_re, e_im)
+            v0 = _dtft_at(q_re, q_im, jb, nfft, e_re, e_im)
+            vp = _dtft_at(q_re, q_im, jb + 1, nfft, e_re, e_im)
         w_b = two_pi * jb / nfft
     else:
         buf_re[:] = 0.0
@@ -850,8 +872,8 @@ def _power(z: np.ndarray) -> np.ndarray:
 @njit
 def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
                x: np.ndarray, hn_conj: np.ndarray, candidates: np.ndarray, res: np.ndarray, tgrid: np.ndarray,
-               t: np.ndarray, n_t: int, nfft: int, e_re: np.ndarray, e_im: np.ndarray, noise_var: float,
-               newton_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               t: np.ndarray, n_t: int, nfft: int, e_re: np.ndarray, e_im: np.ndarray, tab_re: np.ndarray,
+               tab_im: np.ndarray, noise_var: float, newton_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`rhs_env.point_cloud._new_atom` of the residuals res (D, I, C): theta, omega (D,) and ``exp(j omega t)``.
 
     Coarse Doppler ``w0 = arg sum R[i, c+1] R*[i, c]``; the best candidate of ``|H_n^H rho|^2`` with
@@ -907,8 +929,8 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
     sub = np.flatnonzero(wide)
     if sub.size:
         top = 0.0
-        for d in sub:
-            top = max(top, span[d] * dwell[d])
+        for s_ in range(sub.size):
+            top = max(top, span[sub[s_]] * dwell[sub[s_]])
         n_h = int(min(33, 2 * np.ceil(top / 0.5) + 1))
         u = np.linspace(-1.0, 1.0, n_h)
         om = np.empty((sub.size, n_h))
@@ -957,7 +979,7 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
                 tt = t[i * n_c + c]
                 q_re[tt] += p.real
                 q_im[tt] += p.imag
-        w[d] = w0[d] + _doppler_peak(q_re, q_im, span[d], nfft, e_re, e_im, buf_re, buf_im)
+        w[d] = w0[d] + _doppler_peak(q_re, q_im, span[d], nfft, e_re, e_im, buf_re, buf_im, tab_re, tab_im)
     comp = phasors(w, tgrid, -1.0)
     if newton_steps:
         rho_n = np.empty((n_d, n_i), np.complex128)
@@ -974,9 +996,10 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
 @njit
 def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
                 x: np.ndarray, hn_conj: np.ndarray, candidates: np.ndarray, data: np.ndarray, tgrid: np.ndarray,
-                t: np.ndarray, n_t: int, nfft: int, e_re: np.ndarray, e_im: np.ndarray, fine_re: np.ndarray,
-                fine_im: np.ndarray, fine_w: np.ndarray, max_targets: int, residual_threshold: np.ndarray,
-                noise_var: float, relative_threshold: float, min_amplitude: float, newton_steps: int, cycles: int,
+                t: np.ndarray, n_t: int, nfft: int, e_re: np.ndarray, e_im: np.ndarray, tab_re: np.ndarray,
+                tab_im: np.ndarray, fine_re: np.ndarray, fine_im: np.ndarray, fine_w: np.ndarray, max_targets: int,
+                residual_threshold: np.ndarray, noise_var: float, relative_threshold: float, min_amplitude: float,
+                newton_steps: int, cycles: int,
                 detected: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`rhs_env.point_cloud.omp_doppler` in one call: theta, omega, amp, valid (D, L), atoms (D, I C, L), ``||R||^2``.
 
@@ -986,7 +1009,8 @@ def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step:
     from the second atom on, ``cycles`` passes of :func:`joint_refine` (the fine DTFT grid ``fine_w``,
     ``fine_re + j fine_im`` (J, n_t)) and the test again; a row that fails stops, the others keep the atom
     and continue while ``||R||^2 >= max(delta_r, rel ||data||^2)``. ``e_re + j e_im`` the twiddles
-    ``exp(-2 pi j m / nfft)`` of the Doppler searches.
+    ``exp(-2 pi j m / nfft)`` of the Doppler searches, ``tab_re + j tab_im`` the narrow searches' samples
+    (:func:`_doppler_peak`).
     """
     n_d, n_i, n_c = data.shape
     n_q = n_i * n_c
@@ -1016,7 +1040,7 @@ def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step:
         if n_r == 0:
             break
         th, w, phase = _new_atoms(table, u_c, x_c, lo, step, w2, x, hn_conj, candidates, resid[rows], tgrid, t,
-                                  n_t, nfft, e_re, e_im, noise_var, newton_steps)
+                                  n_t, nfft, e_re, e_im, tab_re, tab_im, noise_var, newton_steps)
         th_r = theta[rows]
         om_r = omega[rows]
         val_r = valid[rows]

@@ -867,10 +867,12 @@ def _compiled_omp(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max
     t, n_t, _ = _time_index(tgrid)
     fine_w, fine_re, fine_im, nfft = fine
     e_re, e_im = _twiddles(nfft)
+    _, tab_re, tab_im = _dtft_kernel_split(n_t, nfft, nfft // 32)  # every narrow search: half <= nfft / 32
     d = data.shape[0]
     out = kernels.omp_doppler(table, u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2, dic._x, dic.Hn_conj,
                               np.ascontiguousarray(dic.candidates, dtype=float), np.ascontiguousarray(data),
-                              np.ascontiguousarray(tgrid, dtype=float), t, n_t, nfft, e_re, e_im, fine_re, fine_im,
+                              np.ascontiguousarray(tgrid, dtype=float), t, n_t, nfft, e_re, e_im, tab_re, tab_im,
+                              fine_re, fine_im,
                               fine_w, int(max_targets),
                               np.ascontiguousarray(np.broadcast_to(np.asarray(residual_threshold, float), (d,))),
                               float(noise_var), float(relative_threshold), float(min_amplitude), int(newton_steps),

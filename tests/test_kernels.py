@@ -253,7 +253,7 @@ def test_read_only_install_caches_in_the_user_directory(tmp_path):
 def test_doppler_peak_matches_the_numpy_search(span):
     """The compiled Doppler search (direct samples or its radix-2 FFT) finds the numpy search's d_omega per row."""
     from rhs_env import kernels
-    from rhs_env.point_cloud import _doppler_grid_refine, _time_index, _twiddles
+    from rhs_env.point_cloud import _doppler_grid_refine, _dtft_kernel_split, _time_index, _twiddles
 
     rng = np.random.default_rng(3)
     tgrid = np.arange(90 * 4, dtype=float).reshape(90, 4)
@@ -265,11 +265,14 @@ def test_doppler_peak_matches_the_numpy_search(span):
     t, n_t, _ = _time_index(tgrid)
     nfft = 2048
     e_re, e_im = _twiddles(nfft)
+    tables = [_dtft_kernel_split(n_t, nfft, h)[1:] for h in (1, 64)]  # too small (twiddles used), every narrow half
     for row in range(d):
         q = np.zeros(n_t, complex)
         np.add.at(q, t, (h[row].conj()[:, None] * r[row]).reshape(-1))
-        got = kernels._doppler_peak(q.real.copy(), q.imag.copy(), span, nfft, e_re, e_im, np.empty(nfft), np.empty(nfft))
-        assert abs(got - want[row]) < 1e-6
+        for tab in tables:
+            got = kernels._doppler_peak(q.real.copy(), q.imag.copy(), span, nfft, e_re, e_im, np.empty(nfft),
+                                        np.empty(nfft), *tab)
+            assert abs(got - want[row]) < 1e-6
         assert abs(got - w_true[row]) < 5e-3  # and it is the tone's frequency
 
 
