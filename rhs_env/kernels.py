@@ -207,8 +207,10 @@ def taylor_tables(w2: np.ndarray, x: np.ndarray, candidates: np.ndarray,
 
 @njit
 def _atom_at(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray, x: np.ndarray,
-             th: float, order: int, f0: np.ndarray, f1: np.ndarray, f2: np.ndarray, h: np.ndarray) -> None:
-    """h (order + 1, I) at one angle th: :func:`taylor_atoms` for one angle (f0, f1, f2: (2 I,) complex work arrays).
+             th: float, order: int, f0: np.ndarray, f1: np.ndarray, f2: np.ndarray, h: np.ndarray,
+             work: np.ndarray) -> None:
+    """h (order + 1, I) at one angle th: :func:`taylor_atoms` for one angle (f0, f1, f2: (2 I,) complex and
+    ``work`` (3, 4 I) float work arrays).
 
     ``table``: the coefficients of :func:`taylor_tables` viewed as float64, (I_c, N + 1, 4 I) with re, im
     interleaved: delta is real, so the Horner steps act on the real and imaginary parts alike (the same
@@ -223,20 +225,27 @@ def _atom_at(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: fl
     if -1 <= c <= n_c:
         c = min(max(c, 0), n_c - 1)
         delta = u - u_c[c]
-        # Horner in delta for the value and its first two derivatives, on re / im alike
-        p0 = table[c, n_n - 1].copy()
-        p1 = np.zeros(n_f)
-        p2 = np.zeros(n_f)
+        # Horner in delta for the value and its first two derivatives, on re / im alike (one pass per term)
+        p0 = work[0]
+        p1 = work[1]
+        p2 = work[2]
+        p0[:] = table[c, n_n - 1]
+        p1[:] = 0.0
+        p2[:] = 0.0
         for n in range(n_n - 2, -1, -1):
             row = table[c, n]
             if order >= 2:
                 for i in range(n_f):
                     p2[i] = p2[i] * delta + 2.0 * p1[i]
-            if order >= 1:
+                    p1[i] = p1[i] * delta + p0[i]
+                    p0[i] = p0[i] * delta + row[i]
+            elif order == 1:
                 for i in range(n_f):
                     p1[i] = p1[i] * delta + p0[i]
-            for i in range(n_f):
-                p0[i] = p0[i] * delta + row[i]
+                    p0[i] = p0[i] * delta + row[i]
+            else:
+                for i in range(n_f):
+                    p0[i] = p0[i] * delta + row[i]
         for i in range(n_i2):
             f0[i] = complex(p0[2 * i], p0[2 * i + 1])
             f1[i] = complex(p1[2 * i], p1[2 * i + 1])
@@ -294,8 +303,9 @@ def taylor_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step
     f1 = np.empty(n_i2, np.complex128)
     f2 = np.empty(n_i2, np.complex128)
     h = np.empty((order + 1, n_i2 // 2), np.complex128)
+    work = np.empty((3, table.shape[2]))
     for q in range(theta.size):
-        _atom_at(table, u_c, x_c, lo, step, w2, x, theta[q], order, f0, f1, f2, h)
+        _atom_at(table, u_c, x_c, lo, step, w2, x, theta[q], order, f0, f1, f2, h, work)
         for o in range(order + 1):
             for i in range(n_i2 // 2):
                 out[o, q, i] = h[o, i]
@@ -320,11 +330,12 @@ def newton_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, ste
     f1 = np.empty(n_i2, np.complex128)
     f2 = np.empty(n_i2, np.complex128)
     h = np.empty((3, n_i), np.complex128)
+    work = np.empty((3, table.shape[2]))
     out = theta.copy()
     for d in range(theta.size):
         th = theta[d]
         for _ in range(steps):
-            _atom_at(table, u_c, x_c, lo, step, w2, x, th, 2, f0, f1, f2, h)
+            _atom_at(table, u_c, x_c, lo, step, w2, x, th, 2, f0, f1, f2, h, work)
             g = 0j
             g1 = 0j
             g2 = 0j
