@@ -33,7 +33,7 @@ import numpy as np
 from rhs_common.jit import njit
 
 __all__ = [
-    "TAYLOR_ORDER", "atom_norms", "doppler_dtft_refine", "footprint_detections", "joint_refine", "joint_rho", "lstsq",
+    "TAYLOR_ORDER", "atom_norms", "bin_amplitudes", "doppler_dtft_refine", "footprint_detections", "joint_refine", "joint_rho", "lstsq",
     "newton_refine", "omp_doppler", "phasors", "taylor_atoms", "taylor_tables", "tone_operands", "tone_spectra",
 ]
 
@@ -508,12 +508,53 @@ def atom_norms(a: np.ndarray) -> np.ndarray:
 
 
 @njit
+def _gram_cholesky(a: np.ndarray, d: int, gram: np.ndarray, chol: np.ndarray) -> None:
+    """``G = A_d^H A_d + 1e-12 I = C C^H`` (L x L, Hermitian positive definite: the ridge keeps an unused,
+    all-zero column at amplitude 0); C (lower triangular) written into ``chol``."""
+    n_q, n_l = a.shape[1], a.shape[2]
+    gram[:] = 0
+    for q in range(n_q):
+        for l in range(n_l):
+            al = np.conj(a[d, q, l])
+            for m in range(l, n_l):
+                gram[l, m] += al * a[d, q, m]
+    for l in range(n_l):
+        gram[l, l] += 1e-12
+    for l in range(n_l):  # C[m, l] = (G[l, m]^* - sum_k C[m, k] C[l, k]^*) / C[l, l]
+        acc = gram[l, l].real
+        for k in range(l):
+            acc -= chol[l, k].real ** 2 + chol[l, k].imag ** 2
+        cll = np.sqrt(acc)
+        chol[l, l] = cll
+        for m in range(l + 1, n_l):
+            v = np.conj(gram[l, m])
+            for k in range(l):
+                v -= chol[m, k] * np.conj(chol[l, k])
+            chol[m, l] = v / cll
+
+
+@njit
+def _cholesky_solve(chol: np.ndarray, rhs: np.ndarray, out: np.ndarray) -> None:
+    """``out = (C C^H)^-1 rhs``: ``C z = rhs`` then ``C^H out = z`` by substitution (rhs overwritten by z)."""
+    n_l = rhs.size
+    for l in range(n_l):
+        v = rhs[l]
+        for k in range(l):
+            v -= chol[l, k] * rhs[k]
+        rhs[l] = v / chol[l, l].real
+    for l in range(n_l - 1, -1, -1):
+        v = rhs[l]
+        for k in range(l + 1, n_l):
+            v -= np.conj(chol[k, l]) * out[k]
+        out[l] = v / chol[l, l].real
+
+
+@njit
 def lstsq(a: np.ndarray, y: np.ndarray) -> np.ndarray:
     """:func:`rhs_env.point_cloud._lstsq` for one right-hand side: ``s_d = (A_d^H A_d + 1e-12 I)^-1 A_d^H y_d`` (D, L).
 
-    a (D, Q, L), y (D, Q) complex128. The Gram matrix ``G = A^H A + 1e-12 I`` (L x L, Hermitian positive
-    definite: the ridge keeps an unused, all-zero column at amplitude 0) is factored ``G = C C^H``
-    (Cholesky, C lower triangular), then ``C z = A^H y`` and ``C^H s = z`` by substitution.
+    a (D, Q, L), y (D, Q) complex128. The Gram matrix ``G = A^H A + 1e-12 I`` is factored ``G = C C^H``
+    (Cholesky, :func:`_gram_cholesky`), then ``C z = A^H y`` and ``C^H s = z`` (:func:`_cholesky_solve`).
     """
     n_d, n_q, n_l = a.shape
     out = np.empty((n_d, n_l), np.complex128)
@@ -521,38 +562,45 @@ def lstsq(a: np.ndarray, y: np.ndarray) -> np.ndarray:
     chol = np.zeros((n_l, n_l), np.complex128)
     rhs = np.empty(n_l, np.complex128)
     for d in range(n_d):
-        gram[:] = 0
+        _gram_cholesky(a, d, gram, chol)
         rhs[:] = 0
         for q in range(n_q):
             yq = y[d, q]
             for l in range(n_l):
-                al = np.conj(a[d, q, l])
-                rhs[l] += al * yq
-                for m in range(l, n_l):
-                    gram[l, m] += al * a[d, q, m]
-        for l in range(n_l):
-            gram[l, l] += 1e-12
-        for l in range(n_l):  # G = C C^H: C[m, l] = (G[l, m]^* - sum_k C[m, k] C[l, k]^*) / C[l, l]
-            acc = gram[l, l].real
-            for k in range(l):
-                acc -= chol[l, k].real ** 2 + chol[l, k].imag ** 2
-            cll = np.sqrt(acc)
-            chol[l, l] = cll
-            for m in range(l + 1, n_l):
-                v = np.conj(gram[l, m])
-                for k in range(l):
-                    v -= chol[m, k] * np.conj(chol[l, k])
-                chol[m, l] = v / cll
-        for l in range(n_l):  # C z = A^H y
-            v = rhs[l]
-            for k in range(l):
-                v -= chol[l, k] * rhs[k]
-            rhs[l] = v / chol[l, l].real
-        for l in range(n_l - 1, -1, -1):  # C^H s = z
-            v = rhs[l]
-            for k in range(l + 1, n_l):
-                v -= np.conj(chol[k, l]) * out[d, k]
-            out[d, l] = v / chol[l, l].real
+                rhs[l] += np.conj(a[d, q, l]) * yq
+        _cholesky_solve(chol, rhs, out[d])
+    return out
+
+
+@njit
+def bin_amplitudes(a: np.ndarray, spec: np.ndarray, rd: np.ndarray, kk: np.ndarray) -> np.ndarray:
+    """Least-squares amplitudes of fixed atoms at neighbouring range bins (D, L, W), for
+    :meth:`rhs_env.radar.RadarSystem._target_bins`.
+
+    ``s_d[:, w] = (A_d^H A_d + 1e-12 I)^-1 A_d^H y_dw`` with ``y_dw[(i, c)] = Y[rd_d, i, c, kk_dw]`` read from the
+    spectrum Y (R, I, C, K) complex64 (no gathered copy), one Cholesky factor per row for its W bins.
+    """
+    n_d, n_q, n_l = a.shape
+    n_w = kk.shape[1]
+    n_c = spec.shape[2]
+    out = np.empty((n_d, n_l, n_w), np.complex128)
+    gram = np.empty((n_l, n_l), np.complex128)
+    chol = np.zeros((n_l, n_l), np.complex128)
+    rhs = np.empty(n_l, np.complex128)
+    sol = np.empty(n_l, np.complex128)
+    for d in range(n_d):
+        _gram_cholesky(a, d, gram, chol)
+        r = rd[d]
+        for w in range(n_w):
+            k = kk[d, w]
+            rhs[:] = 0
+            for q in range(n_q):
+                yq = complex(spec[r, q // n_c, q % n_c, k])
+                for l in range(n_l):
+                    rhs[l] += np.conj(a[d, q, l]) * yq
+            _cholesky_solve(chol, rhs, sol)
+            for l in range(n_l):
+                out[d, l, w] = sol[l]
     return out
 
 

@@ -559,12 +559,18 @@ class RadarSystem:
 
         LS amplitudes of the fixed atoms at the neighbouring bins, parabola on
         log|s|^2 (a target merged into the peak of another lies within the window
-        main lobe, +-2 bins).
+        main lobe, +-2 bins). Compiled with ``kernels="numba"`` (:func:`rhs_env.kernels.bin_amplitudes`).
         """
         half = 2 * self.config.waveform.zero_pad + 1
         kk = np.clip(kd[:, None] + np.arange(-half, half + 1)[None, :], 0, spec.shape[-1] - 1)
-        nb = spec[rd[:, None], :, :, kk].reshape(rd.size, 2 * half + 1, -1)  # (D, W, I C)
-        s_nb = _lstsq(atoms, np.swapaxes(nb, 1, 2).astype(complex))  # (D, L, W)
+        if self.config.kernels == "numba":  # the same least squares, compiled, reading the bins in place
+            from rhs_env.kernels import bin_amplitudes
+
+            s_nb = bin_amplitudes(np.ascontiguousarray(atoms, dtype=complex), spec, rd.astype(np.int64),
+                                  kk.astype(np.int64))
+        else:
+            nb = spec[rd[:, None], :, :, kk].reshape(rd.size, 2 * half + 1, -1)  # (D, W, I C)
+            s_nb = _lstsq(atoms, np.swapaxes(nb, 1, 2).astype(complex))  # (D, L, W)
         pw = np.log(np.abs(s_nb) ** 2 + 1e-300)
         j = 1 + np.argmax(pw[:, :, 1:-1], axis=2)  # interior peak
         lm = np.take_along_axis(pw, (j - 1)[..., None], 2)[..., 0]
