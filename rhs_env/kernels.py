@@ -19,11 +19,14 @@ Python 3.11, 2 cores shared with other jobs, load average 5-8):
 * numpy upper bound: every numba release caps numpy (0.68.1: numpy < 2.6); a numpy newer than the
   cap waits for a numba release (pyproject asks numba >= 0.60, pip picks the one matching numpy);
 * no SVML in the wheels: transcendental loops are not vectorised, so the noise generator stays numpy;
-* first compile of every kernel here and in :mod:`slam.kernels`: ~13 s (footprint detector ~3 s,
-  ICP ~2.5 s, the atoms and Newton steps ~3 s, the rest ~1 s each or less), once per machine; a new
-  process then loads them from the cache (:mod:`rhs_common.jit`): imports, ``gym.make``, reset and
-  the first step of the SLAM env in a new process took 18.5 s with an empty cache and 2.6 s with it
-  (load 3.7; ``python scripts/benchmark.py --sections start``).
+* first compile of every kernel here and in :mod:`slam.kernels`, once per machine: ~29 s at load 1.2,
+  of which the one-call OMP (:func:`omp_doppler`) takes ~22 s (its new-atom search ~12 s, with the
+  Taylor atoms ~2.7 s, Newton steps ~1.4 s, Doppler search ~1.5 s; the joint refinement ~2.6 s), the
+  footprint detector ~2.3 s, ICP ~1.7 s; a new process then loads them from the cache
+  (:mod:`rhs_common.jit`): imports, ``gym.make``, reset and the first step of the SLAM env in a new
+  process took 30.7 s with an empty cache and 1.9 s with it (load 1.2; ``python scripts/benchmark.py
+  --sections start``; before the OMP was one call: 10.8 s and 1.7 s in the same conditions). Vector
+  envs compile once, in the parent (``agents.run_setup.make_vec_env``, :func:`rhs_common.jit.warm_cache`).
 """
 
 from __future__ import annotations
@@ -335,7 +338,7 @@ def newton_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, ste
     for d in range(theta.size):
         th = theta[d]
         for _ in range(steps):
-            _atom_at(table, u_c, x_c, lo, step, w2, x, th, 2, f0, f1, f2, h, work)
+            _atom_at(table, u_c, x_c, lo, step, w2, x, th, np.int64(2), f0, f1, f2, h, work)
             g = 0j
             g1 = 0j
             g2 = 0j
@@ -743,7 +746,7 @@ def joint_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step
                         acc += part[p, i, c] * base[p, i, c]
                     rho[p, i] = acc
             th = newton_refine(table, u_c, x_c, lo, step, w2, x, th, rho, newton_steps)
-        hs = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, 0)[0]  # (P, I)
+        hs = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, np.int64(0))[0]  # (P, I)
         for p in range(n_p):
             d, k = dd[p], kk[p]
             theta[d, k] = th[p]
@@ -1022,7 +1025,7 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
         rc_s = res[sub] * phasors(w0[sub], tgrid, -1.0)
         for s_ in range(sub.size):
             rc[sub[s_]] = rc_s[s_]
-    h = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, 0)[0]
+    h = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, np.int64(0))[0]
     q_re = np.empty(n_t)
     q_im = np.empty(n_t)
     buf_re = np.empty(nfft)
@@ -1104,7 +1107,7 @@ def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step:
         om_r = omega[rows]
         val_r = valid[rows]
         a = atoms[rows]
-        h = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, 0)[0]
+        h = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, np.int64(0))[0]
         data_r = np.empty((n_r, n_q), np.complex128)
         for rr in range(n_r):
             th_r[rr, l], om_r[rr, l], val_r[rr, l] = th[rr], w[rr], True
