@@ -694,18 +694,8 @@ def joint_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step
     theta = theta.copy()
     domega = domega.copy()
     a = a.copy()
-    n_p = 0
-    for d in range(n_d):
-        for k in range(n_l):
-            n_p += valid[d, k]
-    dd = np.empty(n_p, np.int64)
-    kk = np.empty(n_p, np.int64)
-    p = 0
-    for d in range(n_d):
-        for k in range(n_l):
-            if valid[d, k]:
-                dd[p], kk[p] = d, k
-                p += 1
+    dd, kk = np.nonzero(valid)  # the valid (row, target) pairs, row-major
+    n_p = dd.size
     span_p = np.empty(n_p)
     w_p = np.empty(n_p)
     for p in range(n_p):
@@ -932,6 +922,89 @@ def _power(z: np.ndarray) -> np.ndarray:
 
 
 @njit
+def _search_widths(res: np.ndarray, noise_var: float, t_span: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per row of res (D, I, C): the Doppler search half-width ``span``, the dwell and whether the row is wide.
+
+    ``snr = max(||R||^2 / sigma^2 - I C, 1)``, ``span = clip(5 / sqrt(snr), min(pi, 8 pi / T), pi)``, the dwell
+    ``clip(C (sum_i e_i)^2 / sum_i e_i^2, C, T)`` of the slot energies ``e_i = max(sum_c |R_ic|^2 - C sigma^2, 0)``,
+    wide: ``5 dwell / sqrt(snr) > pi / 2`` (the joint angle x Doppler search).
+    """
+    n_d, n_i, n_c = res.shape
+    span = np.empty(n_d)
+    dwell = np.empty(n_d)
+    wide = np.zeros(n_d, np.bool_)
+    floor_span = min(np.pi, 8 * np.pi / t_span)
+    for d in range(n_d):
+        tot = 0.0
+        e_sum = 0.0
+        e_sq = 0.0
+        for i in range(n_i):
+            e = 0.0
+            for c in range(n_c):
+                v = res[d, i, c]
+                e += v.real ** 2 + v.imag ** 2
+            tot += e
+            e = max(e - n_c * noise_var, 0.0)
+            e_sum += e
+            e_sq += e * e
+        snr = max(tot / noise_var - n_i * n_c, 1.0)
+        span[d] = min(max(5.0 / np.sqrt(snr), floor_span), np.pi)
+        dw = e_sum ** 2 / max(e_sq, 1e-300) * n_c
+        dwell[d] = min(max(dw, n_c), t_span)
+        wide[d] = 5.0 / np.sqrt(snr) * dwell[d] > 0.5 * np.pi
+    return span, dwell, wide
+
+
+@njit
+def _joint_search(res: np.ndarray, sub: np.ndarray, w0: np.ndarray, th: np.ndarray, span: np.ndarray,
+                  dwell: np.ndarray, hn_conj: np.ndarray, candidates: np.ndarray, step: float, tgrid: np.ndarray,
+                  rc: np.ndarray) -> None:
+    """The joint angle x Doppler search of :func:`rhs_env.point_cloud._joint_grid_search` for the rows ``sub``.
+
+    ``n_h = min(33, 2 ceil(max(span dwell) / 0.5) + 1)`` hypotheses ``w0 + span u`` (u on [-1, 1]) over the
+    rows, ``rho`` of :func:`joint_rho`, the best (hypothesis, candidate) of ``|H_n^H rho|^2`` (one complex64
+    product) and the log-parabola in angle; w0, th, span (``min(span, pi / dwell)``) and the compensated
+    residuals rc of those rows updated in place.
+    """
+    n_i = res.shape[1]
+    top = 0.0
+    for s_ in range(sub.size):
+        top = max(top, span[sub[s_]] * dwell[sub[s_]])
+    n_h = int(min(33, 2 * np.ceil(top / 0.5) + 1))
+    u = np.linspace(-1.0, 1.0, n_h)
+    om = np.empty((sub.size, n_h))
+    for s_ in range(sub.size):
+        for hh in range(n_h):
+            om[s_, hh] = w0[sub[s_]] + span[sub[s_]] * u[hh]
+    t_chirp = tgrid[0] - tgrid[0, 0]
+    t_slot = tgrid[:, 0].copy()
+    rho_j = joint_rho(res[sub], om, t_chirp, t_slot)  # (S, H, I) complex64
+    cj = _power(np.dot(rho_j.reshape(sub.size * n_h, n_i), hn_conj)).reshape(sub.size, n_h, -1)
+    for s_ in range(sub.size):
+        d = sub[s_]
+        hb, jb = 0, 0
+        best = cj[s_, 0, 0]
+        for hh in range(n_h):
+            for jj in range(cj.shape[2]):
+                if cj[s_, hh, jj] > best:
+                    best = cj[s_, hh, jj]
+                    hb, jb = hh, jj
+        n_cand = cj.shape[2]
+        jm, jp = max(jb - 1, 0), min(jb + 1, n_cand - 1)
+        ym = np.log(max(cj[s_, hb, jm], 1e-30))
+        y0 = np.log(max(cj[s_, hb, jb], 1e-30))
+        yp = np.log(max(cj[s_, hb, jp], 1e-30))
+        den = ym - 2.0 * y0 + yp
+        off = min(max(0.5 * (ym - yp) / den, -0.5), 0.5) if den < 0 else 0.0
+        w0[d] = om[s_, hb]
+        th[d] = candidates[jb] + off * step
+        span[d] = min(span[d], np.pi / dwell[d])
+    rc_s = res[sub] * phasors(w0[sub], tgrid, -1.0)
+    for s_ in range(sub.size):
+        rc[sub[s_]] = rc_s[s_]
+
+
+@njit
 def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
                x: np.ndarray, hn_conj: np.ndarray, candidates: np.ndarray, res: np.ndarray, tgrid: np.ndarray,
                t: np.ndarray, n_t: int, nfft: int, e_re: np.ndarray, e_im: np.ndarray, tab_re: np.ndarray,
@@ -949,10 +1022,6 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
     t_span = float(n_t)
     th = np.empty(n_d)
     w0 = np.empty(n_d)
-    span = np.empty(n_d)
-    dwell = np.empty(n_d)
-    snr = np.empty(n_d)
-    wide = np.zeros(n_d, np.bool_)
     for d in range(n_d):
         acc = 0j
         for i in range(n_i):
@@ -968,63 +1037,12 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
                 acc += rc[d, i, c]
             rho[d, i] = acc
     corr = _power(np.dot(rho, hn_conj))
-    floor_span = min(np.pi, 8 * np.pi / t_span)
     for d in range(n_d):
         th[d] = _angle_peak(corr[d], candidates, step)[1]
-        tot = 0.0
-        e_sum = 0.0
-        e_sq = 0.0
-        for i in range(n_i):
-            e = 0.0
-            for c in range(n_c):
-                v = res[d, i, c]
-                e += v.real ** 2 + v.imag ** 2
-            tot += e
-            e = max(e - n_c * noise_var, 0.0)
-            e_sum += e
-            e_sq += e * e
-        snr[d] = max(tot / noise_var - n_i * n_c, 1.0)
-        span[d] = min(max(5.0 / np.sqrt(snr[d]), floor_span), np.pi)
-        dw = e_sum ** 2 / max(e_sq, 1e-300) * n_c
-        dwell[d] = min(max(dw, n_c), t_span)
-        wide[d] = 5.0 / np.sqrt(snr[d]) * dwell[d] > 0.5 * np.pi
+    span, dwell, wide = _search_widths(res, noise_var, t_span)
     sub = np.flatnonzero(wide)
     if sub.size:
-        top = 0.0
-        for s_ in range(sub.size):
-            top = max(top, span[sub[s_]] * dwell[sub[s_]])
-        n_h = int(min(33, 2 * np.ceil(top / 0.5) + 1))
-        u = np.linspace(-1.0, 1.0, n_h)
-        om = np.empty((sub.size, n_h))
-        for s_ in range(sub.size):
-            for hh in range(n_h):
-                om[s_, hh] = w0[sub[s_]] + span[sub[s_]] * u[hh]
-        t_chirp = tgrid[0] - tgrid[0, 0]
-        t_slot = tgrid[:, 0].copy()
-        rho_j = joint_rho(res[sub], om, t_chirp, t_slot)  # (S, H, I) complex64
-        cj = _power(np.dot(rho_j.reshape(sub.size * n_h, n_i), hn_conj)).reshape(sub.size, n_h, -1)
-        for s_ in range(sub.size):
-            d = sub[s_]
-            hb, jb = 0, 0
-            best = cj[s_, 0, 0]
-            for hh in range(n_h):
-                for jj in range(cj.shape[2]):
-                    if cj[s_, hh, jj] > best:
-                        best = cj[s_, hh, jj]
-                        hb, jb = hh, jj
-            n_cand = cj.shape[2]
-            jm, jp = max(jb - 1, 0), min(jb + 1, n_cand - 1)
-            ym = np.log(max(cj[s_, hb, jm], 1e-30))
-            y0 = np.log(max(cj[s_, hb, jb], 1e-30))
-            yp = np.log(max(cj[s_, hb, jp], 1e-30))
-            den = ym - 2.0 * y0 + yp
-            off = min(max(0.5 * (ym - yp) / den, -0.5), 0.5) if den < 0 else 0.0
-            w0[d] = om[s_, hb]
-            th[d] = candidates[jb] + off * step
-            span[d] = min(span[d], np.pi / dwell[d])
-        rc_s = res[sub] * phasors(w0[sub], tgrid, -1.0)
-        for s_ in range(sub.size):
-            rc[sub[s_]] = rc_s[s_]
+        _joint_search(res, sub, w0, th, span, dwell, hn_conj, candidates, step, tgrid, rc)
     h = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, np.int64(0))[0]
     q_re = np.empty(n_t)
     q_im = np.empty(n_t)
@@ -1053,6 +1071,43 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
                 rho_n[d, i] = acc
         th = newton_refine(table, u_c, x_c, lo, step, w2, x, th, rho_n, newton_steps)
     return th, w, np.conj(comp)
+
+
+@njit
+def _amplitudes_pass(s: np.ndarray, a: np.ndarray, valid: np.ndarray, min_amplitude: float) -> np.ndarray:
+    """Per row: every valid atom k has ``|s_k| ||a_k|| >= min_amplitude`` (s (D, L), a (D, Q, L), valid (D, L))."""
+    norms = atom_norms(a)
+    ok = np.ones(s.shape[0], np.bool_)
+    for rr in range(s.shape[0]):
+        for k in range(s.shape[1]):
+            if valid[rr, k] and not np.abs(s[rr, k]) * norms[rr, k] >= min_amplitude:
+                ok[rr] = False
+    return ok
+
+
+@njit
+def _residual(y: np.ndarray, a: np.ndarray, s: np.ndarray, out: np.ndarray) -> float:
+    """``R = y - A s`` written into out (I, C) (y (I C,), a (I C, L), s (L,)); returns ``||R||^2``."""
+    n_c = out.shape[1]
+    acc = 0.0
+    for q in range(y.size):
+        fit = 0j
+        for k in range(s.size):
+            fit += a[q, k] * s[k]
+        v = y[q] - fit
+        out[q // n_c, q % n_c] = v
+        acc += v.real ** 2 + v.imag ** 2
+    return acc
+
+
+@njit
+def _set_column(a: np.ndarray, l: int, h: np.ndarray, phase: np.ndarray) -> None:
+    """Atom column l of every row: ``a[d, (i, c), l] = h[d, i] phase[d, i, c]`` (a (D, I C, L))."""
+    n_d, n_i, n_c = phase.shape
+    for d in range(n_d):
+        for i in range(n_i):
+            for c in range(n_c):
+                a[d, i * n_c + c, l] = h[d, i] * phase[d, i, c]
 
 
 @njit
@@ -1085,16 +1140,10 @@ def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step:
     flat = data.reshape(n_d, n_q)
     resid = data.copy()
     r2 = np.empty(n_d)
-    stop = np.empty(n_d)
-    active = np.empty(n_d, np.bool_)
     for d in range(n_d):
-        acc = 0.0
-        for i in range(n_i):
-            for c in range(n_c):
-                acc += resid[d, i, c].real ** 2 + resid[d, i, c].imag ** 2
-        r2[d] = acc
-        stop[d] = max(residual_threshold[d], relative_threshold * acc)
-        active[d] = True if detected else acc >= stop[d]
+        r2[d] = np.sum(np.abs(flat[d]) ** 2)
+    stop = np.maximum(residual_threshold, relative_threshold * r2)
+    active = np.ones(n_d, np.bool_) if detected else r2 >= stop
     fine_span = min(np.pi, 8 * np.pi / float(n_t))
     for l in range(n_l):
         rows = np.flatnonzero(active)
@@ -1108,41 +1157,25 @@ def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step:
         val_r = valid[rows]
         a = atoms[rows]
         h = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, np.int64(0))[0]
-        data_r = np.empty((n_r, n_q), np.complex128)
+        data_r = flat[rows]
         for rr in range(n_r):
             th_r[rr, l], om_r[rr, l], val_r[rr, l] = th[rr], w[rr], True
-            for i in range(n_i):
-                for c in range(n_c):
-                    a[rr, i * n_c + c, l] = h[rr, i] * phase[rr, i, c]
-            data_r[rr] = flat[rows[rr]]
-        s = lstsq(a, data_r)
-        ok = np.empty(n_r, np.bool_)
-        for rr in range(n_r):
-            for k in range(n_l):
-                if not val_r[rr, k]:
-                    s[rr, k] = 0
-        norms = atom_norms(a)
-        for rr in range(n_r):
-            good = True
-            for k in range(n_l):
-                if val_r[rr, k] and not np.abs(s[rr, k]) * norms[rr, k] >= min_amplitude:
-                    good = False
-            ok[rr] = good or (detected and l == 0)
+        _set_column(a, l, h, phase)
+        s = np.where(val_r, lstsq(a, data_r), 0j)
+        ok = _amplitudes_pass(s, a, val_r, min_amplitude) | (detected and l == 0)
         if l > 0 and cycles and ok.any():
             kk = np.flatnonzero(ok)
             th_k, om_k, s_k, a_k = joint_refine(table, u_c, x_c, lo, step, w2, x, data_r[kk], tgrid, t, n_t, fine_re,
                                                 fine_im, fine_w, nfft, th_r[kk], om_r[kk], val_r[kk],
                                                 np.full(kk.size, fine_span), cycles, newton_steps, a[kk], s[kk])
-            norms_k = atom_norms(a_k)
+            ok_k = _amplitudes_pass(s_k, a_k, val_r[kk], min_amplitude)
             for m in range(kk.size):
                 rr = kk[m]
                 th_r[rr] = th_k[m]
                 om_r[rr] = om_k[m]
                 s[rr] = s_k[m]
                 a[rr] = a_k[m]
-                for k in range(n_l):
-                    if val_r[rr, k] and not np.abs(s_k[m, k]) * norms_k[m, k] >= min_amplitude:
-                        ok[rr] = False
+                ok[rr] = ok_k[m]
         for rr in range(n_r):
             d = rows[rr]
             if not ok[rr]:
@@ -1153,14 +1186,6 @@ def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step:
             valid[d] = val_r[rr]
             amp[d] = s[rr]
             atoms[d] = a[rr]
-            acc = 0.0
-            for q in range(n_q):
-                fit = 0j
-                for k in range(n_l):
-                    fit += a[rr, q, k] * s[rr, k]
-                v = flat[d, q] - fit
-                resid[d, q // n_c, q % n_c] = v
-                acc += v.real ** 2 + v.imag ** 2
-            r2[d] = acc
-            active[d] = acc >= stop[d]
+            r2[d] = _residual(flat[d], a[rr], s[rr], resid[d])
+            active[d] = r2[d] >= stop[d]
     return theta, omega, amp, valid, atoms, r2
