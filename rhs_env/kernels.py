@@ -913,8 +913,8 @@ def _angle_peak(corr: np.ndarray, candidates: np.ndarray, step: float) -> tuple[
 def _power(z: np.ndarray) -> np.ndarray:
     """``|z|^2`` (float32) of complex64 correlations, as ``np.abs(z) ** 2``."""
     out = np.empty(z.shape, np.float32)
-    zf = z.reshape(-1)
-    of = out.reshape(-1)
+    zf = z.reshape(z.size)
+    of = out.reshape(out.size)
     for n in range(zf.size):
         a = np.float32(np.abs(zf[n]))
         of[n] = a * a
@@ -978,8 +978,12 @@ def _joint_search(res: np.ndarray, sub: np.ndarray, w0: np.ndarray, th: np.ndarr
             om[s_, hh] = w0[sub[s_]] + span[sub[s_]] * u[hh]
     t_chirp = tgrid[0] - tgrid[0, 0]
     t_slot = tgrid[:, 0].copy()
-    rho_j = joint_rho(res[sub], om, t_chirp, t_slot)  # (S, H, I) complex64
-    cj = _power(np.dot(rho_j.reshape(sub.size * n_h, n_i), hn_conj)).reshape(sub.size, n_h, -1)
+    n_c = res.shape[2]
+    res_s = np.empty((sub.size, n_i, n_c), np.complex128)
+    for s_ in range(sub.size):
+        res_s[s_] = res[sub[s_]]
+    rho_j = joint_rho(res_s, om, t_chirp, t_slot)  # (S, H, I) complex64
+    cj = _power(np.dot(rho_j.reshape(sub.size * n_h, n_i), hn_conj)).reshape(sub.size, n_h, hn_conj.shape[1])
     for s_ in range(sub.size):
         d = sub[s_]
         hb, jb = 0, 0
@@ -999,9 +1003,14 @@ def _joint_search(res: np.ndarray, sub: np.ndarray, w0: np.ndarray, th: np.ndarr
         w0[d] = om[s_, hb]
         th[d] = candidates[jb] + off * step
         span[d] = min(span[d], np.pi / dwell[d])
-    rc_s = res[sub] * phasors(w0[sub], tgrid, -1.0)
+    w_s = np.empty(sub.size)
     for s_ in range(sub.size):
-        rc[sub[s_]] = rc_s[s_]
+        w_s[s_] = w0[sub[s_]]
+    ph = phasors(w_s, tgrid, -1.0)
+    for s_ in range(sub.size):
+        for i in range(n_i):
+            for c in range(n_c):
+                rc[sub[s_], i, c] = res_s[s_, i, c] * ph[s_, i, c]
 
 
 @njit
