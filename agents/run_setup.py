@@ -252,6 +252,7 @@ def make_vec_env(
     vec_cls = SubprocVecEnv if (subprocess and n_envs > 1) else DummyVecEnv
     if vec_cls is SubprocVecEnv:
         _preload_forkserver()
+        warm_kernels(env_id, env_kwargs or {})
     return sb3_make_vec_env(
         worker_env_id(env_id),
         n_envs=n_envs,
@@ -262,6 +263,43 @@ def make_vec_env(
         monitor_kwargs={"info_keywords": ("crashed",)},
         wrapper_class=_compose(wrapper, partial(HoldAction, k=k, fill=fill_action(decision_mode)) if k > 1 else None),
     )
+
+
+#: env steps of :func:`warm_kernels`' workload: past the first scans, until the SLAM matches landmarks
+WARM_STEPS = 12
+
+
+def warm_kernels(env_id: str, env_kwargs: dict[str, Any], steps: int = WARM_STEPS) -> bool:
+    """Compile (or load) the radar / SLAM kernels here, before vector-env workers start; True if it ran.
+
+    On an empty kernel cache each worker would compile every kernel itself; this steps one env of
+    ``env_id`` (with ``env_kwargs``) ``steps`` times in this process, once per cache and config
+    (:func:`rhs_common.jit.warm_cache`), so the workers load the cache. The base highway env has no kernels.
+    """
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+    from rhs_common.jit import warm_cache
+    from rhs_env.kernels import lstsq
+    from rhs_env.registration import HIGHWAY_ID
+
+    bare = env_id.split(":", 1)[-1]
+    if bare == HIGHWAY_ID:
+        return False
+
+    def run() -> None:
+        env = gym.make(bare, **env_kwargs)
+        try:
+            env.reset(seed=0)
+            env.action_space.seed(0)
+            for n in range(steps):
+                _, _, term, trunc, _ = env.step(env.action_space.sample())
+                if term or trunc:
+                    env.reset(seed=n + 1)
+        finally:
+            env.close()
+
+    return warm_cache(run, lstsq, key=f"{bare}|{sorted(env_kwargs.items())!r}")
 
 
 def _compose(*wrappers: Callable[[Any], Any] | None) -> Callable[[Any], Any] | None:

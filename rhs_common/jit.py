@@ -19,6 +19,10 @@ Notice. The first compile of a kernel in a process prints one line to stderr
 (:data:`NOTICE`), once per process: a new install compiles every kernel once
 (seconds, see :mod:`rhs_env.kernels` for the measured cost).
 
+Vector envs. Worker processes started on an empty cache would each compile every kernel
+(seconds of CPU per worker); :func:`warm_cache` runs a workload once in the parent first, so the
+workers only load (``agents.run_setup.make_vec_env`` does it before its subprocess workers start).
+
 ``NUMBA_DISABLE_JIT=1`` runs the kernels as the plain Python functions they are
 (the tests use it to cover their source).
 """
@@ -31,7 +35,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["KERNELS", "NOTICE", "njit"]
+__all__ = ["KERNELS", "NOTICE", "njit", "warm_cache"]
 
 #: the kernel implementations a config may choose: compiled (default) or the numpy reference
 KERNELS = ("numba", "numpy")
@@ -99,3 +103,36 @@ def njit(func: Callable | None = None, **options: Any) -> Any:
     if func is None:
         return lambda f: _numba().njit(**options)(f)
     return _numba().njit(**options)(func)
+
+
+def warm_cache(run: Callable[[], Any], probe: Any, key: str = "") -> bool:
+    """Run ``run`` (a workload calling the kernels) unless this cache was warmed for ``key`` already; True if it ran.
+
+    ``probe``: one of the project's kernels; the cache it writes to holds a marker file named by a
+    digest of ``key``, numba's version and the sources of the kernel modules (any edit re-warms), written
+    after ``run`` returns. Without numba's cache (``NUMBA_DISABLE_JIT=1``) nothing runs.
+    """
+    import hashlib
+
+    numba = _numba()
+    if numba.config.DISABLE_JIT:
+        return False
+    try:
+        folder = Path(probe._cache._cache_file._index_path).parent
+    except AttributeError:  # no on-disk cache (not a cached dispatcher)
+        return False
+    digest = hashlib.sha256(f"{key}|{numba.__version__}".encode())
+    for module in ("rhs_env/kernels.py", "slam/kernels.py", "rhs_common/jit.py"):
+        source = _PACKAGE_ROOT / module
+        if source.is_file():
+            digest.update(source.read_bytes())
+    marker = folder / f"rhs-slam-warm-{digest.hexdigest()[:16]}"
+    if marker.exists():
+        return False
+    run()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        marker.touch()
+    except OSError:  # a cache folder we may not write: the next parent warms again
+        pass
+    return True

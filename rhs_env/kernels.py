@@ -19,11 +19,15 @@ Python 3.11, 2 cores shared with other jobs, load average 5-8):
 * numpy upper bound: every numba release caps numpy (0.68.1: numpy < 2.6); a numpy newer than the
   cap waits for a numba release (pyproject asks numba >= 0.60, pip picks the one matching numpy);
 * no SVML in the wheels: transcendental loops are not vectorised, so the noise generator stays numpy;
-* first compile of every kernel here and in :mod:`slam.kernels`: ~13 s (footprint detector ~3 s,
-  ICP ~2.5 s, the atoms and Newton steps ~3 s, the rest ~1 s each or less), once per machine; a new
-  process then loads them from the cache (:mod:`rhs_common.jit`): imports, ``gym.make``, reset and
-  the first step of the SLAM env in a new process took 18.5 s with an empty cache and 2.6 s with it
-  (load 3.7; ``python scripts/benchmark.py --sections start``).
+* first compile of every kernel here and in :mod:`slam.kernels`, once per machine: ~30 s at load 1-3,
+  of which the one-call OMP (:func:`omp_doppler`) takes ~24 s (its new-atom search ~13 s: the joint
+  search ~4 s, the Taylor atoms ~1.8 s, the Doppler search ~1.2 s, Newton steps ~0.8 s; the joint
+  refinement ~2.4 s), the footprint detector ~2.4 s, ICP ~1.8 s; a new process then loads them from the
+  cache (:mod:`rhs_common.jit`): imports, ``gym.make``, reset and the first step of the SLAM env in a
+  new process took 28.8-33.2 s with an empty cache and 1.9-2.1 s with it (load 0.8-2.3; ``python
+  scripts/benchmark.py --sections start``; with the OMP as many small kernels: 10.8 s and 1.7 s at load
+  1). Vector envs compile once, in the parent (``agents.run_setup.make_vec_env``,
+  :func:`rhs_common.jit.warm_cache`).
 """
 
 from __future__ import annotations
@@ -33,8 +37,8 @@ import numpy as np
 from rhs_common.jit import njit
 
 __all__ = [
-    "TAYLOR_ORDER", "atom_norms", "footprint_detections", "joint_rho", "newton_refine", "phasors", "taylor_atoms",
-    "taylor_tables", "tone_operands", "tone_spectra",
+    "TAYLOR_ORDER", "atom_norms", "bin_amplitudes", "doppler_dtft_refine", "footprint_detections", "joint_refine", "joint_rho", "lstsq",
+    "newton_refine", "omp_doppler", "phasors", "taylor_atoms", "taylor_tables", "tone_operands", "tone_spectra",
 ]
 
 
@@ -207,8 +211,10 @@ def taylor_tables(w2: np.ndarray, x: np.ndarray, candidates: np.ndarray,
 
 @njit
 def _atom_at(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray, x: np.ndarray,
-             th: float, order: int, f0: np.ndarray, f1: np.ndarray, f2: np.ndarray, h: np.ndarray) -> None:
-    """h (order + 1, I) at one angle th: :func:`taylor_atoms` for one angle (f0, f1, f2: (2 I,) complex work arrays).
+             th: float, order: int, f0: np.ndarray, f1: np.ndarray, f2: np.ndarray, h: np.ndarray,
+             work: np.ndarray) -> None:
+    """h (order + 1, I) at one angle th: :func:`taylor_atoms` for one angle (f0, f1, f2: (2 I,) complex and
+    ``work`` (3, 4 I) float work arrays).
 
     ``table``: the coefficients of :func:`taylor_tables` viewed as float64, (I_c, N + 1, 4 I) with re, im
     interleaved: delta is real, so the Horner steps act on the real and imaginary parts alike (the same
@@ -223,20 +229,27 @@ def _atom_at(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: fl
     if -1 <= c <= n_c:
         c = min(max(c, 0), n_c - 1)
         delta = u - u_c[c]
-        # Horner in delta for the value and its first two derivatives, on re / im alike
-        p0 = table[c, n_n - 1].copy()
-        p1 = np.zeros(n_f)
-        p2 = np.zeros(n_f)
+        # Horner in delta for the value and its first two derivatives, on re / im alike (one pass per term)
+        p0 = work[0]
+        p1 = work[1]
+        p2 = work[2]
+        p0[:] = table[c, n_n - 1]
+        p1[:] = 0.0
+        p2[:] = 0.0
         for n in range(n_n - 2, -1, -1):
             row = table[c, n]
             if order >= 2:
                 for i in range(n_f):
                     p2[i] = p2[i] * delta + 2.0 * p1[i]
-            if order >= 1:
+                    p1[i] = p1[i] * delta + p0[i]
+                    p0[i] = p0[i] * delta + row[i]
+            elif order == 1:
                 for i in range(n_f):
                     p1[i] = p1[i] * delta + p0[i]
-            for i in range(n_f):
-                p0[i] = p0[i] * delta + row[i]
+                    p0[i] = p0[i] * delta + row[i]
+            else:
+                for i in range(n_f):
+                    p0[i] = p0[i] * delta + row[i]
         for i in range(n_i2):
             f0[i] = complex(p0[2 * i], p0[2 * i + 1])
             f1[i] = complex(p1[2 * i], p1[2 * i + 1])
@@ -294,8 +307,9 @@ def taylor_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step
     f1 = np.empty(n_i2, np.complex128)
     f2 = np.empty(n_i2, np.complex128)
     h = np.empty((order + 1, n_i2 // 2), np.complex128)
+    work = np.empty((3, table.shape[2]))
     for q in range(theta.size):
-        _atom_at(table, u_c, x_c, lo, step, w2, x, theta[q], order, f0, f1, f2, h)
+        _atom_at(table, u_c, x_c, lo, step, w2, x, theta[q], order, f0, f1, f2, h, work)
         for o in range(order + 1):
             for i in range(n_i2 // 2):
                 out[o, q, i] = h[o, i]
@@ -320,11 +334,12 @@ def newton_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, ste
     f1 = np.empty(n_i2, np.complex128)
     f2 = np.empty(n_i2, np.complex128)
     h = np.empty((3, n_i), np.complex128)
+    work = np.empty((3, table.shape[2]))
     out = theta.copy()
     for d in range(theta.size):
         th = theta[d]
         for _ in range(steps):
-            _atom_at(table, u_c, x_c, lo, step, w2, x, th, 2, f0, f1, f2, h)
+            _atom_at(table, u_c, x_c, lo, step, w2, x, th, np.int64(2), f0, f1, f2, h, work)
             g = 0j
             g1 = 0j
             g2 = 0j
@@ -394,33 +409,25 @@ def tone_spectra(mu: np.ndarray, coef: np.ndarray, n: int, zero_pad: int, n_bins
 
 
 @njit
-def tone_operands(rr: np.ndarray, g_mat: np.ndarray, omega: np.ndarray, wk: np.ndarray, chirps: int,
-                  n_radars: int) -> tuple[np.ndarray, np.ndarray]:
-    """The operands of ``Y_s[r] = G_r @ E_r`` (:meth:`rhs_env.radar.RadarSystem._mix`), complex64, rr sorted.
+def tone_operands(g_mat: np.ndarray, omega: np.ndarray, wk: np.ndarray, chirps: int) -> tuple[np.ndarray, np.ndarray]:
+    """The operands of ``Y_s[r] = G_r @ E_r`` (:meth:`rhs_env.radar.RadarSystem._mix`), complex64, the tones in order.
 
-    ``G_r[i, q] = G[i, p]`` and ``E_r[q, (c, k)] = exp(j omega_p c) W_p[k]`` for the q-th tone p of radar r
-    (zero-padded to the largest count; the product is formed in complex128 and rounded once, as numpy does).
-    Returns gp (R, I, Q) and ep (R, Q, C K).
+    ``G[i, p]`` (I, P) and ``E[p, (c, k)] = exp(j omega_p c) W_p[k]`` (P, C K) (the product formed in
+    complex128 and rounded once, as numpy does). With the tones sorted by radar, radar r's operands are
+    the column block ``G[:, lo_r:hi_r]`` and the row block ``E[lo_r:hi_r]``: no padding to the largest count.
     """
-    n_p = rr.size
+    n_p = omega.size
     n_i, n_k = g_mat.shape[0], wk.shape[1]
-    counts = np.zeros(n_radars, np.int64)
+    gp = np.empty((n_i, n_p), np.complex64)
+    ep = np.empty((n_p, chirps * n_k), np.complex64)
+    for i in range(n_i):
+        for p in range(n_p):
+            gp[i, p] = g_mat[i, p]
     for p in range(n_p):
-        counts[rr[p]] += 1
-    width = max(counts.max(), 1)
-    gp = np.zeros((n_radars, n_i, width), np.complex64)
-    ep = np.zeros((n_radars, width, chirps * n_k), np.complex64)
-    slot = np.zeros(n_radars, np.int64)
-    for p in range(n_p):
-        r = rr[p]
-        q = slot[r]
-        slot[r] += 1
-        for i in range(n_i):
-            gp[r, i, q] = g_mat[i, p]
         for c in range(chirps):
             ph = np.exp(1j * omega[p] * c)
             for k in range(n_k):
-                ep[r, q, c * n_k + k] = ph * wk[p, k]
+                ep[p, c * n_k + k] = ph * wk[p, k]
     return gp, ep
 
 
@@ -430,11 +437,32 @@ def phasors(w: np.ndarray, tgrid: np.ndarray, sign: float) -> np.ndarray:
     """``exp(sign j w_p t_ic)`` (P, I, C) for w (P,) rad per chirp and chirp times tgrid (I, C), sign +-1.
 
     ``cos(x) + j sin(x)`` with ``x = (sign w) t``: the values numpy's complex exp gives for
-    ``np.exp(sign * 1j * w[:, None, None] * tgrid[None])`` (bit for bit), without its complex temporaries.
+    ``np.exp(sign * 1j * w[:, None, None] * tgrid[None])``, without its complex temporaries. Where the
+    chirp times are separable, ``t_ic = t_i + t_c`` (slot start plus chirp offset, every sweep here),
+    ``exp(j x t_ic) = exp(j x t_i) exp(j x t_c)``: I + C cosines and sines instead of I C (one rounding
+    more, ~1e-16 relative).
     """
     n_p = w.size
     n_i, n_c = tgrid.shape
     out = np.empty((n_p, n_i, n_c), np.complex128)
+    separable = True
+    for i in range(n_i):
+        for c in range(n_c):
+            if tgrid[i, c] != tgrid[i, 0] + (tgrid[0, c] - tgrid[0, 0]):
+                separable = False
+    if separable:
+        ec = np.empty(n_c, np.complex128)
+        for p in range(n_p):
+            sw = sign * w[p]
+            for c in range(n_c):
+                x = sw * (tgrid[0, c] - tgrid[0, 0])
+                ec[c] = complex(np.cos(x), np.sin(x))
+            for i in range(n_i):
+                x = sw * tgrid[i, 0]
+                ei = complex(np.cos(x), np.sin(x))
+                for c in range(n_c):
+                    out[p, i, c] = ei * ec[c]
+        return out
     for p in range(n_p):
         sw = sign * w[p]
         for i in range(n_i):
@@ -481,3 +509,693 @@ def atom_norms(a: np.ndarray) -> np.ndarray:
                 v = a[d, q, l]
                 out[d, l] += v.real * v.real + v.imag * v.imag
     return np.sqrt(out)
+
+
+@njit
+def _gram_cholesky(a: np.ndarray, d: int, gram: np.ndarray, chol: np.ndarray) -> None:
+    """``G = A_d^H A_d + 1e-12 I = C C^H`` (L x L, Hermitian positive definite: the ridge keeps an unused,
+    all-zero column at amplitude 0); C (lower triangular) written into ``chol``."""
+    n_q, n_l = a.shape[1], a.shape[2]
+    gram[:] = 0
+    for q in range(n_q):
+        for l in range(n_l):
+            al = np.conj(a[d, q, l])
+            for m in range(l, n_l):
+                gram[l, m] += al * a[d, q, m]
+    for l in range(n_l):
+        gram[l, l] += 1e-12
+    for l in range(n_l):  # C[m, l] = (G[l, m]^* - sum_k C[m, k] C[l, k]^*) / C[l, l]
+        acc = gram[l, l].real
+        for k in range(l):
+            acc -= chol[l, k].real ** 2 + chol[l, k].imag ** 2
+        cll = np.sqrt(acc)
+        chol[l, l] = cll
+        for m in range(l + 1, n_l):
+            v = np.conj(gram[l, m])
+            for k in range(l):
+                v -= chol[m, k] * np.conj(chol[l, k])
+            chol[m, l] = v / cll
+
+
+@njit
+def _cholesky_solve(chol: np.ndarray, rhs: np.ndarray, out: np.ndarray) -> None:
+    """``out = (C C^H)^-1 rhs``: ``C z = rhs`` then ``C^H out = z`` by substitution (rhs overwritten by z)."""
+    n_l = rhs.size
+    for l in range(n_l):
+        v = rhs[l]
+        for k in range(l):
+            v -= chol[l, k] * rhs[k]
+        rhs[l] = v / chol[l, l].real
+    for l in range(n_l - 1, -1, -1):
+        v = rhs[l]
+        for k in range(l + 1, n_l):
+            v -= np.conj(chol[k, l]) * out[k]
+        out[l] = v / chol[l, l].real
+
+
+@njit
+def lstsq(a: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """:func:`rhs_env.point_cloud._lstsq` for one right-hand side: ``s_d = (A_d^H A_d + 1e-12 I)^-1 A_d^H y_d`` (D, L).
+
+    a (D, Q, L), y (D, Q) complex128. The Gram matrix ``G = A^H A + 1e-12 I`` is factored ``G = C C^H``
+    (Cholesky, :func:`_gram_cholesky`), then ``C z = A^H y`` and ``C^H s = z`` (:func:`_cholesky_solve`).
+    """
+    n_d, n_q, n_l = a.shape
+    out = np.empty((n_d, n_l), np.complex128)
+    gram = np.empty((n_l, n_l), np.complex128)
+    chol = np.zeros((n_l, n_l), np.complex128)
+    rhs = np.empty(n_l, np.complex128)
+    for d in range(n_d):
+        _gram_cholesky(a, d, gram, chol)
+        rhs[:] = 0
+        for q in range(n_q):
+            yq = y[d, q]
+            for l in range(n_l):
+                rhs[l] += np.conj(a[d, q, l]) * yq
+        _cholesky_solve(chol, rhs, out[d])
+    return out
+
+
+@njit
+def bin_amplitudes(a: np.ndarray, spec: np.ndarray, rd: np.ndarray, kk: np.ndarray) -> np.ndarray:
+    """Least-squares amplitudes of fixed atoms at neighbouring range bins (D, L, W), for
+    :meth:`rhs_env.radar.RadarSystem._target_bins`.
+
+    ``s_d[:, w] = (A_d^H A_d + 1e-12 I)^-1 A_d^H y_dw`` with ``y_dw[(i, c)] = Y[rd_d, i, c, kk_dw]`` read from the
+    spectrum Y (R, I, C, K) complex64 (no gathered copy), one Cholesky factor per row for its W bins.
+    """
+    n_d, n_q, n_l = a.shape
+    n_w = kk.shape[1]
+    n_c = spec.shape[2]
+    out = np.empty((n_d, n_l, n_w), np.complex128)
+    gram = np.empty((n_l, n_l), np.complex128)
+    chol = np.zeros((n_l, n_l), np.complex128)
+    rhs = np.empty(n_l, np.complex128)
+    sol = np.empty(n_l, np.complex128)
+    for d in range(n_d):
+        _gram_cholesky(a, d, gram, chol)
+        r = rd[d]
+        for w in range(n_w):
+            k = kk[d, w]
+            rhs[:] = 0
+            for q in range(n_q):
+                yq = complex(spec[r, q // n_c, q % n_c, k])
+                for l in range(n_l):
+                    rhs[l] += np.conj(a[d, q, l]) * yq
+            _cholesky_solve(chol, rhs, sol)
+            for l in range(n_l):
+                out[d, l, w] = sol[l]
+    return out
+
+
+@njit(fastmath={"reassoc", "contract"})
+def doppler_dtft_refine(h: np.ndarray, r: np.ndarray, t: np.ndarray, n_t: int, kern_re: np.ndarray,
+                        kern_im: np.ndarray, w: np.ndarray, span: np.ndarray, nfft: int) -> np.ndarray:
+    """The narrow search of :func:`rhs_env.point_cloud._doppler_grid_refine`: d_omega (D,) rad per chirp.
+
+    ``q_t = sum_{t_ic = t} conj(h_i) r_ic`` (rounded to complex64, as the reference), its DTFT
+    ``V_j = |sum_t q_t exp(-j w_j t)|^2`` on the grid ``w_j = 2 pi j / nfft`` (``kern_re + j kern_im``
+    (J, n_t): the reference's complex64 ``exp(-j w_j t)``, transposed), the first maximum ``j*`` within
+    ``|w_j| <= span_d`` (clipped to 1..J-2), then the vertex of the parabola through
+    ``log V`` at ``j* - 1, j*, j* + 1``: ``w_j* + off 2 pi / nfft``. Real and imaginary parts are
+    separate float64 sums (vectorised; the sums' order is free, so V agrees with the reference's
+    float32 product to ~1e-6 relative).
+    """
+    n_d, n_i, n_c = r.shape
+    n_j = w.size
+    out = np.empty(n_d)
+    qr = np.empty(n_t)
+    qi = np.empty(n_t)
+    val = np.zeros(n_j)
+    for d in range(n_d):
+        qr[:] = 0.0
+        qi[:] = 0.0
+        for i in range(n_i):
+            hc = np.conj(h[d, i])
+            for c in range(n_c):
+                p = hc * r[d, i, c]
+                tt = t[i * n_c + c]
+                qr[tt] += p.real
+                qi[tt] += p.imag
+        for tt in range(n_t):
+            qr[tt] = np.float32(qr[tt])
+            qi[tt] = np.float32(qi[tt])
+        j_lo = n_j
+        j_hi = -1
+        for j in range(n_j):
+            if abs(w[j]) <= span[d]:
+                j_lo = min(j_lo, j)
+                j_hi = max(j_hi, j)
+        a = max(min(j_lo, n_j - 2) - 1, 0)
+        b = min(max(j_hi, 1) + 1, n_j - 1)
+        for j in range(a, b + 1):
+            kr = kern_re[j]
+            ki = kern_im[j]
+            sr = 0.0
+            si = 0.0
+            for tt in range(n_t):
+                sr += qr[tt] * kr[tt] - qi[tt] * ki[tt]
+                si += qr[tt] * ki[tt] + qi[tt] * kr[tt]
+            val[j] = sr * sr + si * si
+        best = -1.0
+        jb = 0
+        for j in range(n_j):
+            v = val[j] if j_lo <= j <= j_hi else -1.0
+            if v > best:
+                best = v
+                jb = j
+        jb = min(max(jb, 1), n_j - 2)
+        ym = np.log(max(val[jb - 1], 1e-300))
+        y0 = np.log(max(val[jb], 1e-300))
+        yp = np.log(max(val[jb + 1], 1e-300))
+        den = ym - 2.0 * y0 + yp
+        off = min(max(0.5 * (ym - yp) / den, -0.5), 0.5) if den < 0 else 0.0
+        out[d] = w[jb] + off * 2 * np.pi / nfft
+    return out
+
+
+@njit
+def joint_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
+                 x: np.ndarray, flat: np.ndarray, tgrid: np.ndarray, t: np.ndarray, n_t: int, kern_re: np.ndarray,
+                 kern_im: np.ndarray, w: np.ndarray, nfft: int, theta: np.ndarray, domega: np.ndarray,
+                 valid: np.ndarray, span: np.ndarray, passes: int, newton_steps: int, a: np.ndarray,
+                 s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`rhs_env.point_cloud.joint_refine` in one call: ``passes`` Jacobi passes over every valid (row, target).
+
+    Per pass, for every pair (d, k) at once against the pass' atoms a (D, I C, L) and amplitudes s (D, L):
+    the partial residual ``part = data_d - sum_l a_l s_l + a_k s_k`` (I, C); with ``base = exp(-j omega_k t)``
+    (the previous pass' phases) and ``h_i = a_k[i, 0] base[i, 0]``, the Doppler step of
+    :func:`doppler_dtft_refine` on ``part base``; then ``base = exp(-j omega'_k t)``, Newton steps on the angle
+    (:func:`newton_refine`) with ``rho_i = sum_c part_ic base_ic``; then the new atoms
+    ``a_k = h(theta'_k) conj(base)`` and least squares for every amplitude (:func:`lstsq`). Returns theta,
+    d_omega, ``s * valid`` and a (updated copies). The narrow DTFT grid (w, kern) must cover ``span``.
+    """
+    n_d, n_q, n_l = a.shape
+    n_i, n_c = tgrid.shape
+    theta = theta.copy()
+    domega = domega.copy()
+    a = a.copy()
+    dd, kk = np.nonzero(valid)  # the valid (row, target) pairs, row-major
+    n_p = dd.size
+    span_p = np.empty(n_p)
+    w_p = np.empty(n_p)
+    for p in range(n_p):
+        span_p[p] = span[dd[p]]
+        w_p[p] = domega[dd[p], kk[p]]
+    base = phasors(w_p, tgrid, -1.0)  # (P, I, C)
+    part = np.empty((n_p, n_i, n_c), np.complex128)
+    comp = np.empty((n_p, n_i, n_c), np.complex128)
+    h = np.empty((n_p, n_i), np.complex128)
+    rho = np.empty((n_p, n_i), np.complex128)
+    th = np.empty(n_p)
+    fit = np.empty(n_q, np.complex128)
+    for _ in range(passes):
+        for p in range(n_p):
+            d, k = dd[p], kk[p]
+            for q in range(n_q):
+                acc = 0j
+                for m in range(n_l):
+                    acc += a[d, q, m] * s[d, m]
+                fit[q] = acc
+            for i in range(n_i):
+                for c in range(n_c):
+                    q = i * n_c + c
+                    v = flat[d, q] - fit[q] + a[d, q, k] * s[d, k]
+                    part[p, i, c] = v
+                    comp[p, i, c] = v * base[p, i, c]
+                h[p, i] = a[d, i * n_c, k] * base[p, i, 0]
+            th[p] = theta[d, k]
+        dw = doppler_dtft_refine(h, comp, t, n_t, kern_re, kern_im, w, span_p, nfft)
+        for p in range(n_p):
+            dw[p] += domega[dd[p], kk[p]]
+        base = phasors(dw, tgrid, -1.0)
+        if newton_steps:
+            for p in range(n_p):
+                for i in range(n_i):
+                    acc = 0j
+                    for c in range(n_c):
+                        acc += part[p, i, c] * base[p, i, c]
+                    rho[p, i] = acc
+            th = newton_refine(table, u_c, x_c, lo, step, w2, x, th, rho, newton_steps)
+        hs = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, np.int64(0))[0]  # (P, I)
+        for p in range(n_p):
+            d, k = dd[p], kk[p]
+            theta[d, k] = th[p]
+            domega[d, k] = dw[p]
+            for i in range(n_i):
+                for c in range(n_c):
+                    a[d, i * n_c + c, k] = hs[p, i] * np.conj(base[p, i, c])
+        s = lstsq(a, flat)
+    out = s.copy()
+    for d in range(n_d):
+        for k in range(n_l):
+            if not valid[d, k]:
+                out[d, k] = 0
+    return theta, domega, out, a
+
+
+# --------------------------------------------------------------------------- the OMP in one call
+@njit
+def _fft_pow2(re: np.ndarray, im: np.ndarray, e_re: np.ndarray, e_im: np.ndarray) -> None:
+    """In-place forward FFT ``X_k = sum_t x_t exp(-2 pi j k t / n)`` of ``re + j im`` (n a power of 2).
+
+    Iterative radix 2 (bit-reversed order, then log2 n butterfly stages); ``e_re + j e_im`` the twiddles
+    ``exp(-2 pi j m / n)``, m = 0..n-1.
+    """
+    n = re.size
+    j = 0
+    for i in range(1, n):
+        bit = n >> 1
+        while j & bit:
+            j ^= bit
+            bit >>= 1
+        j |= bit
+        if i < j:
+            re[i], re[j] = re[j], re[i]
+            im[i], im[j] = im[j], im[i]
+    size = 2
+    while size <= n:
+        half = size // 2
+        stride = n // size
+        for start in range(0, n, size):
+            for k in range(half):
+                wr = e_re[k * stride]
+                wi = e_im[k * stride]
+                a = start + k
+                b = a + half
+                tr = re[b] * wr - im[b] * wi
+                ti = re[b] * wi + im[b] * wr
+                re[b] = re[a] - tr
+                im[b] = im[a] - ti
+                re[a] += tr
+                im[a] += ti
+        size *= 2
+
+
+@njit
+def _dtft_at(q_re: np.ndarray, q_im: np.ndarray, jj: int, nfft: int, e_re: np.ndarray, e_im: np.ndarray) -> float:
+    """``|sum_t q_t exp(-2 pi j jj t / nfft)|^2`` (the twiddle table indexed by ``jj t mod nfft``)."""
+    sr = 0.0
+    si = 0.0
+    inc = jj % nfft
+    m = 0
+    for tt in range(q_re.size):  # m = jj tt mod nfft, advanced without a division
+        sr += q_re[tt] * e_re[m] - q_im[tt] * e_im[m]
+        si += q_re[tt] * e_im[m] + q_im[tt] * e_re[m]
+        m += inc
+        if m >= nfft:
+            m -= nfft
+    return sr * sr + si * si
+
+
+@njit(fastmath={"reassoc", "contract"})
+def _dtft_row(q_re: np.ndarray, q_im: np.ndarray, k_re: np.ndarray, k_im: np.ndarray) -> float:
+    """``|sum_t q_t k_t|^2`` for one row ``k = k_re + j k_im`` of a DTFT table (contiguous: vectorised sums)."""
+    sr = 0.0
+    si = 0.0
+    for tt in range(q_re.size):
+        sr += q_re[tt] * k_re[tt] - q_im[tt] * k_im[tt]
+        si += q_re[tt] * k_im[tt] + q_im[tt] * k_re[tt]
+    return sr * sr + si * si
+
+
+@njit
+def _doppler_peak(q_re: np.ndarray, q_im: np.ndarray, span: float, nfft: int, e_re: np.ndarray, e_im: np.ndarray,
+                  buf_re: np.ndarray, buf_im: np.ndarray, tab_re: np.ndarray, tab_im: np.ndarray) -> float:
+    """d_omega of one row of :func:`rhs_env.point_cloud._doppler_grid_refine` from its ``q_t`` (n_t,).
+
+    ``V(w) = |sum_t q_t exp(-j w t)|^2`` on ``w_k = 2 pi k / nfft``, the first maximum within ``|w| <= span``,
+    plus the log-parabola vertex. A narrow search (``2 half + 1 < nfft / 8``, ``half`` the reference's
+    power of two above ``span nfft / (2 pi)``) sums the few samples directly, q rounded to complex64 and the
+    peak clipped to ``|k| <= half - 1`` as the reference's matrix product; a wide one takes the FFT
+    (:func:`_fft_pow2`), neighbours wrapping around, frequencies in ``np.fft.fftfreq`` order.
+    ``tab_re + j tab_im`` (2 H + 1, n_t): the reference's complex64 samples ``exp(-j w_k t)``, k = -H..H,
+    read row by row where ``half <= H`` (else the twiddle table, indexed ``k t mod nfft``).
+    """
+    n_t = q_re.size
+    two_pi = 2 * np.pi
+    half = 1 << int(np.ceil(np.log2(np.ceil(span * nfft / two_pi) + 1)))
+    if 2 * half + 1 < nfft // 8:
+        for tt in range(n_t):
+            q_re[tt] = np.float32(q_re[tt])
+            q_im[tt] = np.float32(q_im[tt])
+        tab_h = (tab_re.shape[0] - 1) // 2
+        best = -1.0
+        jb = -half
+        for jj in range(-half, half + 1):
+            if abs(two_pi * jj / nfft) <= span:
+                if half <= tab_h:
+                    v = _dtft_row(q_re, q_im, tab_re[jj + tab_h], tab_im[jj + tab_h])
+                else:
+                    v = _dtft_at(q_re, q_im, jj, nfft, e_re, e_im)
+                if v > best:
+                    best = v
+                    jb = jj
+        jb = min(max(jb, -half + 1), half - 1)
+        if half <= tab_h:
+            vm = _dtft_row(q_re, q_im, tab_re[jb - 1 + tab_h], tab_im[jb - 1 + tab_h])
+            v0 = _dtft_row(q_re, q_im, tab_re[jb + tab_h], tab_im[jb + tab_h])
+            vp = _dtft_row(q_re, q_im, tab_re[jb + 1 + tab_h], tab_im[jb + 1 + tab_h])
+        else:
+            vm = _dtft_at(q_re, q_im, jb - 1, nfft, e_re, e_im)
+            v0 = _dtft_at(q_re, q_im, jb, nfft, e_re, e_im)
+            vp = _dtft_at(q_re, q_im, jb + 1, nfft, e_re, e_im)
+        w_b = two_pi * jb / nfft
+    else:
+        buf_re[:] = 0.0
+        buf_im[:] = 0.0
+        buf_re[:n_t] = q_re
+        buf_im[:n_t] = q_im
+        _fft_pow2(buf_re, buf_im, e_re, e_im)
+        best = -1.0
+        kb = 0
+        inv = 1.0 / nfft
+        for k in range(nfft):
+            kf = k if k < (nfft - 1) // 2 + 1 else k - nfft
+            if abs(two_pi * (kf * inv)) <= span:
+                v = buf_re[k] ** 2 + buf_im[k] ** 2
+                if v > best:
+                    best = v
+                    kb = k
+        km, kp = (kb - 1) % nfft, (kb + 1) % nfft
+        vm = buf_re[km] ** 2 + buf_im[km] ** 2
+        v0 = buf_re[kb] ** 2 + buf_im[kb] ** 2
+        vp = buf_re[kp] ** 2 + buf_im[kp] ** 2
+        kf = kb if kb < (nfft - 1) // 2 + 1 else kb - nfft
+        w_b = two_pi * (kf * inv)
+    ym = np.log(max(vm, 1e-300))
+    y0 = np.log(max(v0, 1e-300))
+    yp = np.log(max(vp, 1e-300))
+    den = ym - 2.0 * y0 + yp
+    off = min(max(0.5 * (ym - yp) / den, -0.5), 0.5) if den < 0 else 0.0
+    return w_b + off * two_pi / nfft
+
+
+@njit
+def _angle_peak(corr: np.ndarray, candidates: np.ndarray, step: float) -> tuple[int, float]:
+    """Best candidate of one correlation line (I_c,) and the angle ``theta_j + off step`` (log-parabola; 0 at the ends)."""
+    n_c = corr.size
+    j = 0
+    for jj in range(1, n_c):
+        if corr[jj] > corr[j]:
+            j = jj
+    jm, jp = max(j - 1, 0), min(j + 1, n_c - 1)
+    ym = np.log(max(corr[jm], 1e-30))
+    y0 = np.log(max(corr[j], 1e-30))
+    yp = np.log(max(corr[jp], 1e-30))
+    den = ym - 2.0 * y0 + yp
+    off = min(max(0.5 * (ym - yp) / den, -0.5), 0.5) if den < 0 else 0.0
+    if j == 0 or j == n_c - 1:
+        off = 0.0
+    return j, candidates[j] + off * step
+
+
+@njit
+def _power(z: np.ndarray) -> np.ndarray:
+    """``|z|^2`` (float32) of complex64 correlations, as ``np.abs(z) ** 2``."""
+    out = np.empty(z.shape, np.float32)
+    zf = z.reshape(z.size)
+    of = out.reshape(out.size)
+    for n in range(zf.size):
+        a = np.float32(np.abs(zf[n]))
+        of[n] = a * a
+    return out
+
+
+@njit
+def _search_widths(res: np.ndarray, noise_var: float, t_span: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per row of res (D, I, C): the Doppler search half-width ``span``, the dwell and whether the row is wide.
+
+    ``snr = max(||R||^2 / sigma^2 - I C, 1)``, ``span = clip(5 / sqrt(snr), min(pi, 8 pi / T), pi)``, the dwell
+    ``clip(C (sum_i e_i)^2 / sum_i e_i^2, C, T)`` of the slot energies ``e_i = max(sum_c |R_ic|^2 - C sigma^2, 0)``,
+    wide: ``5 dwell / sqrt(snr) > pi / 2`` (the joint angle x Doppler search).
+    """
+    n_d, n_i, n_c = res.shape
+    span = np.empty(n_d)
+    dwell = np.empty(n_d)
+    wide = np.zeros(n_d, np.bool_)
+    floor_span = min(np.pi, 8 * np.pi / t_span)
+    for d in range(n_d):
+        tot = 0.0
+        e_sum = 0.0
+        e_sq = 0.0
+        for i in range(n_i):
+            e = 0.0
+            for c in range(n_c):
+                v = res[d, i, c]
+                e += v.real ** 2 + v.imag ** 2
+            tot += e
+            e = max(e - n_c * noise_var, 0.0)
+            e_sum += e
+            e_sq += e * e
+        snr = max(tot / noise_var - n_i * n_c, 1.0)
+        span[d] = min(max(5.0 / np.sqrt(snr), floor_span), np.pi)
+        dw = e_sum ** 2 / max(e_sq, 1e-300) * n_c
+        dwell[d] = min(max(dw, n_c), t_span)
+        wide[d] = 5.0 / np.sqrt(snr) * dwell[d] > 0.5 * np.pi
+    return span, dwell, wide
+
+
+@njit
+def _joint_search(res: np.ndarray, sub: np.ndarray, w0: np.ndarray, th: np.ndarray, span: np.ndarray,
+                  dwell: np.ndarray, hn_conj: np.ndarray, candidates: np.ndarray, step: float, tgrid: np.ndarray,
+                  rc: np.ndarray) -> None:
+    """The joint angle x Doppler search of :func:`rhs_env.point_cloud._joint_grid_search` for the rows ``sub``.
+
+    ``n_h = min(33, 2 ceil(max(span dwell) / 0.5) + 1)`` hypotheses ``w0 + span u`` (u on [-1, 1]) over the
+    rows, ``rho`` of :func:`joint_rho`, the best (hypothesis, candidate) of ``|H_n^H rho|^2`` (one complex64
+    product) and the log-parabola in angle; w0, th, span (``min(span, pi / dwell)``) and the compensated
+    residuals rc of those rows updated in place.
+    """
+    n_i = res.shape[1]
+    top = 0.0
+    for s_ in range(sub.size):
+        top = max(top, span[sub[s_]] * dwell[sub[s_]])
+    n_h = int(min(33, 2 * np.ceil(top / 0.5) + 1))
+    u = np.linspace(-1.0, 1.0, n_h)
+    om = np.empty((sub.size, n_h))
+    for s_ in range(sub.size):
+        for hh in range(n_h):
+            om[s_, hh] = w0[sub[s_]] + span[sub[s_]] * u[hh]
+    t_chirp = tgrid[0] - tgrid[0, 0]
+    t_slot = tgrid[:, 0].copy()
+    n_c = res.shape[2]
+    res_s = np.empty((sub.size, n_i, n_c), np.complex128)
+    for s_ in range(sub.size):
+        res_s[s_] = res[sub[s_]]
+    rho_j = joint_rho(res_s, om, t_chirp, t_slot)  # (S, H, I) complex64
+    cj = _power(np.dot(rho_j.reshape(sub.size * n_h, n_i), hn_conj)).reshape(sub.size, n_h, hn_conj.shape[1])
+    for s_ in range(sub.size):
+        d = sub[s_]
+        hb, jb = 0, 0
+        best = cj[s_, 0, 0]
+        for hh in range(n_h):
+            for jj in range(cj.shape[2]):
+                if cj[s_, hh, jj] > best:
+                    best = cj[s_, hh, jj]
+                    hb, jb = hh, jj
+        n_cand = cj.shape[2]
+        jm, jp = max(jb - 1, 0), min(jb + 1, n_cand - 1)
+        ym = np.log(max(cj[s_, hb, jm], 1e-30))
+        y0 = np.log(max(cj[s_, hb, jb], 1e-30))
+        yp = np.log(max(cj[s_, hb, jp], 1e-30))
+        den = ym - 2.0 * y0 + yp
+        off = min(max(0.5 * (ym - yp) / den, -0.5), 0.5) if den < 0 else 0.0
+        w0[d] = om[s_, hb]
+        th[d] = candidates[jb] + off * step
+        span[d] = min(span[d], np.pi / dwell[d])
+    w_s = np.empty(sub.size)
+    for s_ in range(sub.size):
+        w_s[s_] = w0[sub[s_]]
+    ph = phasors(w_s, tgrid, -1.0)
+    for s_ in range(sub.size):
+        for i in range(n_i):
+            for c in range(n_c):
+                rc[sub[s_], i, c] = res_s[s_, i, c] * ph[s_, i, c]
+
+
+@njit
+def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
+               x: np.ndarray, hn_conj: np.ndarray, candidates: np.ndarray, res: np.ndarray, tgrid: np.ndarray,
+               t: np.ndarray, n_t: int, nfft: int, e_re: np.ndarray, e_im: np.ndarray, tab_re: np.ndarray,
+               tab_im: np.ndarray, noise_var: float, newton_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`rhs_env.point_cloud._new_atom` of the residuals res (D, I, C): theta, omega (D,) and ``exp(j omega t)``.
+
+    Coarse Doppler ``w0 = arg sum R[i, c+1] R*[i, c]``; the best candidate of ``|H_n^H rho|^2`` with
+    ``rho_i = sum_c R_ic exp(-j w0 t_ic)`` (one complex64 product); ``snr = max(||R||^2 / sigma^2 - I C, 1)``,
+    ``span = clip(5 / sqrt(snr), min(pi, 8 pi / T), pi)``; the dwell ``C (sum_i e_i)^2 / sum_i e_i^2`` of the
+    slot energies ``e_i = max(sum_c |R_ic|^2 - C sigma^2, 0)``; the rows with ``5 dwell / sqrt(snr) > pi / 2``
+    take the joint angle x Doppler search (``n_h`` hypotheses over the batch, :func:`joint_rho`); the fine
+    Doppler (:func:`_doppler_peak`) on ``q_t = sum conj(h_i) rc_it``, Newton steps on the angle.
+    """
+    n_d, n_i, n_c = res.shape
+    t_span = float(n_t)
+    th = np.empty(n_d)
+    w0 = np.empty(n_d)
+    for d in range(n_d):
+        acc = 0j
+        for i in range(n_i):
+            for c in range(n_c - 1):
+                acc += res[d, i, c + 1] * np.conj(res[d, i, c])
+        w0[d] = np.arctan2(acc.imag, acc.real)
+    rc = res * phasors(w0, tgrid, -1.0)
+    rho = np.empty((n_d, n_i), np.complex64)
+    for d in range(n_d):
+        for i in range(n_i):
+            acc = 0j
+            for c in range(n_c):
+                acc += rc[d, i, c]
+            rho[d, i] = acc
+    corr = _power(np.dot(rho, hn_conj))
+    for d in range(n_d):
+        th[d] = _angle_peak(corr[d], candidates, step)[1]
+    span, dwell, wide = _search_widths(res, noise_var, t_span)
+    sub = np.flatnonzero(wide)
+    if sub.size:
+        _joint_search(res, sub, w0, th, span, dwell, hn_conj, candidates, step, tgrid, rc)
+    h = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, np.int64(0))[0]
+    q_re = np.empty(n_t)
+    q_im = np.empty(n_t)
+    buf_re = np.empty(nfft)
+    buf_im = np.empty(nfft)
+    w = np.empty(n_d)
+    for d in range(n_d):
+        q_re[:] = 0.0
+        q_im[:] = 0.0
+        for i in range(n_i):
+            hc = np.conj(h[d, i])
+            for c in range(n_c):
+                p = hc * rc[d, i, c]
+                tt = t[i * n_c + c]
+                q_re[tt] += p.real
+                q_im[tt] += p.imag
+        w[d] = w0[d] + _doppler_peak(q_re, q_im, span[d], nfft, e_re, e_im, buf_re, buf_im, tab_re, tab_im)
+    comp = phasors(w, tgrid, -1.0)
+    if newton_steps:
+        rho_n = np.empty((n_d, n_i), np.complex128)
+        for d in range(n_d):
+            for i in range(n_i):
+                acc = 0j
+                for c in range(n_c):
+                    acc += res[d, i, c] * comp[d, i, c]
+                rho_n[d, i] = acc
+        th = newton_refine(table, u_c, x_c, lo, step, w2, x, th, rho_n, newton_steps)
+    return th, w, np.conj(comp)
+
+
+@njit
+def _amplitudes_pass(s: np.ndarray, a: np.ndarray, valid: np.ndarray, min_amplitude: float) -> np.ndarray:
+    """Per row: every valid atom k has ``|s_k| ||a_k|| >= min_amplitude`` (s (D, L), a (D, Q, L), valid (D, L))."""
+    norms = atom_norms(a)
+    ok = np.ones(s.shape[0], np.bool_)
+    for rr in range(s.shape[0]):
+        for k in range(s.shape[1]):
+            if valid[rr, k] and not np.abs(s[rr, k]) * norms[rr, k] >= min_amplitude:
+                ok[rr] = False
+    return ok
+
+
+@njit
+def _residual(y: np.ndarray, a: np.ndarray, s: np.ndarray, out: np.ndarray) -> float:
+    """``R = y - A s`` written into out (I, C) (y (I C,), a (I C, L), s (L,)); returns ``||R||^2``."""
+    n_c = out.shape[1]
+    acc = 0.0
+    for q in range(y.size):
+        fit = 0j
+        for k in range(s.size):
+            fit += a[q, k] * s[k]
+        v = y[q] - fit
+        out[q // n_c, q % n_c] = v
+        acc += v.real ** 2 + v.imag ** 2
+    return acc
+
+
+@njit
+def _set_column(a: np.ndarray, l: int, h: np.ndarray, phase: np.ndarray) -> None:
+    """Atom column l of every row: ``a[d, (i, c), l] = h[d, i] phase[d, i, c]`` (a (D, I C, L))."""
+    n_d, n_i, n_c = phase.shape
+    for d in range(n_d):
+        for i in range(n_i):
+            for c in range(n_c):
+                a[d, i * n_c + c, l] = h[d, i] * phase[d, i, c]
+
+
+@njit
+def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
+                x: np.ndarray, hn_conj: np.ndarray, candidates: np.ndarray, data: np.ndarray, tgrid: np.ndarray,
+                t: np.ndarray, n_t: int, nfft: int, e_re: np.ndarray, e_im: np.ndarray, tab_re: np.ndarray,
+                tab_im: np.ndarray, fine_re: np.ndarray, fine_im: np.ndarray, fine_w: np.ndarray, max_targets: int,
+                residual_threshold: np.ndarray, noise_var: float, relative_threshold: float, min_amplitude: float,
+                newton_steps: int, cycles: int,
+                detected: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`rhs_env.point_cloud.omp_doppler` in one call: theta, omega, amp, valid (D, L), atoms (D, I C, L), ``||R||^2``.
+
+    Per iteration l on the residuals R of the active rows: the next atom (:func:`_new_atoms`), its column
+    ``a_l = h(theta_l) exp(j omega_l t)``, least squares on the support (:func:`lstsq`), the amplitude test
+    ``|s_k| ||a_k|| >= min_amplitude`` on every atom (waived for the first atom of a detected row), then,
+    from the second atom on, ``cycles`` passes of :func:`joint_refine` (the fine DTFT grid ``fine_w``,
+    ``fine_re + j fine_im`` (J, n_t)) and the test again; a row that fails stops, the others keep the atom
+    and continue while ``||R||^2 >= max(delta_r, rel ||data||^2)``. ``e_re + j e_im`` the twiddles
+    ``exp(-2 pi j m / nfft)`` of the Doppler searches, ``tab_re + j tab_im`` the narrow searches' samples
+    (:func:`_doppler_peak`).
+    """
+    n_d, n_i, n_c = data.shape
+    n_q = n_i * n_c
+    n_l = max_targets
+    theta = np.zeros((n_d, n_l))
+    omega = np.zeros((n_d, n_l))
+    amp = np.zeros((n_d, n_l), np.complex128)
+    valid = np.zeros((n_d, n_l), np.bool_)
+    atoms = np.zeros((n_d, n_q, n_l), np.complex128)
+    flat = data.reshape(n_d, n_q)
+    resid = data.copy()
+    r2 = np.empty(n_d)
+    for d in range(n_d):
+        r2[d] = np.sum(np.abs(flat[d]) ** 2)
+    stop = np.maximum(residual_threshold, relative_threshold * r2)
+    active = np.ones(n_d, np.bool_) if detected else r2 >= stop
+    fine_span = min(np.pi, 8 * np.pi / float(n_t))
+    for l in range(n_l):
+        rows = np.flatnonzero(active)
+        n_r = rows.size
+        if n_r == 0:
+            break
+        th, w, phase = _new_atoms(table, u_c, x_c, lo, step, w2, x, hn_conj, candidates, resid[rows], tgrid, t,
+                                  n_t, nfft, e_re, e_im, tab_re, tab_im, noise_var, newton_steps)
+        th_r = theta[rows]
+        om_r = omega[rows]
+        val_r = valid[rows]
+        a = atoms[rows]
+        h = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, np.int64(0))[0]
+        data_r = flat[rows]
+        for rr in range(n_r):
+            th_r[rr, l], om_r[rr, l], val_r[rr, l] = th[rr], w[rr], True
+        _set_column(a, l, h, phase)
+        s = np.where(val_r, lstsq(a, data_r), 0j)
+        ok = _amplitudes_pass(s, a, val_r, min_amplitude) | (detected and l == 0)
+        if l > 0 and cycles and ok.any():
+            kk = np.flatnonzero(ok)
+            th_k, om_k, s_k, a_k = joint_refine(table, u_c, x_c, lo, step, w2, x, data_r[kk], tgrid, t, n_t, fine_re,
+                                                fine_im, fine_w, nfft, th_r[kk], om_r[kk], val_r[kk],
+                                                np.full(kk.size, fine_span), cycles, newton_steps, a[kk], s[kk])
+            ok_k = _amplitudes_pass(s_k, a_k, val_r[kk], min_amplitude)
+            for m in range(kk.size):
+                rr = kk[m]
+                th_r[rr] = th_k[m]
+                om_r[rr] = om_k[m]
+                s[rr] = s_k[m]
+                a[rr] = a_k[m]
+                ok[rr] = ok_k[m]
+        for rr in range(n_r):
+            d = rows[rr]
+            if not ok[rr]:
+                active[d] = False
+                continue
+            theta[d] = th_r[rr]
+            omega[d] = om_r[rr]
+            valid[d] = val_r[rr]
+            amp[d] = s[rr]
+            atoms[d] = a[rr]
+            r2[d] = _residual(flat[d], a[rr], s[rr], resid[d])
+            active[d] = r2[d] >= stop[d]
+    return theta, omega, amp, valid, atoms, r2

@@ -69,7 +69,7 @@ import numpy as np
 import scipy.fft as sfft
 from scipy import stats
 
-from rhs_common.linalg import batched_lstsq as _lstsq
+from rhs_common.linalg import batched_lstsq
 from rhs_env.array_models import ArrayAntenna, steering
 from rhs_env.windows import make_window
 
@@ -464,6 +464,20 @@ def _grid_refine(dic: AngleDictionary, resid: np.ndarray, center: np.ndarray | N
     return dic.candidates[j] + off * dic.step
 
 
+def _lstsq(atoms: np.ndarray, iota: np.ndarray, kernels: str = "numpy") -> np.ndarray:
+    """Batched least squares: atoms (D, I, L), iota (D, I, ...) -> (D, L, ...).
+
+    ``s = (A^H A + 1e-12 I)^-1 A^H iota`` (:func:`rhs_common.linalg.batched_lstsq`); with
+    ``kernels="numba"`` and one right-hand side (iota (D, I, 1)) a compiled Cholesky solve
+    (:func:`rhs_env.kernels.lstsq`, the same s to round-off).
+    """
+    if kernels == "numba" and iota.ndim == 3 and iota.shape[2] == 1:
+        from rhs_env.kernels import lstsq
+
+        return lstsq(np.ascontiguousarray(atoms, dtype=complex), np.ascontiguousarray(iota[..., 0], dtype=complex))[..., None]
+    return batched_lstsq(atoms, iota)
+
+
 @dataclass
 class OMPResult:
     theta: np.ndarray  # (D, L) rad
@@ -564,7 +578,26 @@ def _dtft_kernel(n_t: int, nfft: int, half: int) -> tuple[np.ndarray, np.ndarray
     return w, np.exp(-1j * np.outer(np.arange(n_t), w)).astype(np.complex64)
 
 
-def _doppler_grid_refine(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: np.ndarray) -> np.ndarray:
+@functools.lru_cache(maxsize=16)
+def _dtft_kernel_split(n_t: int, nfft: int, half: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_dtft_kernel` as the compiled search reads it: w, and the real and imaginary parts (2 half + 1, n_t) float64."""
+    w, kern = _dtft_kernel(n_t, nfft, half)
+    kt = kern.T.astype(complex)
+    return w, np.ascontiguousarray(kt.real), np.ascontiguousarray(kt.imag)
+
+
+def _narrow_dtft(tgrid: np.ndarray, span: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int] | None:
+    """The DTFT grid of :func:`_doppler_grid_refine`'s narrow search for ``span`` (w, kernel re / im, nfft), None if it takes the FFT."""
+    _, n_t, _ = _time_index(tgrid)
+    nfft = 1 << math.ceil(math.log2(max(4 * n_t, 64)))
+    half = 1 << math.ceil(math.log2(math.ceil(float(np.max(span)) * nfft / (2 * np.pi)) + 1))
+    if 2 * half + 1 >= nfft // 8:
+        return None
+    return (*_dtft_kernel_split(n_t, nfft, half), nfft)
+
+
+def _doppler_grid_refine(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: np.ndarray,
+                         kernels: str = "numpy") -> np.ndarray:
     """Residual chirp-phase rate d_omega (D,) maximising ``|sum_ic conj(h_i) r_ic exp(-j d_omega t_ic)|``.
 
     h (D, I) atoms, r (D, I, C) Doppler-compensated data, tgrid (I, C) integer
@@ -574,18 +607,26 @@ def _doppler_grid_refine(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: 
     through the log-peak; the maximum is taken within ``|d_omega| <= span``. A
     narrow search (the refinements: a few dozen grid points) evaluates the DTFT
     directly on those points (one complex64 matrix product, the same samples as
-    the FFT); a wide one takes the zero-padded FFT.
+    the FFT); a wide one takes the zero-padded FFT. With ``kernels="numba"`` the narrow search is
+    compiled (:func:`rhs_env.kernels.doppler_dtft_refine`: the same samples, summed in float64).
     """
     d = h.shape[0]
     t, n_t, consecutive = _time_index(tgrid)
+    nfft = 1 << math.ceil(math.log2(max(4 * n_t, 64)))
+    half = 1 << math.ceil(math.log2(math.ceil(float(np.max(span)) * nfft / (2 * np.pi)) + 1))  # few kernels
+    narrow = _narrow_dtft(tgrid, span) if kernels == "numba" else None
+    if narrow is not None:
+        from rhs_env.kernels import doppler_dtft_refine
+
+        w, kern_re, kern_im, nfft = narrow
+        return doppler_dtft_refine(np.ascontiguousarray(h, dtype=complex), np.ascontiguousarray(r, dtype=complex),
+                                   t, n_t, kern_re, kern_im, w, np.ascontiguousarray(span, dtype=float), nfft)
     prod = (h.conj()[:, :, None] * r).reshape(d, -1)
     if consecutive:
         q = prod  # every chirp has its own time (Doppler phase runs across slots)
     else:
         q = np.zeros((d, n_t), complex)
         np.add.at(q.T, t, prod.T)  # q[:, t] += prod, repeated t accumulated
-    nfft = 1 << math.ceil(math.log2(max(4 * n_t, 64)))
-    half = 1 << math.ceil(math.log2(math.ceil(float(np.max(span)) * nfft / (2 * np.pi)) + 1))  # few kernels
     if 2 * half + 1 < nfft // 8:
         w, kern = _dtft_kernel(n_t, nfft, half)
         val = np.abs(q.astype(np.complex64) @ kern).astype(float) ** 2  # (D, 2 half + 1)
@@ -641,7 +682,7 @@ def _joint_grid_search(dic: AngleDictionary, r: np.ndarray, w0: np.ndarray, span
 
 def _phasors(dic: AngleDictionary, w: np.ndarray, tgrid: np.ndarray, sign: float = -1.0) -> np.ndarray:
     """``exp(sign j w t)`` (P, I, C) for w (P,) and tgrid (I, C); compiled with the dictionary's ``kernels="numba"``
-    (:func:`rhs_env.kernels.phasors`, the same values)."""
+    (:func:`rhs_env.kernels.phasors`, the same values to ~1e-16 relative)."""
     if dic.kernels == "numba":
         from rhs_env.kernels import phasors
 
@@ -687,6 +728,9 @@ def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, thet
     amplitudes with atoms ``a_k = h(theta_k) exp(j d_omega_k t)``. ``atoms`` /
     ``amp``: the current atoms (D, I C, L) and amplitudes, when the caller has them.
     Returns theta, d_omega, amplitudes (D, L) and atoms (D, I C, L).
+
+    With the dictionary's ``kernels="numba"`` (Taylor atoms, a narrow Doppler search) the passes run in
+    one compiled call (:func:`rhs_env.kernels.joint_refine`, the same steps).
     """
     d, i, c = data.shape
     flat = data.reshape(d, i * c)
@@ -696,7 +740,21 @@ def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, thet
         atoms = np.zeros((d, i * c, theta.shape[1]), complex)
         atoms[dd, :, kk] = _doppler_atoms(dic, theta[dd, kk], domega[dd, kk], tgrid)
     a = atoms.copy()
-    s = _lstsq(a, flat[..., None])[..., 0] if amp is None else amp.copy()
+    s = _lstsq(a, flat[..., None], dic.kernels)[..., 0] if amp is None else amp.copy()
+    taylor = getattr(dic, "_taylor", None)
+    narrow = _narrow_dtft(tgrid, span) if taylor is not None and dic.kernels == "numba" and dd.size else None
+    if narrow is not None and taylor is not None:
+        from rhs_env import kernels
+
+        table, u_c, x_c = taylor
+        t, n_t, _ = _time_index(tgrid)
+        w, kern_re, kern_im, nfft = narrow
+        return kernels.joint_refine(table, u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2, dic._x,
+                                    np.ascontiguousarray(flat, dtype=complex), np.ascontiguousarray(tgrid, dtype=float),
+                                    t, n_t, kern_re, kern_im, w, nfft, np.ascontiguousarray(theta, dtype=float),
+                                    np.ascontiguousarray(domega, dtype=float), np.ascontiguousarray(valid),
+                                    np.ascontiguousarray(span, dtype=float), passes, newton_steps, a,
+                                    np.ascontiguousarray(s, dtype=complex))
     base = None  # exp(-j d_omega t) of the current d_omega, carried from the previous pass
     for _ in range(passes):
         fit = np.einsum("dkl,dl->dk", a, s)
@@ -704,7 +762,7 @@ def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, thet
         if base is None:
             base = _phasors(dic, domega[dd, kk], tgrid)
         h = a[dd, :, kk].reshape(-1, i, c)[:, :, 0] * base[:, :, 0]  # h(theta) of the current atom, (P, I)
-        dw = domega[dd, kk] + _doppler_grid_refine(h, part * base, tgrid, span[dd])
+        dw = domega[dd, kk] + _doppler_grid_refine(h, part * base, tgrid, span[dd], dic.kernels)
         th = theta[dd, kk]
         base = _phasors(dic, dw, tgrid)
         if newton_steps:
@@ -712,7 +770,7 @@ def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, thet
             th = _newton_refine(dic, th, rho, newton_steps)
         theta[dd, kk], domega[dd, kk] = th, dw
         a[dd, :, kk] = _doppler_atoms(dic, th, dw, tgrid, np.conj(base))
-        s = _lstsq(a, flat[..., None])[..., 0]
+        s = _lstsq(a, flat[..., None], dic.kernels)[..., 0]
     return theta, domega, s * valid, a
 
 
@@ -758,7 +816,7 @@ def _new_atom(dic: AngleDictionary, res: np.ndarray, tgrid: np.ndarray, noise_va
         w0[sub], th[sub] = w_s, th_s
         rc[sub] = res[sub] * _phasors(dic, w_s, tgrid)
         span[sub] = np.minimum(span[sub], np.pi / dwell[sub])
-    w = w0 + _doppler_grid_refine(dic.atoms(th)[0].T, rc, tgrid, span)
+    w = w0 + _doppler_grid_refine(dic.atoms(th)[0].T, rc, tgrid, span, dic.kernels)
     phase = None
     if newton_steps:
         comp = _phasors(dic, w, tgrid)
@@ -766,6 +824,49 @@ def _new_atom(dic: AngleDictionary, res: np.ndarray, tgrid: np.ndarray, noise_va
         th = _newton_refine(dic, th, rho, newton_steps)
         phase = np.conj(comp, out=comp)
     return th, w, phase
+
+
+@functools.lru_cache(maxsize=8)
+def _twiddles(nfft: int) -> tuple[np.ndarray, np.ndarray]:
+    """``exp(-2 pi j m / nfft)``, m = 0..nfft-1, as real and imaginary parts (the compiled Doppler searches' table)."""
+    e = np.exp(-2j * np.pi * np.arange(nfft) / nfft)
+    return np.ascontiguousarray(e.real), np.ascontiguousarray(e.imag)
+
+
+def _compiled_omp(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_targets: int,
+                  residual_threshold: np.ndarray, noise_var: float, relative_threshold: float, min_amplitude: float,
+                  newton_steps: int, cycles: int, detected: bool) -> DopplerOMPResult | None:
+    """:func:`omp_doppler` as one compiled call (:func:`rhs_env.kernels.omp_doppler`), or None where it does not apply.
+
+    It applies with the dictionary's ``kernels="numba"``, Taylor-table atoms, separable chirp times
+    (``t_ic = t_i + t_c``) and a narrow fine-Doppler grid; the other configurations keep the numpy steps.
+    """
+    taylor = getattr(dic, "_taylor", None)
+    if taylor is None or dic.kernels != "numba" or data.shape[0] == 0:
+        return None
+    t_slot, t_chirp = tgrid[:, :1] - tgrid[0, 0], tgrid[0] - tgrid[0, 0]
+    if not np.array_equal(tgrid, tgrid[0, 0] + t_slot + t_chirp[None, :]):
+        return None
+    fine = _narrow_dtft(tgrid, np.array([min(np.pi, 8 * np.pi / float(tgrid.max() + 1))]))
+    if fine is None:
+        return None
+    from rhs_env import kernels
+
+    table, u_c, x_c = taylor
+    t, n_t, _ = _time_index(tgrid)
+    fine_w, fine_re, fine_im, nfft = fine
+    e_re, e_im = _twiddles(nfft)
+    _, tab_re, tab_im = _dtft_kernel_split(n_t, nfft, nfft // 32)  # every narrow search: half <= nfft / 32
+    d = data.shape[0]
+    out = kernels.omp_doppler(table, u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2, dic._x, dic.Hn_conj,
+                              np.ascontiguousarray(dic.candidates, dtype=float), np.ascontiguousarray(data),
+                              np.ascontiguousarray(tgrid, dtype=float), t, n_t, nfft, e_re, e_im, tab_re, tab_im,
+                              fine_re, fine_im,
+                              fine_w, int(max_targets),
+                              np.ascontiguousarray(np.broadcast_to(np.asarray(residual_threshold, float), (d,))),
+                              float(noise_var), float(relative_threshold), float(min_amplitude), int(newton_steps),
+                              int(cycles), bool(detected))
+    return DopplerOMPResult(*out)
 
 
 def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_targets: int,
@@ -796,6 +897,10 @@ def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_t
     slot-summed statistics, weaker than that detector); the later atoms keep them.
     """
     data = np.asarray(data, complex)
+    compiled = _compiled_omp(dic, data, tgrid, max_targets, residual_threshold, noise_var, relative_threshold,
+                             min_amplitude, newton_steps, cycles, detected)
+    if compiled is not None:
+        return compiled
     d, i, c = data.shape
     n_l = max_targets
     theta, omega = np.zeros((d, n_l)), np.zeros((d, n_l))
@@ -815,7 +920,7 @@ def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_t
         th_r, om_r, val_r, a = theta[rows], omega[rows], valid[rows], atoms[rows]
         th_r[:, l], om_r[:, l], val_r[:, l] = th, w, True
         a[:, :, l] = _doppler_atoms(dic, th, w, tgrid, phase)
-        s = _lstsq(a, data[rows].reshape(rows.size, -1, 1))[..., 0] * val_r
+        s = _lstsq(a, data[rows].reshape(rows.size, -1, 1), dic.kernels)[..., 0] * val_r
         ok = np.all((np.abs(s) * atom_norms(a, dic.kernels) >= min_amplitude) | ~val_r, axis=1) | (detected and l == 0)
         if l > 0 and cycles and np.any(ok):  # joint refinement of the rows that keep the new atom
             k = np.flatnonzero(ok)

@@ -364,7 +364,8 @@ class RadarSystem:
           IQ path's, ``sigma_n^2 sum_n w[n]^2 exp(-j 2 pi (k - l) n / (Z N))``.
 
         With ``kernels="numba"`` the tone spectra and the operands of the product are built compiled
-        (:func:`rhs_env.kernels.tone_spectra`, :func:`rhs_env.kernels.tone_operands`); the noise stays numpy.
+        (:func:`rhs_env.kernels.tone_spectra`, :func:`rhs_env.kernels.tone_operands`) and multiplied per radar
+        (its own tones only, no padding to the largest count); the noise stays numpy.
         """
         cfg = self.config
         i_slots, c, n, z, kb = cfg.scan.slots, cfg.waveform.chirps_per_slot, cfg.waveform.samples, cfg.waveform.zero_pad, self._bin_hi
@@ -377,10 +378,14 @@ class RadarSystem:
             rr, g_mat, omega, f_tot = tones
             mu, coef = window_exponentials(cfg.waveform.window, n)
             wk = kernels.tone_spectra(mu, coef, n, z, kb, np.ascontiguousarray(f_tot / cfg.waveform.sample_rate_hz))
-            gp, ep = kernels.tone_operands(rr, g_mat, omega, wk, c, 4)
-            sig = self._buffer("sig", (4, i_slots, c * kb), np.complex64)
-            np.matmul(gp, ep, out=sig)
-            spec += sig.reshape(spec.shape)
+            gp, ep = kernels.tone_operands(g_mat, omega, wk, c)
+            sig = self._buffer("sig", (i_slots, c * kb), np.complex64)
+            bounds = np.searchsorted(rr, np.arange(5))  # rr sorted: radar r's tones are lo_r:hi_r
+            for r in range(4):
+                lo, hi = int(bounds[r]), int(bounds[r + 1])
+                if hi > lo:  # that radar's own tones only: no product with padding
+                    np.matmul(gp[:, lo:hi], ep[lo:hi], out=sig)
+                    spec[r] += sig.reshape(spec.shape[1:])
         elif tones is not None:
             rr, g_mat, omega, f_tot = tones
             wk = tone_spectra(cfg.waveform.window, n, z, kb, f_tot / cfg.waveform.sample_rate_hz)  # (P, K_b)
@@ -554,12 +559,18 @@ class RadarSystem:
 
         LS amplitudes of the fixed atoms at the neighbouring bins, parabola on
         log|s|^2 (a target merged into the peak of another lies within the window
-        main lobe, +-2 bins).
+        main lobe, +-2 bins). Compiled with ``kernels="numba"`` (:func:`rhs_env.kernels.bin_amplitudes`).
         """
         half = 2 * self.config.waveform.zero_pad + 1
         kk = np.clip(kd[:, None] + np.arange(-half, half + 1)[None, :], 0, spec.shape[-1] - 1)
-        nb = spec[rd[:, None], :, :, kk].reshape(rd.size, 2 * half + 1, -1)  # (D, W, I C)
-        s_nb = batched_lstsq(atoms, np.swapaxes(nb, 1, 2).astype(complex))  # (D, L, W)
+        if self.config.kernels == "numba":  # the same least squares, compiled, reading the bins in place
+            from rhs_env.kernels import bin_amplitudes
+
+            s_nb = bin_amplitudes(np.ascontiguousarray(atoms, dtype=complex), spec, rd.astype(np.int64),
+                                  kk.astype(np.int64))
+        else:
+            nb = spec[rd[:, None], :, :, kk].reshape(rd.size, 2 * half + 1, -1)  # (D, W, I C)
+            s_nb = batched_lstsq(atoms, np.swapaxes(nb, 1, 2).astype(complex))  # (D, L, W)
         pw = np.log(np.abs(s_nb) ** 2 + 1e-300)
         j = 1 + np.argmax(pw[:, :, 1:-1], axis=2)  # interior peak
         lm = np.take_along_axis(pw, (j - 1)[..., None], 2)[..., 0]

@@ -247,3 +247,82 @@ def test_read_only_install_caches_in_the_user_directory(tmp_path):
     res = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=ROOT, capture_output=True, text=True, env=env,
                          timeout=300)
     assert res.returncode == 0 and "ok" in res.stdout, res.stderr[-3000:]
+
+
+@pytest.mark.parametrize("span", [0.05, 0.4, np.pi], ids=["narrow", "wider", "fft"])
+def test_doppler_peak_matches_the_numpy_search(span):
+    """The compiled Doppler search (direct samples or its radix-2 FFT) finds the numpy search's d_omega per row."""
+    from rhs_env import kernels
+    from rhs_env.point_cloud import _doppler_grid_refine, _dtft_kernel_split, _time_index, _twiddles
+
+    rng = np.random.default_rng(3)
+    tgrid = np.arange(90 * 4, dtype=float).reshape(90, 4)
+    d = 12
+    w_true = rng.uniform(-0.8, 0.8, d) * span
+    h = rng.normal(size=(d, 90)) + 1j * rng.normal(size=(d, 90))
+    r = h[:, :, None] * np.exp(1j * w_true[:, None, None] * tgrid) + 0.3 * (rng.normal(size=(d, 90, 4)) + 1j * rng.normal(size=(d, 90, 4)))
+    want = _doppler_grid_refine(h, r, tgrid, np.full(d, span))
+    t, n_t, _ = _time_index(tgrid)
+    nfft = 2048
+    e_re, e_im = _twiddles(nfft)
+    tables = [_dtft_kernel_split(n_t, nfft, h)[1:] for h in (1, 64)]  # too small (twiddles used), every narrow half
+    for row in range(d):
+        q = np.zeros(n_t, complex)
+        np.add.at(q, t, (h[row].conj()[:, None] * r[row]).reshape(-1))
+        for tab in tables:
+            got = kernels._doppler_peak(q.real.copy(), q.imag.copy(), span, nfft, e_re, e_im, np.empty(nfft),
+                                        np.empty(nfft), *tab)
+            assert abs(got - want[row]) < 1e-6
+        assert abs(got - w_true[row]) < 5e-3  # and it is the tone's frequency
+
+
+def test_fft_pow2_is_the_dft():
+    from rhs_env import kernels
+    from rhs_env.point_cloud import _twiddles
+
+    x = np.random.default_rng(0).normal(size=64) + 1j * np.random.default_rng(1).normal(size=64)
+    re, im = x.real.copy(), x.imag.copy()
+    kernels._fft_pow2(re, im, *_twiddles(64))
+    np.testing.assert_allclose(re + 1j * im, np.fft.fft(x), rtol=0, atol=1e-12)
+
+
+def test_whole_omp_runs_compiled_on_the_default_radar(monkeypatch):
+    """The default radar takes the one-call OMP (not the step-by-step path) and it gives the numpy result."""
+    import rhs_env.point_cloud as pc
+
+    radars = _pair()
+    used = []
+    orig = pc._compiled_omp
+    monkeypatch.setattr(pc, "_compiled_omp", lambda *a, **k: used.append(1) or orig(*a, **k))
+    sc = Scatterers.static_points([[30.0, 10.0], [-45.0, -11.0], [60.0, -9.0], [61.0, -9.5]], rcs=8.0)
+    spec = radars["numpy"].synthesize_spectrum(sc, Occluders.empty())
+    a, b = (r.process_spectrum(spec)[0] for r in radars.values())
+    assert len(used) and pc._compiled_omp(radars["numba"].dictionaries[0], np.ones((1, 90, 4), complex),
+                                          radars["numba"]._chirp_index, 2, np.ones(1), 1.0, 0.0, 0.0, 2, 2, True) is not None
+    _compare_clouds(a, b)
+
+
+def test_vector_env_workers_load_the_kernels_the_parent_compiled(tmp_path):
+    """On an empty cache, make_vec_env compiles in the parent once; its SubprocVecEnv workers compile nothing.
+
+    The workers inherit the parent's stderr: the compile notice appears once (the parent's warm-up) and a
+    second vector env on the same cache neither warms up again nor compiles.
+    """
+    code = """
+        import sys
+        import numpy as np
+        from agents.run_setup import make_vec_env, warm_kernels
+        vec = make_vec_env("rhs_env:rhs-highway-slam-v0", n_envs=2, seed=0)
+        print("parent warm-up done", file=sys.stderr, flush=True)
+        vec.reset()
+        for _ in range(25):
+            vec.step(np.ones(2, int))
+        vec.close()
+        print("again", warm_kernels("rhs-highway-slam-v0", {}))
+    """
+    first = _run(code, NUMBA_CACHE_DIR=str(tmp_path))
+    assert first.returncode == 0, first.stderr[-3000:]
+    before, _, after = first.stderr.partition("parent warm-up done")
+    assert before.count(NOTICE) == 1 and NOTICE not in after  # compiled in the parent only
+    assert first.stdout.strip().endswith("again False")
+    assert list(tmp_path.rglob("rhs-slam-warm-*"))
