@@ -589,9 +589,15 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, dict]:
 
 
 def fingerprint() -> list[float]:
-    """The paper and dense parts of the quick config (seed 100, 10 particles): seconds."""
+    """The paper part and the dense part's RHS values of the quick config (seed 100, 10 particles): seconds.
+
+    The dense part's phased-array run is left out: with 10 particles it loses the car, and a
+    lost track turns last-digit differences between machines into other numbers (the
+    tolerance of ``scripts/fingerprint_tolerance.py`` cannot bound a chaotic run).
+    """
     args, slam = parse_args(["--quick", "--no-progress"])
-    return numbers([run_paper(args, slam)["summary"], run_dense(args, slam)["summary"]])
+    dense = {k: v for k, v in run_dense(args, slam)["summary"].items() if k.startswith("rhs_")}
+    return numbers([run_paper(args, slam)["summary"], dense])
 
 
 def main(argv: list[str] | None = None) -> int:
