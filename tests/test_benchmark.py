@@ -2,14 +2,9 @@
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
-
-import benchmark
+from rhs_studies import benchmark
 
 
 def test_floor_times_the_noise_and_fft_of_every_sample_of_a_scan():

@@ -4,17 +4,13 @@ from __future__ import annotations
 
 import json
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from rhs_studies import slam_accuracy
 from slam.pipeline import PipelineConfig, SlamPipeline
 from slam.registration import OdometryRegistration
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
-import slam_accuracy
 
 
 def test_quick_run_records_provenance_and_targets(tmp_path):

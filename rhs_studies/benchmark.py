@@ -1,0 +1,566 @@
+"""Speed of every stage of rhs-slam, in one run, as JSON (never in timed tests).
+
+Speeds are reported as ratios measured side by side in the same run (a busy
+machine slows both sides alike); the load average is recorded at the start of
+every section and printed beside it. Sections (``--sections``, default all):
+
+* ``envs``: steps per second of ``rhs-highway-v0``, ``rhs-highway-radar-v0`` and
+  ``rhs-highway-slam-v0`` (and the radar and SLAM envs on the numpy reference kernels),
+  stepped round-robin in blocks (``--block`` steps each in turn) on the same seeds and
+  actions, with the radar's time per stage (synthesis, range/CFAR, OMP) and the SLAM's
+  time per stage (registration, association, RBPF) at 100 particles, each stage before
+  (numpy kernels) and after (compiled); goals: radar >= 0.75x and SLAM >= 0.67x the base
+  env's steps/s;
+* ``start``: seconds to the first step of ``rhs-highway-slam-v0`` in a new process (imports,
+  make, reset, one step) with an empty kernel cache (cold, goal <= 30 s) and with the cache (warm,
+  goal <= 5 s);
+* ``floor``: what the IQ path costs before any processing, per 4-radar scan: the
+  noise of its 4 I C N samples (a scan of an empty scene) and their range FFT; the range
+  path's (``fidelity="range"``) noise spectrum of the same empty scan; set
+  beside the radar budget that the ``envs`` goals leave (radar <= base step x
+  (1 / 0.75 - 1) + the base step's Kinematics observation, which the radar and SLAM envs skip;
+  radar + SLAM <= base step x (1 / 0.67 - 1) + that observation);
+* ``load``: steady under load, the radar env's steps/s with one other busy
+  process (a CPU spin loop) against quiet, with single-threaded BLAS in the step
+  (the default) and with the process's own BLAS threads (``blas_threads=None``);
+  goal >= 0.85x;
+* ``vec``: the radar env in ``SubprocVecEnv`` with 2 workers against 1 (total
+  env steps/s); goal >= 1.8x;
+* ``radar``: one 4-radar scan of a typical scene (scripts/benchmark_radar.py),
+  both synthesis fidelities;
+* ``patterns``: time to build the dtheta = 1 deg default library with each
+  method (scripts/benchmark_patterns.py; SDR on a subset, extrapolated);
+* ``training``: PPO training steps/s with 2 subprocess envs on
+  ``rhs-highway-slam-v0`` against ``rhs-highway-v0``; goal >= 0.7x.
+
+    python scripts/benchmark.py --out results/benchmark.json      # also writes results/benchmark.md
+    python scripts/benchmark.py --sections envs load vec --steps 30   # keeps the other sections of --out
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from rhs_studies.provenance import command_line, write_json
+
+ROOT = Path(__file__).resolve().parent.parent
+
+SECTIONS = ("envs", "start", "floor", "load", "vec", "radar", "patterns", "training")
+GOALS = {"radar_env_over_base": 0.75, "slam_env_over_base": 0.67, "loaded_over_quiet": 0.85,
+         "two_workers_over_one": 1.8, "ppo_slam_over_base": 0.7}
+START_GOALS_S = {"cold_s": 30.0, "warm_s": 5.0}  # first step of a new user: empty kernel cache / warm cache
+LIBRARY_GOAL_S = 30.0  # the fast M = 60, 1-degree library, 2 workers, every grid pointing within half a grid
+
+
+def _mean_times(dicts: list[dict]) -> dict:
+    keys = sorted({k for d in dicts for k in d})
+    return {k: float(np.mean([d.get(k, 0.0) for d in dicts])) * 1e3 for k in keys}
+
+
+#: the envs of the ``envs`` section: (label, id, kwargs beside the radar grid); the last two are the
+#: numpy reference kernels of the same envs (the per-stage "before" of the compiled kernels)
+ENV_RUNS = (
+    ("rhs-highway-v0", "rhs-highway-v0", None),
+    ("rhs-highway-radar-v0", "rhs-highway-radar-v0", {}),
+    ("rhs-highway-slam-v0", "rhs-highway-slam-v0", {}),
+    ("rhs-highway-radar-v0 (numpy kernels)", "rhs-highway-radar-v0", {"kernels": "numpy"}),
+    ("rhs-highway-slam-v0 (numpy kernels)", "rhs-highway-slam-v0", {"kernels": "numpy"}),
+)
+
+
+def _kinematics_observation_ms(env, repeats: int = 20) -> float:
+    """Median ms of the base env's own observation (highway-env's Kinematics table, pandas).
+
+    The base step pays it; the radar and SLAM envs replace it by a null observation
+    (:data:`rhs_env.registration.NULL_OBSERVATION`), so their radar stages have that much more room.
+    """
+    obs_type = env.unwrapped.observation_type
+    times = []
+    for _ in range(repeats + 1):
+        t0 = time.perf_counter()
+        obs_type.observe()
+        times.append(time.perf_counter() - t0)
+    return 1e3 * float(np.median(times[1:]))
+
+
+def bench_envs(steps: int, seed: int, grid_deg: float, block: int = 5, numpy_kernels: bool = True) -> dict:
+    """Steps/s of the three highway ids (and the radar / SLAM envs on the numpy kernels) on the same actions.
+
+    The envs step round-robin, ``block`` steps each in turn (a load drift slows every env alike, as
+    the ``load`` section does); the load average is recorded at the start and the end. Also the
+    base env's Kinematics observation time (:func:`_kinematics_observation_ms`) and, with
+    ``numpy_kernels``, each radar / SLAM stage before (``kernels="numpy"``) and after (compiled).
+    """
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401  (registers the ids)
+
+    load_start = [round(x, 2) for x in os.getloadavg()]
+    runs = [r for r in ENV_RUNS if numpy_kernels or "numpy" not in r[0]]
+    envs, actions = {}, np.random.default_rng(seed).choice([1, 1, 1, 3, 4], size=max(steps, 2 * block))
+    for label, env_id, kernels in runs:
+        kwargs = {} if kernels is None else {"radar": {"scan": {"grid_deg": grid_deg}, **kernels},
+                                             "stage_times_in_info": True}
+        if kernels and env_id.startswith("rhs-highway-slam"):
+            kwargs["slam"] = dict(kernels)
+        env = gym.make(env_id, **kwargs)
+        env.reset(seed=seed)
+        # warm-up, untimed: the first steps build caches (steering rows, FFT plans) and load or compile the
+        # kernels (some run only once the SLAM has matched landmarks)
+        for a in actions[: 2 * block]:
+            _, _, term, trunc, _ = env.step(int(a))
+            if term or trunc:
+                env.reset(seed=seed)
+        envs[label] = {"env": env, "dt": 0.0, "n": 0, "radar": [], "slam": []}
+    actions = actions[:steps]
+    for lo in range(0, steps, block):
+        for rec in envs.values():
+            env = rec["env"]
+            t0 = time.perf_counter()
+            for a in actions[lo: lo + block]:
+                _, _, term, trunc, info = env.step(int(a))
+                rec["n"] += 1
+                if "slam_stage_times" in info:
+                    rec["slam"].append(info["slam_stage_times"])
+                if "radar_stage_times" in info:
+                    rec["radar"].append(info["radar_stage_times"])
+                if term or trunc:
+                    env.reset(seed=seed + rec["n"])
+            rec["dt"] += time.perf_counter() - t0
+    out: dict = {"block_steps": block, "load_average_start": load_start}
+    out["kinematics_observation_ms"] = _kinematics_observation_ms(envs["rhs-highway-v0"]["env"])
+    for label, rec in envs.items():
+        rec["env"].close()
+        n, dt = rec["n"], rec["dt"]
+        out[label] = {"steps": n, "steps_per_s": n / dt, "ms_per_step": 1e3 * dt / n,
+                      "radar_stage_ms": _mean_times(rec["radar"]) if rec["radar"] else None,
+                      "slam_stage_ms": _mean_times(rec["slam"]) if rec["slam"] else None}
+    out["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
+    base = out["rhs-highway-v0"]["ms_per_step"]
+    out["radar_added_ms"] = out["rhs-highway-radar-v0"]["ms_per_step"] - base
+    out["radar_slam_added_ms"] = out["rhs-highway-slam-v0"]["ms_per_step"] - base
+    out["radar_added_over_base"] = out["radar_added_ms"] / base
+    out["radar_slam_added_over_base"] = out["radar_slam_added_ms"] / base
+    out["radar_env_over_base"] = out["rhs-highway-radar-v0"]["steps_per_s"] / out["rhs-highway-v0"]["steps_per_s"]
+    out["slam_env_over_base"] = out["rhs-highway-slam-v0"]["steps_per_s"] / out["rhs-highway-v0"]["steps_per_s"]
+    if numpy_kernels:
+        for kind in ("radar", "slam"):
+            ref = out[f"rhs-highway-{kind}-v0 (numpy kernels)"]
+            out[f"{kind}_env_over_base_numpy_kernels"] = ref["steps_per_s"] / out["rhs-highway-v0"]["steps_per_s"]
+        out["stages_before_after"] = stages_before_after(out)
+    return out
+
+
+def stages_before_after(envs: dict) -> dict:
+    """``{stage: {"numpy": ms, "compiled": ms}}`` of the SLAM env's radar and SLAM stages (``radar.`` / ``slam.`` prefixed)."""
+    table = {}
+    for kind in ("radar", "slam"):
+        before = envs["rhs-highway-slam-v0 (numpy kernels)"].get(f"{kind}_stage_ms") or {}
+        after = envs["rhs-highway-slam-v0"].get(f"{kind}_stage_ms") or {}
+        for stage in sorted(set(before) | set(after)):
+            table[f"{kind}.{stage}"] = {"numpy": before.get(stage, float("nan")), "compiled": after.get(stage, float("nan"))}
+    return table
+
+
+#: the cold / warm start of a new user: imports, gym.make, reset and one step of the SLAM env
+START_CODE = """
+import time
+t0 = time.perf_counter()
+import gymnasium as gym
+import rhs_env  # noqa: F401
+env = gym.make("rhs-highway-slam-v0")
+env.reset(seed=0)
+env.step(1)
+print(time.perf_counter() - t0)
+"""
+
+
+def bench_start(repeats: int = 1) -> dict:
+    """Seconds to the first step of ``rhs-highway-slam-v0`` in a fresh process, cold (an empty kernel cache) and warm.
+
+    Each run is a subprocess with ``NUMBA_CACHE_DIR`` set to a new temporary directory (cold: every
+    kernel compiles), then the same directory again (warm: loaded from the cache). ``*_s`` is the
+    time inside the process (imports + make + reset + step), ``*_process_s`` the whole process.
+    """
+    import tempfile
+
+    out: dict = {"load_average_start": [round(x, 2) for x in os.getloadavg()]}
+    cold, warm, cold_p, warm_p = [], [], [], []
+    for _ in range(repeats):
+        with tempfile.TemporaryDirectory() as cache:
+            env = {**os.environ, "NUMBA_CACHE_DIR": cache, "OMP_NUM_THREADS": "1"}
+            for inside, whole in ((cold, cold_p), (warm, warm_p)):
+                t0 = time.perf_counter()
+                res = subprocess.run([sys.executable, "-c", START_CODE], cwd=ROOT, env=env, capture_output=True,
+                                     text=True, check=True)
+                whole.append(time.perf_counter() - t0)
+                inside.append(float(res.stdout.strip().splitlines()[-1]))
+    out.update(cold_s=float(np.median(cold)), warm_s=float(np.median(warm)), cold_process_s=float(np.median(cold_p)),
+               warm_process_s=float(np.median(warm_p)), repeats=repeats)
+    out["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
+    return out
+
+
+def _steps_per_s(env, steps: int, seed: int) -> float:
+    """Env steps per second over ``steps`` steps of a fixed action sequence (resets on episode end)."""
+    actions = np.random.default_rng(seed).choice([1, 1, 1, 3, 4], size=steps)
+    env.reset(seed=seed)
+    t0 = time.perf_counter()
+    for n, a in enumerate(actions):
+        _, _, term, trunc, _ = env.step(int(a))
+        if term or trunc:
+            env.reset(seed=seed + n + 1)
+    return steps / (time.perf_counter() - t0)
+
+
+def bench_floor(grid_deg: float, seed: int, repeats: int = 30) -> dict:
+    """Median ms per 4-radar scan of the IQ path's data-size floor: noise synthesis and range FFT.
+
+    ``synthesis_noise_ms``: :meth:`RadarSystem.synthesize` of an empty scene (every one of the
+    4 I C N samples gets CN(0, sigma_n^2) noise and nothing else); ``range_fft_ms``: the
+    windowed, zero-padded range FFT of those samples. Every IQ scan (the default fidelity) pays
+    both before detection. ``range_noise_ms``: the same empty scene on the range path
+    (``fidelity="range"``, :meth:`RadarSystem.synthesize_spectrum`: the searched bins' noise, drawn
+    at half rate), that path's floor.
+    """
+    from rhs_env.array_models import ScanConfig
+    from rhs_env.radar import RadarConfig, RadarSystem
+    from rhs_env.scatterers import Scatterers
+
+    cfg = RadarConfig(scan=ScanConfig(grid_deg=grid_deg), fidelity="iq")
+    radar = RadarSystem(cfg, np.random.default_rng(seed))
+    direct = RadarSystem(replace(cfg, fidelity="range"), np.random.default_rng(seed))
+    empty = Scatterers(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0, int), np.zeros(0, bool))
+    noise, fft, spectrum = [], [], []
+    for _ in range(repeats + 1):  # the two paths in turn: load slows both alike
+        t0 = time.perf_counter()
+        y = radar.synthesize(empty)
+        t1 = time.perf_counter()
+        radar.range_spectrum(y)
+        t2 = time.perf_counter()
+        direct.synthesize_spectrum(empty)
+        noise.append(t1 - t0)
+        fft.append(t2 - t1)
+        spectrum.append(time.perf_counter() - t2)
+    wf = cfg.waveform
+    return {"samples_per_scan": 4 * cfg.scan.slots * wf.chirps_per_slot * wf.samples, "repeats": repeats,
+            "synthesis_noise_ms": 1e3 * float(np.median(noise[1:])), "range_fft_ms": 1e3 * float(np.median(fft[1:])),
+            "floor_ms": 1e3 * float(np.median(noise[1:]) + np.median(fft[1:])),
+            "range_noise_ms": 1e3 * float(np.median(spectrum[1:]))}
+
+
+def radar_budget(result: dict) -> dict | None:
+    """The radar's time per scan that the envs goals allow, beside the floor (None without both sections).
+
+    Radar env >= g_r x the base env's steps/s means ``base - obs + radar <= base / g_r``, i.e.
+    radar <= base ms x (1 / g_r - 1) + obs, with obs the Kinematics observation that the base step
+    pays and the radar and SLAM envs skip; SLAM env >= g_s x means radar + SLAM <= base ms x (1 / g_s - 1) + obs,
+    i.e. radar <= that minus the SLAM stages.
+    """
+    if "envs" not in result or "floor" not in result:
+        return None
+    e = result["envs"]
+    base = e["rhs-highway-v0"]["ms_per_step"]
+    obs = float(e.get("kinematics_observation_ms", 0.0))
+    slam = sum((e["rhs-highway-slam-v0"].get("slam_stage_ms") or {}).values())
+    radar_ms = base * (1 / GOALS["radar_env_over_base"] - 1) + obs
+    radar_slam_ms = base * (1 / GOALS["slam_env_over_base"] - 1) + obs
+    return {"base_ms_per_step": base, "kinematics_observation_ms": obs, "radar_budget_ms": radar_ms,
+            "radar_slam_budget_ms": radar_slam_ms, "slam_stages_ms": slam,
+            "radar_budget_with_slam_ms": radar_slam_ms - slam, "floor_ms": result["floor"]["floor_ms"]}
+
+
+def bench_load(steps: int, seed: int, grid_deg: float) -> dict:
+    """Radar env steps/s quiet and with one busy process (a spin loop), for blas_threads 1 and None."""
+    import subprocess
+
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+
+    out = {}
+    for threads in (1, None):
+        env = gym.make("rhs-highway-radar-v0", radar={"scan": {"grid_deg": grid_deg}}, blas_threads=threads)
+        _steps_per_s(env, 3, seed)  # warm-up
+        quiet = _steps_per_s(env, steps, seed)
+        busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+        try:
+            time.sleep(0.5)
+            loaded = _steps_per_s(env, steps, seed)
+        finally:
+            busy.kill()
+            busy.wait()
+        env.close()
+        out[f"blas_threads_{threads}"] = {"quiet_steps_per_s": quiet, "loaded_steps_per_s": loaded,
+                                          "loaded_over_quiet": loaded / quiet}
+    out["loaded_over_quiet"] = out["blas_threads_1"]["loaded_over_quiet"]
+    return out
+
+
+def _make_radar_env(grid_deg: float):
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+
+    return gym.make("rhs-highway-radar-v0", radar={"scan": {"grid_deg": grid_deg}})
+
+
+def bench_vec(steps: int, seed: int, grid_deg: float) -> dict:
+    """Total env steps/s of the radar env in SubprocVecEnv with 1 and 2 workers (same steps per worker)."""
+    import functools
+
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    out = {}
+    for n in (1, 2):
+        venv = SubprocVecEnv([functools.partial(_make_radar_env, grid_deg) for _ in range(n)])
+        venv.seed(seed)
+        venv.reset()
+        rng = np.random.default_rng(seed)
+        venv.step(rng.choice([1, 3, 4], size=n))  # warm-up
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            venv.step(rng.choice([1, 1, 1, 3, 4], size=n))
+        dt = time.perf_counter() - t0
+        venv.close()
+        out[f"workers_{n}"] = {"steps_per_s": n * steps / dt, "steps_per_worker": steps}
+    out["two_workers_over_one"] = out["workers_2"]["steps_per_s"] / out["workers_1"]["steps_per_s"]
+    return out
+
+
+def bench_training(timesteps: int, seed: int) -> dict:
+    """PPO steps/s with 2 subprocess envs on rhs-highway-slam-v0 and on rhs-highway-v0."""
+    import tempfile
+
+    from agents.train import train
+
+    out = {}
+    for env_id in ("rhs-highway-slam-v0", "rhs-highway-v0"):
+        with tempfile.TemporaryDirectory() as tmp:
+            s = train("ppo", env_id, timesteps, tmp, seed=seed, n_envs=2, eval_freq=10**9,
+                      checkpoint_freq=10**9, progress=False)
+        out[env_id] = {"n_envs": 2, "timesteps": s["timesteps"], "steps_per_s": s["steps_per_s"],
+                       "wall_s": s["wall_time_s"]}
+    out["ppo_slam_over_base"] = out["rhs-highway-slam-v0"]["steps_per_s"] / out["rhs-highway-v0"]["steps_per_s"]
+    return out
+
+
+def _fmt(d: dict | None) -> str:
+    return ", ".join(f"{k} {v:.1f}" for k, v in (d or {}).items()) or "-"
+
+
+def _md_envs(result: dict) -> list[str]:
+    e = result["envs"]
+    grid = result["settings"]["grid_deg"]
+    load = "".join(f", load {e[k][0]:.1f}" for k in ("load_average_start",) if k in e)
+    lines = [f"| env (default radar, dtheta = {grid:g} deg; round-robin{load}) | steps/s | ms/step | radar stages (ms) "
+             "| SLAM stages (ms) |", "|---|---:|---:|---|---|"]
+    for env_id, _, _ in ENV_RUNS:
+        if env_id not in e:
+            continue
+        r = e[env_id]
+        lines.append(f"| `{env_id}` | {r['steps_per_s']:.1f} | {r['ms_per_step']:.1f} | "
+                     f"{_fmt(r['radar_stage_ms'])} | {_fmt(r['slam_stage_ms'])} |")
+    lines += ["", f"The radar adds {e['radar_added_ms']:.1f} ms per step ({e['radar_added_over_base']:.2f} x the "
+              f"base step), radar + SLAM {e['radar_slam_added_ms']:.1f} ms ({e['radar_slam_added_over_base']:.2f} x)."]
+    if "radar_env_over_base" in e:
+        before = (f" (numpy kernels: radar {e['radar_env_over_base_numpy_kernels']:.2f} x, SLAM "
+                  f"{e['slam_env_over_base_numpy_kernels']:.2f} x)" if "radar_env_over_base_numpy_kernels" in e else "")
+        lines.append(f"Steps/s over the base env: radar {e['radar_env_over_base']:.2f} x (goal >= "
+                     f"{GOALS['radar_env_over_base']}), SLAM {e['slam_env_over_base']:.2f} x (goal >= "
+                     f"{GOALS['slam_env_over_base']}){before}.")
+    if "stages_before_after" in e:
+        lines += ["", "| stage of the SLAM env's step | numpy kernels (ms) | compiled (ms) |", "|---|---:|---:|"]
+        for stage, v in e["stages_before_after"].items():
+            lines.append(f"| {stage} | {v['numpy']:.2f} | {v['compiled']:.2f} |")
+    return [*lines, ""]
+
+
+def _md_start(result: dict) -> list[str]:
+    st = result["start"]
+    return [f"First step of `rhs-highway-slam-v0` in a new process (imports, make, reset, one step; load "
+            f"{st['load_average_start'][0]:.1f}): {st['cold_s']:.1f} s with an empty kernel cache (goal <= "
+            f"{START_GOALS_S['cold_s']:g} s), {st['warm_s']:.1f} s with the cache (goal <= {START_GOALS_S['warm_s']:g} s); "
+            f"whole processes {st['cold_process_s']:.1f} s / {st['warm_process_s']:.1f} s.", ""]
+
+
+def _md_ratios(result: dict) -> list[str]:
+    lines = []
+    if "load" in result:
+        ld = result["load"]
+        lines += ["| radar env, one other busy process | quiet steps/s | loaded steps/s | loaded / quiet |",
+                  "|---|---:|---:|---:|"]
+        for k in ("blas_threads_1", "blas_threads_None"):
+            r = ld[k]
+            lines.append(f"| `blas_threads={k.rsplit('_', 1)[1]}` | {r['quiet_steps_per_s']:.1f} | "
+                         f"{r['loaded_steps_per_s']:.1f} | {r['loaded_over_quiet']:.2f} |")
+        lines += [f"Goal: loaded / quiet >= {GOALS['loaded_over_quiet']} with the default (single-threaded BLAS).", ""]
+    if "vec" in result:
+        v = result["vec"]
+        lines += [f"SubprocVecEnv, radar env: 1 worker {v['workers_1']['steps_per_s']:.1f} steps/s, 2 workers "
+                  f"{v['workers_2']['steps_per_s']:.1f} steps/s: {v['two_workers_over_one']:.2f} x (goal >= "
+                  f"{GOALS['two_workers_over_one']}).", ""]
+    if "training" in result and "ppo_slam_over_base" in result["training"]:
+        t = result["training"]
+        lines += ["| PPO, 2 subprocess envs | steps/s |", "|---|---:|"]
+        lines += [f"| `{k}` | {t[k]['steps_per_s']:.1f} |" for k in ("rhs-highway-slam-v0", "rhs-highway-v0")]
+        lines += [f"PPO on the SLAM env over the base env: {t['ppo_slam_over_base']:.2f} x (goal >= "
+                  f"{GOALS['ppo_slam_over_base']}).", ""]
+    return lines
+
+
+def markdown(result: dict) -> str:
+    """The README tables of a benchmark result."""
+    runs = result.get("section_runs", {})
+    when = "; ".join(f"{k} {v['date']}, load {v['load_average'][0]:.1f}" for k, v in runs.items())
+    lines = [f"Measured by `python scripts/benchmark.py` on {result['machine']['cpus']} CPU cores "
+             + (f"(per section: {when})." if when else f"(load average at start {result['machine']['load_average']})."),
+             ""]
+    if "envs" in result:
+        lines += _md_envs(result)
+    if "start" in result:
+        lines += _md_start(result)
+    budget = radar_budget(result)
+    if budget is not None:
+        f = result["floor"]
+        lines += [f"The IQ path's floor per 4-radar scan ({f['samples_per_scan']} samples): noise "
+                  f"{f['synthesis_noise_ms']:.1f} ms + range FFT {f['range_fft_ms']:.1f} ms = {f['floor_ms']:.1f} ms, "
+                  "before detection and OMP"
+                  + (f"; the range path's (`fidelity=\"range\"`: the searched bins' noise drawn directly, at half rate) "
+                     f"{f['range_noise_ms']:.1f} ms" if "range_noise_ms" in f else "")
+                  + f". The goals leave the radar {budget['radar_budget_ms']:.1f} ms "
+                  f"(radar env >= {GOALS['radar_env_over_base']} x) and {budget['radar_budget_with_slam_ms']:.1f} ms "
+                  f"beside the SLAM's {budget['slam_stages_ms']:.1f} ms (SLAM env >= {GOALS['slam_env_over_base']} x) "
+                  f"of a {budget['base_ms_per_step']:.1f} ms base step"
+                  + (f" (the radar and SLAM envs skip its {budget['kinematics_observation_ms']:.1f} ms Kinematics "
+                     "observation)" if budget.get("kinematics_observation_ms") else "") + ".", ""]
+    lines += _md_ratios(result)
+    if "radar" in result:
+        lines += ["| one 4-radar scan, typical scene | synthesis (ms) | range/CFAR (ms) | OMP (ms) | total (ms) |",
+                  "|---|---:|---:|---:|---:|"]
+        for ant, r in result["radar"].items():
+            st = r["stage_ms_median"]
+            lines.append(f"| {ant} | {st.get('synthesis', float('nan')):.1f} | {st.get('range_cfar', float('nan')):.1f} "
+                         f"| {st.get('omp', float('nan')):.1f} | {st.get('total', float('nan')):.1f} |")
+        lines.append("")
+    if "patterns" in result:
+        p = result["patterns"]
+        n = f", n = {p['refractive_index']:g}" if "refractive_index" in p else ""
+        lines += [f"| pattern library (M = 60, dtheta = 1 deg{n}, 2 workers) | build time (s) |", "|---|---:|"]
+        for m in ("fast", "sdr"):
+            if m in p:
+                note = f" ({p[m]['note']})" if p[m].get("extrapolated") else ""
+                lines.append(f"| {m}{note} | {p[m]['build_s']:.1f} |")
+        if "fast_vs_previous" in p:
+            v = p["fast_vs_previous"]
+            lines.append(f"| fast, previous settings / today's on the same {len(v['angles_deg'])} grids (ratio) | "
+                         f"{v['wall_ratio']:.2f} x wall, {v['cpu_ratio']:.2f} x CPU |")
+        g = result.get("goals", {}).get("library_build_s")
+        if g:
+            lines.append(f"Goal: the fast library in <= {g['goal']:g} s with every grid pointing within half a grid: "
+                         f"{'met' if g['met'] else 'NOT met'} ({g['value']:.1f} s, worst pointing "
+                         f"{g['worst_pointing_error_deg']:.2f} deg, worst two-way PSLR {g['worst_pslr_db']:.2f} dB).")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _run_section(sec: str, args: argparse.Namespace) -> dict:
+    if sec == "envs":
+        return bench_envs(args.steps, args.seed, args.grid_deg, block=args.block)
+    if sec == "start":
+        return bench_start()
+    if sec == "floor":
+        return bench_floor(args.grid_deg, args.seed)
+    if sec == "load":
+        return bench_load(args.steps, args.seed, args.grid_deg)
+    if sec == "vec":
+        return bench_vec(args.steps, args.seed, args.grid_deg)
+    if sec == "radar":
+        from rhs_studies.benchmark_radar import benchmark_radar
+
+        return {f"{a}_{f}": benchmark_radar(antenna=a, grid_deg=args.grid_deg, fidelity=f)
+                for a in ("rhs", "phased") for f in ("iq", "range")}
+    if sec == "patterns":
+        from rhs_studies.benchmark_patterns import benchmark_patterns
+
+        return benchmark_patterns(grid_deg=1.0)
+    return bench_training(args.train_steps, args.seed)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sections", nargs="+", choices=SECTIONS, default=list(SECTIONS))
+    ap.add_argument("--steps", type=int, default=100, help="env steps per measurement (envs, load, vec)")
+    ap.add_argument("--block", type=int, default=5, help="steps of one env before the next one's turn (envs)")
+    ap.add_argument("--grid-deg", type=float, default=1.0)
+    ap.add_argument("--train-steps", type=int, default=1024, help="PPO timesteps per env id (training section)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", default=str(ROOT / "results" / "benchmark.json"))
+    args = ap.parse_args(argv)
+    started = time.time()
+    commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+    result: dict = {
+        "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "platform": platform.platform(),
+                    "load_average": [round(x, 2) for x in os.getloadavg()]},
+        "settings": vars(args), "commit": commit, "command": " ".join(command_line(__file__)),
+    }
+    out = Path(args.out)
+    # sections not run now are kept from an existing file, with when and under what load they ran
+    previous = json.loads(out.read_text()) if out.exists() else {}
+    runs = previous.get("section_runs", {})
+    for sec in SECTIONS:
+        if sec in args.sections:
+            load = [round(x, 2) for x in os.getloadavg()]
+            print(f"benchmark: {sec} (load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}) ...", file=sys.stderr)
+            result[sec] = _run_section(sec, args)
+            runs[sec] = {"date": time.strftime("%Y-%m-%d %H:%M"), "load_average": load, "commit": commit}
+        elif sec in previous:
+            result[sec] = previous[sec]
+            runs.setdefault(sec, {"date": "an earlier run",
+                                  "load_average": previous.get("machine", {}).get("load_average", [float("nan")])})
+    result["section_runs"] = {k: runs[k] for k in SECTIONS if k in runs}
+    result["goals"] = _goals(result)
+    result["radar_budget"] = radar_budget(result)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_json(out, result, __file__, args, started, argv=argv)  # timings: provenance, no fingerprint
+    out.with_suffix(".md").write_text(markdown(result) + "\n")
+    print(json.dumps(result, indent=2, default=float))
+    for k, g in result["goals"].items():
+        print(f"{k}: {g['value']:.3f} (goal {g.get('sense', '>=')} {g['goal']}) {'met' if g['met'] else 'NOT met'}",
+              file=sys.stderr)
+    return 0
+
+
+def _goals(result: dict) -> dict:
+    """Each speed ratio present in the result, its goal and whether it is met."""
+    found = {}
+    for sec in ("envs", "load", "vec", "training"):
+        for k, goal in GOALS.items():
+            if k in result.get(sec, {}):
+                v = float(result[sec][k])
+                found[k] = {"value": v, "goal": goal, "met": v >= goal}
+    for k, goal in START_GOALS_S.items():
+        if k in result.get("start", {}):
+            v = float(result["start"][k])
+            found[f"start_{k}"] = {"value": v, "goal": goal, "sense": "<=", "met": v <= goal}
+    fast = result.get("patterns", {}).get("fast")
+    if fast and not fast.get("extrapolated"):
+        v, pointing_ok = float(fast["build_s"]), fast["worst_pointing_error_deg"] <= 0.5 * result["patterns"]["grid_deg"]
+        found["library_build_s"] = {"value": v, "goal": LIBRARY_GOAL_S, "sense": "<=", "met": v <= LIBRARY_GOAL_S and pointing_ok,
+                                    "worst_pointing_error_deg": fast["worst_pointing_error_deg"],
+                                    "worst_pslr_db": fast["worst_pslr_db"]}
+    return found
+
+
+if __name__ == "__main__":
+    sys.exit(main())

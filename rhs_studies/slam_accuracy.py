@@ -1,0 +1,621 @@
+"""SLAM accuracy against its targets: highway, paper scene at 30 dBm, dense landmark pairs.
+
+Writes ``results/slam_accuracy.json`` (per-seed figures, means with 95 % confidence
+intervals, commit, command line, full SLAM config) and ``results/slam_accuracy.md``.
+
+* **highway**: ``rhs-highway-slam-v0`` default (1-degree grid, traffic), ``--cycles``
+  cycles (default 200, the target's run length), the ego driven by the constant
+  meta-action SLOWER (``--highway-action``, default 4): the lowest target speed
+  (20 m/s) and no lane change. It is the package's collision-free scripted driver
+  (always-SLOWER: 0/30 collisions in ``results/policies.md``; all 200 cycles on the
+  tuning seeds 0..4 and the evaluation seeds 100..104), needs no policy and no
+  import from ``agents``. IDLE (the previous driver) crashes into traffic on every
+  one of those ten seeds (after 19-162 cycles), so the run was not the 200 cycles
+  the target asks; the IDM + MOBIL driver (``agents.evaluate.IDMMobilPolicy``) also
+  drives collision-free but swaps the ego vehicle under the env.
+  Metrics: position RMSE and final position error of the vehicle, the fraction of
+  the landmarks seen so far that the map matched (``matched / (matched + missed)``,
+  *seen* = within the radar's 100 m range at some cycle, as
+  :class:`slam.metrics_info.SlamMetricsInfo` counts them: field of view, traffic
+  occlusion and detection ignored) and the fraction of map landmarks that match
+  nothing (``spurious / (matched + spurious)``), Hungarian matching within 2 m.
+  Also ``measured_matched_fraction``: the matched fraction among the landmarks the
+  radar measured, a point within 1 m in >= 2 scans (:mod:`slam.metrics`);
+  ``visible_matched_fraction``: among those in the radar's unoccluded view for at
+  least 2 cycles; and per run the unmatched seen landmarks by the number of scans
+  with a point within 1 m of them (``unmatched_by_scans``).
+* **paper**: ``rhs-paper-v0`` (the Fig. 5c scene, 50 cycles) at 30 dBm: vehicle RMSE.
+* **dense**: a scripted short straight drive (6 m/s, 40 cycles, 47 m) past pairs
+  of landmarks 2-5 deg apart in one range cell (:func:`dense_scene`: pairs on both
+  sides every ``--dense-spacing`` m, 20-35 m from the path, each pair's members
+  across the line of sight from the middle of the drive, the geometry of the claim
+  study's SLAM scene with more pairs), the RHS and the phased array on the same
+  scene and seed: ATE (vehicle RMSE) of each and the ratio, map RMSE, spurious and
+  missed landmarks; ``geometry`` (:func:`pair_geometry`) says how much of the drive
+  the pairs spend in that regime (about half the (cycle, pair)s). The earlier scene
+  (10 m/s past pairs 0.3-1.2 m apart along x, 8-14 m from a 118 m path) had them
+  there for 10 % only: most of the drive saw each pair from far ahead or behind,
+  < 2 deg apart or resolved in range by both antennas, and members closer than the
+  SLAM's 1 m ``cluster_radius_m`` are one object whatever the antenna resolves.
+
+Seeds: ``--seeds`` (default 100..104) are evaluation seeds, disjoint from the seeds
+0..4 used while tuning the filter. ``--slam JSON`` overrides SlamConfig fields (for
+the before/after comparison, e.g. ``'{"variant": "fastslam1", "association":
+"nearest", "measurement_noise": "fixed"}'``). ``--quick`` is the small config of the
+tests (few cycles, one seed, few particles).
+
+Example: ``python scripts/slam_accuracy.py --parts highway paper dense``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.decision import IDLE, SLOWER
+from rhs_common.stats import mean_half_record as ci95
+from rhs_studies.provenance import numbers, write_json
+
+POLICY_HZ = 5
+TARGETS = {
+    "highway": {"position_rmse_m": ("<=", 0.5), "final_error_m": ("<=", 1.0),
+                "matched_fraction": (">=", 0.9), "spurious_fraction": ("<=", 0.1)},
+    "paper": {"position_rmse_m": ("<=", 0.05)},
+    "dense": {"rhs_ate_m": ("<=", 0.12), "ratio_rhs_phased": ("<=", 1.0 / 3.0)},
+}
+
+EXTRA = {"highway": ("measured_matched_fraction", "visible_matched_fraction", "cycles", "final_error_before_crash_m",
+                     "map_rmse_m"), "paper": ("final_error_m",),
+         "dense": ("phased_ate_m", "rhs_map_rmse_m", "phased_map_rmse_m", "rhs_spurious", "phased_spurious",
+                   "rhs_missed", "phased_missed")}
+
+
+def _commit() -> str:
+    try:
+        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def _visible_landmarks(env) -> np.ndarray:
+    """Ids of the roadside landmarks the radar can see now (field of view, range, not occluded)."""
+    from rhs_env.scene import scene_scatterers
+    from rhs_env.wrappers import RadarObservation
+
+    w = env
+    while not isinstance(w, RadarObservation):
+        w = w.env
+    base = env.unwrapped
+    sc, occ = scene_scatterers(base, base.vehicle, w.scatter_config)
+    view = w.radar.in_view(sc, occ) & sc.is_static & (sc.object_id < 1_000_000)
+    return np.unique(sc.object_id[view])
+
+
+def _visible_matched_fraction(env, info: dict, visible: dict) -> float | None:
+    """Matched fraction among the seen landmarks that were in the radar's unoccluded view >= 2 cycles."""
+    from slam.metrics import matched_fraction
+
+    ids = np.array(sorted(env.get_wrapper_attr("seen_ids")), dtype=int)
+    keep = np.array([visible.get(int(i), 0) >= 2 for i in ids], dtype=bool)
+    return matched_fraction(np.asarray(info["estimated_landmarks"]).reshape(-1, 2),
+                            np.asarray(info["true_landmarks"]).reshape(-1, 2), keep, 2.0)
+
+
+def _count_hits(env, obs: dict, hits: dict) -> None:
+    """Add one to ``hits[id]`` for each landmark with a radar point of this scan within 1 m of it."""
+    from rhs_common.geometry import apply_motion
+    from rhs_env.scene import get_landmarks, world_pose
+    from slam.metrics import MEASURED_GATE_M, landmark_hits
+
+    base = env.unwrapped
+    pose_w = world_pose(base.vehicle)
+    pts = np.asarray(obs["points"], dtype=float)[np.asarray(obs["points_mask"]) > 0][:, :2]
+    if not len(pts):
+        return
+    lms = get_landmarks(base)
+    ids = lms.near(np.array([pose_w[0], -pose_w[1]]), 110.0)
+    hit = landmark_hits(apply_motion(pts, pose_w), lms.xy_world[ids], MEASURED_GATE_M)
+    for i in ids[hit]:
+        hits[int(i)] = hits.get(int(i), 0) + 1
+
+
+def _seen_breakdown(env, info: dict, visible: dict, hits: dict) -> dict[str, Any]:
+    """The measured matched fraction and the unmatched seen landmarks by radar scans that hit them."""
+    from slam.metrics import MEASURED_MIN_SCANS, map_metrics, matched_fraction
+
+    ids = np.array(sorted(env.get_wrapper_attr("seen_ids")), dtype=int)
+    est = np.asarray(info["estimated_landmarks"]).reshape(-1, 2)
+    true = np.asarray(info["true_landmarks"]).reshape(-1, 2)
+    scans = np.array([hits.get(int(i), 0) for i in ids], dtype=int)
+    in_view = np.array([visible.get(int(i), 0) for i in ids], dtype=int)
+    matched = np.zeros(len(ids), dtype=bool)
+    matched[map_metrics(est, true, 2.0)["pairs"][:, 1]] = True
+    un = ~matched
+    return {
+        "measured_matched_fraction": matched_fraction(est, true, scans >= MEASURED_MIN_SCANS, 2.0),
+        "seen": int(len(ids)),
+        "measured": int((scans >= MEASURED_MIN_SCANS).sum()),
+        "unmatched_by_scans": {"0": int((un & (scans == 0)).sum()), "1": int((un & (scans == 1)).sum()),
+                               ">=2": int((un & (scans >= 2)).sum())},
+        "unmatched_never_in_view": int((un & (in_view == 0)).sum()),
+        "unmatched_in_view_cycles": [int(v) for v in in_view[un]],
+        "unmatched_scans": [int(v) for v in scans[un]],
+    }
+
+
+def _episode(env, seed: int, visibility: bool = False, action: int = IDLE) -> dict[str, Any]:
+    """Episode at a constant meta-action; vehicle errors per step and the final map counts.
+
+    With ``visibility`` also the landmarks' cycles in the radar's unoccluded view and the
+    scans whose points measured them (:func:`_seen_breakdown`).
+    """
+    obs, _ = env.reset(seed=seed)
+    err, done, info, visible, hits = [], False, {}, {}, {}
+    if visibility:
+        _count_hits(env, obs, hits)
+    while not done:
+        obs, _, term, trunc, info = env.step(action)
+        err.append(float(info["position_error_m"]))
+        done = term or trunc
+        if visibility:
+            for i in _visible_landmarks(env):
+                visible[int(i)] = visible.get(int(i), 0) + 1
+            _count_hits(env, obs, hits)
+    m, miss, sp = int(info["map_matched"]), int(info["map_missed"]), int(info["map_spurious"])
+    return {
+        "visible_matched_fraction": _visible_matched_fraction(env, info, visible) if visibility else None,
+        **(_seen_breakdown(env, info, visible, hits) if visibility else {}),
+        "seed": seed,
+        "cycles": len(err),
+        "crashed": bool(info.get("crashed", False)),
+        "position_rmse_m": float(np.sqrt(np.mean(np.square(err)))),
+        "final_error_m": err[-1],
+        # a highway-env collision stops the car within one step (no physical deceleration) and ends
+        # the episode: the error of the last cycle before it
+        "final_error_before_crash_m": err[-2] if info.get("crashed", False) and len(err) > 1 else err[-1],
+        "matched": m, "missed": miss, "spurious": sp,
+        "matched_fraction": m / max(m + miss, 1),
+        "spurious_fraction": sp / max(m + sp, 1),
+        "map_rmse_m": info.get("map_rmse_m"),
+    }
+
+
+def _slam_config(env) -> dict[str, Any]:
+    try:
+        return asdict(env.get_wrapper_attr("slam_config"))
+    except AttributeError:
+        return {}
+
+
+def run_highway(args, slam: dict) -> dict[str, Any]:
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+
+    kw: dict[str, Any] = {"duration": args.cycles / POLICY_HZ, "landmarks_in_info": True}
+    if slam:
+        kw["slam"] = slam
+    env = gym.make("rhs-highway-slam-v0", **kw)
+    runs = []
+    for seed in args.seeds:
+        t0 = time.perf_counter()
+        runs.append({**_episode(env, seed, visibility=True, action=args.highway_action), "wall_s": time.perf_counter() - t0})
+        _log(args, "highway", runs[-1])
+    cfg = _slam_config(env)
+    env.close()
+    keys = ("position_rmse_m", "final_error_m", "matched_fraction", "spurious_fraction", "map_rmse_m",
+            "visible_matched_fraction", "measured_matched_fraction", "cycles", "final_error_before_crash_m")
+    return {"runs": runs, "summary": {k: ci95([r[k] for r in runs]) for k in keys}, "slam_config": cfg,
+            "env_kwargs": kw, "action": args.highway_action}
+
+
+def run_paper(args, slam: dict) -> dict[str, Any]:
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+
+    kw: dict[str, Any] = {"radar": {"link": {"tx_power_dbm": 30.0}}, "duration": args.paper_cycles / POLICY_HZ}
+    if slam:
+        kw["slam"] = slam
+    env = gym.make("rhs-paper-v0", **kw)
+    runs = []
+    for seed in args.seeds:
+        runs.append(_episode(env, seed))
+        _log(args, "paper", runs[-1])
+    cfg = _slam_config(env)
+    env.close()
+    return {"runs": runs, "summary": {k: ci95([r[k] for r in runs]) for k in ("position_rmse_m", "final_error_m")},
+            "slam_config": cfg, "env_kwargs": kw}
+
+
+def dense_scene(seed: int, cycles: int, dt: float = 0.2, speed: float = 6.0, spacing: float = 12.0):
+    """Short straight drive along x past landmark pairs 2-5 deg apart in one range cell.
+
+    The drive: ``cycles`` poses at ``speed`` m/s from the origin heading +x (40 cycles:
+    47 m, as the paper's Fig. 5c drive). Pair centres on both sides every ``spacing``
+    m (+-2 m jitter) from 10 m before the start to 10 m past the end, 20-35 m from the
+    path (uniform). Pair k: separation ``delta`` uniform in [2, 5] deg; its members are
+    spaced ``2 D tan(delta / 2)`` across the line of sight from the middle of the drive
+    (D: the centre's distance from there; 0.8-4.2 m apart), so from there they are
+    ``delta`` apart at equal ranges. The drive is short next to D: the line of sight
+    turns little and the pairs stay 2-5 deg apart in one range cell (c / 2B = 0.6 m)
+    for about half of the (cycle, pair)s (:func:`pair_geometry`), where the RHS
+    resolves them and the phased array (~3x wider beam) merges them. Members closer
+    than the SLAM's 1 m ``cluster_radius_m`` are one object for either antenna.
+    Returns landmarks (2 K, 2) (first members, then second members), poses (T, 3),
+    the separations (deg).
+    """
+    rng = np.random.default_rng(seed)
+    t = np.arange(cycles)
+    poses = np.stack([speed * dt * t, np.zeros(cycles), np.zeros(cycles)], axis=1)
+    end = float(poses[-1, 0])
+    xs = np.arange(-10.0, end + 10.0, spacing)
+    xs = np.concatenate([xs, xs])
+    side = np.concatenate([np.ones(xs.size // 2), -np.ones(xs.size // 2)])
+    xs = xs + rng.uniform(-2.0, 2.0, xs.size)
+    y = side * rng.uniform(20.0, 35.0, xs.size)
+    delta = rng.uniform(2.0, 5.0, xs.size)
+    centre = np.stack([xs, y], 1)
+    v = centre - np.array([end / 2.0, 0.0])
+    dist = np.hypot(v[:, 0], v[:, 1])
+    across = np.stack([-v[:, 1], v[:, 0]], 1) / dist[:, None]
+    half = (dist * np.tan(np.radians(delta) / 2.0))[:, None] * across
+    return np.concatenate([centre - half, centre + half]), poses, delta
+
+
+def pair_geometry(lm: np.ndarray, poses: np.ndarray, max_range_m: float = 100.0,
+                  range_cell_m: float = 0.6) -> dict[str, float]:
+    """How the pairs of :func:`dense_scene` look from the car over the drive.
+
+    Over every (cycle, pair) with both members within ``max_range_m``: the fraction
+    2-5 deg apart in angle, the fraction within one range cell (``|r1 - r2| <
+    range_cell_m``), the fraction with both (the regime where the RHS resolves what the
+    phased array merges), and that fraction among the pairs within 30 m.
+    """
+    k = len(lm) // 2
+    a, b = lm[:k], lm[k:]
+    sep, dr, rng_m = [], [], []
+    for p in np.asarray(poses, dtype=float):
+        ra, rb = np.hypot(*(a - p[:2]).T), np.hypot(*(b - p[:2]).T)
+        d = np.arctan2(a[:, 1] - p[1], a[:, 0] - p[0]) - np.arctan2(b[:, 1] - p[1], b[:, 0] - p[0])
+        ok = np.maximum(ra, rb) <= max_range_m
+        sep.append(np.degrees(np.abs(np.angle(np.exp(1j * d))))[ok])
+        dr.append(np.abs(ra - rb)[ok])
+        rng_m.append(np.minimum(ra, rb)[ok])
+    s, r, near = np.concatenate(sep), np.concatenate(dr), np.concatenate(rng_m) <= 30.0
+    angle, cell = (s >= 2.0) & (s <= 5.0), r < range_cell_m
+    both = angle & cell
+    return {"angle_2_5_deg": float(angle.mean()), "same_range_cell": float(cell.mean()),
+            "regime": float(both.mean()), "regime_within_30m": float(both[near].mean()) if near.any() else 0.0,
+            "regime_pair_cycles": int(both.sum())}
+
+
+def run_dense(args, slam: dict) -> dict[str, Any]:
+    from rhs_env.radar import RadarConfig, RadarSystem
+    from slam.rbpf import SlamConfig
+    from slam.registration import make_registration
+    from slam.scenario import RadarCloud, run_scenario
+
+    cfg = SlamConfig(**slam) if slam else SlamConfig()
+    if args.particles:
+        cfg = SlamConfig(**{**asdict(cfg), "n_particles": args.particles})
+    runs = []
+    for seed in args.seeds:
+        lm, poses, delta = dense_scene(seed, args.dense_cycles, spacing=args.dense_spacing)
+        row: dict[str, Any] = {"seed": seed, "separation_deg": [float(delta.min()), float(delta.max())],
+                               "geometry": pair_geometry(lm, poses)}
+        for ant in ("rhs", "phased"):
+            rng = np.random.default_rng(seed)
+            radar = RadarSystem(RadarConfig(antenna=ant), rng)
+            res = run_scenario(lm, poses, RadarCloud(lm, poses, 0.2, radar), make_registration("icp", rng), cfg, rng,
+                               dt=0.2)
+            row[f"{ant}_ate_m"] = float(res["ate_rmse_m"])
+            row[f"{ant}_map_rmse_m"] = None if res["map_rmse_m"] is None else float(res["map_rmse_m"])
+            row[f"{ant}_spurious"] = int(res["map_spurious"])
+            row[f"{ant}_missed"] = int(res["map_missed"])
+        row["ratio_rhs_phased"] = row["rhs_ate_m"] / max(row["phased_ate_m"], 1e-12)
+        runs.append(row)
+        _log(args, "dense", row)
+    keys = ("rhs_ate_m", "phased_ate_m", "ratio_rhs_phased", "rhs_map_rmse_m", "phased_map_rmse_m", "rhs_spurious",
+            "phased_spurious", "rhs_missed", "phased_missed")
+    return {"runs": runs, "summary": {k: ci95([r[k] for r in runs]) for k in keys}, "slam_config": asdict(cfg),
+            "cycles": args.dense_cycles, "spacing_m": args.dense_spacing}
+
+
+#: the drivers part: env id -> the shipped DAgger student driving it (agents/data); every driver on an env
+#: runs with that policy's env kwargs (its radar grid and target speeds), so the drivers see one env
+DRIVER_ENVS = {"rhs-highway-slam-v0": "dagger_rhs_highway_slam.zip", "rhs-dense-v0": "antenna/dagger_rhs_highway_dense.zip"}
+DRIVERS = ("idm", "policy", "random")
+LOST_M = 5.0  # an error above this is a lost car
+GOOD_M = 0.5  # below this the health signal must stay quiet
+RECOVER_CYCLES = 10
+RECOVERED_M = 1.0
+
+
+def nees_interval(dof: int = 3, level: float = 0.95) -> tuple[float, float]:
+    """The two-sided ``level`` interval of the chi-square distribution with ``dof`` degrees of freedom."""
+    from scipy import stats
+
+    return float(stats.chi2.ppf((1 - level) / 2, dof)), float(stats.chi2.ppf((1 + level) / 2, dof))
+
+
+def pose_nees(err_xy: np.ndarray, err_heading: float, std: np.ndarray) -> float:
+    """3-dof NEES ``e^T P^-1 e`` with ``P = diag(std^2)`` (``std`` (3,): x, y (m), heading (rad); floored at
+    1 mm / 0.1 mrad so a collapsed particle set does not divide by zero)."""
+    s = np.maximum(np.asarray(std, dtype=float), [1e-3, 1e-3, 1e-4])
+    e = np.array([err_xy[0], err_xy[1], err_heading])
+    return float(np.sum((e / s) ** 2))
+
+
+def driver_episode(env, policy, seed: int) -> dict[str, Any]:
+    """One episode under ``policy`` until it ends; per-cycle errors, health, NEES and the loss events.
+
+    A *loss* is a cycle where the health signal's ``slam_losses`` count rises; it is *recovered* when
+    within ``RECOVER_CYCLES`` cycles the flag clears (relocalised or a new map) and the error in the
+    current map is below ``RECOVERED_M``. Errors are in the current map (after a map break the truth
+    is re-anchored at the break, :class:`slam.metrics_info.SlamMetricsInfo`); ``episode_rmse_m`` is
+    against the episode's start.
+    """
+    from rhs_common.geometry import wrap_angle
+
+    if callable(getattr(policy, "reset", None)):
+        policy.reset()
+    obs, info = env.reset(seed=seed)
+    err, err_ep, lost, nees, losses, done = [], [], [], [], [], False
+    crashed, last_losses = False, 0
+    while not done:
+        action, _ = policy.predict(obs, deterministic=True)
+        a = np.asarray(action)
+        obs, _, term, trunc, info = env.step(int(a) if a.ndim == 0 else action)
+        done = term or trunc
+        crashed = crashed or bool(info.get("crashed", False))
+        e = np.asarray(info["estimated_pose"], dtype=float) - np.asarray(info["true_pose"], dtype=float)
+        err.append(float(info["position_error_m"]))
+        err_ep.append(float(info["position_error_episode_m"]))
+        lost.append(bool(info["slam_lost"]))
+        nees.append(pose_nees(e[:2], float(wrap_angle(e[2])), np.asarray(info["slam_pose_std"], dtype=float)))
+        if int(info["slam_losses"]) > last_losses:
+            losses.append(len(err) - 1)
+        last_losses = int(info["slam_losses"])
+    e_arr, l_arr = np.asarray(err), np.asarray(lost)
+    recovered = 0
+    for t0 in losses:
+        win = range(t0, min(t0 + RECOVER_CYCLES + 1, len(err)))
+        recovered += any(not lost[t] and err[t] < RECOVERED_M for t in win)
+    lo, hi = nees_interval()
+    nees_arr = np.asarray(nees)
+    return {
+        "seed": seed, "cycles": len(err), "crashed": crashed,
+        "position_rmse_m": float(np.sqrt(np.mean(e_arr**2))),
+        "episode_rmse_m": float(np.sqrt(np.mean(np.square(err_ep)))),
+        "max_error_m": float(e_arr.max()),
+        "lost_episode": bool(e_arr.max() > LOST_M),
+        "cycles_above_lost": int((e_arr > LOST_M).sum()),
+        "cycles_above_lost_flagged": int(((e_arr > LOST_M) & l_arr).sum()),
+        "cycles_below_good": int((e_arr < GOOD_M).sum()),
+        "cycles_below_good_flagged": int(((e_arr < GOOD_M) & l_arr).sum()),
+        "nees_cycles": len(nees), "nees_inside": int(((nees_arr >= lo) & (nees_arr <= hi)).sum()),
+        "nees_below": int((nees_arr < lo).sum()), "nees_above": int((nees_arr > hi).sum()),
+        "losses": len(losses), "losses_recovered": int(recovered),
+        "relocalised": int(info.get("slam_relocalised", 0)), "map_breaks": int(info.get("slam_map_breaks", 0)),
+    }
+
+
+def _ratio(num: int, den: int) -> float | None:
+    return num / den if den else None
+
+
+def summarize_driver(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Mean, worst episode and lost fraction of the position RMSE; health hit / false-alarm rates; NEES coverage;
+    losses recovered within ``RECOVER_CYCLES`` cycles."""
+    tot = {k: sum(int(r[k]) for r in runs) for k in (
+        "cycles_above_lost", "cycles_above_lost_flagged", "cycles_below_good", "cycles_below_good_flagged",
+        "nees_cycles", "nees_inside", "nees_below", "nees_above", "losses", "losses_recovered", "map_breaks",
+        "relocalised")}
+    rmse = [r["position_rmse_m"] for r in runs]
+    return {
+        "episodes": len(runs),
+        "position_rmse_m": ci95(rmse),
+        "worst_rmse_m": float(max(rmse)) if rmse else None,
+        "worst_seed": runs[int(np.argmax(rmse))]["seed"] if rmse else None,
+        "lost_fraction": _ratio(sum(r["lost_episode"] for r in runs), len(runs)),
+        "crashed_fraction": _ratio(sum(r["crashed"] for r in runs), len(runs)),
+        "episode_rmse_m": ci95([r["episode_rmse_m"] for r in runs]),
+        "cycles": int(sum(r["cycles"] for r in runs)),
+        "health_hit_rate": _ratio(tot["cycles_above_lost_flagged"], tot["cycles_above_lost"]),
+        "health_false_alarm_rate": _ratio(tot["cycles_below_good_flagged"], tot["cycles_below_good"]),
+        "nees_coverage": _ratio(tot["nees_inside"], tot["nees_cycles"]),
+        "nees_below_fraction": _ratio(tot["nees_below"], tot["nees_cycles"]),
+        "nees_above_fraction": _ratio(tot["nees_above"], tot["nees_cycles"]),
+        "recovered_fraction": _ratio(tot["losses_recovered"], tot["losses"]),
+        **{k: tot[k] for k in ("cycles_above_lost", "cycles_below_good", "losses", "losses_recovered", "map_breaks",
+                               "relocalised")},
+    }
+
+
+def run_drivers(args, slam: dict) -> dict[str, Any]:
+    """Every driver of ``--drivers`` on every env of ``--driver-envs`` over ``--driver-seeds``, until each episode ends."""
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+    from agents.evaluate import DATA_DIR, load_policy, policy_metadata
+
+    out: dict[str, Any] = {}
+    for env_id in args.driver_envs:
+        zip_path = DATA_DIR / DRIVER_ENVS[env_id]
+        kw = {**policy_metadata(zip_path).get("env_kwargs", {}), "duration": args.driver_cycles / POLICY_HZ}
+        if slam:
+            kw["slam"] = slam
+        for driver in args.drivers:
+            env = gym.make(env_id, **kw)
+            runs = []
+            for seed in args.driver_seeds:
+                policy = load_policy(str(zip_path) if driver == "policy" else driver, env, seed=seed)
+                t0 = time.perf_counter()
+                runs.append({**driver_episode(env, policy, seed), "wall_s": time.perf_counter() - t0})
+                _log(args, f"drivers {env_id} {driver}", runs[-1])
+            env.close()
+            out[f"{env_id}/{driver}"] = {"env": env_id, "driver": driver, "env_kwargs": kw,
+                                         "policy": str(zip_path.relative_to(DATA_DIR.parent.parent)) if driver == "policy"
+                                         else driver, "runs": runs, "summary": summarize_driver(runs)}
+    return {"combos": out, "seeds": list(args.driver_seeds), "lost_m": LOST_M, "good_m": GOOD_M,
+            "nees_interval": nees_interval(), "recover_cycles": RECOVER_CYCLES, "recovered_m": RECOVERED_M}
+
+
+def _log(args, part: str, row: dict) -> None:
+    if not args.no_progress:
+        short = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in row.items()
+                 if not isinstance(v, (list, dict))}
+        print(f"[{part}] {short}", file=sys.stderr, flush=True)
+
+
+def _fmt(s: dict) -> str:
+    if s.get("mean") is None:
+        return "n/a"
+    return f"{s['mean']:.3f}" + (f" +- {s['ci95']:.3f}" if s.get("ci95") is not None else "")
+
+
+def _pct(x: float | None) -> str:
+    return "n/a" if x is None else f"{100 * x:.1f} %"
+
+
+def drivers_markdown(res: dict) -> list[str]:
+    """The drivers table: per env and driver, the mean / worst RMSE, lost episodes, health rates, NEES, recovery."""
+    lo, hi = res["nees_interval"]
+    lines = [f"\n## Drivers (seeds {res['seeds'][0]}..{res['seeds'][-1]}, {len(res['seeds'])} per row, each episode until "
+             "it ends)\n",
+             f"Lost episode: position error above {res['lost_m']:g} m in some cycle. Health hit rate: cycles with an "
+             f"error above {res['lost_m']:g} m where `slam_lost` is set; false alarms: cycles with an error below "
+             f"{res['good_m']:g} m where it is set. NEES: 3-dof from `slam_pose_std`, inside [{lo:.3f}, {hi:.2f}] "
+             f"(95 %). Recovered: the flag clears with the error below {res['recovered_m']:g} m within "
+             f"{res['recover_cycles']} cycles of a loss. Errors in the current map (a map break re-anchors the truth).\n",
+             "| env | driver | RMSE mean (m) | worst (m) | lost episodes | crashed | hit rate | false alarms | "
+             "NEES inside | losses (recovered) | map breaks |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for combo in res["combos"].values():
+        sm = combo["summary"]
+        lines.append(f"| {combo['env']} | {combo['driver']} | {_fmt(sm['position_rmse_m'])} | {sm['worst_rmse_m']:.3f} "
+                     f"(seed {sm['worst_seed']}) | {_pct(sm['lost_fraction'])} | {_pct(sm['crashed_fraction'])} | "
+                     f"{_pct(sm['health_hit_rate'])} of {sm['cycles_above_lost']} | {_pct(sm['health_false_alarm_rate'])} "
+                     f"of {sm['cycles_below_good']} | {_pct(sm['nees_coverage'])} | {sm['losses']} "
+                     f"({_pct(sm['recovered_fraction'])}) | {sm['map_breaks']} |")
+    return lines
+
+
+def markdown(doc: dict) -> str:
+    lines = [f"# SLAM accuracy against its targets\n\nCommand: `{doc['command']}`  \nCommit: `{doc['commit']}`  \n"
+             f"Seeds: {doc['seeds']} (evaluation seeds; the filter was tuned on 0..4). Mean +- 95 % CI over seeds.\n",
+             "| scene | metric | value | target | met |", "|---|---|---|---|---|"]
+    for part, res in doc["parts"].items():
+        if part == "drivers":
+            continue
+        for key, (op, val) in TARGETS[part].items():
+            s = res["summary"][key]
+            met = None if s["mean"] is None else (s["mean"] <= val if op == "<=" else s["mean"] >= val)
+            lines.append(f"| {part} | {key} | {_fmt(s)} | {op} {val:.3g} | {'yes' if met else 'no'} |")
+        for key in EXTRA.get(part, ()):
+            if key in res["summary"]:
+                lines.append(f"| {part} | {key} | {_fmt(res['summary'][key])} | - | - |")
+    drivers = doc["parts"].get("drivers")
+    return "\n".join(lines + _notes(doc) + (drivers_markdown(drivers) if drivers else [])) + "\n"
+
+
+def _notes(doc: dict) -> list[str]:
+    """What the highway run drove and counted, and how the dense pairs looked from the car."""
+    out: list[str] = []
+    hw = doc["parts"].get("highway")
+    if hw:
+        runs = hw["runs"]
+        crashed = sum(bool(r["crashed"]) for r in runs)
+        by = {k: sum(r.get("unmatched_by_scans", {}).get(k, 0) for r in runs) for k in ("0", "1", ">=2")}
+        hidden = sum(r.get("unmatched_never_in_view", 0) for r in runs)
+        out.append(f"\nHighway: constant meta-action {hw.get('action', IDLE)} (4 = SLOWER, 20 m/s, no lane change; "
+                   f"IDLE crashed into traffic on each of the seeds 0..4 and 100..104), {crashed} of {len(runs)} runs crashed. "
+                   "`matched_fraction` counts every landmark that has been within the radar's 100 m range; "
+                   "`measured_matched_fraction` only those the radar measured (a point within "
+                   "1 m in >= 2 scans, `slam.metrics`); `visible_matched_fraction` those in its unoccluded view "
+                   f">= 2 cycles. Unmatched seen landmarks, all seeds, by scans with a point within 1 m: "
+                   f"0: {by['0']}, 1: {by['1']}, >= 2: {by['>=2']} ({hidden} never in the unoccluded view).")
+    dense = doc["parts"].get("dense")
+    if dense:
+        geo = [r["geometry"] for r in dense["runs"] if "geometry" in r]
+        if geo:
+            m = {k: float(np.mean([g[k] for g in geo])) for k in ("angle_2_5_deg", "same_range_cell", "regime",
+                                                                   "regime_within_30m")}
+            out.append(f"\nDense: pairs on both sides every {dense.get('spacing_m', 12.0):g} m; over the (cycle, pair)s within "
+                       f"100 m, {m['angle_2_5_deg']:.0%} are 2-5 deg apart, {m['same_range_cell']:.0%} in one "
+                       f"range cell (0.6 m), {m['regime']:.0%} both ({m['regime_within_30m']:.0%} of those within "
+                       "30 m); elsewhere the pair is outside 2-5 deg or resolved in range by both antennas.")
+    return out
+
+
+def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, dict]:
+    """The options and the SlamConfig overrides (``--quick`` applied)."""
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--parts", nargs="+", choices=("highway", "paper", "dense", "drivers"),
+                   default=["highway", "paper", "dense"])
+    p.add_argument("--drivers", nargs="+", choices=DRIVERS, default=list(DRIVERS),
+                   help="drivers part: highway-env's IDM + MOBIL, the shipped DAgger student, uniformly random actions")
+    p.add_argument("--driver-envs", nargs="+", choices=tuple(DRIVER_ENVS), default=list(DRIVER_ENVS))
+    p.add_argument("--driver-seeds", type=int, nargs="+", default=list(range(1000, 1100)),
+                   help="drivers part: held-out seeds (default 1000..1099, 100 per env and driver)")
+    p.add_argument("--driver-cycles", type=int, default=200, help="drivers part: episode length bound (cycles)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[100, 101, 102, 103, 104])
+    p.add_argument("--cycles", type=int, default=200, help="highway cycles")
+    p.add_argument("--highway-action", type=int, default=SLOWER,
+                   help="highway: the constant meta-action (4 SLOWER, default; 1 IDLE crashes on most seeds)")
+    p.add_argument("--paper-cycles", type=int, default=50)
+    p.add_argument("--dense-cycles", type=int, default=40)
+    p.add_argument("--dense-spacing", type=float, default=12.0, help="dense: distance between pairs along the path (m)")
+    p.add_argument("--particles", type=int, default=0, help="dense: particles (0: SlamConfig default)")
+    p.add_argument("--slam", default="", help="JSON dict of SlamConfig overrides")
+    p.add_argument("--out", default="results/slam_accuracy", help="output path without extension")
+    p.add_argument("--quick", action="store_true", help="small config for the tests: 1 seed, few cycles")
+    p.add_argument("--no-progress", action="store_true")
+    args = p.parse_args(argv)
+    slam = json.loads(args.slam) if args.slam else {}
+    if args.quick:
+        args.seeds, args.cycles, args.paper_cycles, args.dense_cycles = args.seeds[:1], 10, 6, 8
+        args.driver_seeds, args.driver_cycles = args.driver_seeds[:1], 10
+        slam = {"n_particles": 10, **slam}
+    return args, slam
+
+
+def fingerprint() -> list[float]:
+    """The paper part and the dense part's RHS values of the quick config (seed 100, 10 particles): seconds.
+
+    The dense part's phased-array run is left out: with 10 particles it loses the car, and a
+    lost track turns last-digit differences between machines into other numbers (the
+    tolerance of ``scripts/fingerprint_tolerance.py`` cannot bound a chaotic run).
+    """
+    args, slam = parse_args(["--quick", "--no-progress"])
+    dense = {k: v for k, v in run_dense(args, slam)["summary"].items() if k.startswith("rhs_")}
+    return numbers([run_paper(args, slam)["summary"], dense])
+
+
+def main(argv: list[str] | None = None) -> int:
+    started = time.time()
+    args, slam = parse_args(argv)
+    runners = {"highway": run_highway, "paper": run_paper, "dense": run_dense, "drivers": run_drivers}
+    doc = {"command": " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])]),
+           "commit": _commit(), "seeds": args.seeds, "slam_overrides": slam, "parts": {}}
+    for part in args.parts:
+        doc["parts"][part] = runners[part](args, slam)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_json(out.with_suffix(".json"), doc, __file__, {**vars(args), "slam_overrides": slam}, started,
+               fingerprint, argv)
+    out.with_suffix(".md").write_text(markdown(doc))
+    print(markdown(doc))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
