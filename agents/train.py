@@ -99,9 +99,18 @@ def train(
     stop a run there, ``summary["interrupted"]`` is then True; DAgger: from the last finished round,
     :func:`agents.imitation.load_round_state`). ``torch_threads`` sets torch's intra-op
     threads in this process (1 by default: the envs need the other cores);
-    worker processes get ``OMP_NUM_THREADS=1`` unless it is set already. ``init_policy`` (DAgger only):
-    continue from that student zip (:func:`agents.imitation.train_dagger`).
+    worker processes get ``OMP_NUM_THREADS=1`` unless it is set already. ``init_policy``: DAgger continues from that
+    student zip (:func:`agents.imitation.train_dagger`); ``algo="finetune"`` fine-tunes it with PPO
+    (:func:`agents.finetune.train_finetune`).
     """
+    if algo == "finetune":
+        from agents.finetune import train_finetune
+
+        if resume:
+            raise ValueError("--resume is not supported for --algo finetune; start the run again")
+        return train_finetune(env_id, timesteps, out, init_policy=init_policy, seed=seed, n_envs=n_envs,
+                              hyperparams=hyperparams, env_kwargs=env_kwargs, progress=progress,
+                              torch_threads=torch_threads, checkpoint_freq=checkpoint_freq)
     if algo == "dagger" or init_policy is not None:
         return _train_dagger(algo, env_id, timesteps, out, seed, n_envs, hyperparams, env_kwargs, progress,
                              torch_threads, resume, init_policy)
@@ -309,7 +318,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="rllib: join an existing Ray cluster ('auto', 'HOST:6379' or 'ray://HOST:10001'; default: a local one)",
     )  # fmt: skip
     parser.add_argument("--init-policy", default=None,
-                        help="dagger: continue from this student zip (first_beta / iterations of the YAML)")
+                        help="dagger: continue from this student zip (first_beta / iterations of the YAML); "
+                        "finetune: the student to fine-tune with PPO (omit it for PPO from scratch with the "
+                        "privileged critic)")
     parser.add_argument("--resume", action="store_true",
                         help="continue from the latest checkpoint in OUT/checkpoints (after SIGTERM / SIGINT / a crash); "
                         "dagger: from the state the last finished round left in OUT")
