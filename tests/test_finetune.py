@@ -1,0 +1,230 @@
+"""PPO fine-tuning of a student: the privileged critic, the weight transfer, the class-prior correction, the anchor."""
+
+from __future__ import annotations
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from conftest import small_env_kwargs, tiny_hyperparams
+from stable_baselines3 import PPO
+from stable_baselines3.common.policies import MultiInputActorCriticPolicy
+
+from agents.expert import HeadwayDriver
+from agents.finetune import (
+    AnchoredPPO,
+    FinetuneConfig,
+    PrivilegedCriticPolicy,
+    anchor_coef,
+    correct_class_prior,
+    export_actor,
+    load_actor,
+)
+from agents.privileged import (
+    GAP_SCALE_M,
+    LANE_FEATURES,
+    PRIVILEGED_DIM,
+    PRIVILEGED_KEY,
+    bumper_gap,
+    privileged_features,
+    without_privileged,
+)
+
+POINTS = gym.spaces.Box(-100.0, 100.0, shape=(8, 3), dtype=np.float32)
+SPACE = gym.spaces.Dict({
+    "points": POINTS,
+    "points_mask": gym.spaces.MultiBinary(8),
+    "ego": gym.spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32),
+    PRIVILEGED_KEY: gym.spaces.Box(-1.0, 1.0, shape=(PRIVILEGED_DIM,), dtype=np.float32),
+})
+POLICY_KWARGS = {"features_extractor_class": __import__("agents.features", fromlist=["x"]).PointSetExtractor,
+                 "features_extractor_kwargs": {"point_dim": 8, "box_dim": 4}, "net_arch": [8]}
+
+
+def _obs(rng: np.random.Generator, n: int = 6) -> dict[str, torch.Tensor]:
+    return {k: torch.as_tensor(np.stack([space.sample() for _ in range(n)]), dtype=torch.float32)
+            for k, space in SPACE.spaces.items()}
+
+
+def _logits(policy, obs) -> torch.Tensor:
+    with torch.no_grad():
+        return policy.get_distribution(obs).distribution.logits
+
+
+def _pair(seed: int = 0):
+    torch.manual_seed(seed)
+    SPACE.seed(seed)
+    lr = lambda _: 1e-3  # noqa: E731
+    student = MultiInputActorCriticPolicy(without_privileged(SPACE), gym.spaces.Discrete(5), lr, **POLICY_KWARGS)
+    tuned = PrivilegedCriticPolicy(SPACE, gym.spaces.Discrete(5), lr, **POLICY_KWARGS)
+    return student, tuned
+
+
+def test_the_actor_ignores_the_privileged_key_and_the_critic_reads_it():
+    _, policy = _pair()
+    obs = _obs(np.random.default_rng(0))
+    other = {**obs, PRIVILEGED_KEY: -obs[PRIVILEGED_KEY]}
+    assert torch.equal(_logits(policy, obs), _logits(policy, other))
+    with torch.no_grad():
+        assert not torch.allclose(policy.predict_values(obs), policy.predict_values(other))
+
+
+def test_the_student_moves_into_the_actor_and_back_unchanged():
+    student, policy = _pair()
+    obs = _obs(np.random.default_rng(1))
+    actor_obs = {k: v for k, v in obs.items() if k != PRIVILEGED_KEY}
+    assert not torch.allclose(_logits(student, actor_obs), _logits(policy, obs))
+    load_actor(policy, student)
+    torch.testing.assert_close(_logits(student, actor_obs), _logits(policy, obs))
+    with torch.no_grad():  # fine-tuning moves the actor; the export carries the move
+        for p in policy.mlp_extractor.policy_net.parameters():
+            p.add_(0.1)
+
+    class Holder:  # export_actor writes into a PPO's policy
+        pass
+
+    holder = Holder()
+    holder.policy = student  # type: ignore[attr-defined]
+    export_actor(policy, holder)  # type: ignore[arg-type]
+    torch.testing.assert_close(_logits(student, actor_obs), _logits(policy, obs))
+
+
+def test_the_class_prior_correction_recovers_the_unweighted_posterior():
+    """A weighted fit's optimum on one state is pi_w(a) ~ w_a p(a); the correction gives p(a) back."""
+    student, _ = _pair()
+    p = np.array([0.05, 0.8, 0.03, 0.07, 0.05])
+    counts = np.round(p * 2000)
+    w = (counts.sum() / (5 * counts)) ** 0.5
+    with torch.no_grad():
+        student.action_net.weight.zero_()
+        student.action_net.bias.copy_(torch.as_tensor(np.log(w * p), dtype=torch.float32))
+    obs = {k: v for k, v in _obs(np.random.default_rng(2), 1).items() if k != PRIVILEGED_KEY}
+    before = torch.softmax(_logits(student, obs), -1).numpy()[0]
+    assert before[1] < 0.7  # the weights pushed probability towards the rare actions
+    correct_class_prior(student, counts, 0.5)
+    after = torch.softmax(_logits(student, obs), -1).numpy()[0]
+    np.testing.assert_allclose(after, counts / counts.sum(), atol=1e-5)
+
+
+def test_the_anchor_decays_to_zero():
+    config = FinetuneConfig(anchor_coef=2.0, anchor_fraction=0.4)
+    coefs = [anchor_coef(config, t) for t in np.linspace(0, 1, 11)]
+    assert coefs[0] == 2.0 and all(a >= b for a, b in zip(coefs, coefs[1:], strict=False))
+    assert coefs[4] == pytest.approx(0.0) and coefs[-1] == 0.0
+    with pytest.raises(ValueError, match="anchor_fraction"):
+        FinetuneConfig(anchor_fraction=0.0)
+
+
+class _DictEnv(gym.Env):
+    """A 10-step episode of random point sets and a reward for action 2: something for PPO to move towards."""
+
+    observation_space = without_privileged(SPACE)
+    action_space = gym.spaces.Discrete(5)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        self.observation_space.seed(seed)
+        return self.observation_space.sample(), {}
+
+    def step(self, action):
+        self.t += 1
+        return self.observation_space.sample(), float(action == 2), False, self.t >= 10, {}
+
+
+def _kl_after_training(coef: float) -> float:
+    torch.manual_seed(0)
+    model = AnchoredPPO("MultiInputPolicy", _DictEnv(), n_steps=64, batch_size=32, n_epochs=4, learning_rate=3e-3,
+                        seed=0, policy_kwargs=POLICY_KWARGS, device="cpu")
+    model.finetune = FinetuneConfig(anchor_coef=coef, anchor_fraction=1.0, anchor_epochs=4)
+    torch.manual_seed(1)
+    teacher = MultiInputActorCriticPolicy(without_privileged(SPACE), gym.spaces.Discrete(5), lambda _: 1e-3,
+                                          **POLICY_KWARGS)
+    model.teacher = teacher
+    model.learn(total_timesteps=256)
+    obs = {k: v for k, v in _obs(np.random.default_rng(3), 64).items() if k != PRIVILEGED_KEY}
+    with torch.no_grad():
+        kl = torch.distributions.kl_divergence(teacher.get_distribution(obs).distribution,
+                                               model.policy.get_distribution(obs).distribution)
+    return float(kl.mean())
+
+
+def test_the_anchor_pulls_the_policy_towards_the_teacher():
+    assert _kl_after_training(20.0) < 0.5 * _kl_after_training(0.0)
+
+
+def test_privileged_features_read_the_true_road():
+    import rhs_env  # noqa: F401
+
+    env = gym.make("rhs-highway-v0", vehicles_count=3)
+    env.reset(seed=0)
+    base = env.unwrapped
+    ego = base.vehicle
+    others = [v for v in base.road.vehicles if v is not ego]
+    leader = others[0]
+    leader.lane_index, leader.lane = ego.lane_index, ego.lane
+    s, _ = ego.lane.local_coordinates(ego.position)
+    leader.position = ego.lane.position(s + 30.0, 0.0)
+    base.road.vehicles = [ego, leader]
+    v = privileged_features(env)
+    assert v.shape == (PRIVILEGED_DIM,)
+    own = v[3:3 + LANE_FEATURES]
+    assert own[0] == 1.0
+    assert own[1] == pytest.approx(bumper_gap(ego, leader) / GAP_SCALE_M, abs=1e-6)
+    assert own[1] == pytest.approx((30.0 - ego.LENGTH) / GAP_SCALE_M, abs=1e-3)
+    assert own[3] == 1.0  # no follower: the gap reads as the scale
+    assert int(np.argmax(v[-5:])) == HeadwayDriver(env).act()
+    lanes = len(base.road.network.graph[ego.lane_index[0]][ego.lane_index[1]])
+    left = v[3 + LANE_FEATURES:3 + 2 * LANE_FEATURES]
+    assert left[0] == float(ego.lane_index[2] > 0) and lanes > 1
+    time_left = v[3 + 3 * LANE_FEATURES]
+    env.step(1)
+    later = privileged_features(env)[3 + 3 * LANE_FEATURES]
+    step_s = 1.0 / base.config["policy_frequency"]
+    assert time_left - later == pytest.approx(step_s / base.config["duration"], abs=1e-6)
+    env.close()
+
+
+def test_finetune_cli_trains_and_exports_a_plain_student(tmp_path):
+    """End to end on the small SLAM env: a student zip -> measured prior -> PPO with the anchor -> a plain zip."""
+    from agents.evaluate import load_policy, make_env
+    from agents.train import train
+
+    env_id = "rhs-highway-slam-v0"
+    kwargs = small_env_kwargs(duration=4)
+    env = make_env(env_id, kwargs)
+    student = PPO("MultiInputPolicy", env, device="cpu", seed=0,
+                  policy_kwargs={**POLICY_KWARGS, "features_extractor_kwargs": {"point_dim": 16, "box_dim": 8},
+                                 "net_arch": [16]})
+    zip_path = tmp_path / "student.zip"
+    student.save(zip_path)
+    record = {"algo": "dagger", "env_id": env_id, "env_kwargs": kwargs, "decision_interval": 5,
+              "decision_mode": "pulse", "dagger": {"class_weight_power": 0.5, "label_between": True}}
+    zip_path.with_suffix(".json").write_text(json.dumps(record))
+    env.close()
+    hp = tmp_path / "finetune.yml"
+    hp.write_text(tiny_hyperparams(env_id, n_envs=1, n_timesteps=80, decision_interval=5, decision_mode="pulse",
+                                   n_steps=8, batch_size=8, n_epochs=2, gamma=0.8, anchor_coef=1.0,
+                                   anchor_fraction=0.5, prior_steps=30))
+    out = tmp_path / "run"
+    summary = train("finetune", env_id, None, out, hyperparams=hp, init_policy=zip_path, progress=False,
+                    checkpoint_freq=0)
+    assert summary["algo"] == "finetune" and summary["timesteps"] >= 80
+    assert sum(summary["class_prior"]["label_counts"]) == 30
+    saved = json.loads((out / "model.json").read_text())
+    assert saved["decision_interval"] == 5 and saved["decision_mode"] == "pulse"
+    model = PPO.load(out / "model.zip", device="cpu")
+    assert PRIVILEGED_KEY not in model.observation_space.spaces  # the deployed actor needs only the sensors
+    full = AnchoredPPO.load(out / "finetune_full.zip", device="cpu")
+    assert PRIVILEGED_KEY in full.observation_space.spaces
+    env = make_env(env_id, kwargs)
+    policy = load_policy(out / "model.zip", env)
+    obs, _ = env.reset(seed=1)
+    action, _ = policy.predict(obs, deterministic=True)
+    assert int(np.asarray(action).reshape(-1)[0]) in range(5)
+    tensor, _ = model.policy.obs_to_tensor(obs)
+    priv = {**tensor, PRIVILEGED_KEY: torch.zeros((1, PRIVILEGED_DIM))}
+    torch.testing.assert_close(_logits(model.policy, tensor), _logits(full.policy, priv))
+    env.close()
