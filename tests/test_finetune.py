@@ -228,3 +228,41 @@ def test_finetune_cli_trains_and_exports_a_plain_student(tmp_path):
     priv = {**tensor, PRIVILEGED_KEY: torch.zeros((1, PRIVILEGED_DIM))}
     torch.testing.assert_close(_logits(model.policy, tensor), _logits(full.policy, priv))
     env.close()
+
+
+def test_the_study_reads_learning_curves_from_monitor_files(tmp_path):
+    """Two envs' monitor files -> episodes ordered by end time, env steps summed, rolling return and crash rate."""
+    from rhs_studies.rl_finetune import learning_curve
+
+    header = '#{"t_start": 0, "env_id": "x"}\nr,l,t,crashed\n'
+    (tmp_path / "0.monitor.csv").write_text(header + "10,200,1.0,False\n2,30,3.0,True\n")
+    (tmp_path / "1.monitor.csv").write_text(header + "8,200,2.0,False\n")
+    curve = learning_curve(tmp_path, window=2)
+    assert curve["env_steps"] == [400, 430]
+    assert curve["return"] == pytest.approx([9.0, 5.0])
+    assert curve["collision_rate"] == pytest.approx([0.0, 0.5])
+    assert learning_curve(tmp_path / "none") == {"env_steps": [], "return": [], "collision_rate": []}
+
+
+def test_the_study_pairs_by_seed_and_bounds_collisions():
+    from rhs_studies.rl_finetune import paired, row_summary
+
+    a = [{"seed": s, "return": 150.0 + s % 3, "crashed": s == 2, "mean_speed": 24.0} for s in range(10)]
+    b = [{"seed": s, "return": 148.0 + s % 3, "crashed": False, "mean_speed": 23.0} for s in reversed(range(10))]
+    d = paired(a, b)
+    assert d["mean"] == pytest.approx(2.0) and d["low"] == pytest.approx(2.0) and d["n"] == 10
+    s = row_summary(a)
+    assert s["collisions"] == 1 and s["collision_interval"][0] < 0.1 < s["collision_interval"][1]
+    assert s["return"]["half"] > 0
+
+
+def test_the_study_derives_a_control_yaml_with_the_keys_set(tmp_path):
+    import yaml
+
+    from rhs_studies.rl_finetune import hyperparams_file
+
+    path = hyperparams_file("finetune.yml:anchor_coef=0,learning_rate=5.0e-4", tmp_path)
+    table = yaml.safe_load(path.read_text())
+    assert table["rhs-highway-slam-v0"]["anchor_coef"] == 0
+    assert table["rhs-highway-slam-v0"]["learning_rate"] == pytest.approx(5e-4)
+    assert table["rhs-highway-slam-v0"]["anchor_fraction"] == 0.5  # the rest as shipped

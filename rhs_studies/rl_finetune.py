@@ -1,0 +1,336 @@
+"""Reinforcement learning on top of imitation: the PPO fine-tune of the DAgger student against its controls.
+
+Arms (same env-step budget each, ``--timesteps``, on ``rhs-highway-slam-v0`` with the student's env kwargs,
+decisions at 1 Hz in pulse mode; :mod:`agents.finetune`):
+
+* ``finetune``: PPO from the student with the privileged critic, the class-prior correction and the KL anchor
+  decaying to zero at half the run (``agents/hyperparams/finetune.yml``);
+* ``finetune_no_anchor``: the same without the anchor (``anchor_coef: 0``);
+* ``dagger_continue``: DAgger going on from the student, the expert labelling the states it reaches
+  (``agents/hyperparams/dagger_continue.yml``);
+* ``scratch``: PPO from scratch with the privileged critic (``finetune.yml`` without a student, with PPO's usual
+  learning rate 5e-4, clip range 0.2 and an entropy bonus 0.01), on request (``--arms ... scratch``).
+
+Evaluation on ``--episodes`` seeds from ``--seed`` (3000..: never used in training, where the envs draw seeds
+0.. and 20000.., nor in any earlier selection), every policy on the same seeds; the scripted references
+(always SLOWER, IDM + MOBIL, the headway expert deciding at 1 Hz) on ``rhs-highway-v0``, which meets the same
+traffic for the same seed and actions. Each row: mean return with its t interval, collisions with a Wilson
+interval, mean speed; paired return differences (t intervals over the common seeds) against the student and the
+DAgger continuation. The learning curves (return and collision rate of the training episodes against env steps)
+come from each run's ``monitor/`` files; ``results/rl_finetune.png`` draws them.
+
+Targets for the fine-tune on the held-out seeds: return >= 1.08x IDM + MOBIL, collisions <= 2 per 100, mean speed
+>= 24 m/s, a paired gain over the student >= +3 with its 95 % interval above 0, and more than the DAgger
+continuation.
+
+    OMP_NUM_THREADS=1 python scripts/rl_finetune.py --train            # train the missing arms, then evaluate
+    OMP_NUM_THREADS=1 python scripts/rl_finetune.py --runs runs/rl     # evaluate trained arms
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.decision import SLOWER
+from rhs_common.stats import mean_interval, paired_difference, wilson_interval
+from rhs_studies.evaluate_policies import run_policy
+from rhs_studies.provenance import git_state, write_json
+
+ROOT = Path(__file__).resolve().parent.parent
+ENV_ID = "rhs-highway-slam-v0"
+STUDENT = ROOT / "agents" / "data" / "dagger_rhs_highway_slam.zip"
+#: where the trained arms are kept (the actor zips and their training records)
+SHIPPED_DIR = ROOT / "agents" / "data" / "rl"
+HYPERPARAMS = ROOT / "agents" / "hyperparams"
+#: arm -> (algo, hyperparameter file, starts from the student)
+ARMS: dict[str, tuple[str, str, bool]] = {
+    "finetune": ("finetune", "finetune.yml", True),
+    "finetune_no_anchor": ("finetune", "finetune.yml:anchor_coef=0", True),
+    "dagger_continue": ("dagger", "dagger_continue.yml", True),
+    "scratch": ("finetune", "finetune.yml:learning_rate=5.0e-4,clip_range=0.2,ent_coef=0.01", False),
+}
+LABELS = {
+    "student": "DAgger student (shipped, start of every arm)",
+    "finetune": "PPO fine-tune, privileged critic, decaying anchor",
+    "finetune_no_anchor": "PPO fine-tune without the anchor (control)",
+    "dagger_continue": "DAgger continuation (control)",
+    "scratch": "PPO from scratch, privileged critic",
+    "slower": "always SLOWER (scripted)",
+    "idm": "IDM + MOBIL (highway-env, scripted)",
+    "headway": "HeadwayDriver at 1 Hz, IDLE between (the expert)",
+}
+#: the fine-tune's targets: return vs IDM + MOBIL, collisions per episode, mean speed, paired gain over the student
+TARGET_VS_IDM, TARGET_COLLISIONS, TARGET_SPEED_MPS, TARGET_GAIN = 1.08, 0.02, 24.0, 3.0
+#: training episodes per point of a learning curve (a rolling window)
+CURVE_WINDOW = 20
+
+
+def hyperparams_file(spec: str, run_dir: Path) -> Path:
+    """``NAME.yml`` of agents/hyperparams, or ``NAME.yml:key=value,...``: a copy with those keys set (in ``run_dir``)."""
+    import yaml
+
+    name, _, overrides = spec.partition(":")
+    path = HYPERPARAMS / name
+    if not overrides:
+        return path
+    table = yaml.safe_load(path.read_text())
+    changes = {k: yaml.safe_load(v) for k, v in (item.split("=", 1) for item in overrides.split(","))}
+    for entry in table.values():
+        entry.update(changes)
+    out = run_dir / f"{name.removesuffix('.yml')}_{'_'.join(f'{k}{v}' for k, v in changes.items())}.yml"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(yaml.safe_dump(table, sort_keys=False))
+    return out
+
+
+def train_arm(arm: str, runs: Path, timesteps: int, seed: int) -> dict[str, Any]:
+    """Train ``arm`` into ``runs/arm`` with ``rhs-slam train`` in a subprocess; its record (command, commit, wall)."""
+    algo, spec, from_student = ARMS[arm]
+    out = runs / arm
+    cmd = [sys.executable, "-m", "rhs_slam", "train", "--algo", algo, "--env", ENV_ID, "--timesteps", str(timesteps),
+           "--seed", str(seed), "--out", str(out), "--no-progress", "--hyperparams", str(hyperparams_file(spec, runs))]
+    if from_student:
+        cmd += ["--init-policy", str(STUDENT)]
+    print(f"rl_finetune: training {arm}: {' '.join(cmd[1:])}", file=sys.stderr)
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    record = {"command": cmd[1:], "commit": git_state().get("commit"), "wall_s": round(time.perf_counter() - t0, 1)}
+    (out / "run.json").write_text(json.dumps(record, indent=1))
+    return record
+
+
+def run_record(runs: Path, arm: str) -> dict[str, Any] | None:
+    """How the arm was trained: ``runs/ARM/run.json`` (written by ``--train``) or, for a run started by hand,
+    the ``runs/ARM.command`` / ``runs/ARM.commit`` files beside its folder; None when neither is there."""
+    run = runs / arm / "run.json"
+    if run.exists():
+        return json.loads(run.read_text())
+    command, commit = runs / f"{arm}.command", runs / f"{arm}.commit"
+    if command.exists() and commit.exists():
+        return {"command": ["rhs_slam", *command.read_text().split()], "commit": commit.read_text().strip()}
+    return None
+
+
+def ship_arm(arm: str, runs: Path, ship_dir: Path = SHIPPED_DIR) -> Path:
+    """Copy the arm's actor zip and training record to ``ship_dir/ARM.zip`` / ``.json``; the zip's path."""
+    ship_dir.mkdir(parents=True, exist_ok=True)
+    src = runs / arm
+    dst = ship_dir / f"{arm}.zip"
+    shutil.copyfile(src / "model.zip", dst)
+    record = json.loads((src / "model.json").read_text())
+    record["trained_by"] = run_record(runs, arm)
+    record["model"] = str(dst.relative_to(ROOT)) if dst.is_relative_to(ROOT) else str(dst)
+    dst.with_suffix(".json").write_text(json.dumps(record, indent=2) + "\n")
+    return dst
+
+
+def learning_curve(monitor_dir: Path, window: int = CURVE_WINDOW) -> dict[str, list[float]]:
+    """Return and collision rate of the training episodes (rolling mean of ``window``) against env steps.
+
+    Reads stable-baselines3's ``*.monitor.csv`` files (one per env; columns r, l, t, crashed), orders the
+    episodes by their end time and counts env steps as the sum of the lengths of the episodes ended so far.
+    """
+    rows = []
+    for path in sorted(Path(monitor_dir).glob("*.monitor.csv")):
+        lines = path.read_text().splitlines()[1:]  # the first line is the monitor's JSON header
+        if len(lines) < 2:
+            continue
+        header = lines[0].split(",")
+        for line in lines[1:]:
+            values = dict(zip(header, line.split(","), strict=False))
+            rows.append((float(values["t"]), float(values["r"]), int(values["l"]),
+                         float(values.get("crashed", "False") in ("True", "1", "1.0"))))
+    if not rows:
+        return {"env_steps": [], "return": [], "collision_rate": []}
+    rows.sort()
+    steps = np.cumsum([r[2] for r in rows])
+    w = min(window, len(rows))
+
+    def rolling(x: np.ndarray) -> list[float]:
+        c = np.concatenate([[0.0], np.cumsum(x)])
+        return ((c[w:] - c[:-w]) / w).tolist()
+
+    return {"env_steps": steps[w - 1:].tolist(), "return": rolling(np.array([r[1] for r in rows])),
+            "collision_rate": rolling(np.array([r[3] for r in rows]))}
+
+
+def row_summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Mean return (t interval), collisions (Wilson interval), mean speed of one policy's episodes."""
+    returns = [r["return"] for r in runs]
+    crashes = sum(bool(r["crashed"]) for r in runs)
+    ret = mean_interval(returns)
+    low, high = wilson_interval(crashes, len(runs))
+    speed = mean_interval([r["mean_speed"] for r in runs])
+    return {"episodes": len(runs), "return": {"mean": ret.mean, "half": ret.half_width, "min": float(np.min(returns))},
+            "collisions": crashes, "collision_rate": crashes / len(runs), "collision_interval": [low, high],
+            "mean_speed_mps": {"mean": speed.mean, "half": speed.half_width}}
+
+
+def paired(a: list[dict[str, Any]], b: list[dict[str, Any]]) -> dict[str, float]:
+    """Paired return difference a - b over the common seeds (t interval)."""
+    by_b = {r["seed"]: r["return"] for r in b}
+    common = [r for r in a if r["seed"] in by_b]
+    d = paired_difference([r["return"] for r in common], [by_b[r["seed"]] for r in common])
+    return {"mean": d.mean, "low": d.low, "high": d.high, "n": len(common)}
+
+
+def targets(rows: dict[str, dict[str, Any]], runs: dict[str, list[dict]], arm: str = "finetune") -> dict[str, Any]:
+    """The fine-tune's targets against IDM + MOBIL, the student and the DAgger continuation."""
+    if arm not in rows:
+        return {}
+    s = rows[arm]
+    gain = paired(runs[arm], runs["student"])
+    out: dict[str, Any] = {
+        "return_vs_idm": s["return"]["mean"] / rows["idm"]["return"]["mean"],
+        "collision_rate": s["collision_rate"],
+        "mean_speed_mps": s["mean_speed_mps"]["mean"],
+        "gain_over_student": gain,
+    }
+    if "dagger_continue" in runs:
+        out["gain_over_dagger_continue"] = paired(runs[arm], runs["dagger_continue"])
+    out["met"] = {
+        "return_vs_idm": out["return_vs_idm"] >= TARGET_VS_IDM,
+        "collisions": s["collision_rate"] <= TARGET_COLLISIONS,
+        "mean_speed": out["mean_speed_mps"] >= TARGET_SPEED_MPS,
+        "gain_over_student": gain["mean"] >= TARGET_GAIN and gain["low"] > 0,
+        "beats_dagger_continue": ("gain_over_dagger_continue" in out and out["gain_over_dagger_continue"]["low"] > 0),
+    }
+    return out
+
+
+def plot(curves: dict[str, dict[str, list[float]]], path: Path) -> None:
+    """Return and collision rate of the training episodes against env steps, one line per arm."""
+    import matplotlib.pyplot as plt
+
+    fig, (ax_r, ax_c) = plt.subplots(1, 2, figsize=(10, 3.6))
+    for arm, curve in curves.items():
+        if curve["env_steps"]:
+            ax_r.plot(curve["env_steps"], curve["return"], label=LABELS.get(arm, arm))
+            ax_c.plot(curve["env_steps"], curve["collision_rate"], label=LABELS.get(arm, arm))
+    ax_r.set(xlabel="env steps", ylabel=f"episode return (mean of {CURVE_WINDOW})", title="Training episodes: return")
+    ax_c.set(xlabel="env steps", ylabel=f"collision rate (of {CURVE_WINDOW})", title="Training episodes: collisions")
+    ax_r.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _fmt_row(key: str, s: dict[str, Any], gain: dict[str, float] | None) -> str:
+    lo, hi = s["collision_interval"]
+    diff = "" if gain is None else f"{gain['mean']:+.1f} [{gain['low']:+.1f}, {gain['high']:+.1f}]"
+    return (f"| {LABELS.get(key, key)} | {s['return']['mean']:.1f} +- {s['return']['half']:.1f} | "
+            f"{s['collisions']}/{s['episodes']} [{100 * lo:.0f}-{100 * hi:.0f} %] | "
+            f"{s['mean_speed_mps']['mean']:.1f} | {diff} |")
+
+
+def markdown(result: dict[str, Any]) -> str:
+    """The results table: one row per policy, paired differences against the student."""
+    lines = [f"Held-out seeds {result['seeds'][0]}-{result['seeds'][-1]} ({result['episodes']} episodes, "
+             f"{ENV_ID}); each arm {result['timesteps']} env steps from the same student.", "",
+             "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs student (paired, 95 % CI) |",
+             "|---|---|---|---|---|"]
+    for key, s in result["rows"].items():
+        lines.append(_fmt_row(key, s, result["vs_student"].get(key)))
+    t = result.get("targets") or {}
+    if t:
+        met = ", ".join(f"{k} {'met' if v else 'not met'}" for k, v in t["met"].items())
+        lines += ["", f"Fine-tune: {t['return_vs_idm']:.3f}x IDM + MOBIL, {100 * t['collision_rate']:.0f} % collisions, "
+                  f"{t['mean_speed_mps']:.1f} m/s; targets: {met}."]
+    return "\n".join(lines) + "\n"
+
+
+def evaluate_rows(policies: dict[str, Path], seeds: list[int], workers: int) -> dict[str, list[dict]]:
+    """Every learned policy on the SLAM env and the scripted references on the ground-truth env, same seeds."""
+    from agents.evaluate import resolve_env
+
+    _, student_kwargs = resolve_env(str(STUDENT))
+    # always SLOWER and IDM with highway-env's own action set, as the driving targets were set; the expert with the
+    # students' target speeds, as it taught them
+    scripted = {"slower": (f"constant:{SLOWER}", {}), "idm": ("idm", {}),
+                "headway": ("headway:5", {"action": student_kwargs.get("action")} if "action" in student_kwargs else {})}
+    runs: dict[str, list[dict]] = {}
+    for key, path in policies.items():
+        env_id, kwargs = resolve_env(str(path))
+        t0 = time.perf_counter()
+        runs[key] = run_policy(str(path), env_id, kwargs, seeds, workers)
+        print(f"rl_finetune: {key}: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
+    for key, (policy, kwargs) in scripted.items():
+        runs[key] = run_policy(policy, "rhs-highway-v0", kwargs, seeds, workers)
+    return runs
+
+
+SLIM_KEYS = ("seed", "return", "steps", "crashed", "mean_speed", "position_rmse_m")
+
+
+def fingerprint() -> list[float]:
+    """The student and each shipped arm, one 2-second episode (10 steps) on seed 3000."""
+    from agents.evaluate import resolve_env
+
+    out: list[float] = []
+    for path in [STUDENT, *sorted(SHIPPED_DIR.glob("*.zip"))]:
+        env_id, kwargs = resolve_env(str(path))
+        run = run_policy(str(path), env_id, {**kwargs, "duration": 2}, [3000], 1)[0]
+        out += [float(run[k]) for k in SLIM_KEYS[1:] if isinstance(run.get(k), (int, float))]
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--runs", default=str(ROOT / "runs" / "rl"), help="training runs folder (one subfolder per arm)")
+    ap.add_argument("--arms", nargs="+", default=["finetune", "finetune_no_anchor", "dagger_continue"],
+                    choices=list(ARMS))
+    ap.add_argument("--train", action="store_true", help="train the arms whose run folder has no model.zip")
+    ap.add_argument("--timesteps", type=int, default=20000, help="env steps per arm")
+    ap.add_argument("--train-seed", type=int, default=0)
+    ap.add_argument("--episodes", type=int, default=100)
+    ap.add_argument("--seed", type=int, default=3000, help="first held-out evaluation seed")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--out-dir", default=str(ROOT / "results"))
+    ap.add_argument("--ship-dir", default=str(SHIPPED_DIR), help="where the arms' actor zips are copied")
+    args = ap.parse_args(argv)
+    if args.episodes < 2:
+        ap.error("--episodes must be >= 2 (intervals need two episodes)")
+    started = time.time()
+    runs_dir = Path(args.runs)
+    for arm in args.arms:
+        if args.train and not (runs_dir / arm / "model.zip").exists():
+            train_arm(arm, runs_dir, args.timesteps, args.train_seed)
+        if not (runs_dir / arm / "model.zip").exists():
+            ap.error(f"{runs_dir / arm}/model.zip is missing: train it (--train) or leave {arm} out of --arms")
+    shipped = {arm: ship_arm(arm, runs_dir, Path(args.ship_dir)) for arm in args.arms}
+    seeds = list(range(args.seed, args.seed + args.episodes))
+    runs = evaluate_rows({"student": STUDENT, **shipped}, seeds, args.workers)
+    rows = {key: row_summary(r) for key, r in runs.items()}
+    curves = {arm: learning_curve(runs_dir / arm / "monitor") for arm in args.arms}
+    out = Path(args.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    plot(curves, out / "rl_finetune.png")
+    training = {arm: {k: json.loads(p.with_suffix(".json").read_text()).get(k) for k in
+                      ("algo", "timesteps", "wall_time_s", "steps_per_s", "trained_by", "class_prior", "finetune")}
+                for arm, p in shipped.items()}
+    result = {
+        "env_id": ENV_ID, "episodes": args.episodes, "seeds": seeds, "timesteps": args.timesteps,
+        "rows": rows,
+        "vs_student": {k: paired(runs[k], runs["student"]) for k in runs if k != "student"},
+        "targets": targets(rows, runs),
+        "training": training,
+        "curves": curves,
+        "runs": {k: [{f: r.get(f) for f in SLIM_KEYS} for r in v] for k, v in runs.items()},
+    }
+    write_json(out / "rl_finetune.json", result, __file__, args, started, fingerprint, argv)
+    (out / "rl_finetune.md").write_text(markdown(result))
+    print(markdown(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
