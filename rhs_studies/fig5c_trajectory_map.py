@@ -35,9 +35,9 @@ from rhs_studies.provenance import write_json
 def run(args: argparse.Namespace) -> dict:
     from tqdm import tqdm
 
-    from slam.metrics import map_metrics
-    from slam.registration import apply_motion
-    from slam.wrapper import SlamObservation
+    from slam.core.metrics import map_metrics
+    from slam.core.registration import apply_motion
+    from slam.gym.wrapper import SlamObservation
 
     env = make_paper_env(args, args.antenna, args.tx_power)
     slam = env

@@ -2,8 +2,9 @@
 
 1. Drives ``rhs-highway-radar-v0`` (traffic, roadside landmarks, the default RHS
    radar) with random lane/speed actions, and the paper's road with random sparse
-   obstacle layouts, and records consecutive clouds and the true motion between them. As in :class:`slam.pipeline.SlamPipeline`, the ego
-   velocity comes from the clouds' Doppler and moving points are removed.
+   obstacle layouts, and records consecutive clouds and the true motion between them. As in
+   :class:`slam.core.pipeline.SlamPipeline`, the ego velocity comes from the clouds' Doppler and moving
+   points are removed.
 2. Each pair gets ``priors_per_pair`` motion priors = truth + Gaussian error
    (``prior_std_m``, ``prior_std_rad``): the network learns the residual.
 3. Trains the paper's CNN with the paper's loss; held-out pairs come from
@@ -57,8 +58,8 @@ def collect_pairs(episodes: int, steps: int, seed: int, env_kwargs: dict, progre
 
     import rhs_env  # noqa: F401  (registers the ids)
     from rhs_env.scene import world_pose
-    from slam.association import estimate_ego_velocity, static_mask
-    from slam.registration import relative_motion
+    from slam.core.association import estimate_ego_velocity, static_mask
+    from slam.core.registration import relative_motion
 
     rng = np.random.default_rng(seed)
     prev_list, cur_list, motions = [], [], []
@@ -91,8 +92,8 @@ def collect_pairs(episodes: int, steps: int, seed: int, env_kwargs: dict, progre
 
 
 def make_dataset(prev_list, cur_list, motions, priors_per_pair, prior_std, grid, rng):
-    from slam.cnn_registration import pair_input
-    from slam.registration import relative_motion
+    from slam.core.cnn_registration import pair_input
+    from slam.core.registration import relative_motion
 
     xs, ys, priors, index = [], [], [], []
     for k, (p, c, m) in enumerate(zip(prev_list, cur_list, motions)):
@@ -122,13 +123,13 @@ def fingerprint() -> list[float]:
     freshly trained CNN, ICP) on the same pairs."""
     import tempfile
 
-    from slam.cnn_registration import (
+    from slam.core.cnn_registration import (
         CNNRegistration,
         CNNTrainConfig,
         GridMapConfig,
         train_cnn,
     )
-    from slam.registration import ICPRegistration
+    from slam.core.registration import ICPRegistration
 
     raw = collect_pairs(1, 5, 0, {"radar": {"scan": {"grid_deg": 5.0}}, "vehicles_count": 5}, progress=False)
     grid, rng = GridMapConfig(), np.random.default_rng(0)
@@ -167,13 +168,13 @@ def main(argv=None) -> int:
         args.episodes, args.val_episodes, args.steps, args.epochs, args.priors_per_pair = 2, 1, 8, 2, 2
         args.paper_episodes = 1
 
-    from slam.cnn_registration import (
+    from slam.core.cnn_registration import (
         CNNRegistration,
         CNNTrainConfig,
         GridMapConfig,
         train_cnn,
     )
-    from slam.registration import ICPRegistration
+    from slam.core.registration import ICPRegistration
 
     progress = not args.no_progress
     env_kwargs = {"radar": {"scan": {"grid_deg": args.grid_deg}}, "vehicles_count": 20}

@@ -29,7 +29,7 @@ from conftest import SMALL_RADAR
 import rhs_env  # noqa: F401
 from rhs_env.scan_cli import SceneError, parse_scene
 from rhs_slam.cli import main
-from slam.scenario_cli import parse_scenario
+from slam.gym.scenario_cli import parse_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 

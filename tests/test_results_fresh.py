@@ -57,7 +57,7 @@ def test_fingerprint_matches_the_code(step):
 
 def _odometry_bias(monkeypatch):
     """A real change of the SLAM: the filter's motion prediction takes the registration motion 1 % long."""
-    from slam.rbpf import RBPFSlam
+    from slam.core.rbpf import RBPFSlam
 
     predict = RBPFSlam._predict
 
