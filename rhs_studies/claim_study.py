@@ -339,7 +339,8 @@ def run_pointcloud_cell(radar: RadarSystem, k: int, sep_deg: float, snr_db: floa
     snr = 10 ** (snr_db / 10)
     rcs = snr / float(radar.config.unit_gain_snr(cfg.range_m, 1.0))
     trials: list[dict[str, Any]] = []
-    crb_group, crb_single = [], []
+    crb_group: list[float] = []
+    crb_single: list[float] = []
     while len(trials) < cfg.seeds:
         groups = make_groups(radar, k, sep_deg, cfg.range_m, cfg.centre_max_deg, scene_rng)
         xy = np.concatenate([g.xy for g in groups])

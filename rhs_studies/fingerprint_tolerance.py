@@ -50,6 +50,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -94,7 +95,7 @@ def worker(names: list[str]) -> None:
     print(json.dumps(out))
 
 
-def run_setting(label: str, env: dict[str, str], names: list[str], python: str) -> dict[str, list]:
+def run_setting(label: str, env: dict[str, str], names: list[str], python: str) -> dict[str, Any]:
     """The fingerprints of ``names`` computed by ``python`` in a fresh process with ``env`` added."""
     t0 = time.time()
     full = {**os.environ, "MPLBACKEND": "Agg", "SDL_VIDEODRIVER": "dummy", "OMP_NUM_THREADS": "1", **env,
@@ -165,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"fingerprint_tolerance: error: no fingerprinted step among {a.only}", file=sys.stderr)
         return 2
     names = [s.name for s in steps]
-    runs: dict[str, dict[str, list]] = {}
+    runs: dict[str, dict[str, Any]] = {}
     for label in a.settings:
         runs[label] = run_setting(label, SETTINGS[label], names, sys.executable)
     for item in a.python:

@@ -143,6 +143,8 @@ def load_script(script: str):
     if name in sys.modules:
         return sys.modules[name]
     spec = importlib.util.spec_from_file_location(name, SCRIPTS / script)
+    if spec is None or spec.loader is None:
+        raise ImportError(f"{SCRIPTS / script} cannot be loaded as a module")
     mod = importlib.util.module_from_spec(spec)
     sys.modules[name] = mod  # dataclasses resolve their annotations through sys.modules
     spec.loader.exec_module(mod)

@@ -93,6 +93,8 @@ def _visible_landmarks(env) -> np.ndarray:
     w = env
     while not isinstance(w, RadarObservation):
         w = w.env
+    if w.radar is None:
+        raise RuntimeError("the radar is built on reset: reset the env before asking what it sees")
     base = env.unwrapped
     sc, occ = scene_scatterers(base, base.vehicle, w.scatter_config)
     view = w.radar.in_view(sc, occ) & sc.is_static & (sc.object_id < 1_000_000)
@@ -158,7 +160,10 @@ def _episode(env, seed: int, visibility: bool = False, action: int = IDLE) -> di
     scans whose points measured them (:func:`_seen_breakdown`).
     """
     obs, _ = env.reset(seed=seed)
-    err, done, info, visible, hits = [], False, {}, {}, {}
+    err: list[float] = []
+    done, info = False, {}
+    visible: dict[int, int] = {}  # landmark id -> cycles in the radar's unoccluded view
+    hits: dict[int, int] = {}  # landmark id -> scans with a point within 1 m of it
     if visibility:
         _count_hits(env, obs, hits)
     while not done:
@@ -589,7 +594,7 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, dict]:
     return args, slam
 
 
-def fingerprint() -> list[float]:
+def fingerprint() -> list[float | None]:
     """The paper part and the dense part's RHS values of the quick config (seed 100, 10 particles): seconds.
 
     The dense part's phased-array run is left out: with 10 particles it loses the car, and a
