@@ -26,7 +26,6 @@ import argparse
 import importlib
 import importlib.util
 import json
-import os
 import subprocess
 import sys
 import time
@@ -43,6 +42,7 @@ from rhs_studies.provenance import (
     script_name,
     verification,
 )
+from rhs_studies.subprocess_env import study_env
 
 SCRIPTS = ROOT / "scripts"
 
@@ -193,9 +193,7 @@ def list_steps(steps: list[Step]) -> None:
 def run_steps(steps: list[Step], progress: bool) -> int:
     from tqdm import tqdm
 
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
-           "MPLBACKEND": "Agg", "SDL_VIDEODRIVER": "dummy",
-           "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
+    env = study_env()
     total = sum(estimate(s) for s in steps)
     print(f"reproduce: {len(steps)} step(s), estimated {_hms(total)}", flush=True)
     failed = []
