@@ -35,7 +35,7 @@ from agents.evaluate import (
     run_episode,
 )
 
-#: GIF legend: the colours drawn over highway-env's frame (rhs_env.wrappers, slam.wrapper, rhs_env.envs)
+#: GIF legend: the colours drawn over highway-env's frame (rhs_env.wrappers, slam.gym.wrapper, rhs_env.envs)
 GIF_LEGEND = (
     ((255, 40, 40), "radar points"),
     ((60, 220, 60), "true landmarks"),
@@ -137,10 +137,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _show_landmarks(env) -> bool:
-    """Ask a SLAM env's :class:`slam.metrics_info.SlamMetricsInfo` for the landmark maps in ``info``."""
+    """Ask a SLAM env's :class:`slam.gym.metrics_info.SlamMetricsInfo` for the landmark maps in ``info``."""
     import gymnasium as gym
 
-    from slam.metrics_info import SlamMetricsInfo
+    from slam.gym.metrics_info import SlamMetricsInfo
 
     e = env
     while isinstance(e, gym.Wrapper):

@@ -154,7 +154,7 @@ def policy_metadata(policy: str | Path) -> dict[str, Any]:
     return meta if isinstance(meta, dict) else {}
 
 
-#: ids whose info carries the SLAM metrics (slam.metrics_info.SlamMetricsInfo)
+#: ids whose info carries the SLAM metrics (slam.gym.metrics_info.SlamMetricsInfo)
 SLAM_ENV_IDS = tuple(env_id for env_id, _ in SLAM_ENV_SPECS)
 
 

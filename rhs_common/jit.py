@@ -1,6 +1,6 @@
 """Compiled kernels: numba's ``njit`` with an on-disk cache that works on any install.
 
-The radar's and the SLAM's inner loops (:mod:`rhs_env.kernels`, :mod:`slam.kernels`)
+The radar's and the SLAM's inner loops (:mod:`rhs_env.kernels`, :mod:`slam.core.kernels`)
 run on arrays of 30-300 rows, where numpy pays more in interpreter overhead than in
 arithmetic; compiled with numba they compute the same equations in the same order
 (the numpy code stays the reference, ``kernels="numpy"`` in the radar and SLAM
@@ -122,7 +122,7 @@ def warm_cache(run: Callable[[], Any], probe: Any, key: str = "") -> bool:
     except AttributeError:  # no on-disk cache (not a cached dispatcher)
         return False
     digest = hashlib.sha256(f"{key}|{numba.__version__}".encode())
-    for module in ("rhs_env/kernels.py", "slam/kernels.py", "rhs_common/jit.py"):
+    for module in ("rhs_env/kernels.py", "slam/core/kernels.py", "rhs_common/jit.py"):
         source = _PACKAGE_ROOT / module
         if source.is_file():
             digest.update(source.read_bytes())

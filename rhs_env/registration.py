@@ -14,9 +14,9 @@ id                         entry point                                     obser
 =========================  ==============================================  =====================
 ``rhs-highway-v0``         ``rhs_env.envs:RHSHighwayEnv``                  Kinematics (truth)
 ``rhs-highway-radar-v0``   ``rhs_env.registration:make_highway_radar``     radar point cloud
-``rhs-highway-slam-v0``    ``slam.envs:make_highway_slam``                 cloud + SLAM
-``rhs-paper-v0``           ``slam.envs:make_paper_slam``                   cloud + SLAM
-``rhs-dense-v0``           ``slam.envs:make_dense_slam``                   cloud + SLAM
+``rhs-highway-slam-v0``    ``slam.gym.envs:make_highway_slam``             cloud + SLAM
+``rhs-paper-v0``           ``slam.gym.envs:make_paper_slam``               cloud + SLAM
+``rhs-dense-v0``           ``slam.gym.envs:make_dense_slam``               cloud + SLAM
 =========================  ==============================================  =====================
 
 Keyword arguments of ``gym.make`` go to the entry point: env config keys
@@ -88,11 +88,11 @@ ENV_SPECS: tuple[tuple[str, str], ...] = (
 )
 
 #: the SLAM ids: scene -> RadarObservation -> SlamObservation -> SlamMetricsInfo. They live one
-#: layer up (slam.envs); the string entry point is resolved only when such an env is made.
+#: layer up (slam.gym.envs); the string entry point is resolved only when such an env is made.
 SLAM_ENV_SPECS: tuple[tuple[str, str], ...] = (
-    (HIGHWAY_SLAM_ID, "slam.envs:make_highway_slam"),
-    (PAPER_ID, "slam.envs:make_paper_slam"),
-    (DENSE_ID, "slam.envs:make_dense_slam"),
+    (HIGHWAY_SLAM_ID, "slam.gym.envs:make_highway_slam"),
+    (PAPER_ID, "slam.gym.envs:make_paper_slam"),
+    (DENSE_ID, "slam.gym.envs:make_dense_slam"),
 )
 
 

@@ -28,12 +28,12 @@ plus a floor for what the bound does not model:
   ``RadarConfig.uncertainty.angle_std_floor_deg`` = 0.003 deg) sit above the errors of isolated noiseless targets (0.7 mm,
   1e-4 deg RMS, ``tests/test_uncertainty.py``). Two targets in one range cell
   and errors outside the radar (timing, clustering) are not covered here: the
-  SLAM filter adds its own floor (``slam.rbpf.SlamConfig.measurement_floor_m``).
+  SLAM filter adds its own floor (``slam.core.rbpf.SlamConfig.measurement_floor_m``).
 
 A point's Cartesian covariance in the vehicle frame follows by linearising
 ``x = s + R (cos phi, sin phi)``, ``phi = boresight + theta``:
 ``Sigma = J diag(sigma_R^2, sigma_theta^2) J^T``, ``J = [u, R u_perp]``
-(:func:`slam.association.point_covariance`, from the rows of :func:`point_rows`).
+(:func:`slam.core.association.point_covariance`, from the rows of :func:`point_rows`).
 """
 
 from __future__ import annotations

@@ -37,6 +37,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -142,7 +143,8 @@ def _action_histogram(policy: Path, env_id: str, kwargs: dict, seed: int) -> dic
 
     env = gym.make(env_id, **kwargs)
     model = load_policy(policy, env)  # a HeldPolicy for a decision_interval > 1
-    names = env.unwrapped.action_type.actions
+    base: Any = env.unwrapped  # highway-env's AbstractEnv (untyped)
+    names = base.action_type.actions
     counts: dict[str, int] = {}
 
     class Counted:

@@ -48,6 +48,7 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -69,7 +70,7 @@ def _mean_times(dicts: list[dict]) -> dict:
 
 #: the envs of the ``envs`` section: (label, id, kwargs beside the radar grid); the last two are the
 #: numpy reference kernels of the same envs (the per-stage "before" of the compiled kernels)
-ENV_RUNS = (
+ENV_RUNS: tuple[tuple[str, str, dict[str, str] | None], ...] = (
     ("rhs-highway-v0", "rhs-highway-v0", None),
     ("rhs-highway-radar-v0", "rhs-highway-radar-v0", {}),
     ("rhs-highway-slam-v0", "rhs-highway-slam-v0", {}),
@@ -107,9 +108,10 @@ def bench_envs(steps: int, seed: int, grid_deg: float, block: int = 5, numpy_ker
 
     load_start = [round(x, 2) for x in os.getloadavg()]
     runs = [r for r in ENV_RUNS if numpy_kernels or "numpy" not in r[0]]
-    envs, actions = {}, np.random.default_rng(seed).choice([1, 1, 1, 3, 4], size=max(steps, 2 * block))
+    envs: dict[str, dict[str, Any]] = {}  # label -> env, seconds and steps timed, stage times per step
+    actions = np.random.default_rng(seed).choice([1, 1, 1, 3, 4], size=max(steps, 2 * block))
     for label, env_id, kernels in runs:
-        kwargs = {} if kernels is None else {"radar": {"scan": {"grid_deg": grid_deg}, **kernels},
+        kwargs: dict[str, Any] = {} if kernels is None else {"radar": {"scan": {"grid_deg": grid_deg}, **kernels},
                                              "stage_times_in_info": True}
         if kernels and env_id.startswith("rhs-highway-slam"):
             kwargs["slam"] = dict(kernels)
@@ -195,7 +197,10 @@ def bench_start(repeats: int = 1) -> dict:
     import tempfile
 
     out: dict = {"load_average_start": [round(x, 2) for x in os.getloadavg()]}
-    cold, warm, cold_p, warm_p = [], [], [], []
+    cold: list[float] = []
+    warm: list[float] = []
+    cold_p: list[float] = []
+    warm_p: list[float] = []
     for _ in range(repeats):
         with tempfile.TemporaryDirectory() as cache:
             env = {**os.environ, "NUMBA_CACHE_DIR": cache, "OMP_NUM_THREADS": "1"}
@@ -288,7 +293,7 @@ def bench_load(steps: int, seed: int, grid_deg: float) -> dict:
 
     import rhs_env  # noqa: F401
 
-    out = {}
+    out: dict[str, Any] = {}
     for threads in (1, None):
         env = gym.make("rhs-highway-radar-v0", radar={"scan": {"grid_deg": grid_deg}}, blas_threads=threads)
         _steps_per_s(env, 3, seed)  # warm-up
@@ -321,7 +326,7 @@ def bench_vec(steps: int, seed: int, grid_deg: float) -> dict:
 
     from stable_baselines3.common.vec_env import SubprocVecEnv
 
-    out = {}
+    out: dict[str, Any] = {}
     for n in (1, 2):
         venv = SubprocVecEnv([functools.partial(_make_radar_env, grid_deg) for _ in range(n)])
         venv.seed(seed)
@@ -543,7 +548,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _goals(result: dict) -> dict:
     """Each speed ratio present in the result, its goal and whether it is met."""
-    found = {}
+    found: dict[str, dict[str, Any]] = {}
     for sec in ("envs", "load", "vec", "training"):
         for k, goal in GOALS.items():
             if k in result.get(sec, {}):

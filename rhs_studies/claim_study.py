@@ -39,8 +39,8 @@ library for a non-default M is optimised into the user cache on first use).
 obstacles; :data:`rhs_env.envs.PAPER_OBSTACLES`), each obstacle replaced by a group
 of K landmarks spaced ``2 D tan(dtheta / 2)`` across the line of sight from the
 middle of the drive (D its distance), the ego at ``slam_speed_mps`` straight ahead,
-one cycle per ``slam_dt_s``; :class:`slam.scenario.RadarCloud` scans the landmarks
-with the package's radar and :func:`slam.scenario.run_scenario` runs the package's
+one cycle per ``slam_dt_s``; :class:`slam.gym.radar_cloud.RadarCloud` scans the landmarks
+with the package's radar and :func:`slam.core.scenario.run_scenario` runs the package's
 SLAM with its default registration and, on the same clouds, the odometry oracle
 (the filter's own floor). Metrics: ATE (vehicle position RMSE), map RMSE, spurious
 and missed landmarks.
@@ -339,7 +339,8 @@ def run_pointcloud_cell(radar: RadarSystem, k: int, sep_deg: float, snr_db: floa
     snr = 10 ** (snr_db / 10)
     rcs = snr / float(radar.config.unit_gain_snr(cfg.range_m, 1.0))
     trials: list[dict[str, Any]] = []
-    crb_group, crb_single = [], []
+    crb_group: list[float] = []
+    crb_single: list[float] = []
     while len(trials) < cfg.seeds:
         groups = make_groups(radar, k, sep_deg, cfg.range_m, cfg.centre_max_deg, scene_rng)
         xy = np.concatenate([g.xy for g in groups])
@@ -419,8 +420,9 @@ def slam_scene(k: int, sep_deg: float, cfg: StudyConfig) -> tuple[np.ndarray, np
 def run_slam_unit(radar: RadarSystem, k: int, sep_deg: float, snr_db: float, seed: int, cfg: StudyConfig,
                   key: str) -> dict[str, Any]:
     """One seed of one SLAM cell: the clouds of the drive once, then SLAM per registration on them."""
-    from slam.registration import DEFAULT_REGISTRATION, make_registration
-    from slam.scenario import RadarCloud, run_scenario
+    from slam.core.registration import DEFAULT_REGISTRATION, make_registration
+    from slam.core.scenario import run_scenario
+    from slam.gym.radar_cloud import RadarCloud
 
     t0 = time.perf_counter()
     s = cell_seed(key)
@@ -471,8 +473,8 @@ def _fingerprint(obj: Any) -> str:
 
 def slam_fingerprint() -> str:
     """The package's SLAM defaults (filter config, default registration) that a SLAM unit depends on."""
-    from slam.rbpf import SlamConfig
-    from slam.registration import DEFAULT_REGISTRATION
+    from slam.core.rbpf import SlamConfig
+    from slam.core.registration import DEFAULT_REGISTRATION
 
     return _fingerprint({"slam": asdict(SlamConfig()), "registration": DEFAULT_REGISTRATION})
 
@@ -530,8 +532,8 @@ def load_cache(path: Path) -> dict[str, Any]:
 
 def run_config(cfg: StudyConfig, cache_dir: Path, report_only: bool) -> dict[str, Any]:
     """The full configuration recorded in the provenance: study, default radar, default SLAM, cache."""
-    from slam.rbpf import SlamConfig
-    from slam.registration import DEFAULT_REGISTRATION
+    from slam.core.rbpf import SlamConfig
+    from slam.core.registration import DEFAULT_REGISTRATION
 
     return {"study": asdict(cfg), "radar": RadarConfig().to_dict(), "slam": asdict(SlamConfig()),
             "registration": DEFAULT_REGISTRATION, "report_only": report_only, "cache_dir": cache_dir}  # fmt: skip

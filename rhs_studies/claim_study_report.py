@@ -32,15 +32,16 @@ def _ci(x: list | None, fmt: str = "{:.2f}") -> str:
     return f"{fmt.format(x[0])} [{fmt.format(x[1])}, {fmt.format(x[2])}]"
 
 
-def _ranges(values: list[float]) -> str:
-    """'0.5-3, 8' style summary of sorted grid values (consecutive grid values joined)."""
+def _ranges(values: list[tuple[float, float]]) -> str:
+    """'0.5-3, 8' style summary of runs (first, last) of sorted grid values (a one-value run as one value)."""
     return ", ".join(f"{a:g}" if a == b else f"{a:g}-{b:g}" for a, b in values) if values else "none"
 
 
 def _runs(grid: list[float], chosen: set[float]) -> list[tuple[float, float]]:
     """Maximal runs of consecutive grid values that are in ``chosen``."""
     out: list[tuple[float, float]] = []
-    start = prev = None
+    start: float | None = None
+    prev = 0.0  # the last grid value in ``chosen``; set before any run closes
     for g in grid:
         if g in chosen:
             start = g if start is None else start
@@ -67,10 +68,19 @@ def ratio_grid(data: dict, k: int, antenna: str = "rhs") -> tuple[list[float], l
 
 
 def _cell(data: dict, level: str, **sel: Any) -> dict | None:
+    """The first cell of ``data[level]["cells"]`` whose entries equal ``sel``, else None."""
     for c in data.get(level, {}).get("cells", []):
         if all(c.get(k) == v for k, v in sel.items()):
             return c
     return None
+
+
+def _cell_of(data: dict, level: str, **sel: Any) -> dict:
+    """:func:`_cell` where the study wrote every cell of the grid: a missing one is a malformed result."""
+    c = _cell(data, level, **sel)
+    if c is None:
+        raise LookupError(f"the claim study's {level} level has no cell {sel}")
+    return c
 
 
 def _antenna_section(data: dict) -> list[str]:
@@ -101,8 +111,8 @@ def _verdict_pointcloud(data: dict) -> list[str]:
             if r["k"] == k and r["antenna"] == "rhs":
                 i, j = snrs.index(r["snr_db"]), seps.index(r["sep_deg"])
                 lo_bound[i, j] = _v(r["ospa_ratio"][1:])
-                a = _cell(data, "pointcloud", antenna="rhs", k=k, sep_deg=r["sep_deg"], snr_db=r["snr_db"])
-                b = _cell(data, "pointcloud", antenna="phased", k=k, sep_deg=r["sep_deg"], snr_db=r["snr_db"])
+                a = _cell_of(data, "pointcloud", antenna="rhs", k=k, sep_deg=r["sep_deg"], snr_db=r["snr_db"])
+                b = _cell_of(data, "pointcloud", antenna="phased", k=k, sep_deg=r["sep_deg"], snr_db=r["snr_db"])
                 fail[i, j] = _v(a["ospa_deg"]) >= 0.8 * cut and _v(b["ospa_deg"]) >= 0.8 * cut
         win, sure = val <= PAPER_RATIO, hi <= PAPER_RATIO
         worse = (val > 1.0) & ~fail
@@ -133,8 +143,8 @@ def classify(data: dict, k: int, antenna: str = "rhs") -> dict[str, dict[str, in
     for r in data["pointcloud"]["ratios"]:
         if r["k"] != k or r["antenna"] != antenna or r["ospa_ratio"][0] is None:
             continue
-        a = _cell(data, "pointcloud", antenna=antenna, k=k, sep_deg=r["sep_deg"], snr_db=r["snr_db"])
-        b = _cell(data, "pointcloud", antenna="phased", k=k, sep_deg=r["sep_deg"], snr_db=r["snr_db"])
+        a = _cell_of(data, "pointcloud", antenna=antenna, k=k, sep_deg=r["sep_deg"], snr_db=r["snr_db"])
+        b = _cell_of(data, "pointcloud", antenna="phased", k=k, sep_deg=r["sep_deg"], snr_db=r["snr_db"])
         ratio = r["ospa_ratio"][0]
         if _v(a["ospa_deg"]) >= 0.8 * cut and _v(b["ospa_deg"]) >= 0.8 * cut:
             out["loss"]["both_fail"] = out["loss"].get("both_fail", 0) + 1
@@ -216,7 +226,7 @@ def _slam_section(data: dict) -> list[str]:
           "|---|---:|---:|---:|" + "---:|" * (len(regs) + 4)]
     ratios = {(r["antenna"], r["k"], r["sep_deg"], r["snr_db"]): r for r in sl["ratios"]}
     first = regs[0]
-    verdict = {"win": [], "lose": []}
+    verdict: dict[str, list[str]] = {"win": [], "lose": []}
     for (a, k, sep, snr), r in sorted(ratios.items()):
         x = r.get(f"ate_m_ratio_{first}") or [None]
         if a != "rhs" or x[0] is None:
@@ -256,8 +266,8 @@ def _elements_section(data: dict) -> list[str]:
                   + "): a target between two beams loses gain and the dictionary is coarse, so this sweep "
                   "understates the RHS (compare the default-grid point-cloud level at M=60).")
     for (m, s, snr), r in sorted(ratios.items()):
-        a = _cell(data, "elements", antenna="rhs", elements=m, sep_deg=s, snr_db=snr)
-        b = _cell(data, "elements", antenna="phased", elements=m, sep_deg=s, snr_db=snr)
+        a = _cell_of(data, "elements", antenna="rhs", elements=m, sep_deg=s, snr_db=snr)
+        b = _cell_of(data, "elements", antenna="phased", elements=m, sep_deg=s, snr_db=snr)
         pe = props.get(f"M{m}", {}).get("phased", {}).get("elements", "?")
         md.append(f"| {m} | {pe} | {s:g} | {snr:g} | {_ci(a['ospa_deg'], '{:.3f}')} | {_ci(b['ospa_deg'], '{:.3f}')} "
                   f"| {_ci(r['ospa_ratio'])} | {_v(a['rmse_over_crb']):.1f} |")

@@ -22,6 +22,7 @@ import argparse
 import os
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -48,9 +49,9 @@ def compare(config: RHSConfig, scan: ScanConfig, grids: int | None, workers: int
     out: dict = {"config": config.to_dict(), "scan": scan.to_dict(), "angles_deg": angles.tolist(),
                  "subset": bool(angles.size < scan.slots), "methods": {}}
     fs, ss = FastSettings(), SDRSettings()
-    for name, fn, st in (("fast", build_fast, fs), ("sdr", build_sdr, ss)):
+    for name, fn, st in (("fast", partial(build_fast, settings=fs), fs), ("sdr", partial(build_sdr, settings=ss), ss)):
         t0 = time.perf_counter()
-        tx, rx, infos = fn(config, scan, st, workers=workers, angles_deg=angles)
+        tx, rx, infos = fn(config, scan, workers=workers, angles_deg=angles)
         dt = time.perf_counter() - t0
         rep = pattern_report(config, tx, rx, angles, oversample=st.oversample)
         out["methods"][name] = {"settings": st.to_dict(), "time_s": dt, "summary": rep.summary(),

@@ -71,7 +71,7 @@ def simulate_pd(radars: dict[str, RadarSystem], snr_db: np.ndarray, trials: int,
     bins_per_m = 2 * wf.slope / 299_792_458.0 * wf.zero_pad * wf.samples / wf.sample_rate_hz
     tol = wf.zero_pad + 1
     sweeps = int(np.ceil(trials / 4))
-    pd = {d: [] for d in radars}
+    pd: dict[str, list[float]] = {d: [] for d in radars}
     for x in snr_db:
         rcs = 10 ** (x / 10) / cfg.unit_gain_snr(range_m, 1.0)
         hits = dict.fromkeys(radars, 0)
@@ -97,7 +97,7 @@ def theory_pd(radar: RadarSystem, snr_db: np.ndarray, pfa: float) -> dict[str, l
     g = np.abs(dic.atoms(theta)[0]) ** 2  # (I, T)
     e_unit = g.sum(0)  # sweep energy per unit snr_1
     looks_all = cfg.scan.slots * cfg.waveform.chirps_per_slot
-    out = {"matched_filter": [], "summed_known_noise": [], "footprint_known_noise": []}
+    out: dict[str, list[float]] = {"matched_filter": [], "summed_known_noise": [], "footprint_known_noise": []}
     for x in snr_db:
         e = 10 ** (x / 10) * e_unit
         out["matched_filter"].append(float(np.mean(stats.ncx2.sf(2 * np.log(1 / pfa), 2, 2 * e))))
@@ -142,8 +142,8 @@ def time_detectors(antenna: str, repeats: int, seed: int = 0) -> dict:
     radars = {d: RadarSystem(RadarConfig(antenna=antenna, detection=DetectionConfig(statistic=d)), np.random.default_rng(seed))
               for d in DETECTORS}
     spec = spectra(radars["summed"], scene)
-    det_ms = {d: [] for d in DETECTORS}
-    scan_ms = {d: [] for d in DETECTORS}
+    det_ms: dict[str, list[float]] = {d: [] for d in DETECTORS}
+    scan_ms: dict[str, list[float]] = {d: [] for d in DETECTORS}
     points = {}
     for _ in range(repeats):
         for d, radar in radars.items():  # interleaved, so load changes hit both alike

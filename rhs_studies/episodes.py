@@ -23,7 +23,7 @@ import numpy as np
 from agents.decision import IDLE
 from rhs_common.geometry import wrap_angle
 from rhs_env.array_models import ANTENNA_KINDS
-from slam.registration import DEFAULT_REGISTRATION, REGISTRATIONS
+from slam.core.registration import DEFAULT_REGISTRATION, REGISTRATIONS
 
 POLICY_HZ = 5  # rhs-paper-v0: one SLAM cycle per 0.2 s
 ANTENNAS = ANTENNA_KINDS

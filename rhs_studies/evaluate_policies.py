@@ -47,6 +47,7 @@ import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from typing import Any
 
 from agents.decision import SLOWER
 from rhs_common.stats import mean_interval, paired_difference, wilson_interval
@@ -446,7 +447,8 @@ def main(argv: list[str] | None = None) -> int:
 
         import rhs_env  # noqa: F401  (registers the ids)
 
-        cfg = gym.make(truth_env, **truth_kwargs).unwrapped.config
+        base: Any = gym.make(truth_env, **truth_kwargs).unwrapped  # highway-env's AbstractEnv (untyped)
+        cfg = base.config
         max_steps = round(cfg["duration"] * cfg["policy_frequency"])
     except Exception:
         pass

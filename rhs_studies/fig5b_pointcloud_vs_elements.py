@@ -43,7 +43,11 @@ def evaluate(cfg: RadarConfig, cycles: int, seed: int) -> dict:
     """
     radar = RadarSystem(cfg, np.random.default_rng(seed))
     scene_rng = np.random.default_rng(seed + 1)
-    err, iso, det, false_pts, crb = [], [], [], [], []
+    err: list[float] = []
+    iso: list[float] = []
+    det: list[float] = []
+    false_pts: list[float] = []
+    crb: list[float] = []
     for _ in range(cycles):
         scene = landmark_scene(scene_rng, radar)
         cloud = radar.scan(scene)
@@ -71,12 +75,12 @@ def evaluate(cfg: RadarConfig, cycles: int, seed: int) -> dict:
             sel = kk[rr == r]
             c = radar.angle_crb(ang[r, sel], rng_m[r, sel], 5.0, radar=r)
             crb.extend(rng_m[r, sel] ** 2 * c)
-    err, iso = np.asarray(err), np.asarray(iso)
+    err_m, iso_m = np.asarray(err), np.asarray(iso)
     return {
-        "rmse_m": float(np.sqrt(np.mean(err ** 2))) if err.size else float("nan"),
-        "median_error_m": float(np.median(err)) if err.size else float("nan"),
-        "rmse_isolated_m": float(np.sqrt(np.mean(iso ** 2))) if iso.size else float("nan"),
-        "n_isolated": int(iso.size),
+        "rmse_m": float(np.sqrt(np.mean(err_m ** 2))) if err_m.size else float("nan"),
+        "median_error_m": float(np.median(err_m)) if err_m.size else float("nan"),
+        "rmse_isolated_m": float(np.sqrt(np.mean(iso_m ** 2))) if iso_m.size else float("nan"),
+        "n_isolated": int(iso_m.size),
         "detection_rate": float(np.mean(det)),
         "false_points_per_cycle": float(np.mean(false_pts)),
         "crb_cross_range_m": float(np.sqrt(np.mean(crb))) if crb else float("nan"),

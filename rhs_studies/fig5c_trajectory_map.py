@@ -35,9 +35,9 @@ from rhs_studies.provenance import write_json
 def run(args: argparse.Namespace) -> dict:
     from tqdm import tqdm
 
-    from slam.metrics import map_metrics
-    from slam.registration import apply_motion
-    from slam.wrapper import SlamObservation
+    from slam.core.metrics import map_metrics
+    from slam.core.registration import apply_motion
+    from slam.gym.wrapper import SlamObservation
 
     env = make_paper_env(args, args.antenna, args.tx_power)
     slam = env
@@ -50,16 +50,15 @@ def run(args: argparse.Namespace) -> dict:
     origin = np.asarray(slam.origin, dtype=float)  # world pose of the map frame (the start pose)
     env.close()
     info = trace[-1][1]
-    true = [i["true_pose"] for _, i in trace]
-    est = [i["estimated_pose"] for _, i in trace]
-    std = [o["pose_std"] for o, _ in trace]
+    true = np.asarray([i["true_pose"] for _, i in trace], float)
+    est = np.asarray([i["estimated_pose"] for _, i in trace], float)
+    std = np.asarray([o["pose_std"] for o, _ in trace], float)
     clouds = []
     for o, i in trace:  # every scan's points in the world frame
         pts = o["points"][o["points_mask"] > 0, :2].astype(float)
         if len(pts):
             clouds.append(apply_motion(pts, np.asarray(i["world_pose"], dtype=float)))
 
-    true, est, std = (np.asarray(true, float), np.asarray(est, float), np.asarray(std, float))
     to_world = lambda xy: apply_motion(np.asarray(xy, float).reshape(-1, 2), origin)
     true_lm = np.asarray(info["true_landmarks"], float).reshape(-1, 2)
     est_lm = np.asarray(info["estimated_landmarks"], float).reshape(-1, 2)

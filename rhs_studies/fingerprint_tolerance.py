@@ -50,10 +50,12 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from rhs_studies.provenance import FINGERPRINTS, ROOT, ROUNDING_RTOL, STATE_AT_START, load_fingerprints, script_name
+from rhs_studies.subprocess_env import study_env
 
 SAFETY = 4.0  # tolerance = SAFETY x the largest measured round-off spread
 FLIP_REL = 0.02  # a value that moved by more than 2 % under a machine-only change flipped a discrete decision
@@ -94,11 +96,10 @@ def worker(names: list[str]) -> None:
     print(json.dumps(out))
 
 
-def run_setting(label: str, env: dict[str, str], names: list[str], python: str) -> dict[str, list]:
+def run_setting(label: str, env: dict[str, str], names: list[str], python: str) -> dict[str, Any]:
     """The fingerprints of ``names`` computed by ``python`` in a fresh process with ``env`` added."""
     t0 = time.time()
-    full = {**os.environ, "MPLBACKEND": "Agg", "SDL_VIDEODRIVER": "dummy", "OMP_NUM_THREADS": "1", **env,
-            "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
+    full = study_env(env, blas_single_thread=False)  # one OpenMP thread, as the tests run; a setting may add more
     proc = subprocess.run([python, "-m", "rhs_studies.fingerprint_tolerance", "--worker", *names], cwd=ROOT, env=full, capture_output=True,
                           text=True, check=False)
     if proc.returncode != 0:
@@ -165,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"fingerprint_tolerance: error: no fingerprinted step among {a.only}", file=sys.stderr)
         return 2
     names = [s.name for s in steps]
-    runs: dict[str, dict[str, list]] = {}
+    runs: dict[str, dict[str, Any]] = {}
     for label in a.settings:
         runs[label] = run_setting(label, SETTINGS[label], names, sys.executable)
     for item in a.python:

@@ -185,7 +185,7 @@ def provenance(script: str | Path, config: Any, started: float, argv: list[str] 
     }
 
 
-def digest(values: Iterable[float], significant: int = SIGNIFICANT) -> tuple[str, list[float | None]]:
+def digest(values: Iterable[float | None], significant: int = SIGNIFICANT) -> tuple[str, list[float | None]]:
     """(sha256 hex prefix, rounded values): each value kept to ``significant`` digits; NaN/inf/None -> None."""
     rounded: list[float | None] = []
     for v in values:
@@ -195,7 +195,7 @@ def digest(values: Iterable[float], significant: int = SIGNIFICANT) -> tuple[str
     return hashlib.sha256(text.encode()).hexdigest()[:16], rounded
 
 
-def numbers(obj: Any) -> list[float]:
+def numbers(obj: Any) -> list[float | None]:
     """Every number in a nested result (dict keys sorted; bools as 0/1; None kept): a fingerprint's values."""
     if isinstance(obj, dict):
         return [v for k in sorted(obj, key=str) for v in numbers(obj[k])]

@@ -135,7 +135,7 @@ def markdown(res: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def fingerprint() -> list[float]:
+def fingerprint() -> list[float | None]:
     """Quality of two profiles on two scenes of the 5-degree grid (no timings: they are not reproducible)."""
     from rhs_studies.radar_quality import evaluate
 

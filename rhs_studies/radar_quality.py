@@ -74,7 +74,7 @@ def evaluate(cfg: RadarConfig, scenes: int, seed: int, noise_draws: int = 1, sce
     }
 
 
-def fingerprint() -> list[float]:
+def fingerprint() -> list[float | None]:
     """:func:`evaluate` on one scene of the default RHS radar on the 5-degree grid, seed 0: seconds."""
     return numbers(evaluate(RadarConfig(antenna="rhs", scan=ScanConfig(grid_deg=5.0)), 1, 0))
 

@@ -26,7 +26,6 @@ import argparse
 import importlib
 import importlib.util
 import json
-import os
 import subprocess
 import sys
 import time
@@ -43,6 +42,7 @@ from rhs_studies.provenance import (
     script_name,
     verification,
 )
+from rhs_studies.subprocess_env import study_env
 
 SCRIPTS = ROOT / "scripts"
 
@@ -146,6 +146,8 @@ def load_script(script: str):
     if name in sys.modules:
         return sys.modules[name]
     spec = importlib.util.spec_from_file_location(name, SCRIPTS / script)
+    if spec is None or spec.loader is None:
+        raise ImportError(f"{SCRIPTS / script} cannot be loaded as a module")
     mod = importlib.util.module_from_spec(spec)
     sys.modules[name] = mod  # dataclasses resolve their annotations through sys.modules
     spec.loader.exec_module(mod)
@@ -194,9 +196,7 @@ def list_steps(steps: list[Step]) -> None:
 def run_steps(steps: list[Step], progress: bool) -> int:
     from tqdm import tqdm
 
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
-           "MPLBACKEND": "Agg", "SDL_VIDEODRIVER": "dummy",
-           "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
+    env = study_env()
     total = sum(estimate(s) for s in steps)
     print(f"reproduce: {len(steps)} step(s), estimated {_hms(total)}", flush=True)
     failed = []

@@ -16,11 +16,11 @@ intervals, commit, command line, full SLAM config) and ``results/slam_accuracy.m
   Metrics: position RMSE and final position error of the vehicle, the fraction of
   the landmarks seen so far that the map matched (``matched / (matched + missed)``,
   *seen* = within the radar's 100 m range at some cycle, as
-  :class:`slam.metrics_info.SlamMetricsInfo` counts them: field of view, traffic
+  :class:`slam.gym.metrics_info.SlamMetricsInfo` counts them: field of view, traffic
   occlusion and detection ignored) and the fraction of map landmarks that match
   nothing (``spurious / (matched + spurious)``), Hungarian matching within 2 m.
   Also ``measured_matched_fraction``: the matched fraction among the landmarks the
-  radar measured, a point within 1 m in >= 2 scans (:mod:`slam.metrics`);
+  radar measured, a point within 1 m in >= 2 scans (:mod:`slam.core.metrics`);
   ``visible_matched_fraction``: among those in the radar's unoccluded view for at
   least 2 cycles; and per run the unmatched seen landmarks by the number of scans
   with a point within 1 m of them (``unmatched_by_scans``).
@@ -93,6 +93,8 @@ def _visible_landmarks(env) -> np.ndarray:
     w = env
     while not isinstance(w, RadarObservation):
         w = w.env
+    if w.radar is None:
+        raise RuntimeError("the radar is built on reset: reset the env before asking what it sees")
     base = env.unwrapped
     sc, occ = scene_scatterers(base, base.vehicle, w.scatter_config)
     view = w.radar.in_view(sc, occ) & sc.is_static & (sc.object_id < 1_000_000)
@@ -101,7 +103,7 @@ def _visible_landmarks(env) -> np.ndarray:
 
 def _visible_matched_fraction(env, info: dict, visible: dict) -> float | None:
     """Matched fraction among the seen landmarks that were in the radar's unoccluded view >= 2 cycles."""
-    from slam.metrics import matched_fraction
+    from slam.core.metrics import matched_fraction
 
     ids = np.array(sorted(env.get_wrapper_attr("seen_ids")), dtype=int)
     keep = np.array([visible.get(int(i), 0) >= 2 for i in ids], dtype=bool)
@@ -113,7 +115,7 @@ def _count_hits(env, obs: dict, hits: dict) -> None:
     """Add one to ``hits[id]`` for each landmark with a radar point of this scan within 1 m of it."""
     from rhs_common.geometry import apply_motion
     from rhs_env.scene import get_landmarks, world_pose
-    from slam.metrics import MEASURED_GATE_M, landmark_hits
+    from slam.core.metrics import MEASURED_GATE_M, landmark_hits
 
     base = env.unwrapped
     pose_w = world_pose(base.vehicle)
@@ -129,7 +131,7 @@ def _count_hits(env, obs: dict, hits: dict) -> None:
 
 def _seen_breakdown(env, info: dict, visible: dict, hits: dict) -> dict[str, Any]:
     """The measured matched fraction and the unmatched seen landmarks by radar scans that hit them."""
-    from slam.metrics import MEASURED_MIN_SCANS, map_metrics, matched_fraction
+    from slam.core.metrics import MEASURED_MIN_SCANS, map_metrics, matched_fraction
 
     ids = np.array(sorted(env.get_wrapper_attr("seen_ids")), dtype=int)
     est = np.asarray(info["estimated_landmarks"]).reshape(-1, 2)
@@ -158,7 +160,10 @@ def _episode(env, seed: int, visibility: bool = False, action: int = IDLE) -> di
     scans whose points measured them (:func:`_seen_breakdown`).
     """
     obs, _ = env.reset(seed=seed)
-    err, done, info, visible, hits = [], False, {}, {}, {}
+    err: list[float] = []
+    done, info = False, {}
+    visible: dict[int, int] = {}  # landmark id -> cycles in the radar's unoccluded view
+    hits: dict[int, int] = {}  # landmark id -> scans with a point within 1 m of it
     if visibility:
         _count_hits(env, obs, hits)
     while not done:
@@ -300,9 +305,10 @@ def pair_geometry(lm: np.ndarray, poses: np.ndarray, max_range_m: float = 100.0,
 
 def run_dense(args, slam: dict) -> dict[str, Any]:
     from rhs_env.radar import RadarConfig, RadarSystem
-    from slam.rbpf import SlamConfig
-    from slam.registration import make_registration
-    from slam.scenario import RadarCloud, run_scenario
+    from slam.core.rbpf import SlamConfig
+    from slam.core.registration import make_registration
+    from slam.core.scenario import run_scenario
+    from slam.gym.radar_cloud import RadarCloud
 
     cfg = SlamConfig(**slam) if slam else SlamConfig()
     if args.particles:
@@ -361,7 +367,7 @@ def driver_episode(env, policy, seed: int) -> dict[str, Any]:
     A *loss* is a cycle where the health signal's ``slam_losses`` count rises; it is *recovered* when
     within ``RECOVER_CYCLES`` cycles the flag clears (relocalised or a new map) and the error in the
     current map is below ``RECOVERED_M``. Errors are in the current map (after a map break the truth
-    is re-anchored at the break, :class:`slam.metrics_info.SlamMetricsInfo`); ``episode_rmse_m`` is
+    is re-anchored at the break, :class:`slam.gym.metrics_info.SlamMetricsInfo`); ``episode_rmse_m`` is
     against the episode's start.
     """
     from rhs_common.geometry import wrap_angle
@@ -588,7 +594,7 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, dict]:
     return args, slam
 
 
-def fingerprint() -> list[float]:
+def fingerprint() -> list[float | None]:
     """The paper part and the dense part's RHS values of the quick config (seed 100, 10 particles): seconds.
 
     The dense part's phased-array run is left out: with 10 particles it loses the car, and a

@@ -134,7 +134,7 @@ def _machine() -> dict:
 
 
 def _registration_weights() -> dict:
-    from slam.cnn_registration import DEFAULT_WEIGHTS
+    from slam.core.cnn_registration import DEFAULT_WEIGHTS
 
     return {"path": str(Path(DEFAULT_WEIGHTS).relative_to(ROOT)), "exists": Path(DEFAULT_WEIGHTS).exists()}
 

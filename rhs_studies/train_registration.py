@@ -2,8 +2,9 @@
 
 1. Drives ``rhs-highway-radar-v0`` (traffic, roadside landmarks, the default RHS
    radar) with random lane/speed actions, and the paper's road with random sparse
-   obstacle layouts, and records consecutive clouds and the true motion between them. As in :class:`slam.pipeline.SlamPipeline`, the ego
-   velocity comes from the clouds' Doppler and moving points are removed.
+   obstacle layouts, and records consecutive clouds and the true motion between them. As in
+   :class:`slam.core.pipeline.SlamPipeline`, the ego velocity comes from the clouds' Doppler and moving
+   points are removed.
 2. Each pair gets ``priors_per_pair`` motion priors = truth + Gaussian error
    (``prior_std_m``, ``prior_std_rad``): the network learns the residual.
 3. Trains the paper's CNN with the paper's loss; held-out pairs come from
@@ -22,16 +23,21 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from rhs_common.geometry import wrap_angle
 from rhs_studies.provenance import write_json
 
+if TYPE_CHECKING:
+    from rhs_env.wrappers import RadarObservation
+    from slam.core.cnn_registration import GridMapConfig
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def paper_like_env(rng: np.random.Generator, radar: dict):
+def paper_like_env(rng: np.random.Generator, radar: dict | None) -> RadarObservation:
     """The paper's scene with a random sparse obstacle layout and ego speed (radar observation)."""
     from rhs_env.envs import RHSPaperEnv
     from rhs_env.registration import with_cheap_base_observation
@@ -46,7 +52,7 @@ def paper_like_env(rng: np.random.Generator, radar: dict):
 
 
 def collect_pairs(episodes: int, steps: int, seed: int, env_kwargs: dict, progress: bool = True,
-                  scene: str = "highway"):
+                  scene: str = "highway") -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
     """Consecutive static clouds and true motions from ``episodes`` episodes of ``steps`` steps.
 
     ``scene``: ``highway`` (rhs-highway-radar-v0, traffic and roadside landmarks) or
@@ -57,13 +63,15 @@ def collect_pairs(episodes: int, steps: int, seed: int, env_kwargs: dict, progre
 
     import rhs_env  # noqa: F401  (registers the ids)
     from rhs_env.scene import world_pose
-    from slam.association import estimate_ego_velocity, static_mask
-    from slam.registration import relative_motion
+    from slam.core.association import estimate_ego_velocity, static_mask
+    from slam.core.registration import relative_motion
 
     rng = np.random.default_rng(seed)
-    prev_list, cur_list, motions = [], [], []
+    prev_list: list[np.ndarray] = []
+    cur_list: list[np.ndarray] = []
+    motions: list[np.ndarray] = []
     bar = tqdm(total=episodes * steps, desc=f"collect clouds ({scene})", unit="step", disable=not progress)
-    env = gym.make("rhs-highway-radar-v0", **env_kwargs) if scene == "highway" else None
+    env: Any = gym.make("rhs-highway-radar-v0", **env_kwargs) if scene == "highway" else None
     for ep in range(episodes):
         if scene == "paper":
             env = paper_like_env(rng, env_kwargs.get("radar"))
@@ -90,9 +98,13 @@ def collect_pairs(episodes: int, steps: int, seed: int, env_kwargs: dict, progre
     return prev_list, cur_list, np.asarray(motions)
 
 
-def make_dataset(prev_list, cur_list, motions, priors_per_pair, prior_std, grid, rng):
-    from slam.cnn_registration import pair_input
-    from slam.registration import relative_motion
+def make_dataset(prev_list: list[np.ndarray], cur_list: list[np.ndarray], motions: np.ndarray, priors_per_pair: int,
+                 prior_std: np.ndarray, grid: GridMapConfig, rng: np.random.Generator
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """CNN inputs (grid maps of each pair under ``priors_per_pair`` noisy priors), residual targets, the
+    priors and the index of each sample's pair."""
+    from slam.core.cnn_registration import pair_input
+    from slam.core.registration import relative_motion
 
     xs, ys, priors, index = [], [], [], []
     for k, (p, c, m) in enumerate(zip(prev_list, cur_list, motions)):
@@ -122,13 +134,13 @@ def fingerprint() -> list[float]:
     freshly trained CNN, ICP) on the same pairs."""
     import tempfile
 
-    from slam.cnn_registration import (
+    from slam.core.cnn_registration import (
         CNNRegistration,
         CNNTrainConfig,
         GridMapConfig,
         train_cnn,
     )
-    from slam.registration import ICPRegistration
+    from slam.core.registration import ICPRegistration
 
     raw = collect_pairs(1, 5, 0, {"radar": {"scan": {"grid_deg": 5.0}}, "vehicles_count": 5}, progress=False)
     grid, rng = GridMapConfig(), np.random.default_rng(0)
@@ -167,18 +179,18 @@ def main(argv=None) -> int:
         args.episodes, args.val_episodes, args.steps, args.epochs, args.priors_per_pair = 2, 1, 8, 2, 2
         args.paper_episodes = 1
 
-    from slam.cnn_registration import (
+    from slam.core.cnn_registration import (
         CNNRegistration,
         CNNTrainConfig,
         GridMapConfig,
         train_cnn,
     )
-    from slam.registration import ICPRegistration
+    from slam.core.registration import ICPRegistration
 
     progress = not args.no_progress
     env_kwargs = {"radar": {"scan": {"grid_deg": args.grid_deg}}, "vehicles_count": 20}
     t0 = time.perf_counter()
-    def both(episodes: int, paper_episodes: int, seed: int):
+    def both(episodes: int, paper_episodes: int, seed: int) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
         a = collect_pairs(episodes, args.steps, seed, env_kwargs, progress)
         b = collect_pairs(paper_episodes, args.steps, seed + 500, env_kwargs, progress, scene="paper")
         return a[0] + b[0], a[1] + b[1], np.concatenate([a[2].reshape(-1, 3), b[2].reshape(-1, 3)])

@@ -1,6 +1,7 @@
 """The layering of the packages, checked on the source: imports flow one way, no cycles.
 
-Layers, bottom to top: ``rhs_common`` <- ``rhs_env`` <- ``slam`` <- ``agents`` <- ``rhs_slam``.
+Layers, bottom to top: ``rhs_common`` <- ``rhs_env`` <- ``slam`` <- ``agents`` <- ``rhs_slam``; inside ``slam``,
+the core (``slam/core/``) imports neither gymnasium nor ``rhs_env`` nor the gym layer (``slam/gym/``).
 Every import statement counts, lazy ones inside functions and ``TYPE_CHECKING``
 blocks included. Env ids may name upper layers in string entry points (not imports).
 """
@@ -104,10 +105,10 @@ def _upward(graph: dict[str, set[str]], layer: str) -> list[str]:
 def test_the_checker_finds_a_cycle_and_an_upward_import(tmp_path):
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     src = tmp_path / "x.py"
-    src.write_text("def f():\n    from slam.rbpf import SlamConfig\n")  # a lazy import counts
-    modules = {"rhs_env.x": src, "slam.rbpf": tmp_path / "rbpf.py"}
-    graph = {"rhs_env.x": _imports(src, "rhs_env.x", modules), "slam.rbpf": set()}
-    assert _upward(graph, "rhs_env") == ["rhs_env.x -> slam.rbpf"]
+    src.write_text("def f():\n    from slam.core.rbpf import SlamConfig\n")  # a lazy import counts
+    modules = {"rhs_env.x": src, "slam.core.rbpf": tmp_path / "rbpf.py"}
+    graph = {"rhs_env.x": _imports(src, "rhs_env.x", modules), "slam.core.rbpf": set()}
+    assert _upward(graph, "rhs_env") == ["rhs_env.x -> slam.core.rbpf"]
 
 
 def test_no_import_cycle_between_files():
@@ -119,9 +120,35 @@ def test_imports_flow_one_way(layer):
     assert _upward(_graph(), layer) == []
 
 
-def test_slam_core_imports_without_gymnasium():
-    core = "slam.rbpf, slam.association, slam.registration, slam.pipeline, slam.metrics, slam.scenario"
-    code = f"import sys, {core}; bad = [m for m in ('gymnasium', 'highway_env', 'rhs_env') if m in sys.modules]; print(bad)"
+#: what the SLAM core (every file under slam/core/) must not import, not even lazily: it runs on any point cloud
+CORE_FORBIDDEN = ("gymnasium", "gym", "highway_env", "rhs_env", "slam.gym", "agents", "rhs_slam", STUDIES)
+
+
+def _core_files() -> list[Path]:
+    return sorted((ROOT / "slam" / "core").rglob("*.py"))
+
+
+def _forbidden_in_core(path: Path) -> list[str]:
+    """Imports of ``path`` (every statement, lazy ones included) that name a package the core must not use."""
+    return [f"{path.name}: {a}" for a in _imported_names(path)
+            if any(a == bad or a.startswith(bad + ".") for bad in CORE_FORBIDDEN)]
+
+
+def test_the_core_check_sees_a_lazy_gym_import(tmp_path):
+    src = tmp_path / "x.py"
+    src.write_text("import numpy\ndef f():\n    import gymnasium as gym\n    from slam.gym.wrapper import SlamObservation\n")
+    assert _forbidden_in_core(src) == ["x.py: gymnasium", "x.py: slam.gym.wrapper"]
+
+
+def test_slam_core_imports_neither_gymnasium_nor_rhs_env_nor_the_gym_layer():
+    """By folder: every file under slam/core/, on its source, and every module of it imported in a fresh interpreter."""
+    files = _core_files()
+    assert {f.stem for f in files} >= {"rbpf", "association", "registration", "pipeline", "metrics", "scenario"}
+    assert [bad for path in files for bad in _forbidden_in_core(path)] == []
+    names = [".".join(f.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__") for f in files]
+    code = (f"import sys, {', '.join(names)}; "
+            "print([m for m in sys.modules if m.split('.')[0] in ('gymnasium', 'highway_env', 'rhs_env') "
+            "or m.startswith('slam.gym')])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
     assert out.stdout.strip() == "[]"
 

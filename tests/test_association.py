@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from slam.association import (
+from slam.core.association import (
     DROPPED,
     NEW,
     associate,
@@ -90,7 +90,7 @@ def test_static_mask_separates_moving_points():
 def test_ego_velocity_prefers_the_surrounding_static_world_over_a_platoon():
     """A platoon ahead (many points, one common velocity, one narrow sector) must not win
     over fewer static points spread around the vehicle; the prior gate rejects it too."""
-    from slam.association import estimate_ego_velocity
+    from slam.core.association import estimate_ego_velocity
 
     rng = np.random.default_rng(3)
     v_ego = np.array([25.0, 0.0])

@@ -8,13 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from slam.cnn_registration import (
+from slam.core.cnn_registration import (
     DEFAULT_WEIGHTS,
     CNNRegistration,
     GridMapConfig,
     grid_map,
 )
-from slam.registration import compose, points_in_frame, relative_motion
+from slam.core.registration import compose, points_in_frame, relative_motion
 
 ROOT = Path(__file__).resolve().parent.parent
 

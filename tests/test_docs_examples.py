@@ -155,8 +155,8 @@ def test_api_reference_lists_every_module_of_each_package():
 def test_sphinx_roles_become_inline_code():
     pytest.importorskip("griffe")
     roles = _load(ROOT / "docs" / "hooks" / "griffe_roles.py")
-    assert roles.plain(":func:`~agents.evaluate.run_episode` and :class:`slam.rbpf.RBPFSlam`. Input::\n\n    {}") == (
-        "`run_episode` and `slam.rbpf.RBPFSlam`. Input:\n\n    {}")
+    assert roles.plain(":func:`~agents.evaluate.run_episode` and :class:`slam.core.rbpf.RBPFSlam`. Input::\n\n    {}") == (
+        "`run_episode` and `slam.core.rbpf.RBPFSlam`. Input:\n\n    {}")
     assert roles.plain("a :: b, x::y") == "a :: b, x::y"
 
 

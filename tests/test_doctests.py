@@ -12,8 +12,8 @@ MODULES = (
     "rhs_common.timing",
     "rhs_env.radar_config",
     "rhs_env.wrappers",
-    "slam.wrapper",
-    "slam.metrics_info",
+    "slam.gym.wrapper",
+    "slam.gym.metrics_info",
     "agents.decision",
 )
 

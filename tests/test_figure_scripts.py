@@ -137,7 +137,7 @@ def test_fig5c_quick(tmp_path):
 
 @pytest.mark.parametrize("name", ["fig5a_slam_rmse.py", "fig5c_trajectory_map.py"])
 def test_default_registration_is_the_envs_default(name):
-    from slam.registration import DEFAULT_REGISTRATION
+    from slam.core.registration import DEFAULT_REGISTRATION
 
     mod = load_script(name)
     assert mod.parse_args([]).registration == DEFAULT_REGISTRATION

@@ -29,7 +29,7 @@ from conftest import SMALL_RADAR
 import rhs_env  # noqa: F401
 from rhs_env.scan_cli import SceneError, parse_scene
 from rhs_slam.cli import main
-from slam.scenario_cli import parse_scenario
+from slam.gym.scenario_cli import parse_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -109,34 +109,37 @@ def _origin(exc: BaseException) -> BaseException:
         exc = nxt
 
 
-def _check_outcome(fn, field: str):
-    """Run ``fn``: success, or a ValueError/TypeError naming ``field`` from a validator."""
+def _short_episode(env_id: str, kw: dict, steps: int = 2) -> None:
+    """``gym.make(env_id, **kw)``, a reset and ``steps`` IDLE steps: every observation array and reward finite."""
+    env = gym.make(env_id, **kw)
+    try:
+        obs, _ = env.reset(seed=0)
+        for _ in range(steps):
+            for key, value in (obs.items() if isinstance(obs, dict) else [("observation", obs)]):
+                assert np.all(np.isfinite(value)), key
+            obs, reward, *_ = env.step(1)
+            assert math.isfinite(reward)
+    finally:
+        env.close()
+
+
+def _check_outcome(fn, fields: list[str]):
+    """Success, or a ValueError / TypeError from a validator naming one of ``fields``."""
     try:
         return fn()
     except (ValueError, TypeError) as exc:
         cause = _origin(exc)
-        assert field in str(exc), f"{field!r} not named in {exc!r}"
+        message = str(exc).split(" was raised from the environment creator")[0]
+        assert any(f in message for f in fields), f"none of {fields} named in {exc!r}"
         assert _raised_by_a_validator(cause), "".join(traceback.format_exception(cause))[-1500:]
         return None
-
-
-def _episode(kw: dict) -> None:
-    env = gym.make("rhs-highway-slam-v0", **kw)
-    try:
-        obs, _ = env.reset(seed=0)
-        for _ in range(2):
-            for key, value in obs.items():
-                assert np.all(np.isfinite(value)), key
-            obs, *_ = env.step(1)
-    finally:
-        env.close()
 
 
 def test_fuzz_env_kwargs():
     rng = np.random.default_rng(20261123)
     outcomes = {"ok": 0, "refused": 0}
     for path, _value, kw in _mutations(rng, 40):
-        ok = _check_outcome(lambda kw=kw: _episode(kw) or True, path[-1])
+        ok = _check_outcome(lambda kw=kw: _short_episode("rhs-highway-slam-v0", kw) or True, [path[-1]])
         outcomes["ok" if ok else "refused"] += 1
     assert outcomes["refused"] > 20  # most mutations are bad on purpose
 
@@ -170,7 +173,7 @@ def test_fuzz_scene_and_scenario_documents():
         except SceneError as exc:
             assert key in str(exc), (doc, exc)
         key, doc = _jitter(rng, scenario)
-        _check_outcome(lambda doc=doc: parse_scenario(doc), key)
+        _check_outcome(lambda doc=doc: parse_scenario(doc), [key])
 
 
 @pytest.mark.parametrize("env_id", ["rhs-highway-v0", "rhs-paper-v0"])
@@ -225,33 +228,9 @@ def test_fuzz_highway_env_keys():
             values = HIGHWAY_KEYS[path]
             _set(kw, path, values[rng.integers(len(values))])
         fields = [p[-1] for p in picked] + ["lanes_count"] if ("initial_lane_id",) in picked else [p[-1] for p in picked]
-        ok = _check_outcome_any(lambda kw=kw: _highway_episode(kw) or True, fields)
+        ok = _check_outcome(lambda kw=kw: _short_episode(HW, kw) or True, fields)
         outcomes["ok" if ok else "refused"] += 1
     assert outcomes["refused"] > 10 and outcomes["ok"] > 3, outcomes
-
-
-def _highway_episode(kw: dict) -> None:
-    env = gym.make(HW, **kw)
-    try:
-        obs, _ = env.reset(seed=0)
-        for _ in range(2):
-            assert np.all(np.isfinite(obs))
-            obs, reward, *_ = env.step(1)
-            assert math.isfinite(reward)
-    finally:
-        env.close()
-
-
-def _check_outcome_any(fn, fields: list[str]):
-    """Success, or a ValueError / TypeError from a validator naming one of ``fields``."""
-    try:
-        return fn()
-    except (ValueError, TypeError) as exc:
-        cause = _origin(exc)
-        message = str(exc).split(" was raised from the environment creator")[0]
-        assert any(f in message for f in fields), f"none of {fields} named in {exc!r}"
-        assert _raised_by_a_validator(cause), "".join(traceback.format_exception(cause))[-1500:]
-        return None
 
 
 # --------------------------------------------------------------------------- the paper scene's start / obstacles
@@ -275,22 +254,9 @@ def test_fuzz_paper_start_and_obstacles():
             "string": "10,65",
             "bools": [[True, False]],
         }[shape]
-        ok = _check_outcome_any(lambda kw=kw: _paper_episode(kw) or True, ["start", "obstacles"])
+        ok = _check_outcome(lambda kw=kw: _short_episode(PAPER, kw) or True, ["start", "obstacles"])
         outcomes["ok" if ok else "refused"] += 1
     assert outcomes["refused"] > 10 and outcomes["ok"] > 2, outcomes
-
-
-def _paper_episode(kw: dict) -> None:
-    env = gym.make(PAPER, **kw)
-    try:
-        obs, _ = env.reset(seed=0)
-        for _ in range(2):
-            for key, value in obs.items():
-                assert np.all(np.isfinite(value)), key
-            obs, reward, *_ = env.step(1)
-            assert math.isfinite(reward)
-    finally:
-        env.close()
 
 
 # --------------------------------------------------------------------------- JSON files, byte by byte

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from slam.registration import (
+from slam.core.registration import (
     ICPRegistration,
     OdometryRegistration,
     apply_motion,
@@ -76,7 +76,7 @@ def test_odometry_registration_noise():
 
 def test_icp_heading_search_recovers_a_lane_change_turn():
     """A 10 deg turn within one cycle with a yaw-free prior: plain ICP stalls, the search finds it."""
-    from slam.registration import ICPRegistration, apply_motion
+    from slam.core.registration import ICPRegistration, apply_motion
 
     rng = np.random.default_rng(4)
     prev = np.column_stack([rng.uniform(5, 80, 30) * rng.choice([-1, 1], 30), rng.uniform(-40, 40, 30)])

@@ -1,4 +1,4 @@
-"""The compiled kernels (rhs_env.kernels, slam.kernels) against the numpy reference, and their cache / notice."""
+"""The compiled kernels (rhs_env.kernels, slam.core.kernels) against the numpy reference, and their cache / notice."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import pytest
 from rhs_common.jit import NOTICE
 from rhs_env.radar import DetectionConfig, RadarConfig, RadarSystem
 from rhs_env.scatterers import Occluders, Scatterers
-from slam.rbpf import SlamConfig
+from slam.core.rbpf import SlamConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -132,7 +132,7 @@ def test_compiled_slam_matches_numpy_over_an_episode(slam):
 def test_compiled_icp_equals_the_numpy_fit():
     """The compiled ICP (brute-force neighbours, fused iterations) gives the cKDTree / numpy estimate."""
     from rhs_common.geometry import apply_motion
-    from slam.registration import ICPRegistration
+    from slam.core.registration import ICPRegistration
 
     rng = np.random.default_rng(3)
     for trial in range(20):
@@ -168,7 +168,7 @@ def test_kernels_as_python_under_disable_jit():
         assert config.DISABLE_JIT
         from rhs_env.radar import RadarConfig, RadarSystem
         from rhs_env.scatterers import Scatterers
-        from slam.registration import ICPRegistration
+        from slam.core.registration import ICPRegistration
         radars = {k: RadarSystem(RadarConfig(kernels=k), np.random.default_rng(1)) for k in ("numpy", "numba")}
         scene = Scatterers.static_points([[30.0, 10.0], [-45.0, -11.0], [60.0, -9.0]], rcs=8.0)
         spec = radars["numpy"].synthesize_spectrum(scene)
@@ -185,8 +185,8 @@ def test_kernels_as_python_under_disable_jit():
         regs[0].kernels = "numpy"
         e0, e1 = (r.estimate(prev, cur, prior=np.array([1.8, 0.0, 0.0])) for r in regs)
         assert np.abs(e0 - e1).max() < 1e-9 and abs(e1[0] - 2.0) < 1e-6
-        from slam.association import mahalanobis_associate
-        from slam.kernels import mahalanobis_association, proposal_information
+        from slam.core.association import mahalanobis_associate
+        from slam.core.kernels import mahalanobis_association, proposal_information
         P, M, L = 3, 4, 5
         obs, mean = rng.uniform(0, 6, (P, M, 2)), rng.uniform(0, 6, (P, L, 2))
         a00, a11, a01 = rng.uniform(0.5, 1, (P, M)), rng.uniform(0.5, 1, (P, M)), rng.uniform(-0.1, 0.1, (P, M))

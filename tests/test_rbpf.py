@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from slam.rbpf import Observations, RBPFSlam, SlamConfig, circular_mean
-from slam.registration import ICPRegistration, OdometryRegistration
-from slam.scenario import SyntheticCloud, run_scenario
+from slam.core.rbpf import Observations, RBPFSlam, SlamConfig, circular_mean
+from slam.core.registration import ICPRegistration, OdometryRegistration
+from slam.core.scenario import SyntheticCloud, run_scenario
 
 NOISELESS = dict(trans_std_m=0.0, trans_frac=0.0, rot_std_rad=0.0, accel_std_mps2=0.0, yaw_accel_std_radps2=0.0)
 

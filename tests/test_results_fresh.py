@@ -57,7 +57,7 @@ def test_fingerprint_matches_the_code(step):
 
 def _odometry_bias(monkeypatch):
     """A real change of the SLAM: the filter's motion prediction takes the registration motion 1 % long."""
-    from slam.rbpf import RBPFSlam
+    from slam.core.rbpf import RBPFSlam
 
     predict = RBPFSlam._predict
 
@@ -176,6 +176,24 @@ def test_the_tolerance_script_measures_a_step_in_subprocesses(capsys):
     assert ft.main(["--only", "fig5b", "--settings", "native", "openblas-sandybridge", "--dry-run"]) == 0
     out = capsys.readouterr().out
     assert "native" in out and "openblas-sandybridge" in out and "\nfig5b " in out
+
+
+def test_a_study_subprocess_runs_single_threaded_and_headless_on_this_checkout(monkeypatch):
+    """reproduce's steps: one OpenMP / OpenBLAS / MKL thread; the tolerance's settings: OpenMP only (as the
+    tests run), a setting's own variables on top; both headless and with this checkout first on PYTHONPATH."""
+    import os
+
+    from rhs_studies.subprocess_env import study_env
+
+    monkeypatch.setenv("PYTHONPATH", "/elsewhere")
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "8")
+    env = study_env()
+    assert env["OMP_NUM_THREADS"] == env["OPENBLAS_NUM_THREADS"] == env["MKL_NUM_THREADS"] == "1"
+    assert env["MPLBACKEND"] == "Agg" and env["SDL_VIDEODRIVER"] == "dummy"
+    assert env["PYTHONPATH"].split(os.pathsep) == [str(prov.ROOT), "/elsewhere"]
+    setting = study_env({"OMP_NUM_THREADS": "2", "PYTHONPATH": "/x"}, blas_single_thread=False)
+    assert setting["OMP_NUM_THREADS"] == "2" and setting["OPENBLAS_NUM_THREADS"] == "8"
+    assert setting["PYTHONPATH"].split(os.pathsep)[0] == str(prov.ROOT)
 
 
 def test_digest_rounds_to_significant_digits_and_detects_changes():

@@ -189,7 +189,7 @@ def test_bad_scenario_in_a_subprocess_has_no_traceback(tmp_path):
 
 
 def test_missing_cnn_weights_is_a_clear_error(tmp_path, capsys, monkeypatch):
-    import slam.cnn_registration as cnn
+    import slam.core.cnn_registration as cnn
 
     monkeypatch.setattr(cnn, "DEFAULT_WEIGHTS", tmp_path / "no_weights.pt")
     scen = write(tmp_path, {**GOOD, "registration": "cnn"})

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from rhs_studies import slam_accuracy
-from slam.pipeline import PipelineConfig, SlamPipeline
-from slam.registration import OdometryRegistration
+from slam.core.pipeline import PipelineConfig, SlamPipeline
+from slam.core.registration import OdometryRegistration
 
 
 def test_quick_run_records_provenance_and_targets(tmp_path):

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import rhs_env  # noqa: F401
-from slam.health import HealthConfig, TrackHealth
-from slam.pipeline import PipelineConfig, doppler_displacement, doppler_ego_motion, forward_speed_fit
+from slam.core.health import HealthConfig, TrackHealth
+from slam.core.pipeline import PipelineConfig, doppler_displacement, doppler_ego_motion, forward_speed_fit
 
 CHEAP: dict[str, Any] = {"radar": {"scan": {"grid_deg": 5}}, "vehicles_count": 3}
 
@@ -143,8 +143,9 @@ def test_health_in_the_observation_is_opt_in():
 def test_few_landmarks_at_speed_keep_the_start(speed):
     """Three landmarks, straight at speed: the Doppler carries the first cycles (the first pose moves)."""
     from rhs_env.radar import RadarConfig, RadarSystem
-    from slam.registration import make_registration
-    from slam.scenario import RadarCloud, run_scenario
+    from slam.core.registration import make_registration
+    from slam.core.scenario import run_scenario
+    from slam.gym.radar_cloud import RadarCloud
 
     dt, cycles = 0.2, 30
     rng = np.random.default_rng(0)

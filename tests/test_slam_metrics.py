@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from slam.metrics import (
+from slam.core.metrics import (
     MEASURED_GATE_M,
     MEASURED_MIN_SCANS,
     heading_rmse,

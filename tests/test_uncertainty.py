@@ -19,10 +19,10 @@ from scipy import stats
 from rhs_env.radar import LinkBudgetConfig, RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers
 from rhs_env.uncertainty import point_rows
-from slam.association import point_covariance
-from slam.rbpf import SlamConfig
-from slam.registration import OdometryRegistration
-from slam.scenario import SyntheticCloud, run_scenario
+from slam.core.association import point_covariance
+from slam.core.rbpf import SlamConfig
+from slam.core.registration import OdometryRegistration
+from slam.core.scenario import SyntheticCloud, run_scenario
 
 
 def _isolated_errors(add_noise: bool, tx_power_dbm: float, n: int, antenna: str = "rhs", seed: int = 0):
@@ -126,8 +126,8 @@ def _landmark_nees(seed: int) -> np.ndarray:
     landmark estimate is the Kalman fusion of its observations with their own covariances:
     its NEES is chi-square(2) exactly when those covariances are right.
     """
-    from slam.pipeline import PipelineConfig, SlamPipeline
-    from slam.registration import points_in_frame
+    from slam.core.pipeline import PipelineConfig, SlamPipeline
+    from slam.core.registration import points_in_frame
 
     lm, poses = _road(40)
     cloud = SyntheticCloud(lm, 300 + seed, max_range_m=30.0, dt=0.2, range_std_m=0.02,
@@ -136,7 +136,7 @@ def _landmark_nees(seed: int) -> np.ndarray:
                      yaw_accel_std_radps2=0.0, measurement_floor_m=0.0)
     odo = OdometryRegistration(400 + seed, trans_std_m=0.0, rot_std_rad=0.0)  # the pose is known
     pipe = SlamPipeline(odo, cfg, np.random.default_rng(seed), PipelineConfig(use_doppler=False))
-    from slam.registration import relative_motion
+    from slam.core.registration import relative_motion
 
     for t in range(len(poses)):
         if t:

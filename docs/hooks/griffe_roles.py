@@ -1,8 +1,8 @@
 """Griffe extension of the API reference (``mkdocs.yml``: the python handler's ``extensions``).
 
-The docstrings name other objects with Sphinx roles (``:class:`slam.rbpf.RBPFSlam```,
+The docstrings name other objects with Sphinx roles (``:class:`slam.core.rbpf.RBPFSlam```,
 ``:func:`~agents.evaluate.run_episode```), which Markdown would print as they are. This
-extension turns each into inline code (``slam.rbpf.RBPFSlam``; with ``~``, the last
+extension turns each into inline code (``slam.core.rbpf.RBPFSlam``; with ``~``, the last
 name only, as Sphinx shows it), and a paragraph's closing ``::`` (which introduces an
 indented literal block, already a code block in Markdown) into ``:``, before the
 docstrings are rendered.
@@ -22,8 +22,8 @@ ROLE = re.compile(r":(?:py:)?(?:func|class|mod|meth|attr|data|obj|exc|const|ref)
 def plain(text: str) -> str:
     """``text`` with its Sphinx cross-reference roles as inline code and ``::`` as ``:``.
 
-    >>> plain("Runs :func:`~agents.evaluate.run_episode` on :class:`slam.rbpf.RBPFSlam`. Input::")
-    'Runs `run_episode` on `slam.rbpf.RBPFSlam`. Input:'
+    >>> plain("Runs :func:`~agents.evaluate.run_episode` on :class:`slam.core.rbpf.RBPFSlam`. Input::")
+    'Runs `run_episode` on `slam.core.rbpf.RBPFSlam`. Input:'
     """
 
     def code(m: re.Match) -> str:

@@ -11,7 +11,7 @@ frame is at ``R(dth) x + [dx, dy]`` in the previous frame.
 - :class:`OdometryRegistration`: the true motion plus Gaussian noise (an "oracle"
   baseline for tests and ablations).
 
-The CNN registration lives in ``slam.cnn_registration`` and follows the same protocol.
+The CNN registration lives in ``slam.core.cnn_registration`` and follows the same protocol.
 """
 
 from __future__ import annotations
@@ -173,7 +173,7 @@ class ICPRegistration:
         self.min_pairs = cfg.min_pairs
         self.amplitude_weights = cfg.amplitude_weights
         self.constant_velocity = cfg.constant_velocity
-        #: "numba": the fit compiled with brute-force nearest neighbours (:func:`slam.kernels.icp_fit`, the
+        #: "numba": the fit compiled with brute-force nearest neighbours (:func:`slam.core.kernels.icp_fit`, the
         #: clouds hold tens of points), "numpy": cKDTree and numpy; set from the SLAM config by the pipeline
         self.kernels = "numba"
         self.reset()
@@ -211,7 +211,7 @@ class ICPRegistration:
         best = None
         for offset in np.concatenate([[0.0], self.yaw_offsets[self.yaw_offsets != 0.0]]):
             start = guess + np.array([0.0, 0.0, offset])
-            if self.kernels == "numba":  # the same iterations and score, compiled (slam.kernels.icp_fit)
+            if self.kernels == "numba":  # the same iterations and score, compiled (slam.core.kernels.icp_fit)
                 est, pairs, rmse, near = self._fit_compiled(src, prev, start, amp_p, amp_c)
             else:
                 assert tree is not None
@@ -232,8 +232,8 @@ class ICPRegistration:
         return est
 
     def _fit_compiled(self, src, prev, guess, amp_p, amp_c) -> tuple[np.ndarray, int, float, int]:
-        """:meth:`_fit` and the yaw-search score by :func:`slam.kernels.icp_fit`."""
-        from slam.kernels import icp_fit
+        """:meth:`_fit` and the yaw-search score by :func:`slam.core.kernels.icp_fit`."""
+        from slam.core.kernels import icp_fit
 
         use_amp = amp_p is not None
         ones = np.ones(1)
@@ -338,7 +338,7 @@ def make_registration(
     (the oracle: ``truth()`` returns the true motion of the cycle)."""
     check_choice("registration", kind, REGISTRATIONS)
     if kind == "cnn":
-        from slam.cnn_registration import CNNRegistration
+        from slam.core.cnn_registration import CNNRegistration
 
         return CNNRegistration(weights)
     if kind == "icp":

@@ -12,7 +12,7 @@ Input JSON (``examples/scenario.json`` in the repository is one)::
      "grid_deg": 1.0}                     # optional beam grid
 
 The radar synthesises and processes the echoes of the landmarks seen from each
-true pose; the SLAM runs through the same :class:`slam.pipeline.SlamPipeline`
+true pose; the SLAM runs through the same :class:`slam.core.pipeline.SlamPipeline`
 as the env. Output: ``estimated_poses`` and ``landmarks`` (map frame),
 ``ate_rmse_m``, ``map_rmse_m`` and the map match counts.
 """
@@ -106,7 +106,7 @@ def parse_scenario(doc: Any) -> dict[str, Any]:
     if unknown:
         raise ValueError(f"unknown key(s) {', '.join(map(repr, unknown))}")
     from rhs_env.array_models import ScanConfig
-    from slam.rbpf import SlamConfig
+    from slam.core.rbpf import SlamConfig
 
     out: dict[str, Any] = {"landmarks": _array(doc, "landmarks", 2, 0, MAX_LANDMARKS),
                            "poses": _array(doc, "poses", 3, 2, MAX_CYCLES)}
@@ -135,9 +135,10 @@ def run_scripted(spec: dict[str, Any], progress: bool = False) -> dict[str, Any]
     """Run the radar + SLAM on a parsed scenario; returns the JSON-ready result."""
     from rhs_env.array_models import ScanConfig
     from rhs_env.radar import RadarConfig, RadarSystem
-    from slam.rbpf import SlamConfig
-    from slam.registration import make_registration
-    from slam.scenario import RadarCloud, run_scenario
+    from slam.core.rbpf import SlamConfig
+    from slam.core.registration import make_registration
+    from slam.core.scenario import run_scenario
+    from slam.gym.radar_cloud import RadarCloud
 
     rng = np.random.default_rng(spec["seed"])
     radar = RadarSystem(RadarConfig(antenna=spec["antenna"], scan=ScanConfig(grid_deg=spec["grid_deg"])), rng)

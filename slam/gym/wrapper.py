@@ -2,7 +2,7 @@
 
 Wraps an env whose observation is the radar's ``points`` / ``points_mask``
 (:class:`rhs_env.wrappers.RadarObservation`) and runs one SLAM cycle per step
-through :class:`slam.pipeline.SlamPipeline` (the same code as ``rhs-slam
+through :class:`slam.core.pipeline.SlamPipeline` (the same code as ``rhs-slam
 scenario``). The SLAM state lives here, not in highway-env's observation
 object, which highway-env rebuilds at every reset.
 
@@ -15,7 +15,7 @@ Observation, adding to the radar's keys:
 * with ``health_in_obs=True`` (off by default: the shipped policies were trained without it)
   ``slam_health`` (1,) and ``slam_lost`` (1,).
 
-``info`` always gets the track health (:mod:`slam.health`): ``slam_health`` in [0, 1],
+``info`` always gets the track health (:mod:`slam.core.health`): ``slam_health`` in [0, 1],
 ``slam_lost`` (the filter has lost the car since a loss it has not relocalised from),
 ``slam_losses`` (losses so far in the episode), ``slam_relocalised`` (relocalisations so far)
 and ``slam_map_breaks`` (new maps started after a loss; the map frame restarts at the estimate
@@ -24,7 +24,7 @@ distance travelled since the loss (the loss's offset is unknown, the drive since
 
 :meth:`SlamObservation.observation` is the map cloud -> SLAM estimate and
 nothing else: ground truth and errors are added to ``info`` by
-:class:`slam.metrics_info.SlamMetricsInfo`; the oracle registration
+:class:`slam.gym.metrics_info.SlamMetricsInfo`; the oracle registration
 (``registration="odometry"``) gets the true motion through an explicit
 callback, :meth:`SlamObservation.true_motion`. With
 ``stage_times_in_info=True`` ``info`` gets ``slam_stage_times`` (s per SLAM
@@ -45,9 +45,9 @@ from rhs_common.geometry import apply_motion, relative_motion
 from rhs_common.threads import blas_threads_limit, check_blas_threads
 from rhs_common.validation import build, check_bool, check_int
 from rhs_env.scene import draw_disks, he_to_world_xy, world_pose, world_surface_pixels
-from slam.pipeline import PipelineConfig, SlamPipeline
-from slam.rbpf import SlamConfig, SlamEstimate
-from slam.registration import (
+from slam.core.pipeline import PipelineConfig, SlamPipeline
+from slam.core.rbpf import SlamConfig, SlamEstimate
+from slam.core.registration import (
     DEFAULT_REGISTRATION,
     ICPConfig,
     make_registration,
@@ -62,10 +62,10 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
 
     Args:
         env: an env with ``points`` / ``points_mask`` observations (RadarObservation).
-        slam: a :class:`slam.rbpf.SlamConfig` or a dict of its fields.
-        registration: ``icp`` (default, :data:`slam.registration.DEFAULT_REGISTRATION`), ``cnn`` or ``odometry``.
-        icp: a :class:`slam.registration.ICPConfig` or a dict of its fields (``registration="icp"``).
-        pipeline: a :class:`slam.pipeline.PipelineConfig` or a dict (Doppler use, acceleration bound).
+        slam: a :class:`slam.core.rbpf.SlamConfig` or a dict of its fields.
+        registration: ``icp`` (default, :data:`slam.core.registration.DEFAULT_REGISTRATION`), ``cnn`` or ``odometry``.
+        icp: a :class:`slam.core.registration.ICPConfig` or a dict of its fields (``registration="icp"``).
+        pipeline: a :class:`slam.core.pipeline.PipelineConfig` or a dict (Doppler use, acceleration bound).
         max_landmarks: L_max, rows of the ``landmarks`` observation, [1, 4096].
         stage_times_in_info: add ``slam_stage_times`` to ``info`` (non-deterministic values).
         health_in_obs: add ``slam_health`` and ``slam_lost`` to the observation.

@@ -10,7 +10,7 @@
   without a match.
 - :func:`landmark_hits` and :func:`matched_fraction`: the map's recall over a
   chosen subset of the true landmarks. Which landmarks count as *seen* is a
-  definition the caller states. :class:`slam.metrics_info.SlamMetricsInfo`'s
+  definition the caller states. :class:`slam.gym.metrics_info.SlamMetricsInfo`'s
   ``map_matched`` / ``map_missed`` count every landmark that has been within
   radar range (``max_range_m``, a disc: field of view, traffic occlusion and
   detection ignored). ``scripts/slam_accuracy.py`` also reports the

@@ -20,12 +20,12 @@ import numpy as np
 
 from rhs_common.geometry import compose, points_in_frame, relative_motion
 from rhs_common.validation import check_int, check_range
-from slam.metrics import heading_rmse, map_metrics, position_rmse
-from slam.pipeline import PipelineConfig, SlamPipeline
-from slam.rbpf import SlamConfig
-from slam.registration import Registration
+from slam.core.metrics import heading_rmse, map_metrics, position_rmse
+from slam.core.pipeline import PipelineConfig, SlamPipeline
+from slam.core.rbpf import SlamConfig
+from slam.core.registration import Registration
 
-__all__ = ["run_scenario", "SyntheticCloud", "RadarCloud", "compose", "poses_in_frame"]
+__all__ = ["run_scenario", "SyntheticCloud", "compose", "poses_in_frame"]
 
 
 def poses_in_frame(poses: np.ndarray, origin: np.ndarray) -> np.ndarray:
@@ -133,53 +133,6 @@ class SyntheticCloud:
         return pts
 
 
-class RadarCloud:
-    """Point clouds of the simulated RHS radar for a scripted run (callable ``(t, true_pose) -> (N, 7)``).
-
-    Rows: x, y, radial velocity, amplitude, range std, angle std, radar index
-    (:func:`rhs_env.uncertainty.point_rows`).
-
-    The world landmarks (K, 2) are static point scatterers of RCS ``rcs_m2``; each
-    cycle they are moved into the vehicle frame of the true pose, their velocity
-    relative to the ego is ``-(v + w z x r)`` with the ego velocity ``v`` and yaw
-    rate ``w`` from the scripted poses (finite differences over ``dt``), and the
-    four radars of :class:`rhs_env.radar.RadarSystem` scan them (echo synthesis,
-    range FFT, CFAR, OMP). ``last_true_xy`` holds the scatterers in view.
-    """
-
-    def __init__(self, landmarks: np.ndarray, poses: np.ndarray, dt: float, radar, rcs_m2: float = 5.0) -> None:
-        check_range("dt", dt, 0.0, None, low_open=True)
-        check_range("rcs_m2", rcs_m2, 0.0, None)
-        self.landmarks = np.asarray(landmarks, dtype=float).reshape(-1, 2)
-        self.poses = np.asarray(poses, dtype=float).reshape(-1, 3)
-        self.dt = float(dt)
-        self.radar = radar
-        self.rcs_m2 = float(rcs_m2)
-        self.last_true_xy = np.zeros((0, 2))
-
-    def __call__(self, t: int, true_pose: np.ndarray) -> np.ndarray:
-        from rhs_env.scatterers import Scatterers
-        from rhs_env.uncertainty import point_rows
-
-        pose = np.asarray(true_pose, dtype=float).reshape(3)
-        lo, hi = max(t - 1, 0), min(t + 1, len(self.poses) - 1)
-        if hi > lo:  # central (or one-sided) difference of the scripted trajectory
-            m = relative_motion(self.poses[lo], self.poses[hi])
-            frac = relative_motion(self.poses[lo], pose)[2]
-            c, s = math.cos(frac), math.sin(frac)  # velocity of the lo frame -> current frame
-            v_prev = m[:2] / ((hi - lo) * self.dt)
-            v = np.array([c * v_prev[0] + s * v_prev[1], -s * v_prev[0] + c * v_prev[1]])
-            w = m[2] / ((hi - lo) * self.dt)
-        else:
-            v, w = np.zeros(2), 0.0
-        xy = points_in_frame(self.landmarks, pose)
-        rel_v = -(v[None, :] + w * np.stack([-xy[:, 1], xy[:, 0]], axis=1))
-        k = len(xy)
-        sc = Scatterers(xy, rel_v, np.full(k, self.rcs_m2), np.arange(k), np.ones(k, bool))
-        self.last_true_xy = xy[self.radar.in_view(sc)]
-        return point_rows(self.radar.scan(sc))
-
-
 def run_scenario(
     landmarks: np.ndarray,
     poses: np.ndarray,
@@ -206,11 +159,12 @@ def run_scenario(
         if it has ``set_true_motion`` (the odometry oracle) it receives the truth first.
     slam_config : RBPF settings. rng : numpy Generator or seed.
     dt : cycle duration (s). map_gate_m : gate of the Hungarian map metric (m).
-    sensor_xy : (S, 2) radar positions (vehicle frame, m) for (N, 7) clouds; default: for a
-        :class:`RadarCloud`, its radar's mounts, else the vehicle origin.
+    sensor_xy : (S, 2) radar positions (vehicle frame, m) for (N, 7) clouds; default: the
+        cloud's own ``sensor_xy`` attribute when it has one (:class:`slam.gym.radar_cloud.RadarCloud`:
+        its radar's mounts), else the vehicle origin.
     use_doppler : filter moving points with the radial velocity. The ego velocity
         comes from the Doppler of the cloud itself (RANSAC fit of
-        ``vr = -v . u``, :func:`slam.association.estimate_ego_velocity`), which also
+        ``vr = -v . u``, :func:`slam.core.association.estimate_ego_velocity`), which also
         gives the registration its prior displacement ``v dt``; when the fit fails,
         the last registration motion over dt is used.
 
@@ -230,8 +184,8 @@ def run_scenario(
     check_int("len(poses)", T, 1, None)
     rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
     cfg = slam_config if slam_config is not None else SlamConfig()
-    if sensor_xy is None and isinstance(cloud_fn, RadarCloud):
-        sensor_xy = cloud_fn.radar.config.mounting.mounts()[0]
+    if sensor_xy is None:  # a cloud that knows its radars' mounts (slam.gym.radar_cloud.RadarCloud) says them
+        sensor_xy = getattr(cloud_fn, "sensor_xy", None)
     pipe = SlamPipeline(registration, cfg, rng, PipelineConfig(use_doppler=use_doppler), sensor_xy=sensor_xy)
     log = _RunLog(T)
     it = range(T)

@@ -25,7 +25,7 @@ import numpy as np
 from rhs_common.geometry import compose, points_in_frame
 from rhs_common.validation import check_int, check_range, check_types
 
-DEFAULT_WEIGHTS = Path(__file__).parent / "data" / "registration_cnn.pt"
+DEFAULT_WEIGHTS = Path(__file__).parent.parent / "data" / "registration_cnn.pt"
 
 
 @dataclass(frozen=True)

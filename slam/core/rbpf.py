@@ -15,7 +15,7 @@ particles is therefore a weighted mean over one slot.
 
 **Measurement model.** An observation is a point ``z`` in the vehicle frame with its
 own covariance ``Q`` (m^2): the radar's range / angle std of the point turned into
-Cartesian form (:func:`slam.association.point_covariance`), fused over a cluster,
+Cartesian form (:func:`slam.core.association.point_covariance`), fused over a cluster,
 plus ``measurement_floor_m^2 I`` (errors outside the radar: clustering, timing).
 ``measurement_noise="fixed"`` uses ``range_std_m`` / ``bearing_std_rad`` for every
 point instead (the first round's model). The prediction of landmark ``e`` from pose
@@ -34,7 +34,7 @@ One cycle (:meth:`RBPFSlam.update`): predict, associate, update, weight, resampl
 2. **Associate** (per particle, at ``mu_c``): innovation ``nu = t + R z - e`` (map frame)
    with covariance ``C = Lambda + R (Q + H_p,z Sigma_p H_p,z^T) R^T`` (``H_p`` evaluated
    at the observation); gate ``nu^T C^-1 nu <= gate_mahalanobis^2``, mutual exclusion
-   (:func:`slam.association.mahalanobis_associate`); an observation within
+   (:func:`slam.core.association.mahalanobis_associate`); an observation within
    ``new_gate_mahalanobis`` of a landmark it did not get is dropped, not made a new
    landmark. ``association="nearest"`` is the paper's nearest landmark within ``delta_m``.
    Recovery (FastSLAM 2.0): when the particles match fewer than
@@ -96,7 +96,7 @@ from rhs_common.geometry import circular_mean, wrap_angle
 from rhs_common.jit import KERNELS
 from rhs_common.timing import StageTimer
 from rhs_common.validation import check_bool, check_choice, check_int, check_range, check_types
-from slam.association import (
+from slam.core.association import (
     DROPPED,
     NEW,
     associate,
@@ -157,7 +157,7 @@ class SlamConfig:
     threshold (m/s). min_range_m: observations closer than this are ignored (m).
     max_retired: cap on archived landmarks. retire_min_hits: updates needed to
     archive a pruned landmark. kernels: "numba" (default: the Mahalanobis association, the
-    FastSLAM 2.0 proposal sums and the ICP fit compiled, :mod:`slam.kernels`) | "numpy" (the
+    FastSLAM 2.0 proposal sums and the ICP fit compiled, :mod:`slam.core.kernels`) | "numpy" (the
     reference; the same results to round-off).
     """
 
@@ -457,7 +457,7 @@ class RBPFSlam:
             cth, sth = np.cos(self.pose[:, 2])[:, None], np.sin(self.pose[:, 2])[:, None]
             a00, a01, a11 = rotate_sym2(cth, sth, *self._observation_with_pose(obs))  # (P, M)
             if c.kernels == "numba":  # the same distances and rounds per particle, compiled
-                from slam.kernels import mahalanobis_association
+                from slam.core.kernels import mahalanobis_association
 
                 sub = mahalanobis_association(obs_map, a00, a01, a11, self.mean, self.cov, self.active, used,
                                               c.gate_mahalanobis**2, c.new_gate_mahalanobis**2, c.association_rounds)
@@ -521,7 +521,7 @@ class RBPFSlam:
         ok = np.ones(pp.size, dtype=bool)
         for attempt in range(2 if c.joint_compatibility else 1):
             if c.kernels == "numba":  # the same sums per particle, compiled
-                from slam.kernels import proposal_information
+                from slam.core.kernels import proposal_information
 
                 info, g = proposal_information(pp, H, Si, nu, ok, P)
             else:

@@ -1,7 +1,7 @@
 """Entry points of the SLAM env ids: scene -> RadarObservation -> SlamObservation -> SlamMetricsInfo.
 
 Registered by :mod:`rhs_env.registration` through string entry points
-(``"slam.envs:make_highway_slam"``), so ``rhs_env`` never imports this layer.
+(``"slam.gym.envs:make_highway_slam"``), so ``rhs_env`` never imports this layer.
 ``gym.make`` kwargs are routed to each wrapper by its signature
 (:func:`rhs_env.registration.route_kwargs`); the rest configure the scene.
 """
@@ -15,8 +15,8 @@ import gymnasium as gym
 from rhs_env.envs import RHSDenseEnv, RHSHighwayEnv, RHSPaperEnv
 from rhs_env.registration import route_kwargs, with_cheap_base_observation
 from rhs_env.wrappers import RadarObservation
-from slam.metrics_info import SlamMetricsInfo
-from slam.wrapper import SlamObservation
+from slam.gym.metrics_info import SlamMetricsInfo
+from slam.gym.wrapper import SlamObservation
 
 
 def make_slam_env(env_cls: type[gym.Env], kwargs: dict[str, Any]) -> gym.Env:

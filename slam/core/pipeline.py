@@ -1,30 +1,30 @@
 """One SLAM cycle from a raw point cloud: ego velocity, moving-point filter, registration, RBPF.
 
 This is the single code path shared by the env's SLAM wrapper
-(:class:`slam.wrapper.SlamObservation`) and the scripted runs of
-:func:`slam.scenario.run_scenario` (``rhs-slam scenario``).
+(:class:`slam.gym.wrapper.SlamObservation`) and the scripted runs of
+:func:`slam.core.scenario.run_scenario` (``rhs-slam scenario``).
 
 Per cycle, with cloud ``A_z`` (N, 4) in the vehicle frame and cycle length dt (s)
 (or (N, 7) rows that add each point's range std (m), angle std (rad) and radar
-index: their vehicle-frame covariance, :func:`slam.association.point_covariance`
+index: their vehicle-frame covariance, :func:`slam.core.association.point_covariance`
 with the radars at ``sensor_xy``, goes to the RBPF):
 
 1. ego velocity ``v`` from the Doppler of static points, each seen along its own radar's
    line of sight ``u`` (RANSAC fit of ``vr = -v . u`` scored by bearing coverage, within
    ``max_accel * dt`` of the last velocity, else unconstrained,
-   :func:`slam.association.estimate_ego_velocity`); with fewer than three agreeing points
+   :func:`slam.core.association.estimate_ego_velocity`); with fewer than three agreeing points
    the forward speed of two (:func:`forward_speed_fit`; one while no velocity is known);
    when every fit fails, the last registration motion over dt (constant velocity), and the
    velocity holds when the registration measured nothing either;
 2. static points: ``|vr - vr_static| <= threshold`` with the yaw rate and each point's radar
-   (:func:`slam.association.static_mask`);
+   (:func:`slam.core.association.static_mask`);
 3. registration of the static points of ``A_{z-1}`` and ``A_z`` from the Doppler displacement
    (:func:`doppler_displacement`, the last yaw increment); when few points fit it is tried again
    from the headings 0 and ``-dpsi_last``; the best fit whose translation agrees with the Doppler
    displacement within ``doppler_gate_m`` wins, else the Doppler displacement replaces the
    translation -> motion ``(dx, dy, dpsi)``;
-4. RBPF update (:class:`slam.rbpf.RBPFSlam`);
-5. track health (:mod:`slam.health`); while lost, relocalisation against the map built before
+4. RBPF update (:class:`slam.core.rbpf.RBPFSlam`);
+5. track health (:mod:`slam.core.health`); while lost, relocalisation against the map built before
    the loss, else after ``new_map_after_cycles`` a new map at the estimate.
 """
 
@@ -39,10 +39,10 @@ from scipy.spatial import cKDTree
 
 from rhs_common.geometry import apply_motion, points_in_frame
 from rhs_common.validation import check_int, check_range, check_types
-from slam.association import estimate_ego_velocity, point_covariance, static_mask
-from slam.health import HealthConfig, TrackHealth
-from slam.rbpf import RBPFSlam, SlamConfig, SlamEstimate
-from slam.registration import ICPRegistration, Registration
+from slam.core.association import estimate_ego_velocity, point_covariance, static_mask
+from slam.core.health import HealthConfig, TrackHealth
+from slam.core.rbpf import RBPFSlam, SlamConfig, SlamEstimate
+from slam.core.registration import ICPRegistration, Registration
 
 
 @dataclass(frozen=True)
@@ -64,7 +64,7 @@ class PipelineConfig:
     the registration is tried again from the heading increments 0 and ``-dpsi_last`` (the turn
     rate reversed, as in a lane change's second half), then, if still no start fits, from
     ``WIDE_YAW_STARTS``; the best fit is kept; 0 disables it.
-    ``new_map_after_cycles`` [1, 10^6]: after a loss (:mod:`slam.health`) the filter tries each cycle
+    ``new_map_after_cycles`` [1, 10^6]: after a loss (:mod:`slam.core.health`) the filter tries each cycle
     to relocalise against the map built before it; after this many lost cycles without success it
     starts a new map at its estimate (a break in the map frame).
     """
@@ -194,7 +194,7 @@ def forward_speed_fit(points: np.ndarray, threshold: float, min_inliers: int = 2
     (a car's side slip is small), so each point with ``|cos b| >= min_cos`` proposes
     ``vx = -vr / cos b``; the proposal that most points fit within ``threshold`` (m/s) wins and is
     refined by least squares on its inliers. Needs ``min_inliers`` agreeing points (two: the
-    full 2-D fit of :func:`slam.association.estimate_ego_velocity` needs three, and a few
+    full 2-D fit of :func:`slam.core.association.estimate_ego_velocity` needs three, and a few
     landmarks at the start of a drive give fewer). ``None`` without such a consensus.
     """
     pts = np.asarray(points, dtype=float)
@@ -254,13 +254,13 @@ class SlamPipeline:
     ) -> None:
         """``sensor_xy`` (S, 2): radar positions in the vehicle frame (m) indexed by column 6 of
         (N, 7) clouds; ``None`` puts every sensor at the vehicle origin. ``health``: the thresholds of
-        the track-health signal (:mod:`slam.health`)."""
+        the track-health signal (:mod:`slam.core.health`)."""
         self.registration = registration
         self.sensor_xy = None if sensor_xy is None else np.asarray(sensor_xy, dtype=float).reshape(-1, 2)
         self.options = options if options is not None else PipelineConfig()
         self.max_accel_mps2 = self.options.max_accel_mps2
         self.config = config if config is not None else SlamConfig()
-        if hasattr(registration, "kernels"):  # the ICP fit follows the SLAM's kernels (slam.kernels.icp_fit)
+        if hasattr(registration, "kernels"):  # the ICP fit follows the SLAM's kernels (slam.core.kernels.icp_fit)
             registration.kernels = self.config.kernels
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         self.use_doppler = self.options.use_doppler

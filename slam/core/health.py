@@ -14,7 +14,7 @@ Per cycle, three scores in [0, 1] (1 = healthy):
   Without that evidence the score holds its last value.
 * **registration**: the fraction ``g`` of the current static points within the registration's
   gate of a previous point after the fit; ``h_reg = clip(g / g_ok, 0, 1)``, halved when the fit's
-  translation failed the Doppler gate (:class:`slam.pipeline.PipelineConfig`).
+  translation failed the Doppler gate (:class:`slam.core.pipeline.PipelineConfig`).
 * **dead reckoning**: after ``blind_cycles_ok`` consecutive cycles whose registration measured
   nothing (too few points, no pair), the score falls by ``1 / blind_cycles_ok`` per further cycle:
   the heading then comes from the last turn rate alone, and a lane change reverses it within
