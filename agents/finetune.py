@@ -35,7 +35,9 @@ student drives (:func:`label_frequencies`), as in the student's last DAgger roun
 Decisions are taken at 1 Hz in ``"pulse"`` mode (:mod:`agents.decision`), the student's
 own rate, so ``gamma`` is per second. Hyperparameters: ``agents/hyperparams/finetune.yml``
 (PPO's arguments plus the fields of :class:`FinetuneConfig`). Without ``--init-policy``
-the same stage is PPO from scratch with the privileged critic (no anchor, no correction).
+the same stage is PPO from scratch with the privileged critic (no anchor, no correction). A
+``reward_shaping`` entry (``{ttc_s, weight}``, :mod:`agents.shaping`) adds a time-to-collision penalty to the
+training reward; evaluation keeps highway-env's.
 """
 
 from __future__ import annotations
@@ -272,6 +274,18 @@ class AnchoredPPO(PPO):
         self.logger.record("anchor/kl", float(np.mean(kls)))
 
 
+def training_wrapper(env: gym.Env, privileged: bool, shaping: dict[str, Any] | None) -> gym.Env:
+    """The fine-tune's wrappers of each training env: the privileged key (for the critic), then the reward shaping
+    (:class:`agents.shaping.TimeToCollisionShaping`; None: highway-env's reward)."""
+    if privileged:
+        env = PrivilegedObservation(env)
+    if shaping is not None:
+        from agents.shaping import TimeToCollisionShaping
+
+        env = TimeToCollisionShaping(env, shaping)
+    return env
+
+
 def _plain_model(env_id: str, run: Any, ppo_args: dict[str, Any]) -> PPO:
     """A fresh PPO of the YAML's policy on the plain env (one in-process env): what a from-scratch actor is
     exported into, so ``model.zip`` runs without the privileged key."""
@@ -344,14 +358,19 @@ def train_finetune(env_id: str, timesteps: int | None, out: str | Path, init_pol
         env_kwargs = continued_env_kwargs(env_id, env_kwargs, init_policy)
     run = run_settings("finetune", env_id, timesteps, n_envs, hyperparams, env_kwargs)
     config = build(FinetuneConfig, {k: v for k, v in run.hp.items() if k in FINETUNE_KEYS}, "finetune")
-    ppo_args = {k: v for k, v in run.hp.items() if k not in FINETUNE_KEYS}
+    ppo_args = {k: v for k, v in run.hp.items() if k not in (*FINETUNE_KEYS, "reward_shaping")}
+    shaping = run.hp.get("reward_shaping")
+    if shaping is not None:
+        from agents.shaping import ShapingConfig
+
+        build(ShapingConfig, shaping, "reward_shaping")  # a wrong value fails here, not in a worker
     check_train_args(run.timesteps, run.n_envs, seed, 0, 1, checkpoint_freq)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     limit_threads(torch_threads)
     torch.manual_seed(seed)
     k = run.decision_interval
-    record: dict[str, Any] = {"finetune": asdict(config)}
+    record: dict[str, Any] = {"finetune": asdict(config), "reward_shaping": shaping}
     student = None
     if init_policy is not None:
         student = PPO.load(init_policy, device="cpu")
@@ -362,7 +381,7 @@ def train_finetune(env_id: str, timesteps: int | None, out: str | Path, init_pol
             power = float(dagger.get("class_weight_power", 0.0))
             record["class_prior"] = measure_prior(env_id, run.env_kwargs, student, run, config, power,
                                                   bool(dagger.get("label_between", False)), seed + 20_000)
-    wrapper = PrivilegedObservation if config.privileged_critic else None
+    wrapper = partial(training_wrapper, privileged=config.privileged_critic, shaping=shaping)
     venv = make_vec_env(env_id, run.n_envs, seed, run.env_kwargs, monitor_dir=out / "monitor", decision_interval=k,
                         decision_mode=run.decision_mode, wrapper=wrapper)
     decisions = -(-run.timesteps // k)

@@ -9,7 +9,8 @@ decisions at 1 Hz in pulse mode; :mod:`agents.finetune`):
 * ``dagger_continue``: DAgger going on from the student, the expert labelling the states it reaches
   (``agents/hyperparams/dagger_continue.yml``);
 * ``scratch``: PPO from scratch with the privileged critic (``finetune.yml`` without a student, with PPO's usual
-  learning rate 5e-4, clip range 0.2 and an entropy bonus 0.01), on request (``--arms ... scratch``).
+  learning rate 5e-4, clip range 0.2, an entropy bonus 0.01 and the time-to-collision shaping of
+  :mod:`agents.shaping`), on request (``--arms ... scratch``).
 
 Evaluation on ``--episodes`` seeds from ``--seed`` (3000..: never used in training, where the envs draw seeds
 0.. and 20000.., nor in any earlier selection), every policy on the same seeds; the scripted references
@@ -56,7 +57,8 @@ ARMS: dict[str, tuple[str, str, bool]] = {
     "finetune": ("finetune", "finetune.yml", True),
     "finetune_no_anchor": ("finetune", "finetune.yml:anchor_coef=0", True),
     "dagger_continue": ("dagger", "dagger_continue.yml", True),
-    "scratch": ("finetune", "finetune.yml:learning_rate=5.0e-4,clip_range=0.2,ent_coef=0.01", False),
+    "scratch": ("finetune", "finetune.yml:learning_rate=5.0e-4;clip_range=0.2;ent_coef=0.01;"
+                            "reward_shaping={ttc_s: 3.0, weight: 0.5}", False),
 }
 LABELS = {
     "student": "DAgger student (shipped, start of every arm)",
@@ -74,8 +76,9 @@ TARGET_VS_IDM, TARGET_COLLISIONS, TARGET_SPEED_MPS, TARGET_GAIN = 1.08, 0.02, 24
 CURVE_WINDOW = 20
 
 
-def hyperparams_file(spec: str, run_dir: Path) -> Path:
-    """``NAME.yml`` of agents/hyperparams, or ``NAME.yml:key=value,...``: a copy with those keys set (in ``run_dir``)."""
+def hyperparams_file(spec: str, run_dir: Path, arm: str) -> Path:
+    """``NAME.yml`` of agents/hyperparams, or ``NAME.yml:key=value;key=value``: a copy with those keys set (values
+    in YAML), written to ``run_dir/ARM.yml``."""
     import yaml
 
     name, _, overrides = spec.partition(":")
@@ -83,10 +86,10 @@ def hyperparams_file(spec: str, run_dir: Path) -> Path:
     if not overrides:
         return path
     table = yaml.safe_load(path.read_text())
-    changes = {k: yaml.safe_load(v) for k, v in (item.split("=", 1) for item in overrides.split(","))}
+    changes = {k.strip(): yaml.safe_load(v) for k, v in (item.split("=", 1) for item in overrides.split(";"))}
     for entry in table.values():
         entry.update(changes)
-    out = run_dir / f"{name.removesuffix('.yml')}_{'_'.join(f'{k}{v}' for k, v in changes.items())}.yml"
+    out = run_dir / f"{arm}.yml"
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(yaml.safe_dump(table, sort_keys=False))
     return out
@@ -97,7 +100,7 @@ def train_arm(arm: str, runs: Path, timesteps: int, seed: int) -> dict[str, Any]
     algo, spec, from_student = ARMS[arm]
     out = runs / arm
     cmd = [sys.executable, "-m", "rhs_slam", "train", "--algo", algo, "--env", ENV_ID, "--timesteps", str(timesteps),
-           "--seed", str(seed), "--out", str(out), "--no-progress", "--hyperparams", str(hyperparams_file(spec, runs))]
+           "--seed", str(seed), "--out", str(out), "--no-progress", "--hyperparams", str(hyperparams_file(spec, runs, arm))]
     if from_student:
         cmd += ["--init-policy", str(STUDENT)]
     print(f"rl_finetune: training {arm}: {' '.join(cmd[1:])}", file=sys.stderr)

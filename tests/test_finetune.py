@@ -261,8 +261,35 @@ def test_the_study_derives_a_control_yaml_with_the_keys_set(tmp_path):
 
     from rhs_studies.rl_finetune import hyperparams_file
 
-    path = hyperparams_file("finetune.yml:anchor_coef=0,learning_rate=5.0e-4", tmp_path)
+    path = hyperparams_file("finetune.yml:anchor_coef=0;learning_rate=5.0e-4;reward_shaping={ttc_s: 2.0}", tmp_path,
+                            "control")
+    assert path == tmp_path / "control.yml"
     table = yaml.safe_load(path.read_text())
     assert table["rhs-highway-slam-v0"]["anchor_coef"] == 0
     assert table["rhs-highway-slam-v0"]["learning_rate"] == pytest.approx(5e-4)
+    assert table["rhs-highway-slam-v0"]["reward_shaping"] == {"ttc_s": 2.0}
     assert table["rhs-highway-slam-v0"]["anchor_fraction"] == 0.5  # the rest as shipped
+
+
+def test_time_to_collision_shaping_penalises_closing_in_on_a_leader():
+    import rhs_env  # noqa: F401
+    from agents.shaping import ShapingConfig, TimeToCollisionShaping, time_to_collision, ttc_penalty
+
+    env = TimeToCollisionShaping(gym.make("rhs-highway-v0", vehicles_count=3), {"ttc_s": 3.0, "weight": 0.5})
+    env.reset(seed=0)
+    base = env.unwrapped
+    ego = base.vehicle
+    leader = next(v for v in base.road.vehicles if v is not ego)
+    leader.lane_index, leader.lane = ego.lane_index, ego.lane
+    s, _ = ego.lane.local_coordinates(ego.position)
+    leader.position = ego.lane.position(s + 20.0, 0.0)
+    base.road.vehicles = [ego, leader]
+    leader.speed = ego.speed - 10.0  # closing at 10 m/s from (20 - L) m: TTC ~ 1.5 s
+    ttc = time_to_collision(env)
+    assert ttc == pytest.approx((20.0 - ego.LENGTH) / 10.0, rel=1e-6)
+    assert ttc_penalty(ttc, ShapingConfig(ttc_s=3.0, weight=0.5)) == pytest.approx(0.5 * (1 - ttc / 3.0))
+    leader.speed = ego.speed + 5.0  # pulling away: no danger
+    assert time_to_collision(env) == float("inf")
+    with pytest.raises(ValueError, match="reward_shaping.ttc_s"):
+        TimeToCollisionShaping(env.env, {"ttc_s": 0.0})
+    env.close()
