@@ -104,9 +104,11 @@ def train_arm(arm: str, runs: Path, timesteps: int, seed: int) -> dict[str, Any]
     if from_student:
         cmd += ["--init-policy", str(STUDENT)]
     print(f"rl_finetune: training {arm}: {' '.join(cmd[1:])}", file=sys.stderr)
+    state = git_state()  # the code the run starts from
     t0 = time.perf_counter()
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-    record = {"command": cmd[1:], "commit": git_state().get("commit"), "wall_s": round(time.perf_counter() - t0, 1)}
+    record = {"command": cmd[1:], "commit": state.get("commit"), "dirty": state.get("dirty"),
+              "wall_s": round(time.perf_counter() - t0, 1)}
     (out / "run.json").write_text(json.dumps(record, indent=1))
     return record
 
