@@ -263,7 +263,7 @@ def _load_rllib(path: Path, env=None):
     """The RLModule of an RLlib checkpoint directory (``rhs-slam train --backend rllib``); a run with a decision
     interval k > 1 (``decision_interval`` in the JSON beside the directory) comes back as a
     :class:`agents.decision.HeldPolicy`, as a zip does."""
-    from agents.rllib import MODULE_SUBDIR, RLlibPolicy, is_rllib_checkpoint
+    from agents.rllib_policy import MODULE_SUBDIR, RLlibPolicy, is_rllib_checkpoint
 
     if not is_rllib_checkpoint(path):
         raise ValueError(f"{path} is a directory but not an RLlib checkpoint (no {'/'.join(MODULE_SUBDIR)})")

@@ -1,22 +1,53 @@
 """Ray RLlib backend for ``rhs-slam train --backend rllib`` (training beyond one machine).
 
-PPO on RLlib's new API stack (``EnvRunner`` actors sample, a ``Learner`` updates):
+PPO (``--algo ppo``) and the fine-tuning stage of :mod:`agents.finetune` (``--algo finetune``) on
+RLlib's new API stack (``EnvRunner`` actors sample, a ``Learner`` updates), from the same YAML
+entries as the stable-baselines3 backend (``agents/hyperparams/ppo.yml`` / ``finetune.yml``):
 
 * the env is registered with ``ray.tune.register_env(<gym id>, creator)``; the
-  creator imports ``rhs_env`` (which registers the gym ids in each Ray worker)
-  and calls ``gym.make(<id>, **env_config)``; ``env_config`` is the training
-  ``env_kwargs``, so a worker on another machine rebuilds exactly the same env;
+  creator (:func:`make_env`) imports ``rhs_env`` (which registers the gym ids in each Ray worker),
+  calls ``gym.make(<id>, **env_kwargs)`` and wraps the env as the SB3 backend does:
+  :class:`agents.privileged.PrivilegedObservation` when the critic is privileged, then
+  :class:`agents.decision.HoldAction` for a ``decision_interval`` k > 1 (``decision_mode``:
+  ``hold`` or ``pulse``). ``env_config`` (:func:`env_config`) carries the kwargs and the
+  wrappers, so a worker on another machine rebuilds exactly the same env;
 * observations reach the policy unflattened: :class:`PointSetPPOModule` (a
   ``TorchRLModule`` with RLlib's ``ValueFunctionAPI``) encodes Dict observations
   with the masked point-set encoder of :mod:`agents.features` (the one the
   stable-baselines3 backend uses, permutation invariant, padding ignored) and
-  Box observations by flattening; separate policy and value MLPs
-  (``net_arch``) sit on the shared encoding;
-* hyperparameters come from the same ``agents/hyperparams/ppo.yml`` entry as the
-  SB3 backend, mapped as: rollout ``n_steps * n_envs`` -> ``train_batch_size``,
-  ``batch_size`` -> ``minibatch_size``, ``n_epochs`` -> ``num_epochs``,
-  ``gae_lambda`` -> ``lambda_``, ``clip_range`` -> ``clip_param``, ``ent_coef``
-  -> ``entropy_coeff``, ``lin_<lr>`` -> a linear schedule to 0 over the run;
+  Box observations by flattening; separate policy and value MLPs (``net_arch``)
+  sit on the shared encoding; with the privileged key in the observation the critic has its own
+  encoder and reads the key too, the actor never does (an asymmetric actor-critic, as
+  :class:`agents.finetune.PrivilegedCriticPolicy`);
+* the learner is :class:`AnchoredPPOLearner`: RLlib's PPO loss, plus for the fine-tune the
+  decaying anchor ``lambda(t) KL(pi_student || pi)`` (:func:`agents.finetune.anchor_coef`);
+* hyperparameters map as:
+
+  | YAML entry (stable-baselines3) | RLlib |
+  |---|---|
+  | ``n_steps * n_envs`` (decisions) | ``train_batch_size_per_learner`` |
+  | ``batch_size`` / ``n_epochs`` | ``minibatch_size`` / ``num_epochs`` |
+  | ``learning_rate`` (``lin_<lr>``) | ``lr`` (a linear schedule to 0 over the run's decisions) |
+  | ``gamma`` / ``gae_lambda`` | ``gamma`` / ``lambda_`` |
+  | ``clip_range`` | ``clip_param`` |
+  | ``ent_coef`` / ``vf_coef`` / ``max_grad_norm`` | ``entropy_coeff`` / ``vf_loss_coeff`` / ``grad_clip`` |
+  | (SB3 has neither) | ``use_kl_loss=False``, ``vf_clip_param=1e30`` (no clip) |
+  | ``policy_kwargs`` | ``model_config``: ``net_arch``, ``features_extractor_kwargs`` (point-set only) |
+  | ``decision_interval`` / ``decision_mode`` | the env creator's :class:`agents.decision.HoldAction` |
+  | ``privileged_critic`` | the creator's ``PrivilegedObservation`` and the module's critic |
+  | ``anchor_coef`` / ``anchor_fraction`` | the learner's anchor (``learner_config_dict["finetune"]``) |
+  | ``anchor_epochs`` | 0: no anchor; else the term is in every minibatch's loss |
+  | ``correct_class_prior`` / ``prior_steps`` | the student corrected with SB3 before its actor is copied |
+
+  Two differences from the SB3 fine-tune: the anchor is a term of the PPO loss on each
+  minibatch (RLlib's loss is one function) instead of ``anchor_epochs`` separate passes after
+  the update, and ``t`` counts decisions sampled (RLlib's ``num_env_steps_sampled_lifetime``
+  under a ``HoldAction``), which is the same fraction of the run;
+* ``--algo finetune --init-policy STUDENT.zip`` loads the student with stable-baselines3,
+  corrects its logits for its class weights (:func:`agents.finetune.measure_prior`), copies its
+  actor into the module (:func:`student_actor_state`: extractor -> ``encoder`` and the critic's
+  ``vf_encoder``, policy MLP and action head -> ``pi``) and freezes that as the anchor's teacher;
+  without ``--init-policy`` it is PPO from scratch with the privileged critic;
 * ``address=None`` starts a local Ray instance (``num_env_runners + 1`` CPUs);
   ``address="auto"`` or ``"ray://host:10001"`` / ``"host:6379"`` joins an existing
   cluster, whose nodes must have this package installed (same version).
@@ -29,10 +60,14 @@ parallelism is not wired) and the synchronous gather of each iteration (an
 iteration waits for the slowest runner).
 
 Writes into ``DIR``: ``rllib_checkpoint/`` (``Algorithm.save_to_path``; its
-RLModule is what ``rhs-slam evaluate --policy DIR/rllib_checkpoint`` loads),
-``rllib_checkpoint.json`` beside it and ``train.json`` (env id, env kwargs,
-settings, timings, per-iteration progress), ``checkpoints/step_<n>/`` every
-``checkpoint_freq`` env steps, ``tb/`` (TensorBoard scalars per iteration).
+RLModule is what ``rhs-slam evaluate --policy DIR/rllib_checkpoint`` loads, held for the
+decision interval as a zip is), ``rllib_checkpoint.json`` beside it and ``train.json`` (env id,
+env kwargs, decision interval and mode, settings, timings, per-iteration progress with the
+anchor's ``lambda`` and KL), ``checkpoints/step_<n>/`` every ``checkpoint_freq`` env steps,
+``tb/`` (TensorBoard scalars per iteration). The fine-tune also writes ``model.zip`` /
+``model.json``: the trained actor as a plain stable-baselines3 student
+(:func:`export_module_actor`, what :func:`agents.finetune.export_actor` writes), which
+``rhs-slam evaluate`` / ``demo`` run without Ray.
 
 Works with gymnasium 1.2 (ray[rllib] 2.60's pin) and 1.4 (the base install).
 """
@@ -48,21 +83,13 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-CHECKPOINT_DIR = "rllib_checkpoint"
-#: the RLModule inside an algorithm checkpoint (single-agent: the default module id)
-MODULE_SUBDIR = ("learner_group", "learner", "rl_module", "default_policy")
-
-
-def require_ray():
-    """Import ray, or raise ``ValueError`` telling how to install the extra."""
-    try:
-        import ray
-        from ray.rllib.algorithms.ppo import PPOConfig  # noqa: F401
-    except ImportError as exc:
-        raise ValueError(
-            f"the rllib backend needs Ray RLlib ({exc}): pip install torch==2.13.0 && pip install -e '.[rllib]'"
-        ) from None
-    return ray
+from agents.rllib_policy import (  # noqa: F401  (re-exported: the checkpoint side, importable without the trainer)
+    CHECKPOINT_DIR,
+    MODULE_SUBDIR,
+    RLlibPolicy,
+    is_rllib_checkpoint,
+    require_ray,
+)
 
 
 def env_config(env_kwargs: dict[str, Any], decision_interval: int = 1, decision_mode: str = "hold",
@@ -282,6 +309,9 @@ def ppo_settings(hp: dict[str, Any], n_envs: int, timesteps: int) -> dict[str, A
         "entropy_coeff": float(hp.get("ent_coef", 0.0)),
         "vf_loss_coeff": float(hp.get("vf_coef", 0.5)),
         "grad_clip": float(hp.get("max_grad_norm", 0.5)),
+        # stable-baselines3's PPO has neither RLlib's adaptive KL penalty nor its clip of the value loss
+        "use_kl_loss": False,
+        "vf_clip_param": 1e30,  # no clip
     }
 
 
@@ -661,6 +691,19 @@ def _train_loop(out: Path, env_kwargs: dict[str, Any], run: dict[str, Any]) -> d
         bar.close()
         writer.close()
         algo.stop()
+    summary = _summary(out, env_kwargs, run, steps, wall, history, anchor)
+    text = json.dumps(summary, indent=2)
+    (out / "train.json").write_text(text)
+    (out / f"{CHECKPOINT_DIR}.json").write_text(text)
+    if finetune is not None and start is not None:
+        _export_student(out, summary, start["student"], run["policy"])
+    return summary
+
+
+def _summary(out: Path, env_kwargs: dict[str, Any], run: dict[str, Any], steps: int, wall: float,
+             history: list[dict[str, Any]], anchor: bool) -> dict[str, Any]:
+    """The run's record (``train.json``): env, decision interval, settings, timings, per-iteration progress."""
+    k, settings, finetune, start = run["k"], run["settings"], run["finetune"], run["start"]
     summary = {
         "backend": "rllib",
         "algo": run["algo"],
@@ -687,11 +730,6 @@ def _train_loop(out: Path, env_kwargs: dict[str, Any], run: dict[str, Any]) -> d
 
         summary["finetune"] = {**asdict(finetune), "anchor": anchor}
         summary.update(start["record"] if start is not None else {})
-    text = json.dumps(summary, indent=2)
-    (out / "train.json").write_text(text)
-    (out / f"{CHECKPOINT_DIR}.json").write_text(text)
-    if finetune is not None and start is not None:
-        _export_student(out, summary, start["student"], run["policy"])
     return summary
 
 
@@ -705,47 +743,3 @@ def _export_student(out: Path, summary: dict[str, Any], student: Any, policy: st
     record = {**summary, "policy": policy, "model": str(out / "model.zip"),
               "rllib_checkpoint": str(out / CHECKPOINT_DIR)}  # fmt: skip
     (out / "model.json").write_text(json.dumps(record, indent=2))
-
-
-def is_rllib_checkpoint(path: str | Path) -> bool:
-    """A directory holding an RLlib algorithm checkpoint (or its RLModule)."""
-    p = Path(path)
-    return p.is_dir() and (p.joinpath(*MODULE_SUBDIR).is_dir() or (p / "class_and_ctor_args.pkl").exists())
-
-
-class RLlibPolicy:
-    """The RLModule of an RLlib checkpoint behind the ``predict(obs, deterministic)`` interface of SB3 models.
-
-    Needs only torch and ray.rllib (no Ray cluster): the module is rebuilt from
-    the checkpoint and run on one observation at a time; ``deterministic``
-    takes the arg-max action, else samples the categorical distribution.
-    """
-
-    def __init__(self, path: str | Path):
-        require_ray()
-        from ray.rllib.core.rl_module.rl_module import RLModule
-
-        p = Path(path)
-        module_dir = p.joinpath(*MODULE_SUBDIR) if p.joinpath(*MODULE_SUBDIR).is_dir() else p
-        self.module = RLModule.from_checkpoint(str(module_dir.resolve()))
-        self.module.eval()
-        space = self.module.observation_space
-        if isinstance(space, gym.spaces.Dict):  # the actor never reads a privileged critic's key
-            from agents.privileged import without_privileged
-
-            space = without_privileged(space)
-        self.observation_space = space
-        self.action_space = self.module.action_space
-
-    def predict(self, obs, deterministic: bool = True):
-        import torch
-
-        def batch1(x):
-            return torch.as_tensor(np.asarray(x))[None]
-
-        o = {k: batch1(v) for k, v in obs.items()} if isinstance(obs, dict) else batch1(obs)
-        with torch.no_grad():
-            logits = self.module.forward_inference({"obs": o})["action_dist_inputs"][0]
-        if deterministic:
-            return int(torch.argmax(logits)), None
-        return int(torch.distributions.Categorical(logits=logits).sample()), None

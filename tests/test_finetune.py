@@ -56,7 +56,7 @@ def _logits(policy, obs) -> torch.Tensor:
 def _pair(seed: int = 0):
     torch.manual_seed(seed)
     SPACE.seed(seed)
-    lr = lambda _: 1e-3  # noqa: E731
+    lr = lambda _: 1e-3
     student = MultiInputActorCriticPolicy(without_privileged(SPACE), gym.spaces.Discrete(5), lr, **POLICY_KWARGS)
     tuned = PrivilegedCriticPolicy(SPACE, gym.spaces.Discrete(5), lr, **POLICY_KWARGS)
     return student, tuned
