@@ -345,7 +345,7 @@ if TorchRLModule is not None:
         the run's (``learner_config_dict["anchor_total_steps"]``); the other fields of the
         :class:`agents.finetune.FinetuneConfig` come in ``learner_config_dict["finetune"]``. The teacher is a frozen
         copy of the module as :meth:`start_from` leaves it (the student's actor); without one it is plain PPO.
-        Logs ``anchor_coef`` and ``anchor_kl`` per module.
+        Logs ``anchor_coef`` (with a teacher) and ``anchor_kl`` (while ``lambda > 0``) per module.
         """
 
         teacher: Any = None
@@ -378,6 +378,8 @@ if TorchRLModule is not None:
 
         def compute_loss_for_module(self, *, module_id, config, batch, fwd_out):
             loss = super().compute_loss_for_module(module_id=module_id, config=config, batch=batch, fwd_out=fwd_out)
+            if self.teacher is None:
+                return loss
             coef = self.anchor_coef()
             self.metrics.log_value((module_id, "anchor_coef"), coef, window=1)
             if coef <= 0:

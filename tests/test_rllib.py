@@ -248,6 +248,12 @@ class _RewardTwoEnv(gym.Env):
         return self.observation_space.sample(), float(action == 2), False, self.t >= 10, {}
 
 
+def _start_module(state: dict) -> PointSetPPOModule:
+    module = _module(without_privileged(SPACE))
+    module.load_actor_state(state)
+    return module
+
+
 def _kl_after_training(coef: float) -> tuple[float, list[float]]:
     """KL(start || trained) on fresh observations after 4 PPO iterations of 64 decisions, anchor ``coef``."""
     import copy
@@ -267,13 +273,16 @@ def _kl_after_training(coef: float) -> tuple[float, list[float]]:
         start = student_actor_state(_student(without_privileged(SPACE), seed=5), 1, privileged=False)
         algo.learner_group.foreach_learner(lambda learner: learner.start_from(start, coef > 0))
         algo.env_runner_group.sync_weights(from_worker_or_learner_group=algo.learner_group, inference_only=True)
-        coefs = [algo.train()["learners"]["default_policy"]["anchor_coef"] for _ in range(4)]
+        sampler = algo.env_runner_group.local_env_runner.module
+        obs = _obs(without_privileged(SPACE), 4, seed=4)
+        with torch.no_grad():  # the runner samples with the student's actor from the first step
+            torch.testing.assert_close(sampler.actor_logits(obs), _start_module(start).actor_logits(obs))
+        coefs = [algo.train()["learners"]["default_policy"].get("anchor_coef", 0.0) for _ in range(4)]
         trained = next(iter(algo.learner_group.foreach_learner(lambda learner: copy.deepcopy(
             learner.module["default_policy"].unwrapped())))).get()
     finally:
         algo.stop()
-    teacher = _module(without_privileged(SPACE))
-    teacher.load_actor_state(start)
+    teacher = _start_module(start)
     obs = _obs(without_privileged(SPACE), 64, seed=3)
     with torch.no_grad():
         target = torch.log_softmax(teacher.actor_logits(obs), -1)
@@ -337,3 +346,22 @@ def test_finetune_on_rllib_trains_from_the_student_and_exports_a_plain_zip(tmp_p
     env.close()
     summary = evaluate(out / "model.zip", episodes=1, seed=5, progress=False)
     assert summary["runs"][0]["steps"] >= 1 and np.isfinite(summary["runs"][0]["return"])
+
+
+def test_finetune_on_rllib_without_a_student_is_ppo_from_scratch_with_the_privileged_critic(tmp_path):
+    """No --init-policy: no prior, no anchor; the privileged critic still trains and model.zip is a fresh SB3 layout."""
+    from stable_baselines3 import PPO
+
+    hp = tmp_path / "finetune.yml"
+    hp.write_text(tiny_hyperparams(SLAM, n_envs=1, n_timesteps=40, decision_interval=5, decision_mode="pulse",
+                                   n_steps=8, batch_size=8, n_epochs=1, anchor_coef=1.0, privileged_critic=True))
+    out = tmp_path / "run"
+    rc = cli_main(["train", "--backend", "rllib", "--algo", "finetune", "--env", SLAM, "--hyperparams", str(hp),
+                   "--env-kwargs", json.dumps(SMALL), "--out", str(out), "--num-env-runners", "0",
+                   "--eval-freq", "0", "--checkpoint-freq", "0", "--no-progress"])  # fmt: skip
+    assert rc == 0
+    s = json.loads((out / "train.json").read_text())
+    assert s["finetune"]["anchor"] is False and "class_prior" not in s and "init_policy" not in s
+    assert s["decisions"] == 8 and not any("anchor_coef" in it for it in s["iterations"])
+    module = RLlibPolicy(out / CHECKPOINT_DIR).module
+    assert module.privileged and PRIVILEGED_KEY not in PPO.load(out / "model.zip").observation_space.spaces
