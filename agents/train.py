@@ -307,7 +307,8 @@ def train_rllib_backend(
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--backend", choices=BACKENDS, default="sb3",
-        help="sb3: stable-baselines3 on this machine; rllib: Ray RLlib PPO (pip install -e '.[rllib]')",
+        help="sb3: stable-baselines3 on this machine; rllib: Ray RLlib, --algo ppo or finetune (pip install -e "
+        "'.[rllib]')",
     )  # fmt: skip
     parser.add_argument("--algo", choices=ALGOS, default="ppo")
     parser.add_argument("--env", default="rhs-highway-slam-v0", help="env id (default: rhs-highway-slam-v0)")
