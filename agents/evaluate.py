@@ -260,15 +260,18 @@ def _headway(policy: str, env):
 
 
 def _load_rllib(path: Path, env=None):
-    """The RLModule of an RLlib checkpoint directory (``rhs-slam train --backend rllib``)."""
-    from agents.rllib import MODULE_SUBDIR, RLlibPolicy, is_rllib_checkpoint
+    """The RLModule of an RLlib checkpoint directory (``rhs-slam train --backend rllib``); a run with a decision
+    interval k > 1 (``decision_interval`` in the JSON beside the directory) comes back as a
+    :class:`agents.decision.HeldPolicy`, as a zip does."""
+    from agents.rllib_policy import MODULE_SUBDIR, RLlibPolicy, is_rllib_checkpoint
 
     if not is_rllib_checkpoint(path):
         raise ValueError(f"{path} is a directory but not an RLlib checkpoint (no {'/'.join(MODULE_SUBDIR)})")
     model = RLlibPolicy(path)
     if env is not None:
         check_spaces(model, env, path)
-    return model
+    meta = policy_metadata(path)
+    return held(model, meta.get("decision_interval", 1), meta.get("decision_mode", "hold"))
 
 
 class PointColumnAdapter:

@@ -257,24 +257,37 @@ def train_rllib_backend(
     eval_episodes: int = 3,
     checkpoint_freq: int = 5000,
     progress: bool = True,
+    algo: str = "ppo",
+    init_policy: str | Path | None = None,
 ) -> dict[str, Any]:
-    """PPO with Ray RLlib (:mod:`agents.rllib`) from the same YAML entry as the SB3 backend.
+    """PPO (``algo="ppo"``) or the fine-tuning stage (``"finetune"``, :mod:`agents.finetune`) with Ray RLlib
+    (:mod:`agents.rllib`) from the same YAML entry as the SB3 backend (``agents/hyperparams/<algo>.yml``).
 
     ``num_env_runners`` defaults to the YAML's ``n_envs`` (one Ray actor per env);
-    the train batch stays ``n_steps * n_envs`` whatever the number of runners.
+    the train batch stays ``n_steps * n_envs`` decisions whatever the number of runners. ``decision_interval`` /
+    ``decision_mode`` wrap every runner's env as the SB3 backend does (:class:`agents.decision.HoldAction`).
+    ``init_policy`` (finetune): the student zip to start from; ``env_kwargs`` are merged over its own.
     """
+    from agents.decision import check_decision_interval, check_decision_mode
     from agents.rllib import require_ray, train_rllib
 
+    if algo not in ("ppo", "finetune"):
+        raise ValueError(f"the rllib backend trains ppo or finetune, got --algo {algo}")
+    if init_policy is not None and algo != "finetune":
+        raise ValueError("--init-policy on the rllib backend is for --algo finetune")
     if num_env_runners is not None and int(num_env_runners) < 0:
         raise ValueError(f"num_env_runners must be >= 0, got {num_env_runners}")
-    from agents.decision import check_decision_interval, check_decision_mode
+    if init_policy is not None:
+        from agents.imitation import continued_env_kwargs
 
-    hp = load_hyperparams("ppo", env_id, hyperparams)
-    hp.pop("policy")
+        if not Path(init_policy).exists():
+            raise FileNotFoundError(f"--init-policy: no such student zip: {init_policy}")
+        env_kwargs = continued_env_kwargs(env_id, env_kwargs, init_policy)
+    hp = load_hyperparams(algo, env_id, hyperparams)
+    policy = str(hp.pop("policy"))
     hp["policy_kwargs"] = policy_kwargs_by_name(hp.get("policy_kwargs") or {})
-    check_decision_mode(hp.pop("decision_mode", "hold"))
-    if check_decision_interval(hp.pop("decision_interval", 1)) != 1:
-        raise ValueError("decision_interval > 1 is for the sb3 backend; the rllib backend decides every env step")
+    mode = check_decision_mode(hp.pop("decision_mode", "hold"))
+    k = check_decision_interval(hp.pop("decision_interval", 1))
     require_ray()
     yaml_steps = hp.pop("n_timesteps", None)
     timesteps = int(timesteps if timesteps is not None else (yaml_steps or 0))
@@ -287,13 +300,15 @@ def train_rllib_backend(
     check_env_kwargs(bare_id, env_kwargs)
     return train_rllib(bare_id, timesteps, out, hp, env_kwargs, n_envs, runners, address=address, seed=seed,
                        eval_freq=eval_freq, eval_episodes=eval_episodes, checkpoint_freq=checkpoint_freq,
-                       progress=progress)  # fmt: skip
+                       progress=progress, decision_interval=k, decision_mode=mode, algo=algo,
+                       init_policy=init_policy, policy=policy)  # fmt: skip
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--backend", choices=BACKENDS, default="sb3",
-        help="sb3: stable-baselines3 on this machine; rllib: Ray RLlib PPO (pip install -e '.[rllib]')",
+        help="sb3: stable-baselines3 on this machine; rllib: Ray RLlib, --algo ppo or finetune (pip install -e "
+        "'.[rllib]')",
     )  # fmt: skip
     parser.add_argument("--algo", choices=ALGOS, default="ppo")
     parser.add_argument("--env", default="rhs-highway-slam-v0", help="env id (default: rhs-highway-slam-v0)")
@@ -333,8 +348,8 @@ def run(args: argparse.Namespace) -> int:
         check_output_path("--out", args.out, directory=True)
         env_kwargs = parse_env_kwargs(args.env_kwargs)
         if args.backend == "rllib":
-            if args.algo != "ppo":
-                raise ValueError(f"the rllib backend trains PPO only, got --algo {args.algo}")
+            if args.algo not in ("ppo", "finetune"):
+                raise ValueError(f"the rllib backend trains ppo or finetune, got --algo {args.algo}")
             if args.n_envs is not None:
                 raise ValueError("--n-envs is for the sb3 backend; the rllib backend takes --num-env-runners")
             if args.resume:
@@ -343,7 +358,7 @@ def run(args: argparse.Namespace) -> int:
                 args.env, args.timesteps, args.out, seed=args.seed, hyperparams=args.hyperparams,
                 env_kwargs=env_kwargs, num_env_runners=args.num_env_runners, address=args.address,
                 eval_freq=args.eval_freq, eval_episodes=args.eval_episodes, checkpoint_freq=args.checkpoint_freq,
-                progress=not args.no_progress,
+                progress=not args.no_progress, algo=args.algo, init_policy=args.init_policy,
             )  # fmt: skip
             print(json.dumps({k: v for k, v in summary.items() if k != "iterations"}, indent=2))
             return 0
