@@ -328,29 +328,11 @@ def measure_prior(env_id: str, env_kwargs: dict[str, Any], student: PPO, run: An
             "steps": config.prior_steps, "seeds_from": seed}
 
 
-def train_finetune(env_id: str, timesteps: int | None, out: str | Path, init_policy: str | Path | None = None,
-                   seed: int = 0, n_envs: int | None = None, hyperparams: str | Path | None = None,
-                   env_kwargs: dict | None = None, progress: bool = True, torch_threads: int | None = 1,
-                   checkpoint_freq: int = 5000) -> dict[str, Any]:
-    """The fine-tuning stage of the module docstring; writes ``out/model.zip`` (the actor, a plain student zip),
-    ``model.json`` / ``train.json``, ``finetune_full.zip`` (actor and privileged critic), ``monitor/``, ``tb/``.
-
-    ``init_policy``: the student zip to start from (None: PPO from scratch with the privileged critic).
-    ``env_kwargs`` are merged over the student's (its action indices mean its target speeds).
-    """
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
-
-    from agents.callbacks import CrashRateCallback, TqdmCallback
+def _settings(env_id: str, timesteps: int | None, n_envs: int | None, hyperparams: str | Path | None,
+              env_kwargs: dict | None, init_policy: str | Path | None) -> tuple[Any, FinetuneConfig, dict, dict | None]:
+    """The run's settings, the :class:`FinetuneConfig`, PPO's own arguments and the reward shaping (or None)."""
     from agents.imitation import continued_env_kwargs
-    from agents.run_setup import (
-        check_train_args,
-        limit_threads,
-        make_vec_env,
-        run_settings,
-        run_summary,
-        tensorboard_available,
-        write_summary,
-    )
+    from agents.run_setup import run_settings
 
     if init_policy is not None:
         if not Path(init_policy).exists():
@@ -364,6 +346,63 @@ def train_finetune(env_id: str, timesteps: int | None, out: str | Path, init_pol
         from agents.shaping import ShapingConfig
 
         build(ShapingConfig, shaping, "reward_shaping")  # a wrong value fails here, not in a worker
+    return run, config, ppo_args, shaping
+
+
+def _start_from(model: AnchoredPPO, student: PPO | None, config: FinetuneConfig) -> None:
+    """The student's actor into ``model`` and, with an anchor, a frozen copy of it as the teacher."""
+    model.finetune = config
+    if student is None:
+        return
+    if config.privileged_critic:
+        load_actor(model.policy, student.policy)
+    else:
+        model.policy.load_state_dict(student.policy.state_dict())
+    if config.anchor_coef > 0:
+        model.teacher = copy.deepcopy(student.policy).eval()
+
+
+def _callbacks(run: Any, out: Path, checkpoint_freq: int, decisions: int, progress: bool) -> Any:
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+
+    from agents.callbacks import CrashRateCallback, TqdmCallback
+
+    callbacks: list = [CrashRateCallback()]
+    if checkpoint_freq > 0:
+        callbacks.append(CheckpointCallback(save_freq=max(1, checkpoint_freq // (run.n_envs * run.decision_interval)),
+                                            save_path=str(out / "checkpoints"), name_prefix="finetune"))
+    if progress:
+        callbacks.append(TqdmCallback(decisions))
+    return CallbackList(callbacks)
+
+
+def _recent(model: PPO) -> dict[str, Any]:
+    """Count, mean return and crash rate of the last training episodes (the model's episode buffer)."""
+    recent = list(model.ep_info_buffer or [])
+    return {"count": len(recent), "mean_return": float(np.mean([e["r"] for e in recent])) if recent else None,
+            "crash_rate": float(np.mean([float(e.get("crashed", 0)) for e in recent])) if recent else None}
+
+
+def train_finetune(env_id: str, timesteps: int | None, out: str | Path, init_policy: str | Path | None = None,
+                   seed: int = 0, n_envs: int | None = None, hyperparams: str | Path | None = None,
+                   env_kwargs: dict | None = None, progress: bool = True, torch_threads: int | None = 1,
+                   checkpoint_freq: int = 5000) -> dict[str, Any]:
+    """The fine-tuning stage of the module docstring; writes ``out/model.zip`` (the actor, a plain student zip),
+    ``model.json`` / ``train.json``, ``finetune_full.zip`` (actor and privileged critic), ``monitor/``, ``tb/``.
+
+    ``init_policy``: the student zip to start from (None: PPO from scratch with the privileged critic).
+    ``env_kwargs`` are merged over the student's (its action indices mean its target speeds).
+    """
+    from agents.run_setup import (
+        check_train_args,
+        limit_threads,
+        make_vec_env,
+        run_summary,
+        tensorboard_available,
+        write_summary,
+    )
+
+    run, config, ppo_args, shaping = _settings(env_id, timesteps, n_envs, hyperparams, env_kwargs, init_policy)
     check_train_args(run.timesteps, run.n_envs, seed, 0, 1, checkpoint_freq)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -390,34 +429,16 @@ def train_finetune(env_id: str, timesteps: int | None, out: str | Path, init_pol
     t0 = time.perf_counter()
     try:
         model = AnchoredPPO(policy, venv, seed=seed, verbose=0, tensorboard_log=tb, device="cpu", **ppo_args)
-        model.finetune = config
-        if student is not None:
-            if config.privileged_critic:
-                load_actor(model.policy, student.policy)
-            else:
-                model.policy.load_state_dict(student.policy.state_dict())
-            if config.anchor_coef > 0:
-                model.teacher = copy.deepcopy(student.policy).eval()
-        callbacks: list = [CrashRateCallback()]
-        if checkpoint_freq > 0:
-            callbacks.append(CheckpointCallback(save_freq=max(1, checkpoint_freq // (run.n_envs * k)),
-                                                save_path=str(out / "checkpoints"), name_prefix="finetune"))
-        if progress:
-            callbacks.append(TqdmCallback(decisions))
-        model.learn(total_timesteps=decisions, callback=CallbackList(callbacks), tb_log_name="finetune")
+        _start_from(model, student, config)
+        model.learn(total_timesteps=decisions, callback=_callbacks(run, out, checkpoint_freq, decisions, progress),
+                    tb_log_name="finetune")
         model.save(out / "finetune_full.zip")
         export_actor(model.policy, student if student is not None else _plain_model(env_id, run, ppo_args)).save(
             out / "model.zip")
     finally:
         venv.close()
-    wall = time.perf_counter() - t0
-    recent = list(model.ep_info_buffer or [])
-    summary = run_summary("finetune", env_id, run, seed, int(model.num_timesteps), wall, out,
-                          recent_episodes={"count": len(recent),
-                                           "mean_return": float(np.mean([e["r"] for e in recent])) if recent else None,
-                                           "crash_rate": float(np.mean([float(e.get("crashed", 0)) for e in recent]))
-                                           if recent else None},
-                          interrupted=False, **record)
+    summary = run_summary("finetune", env_id, run, seed, int(model.num_timesteps), time.perf_counter() - t0, out,
+                          recent_episodes=_recent(model), interrupted=False, **record)
     write_summary(out, summary)
     return summary
 

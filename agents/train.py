@@ -71,6 +71,19 @@ def _train_dagger(algo: str, env_id: str, timesteps: int | None, out: str | Path
                         resume=resume)
 
 
+def _train_finetune(env_id: str, timesteps: int | None, out: str | Path, seed: int, n_envs: int | None,
+                    hyperparams: str | Path | None, env_kwargs: dict | None, progress: bool, torch_threads: int | None,
+                    resume: bool, init_policy: str | Path | None, checkpoint_freq: int) -> dict[str, Any]:
+    """:func:`train`'s fine-tuning branch (:func:`agents.finetune.train_finetune`); ``--resume`` is an error."""
+    from agents.finetune import train_finetune
+
+    if resume:
+        raise ValueError("--resume is not supported for --algo finetune; start the run again")
+    return train_finetune(env_id, timesteps, out, init_policy=init_policy, seed=seed, n_envs=n_envs,
+                          hyperparams=hyperparams, env_kwargs=env_kwargs, progress=progress,
+                          torch_threads=torch_threads, checkpoint_freq=checkpoint_freq)
+
+
 def train(
     algo: str,
     env_id: str,
@@ -91,26 +104,18 @@ def train(
     """Train ``algo`` on ``env_id`` for ``timesteps`` steps; returns the summary written to ``out/train.json``.
 
     ``timesteps=None`` takes ``n_timesteps`` from the YAML. ``env_kwargs`` are
-    merged over the YAML's. ``eval_freq`` / ``checkpoint_freq`` count env steps
-    over all envs (0 disables). With a ``decision_interval`` k in the YAML the agent
-    acts every k env steps (:class:`agents.decision.HoldAction`): ``timesteps`` stays
-    the env-step budget, i.e. ``ceil(timesteps / k)`` decisions. ``resume`` continues from the checkpoint with the
+    merged over the YAML's. ``eval_freq`` / ``checkpoint_freq`` count env steps over all envs (0 disables).
+    With a ``decision_interval`` k in the YAML the agent acts every k env steps (:class:`agents.decision.HoldAction`):
+    ``timesteps`` stays the env-step budget, i.e. ``ceil(timesteps / k)`` decisions. ``resume`` continues from the checkpoint with the
     most steps in ``out/checkpoints`` (see :mod:`agents.resume`; SIGTERM / SIGINT
     stop a run there, ``summary["interrupted"]`` is then True; DAgger: from the last finished round,
-    :func:`agents.imitation.load_round_state`). ``torch_threads`` sets torch's intra-op
-    threads in this process (1 by default: the envs need the other cores);
-    worker processes get ``OMP_NUM_THREADS=1`` unless it is set already. ``init_policy``: DAgger continues from that
-    student zip (:func:`agents.imitation.train_dagger`); ``algo="finetune"`` fine-tunes it with PPO
-    (:func:`agents.finetune.train_finetune`).
+    :func:`agents.imitation.load_round_state`). ``torch_threads``: torch's intra-op threads here (1: the envs need
+    the other cores); workers get ``OMP_NUM_THREADS=1`` unless set. ``init_policy``: the student zip DAgger continues
+    (:func:`agents.imitation.train_dagger`) or ``"finetune"`` tunes (:func:`agents.finetune.train_finetune`).
     """
     if algo == "finetune":
-        from agents.finetune import train_finetune
-
-        if resume:
-            raise ValueError("--resume is not supported for --algo finetune; start the run again")
-        return train_finetune(env_id, timesteps, out, init_policy=init_policy, seed=seed, n_envs=n_envs,
-                              hyperparams=hyperparams, env_kwargs=env_kwargs, progress=progress,
-                              torch_threads=torch_threads, checkpoint_freq=checkpoint_freq)
+        return _train_finetune(env_id, timesteps, out, seed, n_envs, hyperparams, env_kwargs, progress, torch_threads,
+                               resume, init_policy, checkpoint_freq)
     if algo == "dagger" or init_policy is not None:
         return _train_dagger(algo, env_id, timesteps, out, seed, n_envs, hyperparams, env_kwargs, progress,
                              torch_threads, resume, init_policy)
