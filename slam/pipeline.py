@@ -38,7 +38,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rhs_common.geometry import apply_motion, points_in_frame
-from rhs_common.validation import check_int, check_range, check_types
+from rhs_common.validation import check_bool, check_int, check_range, check_types
 from slam.association import estimate_ego_velocity, point_covariance, static_mask
 from slam.drift import DriftCovariance
 from slam.health import HealthConfig, TrackHealth
@@ -81,6 +81,9 @@ class PipelineConfig:
     [0, 1] (rad^2 per m): the random-walk densities of the map-relative drift that the particles share
     (:mod:`slam.drift`), added to their covariance in the reported pose uncertainty
     (:meth:`SlamPipeline.pose_covariance`); measured on the tuning drives (module :mod:`slam.drift`).
+    ``recheck_turn`` (off by default): while a fast turn (``|w| >= TURN_RATE_MIN``) is held from the last
+    cycle and no Doppler turn fit confirms it, the yaw rate among the held one, none and the reversed one
+    that leaves the most points static is used (:meth:`SlamPipeline._recheck_turn`).
     """
 
     use_doppler: bool = True
@@ -92,6 +95,7 @@ class PipelineConfig:
     drift_along_m2pm: float = DRIFT_ALONG_M2PM
     drift_cross_m2pm: float = DRIFT_CROSS_M2PM
     drift_heading_rad2pm: float = DRIFT_HEADING_RAD2PM
+    recheck_turn: bool = False
 
     def __post_init__(self) -> None:
         check_types(self)
@@ -103,6 +107,7 @@ class PipelineConfig:
         check_range("drift_along_m2pm", self.drift_along_m2pm, 0.0, 1.0)
         check_range("drift_cross_m2pm", self.drift_cross_m2pm, 0.0, 1.0)
         check_range("drift_heading_rad2pm", self.drift_heading_rad2pm, 0.0, 1.0)
+        check_bool("recheck_turn", self.recheck_turn)
 
 
 #: yaw rate (rad/s) from which the Doppler fit with the turn (:func:`doppler_ego_motion`) replaces the
@@ -111,6 +116,9 @@ class PipelineConfig:
 TURN_RATE_MIN = 0.4
 #: ... and when its inliers outnumber those of the best turn-free fit by this factor
 TURN_GAIN = 1.15
+
+#: a rechecked yaw rate replaces the held turn when its static mask keeps this factor more points
+RECHECK_GAIN = 1.5
 
 #: heading starts (rad) of the registration when neither the last turn, straight on nor the reversed turn
 #: fits: a lane change at 10 m/s turns by up to 0.5 rad in a 0.2 s cycle (ICP searches +-0.2 rad around each)
@@ -494,6 +502,28 @@ class SlamPipeline:
         without = 0 if v_flat is None else int(np.sum(np.abs(pts[:, 2] - A[:, :2] @ v_flat[:2]) <= 0.5 * thr))
         return fit if with_turn >= TURN_GAIN * max(without, 1) else None
 
+    def _recheck_turn(self, pts: np.ndarray, sensors: np.ndarray | None) -> np.ndarray | None:
+        """``(vx, vy, w)`` that leaves the most points static among the held fast turn ``(v, w)``, ``(v, 0)``,
+        ``(v, -w)`` and the Doppler fit with the turn without the acceleration bound
+        (:func:`doppler_ego_motion`), when it keeps ``RECHECK_GAIN`` times the points that the held state
+        keeps; else None (the held state stands).
+
+        A lane change at 10 m/s turns by 0.4-0.5 rad in a cycle and can straighten or reverse in the next,
+        its side slip with it (2-4 m/s); holding the turn then makes the static points look moving through
+        the radars' lever arms (2.5 m x 2 rad/s = 5 m/s), the registration finds no pair and repeats the held
+        turn: 0.4-0.7 rad of heading error per cycle (random drives, seeds 1000, 1022, 1024, 1034, 1041)."""
+        if sensors is None or self.velocity is None or abs(float(self.velocity[2])) < TURN_RATE_MIN:
+            return None
+        thr = self.config.dynamic_threshold_mps
+        v, w = self.velocity[:2], float(self.velocity[2])
+        cands = [np.array([v[0], v[1], c]) for c in (w, 0.0, -w)]
+        fit = doppler_ego_motion(pts, sensors, 0.5 * thr, self.ransac_rng)
+        if fit is not None:
+            cands.append(np.asarray(fit, dtype=float))
+        counts = [int(static_mask(pts, c[:2], thr, yaw_rate=float(c[2]), sensor_xy=sensors).sum()) for c in cands]
+        k = int(np.argmax(counts[1:])) + 1
+        return cands[k] if counts[k] >= RECHECK_GAIN * max(counts[0], 1) else None
+
     def _doppler_velocity(self, dop: np.ndarray, dt: float) -> np.ndarray | None:
         """The ego velocity (2,) from the Doppler of points seen from their radar, or None (no fit)."""
         thr = self.config.dynamic_threshold_mps
@@ -541,6 +571,12 @@ class SlamPipeline:
             yaw_rate = turn[2] if turn is not None else (0.0 if self.velocity is None else self.velocity[2])
             self.velocity = np.array([v_dop[0], v_dop[1], yaw_rate])
         reg_time = 0.0
+        rechecked = None
+        if turn is None and self.options.recheck_turn and self.cycle > 0:
+            rechecked = self._recheck_turn(pts, sensors)
+            if rechecked is not None:
+                self.velocity = rechecked.copy()
+                v_dop = rechecked[:2]
         if self.cycle == 0:
             motion = np.zeros(3)
         else:
@@ -548,6 +584,8 @@ class SlamPipeline:
             dth = 0.0 if self.last_motion is None else float(self.last_motion[2])
             if turn is not None:  # the measured yaw rate, not the last cycle's turn
                 dth = float(turn[2]) * dt
+            elif rechecked is not None:
+                dth = float(rechecked[2]) * dt
             if v_dop is not None:  # displacement over the cycle from the Doppler velocity
                 prior = doppler_displacement(v_dop, dth, dt)
             elif self.last_motion is not None:
