@@ -117,7 +117,10 @@ TURN_RATE_MIN = 0.4
 #: ... and when its inliers outnumber those of the best turn-free fit by this factor
 TURN_GAIN = 1.15
 
-#: a rechecked yaw rate replaces the held turn when its static mask keeps this factor more points
+#: the held fast turn is rechecked when its static mask keeps fewer than this fraction of the points (the
+#: clouds of the drives are mostly static: a turn that fits below half of them is stale), and another
+#: state replaces it when that keeps RECHECK_GAIN times more points
+RECHECK_BELOW = 0.5
 RECHECK_GAIN = 1.5
 
 #: heading starts (rad) of the registration when neither the last turn, straight on nor the reversed turn
@@ -505,8 +508,8 @@ class SlamPipeline:
     def _recheck_turn(self, pts: np.ndarray, sensors: np.ndarray | None) -> np.ndarray | None:
         """``(vx, vy, w)`` that leaves the most points static among the held fast turn ``(v, w)``, ``(v, 0)``,
         ``(v, -w)`` and the Doppler fit with the turn without the acceleration bound
-        (:func:`doppler_ego_motion`), when it keeps ``RECHECK_GAIN`` times the points that the held state
-        keeps; else None (the held state stands).
+        (:func:`doppler_ego_motion`), when the held state keeps fewer than ``RECHECK_BELOW`` of the points
+        static and the best keeps ``RECHECK_GAIN`` times as many; else None (the held state stands).
 
         A lane change at 10 m/s turns by 0.4-0.5 rad in a cycle and can straighten or reverse in the next,
         its side slip with it (2-4 m/s); holding the turn then makes the static points look moving through
@@ -516,11 +519,18 @@ class SlamPipeline:
             return None
         thr = self.config.dynamic_threshold_mps
         v, w = self.velocity[:2], float(self.velocity[2])
+
+        def static(c: np.ndarray) -> int:
+            return int(static_mask(pts, c[:2], thr, yaw_rate=float(c[2]), sensor_xy=sensors).sum())
+
         cands = [np.array([v[0], v[1], c]) for c in (w, 0.0, -w)]
-        fit = doppler_ego_motion(pts, sensors, 0.5 * thr, self.ransac_rng)
+        held = static(cands[0])
+        if held >= RECHECK_BELOW * len(pts):  # the held turn still explains most points: it stands
+            return None
+        fit = doppler_ego_motion(pts, sensors, 0.5 * thr, self.ransac_rng)  # draws only here
         if fit is not None:
             cands.append(np.asarray(fit, dtype=float))
-        counts = [int(static_mask(pts, c[:2], thr, yaw_rate=float(c[2]), sensor_xy=sensors).sum()) for c in cands]
+        counts = [held] + [static(c) for c in cands[1:]]
         k = int(np.argmax(counts[1:])) + 1
         return cands[k] if counts[k] >= RECHECK_GAIN * max(counts[0], 1) else None
 
