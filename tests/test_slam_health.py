@@ -155,3 +155,59 @@ def test_few_landmarks_at_speed_keep_the_start(speed):
                        make_registration("icp", rng), None, rng, dt=dt)
     assert res["ate_rmse_m"] < 0.3
     assert res["estimated_poses"][1, 0] == pytest.approx(speed * dt, abs=0.3)
+
+
+def test_corrupted_odometry_is_flagged_at_once_and_relocalised():
+    """One cycle's registration turns the car by 0.3 rad that it did not turn (a wrong fit in a lane change):
+    the health signal fires in that cycle, the filter relocalises against its own map and reports it in
+    ``info``, and no cycle with an error above 5 m goes unflagged."""
+    env = gym.make("rhs-highway-slam-v0", duration=40 / 5, **CHEAP)
+    env.reset(seed=3)
+    reg = env.get_wrapper_attr("pipeline").registration
+    fit = reg.estimate
+    corrupt = {"on": False}
+
+    def corrupted(prev, cur, prior=None):
+        m = np.asarray(fit(prev, cur, prior=prior), dtype=float).copy()
+        return m + np.array([0.0, 0.0, 0.3]) if corrupt["on"] else m
+
+    reg.estimate = corrupted
+    infos = []
+    for t in range(40):
+        corrupt["on"] = t == 20
+        _, _, term, trunc, info = env.step(4)
+        infos.append(info)
+        if term or trunc:
+            break
+    env.close()
+    assert len(infos) == 40
+    assert all(i["slam_losses"] == 0 and i["position_error_m"] < 0.5 for i in infos[:20])
+    assert infos[20]["slam_losses"] == 1 or infos[21]["slam_losses"] == 1  # within a cycle of the corruption
+    assert infos[-1]["slam_relocalised"] + infos[-1]["slam_map_breaks"] >= 1
+    assert all(i["slam_lost"] for i in infos if i["position_error_m"] > 5.0)
+    assert max(i["position_error_m"] for i in infos[30:]) < 1.0 and not any(i["slam_lost"] for i in infos[30:])
+
+
+def test_a_held_fast_turn_that_ended_is_rechecked_against_the_doppler():
+    """A lane change's turn (-2.2 rad/s, 3.6 m/s of side slip) held into a cycle where the car drives
+    straight at 10 m/s: with it almost no static point fits; the recheck finds the state that fits them."""
+    from slam.core.pipeline import RECHECK_GAIN, TURN_RATE_MIN, SlamPipeline
+    from slam.core.registration import ICPRegistration
+
+    rng = np.random.default_rng(4)
+    mounts = np.array([[2.5, 0.0], [0.0, 1.0], [-2.5, 0.0], [0.0, -1.0]])
+    xy = rng.uniform(-60, 60, (40, 2))
+    s = mounts[rng.integers(0, 4, 40)]
+    u = (xy - s) / np.hypot(*(xy - s).T)[:, None]
+    vr = -(10.0 * u[:, 0])  # straight on at 10 m/s, no turn
+    pts = np.column_stack([xy, vr, np.ones(40)])
+    pipe = SlamPipeline(ICPRegistration(), rng=0, options=PipelineConfig(recheck_turn=True), sensor_xy=mounts)
+    pipe.velocity = np.array([9.3, -3.6, -2.2])
+    fixed = pipe._recheck_turn(pts, s)
+    assert fixed is not None
+    np.testing.assert_allclose(fixed, [10.0, 0.0, 0.0], atol=1e-6)
+    pipe.velocity = np.array([10.0, 0.0, -2.2])  # the yaw rate alone is stale: straight on keeps every point
+    np.testing.assert_allclose(pipe._recheck_turn(pts, s), [10.0, 0.0, 0.0], atol=1e-6)
+    pipe.velocity = np.array([10.0, 0.0, 0.5 * TURN_RATE_MIN])  # no fast turn held: nothing to recheck
+    assert pipe._recheck_turn(pts, s) is None
+    assert RECHECK_GAIN > 1.0

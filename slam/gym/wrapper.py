@@ -19,8 +19,10 @@ Observation, adding to the radar's keys:
 ``slam_lost`` (the filter has lost the car since a loss it has not relocalised from),
 ``slam_losses`` (losses so far in the episode), ``slam_relocalised`` (relocalisations so far)
 and ``slam_map_breaks`` (new maps started after a loss; the map frame restarts at the estimate
-of that cycle), and ``slam_pose_std`` (3,): the particles' std, and while lost at least the
-distance travelled since the loss (the loss's offset is unknown, the drive since bounds it).
+of that cycle), ``slam_pose_cov`` (3, 3): the pose covariance, the particles' spread plus the map drift that
+they share (:mod:`slam.core.drift`), and ``slam_pose_std`` (3,): its std, and while lost at least the distance
+travelled since the loss (the loss's offset is unknown, the drive since bounds it). The observation's
+``pose_std`` stays the particles' spread alone (the shipped policies were trained on it).
 
 :meth:`SlamObservation.observation` is the map cloud -> SLAM estimate and
 nothing else: ground truth and errors are added to ``info`` by
@@ -230,6 +232,7 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             "slam_relocalised": int(pipe.relocalisations),
             "slam_map_breaks": int(pipe.map_breaks),
             "slam_pose_std": pipe.honest_pose_std(),
+            "slam_pose_cov": pipe.pose_covariance(),
         }
         if self.stage_times_in_info:
             out["slam_stage_times"] = dict(self.stage_times)
