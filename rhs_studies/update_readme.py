@@ -71,6 +71,7 @@ PAGE = {
     "slam_accuracy": "docs/results/slam-accuracy.md",
     "registration": "docs/results/registration.md",
     "policies": "docs/results/driving.md",
+    "rl_finetune": "docs/results/driving.md",
     "benchmark": "docs/results/speed.md",
     "detection_curves": "docs/results/detection.md",
 }
@@ -124,6 +125,15 @@ def _policies(d: dict) -> tuple[str, str]:
     return (f"Driving on radar + SLAM (shipped DAgger student, {s['episodes']} seeds): return, collisions",
             f"{s['return']['mean']:.1f}, {s['collisions']}/{s['episodes']} "
             f"(always-SLOWER: {slower['return']['mean']:.1f}, {slower['collisions']}/{slower['episodes']})")
+
+
+def _rl_finetune(d: dict) -> tuple[str, str]:
+    rows, gain = d["rows"], d["vs_student"]["finetune"]
+    s = rows["finetune"]
+    return (f"PPO fine-tune of the student, privileged critic ({d['timesteps']} env steps; {d['episodes']} held-out "
+            "seeds): return, collisions, paired gain over the student",
+            f"{s['return']['mean']:.1f}, {s['collisions']}/{s['episodes']}, {gain['mean']:+.1f} "
+            f"[{gain['low']:+.1f}, {gain['high']:+.1f}] (IDM + MOBIL: {rows['idm']['return']['mean']:.1f})")
 
 
 def _benchmark(d: dict) -> tuple[str, str]:
