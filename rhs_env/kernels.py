@@ -34,11 +34,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from rhs_common.jit import njit
+from rhs_common.jit import njit, sort_small
 
 __all__ = [
     "TAYLOR_ORDER", "atom_norms", "bin_amplitudes", "doppler_dtft_refine", "footprint_detections", "joint_refine", "joint_rho", "lstsq",
-    "newton_refine", "omp_doppler", "phasors", "taylor_atoms", "taylor_tables", "tone_operands", "tone_spectra",
+    "newton_refine", "omp_doppler", "phasors", "slot_sums", "taylor_atoms", "taylor_tables", "tone_operands",
+    "tone_spectra",
 ]
 
 
@@ -72,13 +73,7 @@ def _cfar_level(line: np.ndarray, cells: np.ndarray, method: int, rank: int, val
         vals[q] = float(line[cells[q]])
     if method == 1:
         return np.mean(vals)
-    for q in range(1, n_train):  # insertion sort of the few training cells
-        x = vals[q]
-        p = q - 1
-        while p >= 0 and vals[p] > x:
-            vals[p + 1] = vals[p]
-            p -= 1
-        vals[p + 1] = x
+    sort_small(vals)  # the few training cells
     return vals[rank - 1]
 
 
@@ -608,12 +603,28 @@ def bin_amplitudes(a: np.ndarray, spec: np.ndarray, rd: np.ndarray, kk: np.ndarr
     return out
 
 
+@njit
+def slot_sums(h: np.ndarray, r: np.ndarray, t: np.ndarray, q_re: np.ndarray, q_im: np.ndarray) -> None:
+    """``q_t = sum_{t_ic = t} conj(h_i) r_ic`` into ``q_re + j q_im`` (n_t,), overwritten: one row's slot vector h (I,)
+    against its residual r (I, C), summed into the chirp-time bins ``t[i C + c]`` (the Doppler searches' input)."""
+    n_i, n_c = r.shape
+    q_re[:] = 0.0
+    q_im[:] = 0.0
+    for i in range(n_i):
+        hc = np.conj(h[i])
+        for c in range(n_c):
+            p = hc * r[i, c]
+            tt = t[i * n_c + c]
+            q_re[tt] += p.real
+            q_im[tt] += p.imag
+
+
 @njit(fastmath={"reassoc", "contract"})
 def doppler_dtft_refine(h: np.ndarray, r: np.ndarray, t: np.ndarray, n_t: int, kern_re: np.ndarray,
                         kern_im: np.ndarray, w: np.ndarray, span: np.ndarray, nfft: int) -> np.ndarray:
     """The narrow search of :func:`rhs_env.point_cloud._doppler_grid_refine`: d_omega (D,) rad per chirp.
 
-    ``q_t = sum_{t_ic = t} conj(h_i) r_ic`` (rounded to complex64, as the reference), its DTFT
+    ``q_t = sum_{t_ic = t} conj(h_i) r_ic`` (:func:`slot_sums`, rounded to complex64, as the reference), its DTFT
     ``V_j = |sum_t q_t exp(-j w_j t)|^2`` on the grid ``w_j = 2 pi j / nfft`` (``kern_re + j kern_im``
     (J, n_t): the reference's complex64 ``exp(-j w_j t)``, transposed), the first maximum ``j*`` within
     ``|w_j| <= span_d`` (clipped to 1..J-2), then the vertex of the parabola through
@@ -621,22 +632,14 @@ def doppler_dtft_refine(h: np.ndarray, r: np.ndarray, t: np.ndarray, n_t: int, k
     separate float64 sums (vectorised; the sums' order is free, so V agrees with the reference's
     float32 product to ~1e-6 relative).
     """
-    n_d, n_i, n_c = r.shape
+    n_d = r.shape[0]
     n_j = w.size
     out = np.empty(n_d)
     qr = np.empty(n_t)
     qi = np.empty(n_t)
     val = np.zeros(n_j)
     for d in range(n_d):
-        qr[:] = 0.0
-        qi[:] = 0.0
-        for i in range(n_i):
-            hc = np.conj(h[d, i])
-            for c in range(n_c):
-                p = hc * r[d, i, c]
-                tt = t[i * n_c + c]
-                qr[tt] += p.real
-                qi[tt] += p.imag
+        slot_sums(h[d], r[d], t, qr, qi)
         for tt in range(n_t):
             qr[tt] = np.float32(qr[tt])
             qi[tt] = np.float32(qi[tt])
@@ -1026,7 +1029,7 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
     ``span = clip(5 / sqrt(snr), min(pi, 8 pi / T), pi)``; the dwell ``C (sum_i e_i)^2 / sum_i e_i^2`` of the
     slot energies ``e_i = max(sum_c |R_ic|^2 - C sigma^2, 0)``; the rows with ``5 dwell / sqrt(snr) > pi / 2``
     take the joint angle x Doppler search (``n_h`` hypotheses over the batch, :func:`joint_rho`); the fine
-    Doppler (:func:`_doppler_peak`) on ``q_t = sum conj(h_i) rc_it``, Newton steps on the angle.
+    Doppler (:func:`_doppler_peak`) on ``q_t = sum conj(h_i) rc_it`` (:func:`slot_sums`), Newton steps on the angle.
     """
     n_d, n_i, n_c = res.shape
     t_span = float(n_t)
@@ -1060,15 +1063,7 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
     buf_im = np.empty(nfft)
     w = np.empty(n_d)
     for d in range(n_d):
-        q_re[:] = 0.0
-        q_im[:] = 0.0
-        for i in range(n_i):
-            hc = np.conj(h[d, i])
-            for c in range(n_c):
-                p = hc * rc[d, i, c]
-                tt = t[i * n_c + c]
-                q_re[tt] += p.real
-                q_im[tt] += p.imag
+        slot_sums(h[d], rc[d], t, q_re, q_im)
         w[d] = w0[d] + _doppler_peak(q_re, q_im, span[d], nfft, e_re, e_im, buf_re, buf_im, tab_re, tab_im)
     comp = phasors(w, tgrid, -1.0)
     if newton_steps:
