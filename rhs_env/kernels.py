@@ -19,14 +19,18 @@ Python 3.11, 2 cores shared with other jobs, load average 5-8):
 * numpy upper bound: every numba release caps numpy (0.68.1: numpy < 2.6); a numpy newer than the
   cap waits for a numba release (pyproject asks numba >= 0.60, pip picks the one matching numpy);
 * no SVML in the wheels: transcendental loops are not vectorised, so the noise generator stays numpy;
-* first compile of every kernel here and in :mod:`slam.kernels`, once per machine: ~30 s at load 1-3,
-  of which the one-call OMP (:func:`omp_doppler`) takes ~24 s (its new-atom search ~13 s: the joint
-  search ~4 s, the Taylor atoms ~1.8 s, the Doppler search ~1.2 s, Newton steps ~0.8 s; the joint
-  refinement ~2.4 s), the footprint detector ~2.4 s, ICP ~1.8 s; a new process then loads them from the
+* first compile of every kernel here and in :mod:`slam.kernels`, once per machine: ~30 s at load 1-3
+  with the first one-call OMP (:func:`omp_doppler`, ~24 s of it); a new process then loads them from the
   cache (:mod:`rhs_common.jit`): imports, ``gym.make``, reset and the first step of the SLAM env in a
   new process took 28.8-33.2 s with an empty cache and 1.9-2.1 s with it (load 0.8-2.3; ``python
   scripts/benchmark.py --sections start``; with the OMP as many small kernels: 10.8 s and 1.7 s at load
-  1). Vector envs compile once, in the parent (``agents.run_setup.make_vec_env``,
+  1). The OMP's orchestration (:func:`omp_doppler`, :func:`_new_atoms`, :func:`_joint_search`,
+  :func:`joint_refine`) is now written as loops: numba's fancy indexing, ``np.where``, array expressions
+  and slice assignments from arrays (whose shape-mismatch message compiles numba's string formatting)
+  cost seconds of compile each; measured side by side (CPU seconds of that first SLAM-env step, fresh
+  cache, load ~9, two runs each): 33.7 s -> 27.4 s, the OMP's share 25.1 s -> 18.5 s (scaled: ~24 s wall
+  expected on a quiet machine, from 29.5 s; not yet rerun there). Vector envs compile once, in the parent
+  (``agents.run_setup.make_vec_env``,
   :func:`rhs_common.jit.warm_cache`).
 """
 
