@@ -765,18 +765,8 @@ def joint_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step
     theta = theta.copy()
     domega = domega.copy()
     a = a.copy()
-    n_p = 0
-    for d in range(n_d):
-        for k in range(n_l):
-            n_p += valid[d, k]
-    dd = np.empty(n_p, np.int64)  # the valid (row, target) pairs, row-major
-    kk = np.empty(n_p, np.int64)
-    p = 0
-    for d in range(n_d):
-        for k in range(n_l):
-            if valid[d, k]:
-                dd[p], kk[p] = d, k
-                p += 1
+    dd, kk = _valid_pairs(valid)  # the valid (row, target) pairs, row-major
+    n_p = dd.size
     span_p = np.empty(n_p)
     w_p = np.empty(n_p)
     for p in range(n_p):
@@ -1141,15 +1131,7 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
     for d in range(n_d):
         th[d] = _angle_peak(corr[d], candidates, step)[1]
     span, dwell, wide = _search_widths(res, noise_var, t_span)
-    n_wide = 0
-    for d in range(n_d):
-        n_wide += wide[d]
-    sub = np.empty(n_wide, np.int64)
-    n_wide = 0
-    for d in range(n_d):
-        if wide[d]:
-            sub[n_wide] = d
-            n_wide += 1
+    sub = _indices(wide)
     if sub.size:
         _joint_search(res, sub, w0, th, span, dwell, hn_conj, candidates, step, tgrid, rc)
     h = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, np.int64(0))[0]
@@ -1216,6 +1198,83 @@ def _set_column(a: np.ndarray, l: int, h: np.ndarray, phase: np.ndarray) -> None
 
 
 @njit
+def _indices(mask: np.ndarray) -> np.ndarray:
+    """``np.flatnonzero(mask)`` of a 1-D bool array (a loop, as :func:`_take2`)."""
+    n = 0
+    for d in range(mask.size):
+        n += mask[d]
+    out = np.empty(n, np.int64)
+    n = 0
+    for d in range(mask.size):
+        if mask[d]:
+            out[n] = d
+            n += 1
+    return out
+
+
+@njit
+def _valid_pairs(valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.nonzero(valid)`` of a 2-D bool array: the valid (row, target) pairs, row-major."""
+    n_d, n_l = valid.shape
+    n_p = 0
+    for d in range(n_d):
+        for k in range(n_l):
+            n_p += valid[d, k]
+    dd = np.empty(n_p, np.int64)
+    kk = np.empty(n_p, np.int64)
+    p = 0
+    for d in range(n_d):
+        for k in range(n_l):
+            if valid[d, k]:
+                dd[p], kk[p] = d, k
+                p += 1
+    return dd, kk
+
+
+@njit
+def _start(flat: np.ndarray, residual_threshold: np.ndarray, relative_threshold: float,
+           detected: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``||data_d||^2``, the stop level ``max(delta_r, rel ||data_d||^2)`` and the rows active at the start (D,)."""
+    n_d, n_q = flat.shape
+    r2 = np.empty(n_d)
+    stop = np.empty(n_d)
+    active = np.empty(n_d, np.bool_)
+    for d in range(n_d):
+        acc = 0.0
+        for q in range(n_q):
+            v = abs(flat[d, q])
+            acc += v * v
+        r2[d] = acc
+        stop[d] = max(residual_threshold[d], relative_threshold * acc)
+        active[d] = detected or acc >= stop[d]
+    return r2, stop, active
+
+
+@njit
+def _keep_rows(rows: np.ndarray, ok: np.ndarray, th_r: np.ndarray, om_r: np.ndarray, val_r: np.ndarray,
+               s: np.ndarray, a: np.ndarray, theta: np.ndarray, omega: np.ndarray, valid: np.ndarray,
+               amp: np.ndarray, atoms: np.ndarray, flat: np.ndarray, resid: np.ndarray, r2: np.ndarray,
+               stop: np.ndarray, active: np.ndarray) -> None:
+    """Write the accepted rows (``ok``) back and update their residual; a failed row stops (``active`` False)."""
+    n_q, n_l = a.shape[1], a.shape[2]
+    for rr in range(rows.size):
+        d = rows[rr]
+        if not ok[rr]:
+            active[d] = False
+            continue
+        for k in range(n_l):
+            theta[d, k] = th_r[rr, k]
+            omega[d, k] = om_r[rr, k]
+            valid[d, k] = val_r[rr, k]
+            amp[d, k] = s[rr, k]
+        for q in range(n_q):
+            for k in range(n_l):
+                atoms[d, q, k] = a[rr, q, k]
+        r2[d] = _residual(flat[d], a[rr], s[rr], resid[d])
+        active[d] = r2[d] >= stop[d]
+
+
+@njit
 def _take2(src: np.ndarray, rows: np.ndarray) -> np.ndarray:
     """``src[rows]`` of a 2-D array (a loop: numba's fancy indexing costs seconds of compile per type)."""
     out = np.empty((rows.size, src.shape[1]), src.dtype)
@@ -1265,30 +1324,13 @@ def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step:
     atoms = np.zeros((n_d, n_q, n_l), np.complex128)
     flat = data.reshape(n_d, n_q)
     resid = data.copy()
-    r2 = np.empty(n_d)
-    stop = np.empty(n_d)
-    active = np.empty(n_d, np.bool_)
-    for d in range(n_d):
-        acc = 0.0
-        for q in range(n_q):
-            v = abs(flat[d, q])
-            acc += v * v
-        r2[d] = acc
-        stop[d] = max(residual_threshold[d], relative_threshold * acc)
-        active[d] = detected or acc >= stop[d]
+    r2, stop, active = _start(flat, residual_threshold, relative_threshold, detected)
     fine_span = min(np.pi, 8 * np.pi / float(n_t))
     for l in range(n_l):
-        n_r = 0
-        for d in range(n_d):
-            n_r += active[d]
+        rows = _indices(active)
+        n_r = rows.size
         if n_r == 0:
             break
-        rows = np.empty(n_r, np.int64)
-        n_r = 0
-        for d in range(n_d):
-            if active[d]:
-                rows[n_r] = d
-                n_r += 1
         th, w, phase = _new_atoms(table, u_c, x_c, lo, step, w2, x, hn_conj, candidates, _take3(resid, rows), tgrid,
                                   t, n_t, nfft, e_re, e_im, tab_re, tab_im, noise_var, newton_steps)
         th_r = _take2(theta, rows)
@@ -1306,17 +1348,10 @@ def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step:
                 if not val_r[rr, k]:
                     s[rr, k] = 0
         ok = _amplitudes_pass(s, a, val_r, min_amplitude)
-        n_ok = 0
         for rr in range(n_r):
             ok[rr] = ok[rr] or (detected and l == 0)
-            n_ok += ok[rr]
-        if l > 0 and cycles and n_ok:
-            kk = np.empty(n_ok, np.int64)
-            n_ok = 0
-            for rr in range(n_r):
-                if ok[rr]:
-                    kk[n_ok] = rr
-                    n_ok += 1
+        kk = _indices(ok)
+        if l > 0 and cycles and kk.size:
             span_k = np.empty(kk.size)
             for m in range(kk.size):
                 span_k[m] = fine_span
@@ -1335,19 +1370,5 @@ def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step:
                     for k in range(n_l):
                         a[rr, q, k] = a_k[m, q, k]
                 ok[rr] = ok_k[m]
-        for rr in range(n_r):
-            d = rows[rr]
-            if not ok[rr]:
-                active[d] = False
-                continue
-            for k in range(n_l):
-                theta[d, k] = th_r[rr, k]
-                omega[d, k] = om_r[rr, k]
-                valid[d, k] = val_r[rr, k]
-                amp[d, k] = s[rr, k]
-            for q in range(n_q):
-                for k in range(n_l):
-                    atoms[d, q, k] = a[rr, q, k]
-            r2[d] = _residual(flat[d], a[rr], s[rr], resid[d])
-            active[d] = r2[d] >= stop[d]
+        _keep_rows(rows, ok, th_r, om_r, val_r, s, a, theta, omega, valid, amp, atoms, flat, resid, r2, stop, active)
     return theta, omega, amp, valid, atoms, r2
