@@ -782,11 +782,12 @@ def joint_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step
     for _ in range(passes):
         for p in range(n_p):
             d, k = dd[p], kk[p]
-            for q in range(n_q):
-                acc = 0j
-                for m in range(n_l):
-                    acc += a[d, q, m] * s[d, m]
-                fit[q] = acc
+            if p == 0 or dd[p - 1] != d:  # the row's fit A_d s_d, once per row (its pairs are adjacent)
+                for q in range(n_q):
+                    acc = 0j
+                    for m in range(n_l):
+                        acc += a[d, q, m] * s[d, m]
+                    fit[q] = acc
             for i in range(n_i):
                 for c in range(n_c):
                     q = i * n_c + c
