@@ -33,9 +33,12 @@ import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-__all__ = ["KERNELS", "NOTICE", "njit", "warm_cache"]
+if TYPE_CHECKING:
+    import numpy as np
+
+__all__ = ["KERNELS", "NOTICE", "njit", "sort_small", "warm_cache"]
 
 #: the kernel implementations a config may choose: compiled (default) or the numpy reference
 KERNELS = ("numba", "numpy")
@@ -103,6 +106,35 @@ def njit(func: Callable | None = None, **options: Any) -> Any:
     if func is None:
         return lambda f: _numba().njit(**options)(f)
     return _numba().njit(**options)(func)
+
+
+def _sort_small(v: np.ndarray) -> None:
+    """Sort the short 1-D array v ascending, in place (insertion sort: ``x_q`` moves left past every larger value).
+
+    For the tens of values of an ICP gate (:mod:`slam.kernels`) and any other short window a kernel ranks (the
+    OS-CFAR of :mod:`rhs_env.kernels` needs no sort: it counts): ~160 ns for 16 values, 8x faster than
+    ``np.partition`` inside numba (which allocates and dispatches).
+    """
+    for q in range(1, v.size):
+        x = v[q]
+        p = q - 1
+        while p >= 0 and v[p] > x:
+            v[p + 1] = v[p]
+            p -= 1
+        v[p + 1] = x
+
+
+if TYPE_CHECKING:
+    sort_small = _sort_small
+
+
+def __getattr__(name: str) -> Any:
+    """``sort_small``: :func:`_sort_small` compiled (one cached dispatcher for both kernel modules), made on first
+    access so that importing this module does not import numba."""
+    if name == "sort_small":
+        compiled = globals()["sort_small"] = njit(_sort_small)
+        return compiled
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def warm_cache(run: Callable[[], Any], probe: Any, key: str = "") -> bool:

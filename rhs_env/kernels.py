@@ -19,14 +19,18 @@ Python 3.11, 2 cores shared with other jobs, load average 5-8):
 * numpy upper bound: every numba release caps numpy (0.68.1: numpy < 2.6); a numpy newer than the
   cap waits for a numba release (pyproject asks numba >= 0.60, pip picks the one matching numpy);
 * no SVML in the wheels: transcendental loops are not vectorised, so the noise generator stays numpy;
-* first compile of every kernel here and in :mod:`slam.kernels`, once per machine: ~30 s at load 1-3,
-  of which the one-call OMP (:func:`omp_doppler`) takes ~24 s (its new-atom search ~13 s: the joint
-  search ~4 s, the Taylor atoms ~1.8 s, the Doppler search ~1.2 s, Newton steps ~0.8 s; the joint
-  refinement ~2.4 s), the footprint detector ~2.4 s, ICP ~1.8 s; a new process then loads them from the
+* first compile of every kernel here and in :mod:`slam.kernels`, once per machine: ~30 s at load 1-3
+  with the first one-call OMP (:func:`omp_doppler`, ~24 s of it); a new process then loads them from the
   cache (:mod:`rhs_common.jit`): imports, ``gym.make``, reset and the first step of the SLAM env in a
   new process took 28.8-33.2 s with an empty cache and 1.9-2.1 s with it (load 0.8-2.3; ``python
   scripts/benchmark.py --sections start``; with the OMP as many small kernels: 10.8 s and 1.7 s at load
-  1). Vector envs compile once, in the parent (``agents.run_setup.make_vec_env``,
+  1). The OMP's orchestration (:func:`omp_doppler`, :func:`_new_atoms`, :func:`_joint_search`,
+  :func:`joint_refine`) is now written as loops: numba's fancy indexing, ``np.where``, array expressions
+  and slice assignments from arrays (whose shape-mismatch message compiles numba's string formatting)
+  cost seconds of compile each; measured side by side (CPU seconds of that first SLAM-env step, fresh
+  cache, load ~9, two runs each): 33.7 s -> 27.4 s, the OMP's share 25.1 s -> 18.5 s (scaled: ~24 s wall
+  expected on a quiet machine, from 29.5 s; not yet rerun there). Vector envs compile once, in the parent
+  (``agents.run_setup.make_vec_env``,
   :func:`rhs_common.jit.warm_cache`).
 """
 
@@ -38,7 +42,8 @@ from rhs_common.jit import njit
 
 __all__ = [
     "TAYLOR_ORDER", "atom_norms", "bin_amplitudes", "doppler_dtft_refine", "footprint_detections", "joint_refine", "joint_rho", "lstsq",
-    "newton_refine", "omp_doppler", "phasors", "taylor_atoms", "taylor_tables", "tone_operands", "tone_spectra",
+    "newton_refine", "omp_doppler", "phasors", "slot_sums", "taylor_atoms", "taylor_tables", "tone_operands",
+    "tone_spectra",
 ]
 
 
@@ -65,21 +70,24 @@ def _peaks(stat: np.ndarray, in_range: np.ndarray, lo32: np.ndarray) -> np.ndarr
 
 
 @njit
-def _cfar_level(line: np.ndarray, cells: np.ndarray, method: int, rank: int, vals: np.ndarray) -> float:
-    """Z of the training cells ``line[cells]``: the rank-th smallest (method 0, OS) or the mean (1, CA)."""
+def _cfar_pass(v: float, line: np.ndarray, cells: np.ndarray, method: int, rank: int, alpha: float, floor: float,
+               cap: float, vals: np.ndarray) -> bool:
+    """``v > alpha clip(Z, floor, cap)``, Z of the training cells ``line[cells]``: their mean (method 1, CA) or
+    their rank-th smallest (0, OS).
+
+    OS without sorting: ``f(z) = alpha clip(z, floor, cap)`` is non-decreasing, so ``f(Z)`` is the rank-th
+    smallest of the ``f(z_q)`` (the same floating-point operations per value), and ``v > f(Z)`` holds exactly
+    when at least ``rank`` of the ``f(z_q)`` are below v.
+    """
     n_train = cells.size
-    for q in range(n_train):
-        vals[q] = float(line[cells[q]])
     if method == 1:
-        return np.mean(vals)
-    for q in range(1, n_train):  # insertion sort of the few training cells
-        x = vals[q]
-        p = q - 1
-        while p >= 0 and vals[p] > x:
-            vals[p + 1] = vals[p]
-            p -= 1
-        vals[p + 1] = x
-    return vals[rank - 1]
+        for q in range(n_train):
+            vals[q] = float(line[cells[q]])
+        return v > alpha * min(max(np.mean(vals), floor), cap)
+    below = 0
+    for q in range(n_train):
+        below += alpha * min(max(float(line[cells[q]]), floor), cap) < v
+    return below >= rank
 
 
 @njit
@@ -157,11 +165,10 @@ def footprint_detections(stat: np.ndarray, in_range: np.ndarray, alpha: np.ndarr
         jj, kk = divmod(rest, n)
         v = float(stat[rr, jj, kk])
         if method == 2:
-            thr = alpha[jj] * floor[jj]
+            hit = v > alpha[jj] * floor[jj]
         else:
-            z = _cfar_level(stat[rr, jj], train_cells[kk], method, rank, vals)
-            thr = alpha[jj] * min(max(z, floor[jj]), cap[jj])
-        if v > thr:
+            hit = _cfar_pass(v, stat[rr, jj], train_cells[kk], method, rank, alpha[jj], floor[jj], cap[jj], vals)
+        if hit:
             r[m], j[m], k[m], val[m] = rr, jj, kk, v
             m += 1
     r, j, k, val = r[:m], j[:m], k[:m], val[:m]
@@ -229,27 +236,30 @@ def _atom_at(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: fl
     if -1 <= c <= n_c:
         c = min(max(c, 0), n_c - 1)
         delta = u - u_c[c]
-        # Horner in delta for the value and its first two derivatives, on re / im alike (one pass per term)
+        # Horner in delta for the value and its first two derivatives, on re / im alike (one pass per term;
+        # the three running values of an entry read before any is written, so the loops vectorise)
+        for i in range(n_f):
+            work[0, i] = table[c, n_n - 1, i]
+            work[1, i] = 0.0
+            work[2, i] = 0.0
+        for n in range(n_n - 2, -1, -1):
+            if order >= 2:
+                for i in range(n_f):
+                    a0, a1, a2 = work[0, i], work[1, i], work[2, i]
+                    work[2, i] = a2 * delta + 2.0 * a1
+                    work[1, i] = a1 * delta + a0
+                    work[0, i] = a0 * delta + table[c, n, i]
+            elif order == 1:
+                for i in range(n_f):
+                    a0, a1 = work[0, i], work[1, i]
+                    work[1, i] = a1 * delta + a0
+                    work[0, i] = a0 * delta + table[c, n, i]
+            else:
+                for i in range(n_f):
+                    work[0, i] = work[0, i] * delta + table[c, n, i]
         p0 = work[0]
         p1 = work[1]
         p2 = work[2]
-        p0[:] = table[c, n_n - 1]
-        p1[:] = 0.0
-        p2[:] = 0.0
-        for n in range(n_n - 2, -1, -1):
-            row = table[c, n]
-            if order >= 2:
-                for i in range(n_f):
-                    p2[i] = p2[i] * delta + 2.0 * p1[i]
-                    p1[i] = p1[i] * delta + p0[i]
-                    p0[i] = p0[i] * delta + row[i]
-            elif order == 1:
-                for i in range(n_f):
-                    p1[i] = p1[i] * delta + p0[i]
-                    p0[i] = p0[i] * delta + row[i]
-            else:
-                for i in range(n_f):
-                    p0[i] = p0[i] * delta + row[i]
         for i in range(n_i2):
             f0[i] = complex(p0[2 * i], p0[2 * i + 1])
             f1[i] = complex(p1[2 * i], p1[2 * i + 1])
@@ -432,6 +442,47 @@ def tone_operands(g_mat: np.ndarray, omega: np.ndarray, wk: np.ndarray, chirps: 
 
 
 # --------------------------------------------------------------------------- OMP phases
+#: the block of :func:`_ramp`: cos + j sin exactly at every RAMP-th sample of a uniform time axis
+RAMP = 8
+
+
+@njit
+def _uniform(t: np.ndarray) -> bool:
+    """Whether the times t (n,) are uniform, ``t_i = t_0 + i (t_1 - t_0)`` exactly (integer chirp times are)."""
+    for i in range(2, t.size):
+        if t[i] - t[0] != i * (t[1] - t[0]):
+            return False
+    return True
+
+
+@njit
+def _ramp(x: float, t: np.ndarray, uniform: bool, em: np.ndarray, out: np.ndarray) -> None:
+    """``out[i] = exp(j x t_i)`` for the times t (n,); ``em`` (:data:`RAMP`,) complex work.
+
+    On a uniform axis (``t_i = t_0 + i dt``, :func:`_uniform`) ``cos + j sin`` of ``x t_b`` at every
+    :data:`RAMP`-th sample b, between them ``exp(j x t_b) exp(j x m dt)`` (m < RAMP): one complex product,
+    ~2e-16 relative, the size of the argument's own rounding; 8 + n / 8 cosines and sines instead of n
+    (the scalar sine and cosine are the phasors' cost: numba has no vectorised ones). Else ``cos + j sin``
+    at every sample.
+    """
+    n = t.size
+    if not uniform or n < 2 * RAMP:
+        for i in range(n):
+            v = x * t[i]
+            out[i] = complex(np.cos(v), np.sin(v))
+        return
+    dt = t[1] - t[0]
+    for m in range(RAMP):
+        v = x * (m * dt)
+        em[m] = complex(np.cos(v), np.sin(v))
+    for b in range(0, n, RAMP):
+        v = x * t[b]
+        base = complex(np.cos(v), np.sin(v))
+        out[b] = base
+        for m in range(1, min(RAMP, n - b)):
+            out[b + m] = base * em[m]
+
+
 @njit
 def phasors(w: np.ndarray, tgrid: np.ndarray, sign: float) -> np.ndarray:
     """``exp(sign j w_p t_ic)`` (P, I, C) for w (P,) rad per chirp and chirp times tgrid (I, C), sign +-1.
@@ -440,7 +491,7 @@ def phasors(w: np.ndarray, tgrid: np.ndarray, sign: float) -> np.ndarray:
     ``np.exp(sign * 1j * w[:, None, None] * tgrid[None])``, without its complex temporaries. Where the
     chirp times are separable, ``t_ic = t_i + t_c`` (slot start plus chirp offset, every sweep here),
     ``exp(j x t_ic) = exp(j x t_i) exp(j x t_c)``: I + C cosines and sines instead of I C (one rounding
-    more, ~1e-16 relative).
+    more, ~1e-16 relative), the slot phases ``exp(j x t_i)`` by :func:`_ramp` (~2e-16 relative).
     """
     n_p = w.size
     n_i, n_c = tgrid.shape
@@ -452,16 +503,21 @@ def phasors(w: np.ndarray, tgrid: np.ndarray, sign: float) -> np.ndarray:
                 separable = False
     if separable:
         ec = np.empty(n_c, np.complex128)
+        ei = np.empty(n_i, np.complex128)
+        em = np.empty(RAMP, np.complex128)
+        t_slot = np.empty(n_i)
+        for i in range(n_i):
+            t_slot[i] = tgrid[i, 0]
+        uniform = _uniform(t_slot)
         for p in range(n_p):
             sw = sign * w[p]
             for c in range(n_c):
                 x = sw * (tgrid[0, c] - tgrid[0, 0])
                 ec[c] = complex(np.cos(x), np.sin(x))
+            _ramp(sw, t_slot, uniform, em, ei)
             for i in range(n_i):
-                x = sw * tgrid[i, 0]
-                ei = complex(np.cos(x), np.sin(x))
                 for c in range(n_c):
-                    out[p, i, c] = ei * ec[c]
+                    out[p, i, c] = ei[i] * ec[c]
         return out
     for p in range(n_p):
         sw = sign * w[p]
@@ -477,23 +533,27 @@ def joint_rho(r: np.ndarray, om: np.ndarray, t_chirp: np.ndarray, t_slot: np.nda
     """Doppler-compensated slot vectors of :func:`rhs_env.point_cloud._joint_grid_search`, complex64 (D, H, I).
 
     ``rho[d, h, i] = exp(-j omega_dh t_i) sum_c r[d, i, c] exp(-j omega_dh t_c)`` for separable chirp times
-    ``t_ic = t_i + t_c`` (``t_slot`` (I,) holds t_i including the first chirp's time, ``t_chirp`` (C,) t_c).
+    ``t_ic = t_i + t_c`` (``t_slot`` (I,) holds t_i including the first chirp's time, ``t_chirp`` (C,) t_c); the
+    slot phases by :func:`_ramp`.
     """
     n_d, n_i, n_c = r.shape
     n_h = om.shape[1]
     rho = np.empty((n_d, n_h, n_i), np.complex64)
     ec = np.empty(n_c, np.complex128)
+    ei = np.empty(n_i, np.complex128)
+    em = np.empty(RAMP, np.complex128)
+    uniform = _uniform(t_slot)
     for d in range(n_d):
         for h in range(n_h):
             w = -om[d, h]
             for c in range(n_c):
                 ec[c] = complex(np.cos(w * t_chirp[c]), np.sin(w * t_chirp[c]))
+            _ramp(w, t_slot, uniform, em, ei)
             for i in range(n_i):
                 acc = 0j
                 for c in range(n_c):
                     acc += r[d, i, c] * ec[c]
-                x = w * t_slot[i]
-                rho[d, h, i] = acc * complex(np.cos(x), np.sin(x))
+                rho[d, h, i] = acc * ei[i]
     return rho
 
 
@@ -516,12 +576,12 @@ def _gram_cholesky(a: np.ndarray, d: int, gram: np.ndarray, chol: np.ndarray) ->
     """``G = A_d^H A_d + 1e-12 I = C C^H`` (L x L, Hermitian positive definite: the ridge keeps an unused,
     all-zero column at amplitude 0); C (lower triangular) written into ``chol``."""
     n_q, n_l = a.shape[1], a.shape[2]
-    gram[:] = 0
-    for q in range(n_q):
-        for l in range(n_l):
-            al = np.conj(a[d, q, l])
-            for m in range(l, n_l):
-                gram[l, m] += al * a[d, q, m]
+    for l in range(n_l):  # one running sum over q per entry (in registers; the order of summation over q kept)
+        for m in range(l, n_l):
+            acc = 0j
+            for q in range(n_q):
+                acc += np.conj(a[d, q, l]) * a[d, q, m]
+            gram[l, m] = acc
     for l in range(n_l):
         gram[l, l] += 1e-12
     for l in range(n_l):  # C[m, l] = (G[l, m]^* - sum_k C[m, k] C[l, k]^*) / C[l, l]
@@ -567,11 +627,11 @@ def lstsq(a: np.ndarray, y: np.ndarray) -> np.ndarray:
     rhs = np.empty(n_l, np.complex128)
     for d in range(n_d):
         _gram_cholesky(a, d, gram, chol)
-        rhs[:] = 0
-        for q in range(n_q):
-            yq = y[d, q]
-            for l in range(n_l):
-                rhs[l] += np.conj(a[d, q, l]) * yq
+        for l in range(n_l):
+            acc = 0j
+            for q in range(n_q):
+                acc += np.conj(a[d, q, l]) * y[d, q]
+            rhs[l] = acc
         _cholesky_solve(chol, rhs, out[d])
     return out
 
@@ -595,17 +655,35 @@ def bin_amplitudes(a: np.ndarray, spec: np.ndarray, rd: np.ndarray, kk: np.ndarr
     for d in range(n_d):
         _gram_cholesky(a, d, gram, chol)
         r = rd[d]
+        n_i = n_q // n_c
         for w in range(n_w):
             k = kk[d, w]
-            rhs[:] = 0
-            for q in range(n_q):
-                yq = complex(spec[r, q // n_c, q % n_c, k])
-                for l in range(n_l):
-                    rhs[l] += np.conj(a[d, q, l]) * yq
+            for l in range(n_l):
+                acc = 0j
+                for i in range(n_i):
+                    for c in range(n_c):
+                        acc += np.conj(a[d, i * n_c + c, l]) * complex(spec[r, i, c, k])
+                rhs[l] = acc
             _cholesky_solve(chol, rhs, sol)
             for l in range(n_l):
                 out[d, l, w] = sol[l]
     return out
+
+
+@njit
+def slot_sums(h: np.ndarray, r: np.ndarray, t: np.ndarray, q_re: np.ndarray, q_im: np.ndarray) -> None:
+    """``q_t = sum_{t_ic = t} conj(h_i) r_ic`` into ``q_re + j q_im`` (n_t,), overwritten: one row's slot vector h (I,)
+    against its residual r (I, C), summed into the chirp-time bins ``t[i C + c]`` (the Doppler searches' input)."""
+    n_i, n_c = r.shape
+    q_re[:] = 0.0
+    q_im[:] = 0.0
+    for i in range(n_i):
+        hc = np.conj(h[i])
+        for c in range(n_c):
+            p = hc * r[i, c]
+            tt = t[i * n_c + c]
+            q_re[tt] += p.real
+            q_im[tt] += p.imag
 
 
 @njit(fastmath={"reassoc", "contract"})
@@ -613,7 +691,7 @@ def doppler_dtft_refine(h: np.ndarray, r: np.ndarray, t: np.ndarray, n_t: int, k
                         kern_im: np.ndarray, w: np.ndarray, span: np.ndarray, nfft: int) -> np.ndarray:
     """The narrow search of :func:`rhs_env.point_cloud._doppler_grid_refine`: d_omega (D,) rad per chirp.
 
-    ``q_t = sum_{t_ic = t} conj(h_i) r_ic`` (rounded to complex64, as the reference), its DTFT
+    ``q_t = sum_{t_ic = t} conj(h_i) r_ic`` (:func:`slot_sums`, rounded to complex64, as the reference), its DTFT
     ``V_j = |sum_t q_t exp(-j w_j t)|^2`` on the grid ``w_j = 2 pi j / nfft`` (``kern_re + j kern_im``
     (J, n_t): the reference's complex64 ``exp(-j w_j t)``, transposed), the first maximum ``j*`` within
     ``|w_j| <= span_d`` (clipped to 1..J-2), then the vertex of the parabola through
@@ -621,22 +699,14 @@ def doppler_dtft_refine(h: np.ndarray, r: np.ndarray, t: np.ndarray, n_t: int, k
     separate float64 sums (vectorised; the sums' order is free, so V agrees with the reference's
     float32 product to ~1e-6 relative).
     """
-    n_d, n_i, n_c = r.shape
+    n_d = r.shape[0]
     n_j = w.size
     out = np.empty(n_d)
     qr = np.empty(n_t)
     qi = np.empty(n_t)
     val = np.zeros(n_j)
     for d in range(n_d):
-        qr[:] = 0.0
-        qi[:] = 0.0
-        for i in range(n_i):
-            hc = np.conj(h[d, i])
-            for c in range(n_c):
-                p = hc * r[d, i, c]
-                tt = t[i * n_c + c]
-                qr[tt] += p.real
-                qi[tt] += p.imag
+        slot_sums(h[d], r[d], t, qr, qi)
         for tt in range(n_t):
             qr[tt] = np.float32(qr[tt])
             qi[tt] = np.float32(qi[tt])
@@ -695,7 +765,7 @@ def joint_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step
     theta = theta.copy()
     domega = domega.copy()
     a = a.copy()
-    dd, kk = np.nonzero(valid)  # the valid (row, target) pairs, row-major
+    dd, kk = _valid_pairs(valid)  # the valid (row, target) pairs, row-major
     n_p = dd.size
     span_p = np.empty(n_p)
     w_p = np.empty(n_p)
@@ -712,11 +782,12 @@ def joint_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step
     for _ in range(passes):
         for p in range(n_p):
             d, k = dd[p], kk[p]
-            for q in range(n_q):
-                acc = 0j
-                for m in range(n_l):
-                    acc += a[d, q, m] * s[d, m]
-                fit[q] = acc
+            if p == 0 or dd[p - 1] != d:  # the row's fit A_d s_d, once per row (its pairs are adjacent)
+                for q in range(n_q):
+                    acc = 0j
+                    for m in range(n_l):
+                        acc += a[d, q, m] * s[d, m]
+                    fit[q] = acc
             for i in range(n_i):
                 for c in range(n_c):
                     q = i * n_c + c
@@ -746,12 +817,11 @@ def joint_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step
                 for c in range(n_c):
                     a[d, i * n_c + c, k] = hs[p, i] * np.conj(base[p, i, c])
         s = lstsq(a, flat)
-    out = s.copy()
     for d in range(n_d):
         for k in range(n_l):
             if not valid[d, k]:
-                out[d, k] = 0
-    return theta, domega, out, a
+                s[d, k] = 0
+    return theta, domega, s, a
 
 
 # --------------------------------------------------------------------------- the OMP in one call
@@ -862,10 +932,9 @@ def _doppler_peak(q_re: np.ndarray, q_im: np.ndarray, span: float, nfft: int, e_
             vp = _dtft_at(q_re, q_im, jb + 1, nfft, e_re, e_im)
         w_b = two_pi * jb / nfft
     else:
-        buf_re[:] = 0.0
-        buf_im[:] = 0.0
-        buf_re[:n_t] = q_re
-        buf_im[:n_t] = q_im
+        for k in range(buf_re.size):
+            buf_re[k] = q_re[k] if k < n_t else 0.0
+            buf_im[k] = q_im[k] if k < n_t else 0.0
         _fft_pow2(buf_re, buf_im, e_re, e_im)
         best = -1.0
         kb = 0
@@ -912,13 +981,17 @@ def _angle_peak(corr: np.ndarray, candidates: np.ndarray, step: float) -> tuple[
 
 @njit
 def _power(z: np.ndarray) -> np.ndarray:
-    """``|z|^2`` (float32) of complex64 correlations, as ``np.abs(z) ** 2``."""
-    out = np.empty(z.shape, np.float32)
-    zf = z.reshape(z.size)
-    of = out.reshape(out.size)
-    for n in range(zf.size):
-        a = np.float32(np.abs(zf[n]))
-        of[n] = a * a
+    """``|z|^2`` (float32) of complex64 correlations z (rows, columns), as ``np.abs(z) ** 2``: ``|z|`` correctly
+    rounded to float32 (``sqrt(re^2 + im^2)`` in float64, where the products are exact: hypot's value, in
+    vectorised loops), then squared in float32."""
+    n_a, n_b = z.shape
+    out = np.empty((n_a, n_b), np.float32)
+    for a in range(n_a):
+        for b in range(n_b):
+            re = np.float64(z[a, b].real)
+            im = np.float64(z[a, b].imag)
+            m = np.float32(np.sqrt(re * re + im * im))
+            out[a, b] = m * m
     return out
 
 
@@ -977,28 +1050,35 @@ def _joint_search(res: np.ndarray, sub: np.ndarray, w0: np.ndarray, th: np.ndarr
     for s_ in range(sub.size):
         for hh in range(n_h):
             om[s_, hh] = w0[sub[s_]] + span[sub[s_]] * u[hh]
-    t_chirp = tgrid[0] - tgrid[0, 0]
-    t_slot = tgrid[:, 0].copy()
     n_c = res.shape[2]
+    t_chirp = np.empty(n_c)
+    for c in range(n_c):
+        t_chirp[c] = tgrid[0, c] - tgrid[0, 0]
+    t_slot = np.empty(n_i)
+    for i in range(n_i):
+        t_slot[i] = tgrid[i, 0]
     res_s = np.empty((sub.size, n_i, n_c), np.complex128)
     for s_ in range(sub.size):
-        res_s[s_] = res[sub[s_]]
+        for i in range(n_i):
+            for c in range(n_c):
+                res_s[s_, i, c] = res[sub[s_], i, c]
     rho_j = joint_rho(res_s, om, t_chirp, t_slot)  # (S, H, I) complex64
-    cj = _power(np.dot(rho_j.reshape(sub.size * n_h, n_i), hn_conj)).reshape(sub.size, n_h, hn_conj.shape[1])
+    cj = _power(np.dot(rho_j.reshape(sub.size * n_h, n_i), hn_conj))  # (S H, I_c), row s H + h
+    n_cand = cj.shape[1]
     for s_ in range(sub.size):
         d = sub[s_]
         hb, jb = 0, 0
-        best = cj[s_, 0, 0]
+        best = cj[s_ * n_h, 0]
         for hh in range(n_h):
-            for jj in range(cj.shape[2]):
-                if cj[s_, hh, jj] > best:
-                    best = cj[s_, hh, jj]
+            for jj in range(n_cand):
+                if cj[s_ * n_h + hh, jj] > best:
+                    best = cj[s_ * n_h + hh, jj]
                     hb, jb = hh, jj
-        n_cand = cj.shape[2]
+        row = s_ * n_h + hb
         jm, jp = max(jb - 1, 0), min(jb + 1, n_cand - 1)
-        ym = np.log(max(cj[s_, hb, jm], 1e-30))
-        y0 = np.log(max(cj[s_, hb, jb], 1e-30))
-        yp = np.log(max(cj[s_, hb, jp], 1e-30))
+        ym = np.log(max(cj[row, jm], 1e-30))
+        y0 = np.log(max(cj[row, jb], 1e-30))
+        yp = np.log(max(cj[row, jp], 1e-30))
         den = ym - 2.0 * y0 + yp
         off = min(max(0.5 * (ym - yp) / den, -0.5), 0.5) if den < 0 else 0.0
         w0[d] = om[s_, hb]
@@ -1026,7 +1106,7 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
     ``span = clip(5 / sqrt(snr), min(pi, 8 pi / T), pi)``; the dwell ``C (sum_i e_i)^2 / sum_i e_i^2`` of the
     slot energies ``e_i = max(sum_c |R_ic|^2 - C sigma^2, 0)``; the rows with ``5 dwell / sqrt(snr) > pi / 2``
     take the joint angle x Doppler search (``n_h`` hypotheses over the batch, :func:`joint_rho`); the fine
-    Doppler (:func:`_doppler_peak`) on ``q_t = sum conj(h_i) rc_it``, Newton steps on the angle.
+    Doppler (:func:`_doppler_peak`) on ``q_t = sum conj(h_i) rc_it`` (:func:`slot_sums`), Newton steps on the angle.
     """
     n_d, n_i, n_c = res.shape
     t_span = float(n_t)
@@ -1038,19 +1118,21 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
             for c in range(n_c - 1):
                 acc += res[d, i, c + 1] * np.conj(res[d, i, c])
         w0[d] = np.arctan2(acc.imag, acc.real)
-    rc = res * phasors(w0, tgrid, -1.0)
+    rc = phasors(w0, tgrid, -1.0)  # then rc = res exp(-j w0 t), in place
     rho = np.empty((n_d, n_i), np.complex64)
     for d in range(n_d):
         for i in range(n_i):
             acc = 0j
             for c in range(n_c):
-                acc += rc[d, i, c]
+                v = res[d, i, c] * rc[d, i, c]
+                rc[d, i, c] = v
+                acc += v
             rho[d, i] = acc
     corr = _power(np.dot(rho, hn_conj))
     for d in range(n_d):
         th[d] = _angle_peak(corr[d], candidates, step)[1]
     span, dwell, wide = _search_widths(res, noise_var, t_span)
-    sub = np.flatnonzero(wide)
+    sub = _indices(wide)
     if sub.size:
         _joint_search(res, sub, w0, th, span, dwell, hn_conj, candidates, step, tgrid, rc)
     h = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, np.int64(0))[0]
@@ -1060,15 +1142,7 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
     buf_im = np.empty(nfft)
     w = np.empty(n_d)
     for d in range(n_d):
-        q_re[:] = 0.0
-        q_im[:] = 0.0
-        for i in range(n_i):
-            hc = np.conj(h[d, i])
-            for c in range(n_c):
-                p = hc * rc[d, i, c]
-                tt = t[i * n_c + c]
-                q_re[tt] += p.real
-                q_im[tt] += p.imag
+        slot_sums(h[d], rc[d], t, q_re, q_im)
         w[d] = w0[d] + _doppler_peak(q_re, q_im, span[d], nfft, e_re, e_im, buf_re, buf_im, tab_re, tab_im)
     comp = phasors(w, tgrid, -1.0)
     if newton_steps:
@@ -1080,7 +1154,11 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
                     acc += res[d, i, c] * comp[d, i, c]
                 rho_n[d, i] = acc
         th = newton_refine(table, u_c, x_c, lo, step, w2, x, th, rho_n, newton_steps)
-    return th, w, np.conj(comp)
+    for d in range(n_d):  # exp(j omega t): comp conjugated in place
+        for i in range(n_i):
+            for c in range(n_c):
+                comp[d, i, c] = np.conj(comp[d, i, c])
+    return th, w, comp
 
 
 @njit
@@ -1121,6 +1199,104 @@ def _set_column(a: np.ndarray, l: int, h: np.ndarray, phase: np.ndarray) -> None
 
 
 @njit
+def _indices(mask: np.ndarray) -> np.ndarray:
+    """``np.flatnonzero(mask)`` of a 1-D bool array (a loop, as :func:`_take2`)."""
+    n = 0
+    for d in range(mask.size):
+        n += mask[d]
+    out = np.empty(n, np.int64)
+    n = 0
+    for d in range(mask.size):
+        if mask[d]:
+            out[n] = d
+            n += 1
+    return out
+
+
+@njit
+def _valid_pairs(valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.nonzero(valid)`` of a 2-D bool array: the valid (row, target) pairs, row-major."""
+    n_d, n_l = valid.shape
+    n_p = 0
+    for d in range(n_d):
+        for k in range(n_l):
+            n_p += valid[d, k]
+    dd = np.empty(n_p, np.int64)
+    kk = np.empty(n_p, np.int64)
+    p = 0
+    for d in range(n_d):
+        for k in range(n_l):
+            if valid[d, k]:
+                dd[p], kk[p] = d, k
+                p += 1
+    return dd, kk
+
+
+@njit
+def _start(flat: np.ndarray, residual_threshold: np.ndarray, relative_threshold: float,
+           detected: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``||data_d||^2``, the stop level ``max(delta_r, rel ||data_d||^2)`` and the rows active at the start (D,)."""
+    n_d, n_q = flat.shape
+    r2 = np.empty(n_d)
+    stop = np.empty(n_d)
+    active = np.empty(n_d, np.bool_)
+    for d in range(n_d):
+        acc = 0.0
+        for q in range(n_q):
+            v = abs(flat[d, q])
+            acc += v * v
+        r2[d] = acc
+        stop[d] = max(residual_threshold[d], relative_threshold * acc)
+        active[d] = detected or acc >= stop[d]
+    return r2, stop, active
+
+
+@njit
+def _keep_rows(rows: np.ndarray, ok: np.ndarray, th_r: np.ndarray, om_r: np.ndarray, val_r: np.ndarray,
+               s: np.ndarray, a: np.ndarray, theta: np.ndarray, omega: np.ndarray, valid: np.ndarray,
+               amp: np.ndarray, atoms: np.ndarray, flat: np.ndarray, resid: np.ndarray, r2: np.ndarray,
+               stop: np.ndarray, active: np.ndarray) -> None:
+    """Write the accepted rows (``ok``) back and update their residual; a failed row stops (``active`` False)."""
+    n_q, n_l = a.shape[1], a.shape[2]
+    for rr in range(rows.size):
+        d = rows[rr]
+        if not ok[rr]:
+            active[d] = False
+            continue
+        for k in range(n_l):
+            theta[d, k] = th_r[rr, k]
+            omega[d, k] = om_r[rr, k]
+            valid[d, k] = val_r[rr, k]
+            amp[d, k] = s[rr, k]
+        for q in range(n_q):
+            for k in range(n_l):
+                atoms[d, q, k] = a[rr, q, k]
+        r2[d] = _residual(flat[d], a[rr], s[rr], resid[d])
+        active[d] = r2[d] >= stop[d]
+
+
+@njit
+def _take2(src: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``src[rows]`` of a 2-D array (a loop: numba's fancy indexing costs seconds of compile per type)."""
+    out = np.empty((rows.size, src.shape[1]), src.dtype)
+    for r in range(rows.size):
+        for k in range(src.shape[1]):
+            out[r, k] = src[rows[r], k]
+    return out
+
+
+@njit
+def _take3(src: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``src[rows]`` of a 3-D array (a loop, as :func:`_take2`)."""
+    out = np.empty((rows.size, src.shape[1], src.shape[2]), src.dtype)
+    for r in range(rows.size):
+        for q in range(src.shape[1]):
+            for k in range(src.shape[2]):
+                out[r, q, k] = src[rows[r], q, k]
+    return out
+
+
+@njit
 def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
                 x: np.ndarray, hn_conj: np.ndarray, candidates: np.ndarray, data: np.ndarray, tgrid: np.ndarray,
                 t: np.ndarray, n_t: int, nfft: int, e_re: np.ndarray, e_im: np.ndarray, tab_re: np.ndarray,
@@ -1149,53 +1325,51 @@ def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step:
     atoms = np.zeros((n_d, n_q, n_l), np.complex128)
     flat = data.reshape(n_d, n_q)
     resid = data.copy()
-    r2 = np.empty(n_d)
-    for d in range(n_d):
-        r2[d] = np.sum(np.abs(flat[d]) ** 2)
-    stop = np.maximum(residual_threshold, relative_threshold * r2)
-    active = np.ones(n_d, np.bool_) if detected else r2 >= stop
+    r2, stop, active = _start(flat, residual_threshold, relative_threshold, detected)
     fine_span = min(np.pi, 8 * np.pi / float(n_t))
     for l in range(n_l):
-        rows = np.flatnonzero(active)
+        rows = _indices(active)
         n_r = rows.size
         if n_r == 0:
             break
-        th, w, phase = _new_atoms(table, u_c, x_c, lo, step, w2, x, hn_conj, candidates, resid[rows], tgrid, t,
-                                  n_t, nfft, e_re, e_im, tab_re, tab_im, noise_var, newton_steps)
-        th_r = theta[rows]
-        om_r = omega[rows]
-        val_r = valid[rows]
-        a = atoms[rows]
+        th, w, phase = _new_atoms(table, u_c, x_c, lo, step, w2, x, hn_conj, candidates, _take3(resid, rows), tgrid,
+                                  t, n_t, nfft, e_re, e_im, tab_re, tab_im, noise_var, newton_steps)
+        th_r = _take2(theta, rows)
+        om_r = _take2(omega, rows)
+        val_r = _take2(valid, rows)
+        a = _take3(atoms, rows)
         h = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, np.int64(0))[0]
-        data_r = flat[rows]
+        data_r = _take2(flat, rows)
         for rr in range(n_r):
             th_r[rr, l], om_r[rr, l], val_r[rr, l] = th[rr], w[rr], True
         _set_column(a, l, h, phase)
-        s = np.where(val_r, lstsq(a, data_r), 0j)
-        ok = _amplitudes_pass(s, a, val_r, min_amplitude) | (detected and l == 0)
-        if l > 0 and cycles and ok.any():
-            kk = np.flatnonzero(ok)
-            th_k, om_k, s_k, a_k = joint_refine(table, u_c, x_c, lo, step, w2, x, data_r[kk], tgrid, t, n_t, fine_re,
-                                                fine_im, fine_w, nfft, th_r[kk], om_r[kk], val_r[kk],
-                                                np.full(kk.size, fine_span), cycles, newton_steps, a[kk], s[kk])
-            ok_k = _amplitudes_pass(s_k, a_k, val_r[kk], min_amplitude)
+        s = lstsq(a, data_r)
+        for rr in range(n_r):
+            for k in range(n_l):
+                if not val_r[rr, k]:
+                    s[rr, k] = 0
+        ok = _amplitudes_pass(s, a, val_r, min_amplitude)
+        for rr in range(n_r):
+            ok[rr] = ok[rr] or (detected and l == 0)
+        kk = _indices(ok)
+        if l > 0 and cycles and kk.size:
+            span_k = np.empty(kk.size)
+            for m in range(kk.size):
+                span_k[m] = fine_span
+            val_k = _take2(val_r, kk)
+            th_k, om_k, s_k, a_k = joint_refine(table, u_c, x_c, lo, step, w2, x, _take2(data_r, kk), tgrid, t, n_t,
+                                                fine_re, fine_im, fine_w, nfft, _take2(th_r, kk), _take2(om_r, kk),
+                                                val_k, span_k, cycles, newton_steps, _take3(a, kk), _take2(s, kk))
+            ok_k = _amplitudes_pass(s_k, a_k, val_k, min_amplitude)
             for m in range(kk.size):
                 rr = kk[m]
-                th_r[rr] = th_k[m]
-                om_r[rr] = om_k[m]
-                s[rr] = s_k[m]
-                a[rr] = a_k[m]
+                for k in range(n_l):
+                    th_r[rr, k] = th_k[m, k]
+                    om_r[rr, k] = om_k[m, k]
+                    s[rr, k] = s_k[m, k]
+                for q in range(n_q):
+                    for k in range(n_l):
+                        a[rr, q, k] = a_k[m, q, k]
                 ok[rr] = ok_k[m]
-        for rr in range(n_r):
-            d = rows[rr]
-            if not ok[rr]:
-                active[d] = False
-                continue
-            theta[d] = th_r[rr]
-            omega[d] = om_r[rr]
-            valid[d] = val_r[rr]
-            amp[d] = s[rr]
-            atoms[d] = a[rr]
-            r2[d] = _residual(flat[d], a[rr], s[rr], resid[d])
-            active[d] = r2[d] >= stop[d]
+        _keep_rows(rows, ok, th_r, om_r, val_r, s, a, theta, omega, valid, amp, atoms, flat, resid, r2, stop, active)
     return theta, omega, amp, valid, atoms, r2

@@ -95,9 +95,13 @@ def attach_uncertainty(system, cloud) -> None:
     cfg = system.config
     n = len(cloud)
     g = np.zeros(n)
+    groups: dict[int, tuple[AngleDictionary, list[int]]] = {}  # radars sharing a dictionary: one evaluation
     for r in np.unique(cloud.radar):
-        sel = cloud.radar == r
-        g[sel] = angle_information(system.dictionaries[int(r)], cloud.angle_rad[sel])
+        dic = system.dictionaries[int(r)]
+        groups.setdefault(id(dic), (dic, []))[1].append(int(r))
+    for dic, radars in groups.values():
+        sel = np.isin(cloud.radar, radars)
+        g[sel] = angle_information(dic, cloud.angle_rad[sel])
     cloud.range_std_m, cloud.angle_std_rad = point_std(
         cloud.points[:, 3],
         g,

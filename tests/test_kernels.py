@@ -155,6 +155,36 @@ def test_compiled_icp_equals_the_numpy_fit():
         assert np.abs(apply_motion(cur[3:, :2], est[1]) - prev[keep][3:, :2]).max() < 0.5  # it does register
 
 
+def test_shared_sort_phase_ramp_and_counting_os_cfar():
+    """The shared insertion sort sorts; the phase ramp is exp(j x t) to round-off (uniform or not); the OS-CFAR
+    test by counting equals the test against the rank-th smallest training cell, ties at the threshold included."""
+    from rhs_common.jit import sort_small
+    from rhs_env.kernels import RAMP, _cfar_pass, _ramp, _uniform
+
+    rng = np.random.default_rng(3)
+    for n in (0, 1, 2, 7, 16, 41):
+        v = rng.normal(size=n)
+        w = v.copy()
+        sort_small(w)
+        np.testing.assert_array_equal(w, np.sort(v))
+    em, out = np.empty(RAMP, complex), np.empty(90, complex)
+    for t, uniform in ((np.arange(90) * 4.0 + 3.0, True), (np.sort(rng.uniform(0.0, 360.0, 90)), False)):
+        assert _uniform(t) == uniform
+        for x in (-2.9, 0.013, 1.7):
+            _ramp(x, t, uniform, em, out)
+            assert np.abs(out - np.exp(1j * x * t)).max() < 1e-12  # |x t| <= 1e3 rad: its own rounding is ~1e-13
+    line = rng.exponential(size=64).astype(np.float32)
+    cells = np.arange(16) * 3
+    vals = np.empty(16)
+    alpha, floor, cap, rank = 4.0, 0.5, 3.0, 12
+    z_os = np.sort(line[cells].astype(float))[rank - 1]
+    z_ca = line[cells].astype(float).mean()
+    levels = alpha * np.clip(line[cells].astype(float), floor, cap)
+    for v in np.concatenate([rng.uniform(0.0, 14.0, 300), levels, [alpha * floor, alpha * cap]]):
+        assert _cfar_pass(v, line, cells, 0, rank, alpha, floor, cap, vals) == (v > alpha * min(max(z_os, floor), cap))
+        assert _cfar_pass(v, line, cells, 1, rank, alpha, floor, cap, vals) == (v > alpha * min(max(z_ca, floor), cap))
+
+
 def _run(code: str, **env: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=ROOT, capture_output=True, text=True,
                           env={**os.environ, "OMP_NUM_THREADS": "1", **env}, timeout=600)

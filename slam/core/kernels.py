@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rhs_common.jit import njit
+from rhs_common.jit import njit, sort_small
 
 __all__ = ["icp_fit", "mahalanobis_association", "proposal_information"]
 
@@ -124,13 +124,7 @@ def _nearest(src: np.ndarray, prev: np.ndarray, motion: np.ndarray, upper_bound:
 def _median(x: np.ndarray) -> float:
     """``np.median`` of a short 1-D array: the middle of the sorted values, or the mean of the two middle ones."""
     v = x.copy()
-    for q in range(1, v.size):  # insertion sort (tens of values)
-        y = v[q]
-        p = q - 1
-        while p >= 0 and v[p] > y:
-            v[p + 1] = v[p]
-            p -= 1
-        v[p + 1] = y
+    sort_small(v)  # tens of values
     h = v.size // 2
     return v[h] if v.size % 2 else (v[h - 1] + v[h]) / 2
 
