@@ -19,7 +19,7 @@ Python 3.11, 2 cores shared with other jobs, load average 5-8):
 * numpy upper bound: every numba release caps numpy (0.68.1: numpy < 2.6); a numpy newer than the
   cap waits for a numba release (pyproject asks numba >= 0.60, pip picks the one matching numpy);
 * no SVML in the wheels: transcendental loops are not vectorised, so the noise generator stays numpy;
-* first compile of every kernel here and in :mod:`slam.kernels`, once per machine: ~30 s at load 1-3
+* first compile of every kernel here and in :mod:`slam.core.kernels`, once per machine: ~30 s at load 1-3
   with the first one-call OMP (:func:`omp_doppler`, ~24 s of it); a new process then loads them from the
   cache (:mod:`rhs_common.jit`): imports, ``gym.make``, reset and the first step of the SLAM env in a
   new process took 28.8-33.2 s with an empty cache and 1.9-2.1 s with it (load 0.8-2.3; ``python

@@ -1,8 +1,8 @@
 """Compiled kernels of the SLAM (numba): the RBPF's Mahalanobis association and FastSLAM 2.0 proposal sums, the ICP.
 
-Each kernel computes what the numpy reference computes (:func:`slam.association.mahalanobis_associate`
-with the distances of :meth:`slam.rbpf.RBPFSlam._associate`; the fit of
-:class:`slam.registration.ICPRegistration` with its ``cKDTree`` queries), with the same variable names and floating-point
+Each kernel computes what the numpy reference computes (:func:`slam.core.association.mahalanobis_associate`
+with the distances of :meth:`slam.core.rbpf.RBPFSlam._associate`; the fit of
+:class:`slam.core.registration.ICPRegistration` with its ``cKDTree`` queries), with the same variable names and floating-point
 order, per particle instead of on P x M x L tensors. ``SlamConfig(kernels="numpy")``
 (``gym.make(..., slam={"kernels": "numpy"})``) selects the reference; the costs of numba are
 listed in :mod:`rhs_env.kernels`.
@@ -32,7 +32,7 @@ def mahalanobis_association(obs_map: np.ndarray, a00: np.ndarray, a01: np.ndarra
 
         d2 = i00 nx nx + 2 i01 nx ny + i11 ny ny     (inf for an inactive landmark).
 
-    Then :func:`slam.association.mahalanobis_associate`: ``rounds`` rounds accepting the pairs that are each
+    Then :func:`slam.core.association.mahalanobis_associate`: ``rounds`` rounds accepting the pairs that are each
     other's nearest among the free observations and landmarks within ``gate2``; a free observation
     is DROPPED when some landmark is within ``new_gate2``, else NEW. Returns idx (P, M) into ``used``.
     """
@@ -133,7 +133,7 @@ def _median(x: np.ndarray) -> float:
 def icp_fit(src: np.ndarray, prev: np.ndarray, guess: np.ndarray, amp_p: np.ndarray, amp_c: np.ndarray,
             use_amp: bool, max_iterations: int, max_gate_m: float, min_gate_m: float, outlier_factor: float,
             tol_m: float, tol_rad: float, min_pairs: int) -> tuple[np.ndarray, int, float, int]:
-    """:meth:`slam.registration.ICPRegistration._fit` from one start, and the score of its result.
+    """:meth:`slam.core.registration.ICPRegistration._fit` from one start, and the score of its result.
 
     Each iteration: the nearest previous point of every moved point (within ``max_gate_m``), the pairs
     within ``gate = max(min_gate_m, outlier_factor median(d))``, then the weighted 2-D Procrustes fit
@@ -208,7 +208,7 @@ def proposal_information(pp: np.ndarray, H: np.ndarray, Si: np.ndarray, nu: np.n
 
     ``info_p = sum_{k of p, ok_k} H_k^T S_k^-1 H_k`` (P, 3, 3) and ``g_p = sum_{k of p, ok_k} H_k^T S_k^-1 nu_k`` (P, 3),
     H (K, 2, 3), Si = S^-1 (K, 2, 2), nu (K, 2), the pairs in the order of ``pp`` (the particle of each pair);
-    :meth:`slam.rbpf.RBPFSlam._sample_proposal`'s einsums and ``np.add.at``, term by term.
+    :meth:`slam.core.rbpf.RBPFSlam._sample_proposal`'s einsums and ``np.add.at``, term by term.
     """
     info = np.zeros((n_particles, 3, 3))
     g = np.zeros((n_particles, 3))
