@@ -111,7 +111,7 @@ def njit(func: Callable | None = None, **options: Any) -> Any:
 def _sort_small(v: np.ndarray) -> None:
     """Sort the short 1-D array v ascending, in place (insertion sort: ``x_q`` moves left past every larger value).
 
-    For the tens of values of an ICP gate (:mod:`slam.kernels`) and any other short window a kernel ranks (the
+    For the tens of values of an ICP gate (:mod:`slam.core.kernels`) and any other short window a kernel ranks (the
     OS-CFAR of :mod:`rhs_env.kernels` needs no sort: it counts): ~160 ns for 16 values, 8x faster than
     ``np.partition`` inside numba (which allocates and dispatches).
     """
