@@ -115,13 +115,14 @@ def train_arm(arm: str, runs: Path, timesteps: int, seed: int) -> dict[str, Any]
 
 def run_record(runs: Path, arm: str) -> dict[str, Any] | None:
     """How the arm was trained: ``runs/ARM/run.json`` (written by ``--train``) or, for a run started by hand,
-    the ``runs/ARM.command`` / ``runs/ARM.commit`` files beside its folder; None when neither is there."""
+    the ``runs/ARM.command`` (the arguments of ``rhs-slam train``) / ``runs/ARM.commit`` files beside its folder;
+    None when neither is there."""
     run = runs / arm / "run.json"
     if run.exists():
         return json.loads(run.read_text())
     command, commit = runs / f"{arm}.command", runs / f"{arm}.commit"
     if command.exists() and commit.exists():
-        return {"command": ["rhs_slam", *command.read_text().split()], "commit": commit.read_text().strip()}
+        return {"command": ["rhs_slam", "train", *command.read_text().split()], "commit": commit.read_text().strip()}
     return None
 
 

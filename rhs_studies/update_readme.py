@@ -150,6 +150,7 @@ HEADLINE: tuple[tuple[str, Callable[[dict], tuple[str, str]]], ...] = (
     ("registration", _registration),
     ("detection_curves", _detection),
     ("policies", _policies),
+    ("rl_finetune", _rl_finetune),
     ("benchmark", _benchmark),
 )
 
