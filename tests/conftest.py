@@ -67,3 +67,43 @@ def small_env() -> Iterator[Callable[..., Any]]:
     yield make
     for env in made:
         env.close()
+
+
+# ---------------------------------------------------------------- the fine-tuning tests' toy observation
+def privileged_space() -> Any:
+    """A small point set, a box and the critic's privileged vector: the observation of the fine-tuning tests."""
+    import gymnasium as gym
+    import numpy as np
+
+    from agents.privileged import PRIVILEGED_DIM, PRIVILEGED_KEY
+
+    return gym.spaces.Dict({
+        "points": gym.spaces.Box(-100.0, 100.0, shape=(8, 3), dtype=np.float32),
+        "points_mask": gym.spaces.MultiBinary(8),
+        "ego": gym.spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32),
+        PRIVILEGED_KEY: gym.spaces.Box(-1.0, 1.0, shape=(PRIVILEGED_DIM,), dtype=np.float32),
+    })
+
+
+def reward_two_env() -> Any:
+    """A 10-step episode of random point sets (the actor's part of :func:`privileged_space`) paying 1 for action 2:
+    something for PPO to move towards, in a few hundred steps."""
+    import gymnasium as gym
+
+    from agents.privileged import without_privileged
+
+    class RewardTwoEnv(gym.Env):
+        observation_space = without_privileged(privileged_space())
+        action_space = gym.spaces.Discrete(5)
+
+        def reset(self, *, seed=None, options=None):
+            super().reset(seed=seed)
+            self.t = 0
+            self.observation_space.seed(seed)
+            return self.observation_space.sample(), {}
+
+        def step(self, action):
+            self.t += 1
+            return self.observation_space.sample(), float(action == 2), False, self.t >= 10, {}
+
+    return RewardTwoEnv()

@@ -8,7 +8,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from conftest import small_env_kwargs, tiny_hyperparams
+from conftest import privileged_space, reward_two_env, small_env_kwargs, tiny_hyperparams
 from stable_baselines3 import PPO
 from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 
@@ -32,13 +32,7 @@ from agents.privileged import (
     without_privileged,
 )
 
-POINTS = gym.spaces.Box(-100.0, 100.0, shape=(8, 3), dtype=np.float32)
-SPACE = gym.spaces.Dict({
-    "points": POINTS,
-    "points_mask": gym.spaces.MultiBinary(8),
-    "ego": gym.spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32),
-    PRIVILEGED_KEY: gym.spaces.Box(-1.0, 1.0, shape=(PRIVILEGED_DIM,), dtype=np.float32),
-})
+SPACE = privileged_space()
 POLICY_KWARGS = {"features_extractor_class": __import__("agents.features", fromlist=["x"]).PointSetExtractor,
                  "features_extractor_kwargs": {"point_dim": 8, "box_dim": 4}, "net_arch": [8]}
 
@@ -117,26 +111,9 @@ def test_the_anchor_decays_to_zero():
         FinetuneConfig(anchor_fraction=0.0)
 
 
-class _DictEnv(gym.Env):
-    """A 10-step episode of random point sets and a reward for action 2: something for PPO to move towards."""
-
-    observation_space = without_privileged(SPACE)
-    action_space = gym.spaces.Discrete(5)
-
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        self.t = 0
-        self.observation_space.seed(seed)
-        return self.observation_space.sample(), {}
-
-    def step(self, action):
-        self.t += 1
-        return self.observation_space.sample(), float(action == 2), False, self.t >= 10, {}
-
-
 def _kl_after_training(coef: float) -> float:
     torch.manual_seed(0)
-    model = AnchoredPPO("MultiInputPolicy", _DictEnv(), n_steps=64, batch_size=32, n_epochs=4, learning_rate=3e-3,
+    model = AnchoredPPO("MultiInputPolicy", reward_two_env(), n_steps=64, batch_size=32, n_epochs=4, learning_rate=3e-3,
                         seed=0, policy_kwargs=POLICY_KWARGS, device="cpu")
     model.finetune = FinetuneConfig(anchor_coef=coef, anchor_fraction=1.0, anchor_epochs=4)
     torch.manual_seed(1)

@@ -18,7 +18,7 @@ import json
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import small_env_kwargs, tiny_hyperparams
+from conftest import privileged_space, reward_two_env, small_env_kwargs, tiny_hyperparams
 
 pytest.importorskip("ray.rllib", reason="Ray RLlib is an optional extra: pip install -e '.[rllib]'")
 torch = pytest.importorskip("torch")
@@ -132,13 +132,7 @@ def test_rllib_flags_are_checked(tmp_path):
 
 # ---------------------------------------------------------------- the fine-tuning stage on RLlib
 
-POINTS = gym.spaces.Box(-100.0, 100.0, shape=(8, 3), dtype=np.float32)
-SPACE = gym.spaces.Dict({
-    "points": POINTS,
-    "points_mask": gym.spaces.MultiBinary(8),
-    "ego": gym.spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32),
-    PRIVILEGED_KEY: gym.spaces.Box(-1.0, 1.0, shape=(PRIVILEGED_DIM,), dtype=np.float32),
-})
+SPACE = privileged_space()
 MODEL = {"net_arch": [8], "features_extractor_kwargs": {"point_dim": 8, "box_dim": 4}}
 
 
@@ -231,23 +225,6 @@ def test_the_corrected_student_moves_into_the_module_and_back():
         _module(SPACE).load_actor_state(student_actor_state(_student(actor_space), 2, privileged=True))
 
 
-class _RewardTwoEnv(gym.Env):
-    """A 10-step episode of random point sets and a reward for action 2: something for PPO to move towards."""
-
-    observation_space = without_privileged(SPACE)
-    action_space = gym.spaces.Discrete(5)
-
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        self.t = 0
-        self.observation_space.seed(seed)
-        return self.observation_space.sample(), {}
-
-    def step(self, action):
-        self.t += 1
-        return self.observation_space.sample(), float(action == 2), False, self.t >= 10, {}
-
-
 def _start_module(state: dict) -> PointSetPPOModule:
     module = _module(without_privileged(SPACE))
     module.load_actor_state(state)
@@ -263,7 +240,7 @@ def _kl_after_training(coef: float) -> tuple[float, list[float]]:
 
     env_id = "rhs-test-reward-two-v0"
     if env_id not in gym.registry:
-        gym.register(env_id, entry_point=_RewardTwoEnv)
+        gym.register(env_id, entry_point=reward_two_env)
     settings = ppo_settings({"n_steps": 64, "batch_size": 32, "n_epochs": 4, "learning_rate": 3e-3,
                              "gamma": 0.9}, n_envs=1, timesteps=256)
     finetune = FinetuneConfig(anchor_coef=coef, anchor_fraction=1.0)
