@@ -6,6 +6,8 @@ decisions at 1 Hz in pulse mode; :mod:`agents.finetune`):
 * ``finetune``: PPO from the student with the privileged critic, the class-prior correction and the KL anchor
   decaying to zero at half the run (``agents/hyperparams/finetune.yml``);
 * ``finetune_no_anchor``: the same without the anchor (``anchor_coef: 0``);
+* ``finetune_horizon``: the fine-tune with a longer horizon (``gamma: 0.95`` at one decision per second: a crash
+  then costs about 20 s of lost reward instead of 5) and the time-to-collision shaping of :mod:`agents.shaping`;
 * ``dagger_continue``: DAgger going on from the student, the expert labelling the states it reaches
   (``agents/hyperparams/dagger_continue.yml``);
 * ``scratch``: PPO from scratch with the privileged critic (``finetune.yml`` without a student, with PPO's usual
@@ -56,6 +58,7 @@ HYPERPARAMS = ROOT / "agents" / "hyperparams"
 ARMS: dict[str, tuple[str, str, bool]] = {
     "finetune": ("finetune", "finetune.yml", True),
     "finetune_no_anchor": ("finetune", "finetune.yml:anchor_coef=0", True),
+    "finetune_horizon": ("finetune", "finetune.yml:gamma=0.95;reward_shaping={ttc_s: 3.0, weight: 0.5}", True),
     "dagger_continue": ("dagger", "dagger_continue.yml", True),
     "scratch": ("finetune", "finetune.yml:learning_rate=5.0e-4;clip_range=0.2;ent_coef=0.01;"
                             "reward_shaping={ttc_s: 3.0, weight: 0.5}", False),
@@ -64,6 +67,7 @@ LABELS = {
     "student": "DAgger student (shipped, start of every arm)",
     "finetune": "PPO fine-tune, privileged critic, decaying anchor",
     "finetune_no_anchor": "PPO fine-tune without the anchor (control)",
+    "finetune_horizon": "PPO fine-tune, gamma 0.95 and time-to-collision shaping",
     "dagger_continue": "DAgger continuation (control)",
     "scratch": "PPO from scratch, privileged critic",
     "slower": "always SLOWER (scripted)",
