@@ -99,18 +99,24 @@ def hyperparams_file(spec: str, run_dir: Path, arm: str) -> Path:
     return out
 
 
+def _rel(path: Path) -> str:
+    """``path`` from the repository root when it lies inside it (commands recorded in results name no machine)."""
+    path = Path(path).resolve()
+    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
+
+
 def train_arm(arm: str, runs: Path, timesteps: int, seed: int) -> dict[str, Any]:
     """Train ``arm`` into ``runs/arm`` with ``rhs-slam train`` in a subprocess; its record (command, commit, wall)."""
     algo, spec, from_student = ARMS[arm]
     out = runs / arm
     cmd = [sys.executable, "-m", "rhs_slam", "train", "--algo", algo, "--env", ENV_ID, "--timesteps", str(timesteps),
-           "--seed", str(seed), "--out", str(out), "--no-progress", "--hyperparams", str(hyperparams_file(spec, runs, arm))]
+           "--seed", str(seed), "--out", _rel(out), "--no-progress", "--hyperparams", _rel(hyperparams_file(spec, runs, arm))]
     if from_student:
-        cmd += ["--init-policy", str(STUDENT)]
+        cmd += ["--init-policy", str(STUDENT.relative_to(ROOT))]
     print(f"rl_finetune: training {arm}: {' '.join(cmd[1:])}", file=sys.stderr)
     state = git_state()  # the code the run starts from
     t0 = time.perf_counter()
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, cwd=ROOT)
     record = {"command": cmd[1:], "commit": state.get("commit"), "dirty": state.get("dirty"),
               "wall_s": round(time.perf_counter() - t0, 1)}
     (out / "run.json").write_text(json.dumps(record, indent=1))
@@ -295,7 +301,8 @@ def fingerprint() -> list[float]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--runs", default=str(ROOT / "runs" / "rl"), help="training runs folder (one subfolder per arm)")
+    ap.add_argument("--runs", type=Path, default=ROOT / "runs" / "rl",
+                    help="training runs folder (one subfolder per arm)")
     ap.add_argument("--arms", nargs="+", default=["finetune", "finetune_no_anchor", "dagger_continue"],
                     choices=list(ARMS))
     ap.add_argument("--train", action="store_true", help="train the arms whose run folder has no model.zip")
@@ -304,8 +311,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--episodes", type=int, default=100)
     ap.add_argument("--seed", type=int, default=3000, help="first held-out evaluation seed")
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--out-dir", default=str(ROOT / "results"))
-    ap.add_argument("--ship-dir", default=str(SHIPPED_DIR), help="where the arms' actor zips are copied")
+    ap.add_argument("--out-dir", type=Path, default=ROOT / "results")
+    ap.add_argument("--ship-dir", type=Path, default=SHIPPED_DIR, help="where the arms' actor zips are copied")
     args = ap.parse_args(argv)
     if args.episodes < 2:
         ap.error("--episodes must be >= 2 (intervals need two episodes)")
