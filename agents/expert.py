@@ -81,6 +81,11 @@ class HeadwayDriverConfig:
         return asdict(self)
 
 
+def bumper_gap(ego, other) -> float:
+    """Gap along the lane between the bumpers of ``ego`` and ``other``, m (negative when they overlap)."""
+    return abs(ego.lane_distance_to(other)) - 0.5 * (ego.LENGTH + other.LENGTH)
+
+
 class HeadwayDriver:
     """Time-gap driver on the true road state (see the module docstring for the rule).
 
@@ -103,10 +108,6 @@ class HeadwayDriver:
             raise ValueError(f"the headway driver needs a meta-action ego (MDPVehicle), got {type(ego).__name__}")
         return ego
 
-    def _bumper_gap(self, ego, other) -> float:
-        """Gap along the lane between bumpers, m (negative ``lane_distance_to`` for a follower)."""
-        return abs(ego.lane_distance_to(other)) - 0.5 * (ego.LENGTH + other.LENGTH)
-
     def leader(self, lane_index):
         """The vehicle ahead of the ego in ``lane_index`` (None when the lane ahead is empty)."""
         front, _ = self.env.unwrapped.road.neighbour_vehicles(self._ego, lane_index)
@@ -121,7 +122,7 @@ class HeadwayDriver:
         if front is None:
             return float("inf")
         c = self.config
-        return float(front.speed + (self._bumper_gap(self._ego, front) - c.standstill_gap_m) / c.headway_s)
+        return float(front.speed + (bumper_gap(self._ego, front) - c.standstill_gap_m) / c.headway_s)
 
     def is_open(self, lane_index, escape: bool = False) -> bool:
         """Room to move into ``lane_index`` now: enough gap to its leader and to its (faster) follower.
@@ -134,19 +135,19 @@ class HeadwayDriver:
         d0 = 0.5 * c.standstill_gap_m if escape else c.standstill_gap_m
         if front is not None:
             need = d0 + max(0.0, ego.speed - front.speed) * c.headway_s
-            if self._bumper_gap(ego, front) < need:
+            if bumper_gap(ego, front) < need:
                 return False
         if rear is None:
             return True
         closing = max(0.0, rear.speed - ego.speed)
         need = d0 + c.rear_headway_s * closing if escape else d0 + 2.0 * c.rear_headway_s * closing + 0.5 * rear.speed
-        return self._bumper_gap(ego, rear) > need
+        return bumper_gap(ego, rear) > need
 
     def _lane_action(self, ego, front, v_own: float, v_max: float, v_min: float) -> int | None:
         """LANE_LEFT / LANE_RIGHT when a side lane is worth taking, else None (``front``: the own lane's leader)."""
         c = self.config
         own = ego.target_lane_index
-        slow_leader = front is not None and front.speed < v_min and self._bumper_gap(ego, front) < c.lookahead_m
+        slow_leader = front is not None and front.speed < v_min and bumper_gap(ego, front) < c.lookahead_m
         # the gap closes, or will, even at the lowest target speed: any better lane will do
         trapped = v_own < v_min + c.margin_mps or slow_leader
         best, best_v, best_right = None, v_own, False

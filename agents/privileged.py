@@ -28,7 +28,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from agents.expert import HeadwayDriver
+from agents.expert import HeadwayDriver, bumper_gap
 
 #: the observation key the critic reads and the actor never sees
 PRIVILEGED_KEY = "privileged"
@@ -42,11 +42,6 @@ LANE_FEATURES = 5
 N_ACTIONS = 5
 #: length of :func:`privileged_features`: ego (3) + 3 lanes + time left (1) + expert action (one-hot)
 PRIVILEGED_DIM = 3 + 3 * LANE_FEATURES + 1 + N_ACTIONS
-
-
-def bumper_gap(ego, other) -> float:
-    """Gap along the lane between the bumpers of ``ego`` and ``other``, m (negative when they overlap)."""
-    return abs(ego.lane_distance_to(other)) - 0.5 * (ego.LENGTH + other.LENGTH)
 
 
 def _lane_features(road, ego, lane_index) -> list[float]:

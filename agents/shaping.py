@@ -26,7 +26,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from agents.privileged import bumper_gap
+from agents.expert import bumper_gap
 from rhs_common.validation import build, check_range, check_types
 
 

@@ -12,7 +12,7 @@ from conftest import privileged_space, reward_two_env, small_env_kwargs, tiny_hy
 from stable_baselines3 import PPO
 from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 
-from agents.expert import HeadwayDriver
+from agents.expert import HeadwayDriver, bumper_gap
 from agents.finetune import (
     AnchoredPPO,
     FinetuneConfig,
@@ -27,7 +27,6 @@ from agents.privileged import (
     LANE_FEATURES,
     PRIVILEGED_DIM,
     PRIVILEGED_KEY,
-    bumper_gap,
     privileged_features,
     without_privileged,
 )
