@@ -107,9 +107,9 @@ STEPS: tuple[Step, ...] = (
          "trains the DAgger policies (PPO: --algo ppo)", no_fingerprint="a record of training runs (timesteps, wall time); "
          "what the policies do is fingerprinted by the policies step"),
     Step("policies", "evaluate_policies.py", (), ("policies.json",), 220),
-    Step("rl_finetune", "rl_finetune.py", ("--train",), ("rl_finetune.json",), 5400,
-         "PPO fine-tune of the student with its controls (trains the arms missing in runs/rl, ~20 min each), then "
-         "100 held-out seeds per policy"),
+    Step("rl_finetune", "rl_finetune.py", ("--train",), ("rl_finetune.json",), 16000,
+         "PPO fine-tune of the student with its controls (trains the arms missing in runs/rl: ~10-20 min per 20k "
+         "env steps, ~45 min per 80k arm), then 100 held-out seeds per policy (~4 min each on 2 cores)"),
     Step("crash_analysis", "crash_analysis.py", (), ("crash_analysis.json",), 700,
          "the shipped radar + SLAM student's crashes against the expert's labels"),
     Step("detection_curves", "detection_curves.py", (), ("detection_curves.json",), 600),

@@ -10,6 +10,8 @@ decisions at 1 Hz in pulse mode; :mod:`agents.finetune`):
   then costs about 20 s of lost reward instead of 5) and the time-to-collision shaping of :mod:`agents.shaping`;
 * ``dagger_continue``: DAgger going on from the student, the expert labelling the states it reaches
   (``agents/hyperparams/dagger_continue.yml``);
+* ``finetune_horizon_80k`` and ``dagger_continue_80k``: the longer-horizon fine-tune and its DAgger control with
+  four times the budget (80k env steps each); the targets judge this pair when it was evaluated;
 * ``scratch``: PPO from scratch with the privileged critic (``finetune.yml`` without a student, with PPO's usual
   learning rate 5e-4, clip range 0.2, an entropy bonus 0.01 and the time-to-collision shaping of
   :mod:`agents.shaping`), on request (``--arms ... scratch``).
@@ -39,7 +41,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -54,21 +56,41 @@ STUDENT = ROOT / "agents" / "data" / "dagger_rhs_highway_slam.zip"
 #: where the trained arms are kept (the actor zips and their training records)
 SHIPPED_DIR = ROOT / "agents" / "data" / "rl"
 HYPERPARAMS = ROOT / "agents" / "hyperparams"
-#: arm -> (algo, hyperparameter file, starts from the student)
-ARMS: dict[str, tuple[str, str, bool]] = {
-    "finetune": ("finetune", "finetune.yml", True),
-    "finetune_no_anchor": ("finetune", "finetune.yml:anchor_coef=0", True),
-    "finetune_horizon": ("finetune", "finetune.yml:gamma=0.95;reward_shaping={ttc_s: 3.0, weight: 0.5}", True),
-    "dagger_continue": ("dagger", "dagger_continue.yml", True),
-    "scratch": ("finetune", "finetune.yml:learning_rate=5.0e-4;clip_range=0.2;ent_coef=0.01;"
-                            "reward_shaping={ttc_s: 3.0, weight: 0.5}", False),
+
+
+class Arm(NamedTuple):
+    """One training run of the study: ``rhs-slam train --algo ALGO`` with the hyperparameters ``spec``."""
+
+    algo: str
+    #: ``NAME.yml`` of agents/hyperparams, or ``NAME.yml:key=value;...`` (see :func:`hyperparams_file`)
+    spec: str
+    #: starts from the shipped DAgger student (``--init-policy``)
+    from_student: bool
+    #: env steps; None: the study's ``--timesteps``
+    timesteps: int | None = None
+
+
+HORIZON = "finetune.yml:gamma=0.95;reward_shaping={ttc_s: 3.0, weight: 0.5}"
+#: a longer budget for the best fine-tune setting and its DAgger control (same env steps each)
+LONG_STEPS = 80000
+ARMS: dict[str, Arm] = {
+    "finetune": Arm("finetune", "finetune.yml", True),
+    "finetune_no_anchor": Arm("finetune", "finetune.yml:anchor_coef=0", True),
+    "finetune_horizon": Arm("finetune", HORIZON, True),
+    "dagger_continue": Arm("dagger", "dagger_continue.yml", True),
+    "scratch": Arm("finetune", "finetune.yml:learning_rate=5.0e-4;clip_range=0.2;ent_coef=0.01;"
+                               "reward_shaping={ttc_s: 3.0, weight: 0.5}", False),
+    "finetune_horizon_80k": Arm("finetune", HORIZON, True, LONG_STEPS),
+    "dagger_continue_80k": Arm("dagger", "dagger_continue.yml", True, LONG_STEPS),
 }
 LABELS = {
     "student": "DAgger student (shipped, start of every arm)",
     "finetune": "PPO fine-tune, privileged critic, decaying anchor",
     "finetune_no_anchor": "PPO fine-tune without the anchor (control)",
     "finetune_horizon": "PPO fine-tune, gamma 0.95 and time-to-collision shaping",
+    "finetune_horizon_80k": f"the same, {LONG_STEPS // 1000}k env steps",
     "dagger_continue": "DAgger continuation (control)",
+    "dagger_continue_80k": f"DAgger continuation, {LONG_STEPS // 1000}k env steps (control)",
     "scratch": "PPO from scratch, privileged critic",
     "slower": "always SLOWER (scripted)",
     "idm": "IDM + MOBIL (highway-env, scripted)",
@@ -106,10 +128,12 @@ def _rel(path: Path) -> str:
 
 
 def train_arm(arm: str, runs: Path, timesteps: int, seed: int) -> dict[str, Any]:
-    """Train ``arm`` into ``runs/arm`` with ``rhs-slam train`` in a subprocess; its record (command, commit, wall)."""
-    algo, spec, from_student = ARMS[arm]
+    """Train ``arm`` into ``runs/arm`` with ``rhs-slam train`` in a subprocess (``timesteps`` env steps unless the
+    arm sets its own); its record (command, commit, wall)."""
+    algo, spec, from_student, own_steps = ARMS[arm]
     out = runs / arm
-    cmd = [sys.executable, "-m", "rhs_slam", "train", "--algo", algo, "--env", ENV_ID, "--timesteps", str(timesteps),
+    steps = own_steps or timesteps
+    cmd = [sys.executable, "-m", "rhs_slam", "train", "--algo", algo, "--env", ENV_ID, "--timesteps", str(steps),
            "--seed", str(seed), "--out", _rel(out), "--no-progress", "--hyperparams", _rel(hyperparams_file(spec, runs, arm))]
     if from_student:
         cmd += ["--init-policy", str(STUDENT.relative_to(ROOT))]
@@ -199,20 +223,34 @@ def paired(a: list[dict[str, Any]], b: list[dict[str, Any]]) -> dict[str, float]
     return {"mean": d.mean, "low": d.low, "high": d.high, "n": len(common)}
 
 
-def targets(rows: dict[str, dict[str, Any]], runs: dict[str, list[dict]], arm: str = "finetune") -> dict[str, Any]:
-    """The fine-tune's targets against IDM + MOBIL, the student and the DAgger continuation."""
+#: (fine-tune arm, its DAgger control of the same budget), the first pair present is the one the targets judge
+HEADLINE_PAIRS = (("finetune_horizon_80k", "dagger_continue_80k"), ("finetune", "dagger_continue"))
+
+
+def headline_arm(runs: dict[str, list[dict]]) -> tuple[str, str]:
+    """The fine-tune the targets judge and its DAgger control: the longest budget evaluated."""
+    for arm, control in HEADLINE_PAIRS:
+        if arm in runs:
+            return arm, control
+    return HEADLINE_PAIRS[-1]
+
+
+def targets(rows: dict[str, dict[str, Any]], runs: dict[str, list[dict]], arm: str = "finetune",
+            control: str = "dagger_continue") -> dict[str, Any]:
+    """The fine-tune's targets against IDM + MOBIL, the student and the DAgger continuation ``control``."""
     if arm not in rows:
         return {}
     s = rows[arm]
     gain = paired(runs[arm], runs["student"])
     out: dict[str, Any] = {
+        "arm": arm, "control": control,
         "return_vs_idm": s["return"]["mean"] / rows["idm"]["return"]["mean"],
         "collision_rate": s["collision_rate"],
         "mean_speed_mps": s["mean_speed_mps"]["mean"],
         "gain_over_student": gain,
     }
-    if "dagger_continue" in runs:
-        out["gain_over_dagger_continue"] = paired(runs[arm], runs["dagger_continue"])
+    if control in runs:
+        out["gain_over_dagger_continue"] = paired(runs[arm], runs[control])
     out["met"] = {
         "return_vs_idm": out["return_vs_idm"] >= TARGET_VS_IDM,
         "collisions": s["collision_rate"] <= TARGET_COLLISIONS,
@@ -251,7 +289,8 @@ def _fmt_row(key: str, s: dict[str, Any], gain: dict[str, float] | None) -> str:
 def markdown(result: dict[str, Any]) -> str:
     """The results table: one row per policy, paired differences against the student."""
     lines = [f"Held-out seeds {result['seeds'][0]}-{result['seeds'][-1]} ({result['episodes']} episodes, "
-             f"{ENV_ID}); each arm {result['timesteps']} env steps from the same student.", "",
+             f"{ENV_ID}); each arm {result['timesteps']} env steps from the same student unless its label gives "
+             "another budget.", "",
              "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs student (paired, 95 % CI) |",
              "|---|---|---|---|---|"]
     for key, s in result["rows"].items():
@@ -259,7 +298,8 @@ def markdown(result: dict[str, Any]) -> str:
     t = result.get("targets") or {}
     if t:
         met = ", ".join(f"{k} {'met' if v else 'not met'}" for k, v in t["met"].items())
-        lines += ["", f"Fine-tune: {t['return_vs_idm']:.3f}x IDM + MOBIL, {100 * t['collision_rate']:.0f} % collisions, "
+        name = LABELS.get(t.get("arm", "finetune"), t.get("arm", "finetune"))
+        lines += ["", f"Targets judged on {name}: {t['return_vs_idm']:.3f}x IDM + MOBIL, {100 * t['collision_rate']:.0f} % collisions, "
                   f"{t['mean_speed_mps']:.1f} m/s; targets: {met}."]
     return "\n".join(lines) + "\n"
 
@@ -303,8 +343,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", type=Path, default=ROOT / "runs" / "rl",
                     help="training runs folder (one subfolder per arm)")
-    ap.add_argument("--arms", nargs="+", default=["finetune", "finetune_no_anchor", "dagger_continue"],
-                    choices=list(ARMS))
+    ap.add_argument("--arms", nargs="+", default=list(ARMS), choices=list(ARMS))
     ap.add_argument("--train", action="store_true", help="train the arms whose run folder has no model.zip")
     ap.add_argument("--timesteps", type=int, default=20000, help="env steps per arm")
     ap.add_argument("--train-seed", type=int, default=0)
@@ -338,7 +377,7 @@ def main(argv: list[str] | None = None) -> int:
         "env_id": ENV_ID, "episodes": args.episodes, "seeds": seeds, "timesteps": args.timesteps,
         "rows": rows,
         "vs_student": {k: paired(runs[k], runs["student"]) for k in runs if k != "student"},
-        "targets": targets(rows, runs),
+        "targets": targets(rows, runs, *headline_arm(runs)),
         "training": training,
         "curves": curves,
         "runs": {k: [{f: r.get(f) for f in SLIM_KEYS} for r in v] for k, v in runs.items()},

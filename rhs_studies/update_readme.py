@@ -128,9 +128,11 @@ def _policies(d: dict) -> tuple[str, str]:
 
 
 def _rl_finetune(d: dict) -> tuple[str, str]:
-    rows, gain = d["rows"], d["vs_student"]["finetune"]
-    s = rows["finetune"]
-    return (f"PPO fine-tune of the student, privileged critic ({d['timesteps']} env steps; {d['episodes']} held-out "
+    arm = d["targets"].get("arm", "finetune")
+    rows, gain = d["rows"], d["vs_student"][arm]
+    s = rows[arm]
+    steps = d["training"][arm]["timesteps"]
+    return (f"PPO fine-tune of the student, privileged critic ({steps} env steps; {d['episodes']} held-out "
             "seeds): return, collisions, paired gain over the student",
             f"{s['return']['mean']:.1f}, {s['collisions']}/{s['episodes']}, {gain['mean']:+.1f} "
             f"[{gain['low']:+.1f}, {gain['high']:+.1f}] (IDM + MOBIL: {rows['idm']['return']['mean']:.1f})")

@@ -232,6 +232,25 @@ def test_the_study_pairs_by_seed_and_bounds_collisions():
     assert s["return"]["half"] > 0
 
 
+def test_the_study_judges_the_longest_fine_tune_against_its_own_budgets_control():
+    from rhs_studies.rl_finetune import ARMS, headline_arm, row_summary, targets
+
+    def runs_of(base: float, crash_seed: int = -1) -> list[dict]:
+        return [{"seed": s, "return": base + s % 3, "crashed": s == crash_seed, "mean_speed": 24.5} for s in range(10)]
+
+    runs = {"student": runs_of(150.0), "finetune": runs_of(151.0), "dagger_continue": runs_of(150.0),
+            "idm": runs_of(140.0), "finetune_horizon_80k": runs_of(156.0), "dagger_continue_80k": runs_of(155.0, 3)}
+    arm, control = headline_arm(runs)
+    assert (arm, control) == ("finetune_horizon_80k", "dagger_continue_80k")
+    assert ARMS[arm].timesteps == ARMS[control].timesteps  # the control has the same env-step budget
+    t = targets({k: row_summary(v) for k, v in runs.items()}, runs, arm, control)
+    assert t["gain_over_student"]["mean"] == pytest.approx(6.0)
+    assert t["gain_over_dagger_continue"]["mean"] == pytest.approx(1.0)
+    assert t["met"]["gain_over_student"] and t["met"]["beats_dagger_continue"] and t["met"]["mean_speed"]
+    del runs["finetune_horizon_80k"]
+    assert headline_arm(runs) == ("finetune", "dagger_continue")
+
+
 def test_the_study_derives_a_control_yaml_with_the_keys_set(tmp_path):
     import yaml
 
