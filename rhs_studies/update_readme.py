@@ -101,6 +101,24 @@ def _highway(d: dict) -> tuple[str, str]:
             f"{s['position_rmse_m']['mean']:.3f} ± {s['position_rmse_m']['ci95']:.3f} m")
 
 
+def _slam_drivers(d: dict) -> tuple[str, str]:
+    part = d["parts"]["drivers"]
+    combos = part["combos"].values()
+    careful = [r for c in combos if c["driver"] != "random" for r in c["runs"]]
+    random = [r for c in combos if c["driver"] == "random" for r in c["runs"]]
+    worst = max(r["episode_rmse_m"] for r in careful)
+    lost = sum(r["lost_episode"] for r in random)
+    above = sum(r["cycles_above_lost"] for c in combos for r in c["runs"])
+    flagged = sum(r["cycles_above_lost_flagged"] for c in combos for r in c["runs"])
+    good = sum(r["cycles_below_good"] for c in combos for r in c["runs"])
+    alarms = sum(r["cycles_below_good_flagged"] for c in combos for r in c["runs"])
+    hit = f"{flagged}/{above}" if above else "none"
+    return (f"SLAM driven by IDM + MOBIL, the shipped policy, random actions ({len(part['seeds'])} held-out seeds each, "
+            "highway and dense env): worst episode RMSE (IDM, policy); random episodes lost (error > "
+            f"{part['lost_m']:g} m); lost cycles flagged; false alarms",
+            f"{worst:.2f} m; {lost}/{len(random)}; {hit}; {alarms}/{good}")
+
+
 def _registration(d: dict) -> tuple[str, str]:
     return ("Scan registration on held-out pairs, translation RMSE: ICP / the paper's CNN",
             f"{d['icp']['translation_rmse_m']:.3f} m / {d['cnn']['translation_rmse_m']:.3f} m")
@@ -149,6 +167,7 @@ HEADLINE: tuple[tuple[str, Callable[[dict], tuple[str, str]]], ...] = (
     ("fig5a", _fig5a),
     ("slam_accuracy", _dense),
     ("slam_accuracy", _highway),
+    ("slam_accuracy", _slam_drivers),
     ("registration", _registration),
     ("detection_curves", _detection),
     ("policies", _policies),
