@@ -421,6 +421,20 @@ class RadarSystem:
             buf[:, :kb] = 0
             return buf[:, :kb].reshape(shape + (kb,))
         bits = self.rng.bit_generator.random_raw(m * n).view(np.int32)  # 2 m n independent 32-bit words
+        if cfg.kernels == "numba":  # the same float32 operations, the elementwise passes fused (numpy's log1p, cos, sin)
+            from rhs_env.kernels import noise_samples, noise_uniforms
+
+            neg_u1 = self._buffer("nu1", (m, n), np.float32)
+            ph = self._buffer("nph", (m, n), np.float32)
+            noise_uniforms(bits, np.float32(2.0 ** -24), np.float32(0.5), np.float32(2 * np.pi), neg_u1.reshape(-1),
+                           ph.reshape(-1))
+            np.log1p(neg_u1, out=neg_u1)
+            cos_ph = self._buffer("ncos", (m, n), np.float32)
+            np.cos(ph, out=cos_ph)
+            np.sin(ph, out=ph)
+            noise_samples(neg_u1, cos_ph, ph, self._noise_window, buf.view(np.float32))
+            spec = sfft.fft(buf, axis=-1, workers=1, overwrite_x=True)  # in place: spec is buf
+            return spec[:, :kb].reshape(shape + (kb,))
         np.right_shift(bits, 8, out=bits)  # 24-bit signed: [-2^23, 2^23)
         u = self._buffer("nu", (2, m, n), np.float32)
         np.copyto(u, bits.reshape(2, m, n), casting="unsafe")
