@@ -691,26 +691,34 @@ def bin_amplitudes(a: np.ndarray, spec: np.ndarray, rd: np.ndarray, kk: np.ndarr
     rhs = np.empty(n_l, np.complex128)
     sol = np.empty(n_l, np.complex128)
     n_i = n_q // n_c
-    rhs_w = np.empty((n_w, n_l), np.complex128)  # A_d^H y_dw of every bin w, summed over (i, c) in order
-    y = np.empty(n_w, np.complex128)
+    # A_d^H y_dw of every bin w and atom l, summed over (i, c) in order, as real and imaginary parts
+    # (``conj(a) y = (a_re y_re + a_im y_im) + j (a_re y_im - a_im y_re)``, complex multiplication's own
+    # operations: vectorised over the bins)
+    acc_re = np.empty((n_l, n_w))
+    acc_im = np.empty((n_l, n_w))
+    y_re = np.empty(n_w)
+    y_im = np.empty(n_w)
     for d in range(n_d):
         _gram_cholesky(a, d, gram, chol)
         r = rd[d]
-        for w in range(n_w):
-            for l in range(n_l):
-                rhs_w[w, l] = 0j
+        acc_re[:] = 0.0
+        acc_im[:] = 0.0
         for i in range(n_i):  # the W neighbouring bins of a cell (i, c) read together: one pass over Y's rows
             for c in range(n_c):
                 q = i * n_c + c
                 for w in range(n_w):
-                    y[w] = complex(spec[r, i, c, kk[d, w]])
+                    v = spec[r, i, c, kk[d, w]]
+                    y_re[w] = np.float64(v.real)
+                    y_im[w] = np.float64(v.imag)
                 for l in range(n_l):
-                    ac = np.conj(a[d, q, l])
+                    a_re = a[d, q, l].real
+                    a_im = -a[d, q, l].imag  # conj(a)
                     for w in range(n_w):
-                        rhs_w[w, l] += ac * y[w]
+                        acc_re[l, w] += a_re * y_re[w] - a_im * y_im[w]
+                        acc_im[l, w] += a_re * y_im[w] + a_im * y_re[w]
         for w in range(n_w):
             for l in range(n_l):
-                rhs[l] = rhs_w[w, l]
+                rhs[l] = complex(acc_re[l, w], acc_im[l, w])
             _cholesky_solve(chol, rhs, sol)
             for l in range(n_l):
                 out[d, l, w] = sol[l]
