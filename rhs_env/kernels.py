@@ -42,8 +42,8 @@ from rhs_common.jit import njit
 
 __all__ = [
     "TAYLOR_ORDER", "atom_norms", "bin_amplitudes", "doppler_dtft_refine", "footprint_detections", "joint_refine", "joint_rho", "lstsq",
-    "newton_refine", "noise_samples", "noise_uniforms", "omp_doppler", "phasors", "slot_projection", "slot_sums", "taylor_atoms", "taylor_tables", "tone_operands",
-    "tone_spectra",
+    "newton_refine", "noise_samples", "noise_uniforms", "omp_doppler", "phasors", "slot_projection", "slot_sums",
+    "taylor_atoms", "taylor_tables", "tone_operands", "tone_spectra",
 ]
 
 
