@@ -41,9 +41,9 @@ import numpy as np
 from rhs_common.jit import njit
 
 __all__ = [
-    "TAYLOR_ORDER", "atom_norms", "bin_amplitudes", "doppler_dtft_refine", "footprint_detections", "joint_refine", "joint_rho", "lstsq",
-    "newton_refine", "noise_samples", "noise_uniforms", "omp_doppler", "phasors", "slot_projection", "slot_sums",
-    "taylor_atoms", "taylor_tables", "tone_operands", "tone_spectra",
+    "TAYLOR_ORDER", "atom_norms", "bin_amplitudes", "doppler_dtft_refine", "footprint_detections", "gather_bins",
+    "joint_refine", "joint_rho", "lstsq", "newton_refine", "noise_samples", "noise_uniforms", "omp_doppler",
+    "phasors", "slot_projection", "slot_sums", "taylor_atoms", "taylor_tables", "tone_operands", "tone_spectra",
 ]
 
 
@@ -675,6 +675,29 @@ def lstsq(a: np.ndarray, y: np.ndarray) -> np.ndarray:
             rhs[l] = acc
         _cholesky_solve(chol, rhs, out[d])
     return out
+
+
+@njit
+def gather_bins(spec: np.ndarray, rd: np.ndarray, kk: np.ndarray, centre: int) -> tuple[np.ndarray, np.ndarray]:
+    """The neighbouring bins of every detection, read from the spectrum Y (R, I, C, K) in one pass.
+
+    ``win[d, i, c, w] = Y[rd_d, i, c, kk_dw]`` (D, I, C, W) complex64 (the bins of
+    :meth:`rhs_env.radar.RadarSystem._target_bins`) and the OMP's data ``y[d, i, c] = Y[rd_d, i, c, kk_d,centre]``
+    (D, I, C) complex128 (``kk[:, centre]`` the detection's own bin): each (slot, chirp) row of Y is visited once
+    per detection, its W adjacent bins together, and :func:`bin_amplitudes` then reads them contiguously.
+    """
+    n_d, n_w = kk.shape
+    _, n_i, n_c, _ = spec.shape
+    win = np.empty((n_d, n_i, n_c, n_w), np.complex64)
+    y = np.empty((n_d, n_i, n_c), np.complex128)
+    for d in range(n_d):
+        r = rd[d]
+        for i in range(n_i):
+            for c in range(n_c):
+                for w in range(n_w):
+                    win[d, i, c, w] = spec[r, i, c, kk[d, w]]
+                y[d, i, c] = complex(win[d, i, c, centre])
+    return win, y
 
 
 @njit

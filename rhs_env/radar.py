@@ -551,7 +551,14 @@ class RadarSystem:
         one unless the patterns differ), batched over every detection of the scan.
         """
         cfg = self.config
-        yd = spec[rd, :, :, kd].astype(np.complex128)  # (D, I, C)
+        kk = self._neighbour_bins(kd, spec.shape[-1])
+        win = None
+        if cfg.kernels == "numba":  # the neighbouring bins of _target_bins and the OMP's data in one pass over Y
+            from rhs_env.kernels import gather_bins
+
+            win, yd = gather_bins(spec, rd.astype(np.int64), kk, kk.shape[1] // 2)
+        else:
+            yd = spec[rd, :, :, kd].astype(np.complex128)  # (D, I, C)
         est = _Targets.empty(rd.size, cfg.estimation.max_targets)
         y_var = cfg.noise_power_w * self._win_energy  # noise variance per cell of Y
         rel = 10 ** (cfg.estimation.residual_rel_db / 10)
@@ -565,23 +572,34 @@ class RadarSystem:
                               detected=bool(self._detectors))
             est.theta[sel], est.amp[sel], est.valid[sel], est.omega[sel] = res.theta, res.amp, res.valid, res.omega
             est.anorm[sel] = atom_norms(res.atoms, cfg.kernels)
-            est.tfrac[sel] = self._target_bins(spec, rd[sel], kd[sel], res.atoms)
+            win_sel = win if win is None or sel.size == rd.size else win[sel]  # sel: every row, in order, or some
+            est.tfrac[sel] = self._target_bins(spec, rd[sel], kk[sel], res.atoms, win_sel)
         return est
 
-    def _target_bins(self, spec: np.ndarray, rd: np.ndarray, kd: np.ndarray, atoms: np.ndarray) -> np.ndarray:
-        """Per-target range offset from kd (D, L), padded bins.
-
-        LS amplitudes of the fixed atoms at the neighbouring bins, parabola on
-        log|s|^2 (a target merged into the peak of another lies within the window
-        main lobe, +-2 bins). Compiled with ``kernels="numba"`` (:func:`rhs_env.kernels.bin_amplitudes`).
-        """
+    def _neighbour_bins(self, kd: np.ndarray, n_bins: int) -> np.ndarray:
+        """The bins ``kd + m``, ``|m| <= 2 Z + 1``, clipped to the spectrum (D, W) int64: :meth:`_target_bins`' window."""
         half = 2 * self.config.waveform.zero_pad + 1
-        kk = np.clip(kd[:, None] + np.arange(-half, half + 1)[None, :], 0, spec.shape[-1] - 1)
-        if self.config.kernels == "numba":  # the same least squares, compiled, reading the bins in place
+        return np.clip(kd[:, None] + np.arange(-half, half + 1)[None, :], 0, n_bins - 1).astype(np.int64)
+
+    def _target_bins(self, spec: np.ndarray, rd: np.ndarray, kk: np.ndarray, atoms: np.ndarray,
+                     win: np.ndarray | None = None) -> np.ndarray:
+        """Per-target range offset from the detection's bin (D, L), padded bins.
+
+        LS amplitudes of the fixed atoms at the neighbouring bins kk (:meth:`_neighbour_bins`), parabola on
+        log|s|^2 (a target merged into the peak of another lies within the window
+        main lobe, +-2 bins). Compiled with ``kernels="numba"`` (:func:`rhs_env.kernels.bin_amplitudes`), on the
+        bins already gathered (``win`` (D, I, C, W), :func:`rhs_env.kernels.gather_bins`) or read from the spectrum.
+        """
+        half = kk.shape[1] // 2
+        if self.config.kernels == "numba":  # the same least squares, compiled
             from rhs_env.kernels import bin_amplitudes
 
-            s_nb = bin_amplitudes(np.ascontiguousarray(atoms, dtype=complex), spec, rd.astype(np.int64),
-                                  kk.astype(np.int64))
+            a = np.ascontiguousarray(atoms, dtype=complex)
+            if win is None:
+                s_nb = bin_amplitudes(a, spec, rd.astype(np.int64), kk)
+            else:  # Y := win, radar d, bins 0..W-1: the same values, read contiguously
+                s_nb = bin_amplitudes(a, win, np.arange(rd.size, dtype=np.int64),
+                                      np.ascontiguousarray(np.broadcast_to(np.arange(kk.shape[1]), kk.shape)))
         else:
             nb = spec[rd[:, None], :, :, kk].reshape(rd.size, 2 * half + 1, -1)  # (D, W, I C)
             s_nb = batched_lstsq(atoms, np.swapaxes(nb, 1, 2).astype(complex))  # (D, L, W)
