@@ -410,7 +410,10 @@ class RadarSystem:
         sqrt(-ln(1 - u1))``, phase ``2 pi u2``), the uniforms as 24-bit fractions
         of the generator's raw 64-bit draws (one draw gives u1 and u2 for two
         samples; cheaper than ``Generator.random`` in float32), the window
-        folded into the radius, then one in-place zero-padded FFT per chirp.
+        folded into the radius, then one in-place zero-padded FFT per chirp. With ``kernels="numba"`` the
+        elementwise passes around numpy's ``log1p``, ``cos`` and ``sin`` (uniforms, radius, window, products,
+        padding) run fused (:func:`rhs_env.kernels.noise_uniforms`, :func:`rhs_env.kernels.noise_samples`): the
+        same float32 operations, the same spectrum bit for bit.
         """
         cfg = self.config
         d, z, kb = self._noise_rate, cfg.waveform.zero_pad, self._bin_hi
