@@ -41,9 +41,9 @@ import numpy as np
 from rhs_common.jit import njit
 
 __all__ = [
-    "TAYLOR_ORDER", "atom_norms", "bin_amplitudes", "doppler_dtft_refine", "footprint_detections", "joint_refine", "joint_rho", "lstsq",
-    "newton_refine", "omp_doppler", "phasors", "slot_sums", "taylor_atoms", "taylor_tables", "tone_operands",
-    "tone_spectra",
+    "TAYLOR_ORDER", "atom_norms", "bin_amplitudes", "doppler_dtft_refine", "footprint_detections", "gather_bins",
+    "joint_refine", "joint_rho", "lstsq", "newton_refine", "noise_samples", "noise_uniforms", "omp_doppler",
+    "phasors", "slot_projection", "slot_sums", "taylor_atoms", "taylor_tables", "tone_operands", "tone_spectra",
 ]
 
 
@@ -52,7 +52,8 @@ __all__ = [
 def _peaks(stat: np.ndarray, in_range: np.ndarray, lo32: np.ndarray) -> np.ndarray:
     """Flat indices (radar, hypothesis, bin) of ``T_j(k) > T_j(k - 1)``, ``T_j(k) >= T_j(k + 1)``, ``T_j(k) > lo_j``.
 
-    In np.nonzero order; branch-free (each cell written, the count advanced by the test): most cells are no peak.
+    In np.nonzero order. The threshold test first: few cells exceed ``lo_j`` (~1 % of them are peaks on the
+    highway scene), so its branch is well predicted and the neighbours are compared only there.
     """
     n_r, n_j, n = stat.shape
     cand = np.empty(n_r * n_j * n + 1, np.int64)
@@ -64,8 +65,10 @@ def _peaks(stat: np.ndarray, in_range: np.ndarray, lo32: np.ndarray) -> np.ndarr
             lo_j = lo32[jj]
             for kk in range(1, n - 1):
                 t = line[kk]
-                cand[c] = base + kk
-                c += (t > line[kk - 1]) & (t >= line[kk + 1]) & (t > lo_j) & in_range[kk]
+                if t > lo_j:
+                    if (t > line[kk - 1]) & (t >= line[kk + 1]) & in_range[kk]:
+                        cand[c] = base + kk
+                        c += 1
     return cand[:c]
 
 
@@ -381,6 +384,44 @@ def newton_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, ste
 
 # --------------------------------------------------------------------------- signal synthesis
 @njit
+def noise_uniforms(words: np.ndarray, scale: np.float32, half: np.float32, two_pi: np.float32, neg_u1: np.ndarray,
+                   phase: np.ndarray) -> None:
+    """The polar method's inputs of :meth:`rhs_env.radar.RadarSystem._noise_spectrum` from raw 32-bit words, in one pass.
+
+    ``u = float32(w >> 8) 2^-24 + 1/2`` (a 24-bit signed word: u uniform on [0, 1) in steps of 2^-24, every
+    step exact in float32) of the words ``words`` (2 M,) int32: the first M give ``neg_u1 = -u1``
+    (the argument of ``log1p``), the last M ``phase = 2 pi u2`` (float32), both (M,) in the order of the
+    numpy reference (``scale = 2^-24``, ``half = 1/2``, ``two_pi = 2 pi`` as float32).
+    """
+    m = neg_u1.size
+    for q in range(m):
+        neg_u1[q] = -(np.float32(words[q] >> 8) * scale + half)
+    for q in range(m):
+        phase[q] = (np.float32(words[m + q] >> 8) * scale + half) * two_pi
+
+
+@njit
+def noise_samples(log1p_neg_u1: np.ndarray, cos_ph: np.ndarray, sin_ph: np.ndarray, radius_window: np.ndarray,
+                  out: np.ndarray) -> None:
+    """Windowed CN(0, sigma_n^2) samples, zero-padded, into ``out`` (rows, 2 L) float32 (complex64 re, im interleaved).
+
+    ``x[m] = rho_m (cos(phi_m) + j sin(phi_m))`` with the radius ``rho_m = sqrt(-log1p(-u1)) sqrt(D) sigma_n w[D m]``
+    (``radius_window`` (n,) float32: ``sqrt(D) sigma_n w[D m]``; ``log1p_neg_u1``, ``cos_ph``, ``sin_ph``
+    (rows, n) float32 from numpy), then zeros up to the FFT length L: the numpy reference's passes
+    (negate, sqrt, window, the two products, the padding) in one, the same float32 operations per sample.
+    """
+    rows, n = cos_ph.shape
+    width = out.shape[1]
+    for r in range(rows):
+        for k in range(n):
+            rad = np.sqrt(-log1p_neg_u1[r, k]) * radius_window[k]
+            out[r, 2 * k] = cos_ph[r, k] * rad
+            out[r, 2 * k + 1] = sin_ph[r, k] * rad
+        for k in range(2 * n, width):
+            out[r, k] = 0
+
+
+@njit
 def tone_spectra(mu: np.ndarray, coef: np.ndarray, n: int, zero_pad: int, n_bins: int, freq: np.ndarray) -> np.ndarray:
     """:func:`rhs_env.point_cloud.tone_spectra`: windowed, zero-padded spectra of unit tones (P, n_bins) complex128.
 
@@ -637,6 +678,29 @@ def lstsq(a: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 @njit
+def gather_bins(spec: np.ndarray, rd: np.ndarray, kk: np.ndarray, centre: int) -> tuple[np.ndarray, np.ndarray]:
+    """The neighbouring bins of every detection, read from the spectrum Y (R, I, C, K) in one pass.
+
+    ``win[d, i, c, w] = Y[rd_d, i, c, kk_dw]`` (D, I, C, W) complex64 (the bins of
+    :meth:`rhs_env.radar.RadarSystem._target_bins`) and the OMP's data ``y[d, i, c] = Y[rd_d, i, c, kk_d,centre]``
+    (D, I, C) complex128 (``kk[:, centre]`` the detection's own bin): each (slot, chirp) row of Y is visited once
+    per detection, its W adjacent bins together, and :func:`bin_amplitudes` then reads them contiguously.
+    """
+    n_d, n_w = kk.shape
+    _, n_i, n_c, _ = spec.shape
+    win = np.empty((n_d, n_i, n_c, n_w), np.complex64)
+    y = np.empty((n_d, n_i, n_c), np.complex128)
+    for d in range(n_d):
+        r = rd[d]
+        for i in range(n_i):
+            for c in range(n_c):
+                for w in range(n_w):
+                    win[d, i, c, w] = spec[r, i, c, kk[d, w]]
+                y[d, i, c] = complex(win[d, i, c, centre])
+    return win, y
+
+
+@njit
 def bin_amplitudes(a: np.ndarray, spec: np.ndarray, rd: np.ndarray, kk: np.ndarray) -> np.ndarray:
     """Least-squares amplitudes of fixed atoms at neighbouring range bins (D, L, W), for
     :meth:`rhs_env.radar.RadarSystem._target_bins`.
@@ -652,22 +716,53 @@ def bin_amplitudes(a: np.ndarray, spec: np.ndarray, rd: np.ndarray, kk: np.ndarr
     chol = np.zeros((n_l, n_l), np.complex128)
     rhs = np.empty(n_l, np.complex128)
     sol = np.empty(n_l, np.complex128)
+    n_i = n_q // n_c
+    # A_d^H y_dw of every bin w and atom l, summed over (i, c) in order, as real and imaginary parts
+    # (``conj(a) y = (a_re y_re + a_im y_im) + j (a_re y_im - a_im y_re)``, complex multiplication's own
+    # operations: vectorised over the bins)
+    acc_re = np.empty((n_l, n_w))
+    acc_im = np.empty((n_l, n_w))
+    y_re = np.empty(n_w)
+    y_im = np.empty(n_w)
     for d in range(n_d):
         _gram_cholesky(a, d, gram, chol)
         r = rd[d]
-        n_i = n_q // n_c
+        acc_re[:] = 0.0
+        acc_im[:] = 0.0
+        for i in range(n_i):  # the W neighbouring bins of a cell (i, c) read together: one pass over Y's rows
+            for c in range(n_c):
+                q = i * n_c + c
+                for w in range(n_w):
+                    v = spec[r, i, c, kk[d, w]]
+                    y_re[w] = np.float64(v.real)
+                    y_im[w] = np.float64(v.imag)
+                for l in range(n_l):
+                    a_re = a[d, q, l].real
+                    a_im = -a[d, q, l].imag  # conj(a)
+                    for w in range(n_w):
+                        acc_re[l, w] += a_re * y_re[w] - a_im * y_im[w]
+                        acc_im[l, w] += a_re * y_im[w] + a_im * y_re[w]
         for w in range(n_w):
-            k = kk[d, w]
             for l in range(n_l):
-                acc = 0j
-                for i in range(n_i):
-                    for c in range(n_c):
-                        acc += np.conj(a[d, i * n_c + c, l]) * complex(spec[r, i, c, k])
-                rhs[l] = acc
+                rhs[l] = complex(acc_re[l, w], acc_im[l, w])
             _cholesky_solve(chol, rhs, sol)
             for l in range(n_l):
                 out[d, l, w] = sol[l]
     return out
+
+
+@njit
+def slot_projection(x: np.ndarray, y: np.ndarray, rho: np.ndarray) -> None:
+    """``rho[p, i] = sum_c x[p, i, c] y[p, i, c]`` (P, I) of x, y (P, I, C): the per-slot projection of the Newton
+    steps, e.g. ``rho_i = sum_c part_ic base_ic`` (:func:`joint_refine`) or ``rho_i = sum_c R_ic exp(-j omega t_ic)``
+    (:func:`_new_atoms`), summed over c in order, as ``np.sum(x * y, axis=2)``."""
+    n_p, n_i, n_c = x.shape
+    for p in range(n_p):
+        for i in range(n_i):
+            acc = 0j
+            for c in range(n_c):
+                acc += x[p, i, c] * y[p, i, c]
+            rho[p, i] = acc
 
 
 @njit
@@ -801,12 +896,7 @@ def joint_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step
             dw[p] += domega[dd[p], kk[p]]
         base = phasors(dw, tgrid, -1.0)
         if newton_steps:
-            for p in range(n_p):
-                for i in range(n_i):
-                    acc = 0j
-                    for c in range(n_c):
-                        acc += part[p, i, c] * base[p, i, c]
-                    rho[p, i] = acc
+            slot_projection(part, base, rho)
             th = newton_refine(table, u_c, x_c, lo, step, w2, x, th, rho, newton_steps)
         hs = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, np.int64(0))[0]  # (P, I)
         for p in range(n_p):
@@ -1147,12 +1237,7 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
     comp = phasors(w, tgrid, -1.0)
     if newton_steps:
         rho_n = np.empty((n_d, n_i), np.complex128)
-        for d in range(n_d):
-            for i in range(n_i):
-                acc = 0j
-                for c in range(n_c):
-                    acc += res[d, i, c] * comp[d, i, c]
-                rho_n[d, i] = acc
+        slot_projection(res, comp, rho_n)
         th = newton_refine(table, u_c, x_c, lo, step, w2, x, th, rho_n, newton_steps)
     for d in range(n_d):  # exp(j omega t): comp conjugated in place
         for i in range(n_i):

@@ -410,7 +410,10 @@ class RadarSystem:
         sqrt(-ln(1 - u1))``, phase ``2 pi u2``), the uniforms as 24-bit fractions
         of the generator's raw 64-bit draws (one draw gives u1 and u2 for two
         samples; cheaper than ``Generator.random`` in float32), the window
-        folded into the radius, then one in-place zero-padded FFT per chirp.
+        folded into the radius, then one in-place zero-padded FFT per chirp. With ``kernels="numba"`` the
+        elementwise passes around numpy's ``log1p``, ``cos`` and ``sin`` (uniforms, radius, window, products,
+        padding) run fused (:func:`rhs_env.kernels.noise_uniforms`, :func:`rhs_env.kernels.noise_samples`): the
+        same float32 operations, the same spectrum bit for bit.
         """
         cfg = self.config
         d, z, kb = self._noise_rate, cfg.waveform.zero_pad, self._bin_hi
@@ -421,6 +424,20 @@ class RadarSystem:
             buf[:, :kb] = 0
             return buf[:, :kb].reshape(shape + (kb,))
         bits = self.rng.bit_generator.random_raw(m * n).view(np.int32)  # 2 m n independent 32-bit words
+        if cfg.kernels == "numba":  # the same float32 operations, the elementwise passes fused (numpy's log1p, cos, sin)
+            from rhs_env.kernels import noise_samples, noise_uniforms
+
+            neg_u1 = self._buffer("nu1", (m, n), np.float32)
+            ph = self._buffer("nph", (m, n), np.float32)
+            noise_uniforms(bits, np.float32(2.0 ** -24), np.float32(0.5), np.float32(2 * np.pi), neg_u1.reshape(-1),
+                           ph.reshape(-1))
+            np.log1p(neg_u1, out=neg_u1)
+            cos_ph = self._buffer("ncos", (m, n), np.float32)
+            np.cos(ph, out=cos_ph)
+            np.sin(ph, out=ph)
+            noise_samples(neg_u1, cos_ph, ph, self._noise_window, buf.view(np.float32))
+            spec = sfft.fft(buf, axis=-1, workers=1, overwrite_x=True)  # in place: spec is buf
+            return spec[:, :kb].reshape(shape + (kb,))
         np.right_shift(bits, 8, out=bits)  # 24-bit signed: [-2^23, 2^23)
         u = self._buffer("nu", (2, m, n), np.float32)
         np.copyto(u, bits.reshape(2, m, n), casting="unsafe")
@@ -537,7 +554,14 @@ class RadarSystem:
         one unless the patterns differ), batched over every detection of the scan.
         """
         cfg = self.config
-        yd = spec[rd, :, :, kd].astype(np.complex128)  # (D, I, C)
+        kk = self._neighbour_bins(kd, spec.shape[-1])
+        win = None
+        if cfg.kernels == "numba":  # the neighbouring bins of _target_bins and the OMP's data in one pass over Y
+            from rhs_env.kernels import gather_bins
+
+            win, yd = gather_bins(spec, rd.astype(np.int64), kk, kk.shape[1] // 2)
+        else:
+            yd = spec[rd, :, :, kd].astype(np.complex128)  # (D, I, C)
         est = _Targets.empty(rd.size, cfg.estimation.max_targets)
         y_var = cfg.noise_power_w * self._win_energy  # noise variance per cell of Y
         rel = 10 ** (cfg.estimation.residual_rel_db / 10)
@@ -551,23 +575,34 @@ class RadarSystem:
                               detected=bool(self._detectors))
             est.theta[sel], est.amp[sel], est.valid[sel], est.omega[sel] = res.theta, res.amp, res.valid, res.omega
             est.anorm[sel] = atom_norms(res.atoms, cfg.kernels)
-            est.tfrac[sel] = self._target_bins(spec, rd[sel], kd[sel], res.atoms)
+            win_sel = win if win is None or sel.size == rd.size else win[sel]  # sel: every row, in order, or some
+            est.tfrac[sel] = self._target_bins(spec, rd[sel], kk[sel], res.atoms, win_sel)
         return est
 
-    def _target_bins(self, spec: np.ndarray, rd: np.ndarray, kd: np.ndarray, atoms: np.ndarray) -> np.ndarray:
-        """Per-target range offset from kd (D, L), padded bins.
-
-        LS amplitudes of the fixed atoms at the neighbouring bins, parabola on
-        log|s|^2 (a target merged into the peak of another lies within the window
-        main lobe, +-2 bins). Compiled with ``kernels="numba"`` (:func:`rhs_env.kernels.bin_amplitudes`).
-        """
+    def _neighbour_bins(self, kd: np.ndarray, n_bins: int) -> np.ndarray:
+        """The bins ``kd + m``, ``|m| <= 2 Z + 1``, clipped to the spectrum (D, W) int64: :meth:`_target_bins`' window."""
         half = 2 * self.config.waveform.zero_pad + 1
-        kk = np.clip(kd[:, None] + np.arange(-half, half + 1)[None, :], 0, spec.shape[-1] - 1)
-        if self.config.kernels == "numba":  # the same least squares, compiled, reading the bins in place
+        return np.clip(kd[:, None] + np.arange(-half, half + 1)[None, :], 0, n_bins - 1).astype(np.int64)
+
+    def _target_bins(self, spec: np.ndarray, rd: np.ndarray, kk: np.ndarray, atoms: np.ndarray,
+                     win: np.ndarray | None = None) -> np.ndarray:
+        """Per-target range offset from the detection's bin (D, L), padded bins.
+
+        LS amplitudes of the fixed atoms at the neighbouring bins kk (:meth:`_neighbour_bins`), parabola on
+        log|s|^2 (a target merged into the peak of another lies within the window
+        main lobe, +-2 bins). Compiled with ``kernels="numba"`` (:func:`rhs_env.kernels.bin_amplitudes`), on the
+        bins already gathered (``win`` (D, I, C, W), :func:`rhs_env.kernels.gather_bins`) or read from the spectrum.
+        """
+        half = kk.shape[1] // 2
+        if self.config.kernels == "numba":  # the same least squares, compiled
             from rhs_env.kernels import bin_amplitudes
 
-            s_nb = bin_amplitudes(np.ascontiguousarray(atoms, dtype=complex), spec, rd.astype(np.int64),
-                                  kk.astype(np.int64))
+            a = np.ascontiguousarray(atoms, dtype=complex)
+            if win is None:
+                s_nb = bin_amplitudes(a, spec, rd.astype(np.int64), kk)
+            else:  # Y := win, radar d, bins 0..W-1: the same values, read contiguously
+                s_nb = bin_amplitudes(a, win, np.arange(rd.size, dtype=np.int64),
+                                      np.ascontiguousarray(np.broadcast_to(np.arange(kk.shape[1]), kk.shape)))
         else:
             nb = spec[rd[:, None], :, :, kk].reshape(rd.size, 2 * half + 1, -1)  # (D, W, I C)
             s_nb = batched_lstsq(atoms, np.swapaxes(nb, 1, 2).astype(complex))  # (D, L, W)
