@@ -13,7 +13,9 @@ with the radars at ``sensor_xy``, goes to the RBPF):
    line of sight ``u`` (RANSAC fit of ``vr = -v . u`` scored by bearing coverage, within
    ``max_accel * dt`` of the last velocity, else unconstrained,
    :func:`slam.core.association.estimate_ego_velocity`); with fewer than three agreeing points
-   the forward speed of two (:func:`forward_speed_fit`; one while no velocity is known);
+   the forward speed of two (:func:`forward_speed_fit`; one while no velocity is known); a fast turn from the
+   fit that models the yaw rate, retried with the bound on the speed alone when the held turn has gone stale
+   (:meth:`SlamPipeline._doppler_turn`, :data:`SLIP_FREE`);
    when every fit fails, the last registration motion over dt (constant velocity), and the
    velocity holds when the registration measured nothing either;
 2. static points: ``|vr - vr_static| <= threshold`` with the yaw rate and each point's radar
@@ -126,7 +128,10 @@ TURN_GAIN = 1.15
 #: reversed at 10 m/s (``w`` from -1.9 to +1.9 rad/s) swings the lateral velocity ``v sin(beta) = w length / 2``
 #: by 9 m/s within one cycle, far past the acceleration bound on the vector (``max_accel * dt`` + the threshold,
 #: 3 m/s), so the bounded fit found no turn, the stale one was held, its static mask dropped the static points
-#: and the registration had nothing to fit (random drives, tuning seeds 2000-2079: every lost episode)
+#: and the registration had nothing to fit: 0.4-0.8 rad of heading error in one cycle. Random drives on
+#: rhs-highway-slam-v0, tuning seeds 2000-2079: all 9 lost episodes began so (true yaw rate 1.7-2.6 rad/s at
+#: 10-12 m/s); with the fit retried on the speed bound (:meth:`SlamPipeline._doppler_turn`) none is lost.
+#: ``False`` restores the bound on the velocity vector alone
 SLIP_FREE = True
 
 #: the held fast turn is rechecked when its static mask keeps fewer than this fraction of the points (the
