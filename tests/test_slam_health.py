@@ -236,6 +236,12 @@ def test_a_reversed_lane_change_is_found_with_the_speed_bound_alone():
     turn = pipe._doppler_turn(pts, s, 0.2, np.array([9.0, 0.5]))
     assert turn is not None
     np.testing.assert_allclose(turn, [9.3, 4.0, 1.9], atol=1e-6)
+    # the same turn at 26 m/s is 49 m/s^2 of lateral acceleration, past what the vehicles can steer: refused
+    fast = np.column_stack([xy, np.sum(-(np.array([26.0, 4.0])[None, :] + w * np.stack([-xy[:, 1], xy[:, 0]], axis=1))
+                                       * u, axis=1), np.ones(40)])
+    pipe.velocity = np.array([26.0, -2.5, -1.9])
+    assert pipe._doppler_turn(fast, s, 0.2, np.array([25.0, 0.5])) is None
+    pipe.velocity = np.array([10.1, -2.5, -1.9])
     # a held state that still explains the points keeps the bounded fit alone (no second fit)
     pipe.velocity = np.array([9.3, 4.0, 1.9])
     straight = np.column_stack([xy, -(9.3 * u[:, 0] + 4.0 * u[:, 1]), np.ones(40)])  # no turn now, same slip

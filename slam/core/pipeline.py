@@ -133,6 +133,12 @@ TURN_GAIN = 1.15
 #: 10-12 m/s); with the fit retried on the speed bound (:meth:`SlamPipeline._doppler_turn`) none is lost.
 #: ``False`` restores the bound on the velocity vector alone
 SLIP_FREE = True
+#: ... and that fit's turn counts only below this lateral acceleration ``|v| |w|`` (m/s^2): highway-env's
+#: lateral controller turns at ``KP_HEADING`` (5 /s) times the heading to a lateral speed command of
+#: ``KP_LATERAL`` (1 / 0.6 s) times the lane offset (a 4 m lane: 6.7 m/s), about 33 m/s^2 whatever the
+#: speed; the true ``|v| |w|`` of the random drives (tuning seeds 2000-2079, 6183 cycles) peaked at 38.9 m/s^2.
+#: Without the bound, a crash's last cycle at 20-26 m/s fit a 2-3 rad/s turn (43-74 m/s^2) on the wreck's points
+LATERAL_ACCEL_MAX = 40.0
 
 #: the held fast turn is rechecked when its static mask keeps fewer than this fraction of the points (the
 #: clouds of the drives are mostly static: a turn that fits below half of them is stale), and another
@@ -516,7 +522,8 @@ class SlamPipeline:
         held state (``v_flat`` or the last velocity, with the last yaw rate) leaves fewer than
         ``RECHECK_BELOW`` of the points static, the fit is tried again with the bound on the speed alone
         (:data:`SLIP_FREE`: a sharp steer swings the velocity's direction within the cycle), and its turn
-        replaces the held state when it leaves ``RECHECK_GAIN`` times as many points static."""
+        replaces the held state when it leaves ``RECHECK_GAIN`` times as many points static and its lateral
+        acceleration ``|v| |w|`` is at most :data:`LATERAL_ACCEL_MAX`."""
         if sensors is None or not self.use_doppler or not np.any(sensors):
             return None
         prior_v = None if self.velocity is None else self.velocity[:2]
@@ -546,7 +553,9 @@ class SlamPipeline:
             return None
         found = turn(doppler_ego_motion(pts, sensors, 0.5 * thr, self.ransac_rng, prior=prior_v, max_change=bound,
                                         speed_only=True))  # draws only here
-        return found if found is not None and static(found) >= RECHECK_GAIN * max(held, 1) else None
+        if found is None or math.hypot(found[0], found[1]) * abs(found[2]) > LATERAL_ACCEL_MAX:
+            return None
+        return found if static(found) >= RECHECK_GAIN * max(held, 1) else None
 
     def _recheck_turn(self, pts: np.ndarray, sensors: np.ndarray | None) -> np.ndarray | None:
         """``(vx, vy, w)`` that leaves the most points static among the held fast turn ``(v, w)``, ``(v, 0)``,
