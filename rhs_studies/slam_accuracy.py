@@ -44,6 +44,9 @@ the before/after comparison, e.g. ``'{"variant": "fastslam1", "association":
 "nearest", "measurement_noise": "fixed"}'``). ``--quick`` is the small config of the
 tests (few cycles, one seed, few particles).
 
+Drivers part: ``--workers N`` spreads its (env, driver, seed) episodes over N processes, the same runs as one
+process (each episode starts from its seed), with a progress line per episode (done / total, time left).
+
 Example: ``python scripts/slam_accuracy.py --parts highway paper dense``.
 """
 
