@@ -341,7 +341,11 @@ class SlamPipeline:
         if hasattr(self.registration, "reset"):
             self.registration.reset()
         # the Doppler RANSAC draws from its own stream so it never shifts the particle noise
-        self.ransac_rng = np.random.default_rng(np.random.SeedSequence(int(self.rng.integers(2**63))))
+        seeds = np.random.SeedSequence(int(self.rng.integers(2**63)))
+        self.ransac_rng = np.random.default_rng(seeds)
+        # the retried turn fit (SLIP_FREE) draws from a stream of its own: a retry whose turn is refused leaves
+        # the Doppler RANSAC's draws, and so the nominal estimate, as they were
+        self.slip_rng = np.random.default_rng(seeds.spawn(1)[0])
         self.cycle = 0
         self.velocity_misses = 0  # consecutive cycles without a Doppler fit near the last velocity
         self.velocity_track = 0  # Doppler fits near the last velocity since the last re-acquisition
@@ -551,8 +555,8 @@ class SlamPipeline:
         held = static(np.array([*(self.velocity[:2] if v_flat is None else v_flat[:2]), self.velocity[2]]))
         if held >= RECHECK_BELOW * len(pts):  # the held state still explains most points: it stands
             return None
-        found = turn(doppler_ego_motion(pts, sensors, 0.5 * thr, self.ransac_rng, prior=prior_v, max_change=bound,
-                                        speed_only=True))  # draws only here
+        found = turn(doppler_ego_motion(pts, sensors, 0.5 * thr, self.slip_rng, prior=prior_v, max_change=bound,
+                                        speed_only=True))
         if found is None or math.hypot(found[0], found[1]) * abs(found[2]) > LATERAL_ACCEL_MAX:
             return None
         return found if static(found) >= RECHECK_GAIN * max(held, 1) else None
