@@ -130,7 +130,9 @@ TURN_GAIN = 1.15
 #: 3 m/s), so the bounded fit found no turn, the stale one was held, its static mask dropped the static points
 #: and the registration had nothing to fit: 0.4-0.8 rad of heading error in one cycle. Random drives on
 #: rhs-highway-slam-v0, tuning seeds 2000-2079: all 9 lost episodes began so (true yaw rate 1.7-2.6 rad/s at
-#: 10-12 m/s); with the fit retried on the speed bound (:meth:`SlamPipeline._doppler_turn`) none is lost.
+#: 10-12 m/s); with the fit retried on the speed bound (:meth:`SlamPipeline._doppler_turn`) 1 is (a turn's onset
+#: whose held state still left 11 of 20 points static, above the retry's trigger ``RECHECK_BELOW``; retrying in
+#: every cycle without a turn removed it but lost an IDM drive to a turn fit on traffic).
 #: ``False`` restores the bound on the velocity vector alone
 SLIP_FREE = True
 #: ... and that fit's turn counts only below this lateral acceleration ``|v| |w|`` (m/s^2): highway-env's
