@@ -44,6 +44,9 @@ the before/after comparison, e.g. ``'{"variant": "fastslam1", "association":
 "nearest", "measurement_noise": "fixed"}'``). ``--quick`` is the small config of the
 tests (few cycles, one seed, few particles).
 
+Drivers part: ``--workers N`` spreads its (env, driver, seed) episodes over N processes, the same runs as one
+process (each episode starts from its seed), with a progress line per episode (done / total, time left).
+
 Example: ``python scripts/slam_accuracy.py --parts highway paper dense``.
 """
 
@@ -469,31 +472,84 @@ def summarize_driver(runs: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
-def run_drivers(args, slam: dict) -> dict[str, Any]:
-    """Every driver of ``--drivers`` on every env of ``--driver-envs`` over ``--driver-seeds``, until each episode ends."""
+#: per worker process: the env of each (env id, env kwargs) and its driver, made once and reused
+_WORKER_ENVS: dict[str, Any] = {}
+
+
+def _driver_task(task: tuple[str, str, str, dict, int]) -> dict[str, Any]:
+    """One (env, driver, seed) episode (:func:`driver_episode`) on this process's env for that env id and driver.
+
+    Every episode starts from ``env.reset(seed)`` and a policy built for its seed (the SLAM's generator is drawn
+    from the env's at reset), so an episode does not depend on which episodes the env ran before: any split
+    of the seeds over processes gives the same runs.
+    """
     import gymnasium as gym
 
     import rhs_env  # noqa: F401
-    from agents.evaluate import DATA_DIR, load_policy, policy_metadata
+    from agents.evaluate import load_policy
 
-    out: dict[str, Any] = {}
+    env_id, driver, zip_path, kw, seed = task
+    key = json.dumps([env_id, driver, kw], sort_keys=True)
+    if key not in _WORKER_ENVS:
+        _WORKER_ENVS[key] = gym.make(env_id, **kw)
+    env = _WORKER_ENVS[key]
+    policy = load_policy(zip_path if driver == "policy" else driver, env, seed=seed)
+    t0 = time.perf_counter()
+    return {**driver_episode(env, policy, seed), "wall_s": time.perf_counter() - t0}
+
+
+def _close_worker_envs() -> None:
+    while _WORKER_ENVS:
+        _WORKER_ENVS.popitem()[1].close()
+
+
+def run_drivers(args, slam: dict) -> dict[str, Any]:
+    """Every driver of ``--drivers`` on every env of ``--driver-envs`` over ``--driver-seeds``, until each episode
+    ends; the episodes spread over ``--workers`` processes (the same runs as one process, :func:`_driver_task`),
+    with a progress line per episode (done / total, elapsed, estimated time left) unless ``--no-progress``."""
+    from agents.evaluate import DATA_DIR, policy_metadata
+
+    tasks, combos = [], []
     for env_id in args.driver_envs:
         zip_path = DATA_DIR / DRIVER_ENVS[env_id]
         kw = {**policy_metadata(zip_path).get("env_kwargs", {}), "duration": args.driver_cycles / POLICY_HZ}
         if slam:
             kw["slam"] = slam
         for driver in args.drivers:
-            env = gym.make(env_id, **kw)
-            runs = []
-            for seed in args.driver_seeds:
-                policy = load_policy(str(zip_path) if driver == "policy" else driver, env, seed=seed)
-                t0 = time.perf_counter()
-                runs.append({**driver_episode(env, policy, seed), "wall_s": time.perf_counter() - t0})
-                _log(args, f"drivers {env_id} {driver}", runs[-1])
-            env.close()
-            out[f"{env_id}/{driver}"] = {"env": env_id, "driver": driver, "env_kwargs": kw,
-                                         "policy": str(zip_path.relative_to(DATA_DIR.parent.parent)) if driver == "policy"
-                                         else driver, "runs": runs, "summary": summarize_driver(runs)}
+            combos.append((env_id, driver, zip_path, kw))
+            tasks += [(env_id, driver, str(zip_path), kw, int(seed)) for seed in args.driver_seeds]
+    started = time.perf_counter()
+    results: list[dict[str, Any]] = []
+
+    def progress(row: dict[str, Any], task: tuple) -> None:
+        results.append(row)
+        if not args.no_progress:
+            done, elapsed = len(results), time.perf_counter() - started
+            print(f"[drivers {done}/{len(tasks)} {elapsed:.0f} s, ~{elapsed / done * (len(tasks) - done):.0f} s left] "
+                  f"{task[0]} {task[1]} seed {row['seed']}: {row['cycles']} cycles, RMSE "
+                  f"{row['position_rmse_m']:.3f} m, max {row['max_error_m']:.2f} m", file=sys.stderr, flush=True)
+
+    if args.workers > 1:
+        import multiprocessing as mp
+
+        with mp.get_context("spawn").Pool(args.workers) as pool:
+            for task, row in zip(tasks, pool.imap(_driver_task, tasks), strict=True):
+                progress(row, task)
+    else:
+        try:
+            for k, task in enumerate(tasks):
+                if k and task[:2] != tasks[k - 1][:2]:  # the next env and driver: one env open at a time
+                    _close_worker_envs()
+                progress(_driver_task(task), task)
+        finally:
+            _close_worker_envs()
+    out: dict[str, Any] = {}
+    n = len(args.driver_seeds)
+    for i, (env_id, driver, zip_path, kw) in enumerate(combos):
+        runs = results[i * n:(i + 1) * n]
+        out[f"{env_id}/{driver}"] = {"env": env_id, "driver": driver, "env_kwargs": kw,
+                                     "policy": str(zip_path.relative_to(DATA_DIR.parent.parent)) if driver == "policy"
+                                     else driver, "runs": runs, "summary": summarize_driver(runs)}
     return {"combos": out, "seeds": list(args.driver_seeds), "lost_m": LOST_M, "good_m": GOOD_M,
             "nees_interval": nees_interval(), "recover_cycles": RECOVER_CYCLES, "recovered_m": RECOVERED_M}
 
@@ -605,6 +661,8 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, dict]:
     p.add_argument("--driver-seeds", type=int, nargs="+", default=list(range(1000, 1100)),
                    help="drivers part: held-out seeds (default 1000..1099, 100 per env and driver)")
     p.add_argument("--driver-cycles", type=int, default=200, help="drivers part: episode length bound (cycles)")
+    p.add_argument("--workers", type=int, default=1,
+                   help="drivers part: processes the episodes spread over (the same runs as 1; default 1)")
     p.add_argument("--seeds", type=int, nargs="+", default=[100, 101, 102, 103, 104])
     p.add_argument("--cycles", type=int, default=200, help="highway cycles")
     p.add_argument("--highway-action", type=int, default=SLOWER,
@@ -618,6 +676,8 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, dict]:
     p.add_argument("--quick", action="store_true", help="small config for the tests: 1 seed, few cycles")
     p.add_argument("--no-progress", action="store_true")
     args = p.parse_args(argv)
+    if args.workers < 1:
+        p.error(f"--workers must be >= 1, got {args.workers}")
     slam = json.loads(args.slam) if args.slam else {}
     if args.quick:
         args.seeds, args.cycles, args.paper_cycles, args.dense_cycles = args.seeds[:1], 10, 6, 8

@@ -65,6 +65,24 @@ def test_quick_highway_drives_slower_and_reports_the_measured_fraction(tmp_path)
     assert "| highway | measured_matched_fraction |" in out.with_suffix(".md").read_text()
 
 
+def test_drivers_part_gives_the_same_runs_with_two_workers(capsys):
+    """The drivers' episodes spread over processes are the runs of one process (each episode starts from its
+    seed), in the same order; the progress line counts them."""
+    argv = ["--parts", "drivers", "--drivers", "random", "--driver-envs", "rhs-highway-slam-v0",
+            "--driver-seeds", "7", "8", "--driver-cycles", "4", "--slam", '{"n_particles": 10}']
+    one = slam_accuracy.run_drivers(*slam_accuracy.parse_args([*argv, "--no-progress"]))
+    two = slam_accuracy.run_drivers(*slam_accuracy.parse_args([*argv, "--workers", "2"]))
+    assert "[drivers 2/2 " in capsys.readouterr().err
+
+    def runs(res: dict) -> list[dict]:
+        return [{k: v for k, v in r.items() if k != "wall_s"} for r in res["combos"]["rhs-highway-slam-v0/random"]["runs"]]
+
+    assert [r["seed"] for r in runs(one)] == [7, 8] and all(r["cycles"] >= 1 for r in runs(one))
+    assert runs(one) == runs(two)
+    with pytest.raises(SystemExit):
+        slam_accuracy.parse_args(["--workers", "0"])
+
+
 def _ring(v: np.ndarray, n: int = 24, r: float = 20.0) -> np.ndarray:
     """Points on a ring around the car with the Doppler of a world moving at -v relative to it."""
     b = np.linspace(-math.pi, math.pi, n, endpoint=False)

@@ -211,3 +211,38 @@ def test_a_held_fast_turn_that_ended_is_rechecked_against_the_doppler():
     pipe.velocity = np.array([10.0, 0.0, 0.5 * TURN_RATE_MIN])  # no fast turn held: nothing to recheck
     assert pipe._recheck_turn(pts, s) is None
     assert RECHECK_GAIN > 1.0
+
+
+def test_a_reversed_lane_change_is_found_with_the_speed_bound_alone():
+    """A lane change reversed within a cycle at 10 m/s (yaw rate -1.9 -> +1.9 rad/s, the side slip of a
+    kinematic bicycle from -2.5 to +4 m/s: the velocity vector moves by 6.5 m/s, past the acceleration
+    bound of 3 m/s): the bounded turn fit finds nothing, the held turn leaves few points static, and the
+    fit with the bound on the speed alone finds the new turn."""
+    from slam.core.pipeline import SlamPipeline, static_mask
+    from slam.core.registration import ICPRegistration
+
+    rng = np.random.default_rng(5)
+    mounts = np.array([[2.5, 0.0], [0.0, 1.0], [-2.5, 0.0], [0.0, -1.0]])
+    xy = rng.uniform(-60, 60, (40, 2))
+    s = mounts[rng.integers(0, 4, 40)]
+    u = (xy - s) / np.hypot(*(xy - s).T)[:, None]
+    v, w = np.array([9.3, 4.0]), 1.9
+    vr = np.sum(-(v[None, :] + w * np.stack([-xy[:, 1], xy[:, 0]], axis=1)) * u, axis=1)
+    pts = np.column_stack([xy, vr, np.ones(40)])
+    pipe = SlamPipeline(ICPRegistration(), rng=0, sensor_xy=mounts)
+    pipe.velocity = np.array([10.1, -2.5, -1.9])  # the first half of the lane change, held
+    thr = pipe.config.dynamic_threshold_mps
+    assert static_mask(pts, pipe.velocity[:2], thr, yaw_rate=-1.9, sensor_xy=s).sum() < 20
+    turn = pipe._doppler_turn(pts, s, 0.2, np.array([9.0, 0.5]))
+    assert turn is not None
+    np.testing.assert_allclose(turn, [9.3, 4.0, 1.9], atol=1e-6)
+    # the same turn at 26 m/s is 49 m/s^2 of lateral acceleration, past what the vehicles can steer: refused
+    fast = np.column_stack([xy, np.sum(-(np.array([26.0, 4.0])[None, :] + w * np.stack([-xy[:, 1], xy[:, 0]], axis=1))
+                                       * u, axis=1), np.ones(40)])
+    pipe.velocity = np.array([26.0, -2.5, -1.9])
+    assert pipe._doppler_turn(fast, s, 0.2, np.array([25.0, 0.5])) is None
+    pipe.velocity = np.array([10.1, -2.5, -1.9])
+    # a held state that still explains the points keeps the bounded fit alone (no second fit)
+    pipe.velocity = np.array([9.3, 4.0, 1.9])
+    straight = np.column_stack([xy, -(9.3 * u[:, 0] + 4.0 * u[:, 1]), np.ones(40)])  # no turn now, same slip
+    assert pipe._doppler_turn(straight, s, 0.2, np.array([9.3, 4.0])) is None

@@ -13,7 +13,9 @@ with the radars at ``sensor_xy``, goes to the RBPF):
    line of sight ``u`` (RANSAC fit of ``vr = -v . u`` scored by bearing coverage, within
    ``max_accel * dt`` of the last velocity, else unconstrained,
    :func:`slam.core.association.estimate_ego_velocity`); with fewer than three agreeing points
-   the forward speed of two (:func:`forward_speed_fit`; one while no velocity is known);
+   the forward speed of two (:func:`forward_speed_fit`; one while no velocity is known); a fast turn from the
+   fit that models the yaw rate, retried with the bound on the speed alone when the held turn has gone stale
+   (:meth:`SlamPipeline._doppler_turn`, :data:`SLIP_FREE`);
    when every fit fails, the last registration motion over dt (constant velocity), and the
    velocity holds when the registration measured nothing either;
 2. static points: ``|vr - vr_static| <= threshold`` with the yaw rate and each point's radar
@@ -120,6 +122,25 @@ class PipelineConfig:
 TURN_RATE_MIN = 0.4
 #: ... and when its inliers outnumber those of the best turn-free fit by this factor
 TURN_GAIN = 1.15
+#: the turn fit bounds the change of the speed, not of the velocity vector: in a kinematic bicycle (highway-env's
+#: vehicles) the velocity at the centre leaves the heading by the slip angle ``beta = atan(tan(delta) / 2)``, set
+#: by the steering angle ``delta`` at once, and the yaw rate is ``w = 2 v sin(beta) / length``: a lane change
+#: reversed at 10 m/s (``w`` from -1.9 to +1.9 rad/s) swings the lateral velocity ``v sin(beta) = w length / 2``
+#: by 9 m/s within one cycle, far past the acceleration bound on the vector (``max_accel * dt`` + the threshold,
+#: 3 m/s), so the bounded fit found no turn, the stale one was held, its static mask dropped the static points
+#: and the registration had nothing to fit: 0.4-0.8 rad of heading error in one cycle. Random drives on
+#: rhs-highway-slam-v0, tuning seeds 2000-2079: all 9 lost episodes began so (true yaw rate 1.7-2.6 rad/s at
+#: 10-12 m/s); with the fit retried on the speed bound (:meth:`SlamPipeline._doppler_turn`) 1 is (a turn's onset
+#: whose held state still left 11 of 20 points static, above the retry's trigger ``RECHECK_BELOW``; retrying in
+#: every cycle without a turn removed it but lost an IDM drive to a turn fit on traffic).
+#: ``False`` restores the bound on the velocity vector alone
+SLIP_FREE = True
+#: ... and that fit's turn counts only below this lateral acceleration ``|v| |w|`` (m/s^2): highway-env's
+#: lateral controller turns at ``KP_HEADING`` (5 /s) times the heading to a lateral speed command of
+#: ``KP_LATERAL`` (1 / 0.6 s) times the lane offset (a 4 m lane: 6.7 m/s), about 33 m/s^2 whatever the
+#: speed; the true ``|v| |w|`` of the random drives (tuning seeds 2000-2079, 6183 cycles) peaked at 38.9 m/s^2.
+#: Without the bound, a crash's last cycle at 20-26 m/s fit a 2-3 rad/s turn (43-74 m/s^2) on the wreck's points
+LATERAL_ACCEL_MAX = 40.0
 
 #: the held fast turn is rechecked when its static mask keeps fewer than this fraction of the points (the
 #: clouds of the drives are mostly static: a turn that fits below half of them is stale), and another
@@ -174,6 +195,7 @@ def doppler_ego_motion(
     n_hypotheses: int = 64,
     min_inliers: int = 5,
     angular_bins: int = 24,
+    speed_only: bool = False,
 ) -> np.ndarray | None:
     """Ego velocity and yaw rate ``(vx, vy, w)`` (m/s, m/s, rad/s) from the Doppler of static points seen by
     radars off the vehicle's origin.
@@ -184,7 +206,9 @@ def doppler_ego_motion(
     ahead sees a 2 rad/s turn as 5 m/s across its line of sight, which a fit of ``v`` alone takes for
     motion or for moving points). RANSAC over ``n_hypotheses`` triples, scored by the bearing sectors
     holding an inlier (within ``threshold`` m/s), then the inlier count; with ``prior`` (2,) the
-    velocity within ``max_change`` of it; ``|w| <= max_yaw_rate``; least squares on the inliers.
+    velocity within ``max_change`` of it, or with ``speed_only`` the speed ``|v|`` within ``max_change``
+    of ``|prior|`` (the direction free: a kinematic bicycle's slip angle follows the steering at once,
+    :data:`SLIP_FREE`); ``|w| <= max_yaw_rate``; least squares on the inliers.
     ``None`` with fewer than ``min_inliers`` inliers or a degenerate geometry.
     """
     pts = np.asarray(points, dtype=float)
@@ -202,7 +226,9 @@ def doppler_ego_motion(
         return None
     X = np.linalg.solve(M[good], vr[idx[good]][..., None])[..., 0]  # (H', 3)
     ok = np.abs(X[:, 2]) <= max_yaw_rate
-    if prior is not None:
+    if prior is not None and speed_only:
+        ok &= np.abs(np.hypot(X[:, 0], X[:, 1]) - math.hypot(*np.asarray(prior, float)[:2])) <= max_change
+    elif prior is not None:
         ok &= np.hypot(*(X[:, :2] - np.asarray(prior, float)[:2]).T) <= max_change
     if not ok.any():
         return None
@@ -317,7 +343,11 @@ class SlamPipeline:
         if hasattr(self.registration, "reset"):
             self.registration.reset()
         # the Doppler RANSAC draws from its own stream so it never shifts the particle noise
-        self.ransac_rng = np.random.default_rng(np.random.SeedSequence(int(self.rng.integers(2**63))))
+        seeds = np.random.SeedSequence(int(self.rng.integers(2**63)))
+        self.ransac_rng = np.random.default_rng(seeds)
+        # the retried turn fit (SLIP_FREE) draws from a stream of its own: a retry whose turn is refused leaves
+        # the Doppler RANSAC's draws, and so the nominal estimate, as they were
+        self.slip_rng = np.random.default_rng(seeds.spawn(1)[0])
         self.cycle = 0
         self.velocity_misses = 0  # consecutive cycles without a Doppler fit near the last velocity
         self.velocity_track = 0  # Doppler fits near the last velocity since the last re-acquisition
@@ -492,22 +522,46 @@ class SlamPipeline:
     ) -> np.ndarray | None:
         """``(vx, vy, w)`` from :func:`doppler_ego_motion` when it finds a yaw rate of at least
         ``TURN_RATE_MIN`` (rad/s) and fits ``TURN_GAIN`` times the points that the turn-free velocity
-        ``v_flat`` fits, else None (the velocity fit alone stands: its yaw-rate error is small)."""
+        ``v_flat`` fits, else None (the velocity fit alone stands: its yaw-rate error is small).
+
+        The fit's velocity lies within the acceleration bound of the last one; when it finds no turn and the
+        held state (``v_flat`` or the last velocity, with the last yaw rate) leaves fewer than
+        ``RECHECK_BELOW`` of the points static, the fit is tried again with the bound on the speed alone
+        (:data:`SLIP_FREE`: a sharp steer swings the velocity's direction within the cycle), and its turn
+        replaces the held state when it leaves ``RECHECK_GAIN`` times as many points static and its lateral
+        acceleration ``|v| |w|`` is at most :data:`LATERAL_ACCEL_MAX`."""
         if sensors is None or not self.use_doppler or not np.any(sensors):
             return None
         prior_v = None if self.velocity is None else self.velocity[:2]
         thr = self.config.dynamic_threshold_mps
-        fit = doppler_ego_motion(pts, sensors, 0.5 * thr, self.ransac_rng, prior=prior_v,
-                                 max_change=self.max_accel_mps2 * dt + thr)
-        if fit is None or abs(fit[2]) < TURN_RATE_MIN:
-            return None
-        # the turn must explain the Doppler better than the best turn-free fit (noisy points can fake a turn)
         d = pts[:, :2] - sensors
         u = d / np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)[:, None]
         A = -np.column_stack([u[:, 0], u[:, 1], sensors[:, 0] * u[:, 1] - sensors[:, 1] * u[:, 0]])
-        with_turn = int(np.sum(np.abs(pts[:, 2] - A @ fit) <= 0.5 * thr))
         without = 0 if v_flat is None else int(np.sum(np.abs(pts[:, 2] - A[:, :2] @ v_flat[:2]) <= 0.5 * thr))
-        return fit if with_turn >= TURN_GAIN * max(without, 1) else None
+
+        def turn(fit: np.ndarray | None) -> np.ndarray | None:
+            if fit is None or abs(fit[2]) < TURN_RATE_MIN:
+                return None
+            # the turn must explain the Doppler better than the best turn-free fit (noisy points can fake a turn)
+            with_turn = int(np.sum(np.abs(pts[:, 2] - A @ fit) <= 0.5 * thr))
+            return fit if with_turn >= TURN_GAIN * max(without, 1) else None
+
+        bound = self.max_accel_mps2 * dt + thr
+        found = turn(doppler_ego_motion(pts, sensors, 0.5 * thr, self.ransac_rng, prior=prior_v, max_change=bound))
+        if found is not None or not SLIP_FREE or self.velocity is None:
+            return found
+
+        def static(c: np.ndarray) -> int:
+            return int(static_mask(pts, c[:2], thr, yaw_rate=float(c[2]), sensor_xy=sensors).sum())
+
+        held = static(np.array([*(self.velocity[:2] if v_flat is None else v_flat[:2]), self.velocity[2]]))
+        if held >= RECHECK_BELOW * len(pts):  # the held state still explains most points: it stands
+            return None
+        found = turn(doppler_ego_motion(pts, sensors, 0.5 * thr, self.slip_rng, prior=prior_v, max_change=bound,
+                                        speed_only=True))
+        if found is None or math.hypot(found[0], found[1]) * abs(found[2]) > LATERAL_ACCEL_MAX:
+            return None
+        return found if static(found) >= RECHECK_GAIN * max(held, 1) else None
 
     def _recheck_turn(self, pts: np.ndarray, sensors: np.ndarray | None) -> np.ndarray | None:
         """``(vx, vy, w)`` that leaves the most points static among the held fast turn ``(v, w)``, ``(v, 0)``,
