@@ -106,7 +106,7 @@ def _slam_drivers(d: dict) -> tuple[str, str]:
     combos = part["combos"].values()
     careful = [r for c in combos if c["driver"] != "random" for r in c["runs"]]
     random = [r for c in combos if c["driver"] == "random" for r in c["runs"]]
-    worst = max(r["episode_rmse_m"] for r in careful)
+    worst = max(r["position_rmse_m"] for r in careful)  # in the current map, as the results table
     lost = sum(r["lost_episode"] for r in random)
     above = sum(r["cycles_above_lost"] for c in combos for r in c["runs"])
     flagged = sum(r["cycles_above_lost_flagged"] for c in combos for r in c["runs"])
