@@ -88,7 +88,7 @@ LABELS = {
     "finetune": "PPO fine-tune, privileged critic, decaying anchor",
     "finetune_no_anchor": "PPO fine-tune without the anchor (control)",
     "finetune_horizon": "PPO fine-tune, gamma 0.95 and time-to-collision shaping",
-    "finetune_horizon_80k": f"the same, {LONG_STEPS // 1000}k env steps",
+    "finetune_horizon_80k": f"PPO fine-tune, gamma 0.95 and time-to-collision shaping, {LONG_STEPS // 1000}k env steps",
     "dagger_continue": "DAgger continuation (control)",
     "dagger_continue_80k": f"DAgger continuation, {LONG_STEPS // 1000}k env steps (control)",
     "scratch": "PPO from scratch, privileged critic",
