@@ -95,17 +95,14 @@ def attach_uncertainty(system, cloud) -> None:
     cfg = system.config
     n = len(cloud)
     dics = system.dictionaries
-    if all(d is dics[0] for d in dics):  # one antenna on the four radars (the default): one evaluation, no grouping
-        g = angle_information(dics[0], cloud.angle_rad)
-    else:
-        g = np.zeros(n)
-        groups: dict[int, tuple[AngleDictionary, list[int]]] = {}  # radars sharing a dictionary: one evaluation
-        for r in np.unique(cloud.radar):
-            dic = dics[int(r)]
-            groups.setdefault(id(dic), (dic, []))[1].append(int(r))
-        for dic, radars in groups.values():
-            sel = np.isin(cloud.radar, radars)
-            g[sel] = angle_information(dic, cloud.angle_rad[sel])
+    groups: dict[int, tuple[AngleDictionary, list[int]]] = {}  # radars sharing a dictionary: one evaluation
+    for r, dic in enumerate(dics):
+        groups.setdefault(id(dic), (dic, []))[1].append(r)
+    g = np.zeros(n)
+    for dic, radars in groups.values():
+        # a dictionary every radar shares (one antenna on the four radars, the default) takes every point
+        sel = slice(None) if len(radars) == len(dics) else np.isin(cloud.radar, radars)
+        g[sel] = angle_information(dic, cloud.angle_rad[sel])
     cloud.range_std_m, cloud.angle_std_rad = point_std(
         cloud.points[:, 3],
         g,

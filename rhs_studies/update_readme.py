@@ -104,9 +104,8 @@ def _highway(d: dict) -> tuple[str, str]:
 def _slam_drivers(d: dict) -> tuple[str, str]:
     part = d["parts"]["drivers"]
     combos = part["combos"].values()
-    careful = [r for c in combos if c["driver"] != "random" for r in c["runs"]]
     random = [r for c in combos if c["driver"] == "random" for r in c["runs"]]
-    worst = max(r["position_rmse_m"] for r in careful)  # in the current map, as the results table
+    worst = max(c["summary"]["worst_rmse_m"] for c in combos if c["driver"] != "random")
     lost = sum(r["lost_episode"] for r in random)
     above = sum(r["cycles_above_lost"] for c in combos for r in c["runs"])
     flagged = sum(r["cycles_above_lost_flagged"] for c in combos for r in c["runs"])

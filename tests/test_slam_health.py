@@ -241,8 +241,7 @@ def test_a_reversed_lane_change_is_found_with_the_speed_bound_alone():
                                        * u, axis=1), np.ones(40)])
     pipe.velocity = np.array([26.0, -2.5, -1.9])
     assert pipe._doppler_turn(fast, s, 0.2, np.array([25.0, 0.5])) is None
-    pipe.velocity = np.array([10.1, -2.5, -1.9])
-    # a held state that still explains the points keeps the bounded fit alone (no second fit)
+    # the turn has ended (straight points, the same slip): no turn is reported
     pipe.velocity = np.array([9.3, 4.0, 1.9])
     straight = np.column_stack([xy, -(9.3 * u[:, 0] + 4.0 * u[:, 1]), np.ones(40)])  # no turn now, same slip
     assert pipe._doppler_turn(straight, s, 0.2, np.array([9.3, 4.0])) is None
