@@ -595,7 +595,7 @@ class RadarSystem:
         """
         half = kk.shape[1] // 2
         if self.config.kernels == "numba":  # the same least squares, compiled
-            from rhs_env.kernels import bin_amplitudes
+            from rhs_env.kernels import bin_amplitudes, range_offsets
 
             a = np.ascontiguousarray(atoms, dtype=complex)
             if win is None:
@@ -603,10 +603,16 @@ class RadarSystem:
             else:  # Y := win, radar d, bins 0..W-1: the same values, read contiguously
                 s_nb = bin_amplitudes(a, win, np.arange(rd.size, dtype=np.int64),
                                       np.ascontiguousarray(np.broadcast_to(np.arange(kk.shape[1]), kk.shape)))
-        else:
-            nb = spec[rd[:, None], :, :, kk].reshape(rd.size, 2 * half + 1, -1)  # (D, W, I C)
-            s_nb = batched_lstsq(atoms, np.swapaxes(nb, 1, 2).astype(complex))  # (D, L, W)
-        pw = np.log(np.abs(s_nb) ** 2 + 1e-300)
+            # the parabola compiled (rhs_env.kernels.range_offsets); the logarithm stays numpy's (its SIMD log)
+            return range_offsets(np.log(np.abs(s_nb) ** 2 + 1e-300), half)
+        nb = spec[rd[:, None], :, :, kk].reshape(rd.size, 2 * half + 1, -1)  # (D, W, I C)
+        s_nb = batched_lstsq(atoms, np.swapaxes(nb, 1, 2).astype(complex))  # (D, L, W)
+        return self._peak_offsets(np.log(np.abs(s_nb) ** 2 + 1e-300), half)
+
+    @staticmethod
+    def _peak_offsets(pw: np.ndarray, half: int) -> np.ndarray:
+        """Offset (D, L) of each target's peak from the window's centre ``half``, padded bins: the first interior
+        maximum j of ``pw[d, l]`` (log-power over the W bins) and the parabola through its neighbours."""
         j = 1 + np.argmax(pw[:, :, 1:-1], axis=2)  # interior peak
         lm = np.take_along_axis(pw, (j - 1)[..., None], 2)[..., 0]
         l0 = np.take_along_axis(pw, j[..., None], 2)[..., 0]
@@ -622,6 +628,13 @@ class RadarSystem:
         at the same angle (:meth:`_sidelobe_points`) are dropped.
         """
         cfg = self.config
+        if cfg.kernels == "numba":
+            return self._assemble_points_compiled(rd, kd, est)
+        return self._assemble_points_numpy(rd, kd, est)
+
+    def _assemble_points_numpy(self, rd: np.ndarray, kd: np.ndarray, est: _Targets) -> PointCloud:
+        """:meth:`_assemble_points` in numpy (the reference)."""
+        cfg = self.config
         lam, z, n = cfg.wavelength, cfg.waveform.zero_pad, cfg.waveform.samples
         di, li = np.nonzero(est.valid)
         vel = _wrap(est.omega[di, li]) * lam / (4 * np.pi * cfg.waveform.chirp_s)
@@ -635,6 +648,23 @@ class RadarSystem:
         keep = (rng_m >= cfg.min_range_m) & (rng_m <= cfg.max_range_m) & ~self._sidelobe_points(radar, rng_m, th, a)
         pts = np.column_stack([xy, vel, a])[keep]
         cloud = PointCloud(points=pts, radar=radar[keep], range_m=rng_m[keep], angle_rad=th[keep])
+        attach_uncertainty(self, cloud)  # per-point range / angle std (rhs_env.uncertainty)
+        return cloud
+
+    def _assemble_points_compiled(self, rd: np.ndarray, kd: np.ndarray, est: _Targets) -> PointCloud:
+        """:meth:`_assemble_points` with the points compiled (:func:`rhs_env.kernels.assemble_points`): the same
+        operations in the same order, the same values bit for bit; the uncertainty stays numpy's (its SIMD complex
+        products and absolute values)."""
+        from rhs_env import kernels
+
+        cfg = self.config
+        wf = cfg.waveform
+        pts, radar, rng_m, th = kernels.assemble_points(
+            rd.astype(np.int64), kd.astype(np.int64), est.theta, est.omega, np.abs(est.amp), est.valid, est.anorm, est.tfrac,
+            self.positions, self.boresights, cfg.wavelength, 4 * np.pi * wf.chirp_s, wf.sample_rate_hz,
+            float(wf.zero_pad), float(wf.samples), SPEED_OF_LIGHT, wf.slope, math.sqrt(cfg.noise_power_w * self._win_energy),
+            cfg.min_range_m, cfg.max_range_m, self._leak, self._same_angle, 10 ** (cfg.detection.sidelobe_margin_db / 10))
+        cloud = PointCloud(points=pts, radar=radar, range_m=rng_m, angle_rad=th)
         attach_uncertainty(self, cloud)  # per-point range / angle std (rhs_env.uncertainty)
         return cloud
 

@@ -176,6 +176,61 @@ def test_compiled_icp_equals_the_numpy_fit():
         assert np.abs(apply_motion(cur[3:, :2], est[1]) - prev[keep][3:, :2]).max() < 0.5  # it does register
 
 
+def test_compiled_points_are_the_numpy_values_bit_for_bit():
+    """From the same OMP output, the compiled range offsets and points equal the numpy reference bit for bit."""
+    from rhs_env.kernels import range_offsets
+
+    radar = RadarSystem(RadarConfig(), np.random.default_rng(7))
+    rng = np.random.default_rng(11)
+    n_points = 0
+    for _ in range(60):
+        spec = radar.synthesize_spectrum(*_scene(rng))
+        rd, kd = radar._detect(spec)
+        est = radar._estimate_angles(spec, rd, kd)
+        compiled, reference = radar._assemble_points_compiled(rd, kd, est), radar._assemble_points_numpy(rd, kd, est)
+        for field in ("points", "radar", "range_m", "angle_rad", "range_std_m", "angle_std_rad"):
+            np.testing.assert_array_equal(getattr(compiled, field), getattr(reference, field), err_msg=field)
+        n_points += len(reference)
+    assert n_points > 300
+    for _ in range(50):  # log-powers with ties (a flat row) and non-concave peaks
+        pw = rng.normal(size=(6, 3, 11)) * 10
+        pw[0, 0] = 1.0
+        pw[1, 2, 4:7] = [2.0, 3.0, 4.0]
+        np.testing.assert_array_equal(range_offsets(pw, 5), RadarSystem._peak_offsets(pw, 5))
+
+
+def test_compiled_icp_search_is_the_best_fit_per_start():
+    """The one-call heading search equals icp_fit from every start with the (near, -rmse) tuple score, bit for bit."""
+    from slam.core.kernels import icp_fit, icp_search
+    from slam.core.registration import ICPRegistration
+
+    reg = ICPRegistration()
+    offsets = np.concatenate([[0.0], reg.yaw_offsets[reg.yaw_offsets != 0.0]])
+    assert offsets.size > 1  # the default searches headings
+    rng = np.random.default_rng(8)
+    args = (reg.max_iterations, reg.max_gate_m, reg.min_gate_m, reg.outlier_factor, reg.tol_m, reg.tol_rad, reg.min_pairs)
+    for trial in range(30):
+        prev = rng.uniform(-40, 40, (int(rng.integers(3, 40)), 2))
+        th = rng.normal(0, 0.1)
+        c, s = np.cos(th), np.sin(th)
+        cur = (prev[: max(3, len(prev) - 5)] - [3.0, 0.2]) @ np.array([[c, -s], [s, c]]) + rng.normal(0, 0.05, (1, 2))
+        if trial % 3 == 0:
+            cur = np.round(cur, 0)  # equal scores between starts
+        amp_p, amp_c = rng.uniform(1, 20, len(prev)), rng.uniform(1, 20, len(cur))
+        guess = np.array([-0.0, 0.0, rng.normal(0, 0.05)]) if trial % 2 else np.array([3.0, 0.2, 0.0])
+        best = None
+        for o in offsets:
+            est, pairs, rmse, near = icp_fit(cur, prev, guess + np.array([0.0, 0.0, o]), amp_p, amp_c, bool(trial % 2),
+                                             *args)
+            if pairs and (best is None or (near, -rmse) > best[0]):
+                best = ((near, -rmse), est, pairs, rmse)
+        got, pairs, rmse, found = icp_search(cur, prev, guess, offsets, amp_p, amp_c, bool(trial % 2), *args)
+        assert found == (best is not None)
+        if best is not None:
+            np.testing.assert_array_equal(got, best[1])
+            assert pairs == best[2] and (rmse == best[3] or (np.isnan(rmse) and np.isnan(best[3])))
+
+
 def test_shared_sort_phase_ramp_and_counting_os_cfar():
     """The shared insertion sort sorts; the phase ramp is exp(j x t) to round-off (uniform or not); the OS-CFAR
     test by counting equals the test against the rank-th smallest training cell, ties at the threshold included."""

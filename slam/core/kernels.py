@@ -14,7 +14,7 @@ import numpy as np
 
 from rhs_common.jit import njit, sort_small
 
-__all__ = ["icp_fit", "mahalanobis_association", "proposal_information"]
+__all__ = ["icp_fit", "icp_search", "mahalanobis_association", "proposal_information"]
 
 NEW = -1  # slam.association.NEW
 DROPPED = -2  # slam.association.DROPPED
@@ -224,3 +224,29 @@ def proposal_information(pp: np.ndarray, H: np.ndarray, Si: np.ndarray, nu: np.n
                 info[p, a, b] += hts[a, 0] * H[q, 0, b] + hts[a, 1] * H[q, 1, b]
             g[p, a] += hts[a, 0] * nu[q, 0] + hts[a, 1] * nu[q, 1]
     return info, g
+
+
+@njit
+def icp_search(src: np.ndarray, prev: np.ndarray, guess: np.ndarray, offsets: np.ndarray, amp_p: np.ndarray,
+               amp_c: np.ndarray, use_amp: bool, max_iterations: int, max_gate_m: float, min_gate_m: float,
+               outlier_factor: float, tol_m: float, tol_rad: float,
+               min_pairs: int) -> tuple[np.ndarray, int, float, bool]:
+    """:meth:`slam.core.registration.ICPRegistration.estimate`'s heading search in one call.
+
+    :func:`icp_fit` from every start ``guess + (0, 0, offset)``; among the fits with pairs, the best score
+    ``(near, -rmse)`` (the points within ``min_gate_m`` of a previous point, then the lower RMS distance),
+    compared as Python compares the tuples: ``near > near*`` or ``near == near*`` and ``-rmse > -rmse*``; the
+    first of equal scores wins. Returns the winner's estimate, pairs and RMS distance, and whether any fit had
+    pairs (else the estimate is the guess).
+    """
+    best = guess.copy()
+    best_pairs, best_rmse, best_near = 0, np.nan, 0
+    found = False
+    start = np.empty(3)
+    for o in offsets:
+        start[0], start[1], start[2] = guess[0] + 0.0, guess[1] + 0.0, guess[2] + o
+        est, pairs, rmse, near = icp_fit(src, prev, start, amp_p, amp_c, use_amp, max_iterations, max_gate_m,
+                                         min_gate_m, outlier_factor, tol_m, tol_rad, min_pairs)
+        if pairs and (not found or near > best_near or (near == best_near and -rmse > -best_rmse)):
+            best, best_pairs, best_rmse, best_near, found = est, pairs, rmse, near, True
+    return best, best_pairs, best_rmse, found

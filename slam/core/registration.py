@@ -208,18 +208,20 @@ class ICPRegistration:
             amp_c = np.maximum(cur[:, 3], 1e-12)
         else:
             amp_p = amp_c = None
+        offsets = np.concatenate([[0.0], self.yaw_offsets[self.yaw_offsets != 0.0]])
+        if self.kernels == "numba":  # every start, its iterations and the score in one compiled call
+            est, self.last_pairs, self.last_rmse = self._search_compiled(src, prev, guess, offsets, amp_p, amp_c)
+            est[2] = wrap_angle(est[2])
+            self.last_estimate = est.copy()
+            return est
+        assert tree is not None
         best = None
-        for offset in np.concatenate([[0.0], self.yaw_offsets[self.yaw_offsets != 0.0]]):
+        for offset in offsets:
             start = guess + np.array([0.0, 0.0, offset])
-            if self.kernels == "numba":  # the same iterations and score, compiled (slam.core.kernels.icp_fit)
-                est, pairs, rmse, near = self._fit_compiled(src, prev, start, amp_p, amp_c)
-            else:
-                assert tree is not None
-                est, pairs, rmse = self._fit(tree, src, prev, start, amp_p, amp_c)
-                if pairs:
-                    d, _ = tree.query(apply_motion(src, est), k=1, distance_upper_bound=self.max_gate_m)
-                    near = int(np.sum(d <= self.min_gate_m))
+            est, pairs, rmse = self._fit(tree, src, prev, start, amp_p, amp_c)
             if pairs:
+                d, _ = tree.query(apply_motion(src, est), k=1, distance_upper_bound=self.max_gate_m)
+                near = int(np.sum(d <= self.min_gate_m))
                 score = (near, -rmse)
                 if best is None or score > best[0]:
                     best = (score, est, pairs, rmse)
@@ -231,18 +233,22 @@ class ICPRegistration:
         self.last_estimate = est.copy()
         return est
 
-    def _fit_compiled(self, src, prev, guess, amp_p, amp_c) -> tuple[np.ndarray, int, float, int]:
-        """:meth:`_fit` and the yaw-search score by :func:`slam.core.kernels.icp_fit`."""
-        from slam.core.kernels import icp_fit
+    def _search_compiled(self, src, prev, guess, offsets, amp_p, amp_c) -> tuple[np.ndarray, int, float]:
+        """The heading search of :meth:`estimate` by :func:`slam.core.kernels.icp_search` (:meth:`_fit` from every
+        start, compiled with brute-force neighbours, the same score): the estimate, its pairs and RMS distance (the
+        guess, 0 pairs and nan when no start fits)."""
+        from slam.core.kernels import icp_search
 
         use_amp = amp_p is not None
         ones = np.ones(1)
-        est, pairs, rmse, near = icp_fit(
+        est, pairs, rmse, found = icp_search(
             np.ascontiguousarray(src, dtype=float), np.ascontiguousarray(prev[:, :2], dtype=float), guess,
-            amp_p if use_amp else ones, amp_c if use_amp else ones, use_amp, self.max_iterations,
-            float(self.max_gate_m), float(self.min_gate_m), float(self.outlier_factor), float(self.tol_m),
-            float(self.tol_rad), int(self.min_pairs))
-        return est, int(pairs), float(rmse), int(near)
+            np.ascontiguousarray(offsets, dtype=float), amp_p if use_amp else ones, amp_c if use_amp else ones,
+            use_amp, self.max_iterations, float(self.max_gate_m), float(self.min_gate_m), float(self.outlier_factor),
+            float(self.tol_m), float(self.tol_rad), int(self.min_pairs))
+        if not found:
+            return guess.copy(), 0, float("nan")
+        return est, int(pairs), float(rmse)
 
     def _fit(self, tree, src, prev, guess, amp_p, amp_c) -> tuple[np.ndarray, int, float]:
         """ICP iterations from ``guess``; returns (estimate, pairs, RMS distance of the final fit)."""
