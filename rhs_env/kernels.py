@@ -42,7 +42,7 @@ from rhs_common.jit import njit
 
 __all__ = [
     "TAYLOR_ORDER", "assemble_points", "atom_norms", "bin_amplitudes", "doppler_dtft_refine", "footprint_detections",
-    "gather_bins", "joint_refine", "joint_rho", "lstsq", "newton_refine", "noise_samples", "noise_uniforms",
+    "gather_bins", "joint_refine", "joint_rho", "line_of_sight", "lstsq", "newton_refine", "noise_samples", "noise_uniforms",
     "omp_doppler", "phasors", "range_offsets", "slot_projection", "slot_sums", "taylor_atoms",
     "taylor_tables", "tone_operands", "tone_spectra",
 ]
@@ -1459,6 +1459,51 @@ def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step:
                 ok[rr] = ok_k[m]
         _keep_rows(rows, ok, th_r, om_r, val_r, s, a, theta, omega, valid, amp, atoms, flat, resid, r2, stop, active)
     return theta, omega, amp, valid, atoms, r2
+
+
+# --------------------------------------------------------------------------- line of sight
+@njit
+def line_of_sight(origins: np.ndarray, points: np.ndarray, segments: np.ndarray, point_object: np.ndarray,
+                  segment_object: np.ndarray, candidates: np.ndarray, eps: float) -> np.ndarray:
+    """``candidates & visible_mask(origins, ...)`` (R, K) of :func:`rhs_env.scatterers.visible_mask`, per pair.
+
+    The segment ``o -> p`` of radar r and point k is hidden when it crosses an occluder segment ``a -> a + e``
+    of another object: with ``d = p - o``, ``f = a - o`` and ``x(u, v) = u_x v_y - u_y v_x``,
+    ``den = x(d, e)``, ``u = x(f, e) / den``, ``w = x(f, d) / den``, a crossing is ``|den| > 1e-12``,
+    ``eps < u < 1 - eps``, ``0 <= w <= 1``: the reference's operations per (r, k, s), evaluated only for the
+    candidate pairs (in the field of view) and up to the first crossing.
+    """
+    n_r, n_k = candidates.shape
+    n_s = segments.shape[0]
+    out = np.zeros((n_r, n_k), np.bool_)
+    e0 = np.empty(n_s)
+    e1 = np.empty(n_s)
+    for s in range(n_s):
+        e0[s] = segments[s, 1, 0] - segments[s, 0, 0]
+        e1[s] = segments[s, 1, 1] - segments[s, 0, 1]
+    u_hi = 1.0 - eps
+    for r in range(n_r):
+        for k in range(n_k):
+            if not candidates[r, k]:
+                continue
+            d0 = points[k, 0] - origins[r, 0]
+            d1 = points[k, 1] - origins[r, 1]
+            seen = True
+            for s in range(n_s):
+                if point_object[k] == segment_object[s]:
+                    continue
+                f0 = segments[s, 0, 0] - origins[r, 0]
+                f1 = segments[s, 0, 1] - origins[r, 1]
+                den = d0 * e1[s] - d1 * e0[s]
+                if not abs(den) > 1e-12:
+                    continue
+                u = (f0 * e1[s] - f1 * e0[s]) / den
+                w = (f0 * d1 - f1 * d0) / den
+                if u > eps and u < u_hi and w >= 0.0 and w <= 1.0:
+                    seen = False
+                    break
+            out[r, k] = seen
+    return out
 
 
 # --------------------------------------------------------------------------- points

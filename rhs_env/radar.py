@@ -82,7 +82,7 @@ from rhs_env.radar_config import (
     UncertaintyConfig,
     WaveformConfig,
 )
-from rhs_env.scatterers import Occluders, Scatterers, visible_mask
+from rhs_env.scatterers import LOS_EPS, Occluders, Scatterers, visible_mask
 from rhs_env.uncertainty import attach_uncertainty
 from rhs_env.windows import make_window
 
@@ -219,6 +219,14 @@ class RadarSystem:
         rng_m, ang, _ = self.radar_frame(scatterers.xy) if frame is None else frame
         half = np.deg2rad(self.config.scan.sector_deg) / 2
         fov = (np.abs(ang) <= half) & (rng_m <= self.config.max_range_m) & (rng_m >= self.config.min_range_m)
+        if self.config.kernels == "numba" and occluders is not None and len(occluders) and len(scatterers):
+            from rhs_env.kernels import line_of_sight
+
+            # the same test per (radar, point) in the field of view, up to its first crossing
+            return line_of_sight(self.positions, np.ascontiguousarray(scatterers.xy, dtype=float),
+                                 np.ascontiguousarray(occluders.segments, dtype=float),
+                                 np.ascontiguousarray(scatterers.object_id), np.ascontiguousarray(occluders.object_id),
+                                 np.ascontiguousarray(fov), LOS_EPS)
         return np.asarray(fov & visible_mask(self.positions, scatterers, occluders), dtype=bool)
 
     def in_view(self, scatterers: Scatterers, occluders: Occluders | None = None) -> np.ndarray:

@@ -24,7 +24,7 @@ import numpy as np
 
 # Relative tolerance on the ray parameter u: a point lying on an occluder
 # (u -> 1) is not hidden by it.
-_EPS = 1e-9
+LOS_EPS = 1e-9
 
 
 def _as_array(name: str, value: np.ndarray, shape_tail: tuple[int, ...], dtype) -> np.ndarray:
@@ -172,7 +172,7 @@ def visible_mask(radar_xy: np.ndarray, scatterers: Scatterers, occluders: Occlud
     with np.errstate(divide="ignore", invalid="ignore"):
         u = num_u / den
         w = num_w / den
-    hit = (np.abs(den) > 1e-12) & (u > _EPS) & (u < 1.0 - _EPS) & (w >= 0.0) & (w <= 1.0)
+    hit = (np.abs(den) > 1e-12) & (u > LOS_EPS) & (u < 1.0 - LOS_EPS) & (w >= 0.0) & (w <= 1.0)
     hit &= scatterers.object_id[None, :, None] != occluders.object_id[None, None, :]
     out = ~np.any(hit, axis=2)
     return out[0] if single else out

@@ -199,6 +199,30 @@ def test_compiled_points_are_the_numpy_values_bit_for_bit():
         np.testing.assert_array_equal(range_offsets(pw, 5), RadarSystem._peak_offsets(pw, 5))
 
 
+def test_compiled_line_of_sight_is_the_numpy_mask():
+    """The compiled visibility (field of view and occlusion, per pair up to its first crossing) is the numpy mask."""
+    radars = _pair()
+    rng = np.random.default_rng(21)
+    hidden = 0
+    for trial in range(40):
+        n_cars = int(rng.integers(1, 12))
+        centres = np.column_stack([rng.uniform(-60, 60, n_cars), rng.choice([-8.0, -4.0, 0.0, 4.0, 8.0], n_cars)])
+        occ = Occluders.from_boxes(centres, rng.normal(0, 0.1, n_cars), 4.8, 1.9, np.arange(n_cars))
+        sc, _ = _scene(rng)
+        # the cars' own corners (on their occluders: not hidden by their own object) and points behind them
+        corners = occ.segments[:, 0]
+        xy = np.concatenate([sc.xy, corners, corners * 1.7])
+        ids = np.concatenate([sc.object_id + 100, np.repeat(np.arange(n_cars), 4), np.full(len(corners), 99)])
+        if trial % 4 == 0:
+            xy[-3:] = occ.segments[:3, 1]  # exactly on an occluder's end point
+        pts = Scatterers(xy, np.zeros_like(xy), np.ones(len(xy)), ids, np.ones(len(xy), bool))
+        vis = {k: r.visible(pts, occ) for k, r in radars.items()}
+        np.testing.assert_array_equal(vis["numba"], vis["numpy"])
+        fov = radars["numpy"].visible(pts, None)
+        hidden += int(np.sum(fov & ~vis["numpy"]))
+    assert hidden > 50  # the scenes do hide points
+
+
 def test_compiled_icp_search_is_the_best_fit_per_start():
     """The one-call heading search equals icp_fit from every start with the (near, -rmse) tuple score, bit for bit."""
     from slam.core.kernels import icp_fit, icp_search
