@@ -223,3 +223,22 @@ def test_fastslam2_proposal_matches_dense_gaussian_algebra():
     assert loglik[0] == pytest.approx(ref, rel=1e-9)
     draw = np.random.default_rng(5).standard_normal(3)
     np.testing.assert_allclose(slam.pose[0], mean + np.linalg.cholesky(cov) @ draw, rtol=1e-9, atol=1e-12)
+
+
+def test_log_sum_exp_is_scipys_value():
+    """The RBPF's weight normaliser equals scipy.special.logsumexp bit for bit (entries at -inf, ties at the max)."""
+    from scipy.special import logsumexp
+
+    from slam.core.rbpf import log_sum_exp
+
+    rng = np.random.default_rng(0)
+    for trial in range(500):
+        p = int(rng.integers(1, 300))
+        a = rng.normal(size=p) * 10 ** rng.uniform(-3, 3) + rng.uniform(-1e4, 1e4)
+        if trial % 3 == 0:
+            a[rng.random(p) < 0.3] = -np.inf
+            a[0] = 0.0
+        if trial % 5 == 0:
+            a[rng.integers(0, p, 3)] = a.max()
+        assert log_sum_exp(a) == logsumexp(a)
+    assert abs(log_sum_exp(np.log([1.0, 2.0, 3.0])) - np.log(6.0)) < 1e-15
