@@ -29,7 +29,10 @@ Python 3.11, 2 cores shared with other jobs, load average 5-8):
   and slice assignments from arrays (whose shape-mismatch message compiles numba's string formatting)
   cost seconds of compile each; measured side by side (CPU seconds of that first SLAM-env step, fresh
   cache, load ~9, two runs each): 33.7 s -> 27.4 s, the OMP's share 25.1 s -> 18.5 s (scaled: ~24 s wall
-  expected on a quiet machine, from 29.5 s; not yet rerun there). Vector envs compile once, in the parent
+  expected on a quiet machine, from 29.5 s; not yet rerun there). The points of the OMP's output
+  (:func:`assemble_points`, :func:`range_offsets`), the line of sight (:func:`line_of_sight`) and the ICP's
+  heading search (:func:`slam.core.kernels.icp_search`) add ~2 s to that first compile (0.9 + 0.2 + 0.3 + 0.5 s,
+  each alone in a fresh cache; the SLAM env's cold start 24.8 s -> 26.7 s, load ~1.8). Vector envs compile once, in the parent
   (``agents.run_setup.make_vec_env``,
   :func:`rhs_common.jit.warm_cache`).
 """

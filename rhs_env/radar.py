@@ -215,7 +215,11 @@ class RadarSystem:
 
     def visible(self, scatterers: Scatterers, occluders: Occluders | None = None,
                 frame: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
-        """(4, K) bool: inside radar r's sector and range interval and in line of sight (``frame``: :meth:`radar_frame`'s)."""
+        """(4, K) bool: inside radar r's sector and range interval and in line of sight (``frame``: :meth:`radar_frame`'s).
+
+        With ``kernels="numba"`` the line of sight is tested compiled, only for the pairs in the field of view
+        (:func:`rhs_env.kernels.line_of_sight`, the same mask as :func:`rhs_env.scatterers.visible_mask`).
+        """
         rng_m, ang, _ = self.radar_frame(scatterers.xy) if frame is None else frame
         half = np.deg2rad(self.config.scan.sector_deg) / 2
         fov = (np.abs(ang) <= half) & (rng_m <= self.config.max_range_m) & (rng_m >= self.config.min_range_m)
