@@ -304,6 +304,11 @@ def test_kernels_as_python_under_disable_jit():
         spec = radars["numpy"].synthesize_spectrum(scene)
         a, b = (r.process_spectrum(spec)[0] for r in radars.values())
         assert len(a) == len(b) > 0 and np.abs(a.points[:, :3] - b.points[:, :3]).max() < 1e-3
+        from rhs_env.scatterers import Occluders
+        occ = Occluders.from_boxes([[20.0, 5.0]], [0.0], 4.8, 1.9, [7])  # hides (40, 10) from the front radar
+        pts = Scatterers.static_points([[40.0, 10.0], [40.0, -10.0], [10.0, 2.0]])
+        vis = [r.visible(pts, occ) for r in radars.values()]
+        assert np.array_equal(vis[0], vis[1]) and not vis[1][0, 0] and vis[1][0, 1]
         radars = {k: RadarSystem(RadarConfig(kernels=k), np.random.default_rng(2)) for k in ("numpy", "numba")}
         s1, s2 = (r.synthesize_spectrum(scene).copy() for r in radars.values())
         assert np.abs(s1 - s2).max() <= 1e-6 * np.abs(s1).max()
