@@ -40,7 +40,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rhs_common.geometry import apply_motion, points_in_frame
-from rhs_common.validation import check_bool, check_int, check_range, check_types
+from rhs_common.validation import check_int, check_range, check_types
 from slam.core.association import estimate_ego_velocity, point_covariance, static_mask
 from slam.core.drift import DriftCovariance
 from slam.core.health import HealthConfig, TrackHealth
@@ -83,13 +83,6 @@ class PipelineConfig:
     [0, 1] (rad^2 per m): the random-walk densities of the map-relative drift that the particles share
     (:mod:`slam.core.drift`), added to their covariance in the reported pose uncertainty
     (:meth:`SlamPipeline.pose_covariance`); measured on the tuning drives (module :mod:`slam.core.drift`).
-    ``recheck_turn`` (off by default): while a fast turn (``|w| >= TURN_RATE_MIN``) is held from the last
-    cycle and no Doppler turn fit confirms it, the yaw rate among the held one, none and the reversed one
-    that leaves the most points static is used (:meth:`SlamPipeline._recheck_turn`). Measured on random
-    highway drives (seeds 1000-1049): it removes the losses of seeds 1000, 1022, 1034 and 1041 but makes
-    new ones in 1017, 1023 and 1032 (its unbounded Doppler fit locks onto traffic, or the turn goes on),
-    lost episodes 5 -> 4, and it changes the estimate of nominal drives (the shipped policy turns at
-    more than 0.4 rad/s): off until those are fixed.
     """
 
     use_doppler: bool = True
@@ -101,7 +94,6 @@ class PipelineConfig:
     drift_along_m2pm: float = DRIFT_ALONG_M2PM
     drift_cross_m2pm: float = DRIFT_CROSS_M2PM
     drift_heading_rad2pm: float = DRIFT_HEADING_RAD2PM
-    recheck_turn: bool = False
 
     def __post_init__(self) -> None:
         check_types(self)
@@ -113,7 +105,6 @@ class PipelineConfig:
         check_range("drift_along_m2pm", self.drift_along_m2pm, 0.0, 1.0)
         check_range("drift_cross_m2pm", self.drift_cross_m2pm, 0.0, 1.0)
         check_range("drift_heading_rad2pm", self.drift_heading_rad2pm, 0.0, 1.0)
-        check_bool("recheck_turn", self.recheck_turn)
 
 
 #: yaw rate (rad/s) from which the Doppler fit with the turn (:func:`doppler_ego_motion`) replaces the
@@ -154,9 +145,9 @@ SLIP_REGISTRATION_CHECK = True
 #: Without the bound, a crash's last cycle at 20-26 m/s fit a 2-3 rad/s turn (43-74 m/s^2) on the wreck's points
 LATERAL_ACCEL_MAX = 40.0
 
-#: the held fast turn is rechecked when its static mask keeps fewer than this fraction of the points (the
-#: clouds of the drives are mostly static: a turn that fits below half of them is stale), and another
-#: state replaces it when that keeps RECHECK_GAIN times more points
+#: the turn fit is retried with the speed bound alone (:data:`SLIP_FREE`) when the held state's static mask keeps
+#: fewer than this fraction of the points (the clouds of the drives are mostly static: a state that fits below half
+#: of them is stale), and the retried turn replaces the held state when it keeps RECHECK_GAIN times more points
 RECHECK_BELOW = 0.5
 RECHECK_GAIN = 1.5
 
@@ -621,35 +612,6 @@ class SlamPipeline:
             return 0
         return int(round(self._fit_fraction(cKDTree(self.prev_static[:, :2]), cur, motion) * len(cur)))
 
-    def _recheck_turn(self, pts: np.ndarray, sensors: np.ndarray | None) -> np.ndarray | None:
-        """``(vx, vy, w)`` that leaves the most points static among the held fast turn ``(v, w)``, ``(v, 0)``,
-        ``(v, -w)`` and the Doppler fit with the turn without the acceleration bound
-        (:func:`doppler_ego_motion`), when the held state keeps fewer than ``RECHECK_BELOW`` of the points
-        static and the best keeps ``RECHECK_GAIN`` times as many; else None (the held state stands).
-
-        A lane change at 10 m/s turns by 0.4-0.5 rad in a cycle and can straighten or reverse in the next,
-        its side slip with it (2-4 m/s); holding the turn then makes the static points look moving through
-        the radars' lever arms (2.5 m x 2 rad/s = 5 m/s), the registration finds no pair and repeats the held
-        turn: 0.4-0.7 rad of heading error per cycle (random drives, seeds 1000, 1022, 1024, 1034, 1041)."""
-        if sensors is None or self.velocity is None or abs(float(self.velocity[2])) < TURN_RATE_MIN:
-            return None
-        thr = self.config.dynamic_threshold_mps
-        v, w = self.velocity[:2], float(self.velocity[2])
-
-        def static(c: np.ndarray) -> int:
-            return int(static_mask(pts, c[:2], thr, yaw_rate=float(c[2]), sensor_xy=sensors).sum())
-
-        cands = [np.array([v[0], v[1], c]) for c in (w, 0.0, -w)]
-        held = static(cands[0])
-        if held >= RECHECK_BELOW * len(pts):  # the held turn still explains most points: it stands
-            return None
-        fit = doppler_ego_motion(pts, sensors, 0.5 * thr, self.ransac_rng)  # draws only here
-        if fit is not None:
-            cands.append(np.asarray(fit, dtype=float))
-        counts = [held] + [static(c) for c in cands[1:]]
-        k = int(np.argmax(counts[1:])) + 1
-        return cands[k] if counts[k] >= RECHECK_GAIN * max(counts[0], 1) else None
-
     def _doppler_velocity(self, dop: np.ndarray, dt: float) -> np.ndarray | None:
         """The ego velocity (2,) from the Doppler of points seen from their radar, or None (no fit)."""
         thr = self.config.dynamic_threshold_mps
@@ -697,12 +659,6 @@ class SlamPipeline:
             yaw_rate = turn[2] if turn is not None else (0.0 if self.velocity is None else self.velocity[2])
             self.velocity = np.array([v_dop[0], v_dop[1], yaw_rate])
         reg_time = 0.0
-        rechecked = None
-        if turn is None and self.options.recheck_turn and self.cycle > 0:
-            rechecked = self._recheck_turn(pts, sensors)
-            if rechecked is not None:
-                self.velocity = rechecked.copy()
-                v_dop = rechecked[:2]
         if self.cycle == 0:
             motion = np.zeros(3)
         else:
@@ -710,8 +666,6 @@ class SlamPipeline:
             dth = 0.0 if self.last_motion is None else float(self.last_motion[2])
             if turn is not None:  # the measured yaw rate, not the last cycle's turn
                 dth = float(turn[2]) * dt
-            elif rechecked is not None:
-                dth = float(rechecked[2]) * dt
             if v_dop is not None:  # displacement over the cycle from the Doppler velocity
                 prior = doppler_displacement(v_dop, dth, dt)
             elif self.last_motion is not None:
