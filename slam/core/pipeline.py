@@ -45,7 +45,7 @@ from slam.core.association import estimate_ego_velocity, point_covariance, stati
 from slam.core.drift import DriftCovariance
 from slam.core.health import HealthConfig, TrackHealth
 from slam.core.rbpf import RBPFSlam, SlamConfig, SlamEstimate
-from slam.core.registration import ICPRegistration, Registration
+from slam.core.registration import ICPRegistration, OdometryRegistration, Registration
 
 #: the drift densities of :mod:`slam.core.drift` (along, cross: m^2 per m driven; heading: rad^2 per m): 1 cm,
 #: 5.5 cm and 1.2 mrad after 1 km (the heading's share of the cross-track std: 0.68 m). Measured on the
@@ -578,11 +578,14 @@ class SlamPipeline:
             return None
         if static(found) < RECHECK_GAIN * max(held, 1):
             return None
-        # the registration must confirm the retried turn at least as well as the held state
+        # the registration must confirm the retried turn at least as well as the held state (a registration that
+        # ignores the clouds, the scripted odometry, cannot)
+        if not SLIP_REGISTRATION_CHECK or isinstance(self.registration, OdometryRegistration):
+            return found
         last_dpsi = 0.0 if self.last_motion is None else float(self.last_motion[2])
         held_fit = self._registered_fit(pts, sensors, held_state, doppler_displacement(held_state[:2], last_dpsi, dt))
         found_fit = self._registered_fit(pts, sensors, found, doppler_displacement(found[:2], float(found[2]) * dt, dt))
-        if not SLIP_REGISTRATION_CHECK or held_fit is None or found_fit is None:
+        if held_fit is None or found_fit is None:  # no previous static points: nothing to register against
             return found
         return found if 0 < found_fit and held_fit <= found_fit else None
 
