@@ -188,31 +188,6 @@ def test_corrupted_odometry_is_flagged_at_once_and_relocalised():
     assert max(i["position_error_m"] for i in infos[30:]) < 1.0 and not any(i["slam_lost"] for i in infos[30:])
 
 
-def test_a_held_fast_turn_that_ended_is_rechecked_against_the_doppler():
-    """A lane change's turn (-2.2 rad/s, 3.6 m/s of side slip) held into a cycle where the car drives
-    straight at 10 m/s: with it almost no static point fits; the recheck finds the state that fits them."""
-    from slam.core.pipeline import RECHECK_GAIN, TURN_RATE_MIN, SlamPipeline
-    from slam.core.registration import ICPRegistration
-
-    rng = np.random.default_rng(4)
-    mounts = np.array([[2.5, 0.0], [0.0, 1.0], [-2.5, 0.0], [0.0, -1.0]])
-    xy = rng.uniform(-60, 60, (40, 2))
-    s = mounts[rng.integers(0, 4, 40)]
-    u = (xy - s) / np.hypot(*(xy - s).T)[:, None]
-    vr = -(10.0 * u[:, 0])  # straight on at 10 m/s, no turn
-    pts = np.column_stack([xy, vr, np.ones(40)])
-    pipe = SlamPipeline(ICPRegistration(), rng=0, options=PipelineConfig(recheck_turn=True), sensor_xy=mounts)
-    pipe.velocity = np.array([9.3, -3.6, -2.2])
-    fixed = pipe._recheck_turn(pts, s)
-    assert fixed is not None
-    np.testing.assert_allclose(fixed, [10.0, 0.0, 0.0], atol=1e-6)
-    pipe.velocity = np.array([10.0, 0.0, -2.2])  # the yaw rate alone is stale: straight on keeps every point
-    np.testing.assert_allclose(pipe._recheck_turn(pts, s), [10.0, 0.0, 0.0], atol=1e-6)
-    pipe.velocity = np.array([10.0, 0.0, 0.5 * TURN_RATE_MIN])  # no fast turn held: nothing to recheck
-    assert pipe._recheck_turn(pts, s) is None
-    assert RECHECK_GAIN > 1.0
-
-
 def test_a_reversed_lane_change_is_found_with_the_speed_bound_alone():
     """A lane change reversed within a cycle at 10 m/s (yaw rate -1.9 -> +1.9 rad/s, the side slip of a
     kinematic bicycle from -2.5 to +4 m/s: the velocity vector moves by 6.5 m/s, past the acceleration
@@ -245,3 +220,63 @@ def test_a_reversed_lane_change_is_found_with_the_speed_bound_alone():
     pipe.velocity = np.array([9.3, 4.0, 1.9])
     straight = np.column_stack([xy, -(9.3 * u[:, 0] + 4.0 * u[:, 1]), np.ones(40)])  # no turn now, same slip
     assert pipe._doppler_turn(straight, s, 0.2, np.array([9.3, 4.0])) is None
+
+
+def test_a_retried_turn_counts_only_when_the_registration_confirms_it():
+    """The speed-bound retry fits a 1.9 rad/s turn to the Doppler (as on traffic that a braking car's
+    cloud holds): when the last cycle's static points, moved by that turn, land where the cloud is, the
+    turn stands; when they land where the held state puts them (the car went on at its held turn), the
+    registration from the retried turn fits nothing and the held state stands."""
+    from rhs_common.geometry import apply_motion
+    from slam.core.pipeline import SlamPipeline
+    from slam.core.registration import ICPRegistration
+
+    rng = np.random.default_rng(5)
+    mounts = np.array([[2.5, 0.0], [0.0, 1.0], [-2.5, 0.0], [0.0, -1.0]])
+    xy = rng.uniform(-60, 60, (40, 2))
+    s = mounts[rng.integers(0, 4, 40)]
+    u = (xy - s) / np.hypot(*(xy - s).T)[:, None]
+    v, w, dt = np.array([9.3, 4.0]), 1.9, 0.2
+    vr = np.sum(-(v[None, :] + w * np.stack([-xy[:, 1], xy[:, 0]], axis=1)) * u, axis=1)
+    pts = np.column_stack([xy, vr, np.ones(40)])
+    held_v, held_w = np.array([9.0, 0.5]), -1.9
+
+    def turn_after(prev_motion: np.ndarray) -> np.ndarray | None:
+        pipe = SlamPipeline(ICPRegistration(), rng=0, sensor_xy=mounts)
+        pipe.velocity = np.array([10.1, -2.5, held_w])
+        pipe.last_motion = doppler_displacement(held_v, held_w * dt, dt)
+        # the last cycle's static points: the scene seen from the pose before ``prev_motion``
+        prev = apply_motion(xy, prev_motion)
+        pipe.prev_static = np.column_stack([prev, np.zeros(40), np.ones(40)])
+        return pipe._doppler_turn(pts, s, dt, held_v)
+
+    confirmed = turn_after(doppler_displacement(v, w * dt, dt))
+    assert confirmed is not None
+    np.testing.assert_allclose(confirmed, [9.3, 4.0, 1.9], atol=1e-6)
+    assert turn_after(doppler_displacement(held_v, held_w * dt, dt)) is None
+
+
+@pytest.mark.parametrize(("shift_m", "driven_m", "accepted"), [(4.0, 0.0, True), (16.0, 0.0, False), (16.0, 5.0, True)])
+def test_relocalisation_refuses_a_correction_past_the_reported_uncertainty(shift_m, driven_m, accepted):
+    """A scan that fits the map built before the loss only ``shift_m`` along the road (a repeating roadside
+    fits one period away) is taken while the shift lies within twice the position std the lost filter
+    reports (``spread_lost_m`` = 6 m plus the distance driven since the loss)."""
+    from slam.core.pipeline import SlamPipeline
+    from slam.core.registration import ICPRegistration
+
+    rng = np.random.default_rng(2)
+    scene = np.column_stack([rng.uniform(-50, 50, 30), rng.choice([-9.0, 9.0], 30) + rng.normal(0, 1.0, 30)])
+    cloud = np.column_stack([scene, np.zeros(30), np.ones(30)])  # a car at rest: every point static
+    pipe = SlamPipeline(ICPRegistration(), rng=0)
+    for _ in range(3):
+        pipe.step(cloud, 0.2)
+    est = pipe.slam.last_estimate
+    pipe.health.lost, pipe.health.loss_landmark_id = True, pipe.slam.next_id
+    pipe.distance_since_loss = driven_m
+    # the scan the map predicts ``shift_m`` ahead: the estimate is that far behind the car
+    seen = cloud.copy()
+    seen[:, 0] -= shift_m
+    correction = pipe._relocalise(est, seen)
+    assert (correction is not None) == accepted
+    if accepted:
+        np.testing.assert_allclose(correction[:2], [shift_m, 0.0], atol=0.1)
