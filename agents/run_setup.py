@@ -350,6 +350,22 @@ def limit_threads(torch_threads: int | None) -> None:
         torch.set_num_threads(int(torch_threads))
 
 
+def update_threads_for(torch_threads: int | None, n_envs: int, update_threads: int | None = None) -> int | None:
+    """torch's threads during an on-policy update: ``update_threads`` if given (an int in [1, 1024]), else the
+    cores that the ``n_envs`` subprocess workers and the learner's ``torch_threads`` use while collecting
+    (they wait during the update), at most the cores this process may run on; None (leave torch alone) when
+    ``torch_threads`` is None or the envs run in this process (``n_envs`` 1)."""
+    from rhs_common.validation import check_int
+
+    if update_threads is not None:
+        check_int("update_threads", update_threads, 1, 1024)
+        return int(update_threads)
+    if not torch_threads or n_envs < 2:
+        return None
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return max(int(torch_threads), min(cores, n_envs + int(torch_threads)))
+
+
 @dataclass(frozen=True)
 class RunSettings:
     """What a training run uses, from the YAML merged with the caller's arguments."""
