@@ -45,8 +45,8 @@ from rhs_common.jit import njit
 
 __all__ = [
     "TAYLOR_ORDER", "assemble_points", "atom_norms", "bin_amplitudes", "doppler_dtft_refine", "footprint_detections",
-    "gather_bins", "joint_refine", "joint_rho", "line_of_sight", "lstsq", "newton_refine", "noise_samples", "noise_uniforms",
-    "omp_doppler", "phasors", "range_offsets", "slot_projection", "slot_sums", "taylor_atoms",
+    "footprint_statistic", "gather_bins", "joint_refine", "joint_rho", "line_of_sight", "lstsq", "newton_refine",
+    "noise_samples", "noise_uniforms", "omp_doppler", "phasors", "range_offsets", "slot_projection", "slot_sums", "taylor_atoms",
     "taylor_tables", "tone_operands", "tone_spectra",
 ]
 
@@ -139,6 +139,42 @@ def _mainlobe_keep(rd: np.ndarray, kd: np.ndarray, strength: np.ndarray, leak: n
                 worst = max(worst, strength[b] * leak[min(dk, leak.size - 1)])
         keep[a] = strength[a] >= margin * worst
     return keep
+
+
+@njit
+def footprint_statistic(f: np.ndarray, slots: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """T (R, J, K) float32 of :meth:`rhs_env.detection.FootprintDetector.statistic`: ``T_rjk = sum_{i in S_j} E_rik``.
+
+    ``E_rik = sum_c re_rick^2 + sum_c im_rick^2`` (float32, the sums over c in order, as the numpy einsum over the
+    interleaved view ``f`` (R, I, C, 2 K) float32 of the complex64 spectra), then the footprint ``S_j`` of each
+    hypothesis summed slot by slot (``slots[starts[j]:starts[j + 1]]``, ascending) instead of the dense product
+    ``F^T E`` with the 0 / 1 footprint matrix: the footprints hold 2-4 of the I slots, so ~30x fewer operations.
+    The float32 sums of 2-4 terms in slot order: within 1-2 ulp of the BLAS product (whose order is its own).
+    """
+    n_r, n_i, n_c, n_b = f.shape
+    n_k = n_b // 2
+    n_j = starts.size - 1
+    e = np.empty((n_i, n_k), np.float32)
+    p = np.empty(n_b, np.float32)
+    out = np.empty((n_r, n_j, n_k), np.float32)
+    for r in range(n_r):
+        for i in range(n_i):  # E: re^2 and im^2 summed over the chirps, then added
+            for b in range(n_b):
+                p[b] = f[r, i, 0, b] * f[r, i, 0, b]
+            for c in range(1, n_c):
+                for b in range(n_b):
+                    p[b] += f[r, i, c, b] * f[r, i, c, b]
+            for k in range(n_k):
+                e[i, k] = p[2 * k] + p[2 * k + 1]
+        for j in range(n_j):
+            first = slots[starts[j]]
+            for k in range(n_k):
+                out[r, j, k] = e[first, k]
+            for m in range(starts[j] + 1, starts[j + 1]):
+                i = slots[m]
+                for k in range(n_k):
+                    out[r, j, k] += e[i, k]
+    return out
 
 
 @njit
