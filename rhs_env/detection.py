@@ -308,10 +308,12 @@ class FootprintDetector:
 
         ``E = sum_c re^2 + sum_c im^2``: one einsum over the interleaved (re, im) float32 view
         (the same sums over c as two einsums on the strided real and imaginary parts, in half the time).
-        With ``kernels="numba"`` and C-contiguous complex64 spectra: :func:`rhs_env.kernels.footprint_statistic`
+        With ``kernels="numba"`` and complex64 spectra contiguous along the bins (e.g. the in-range bins of a
+        longer profile): :func:`rhs_env.kernels.footprint_statistic`
         (each footprint's few slots summed instead of the dense product; within 1-2 float32 ulp).
         """
-        if self.kernels == "numba" and spec.dtype == np.complex64 and spec.flags.c_contiguous and spec.ndim == 4:
+        if (self.kernels == "numba" and spec.dtype == np.complex64 and spec.ndim == 4
+                and spec.strides[-1] == spec.itemsize):
             from rhs_env.kernels import footprint_statistic
 
             return footprint_statistic(spec.view(np.float32), self._slots, self._starts)
