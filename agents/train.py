@@ -127,10 +127,8 @@ def train(
         return _train_dagger(algo, env_id, timesteps, out, seed, n_envs, hyperparams, env_kwargs, progress,
                              torch_threads, resume, init_policy)
     import torch
-    from stable_baselines3.common.callbacks import CallbackList
 
-    from agents.callbacks import PhaseTimer, UpdateThreads
-    from agents.resume import StopOnSignal, save_checkpoint
+    from agents.callbacks import UpdateThreads
 
     t_setup = time.perf_counter()
     run = run_settings(algo, env_id, timesteps, n_envs, hyperparams, env_kwargs)
@@ -150,26 +148,11 @@ def train(
     try:
         model = _new_or_resumed_model(algo, run, venv, seed, out, resume)
         done = int(model.num_timesteps)
-        stopper = StopOnSignal()
-        timer = PhaseTimer()
         callbacks, eval_cb, eval_env = _callbacks(algo, env_id, run, seed, out, eval_freq, eval_episodes,
                                                   checkpoint_freq, max(0, decisions - done) if progress else None)
         if updating is not None:
             callbacks.append(UpdateThreads(torch.get_num_threads(), updating))
-        t0 = time.perf_counter()
-        with warnings.catch_warnings():
-            # the eval env is a DummyVecEnv, the training env a SubprocVecEnv: same envs, on purpose
-            warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
-            if decisions > done:
-                model.learn(total_timesteps=decisions - done, callback=CallbackList([*callbacks, stopper, timer]),
-                            tb_log_name=algo, reset_num_timesteps=done == 0)
-        wall = max(time.perf_counter() - t0, 1e-9)
-        if stopper.stopped:
-            path = save_checkpoint(model, out, algo)
-            print(f"rhs-slam train: interrupted at {model.num_timesteps} steps, saved {path}; "
-                  "run the same command with --resume to continue", file=sys.stderr)
-        else:
-            model.save(out / "model.zip")
+        t0, wall, stopper, timer = _learn(algo, model, callbacks, decisions - done, done == 0, out)
     finally:
         venv.close()
         if eval_env is not None:
@@ -181,6 +164,33 @@ def train(
     if not stopper.stopped:
         write_summary(out, summary)
     return summary
+
+
+def _learn(algo: str, model: Any, callbacks: list, remaining: int, fresh: bool, out: Path) -> tuple[float, float, Any, Any]:
+    """``model.learn`` over the ``remaining`` decisions with ``callbacks``, a stop on SIGTERM / SIGINT and a
+    :class:`agents.callbacks.PhaseTimer`; saves ``out/model.zip`` (or, stopped, a checkpoint).
+    Returns the start (perf_counter), the wall seconds, the stopper and the timer."""
+    from stable_baselines3.common.callbacks import CallbackList
+
+    from agents.callbacks import PhaseTimer
+    from agents.resume import StopOnSignal, save_checkpoint
+
+    stopper, timer = StopOnSignal(), PhaseTimer()
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        # the eval env is a DummyVecEnv, the training env a SubprocVecEnv: same envs, on purpose
+        warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
+        if remaining > 0:
+            model.learn(total_timesteps=remaining, callback=CallbackList([*callbacks, stopper, timer]),
+                        tb_log_name=algo, reset_num_timesteps=fresh)
+    wall = max(time.perf_counter() - t0, 1e-9)
+    if stopper.stopped:
+        path = save_checkpoint(model, out, algo)
+        print(f"rhs-slam train: interrupted at {model.num_timesteps} steps, saved {path}; "
+              "run the same command with --resume to continue", file=sys.stderr)
+    else:
+        model.save(out / "model.zip")
+    return t0, wall, stopper, timer
 
 
 def _check_start(algo: str, run: RunSettings, out: Path, resume: bool) -> None:
