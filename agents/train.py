@@ -101,7 +101,7 @@ def train(
     torch_threads: int | None = 1,
     resume: bool = False,
     init_policy: str | Path | None = None,
-    update_threads: int | None = None,
+    update_threads: int | str | None = None,
 ) -> dict[str, Any]:
     """Train ``algo`` on ``env_id`` for ``timesteps`` steps; returns the summary written to ``out/train.json``.
 
@@ -115,10 +115,10 @@ def train(
     the other cores); workers get ``OMP_NUM_THREADS=1`` unless set. ``init_policy``: the student zip DAgger continues
     (:func:`agents.imitation.train_dagger`) or ``"finetune"`` tunes (:func:`agents.finetune.train_finetune`).
     ``update_threads``: PPO's torch threads during its gradient updates, while the subprocess workers wait
-    (default: those workers' cores plus ``torch_threads``, at most the available cores; see
-    :func:`agents.run_setup.update_threads_for`). ``summary["timing"]`` splits the wall time: ``setup_s`` (vector
-    env, kernel warm-up, model), ``learn_s``, the first rollout and the steady rate from the second rollout on
-    (:class:`agents.callbacks.PhaseTimer`).
+    (None: ``torch_threads`` throughout; ``"auto"``: those workers' cores too; see
+    :func:`agents.run_setup.update_threads_for`, and why it is not the default). ``summary["timing"]`` splits the
+    wall time: ``setup_s`` (vector env, kernel warm-up, model), ``learn_s``, the first rollout and the steady rate
+    from the second rollout on (:class:`agents.callbacks.PhaseTimer`).
     """
     if algo == "finetune":
         return _train_finetune(env_id, timesteps, out, seed, n_envs, hyperparams, env_kwargs, progress, torch_threads,

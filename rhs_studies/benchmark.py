@@ -351,18 +351,19 @@ def bench_training(timesteps: int, seed: int) -> dict:
     rollout to the end (:class:`agents.callbacks.PhaseTimer`); the ratio goal is on it. The one-off cost of a
     run is reported beside it: ``startup_s``, the whole run's wall time (vector env with its workers and
     kernel warm-up, model, learning) less its timesteps at the steady rate; the first run in the process (the
-    SLAM env with ``update_threads_1``) also carries the process's one-time costs (imports, the forkserver with
+    SLAM env with ``update_threads_auto``) also carries the process's one-time costs (imports, the forkserver with
     its preloaded modules, the first kernel-cache loads: ~12 s against ~3-4 s for a later run, load ~1). Each env
     id runs twice,
-    interleaved: with the learner's torch threads during the updates at 1 (``update_threads_1``, the
-    previous setting) and at the default (the cores the waiting env workers leave).
+    interleaved: with the default (the learner's one torch thread throughout) and with ``update_threads="auto"``
+    (the updates also take the cores of the waiting env workers: faster on a quiet machine, much slower on a
+    busy one, see :func:`agents.run_setup.update_threads_for`).
     """
     import tempfile
 
     from agents.train import train
 
     out: dict[str, Any] = {}
-    for label, threads in (("update_threads_1", 1), ("default", None)):
+    for label, threads in (("update_threads_auto", "auto"), ("default", None)):
         for env_id in ("rhs-highway-slam-v0", "rhs-highway-v0"):
             with tempfile.TemporaryDirectory() as tmp:
                 s = train("ppo", env_id, timesteps, tmp, seed=seed, n_envs=2, eval_freq=10**9,
@@ -447,15 +448,15 @@ def _md_ratios(result: dict) -> list[str]:
         if "default" in t:
             lines += ["| PPO, 2 subprocess envs | update threads | steady steps/s | collect / update per rollout (s) "
                       "| start-up (s) |", "|---|---:|---:|---|---:|"]
-            for label in ("update_threads_1", "default"):
+            for label in ("default", "update_threads_auto"):
                 for k in ("rhs-highway-slam-v0", "rhs-highway-v0"):
                     r = t[label][k]
-                    lines.append(f"| `{k}` | {r['update_threads']} | {r['steady_steps_per_s']:.1f} | "
+                    lines.append(f"| `{k}` | {r['update_threads'] or 1} | {r['steady_steps_per_s']:.1f} | "
                                  f"{r['steady_collect_s_per_rollout']:.2f} / {r['steady_update_s_per_rollout']:.2f} | "
                                  f"{r['startup_s']:.1f} |")
             lines += [f"PPO on the SLAM env over the base env, steady rate: {t['ppo_slam_over_base']:.2f} x (goal >= "
-                      f"{GOALS['ppo_slam_over_base']}; update threads 1: "
-                      f"{t['update_threads_1']['ppo_slam_over_base']:.2f} x). Start-up: the run's wall time less its "
+                      f"{GOALS['ppo_slam_over_base']}; with update_threads='auto': "
+                      f"{t['update_threads_auto']['ppo_slam_over_base']:.2f} x). Start-up: the run's wall time less its "
                       "steps at the steady rate.", ""]
         else:
             lines += ["| PPO, 2 subprocess envs | steps/s |", "|---|---:|"]

@@ -91,8 +91,8 @@ def test_ppo_training_run_writes_everything(trained):
     t = s["timing"]
     assert t["rollouts"] == 2 and t["steady_timesteps"] == 128 and t["steady_steps_per_s"] > 0
     assert t["setup_s"] > 0 and t["first_rollout_s"] > 0 and t["steady_update_s_per_rollout"] > 0
-    assert t["update_threads"] == update_threads_for(1, 2)
-    assert torch.get_num_threads() == 1  # back to the collecting threads after the run
+    assert t["update_threads"] is None  # the default: one torch thread throughout
+    assert torch.get_num_threads() == 1
 
 
 def test_update_threads_and_phase_timer():
@@ -101,11 +101,12 @@ def test_update_threads_and_phase_timer():
     from agents.callbacks import PhaseTimer, UpdateThreads
 
     cores = len(os.sched_getaffinity(0))
-    assert update_threads_for(1, 2) == max(1, min(cores, 3))
-    assert update_threads_for(2, 8) == max(2, min(cores, 10))
-    assert update_threads_for(None, 2) is None and update_threads_for(1, 1) is None
+    assert update_threads_for(1, 2) is None  # the default: no switch
+    assert update_threads_for(1, 2, "auto") == max(1, min(cores, 3))
+    assert update_threads_for(2, 8, "auto") == max(2, min(cores, 10))
+    assert update_threads_for(None, 2, "auto") is None and update_threads_for(1, 1, "auto") is None
     assert update_threads_for(1, 2, 3) == 3
-    for bad in (0, 2000, 1.5):
+    for bad in (0, 2000, 1.5, "all"):
         with pytest.raises((ValueError, TypeError), match="update_threads"):
             update_threads_for(1, 2, bad)
     # 3 rollouts of 100 steps: 4 s collecting + 1 s updating each, the first one 3 s longer
