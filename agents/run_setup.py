@@ -357,7 +357,7 @@ def update_threads_for(torch_threads: int | None, n_envs: int, update_threads: i
     ``n_envs`` subprocess workers and the learner's ``torch_threads`` use while collecting (they wait during the
     update), at most the cores this process may run on (None where ``torch_threads`` is None or ``n_envs`` is 1).
     Not the default: on a machine that other jobs keep busy, torch's threads wait for each other at every
-    operation (2 cores at load ~3: the SLAM env's PPO update 0.68 -> 12 s per rollout with 2 threads; quiet,
+    operation (2 cores at load ~3: the SLAM env's PPO update 0.68-0.74 -> 12-32 s per rollout with 2 threads (two runs); quiet,
     0.70 -> 0.47 s).
     """
     from rhs_common.validation import check_int
