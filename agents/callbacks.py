@@ -35,3 +35,100 @@ class CrashRateCallback(BaseCallback):
         flags = [float(e["crashed"]) for e in self.model.ep_info_buffer or () if "crashed" in e]
         if flags:
             self.logger.record("rollout/crash_rate", sum(flags) / len(flags))
+
+
+class PhaseTimer(BaseCallback):
+    """Wall-clock times of a run's phases: each rollout (env steps + policy) and each update after it.
+
+    ``steady()`` gives the throughput once the run is going: env steps per second from the start of the
+    second rollout to the end of training (the first rollout carries the one-off costs: the workers' first
+    reset, their kernel-cache loads, torch's first passes), which is what hours of training run at.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.started = self.ended = float("nan")
+        self.rollouts: list[tuple[float, int]] = []  # (perf_counter at rollout start, num_timesteps then)
+        self.rollout_ends: list[float] = []
+        self.final_timesteps = 0
+
+    def _on_training_start(self) -> None:
+        import time
+
+        self.started = time.perf_counter()
+
+    def _on_rollout_start(self) -> None:
+        import time
+
+        self.rollouts.append((time.perf_counter(), int(self.model.num_timesteps)))
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_end(self) -> None:
+        import time
+
+        self.rollout_ends.append(time.perf_counter())
+
+    def _on_training_end(self) -> None:
+        import time
+
+        self.ended = time.perf_counter()
+        self.final_timesteps = int(self.model.num_timesteps)
+
+    def phases(self, decision_interval: int = 1) -> dict:
+        """``first_rollout_s`` (first rollout and its update), ``steady_s`` / ``steady_timesteps`` /
+        ``steady_steps_per_s`` (from the second rollout on; None with fewer than two rollouts), and the mean
+        seconds per rollout's env stepping and per update in the steady part (env steps: decisions x
+        ``decision_interval``)."""
+        out: dict = {"rollouts": len(self.rollouts), "first_rollout_s": None, "steady_s": None,
+                     "steady_timesteps": None, "steady_steps_per_s": None, "steady_collect_s_per_rollout": None,
+                     "steady_update_s_per_rollout": None}
+        if not self.rollouts:
+            return out
+        ends = [*self.rollouts[1:], (self.ended, self.final_timesteps)]
+        out["first_rollout_s"] = round(ends[0][0] - self.rollouts[0][0], 3)
+        if len(self.rollouts) < 2:
+            return out
+        (t1, n1), (t2, n2) = self.rollouts[1], (self.ended, self.final_timesteps)
+        steps = (n2 - n1) * decision_interval
+        out.update(steady_s=round(t2 - t1, 3), steady_timesteps=steps,
+                   steady_steps_per_s=round(steps / max(t2 - t1, 1e-9), 2))
+        steady = range(1, min(len(self.rollouts), len(self.rollout_ends)))
+        if steady:
+            collect = [self.rollout_ends[i] - self.rollouts[i][0] for i in steady]
+            update = [ends[i][0] - self.rollout_ends[i] for i in steady]
+            out["steady_collect_s_per_rollout"] = round(sum(collect) / len(collect), 3)
+            out["steady_update_s_per_rollout"] = round(sum(update) / len(update), 3)
+        return out
+
+
+class UpdateThreads(BaseCallback):
+    """torch's intra-op threads: ``collect`` while the env workers step, ``update`` during the gradient updates.
+
+    On-policy training is synchronous: while the learner updates, the ``n_envs`` subprocess workers wait,
+    so the update may use their cores; while they step, the learner keeps to ``collect`` threads (its
+    policy forwards are small) and does not compete with them.
+    """
+
+    def __init__(self, collect: int, update: int) -> None:
+        super().__init__()
+        self.collect, self.update = int(collect), int(update)
+
+    def _on_rollout_start(self) -> None:
+        import torch
+
+        torch.set_num_threads(self.collect)
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_end(self) -> None:
+        import torch
+
+        torch.set_num_threads(self.update)
+
+    def _on_training_end(self) -> None:
+        import torch
+
+        torch.set_num_threads(self.collect)

@@ -53,6 +53,7 @@ from agents.run_setup import (  # noqa: F401  (re-exported: the names users of a
     run_settings,
     run_summary,
     tensorboard_available,
+    update_threads_for,
     worker_env_id,
     write_summary,
 )
@@ -100,6 +101,7 @@ def train(
     torch_threads: int | None = 1,
     resume: bool = False,
     init_policy: str | Path | None = None,
+    update_threads: int | str | None = None,
 ) -> dict[str, Any]:
     """Train ``algo`` on ``env_id`` for ``timesteps`` steps; returns the summary written to ``out/train.json``.
 
@@ -112,6 +114,11 @@ def train(
     :func:`agents.imitation.load_round_state`). ``torch_threads``: torch's intra-op threads here (1: the envs need
     the other cores); workers get ``OMP_NUM_THREADS=1`` unless set. ``init_policy``: the student zip DAgger continues
     (:func:`agents.imitation.train_dagger`) or ``"finetune"`` tunes (:func:`agents.finetune.train_finetune`).
+    ``update_threads``: PPO's torch threads during its gradient updates, while the subprocess workers wait
+    (None: ``torch_threads`` throughout; ``"auto"``: those workers' cores too; see
+    :func:`agents.run_setup.update_threads_for`, and why it is not the default). ``summary["timing"]`` splits the
+    wall time: ``setup_s`` (vector env, kernel warm-up, model), ``learn_s``, the first rollout and the steady rate
+    from the second rollout on (:class:`agents.callbacks.PhaseTimer`).
     """
     if algo == "finetune":
         return _train_finetune(env_id, timesteps, out, seed, n_envs, hyperparams, env_kwargs, progress, torch_threads,
@@ -119,16 +126,18 @@ def train(
     if algo == "dagger" or init_policy is not None:
         return _train_dagger(algo, env_id, timesteps, out, seed, n_envs, hyperparams, env_kwargs, progress,
                              torch_threads, resume, init_policy)
-    from stable_baselines3.common.callbacks import CallbackList
+    import torch
 
-    from agents.resume import StopOnSignal, save_checkpoint
+    from agents.callbacks import UpdateThreads
 
+    t_setup = time.perf_counter()
     run = run_settings(algo, env_id, timesteps, n_envs, hyperparams, env_kwargs)
     check_train_args(run.timesteps, run.n_envs, seed, eval_freq, eval_episodes, checkpoint_freq)
     out = Path(out)
     _check_start(algo, run, out, resume)
     out.mkdir(parents=True, exist_ok=True)
     limit_threads(torch_threads)
+    updating = update_threads_for(torch_threads, run.n_envs, update_threads) if algo == "ppo" else None
     if run.n_envs > 1:
         check_env_kwargs(env_id, run.env_kwargs)
     k = run.decision_interval
@@ -139,31 +148,49 @@ def train(
     try:
         model = _new_or_resumed_model(algo, run, venv, seed, out, resume)
         done = int(model.num_timesteps)
-        stopper = StopOnSignal()
         callbacks, eval_cb, eval_env = _callbacks(algo, env_id, run, seed, out, eval_freq, eval_episodes,
                                                   checkpoint_freq, max(0, decisions - done) if progress else None)
-        t0 = time.perf_counter()
-        with warnings.catch_warnings():
-            # the eval env is a DummyVecEnv, the training env a SubprocVecEnv: same envs, on purpose
-            warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
-            if decisions > done:
-                model.learn(total_timesteps=decisions - done, callback=CallbackList([*callbacks, stopper]),
-                            tb_log_name=algo, reset_num_timesteps=done == 0)
-        wall = max(time.perf_counter() - t0, 1e-9)
-        if stopper.stopped:
-            path = save_checkpoint(model, out, algo)
-            print(f"rhs-slam train: interrupted at {model.num_timesteps} steps, saved {path}; "
-                  "run the same command with --resume to continue", file=sys.stderr)
-        else:
-            model.save(out / "model.zip")
+        if updating is not None:
+            callbacks.append(UpdateThreads(torch.get_num_threads(), updating))
+        t0, wall, stopper, timer = _learn(algo, model, callbacks, decisions - done, done == 0, out)
     finally:
         venv.close()
         if eval_env is not None:
             eval_env.close()
     summary = _summary(algo, env_id, run, seed, model, eval_cb, out, wall, done, stopper.stopped)
+    summary["timing"] = {"update_threads": updating, "setup_s": round(t0 - t_setup, 3), "learn_s": round(wall, 3),
+                         "learn_start_s": round(timer.started - t0, 3) if timer.rollouts else None,
+                         **timer.phases(run.decision_interval)}
     if not stopper.stopped:
         write_summary(out, summary)
     return summary
+
+
+def _learn(algo: str, model: Any, callbacks: list, remaining: int, fresh: bool, out: Path) -> tuple[float, float, Any, Any]:
+    """``model.learn`` over the ``remaining`` decisions with ``callbacks``, a stop on SIGTERM / SIGINT and a
+    :class:`agents.callbacks.PhaseTimer`; saves ``out/model.zip`` (or, stopped, a checkpoint).
+    Returns the start (perf_counter), the wall seconds, the stopper and the timer."""
+    from stable_baselines3.common.callbacks import CallbackList
+
+    from agents.callbacks import PhaseTimer
+    from agents.resume import StopOnSignal, save_checkpoint
+
+    stopper, timer = StopOnSignal(), PhaseTimer()
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        # the eval env is a DummyVecEnv, the training env a SubprocVecEnv: same envs, on purpose
+        warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
+        if remaining > 0:
+            model.learn(total_timesteps=remaining, callback=CallbackList([*callbacks, stopper, timer]),
+                        tb_log_name=algo, reset_num_timesteps=fresh)
+    wall = max(time.perf_counter() - t0, 1e-9)
+    if stopper.stopped:
+        path = save_checkpoint(model, out, algo)
+        print(f"rhs-slam train: interrupted at {model.num_timesteps} steps, saved {path}; "
+              "run the same command with --resume to continue", file=sys.stderr)
+    else:
+        model.save(out / "model.zip")
+    return t0, wall, stopper, timer
 
 
 def _check_start(algo: str, run: RunSettings, out: Path, resume: bool) -> None:

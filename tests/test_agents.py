@@ -32,7 +32,7 @@ from agents.evaluate import (
     run_episode,
 )
 from agents.features import GridExtractor, PointSetExtractor
-from agents.train import ALGOS, load_hyperparams, train, worker_env_id
+from agents.train import ALGOS, load_hyperparams, train, update_threads_for, worker_env_id
 from rhs_slam.cli import main as cli_main
 
 SLAM = "rhs-highway-slam-v0"
@@ -87,6 +87,47 @@ def test_ppo_training_run_writes_everything(trained):
     # 4 s episodes at 5 Hz: at least a few finished episodes over 256 steps
     rows = [line for m in monitors for line in m.read_text().splitlines()[2:]]
     assert len(rows) >= 2
+    # the timing splits the run: 2 rollouts of 64 steps x 2 envs, the steady part is the second one
+    t = s["timing"]
+    assert t["rollouts"] == 2 and t["steady_timesteps"] == 128 and t["steady_steps_per_s"] > 0
+    assert t["setup_s"] > 0 and t["first_rollout_s"] > 0 and t["steady_update_s_per_rollout"] > 0
+    assert t["update_threads"] is None  # the default: one torch thread throughout
+    assert torch.get_num_threads() == 1
+
+
+def test_update_threads_and_phase_timer():
+    import os
+
+    from agents.callbacks import PhaseTimer, UpdateThreads
+
+    cores = len(os.sched_getaffinity(0))
+    assert update_threads_for(1, 2) is None  # the default: no switch
+    assert update_threads_for(1, 2, "auto") == max(1, min(cores, 3))
+    assert update_threads_for(2, 8, "auto") == max(2, min(cores, 10))
+    assert update_threads_for(None, 2, "auto") is None and update_threads_for(1, 1, "auto") is None
+    assert update_threads_for(1, 2, 3) == 3
+    for bad in (0, 2000, 1.5, "all"):
+        with pytest.raises((ValueError, TypeError), match="update_threads"):
+            update_threads_for(1, 2, bad)
+    # 3 rollouts of 100 steps: 4 s collecting + 1 s updating each, the first one 3 s longer
+    timer = PhaseTimer()
+    timer.rollouts = [(0.0, 0), (8.0, 100), (13.0, 200)]
+    timer.rollout_ends = [7.0, 12.0, 17.0]
+    timer.ended, timer.final_timesteps = 18.0, 300
+    ph = timer.phases(decision_interval=2)
+    assert ph["first_rollout_s"] == 8.0 and ph["steady_s"] == 10.0 and ph["steady_timesteps"] == 400
+    assert ph["steady_steps_per_s"] == 40.0
+    assert ph["steady_collect_s_per_rollout"] == 4.0 and ph["steady_update_s_per_rollout"] == 1.0
+    one = PhaseTimer()
+    one.rollouts, one.rollout_ends, one.ended, one.final_timesteps = [(0.0, 0)], [3.0], 4.0, 100
+    assert one.phases()["first_rollout_s"] == 4.0 and one.phases()["steady_steps_per_s"] is None
+    before = torch.get_num_threads()
+    switch = UpdateThreads(1, 2)
+    switch._on_rollout_end()
+    assert torch.get_num_threads() == 2
+    switch._on_rollout_start()
+    assert torch.get_num_threads() == 1
+    torch.set_num_threads(before)
 
 
 def test_trained_policy_loads_and_acts(trained):
