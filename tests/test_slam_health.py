@@ -44,18 +44,30 @@ def test_forward_speed_fit_two_points_and_a_mover():
     assert forward_speed_fit(pts[[0]], 0.5, min_inliers=1)[0] == pytest.approx(v)
 
 
+RADAR_MOUNTS = np.array([[2.5, 0.0], [0.0, 1.0], [-2.5, 0.0], [0.0, -1.0]])  # front, left, rear, right (m)
+
+
+def _static_cloud(rng: np.random.Generator, n: int = 40):
+    """``n`` static points within 60 m of the car, each seen by one of :data:`RADAR_MOUNTS`:
+    ``(sensor of each point, cloud)``, where ``cloud(v, w)`` gives the points ``(x, y, v_r, 1)`` whose radial
+    speed is what the car moving at ``v`` (m/s) and turning at ``w`` (rad/s) measures along each radar's line
+    of sight, ``v_r = -(v + w x p) . u``. Draws the points, then their radars, from ``rng``."""
+    xy = rng.uniform(-60, 60, (n, 2))
+    s = RADAR_MOUNTS[rng.integers(0, 4, n)]
+    u = (xy - s) / np.hypot(*(xy - s).T)[:, None]
+
+    def cloud(v, w: float) -> np.ndarray:
+        vr = np.sum(-(np.asarray(v, dtype=float)[None, :] + w * np.stack([-xy[:, 1], xy[:, 0]], axis=1)) * u, axis=1)
+        return np.column_stack([xy, vr, np.ones(n)])
+
+    return s, cloud
+
+
 def test_doppler_ego_motion_sees_the_turn_through_the_lever_arms():
     rng = np.random.default_rng(1)
-    mounts = np.array([[2.5, 0.0], [0.0, 1.0], [-2.5, 0.0], [0.0, -1.0]])
-    xy = rng.uniform(-60, 60, (40, 2))
-    radar = rng.integers(0, 4, 40)
-    s = mounts[radar]
-    v, w = np.array([12.0, 0.3]), 2.0  # a sharp lane change at 12 m/s
-    u = (xy - s) / np.hypot(*(xy - s).T)[:, None]
-    rel = -(v[None, :] + w * np.stack([-xy[:, 1], xy[:, 0]], axis=1))  # a static point relative to the car
-    vr = np.sum(rel * u, axis=1)
-    vr[:5] += 7.0  # five points on a vehicle
-    pts = np.column_stack([xy, vr, np.ones(40)])
+    s, cloud = _static_cloud(rng)
+    pts = cloud([12.0, 0.3], 2.0)  # a sharp lane change at 12 m/s
+    pts[:5, 2] += 7.0  # five points on a vehicle
     fit = doppler_ego_motion(pts, s, 0.5, rng, n_hypotheses=128)
     np.testing.assert_allclose(fit, [12.0, 0.3, 2.0], atol=1e-6)
     # the velocity-only model is off by the lever arms' w |s| (2.5 m x 2 rad/s = 5 m/s across the front radar)
@@ -196,15 +208,9 @@ def test_a_reversed_lane_change_is_found_with_the_speed_bound_alone():
     from slam.core.pipeline import SlamPipeline, static_mask
     from slam.core.registration import ICPRegistration
 
-    rng = np.random.default_rng(5)
-    mounts = np.array([[2.5, 0.0], [0.0, 1.0], [-2.5, 0.0], [0.0, -1.0]])
-    xy = rng.uniform(-60, 60, (40, 2))
-    s = mounts[rng.integers(0, 4, 40)]
-    u = (xy - s) / np.hypot(*(xy - s).T)[:, None]
-    v, w = np.array([9.3, 4.0]), 1.9
-    vr = np.sum(-(v[None, :] + w * np.stack([-xy[:, 1], xy[:, 0]], axis=1)) * u, axis=1)
-    pts = np.column_stack([xy, vr, np.ones(40)])
-    pipe = SlamPipeline(ICPRegistration(), rng=0, sensor_xy=mounts)
+    s, cloud = _static_cloud(np.random.default_rng(5))
+    pts = cloud([9.3, 4.0], 1.9)
+    pipe = SlamPipeline(ICPRegistration(), rng=0, sensor_xy=RADAR_MOUNTS)
     pipe.velocity = np.array([10.1, -2.5, -1.9])  # the first half of the lane change, held
     thr = pipe.config.dynamic_threshold_mps
     assert static_mask(pts, pipe.velocity[:2], thr, yaw_rate=-1.9, sensor_xy=s).sum() < 20
@@ -212,14 +218,11 @@ def test_a_reversed_lane_change_is_found_with_the_speed_bound_alone():
     assert turn is not None
     np.testing.assert_allclose(turn, [9.3, 4.0, 1.9], atol=1e-6)
     # the same turn at 26 m/s is 49 m/s^2 of lateral acceleration, past what the vehicles can steer: refused
-    fast = np.column_stack([xy, np.sum(-(np.array([26.0, 4.0])[None, :] + w * np.stack([-xy[:, 1], xy[:, 0]], axis=1))
-                                       * u, axis=1), np.ones(40)])
     pipe.velocity = np.array([26.0, -2.5, -1.9])
-    assert pipe._doppler_turn(fast, s, 0.2, np.array([25.0, 0.5])) is None
+    assert pipe._doppler_turn(cloud([26.0, 4.0], 1.9), s, 0.2, np.array([25.0, 0.5])) is None
     # the turn has ended (straight points, the same slip): no turn is reported
     pipe.velocity = np.array([9.3, 4.0, 1.9])
-    straight = np.column_stack([xy, -(9.3 * u[:, 0] + 4.0 * u[:, 1]), np.ones(40)])  # no turn now, same slip
-    assert pipe._doppler_turn(straight, s, 0.2, np.array([9.3, 4.0])) is None
+    assert pipe._doppler_turn(cloud([9.3, 4.0], 0.0), s, 0.2, np.array([9.3, 4.0])) is None
 
 
 def test_a_retried_turn_counts_only_when_the_registration_confirms_it():
@@ -231,18 +234,14 @@ def test_a_retried_turn_counts_only_when_the_registration_confirms_it():
     from slam.core.pipeline import SlamPipeline
     from slam.core.registration import ICPRegistration
 
-    rng = np.random.default_rng(5)
-    mounts = np.array([[2.5, 0.0], [0.0, 1.0], [-2.5, 0.0], [0.0, -1.0]])
-    xy = rng.uniform(-60, 60, (40, 2))
-    s = mounts[rng.integers(0, 4, 40)]
-    u = (xy - s) / np.hypot(*(xy - s).T)[:, None]
+    s, cloud = _static_cloud(np.random.default_rng(5))
     v, w, dt = np.array([9.3, 4.0]), 1.9, 0.2
-    vr = np.sum(-(v[None, :] + w * np.stack([-xy[:, 1], xy[:, 0]], axis=1)) * u, axis=1)
-    pts = np.column_stack([xy, vr, np.ones(40)])
+    pts = cloud(v, w)
+    xy = pts[:, :2]
     held_v, held_w = np.array([9.0, 0.5]), -1.9
 
     def turn_after(prev_motion: np.ndarray) -> np.ndarray | None:
-        pipe = SlamPipeline(ICPRegistration(), rng=0, sensor_xy=mounts)
+        pipe = SlamPipeline(ICPRegistration(), rng=0, sensor_xy=RADAR_MOUNTS)
         pipe.velocity = np.array([10.1, -2.5, held_w])
         pipe.last_motion = doppler_displacement(held_v, held_w * dt, dt)
         # the last cycle's static points: the scene seen from the pose before ``prev_motion``
