@@ -201,7 +201,6 @@ class ICPRegistration:
         if prev.ndim != 2 or cur.ndim != 2 or len(prev) < self.min_pairs or len(cur) < self.min_pairs:
             self.last_estimate = guess
             return guess.copy()
-        tree = None if self.kernels == "numba" else cKDTree(prev[:, :2])
         src = cur[:, :2]
         if self.amplitude_weights and prev.shape[1] >= 4 and cur.shape[1] >= 4:
             amp_p = np.maximum(prev[:, 3], 1e-12)
@@ -209,12 +208,17 @@ class ICPRegistration:
         else:
             amp_p = amp_c = None
         offsets = np.concatenate([[0.0], self.yaw_offsets[self.yaw_offsets != 0.0]])
-        if self.kernels == "numba":  # every start, its iterations and the score in one compiled call
-            est, self.last_pairs, self.last_rmse = self._search_compiled(src, prev, guess, offsets, amp_p, amp_c)
-            est[2] = wrap_angle(est[2])
-            self.last_estimate = est.copy()
-            return est
-        assert tree is not None
+        search = self._search_compiled if self.kernels == "numba" else self._search_numpy
+        est, self.last_pairs, self.last_rmse = search(src, prev, guess, offsets, amp_p, amp_c)
+        est[2] = wrap_angle(est[2])
+        self.last_estimate = est.copy()
+        return est
+
+    def _search_numpy(self, src, prev, guess, offsets, amp_p, amp_c) -> tuple[np.ndarray, int, float]:
+        """The heading search of :meth:`estimate`: :meth:`_fit` from ``guess`` turned by each of ``offsets``, the
+        fit with the most points within ``min_gate_m`` (then the smallest RMS distance) kept: the estimate, its
+        pairs and RMS distance (the guess, 0 pairs and nan when no start fits)."""
+        tree = cKDTree(prev[:, :2])
         best = None
         for offset in offsets:
             start = guess + np.array([0.0, 0.0, offset])
@@ -226,12 +230,9 @@ class ICPRegistration:
                 if best is None or score > best[0]:
                     best = (score, est, pairs, rmse)
         if best is None:
-            est, self.last_pairs, self.last_rmse = guess.copy(), 0, float("nan")
-        else:
-            _, est, self.last_pairs, self.last_rmse = best
-        est[2] = wrap_angle(est[2])
-        self.last_estimate = est.copy()
-        return est
+            return guess.copy(), 0, float("nan")
+        _, est, pairs, rmse = best
+        return est, pairs, rmse
 
     def _search_compiled(self, src, prev, guess, offsets, amp_p, amp_c) -> tuple[np.ndarray, int, float]:
         """The heading search of :meth:`estimate` by :func:`slam.core.kernels.icp_search` (:meth:`_fit` from every
