@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import time
+
+import torch
 from stable_baselines3.common.callbacks import BaseCallback
 
 
@@ -53,26 +56,18 @@ class PhaseTimer(BaseCallback):
         self.final_timesteps = 0
 
     def _on_training_start(self) -> None:
-        import time
-
         self.started = time.perf_counter()
 
     def _on_rollout_start(self) -> None:
-        import time
-
         self.rollouts.append((time.perf_counter(), int(self.model.num_timesteps)))
 
     def _on_step(self) -> bool:
         return True
 
     def _on_rollout_end(self) -> None:
-        import time
-
         self.rollout_ends.append(time.perf_counter())
 
     def _on_training_end(self) -> None:
-        import time
-
         self.ended = time.perf_counter()
         self.final_timesteps = int(self.model.num_timesteps)
 
@@ -116,19 +111,13 @@ class UpdateThreads(BaseCallback):
         self.collect, self.update = int(collect), int(update)
 
     def _on_rollout_start(self) -> None:
-        import torch
-
         torch.set_num_threads(self.collect)
 
     def _on_step(self) -> bool:
         return True
 
     def _on_rollout_end(self) -> None:
-        import torch
-
         torch.set_num_threads(self.update)
 
     def _on_training_end(self) -> None:
-        import torch
-
         torch.set_num_threads(self.collect)
