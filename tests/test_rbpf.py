@@ -226,11 +226,15 @@ def test_fastslam2_proposal_matches_dense_gaussian_algebra():
 
 
 def test_log_sum_exp_is_scipys_value():
-    """The RBPF's weight normaliser equals scipy.special.logsumexp bit for bit (entries at -inf, ties at the max)."""
+    """The RBPF's weight normaliser equals scipy.special.logsumexp bit for bit (entries at -inf, ties at the max)
+    from scipy 1.15 on, whose operations it repeats; scipy 1.13-1.14 (allowed by the package's range) order them
+    otherwise, measured within 1 ulp of the shift ``max(|a*|, 1)``: there, within 2."""
+    import scipy
     from scipy.special import logsumexp
 
     from slam.core.rbpf import log_sum_exp
 
+    same_operations = tuple(int(x) for x in scipy.__version__.split(".")[:2]) >= (1, 15)
     rng = np.random.default_rng(0)
     for trial in range(500):
         p = int(rng.integers(1, 300))
@@ -240,5 +244,8 @@ def test_log_sum_exp_is_scipys_value():
             a[0] = 0.0
         if trial % 5 == 0:
             a[rng.integers(0, p, 3)] = a.max()
-        assert log_sum_exp(a) == logsumexp(a)
+        if same_operations:
+            assert log_sum_exp(a) == logsumexp(a)
+        else:
+            assert abs(log_sum_exp(a) - logsumexp(a)) <= 2 * np.spacing(max(abs(a.max()), 1.0))
     assert abs(log_sum_exp(np.log([1.0, 2.0, 3.0])) - np.log(6.0)) < 1e-15
