@@ -108,6 +108,8 @@ def test_health_config_rejects_bad_values(field, value):
 def test_pipeline_config_rejects_bad_values():
     with pytest.raises(ValueError, match="doppler_gate_m"):
         PipelineConfig(doppler_gate_m=0.0)
+    with pytest.raises(ValueError, match="doppler_gate_cross_m"):
+        PipelineConfig(doppler_gate_cross_m=-1.0)
     with pytest.raises(ValueError, match="new_map_after_cycles"):
         PipelineConfig(new_map_after_cycles=0)
 
@@ -220,9 +222,51 @@ def test_a_reversed_lane_change_is_found_with_the_speed_bound_alone():
     # the same turn at 26 m/s is 49 m/s^2 of lateral acceleration, past what the vehicles can steer: refused
     pipe.velocity = np.array([26.0, -2.5, -1.9])
     assert pipe._doppler_turn(cloud([26.0, 4.0], 1.9), s, 0.2, np.array([25.0, 0.5])) is None
-    # the turn has ended (straight points, the same slip): no turn is reported
-    pipe.velocity = np.array([9.3, 4.0, 1.9])
-    assert pipe._doppler_turn(cloud([9.3, 4.0], 0.0), s, 0.2, np.array([9.3, 4.0])) is None
+
+
+def test_a_stale_turn_is_ended_by_the_retried_fit():
+    """The lane change has ended (the points fit a straight drive) while the held state still turns at
+    1.9 rad/s: its static mask keeps few points, the retried fit finds the motion without a turn and it
+    replaces the held state (a result of None would keep the stale yaw rate, the loss of random drives 1232 and
+    1264); with the retry kept to turns (``SLIP_TURN_END = False``) the stale turn stays."""
+    import slam.core.pipeline as pipeline
+    from slam.core.pipeline import SlamPipeline
+    from slam.core.registration import ICPRegistration
+
+    s, cloud = _static_cloud(np.random.default_rng(5))
+    pts = cloud([9.3, 0.4], 0.0)
+
+    def ended() -> np.ndarray | None:
+        pipe = SlamPipeline(ICPRegistration(), rng=0, sensor_xy=RADAR_MOUNTS)
+        pipe.velocity = np.array([9.3, 4.0, 1.9])  # the turn held from the last cycles
+        return pipe._doppler_turn(pts, s, 0.2, np.array([9.3, 0.4]))
+
+    found = ended()
+    assert found is not None
+    np.testing.assert_allclose(found, [9.3, 0.4, 0.0], atol=1e-6)
+    saved = pipeline.SLIP_TURN_END
+    try:
+        pipeline.SLIP_TURN_END = False
+        assert ended() is None
+    finally:
+        pipeline.SLIP_TURN_END = saved
+
+
+def test_the_doppler_gate_is_wider_across_the_displacement():
+    """The gate is an ellipse about the Doppler displacement: 1 m along it, 1.5 m across (a turn's onset gets
+    the Doppler velocity's direction wrong, not its length)."""
+    from slam.core.pipeline import within_doppler_gate
+
+    expected = np.array([2.0, 0.0])  # 10 m/s over 0.2 s, straight on
+    assert within_doppler_gate(expected + [0.0, 1.2], expected, 1.0, 1.5)
+    assert not within_doppler_gate(expected + [1.2, 0.0], expected, 1.0, 1.5)
+    assert within_doppler_gate(expected + [0.6, 1.1], expected, 1.0, 1.5)  # (0.6)^2 + (1.1 / 1.5)^2 = 0.90
+    assert not within_doppler_gate(expected + [0.7, 1.2], expected, 1.0, 1.5)  # 0.49 + 0.64 = 1.13
+    rotated = np.array([0.0, 2.0])  # the same along a turned heading
+    assert within_doppler_gate(rotated + [1.2, 0.0], rotated, 1.0, 1.5)
+    assert not within_doppler_gate(rotated + [0.0, 1.2], rotated, 1.0, 1.5)
+    assert within_doppler_gate([0.9, 0.0], [0.0, 0.0], 1.0, 1.5)  # at rest: the 1 m circle
+    assert not within_doppler_gate([0.0, 1.2], [0.0, 0.0], 1.0, 1.5)
 
 
 def test_a_retried_turn_counts_only_when_the_registration_confirms_it():
@@ -253,6 +297,33 @@ def test_a_retried_turn_counts_only_when_the_registration_confirms_it():
     assert confirmed is not None
     np.testing.assert_allclose(confirmed, [9.3, 4.0, 1.9], atol=1e-6)
     assert turn_after(doppler_displacement(held_v, held_w * dt, dt)) is None
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_relocalisation_finds_a_heading_lost_by_0_68_rad(seed):
+    """A loss at a lane change's onset can leave the estimate 0.7 rad off (dense random drive 1249: 0.68 rad);
+    the relocalisation's coarse grid spans +-0.8 rad of heading and finds the correction (with +-0.4 rad it
+    found none on these three scenes)."""
+    from rhs_common.geometry import apply_motion
+    from slam.core.pipeline import SlamPipeline
+    from slam.core.registration import ICPRegistration
+
+    rng = np.random.default_rng(seed)
+    scene = np.column_stack([rng.uniform(-50, 50, 30), rng.choice([-9.0, 9.0], 30) + rng.normal(0, 1.0, 30)])
+    pipe = SlamPipeline(ICPRegistration(), rng=0)
+    for _ in range(3):
+        pipe.step(np.column_stack([scene, np.zeros(30), np.ones(30)]), 0.2)
+    est = pipe.slam.last_estimate
+    pipe.health.lost, pipe.health.loss_landmark_id = True, pipe.slam.next_id
+    pipe.distance_since_loss = 5.0
+    true = np.array([2.0, 0.5, 0.68])  # the correction: it moves the scan onto the map
+    c, s = math.cos(true[2]), math.sin(true[2])
+    d = scene - true[:2]
+    seen_xy = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
+    np.testing.assert_allclose(apply_motion(seen_xy, true), scene, atol=1e-9)
+    correction = pipe._relocalise(est, np.column_stack([seen_xy, np.zeros(30), np.ones(30)]))
+    assert correction is not None
+    np.testing.assert_allclose(correction, true, atol=0.05)
 
 
 @pytest.mark.parametrize(("shift_m", "driven_m", "accepted"), [(4.0, 0.0, True), (16.0, 0.0, False), (16.0, 5.0, True)])
