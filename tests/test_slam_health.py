@@ -252,6 +252,25 @@ def test_a_stale_turn_is_ended_by_the_retried_fit():
         pipeline.SLIP_TURN_END = saved
 
 
+def test_the_bounded_turn_fit_refuses_a_turn_past_the_vehicles_lateral_acceleration():
+    """A Doppler field that fits a -2.39 rad/s turn at 26 m/s (63 m/s^2 of lateral acceleration, past the
+    ~40 m/s^2 highway-env's vehicles can steer; random drive 1305 fitted it at a lane change's reversal) within the
+    acceleration bound of the last velocity: no turn is taken, not from the bounded fit nor from the retry; the
+    same turn at 12 m/s (29 m/s^2) is."""
+    from slam.core.pipeline import LATERAL_ACCEL_MAX, SlamPipeline
+    from slam.core.registration import ICPRegistration
+
+    s, cloud = _static_cloud(np.random.default_rng(5))
+    pipe = SlamPipeline(ICPRegistration(), rng=0, sensor_xy=RADAR_MOUNTS)
+    pipe.velocity = np.array([27.0, 2.5, 0.98])  # within the 3 m/s acceleration bound of the fitted velocity
+    assert math.hypot(26.16, 3.66) * 2.39 > LATERAL_ACCEL_MAX
+    assert pipe._doppler_turn(cloud([26.16, 3.66], -2.39), s, 0.2, None) is None
+    pipe.velocity = np.array([12.0, 1.61, 0.98])
+    found = pipe._doppler_turn(cloud([11.5, 3.0], -2.39), s, 0.2, None)
+    assert found is not None
+    np.testing.assert_allclose(found, [11.5, 3.0, -2.39], atol=1e-6)
+
+
 def test_the_doppler_gate_is_wider_across_the_displacement():
     """The gate is an ellipse about the Doppler displacement: 1 m along it, 1.5 m across (a turn's onset gets
     the Doppler velocity's direction wrong, not its length)."""

@@ -158,11 +158,15 @@ SLIP_REGISTRATION_CHECK = True
 #: 0.3 rad/s, the turn test discarded it, the stale turn (1-2 rad/s) was held, its static mask dropped the static
 #: points and the car was lost. ``False`` keeps only retried fits with a turn
 SLIP_TURN_END = True
-#: ... and that fit's turn counts only below this lateral acceleration ``|v| |w|`` (m/s^2): highway-env's
+#: a Doppler turn fit (the bounded one and the retried one) counts only below this lateral acceleration ``|v| |w|``
+#: (m/s^2): highway-env's
 #: lateral controller turns at ``KP_HEADING`` (5 /s) times the heading to a lateral speed command of
 #: ``KP_LATERAL`` (1 / 0.6 s) times the lane offset (a 4 m lane: 6.7 m/s), about 33 m/s^2 whatever the
 #: speed; the true ``|v| |w|`` of the random drives (tuning seeds 2000-2079, 6183 cycles) peaked at 38.9 m/s^2.
-#: Without the bound, a crash's last cycle at 20-26 m/s fit a 2-3 rad/s turn (43-74 m/s^2) on the wreck's points
+#: Without the bound, a crash's last cycle at 20-26 m/s fit a 2-3 rad/s turn (43-74 m/s^2) on the wreck's points.
+#: The bounded fit was once exempt: random highway drive 1305 (held-out seeds 1300-1399) reversed a lane change at
+#: 28 m/s (true +1.03 rad/s), the bounded fit took -2.39 rad/s at 26 m/s (63 m/s^2) with a lateral velocity of
+#: 3.7 m/s, and that velocity, held as the next cycle's prior, left one point static: the car was lost (22.7 m)
 LATERAL_ACCEL_MAX = 40.0
 
 #: the turn fit is retried with the speed bound alone (:data:`SLIP_FREE`) when the held state's static mask keeps
@@ -569,16 +573,16 @@ class SlamPipeline:
         self, pts: np.ndarray, sensors: np.ndarray | None, dt: float, v_flat: np.ndarray | None
     ) -> np.ndarray | None:
         """``(vx, vy, w)`` from :func:`doppler_ego_motion` when it finds a yaw rate of at least
-        ``TURN_RATE_MIN`` (rad/s) and fits ``TURN_GAIN`` times the points that the turn-free velocity
-        ``v_flat`` fits, else None (the velocity fit alone stands: its yaw-rate error is small).
+        ``TURN_RATE_MIN`` (rad/s) with a lateral acceleration ``|v| |w|`` of at most :data:`LATERAL_ACCEL_MAX` and
+        fits ``TURN_GAIN`` times the points that the turn-free velocity ``v_flat`` fits, else None (the velocity
+        fit alone stands: its yaw-rate error is small).
 
         The fit's velocity lies within the acceleration bound of the last one; when it finds no turn and the
         held state (``v_flat`` or the last velocity, with the last yaw rate) leaves fewer than
         ``RECHECK_BELOW`` of the points static, the fit is tried again with the bound on the speed alone
         (:data:`SLIP_FREE`: a sharp steer swings the velocity's direction within the cycle), and its turn (or
         its motion without a turn, which ends a stale one: :data:`SLIP_TURN_END`) replaces the held state when it
-        leaves ``RECHECK_GAIN`` times as many points static and its lateral
-        acceleration ``|v| |w|`` is at most :data:`LATERAL_ACCEL_MAX`, and the registration confirms it at
+        leaves ``RECHECK_GAIN`` times as many points static and the registration confirms it at
         least as well as the held state (:meth:`_registered_fit`, :data:`SLIP_REGISTRATION_CHECK`: moving
         traffic can explain the Doppler as well as the road does, not the points' geometry)."""
         if sensors is None or not self.use_doppler or not np.any(sensors):
@@ -592,6 +596,8 @@ class SlamPipeline:
 
         def turn(fit: np.ndarray | None) -> np.ndarray | None:
             if fit is None or abs(fit[2]) < TURN_RATE_MIN:
+                return None
+            if math.hypot(fit[0], fit[1]) * abs(fit[2]) > LATERAL_ACCEL_MAX:  # past what the vehicles can steer
                 return None
             # the turn must explain the Doppler better than the best turn-free fit (noisy points can fake a turn)
             with_turn = int(np.sum(np.abs(pts[:, 2] - A @ fit) <= 0.5 * thr))
@@ -615,7 +621,7 @@ class SlamPipeline:
         turning = abs(float(self.velocity[2])) >= TURN_RATE_MIN
         ends_turn = SLIP_TURN_END and turning and retried is not None and abs(retried[2]) < TURN_RATE_MIN
         found = retried if ends_turn else turn(retried)
-        if found is None or math.hypot(found[0], found[1]) * abs(found[2]) > LATERAL_ACCEL_MAX:
+        if found is None:
             return None
         if static(found) < RECHECK_GAIN * max(held, 1):
             return None
