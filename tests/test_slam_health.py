@@ -224,7 +224,7 @@ def test_a_reversed_lane_change_is_found_with_the_speed_bound_alone():
     assert pipe._doppler_turn(cloud([26.0, 4.0], 1.9), s, 0.2, np.array([25.0, 0.5])) is None
 
 
-def test_a_stale_turn_is_ended_by_the_retried_fit():
+def test_a_stale_turn_is_ended_by_the_retried_fit(monkeypatch):
     """The lane change has ended (the points fit a straight drive) while the held state still turns at
     1.9 rad/s: its static mask keeps few points, the retried fit finds the motion without a turn and it
     replaces the held state (a result of None would keep the stale yaw rate, the loss of random drives 1232 and
@@ -244,12 +244,8 @@ def test_a_stale_turn_is_ended_by_the_retried_fit():
     found = ended()
     assert found is not None
     np.testing.assert_allclose(found, [9.3, 0.4, 0.0], atol=1e-6)
-    saved = pipeline.SLIP_TURN_END
-    try:
-        pipeline.SLIP_TURN_END = False
-        assert ended() is None
-    finally:
-        pipeline.SLIP_TURN_END = saved
+    monkeypatch.setattr(pipeline, "SLIP_TURN_END", False)
+    assert ended() is None
 
 
 def test_the_bounded_turn_fit_refuses_a_turn_past_the_vehicles_lateral_acceleration():
@@ -318,12 +314,9 @@ def test_a_retried_turn_counts_only_when_the_registration_confirms_it():
     assert turn_after(doppler_displacement(held_v, held_w * dt, dt)) is None
 
 
-@pytest.mark.parametrize("seed", [1, 2, 3])
-def test_relocalisation_finds_a_heading_lost_by_0_68_rad(seed):
-    """A loss at a lane change's onset can leave the estimate 0.7 rad off (dense random drive 1249: 0.68 rad);
-    the relocalisation's coarse grid spans +-0.8 rad of heading and finds the correction (with +-0.4 rad it
-    found none on these three scenes)."""
-    from rhs_common.geometry import apply_motion
+def _lost_beside_a_roadside(seed: int, driven_m: float):
+    """A pipeline that mapped 30 roadside points (two rows 9 m either side, +-50 m along) from a car at rest
+    (every point static), then lost the car ``driven_m`` metres ago: ``(pipeline, its estimate, the points)``."""
     from slam.core.pipeline import SlamPipeline
     from slam.core.registration import ICPRegistration
 
@@ -332,13 +325,21 @@ def test_relocalisation_finds_a_heading_lost_by_0_68_rad(seed):
     pipe = SlamPipeline(ICPRegistration(), rng=0)
     for _ in range(3):
         pipe.step(np.column_stack([scene, np.zeros(30), np.ones(30)]), 0.2)
-    est = pipe.slam.last_estimate
     pipe.health.lost, pipe.health.loss_landmark_id = True, pipe.slam.next_id
-    pipe.distance_since_loss = 5.0
+    pipe.distance_since_loss = driven_m
+    return pipe, pipe.slam.last_estimate, scene
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_relocalisation_finds_a_heading_lost_by_0_68_rad(seed):
+    """A loss at a lane change's onset can leave the estimate 0.7 rad off (dense random drive 1249: 0.68 rad);
+    the relocalisation's coarse grid spans +-0.8 rad of heading and finds the correction (with +-0.4 rad it
+    found none on these three scenes)."""
+    from rhs_common.geometry import apply_motion, points_in_frame
+
+    pipe, est, scene = _lost_beside_a_roadside(seed, driven_m=5.0)
     true = np.array([2.0, 0.5, 0.68])  # the correction: it moves the scan onto the map
-    c, s = math.cos(true[2]), math.sin(true[2])
-    d = scene - true[:2]
-    seen_xy = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
+    seen_xy = points_in_frame(scene, true)
     np.testing.assert_allclose(apply_motion(seen_xy, true), scene, atol=1e-9)
     correction = pipe._relocalise(est, np.column_stack([seen_xy, np.zeros(30), np.ones(30)]))
     assert correction is not None
@@ -350,21 +351,9 @@ def test_relocalisation_refuses_a_correction_past_the_reported_uncertainty(shift
     """A scan that fits the map built before the loss only ``shift_m`` along the road (a repeating roadside
     fits one period away) is taken while the shift lies within twice the position std the lost filter
     reports (``spread_lost_m`` = 6 m plus the distance driven since the loss)."""
-    from slam.core.pipeline import SlamPipeline
-    from slam.core.registration import ICPRegistration
-
-    rng = np.random.default_rng(2)
-    scene = np.column_stack([rng.uniform(-50, 50, 30), rng.choice([-9.0, 9.0], 30) + rng.normal(0, 1.0, 30)])
-    cloud = np.column_stack([scene, np.zeros(30), np.ones(30)])  # a car at rest: every point static
-    pipe = SlamPipeline(ICPRegistration(), rng=0)
-    for _ in range(3):
-        pipe.step(cloud, 0.2)
-    est = pipe.slam.last_estimate
-    pipe.health.lost, pipe.health.loss_landmark_id = True, pipe.slam.next_id
-    pipe.distance_since_loss = driven_m
+    pipe, est, scene = _lost_beside_a_roadside(2, driven_m)
     # the scan the map predicts ``shift_m`` ahead: the estimate is that far behind the car
-    seen = cloud.copy()
-    seen[:, 0] -= shift_m
+    seen = np.column_stack([scene[:, 0] - shift_m, scene[:, 1], np.zeros(30), np.ones(30)])
     correction = pipe._relocalise(est, seen)
     assert (correction is not None) == accepted
     if accepted:
