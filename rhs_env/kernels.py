@@ -908,73 +908,124 @@ def doppler_dtft_refine(h: np.ndarray, r: np.ndarray, t: np.ndarray, n_t: int, k
 
 
 @njit
+def _fit_residual(y: np.ndarray, a: np.ndarray, s: np.ndarray) -> float:
+    """``||y - A s||^2`` of one row: y (I C,), a (I C, L), s (L,)."""
+    acc = 0.0
+    for q in range(y.size):
+        fit = 0j
+        for k in range(s.size):
+            fit += a[q, k] * s[k]
+        v = y[q] - fit
+        acc += v.real ** 2 + v.imag ** 2
+    return acc
+
+
+@njit
 def joint_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
                  x: np.ndarray, flat: np.ndarray, tgrid: np.ndarray, t: np.ndarray, n_t: int, kern_re: np.ndarray,
                  kern_im: np.ndarray, w: np.ndarray, nfft: int, theta: np.ndarray, domega: np.ndarray,
                  valid: np.ndarray, span: np.ndarray, passes: int, newton_steps: int, a: np.ndarray,
-                 s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`rhs_env.point_cloud.joint_refine` in one call: ``passes`` Jacobi passes over every valid (row, target).
+                 s: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`rhs_env.point_cloud.joint_refine` in one call: up to ``passes`` Jacobi passes over every valid (row, target).
 
-    Per pass, for every pair (d, k) at once against the pass' atoms a (D, I C, L) and amplitudes s (D, L):
-    the partial residual ``part = data_d - sum_l a_l s_l + a_k s_k`` (I, C); with ``base = exp(-j omega_k t)``
-    (the previous pass' phases) and ``h_i = a_k[i, 0] base[i, 0]``, the Doppler step of
-    :func:`doppler_dtft_refine` on ``part base``; then ``base = exp(-j omega'_k t)``, Newton steps on the angle
+    Per pass, for every pair (d, k) of the rows not yet converged, against the pass' atoms a (D, I C, L) and
+    amplitudes s (D, L): the partial residual ``part = data_d - sum_l a_l s_l + a_k s_k`` (I, C); with
+    ``base = exp(-j omega_k t)`` (the previous pass' phases) and ``h_i = a_k[i, 0] base[i, 0]``, the Doppler step
+    of :func:`doppler_dtft_refine` on ``part base``; then ``base = exp(-j omega'_k t)``, Newton steps on the angle
     (:func:`newton_refine`) with ``rho_i = sum_c part_ic base_ic``; then the new atoms
-    ``a_k = h(theta'_k) conj(base)`` and least squares for every amplitude (:func:`lstsq`). Returns theta,
-    d_omega, ``s * valid`` and a (updated copies). The narrow DTFT grid (w, kern) must cover ``span``.
+    ``a_k = h(theta'_k) conj(base)`` and least squares for the row's amplitudes (:func:`lstsq`). A row whose
+    pass lowered its residual ``||data_d - A_d s_d||^2`` by less than the fraction ``tol`` has converged and takes no
+    further pass (``tol <= 0``: every row takes every pass). Returns theta, d_omega, ``s * valid`` and a
+    (updated copies). The narrow DTFT grid (w, kern) must cover ``span``.
     """
     n_d, n_q, n_l = a.shape
     n_i, n_c = tgrid.shape
     theta = theta.copy()
     domega = domega.copy()
     a = a.copy()
+    s = s.copy()
     dd, kk = _valid_pairs(valid)  # the valid (row, target) pairs, row-major
     n_p = dd.size
-    span_p = np.empty(n_p)
     w_p = np.empty(n_p)
     for p in range(n_p):
-        span_p[p] = span[dd[p]]
         w_p[p] = domega[dd[p], kk[p]]
-    base = phasors(w_p, tgrid, -1.0)  # (P, I, C)
-    part = np.empty((n_p, n_i, n_c), np.complex128)
-    comp = np.empty((n_p, n_i, n_c), np.complex128)
-    h = np.empty((n_p, n_i), np.complex128)
-    rho = np.empty((n_p, n_i), np.complex128)
-    th = np.empty(n_p)
+    base = phasors(w_p, tgrid, -1.0)  # (P, I, C), exp(-j omega t) of each pair's current omega
     fit = np.empty(n_q, np.complex128)
+    moving = np.zeros(n_d, np.bool_)  # rows still refined
+    for p in range(n_p):
+        moving[dd[p]] = True
+    r2 = np.empty(n_d)  # ||data_d - A_d s_d||^2 of each row's current fit
+    if tol > 0:
+        for d in range(n_d):
+            r2[d] = _fit_residual(flat[d], a[d], s[d])
     for _ in range(passes):
+        sel = np.empty(n_p, np.int64)  # the pairs of the moving rows, row-major
+        n_m = 0
         for p in range(n_p):
+            if moving[dd[p]]:
+                sel[n_m] = p
+                n_m += 1
+        if n_m == 0:
+            break
+        sel = sel[:n_m]
+        part = np.empty((n_m, n_i, n_c), np.complex128)
+        comp = np.empty((n_m, n_i, n_c), np.complex128)
+        h = np.empty((n_m, n_i), np.complex128)
+        th = np.empty(n_m)
+        span_m = np.empty(n_m)
+        for m in range(n_m):
+            p = sel[m]
             d, k = dd[p], kk[p]
-            if p == 0 or dd[p - 1] != d:  # the row's fit A_d s_d, once per row (its pairs are adjacent)
+            if m == 0 or dd[sel[m - 1]] != d:  # the row's fit A_d s_d, once per row (its pairs are adjacent)
                 for q in range(n_q):
                     acc = 0j
-                    for m in range(n_l):
-                        acc += a[d, q, m] * s[d, m]
+                    for l in range(n_l):
+                        acc += a[d, q, l] * s[d, l]
                     fit[q] = acc
             for i in range(n_i):
                 for c in range(n_c):
                     q = i * n_c + c
                     v = flat[d, q] - fit[q] + a[d, q, k] * s[d, k]
-                    part[p, i, c] = v
-                    comp[p, i, c] = v * base[p, i, c]
-                h[p, i] = a[d, i * n_c, k] * base[p, i, 0]
-            th[p] = theta[d, k]
-        dw = doppler_dtft_refine(h, comp, t, n_t, kern_re, kern_im, w, span_p, nfft)
-        for p in range(n_p):
-            dw[p] += domega[dd[p], kk[p]]
-        base = phasors(dw, tgrid, -1.0)
+                    part[m, i, c] = v
+                    comp[m, i, c] = v * base[p, i, c]
+                h[m, i] = a[d, i * n_c, k] * base[p, i, 0]
+            th[m] = theta[d, k]
+            span_m[m] = span[d]
+        dw = doppler_dtft_refine(h, comp, t, n_t, kern_re, kern_im, w, span_m, nfft)
+        for m in range(n_m):
+            p = sel[m]
+            dw[m] += domega[dd[p], kk[p]]
+        base_m = phasors(dw, tgrid, -1.0)
         if newton_steps:
-            slot_projection(part, base, rho)
+            rho = np.empty((n_m, n_i), np.complex128)
+            slot_projection(part, base_m, rho)
             th = newton_refine(table, u_c, x_c, lo, step, w2, x, th, rho, newton_steps)
-        hs = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, np.int64(0))[0]  # (P, I)
-        for p in range(n_p):
+        hs = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, np.int64(0))[0]  # (M, I)
+        rows = np.empty(n_m, np.int64)  # the moving rows, in order
+        n_r = 0
+        for m in range(n_m):
+            p = sel[m]
             d, k = dd[p], kk[p]
-            theta[d, k] = th[p]
-            domega[d, k] = dw[p]
+            theta[d, k] = th[m]
+            domega[d, k] = dw[m]
             for i in range(n_i):
                 for c in range(n_c):
-                    a[d, i * n_c + c, k] = hs[p, i] * np.conj(base[p, i, c])
-        s = lstsq(a, flat)
+                    base[p, i, c] = base_m[m, i, c]
+                    a[d, i * n_c + c, k] = hs[m, i] * np.conj(base_m[m, i, c])
+            if n_r == 0 or rows[n_r - 1] != d:
+                rows[n_r] = d
+                n_r += 1
+        rows = rows[:n_r]
+        s_r = lstsq(_take3(a, rows), _take2(flat, rows))
+        for r in range(n_r):
+            for l in range(n_l):
+                s[rows[r], l] = s_r[r, l]
+        if tol > 0:
+            for r in range(n_r):
+                d = rows[r]
+                r2_new = _fit_residual(flat[d], a[d], s[d])
+                moving[d] = r2[d] - r2_new >= tol * r2[d]
+                r2[d] = r2_new
     for d in range(n_d):
         for k in range(n_l):
             if not valid[d, k]:
@@ -1455,14 +1506,15 @@ def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step:
                 t: np.ndarray, n_t: int, nfft: int, e_re: np.ndarray, e_im: np.ndarray, tab_re: np.ndarray,
                 tab_im: np.ndarray, fine_re: np.ndarray, fine_im: np.ndarray, fine_w: np.ndarray, max_targets: int,
                 residual_threshold: np.ndarray, noise_var: float, relative_threshold: float, min_amplitude: float,
-                newton_steps: int, cycles: int,
+                newton_steps: int, cycles: int, refine_tol: float,
                 detected: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`rhs_env.point_cloud.omp_doppler` in one call: theta, omega, amp, valid (D, L), atoms (D, I C, L), ``||R||^2``.
 
     Per iteration l on the residuals R of the active rows: the next atom (:func:`_new_atoms`), its column
     ``a_l = h(theta_l) exp(j omega_l t)``, least squares on the support (:func:`lstsq`), the amplitude test
     ``|s_k| ||a_k|| >= min_amplitude`` on every atom (waived for the first atom of a detected row), then,
-    from the second atom on, ``cycles`` passes of :func:`joint_refine` (the fine DTFT grid ``fine_w``,
+    from the second atom on, up to ``cycles`` passes of :func:`joint_refine` (a row stops once a pass lowers
+    its ``||R||^2`` by less than the fraction ``refine_tol``; the fine DTFT grid ``fine_w``,
     ``fine_re + j fine_im`` (J, n_t)) and the test again; a row that fails stops, the others keep the atom
     and continue while ``||R||^2 >= max(delta_r, rel ||data||^2)``. ``e_re + j e_im`` the twiddles
     ``exp(-2 pi j m / nfft)`` of the Doppler searches, ``tab_re + j tab_im`` the narrow searches' samples
@@ -1512,7 +1564,8 @@ def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step:
             val_k = _take2(val_r, kk)
             th_k, om_k, s_k, a_k = joint_refine(table, u_c, x_c, lo, step, w2, x, _take2(data_r, kk), tgrid, t, n_t,
                                                 fine_re, fine_im, fine_w, nfft, _take2(th_r, kk), _take2(om_r, kk),
-                                                val_k, span_k, cycles, newton_steps, _take3(a, kk), _take2(s, kk))
+                                                val_k, span_k, cycles, newton_steps, _take3(a, kk), _take2(s, kk),
+                                                refine_tol)
             ok_k = _amplitudes_pass(s_k, a_k, val_k, min_amplitude)
             for m in range(kk.size):
                 rr = kk[m]

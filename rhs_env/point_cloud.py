@@ -715,7 +715,7 @@ def _doppler_atoms(dic: AngleDictionary, theta: np.ndarray, omega: np.ndarray, t
 def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, theta: np.ndarray,
                  domega: np.ndarray, valid: np.ndarray, span: np.ndarray, passes: int = 1,
                  newton_steps: int = 2, atoms: np.ndarray | None = None,
-                 amp: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                 amp: np.ndarray | None = None, tol: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Joint (angle, Doppler) refinement of every target on the full slot x chirp data.
 
     Model: ``data[i, c] = sum_k s_k h_i(theta_k) exp(j d_omega_k t_ic) + noise``
@@ -727,6 +727,8 @@ def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, thet
     ``rho_i = sum_c r_ic exp(-j d_omega t_ic)``; then least squares for all
     amplitudes with atoms ``a_k = h(theta_k) exp(j d_omega_k t)``. ``atoms`` /
     ``amp``: the current atoms (D, I C, L) and amplitudes, when the caller has them.
+    ``tol``: a row whose pass lowered its residual ``||data - A s||^2`` by less than this fraction has converged and takes no
+    further pass (``passes`` is then the most a row takes; ``tol <= 0``: every row takes every pass).
     Returns theta, d_omega, amplitudes (D, L) and atoms (D, I C, L).
 
     With the dictionary's ``kernels="numba"`` (Taylor atoms, a narrow Doppler search) the passes run in
@@ -754,23 +756,33 @@ def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, thet
                                     t, n_t, kern_re, kern_im, w, nfft, np.ascontiguousarray(theta, dtype=float),
                                     np.ascontiguousarray(domega, dtype=float), np.ascontiguousarray(valid),
                                     np.ascontiguousarray(span, dtype=float), passes, newton_steps, a,
-                                    np.ascontiguousarray(s, dtype=complex))
-    base = None  # exp(-j d_omega t) of the current d_omega, carried from the previous pass
+                                    np.ascontiguousarray(s, dtype=complex), float(tol))
+    base = _phasors(dic, domega[dd, kk], tgrid)  # exp(-j d_omega t) of each pair, (P, I, C)
+    moving = np.zeros(d, bool)  # the rows still refined
+    moving[dd] = True
+    r2 = np.sum(np.abs(flat - np.einsum("dkl,dl->dk", a, s)) ** 2, axis=1) if tol > 0 else None
     for _ in range(passes):
-        fit = np.einsum("dkl,dl->dk", a, s)
-        part = (flat[dd] - fit[dd] + a[dd, :, kk] * s[dd, kk][:, None]).reshape(-1, i, c)
-        if base is None:
-            base = _phasors(dic, domega[dd, kk], tgrid)
-        h = a[dd, :, kk].reshape(-1, i, c)[:, :, 0] * base[:, :, 0]  # h(theta) of the current atom, (P, I)
-        dw = domega[dd, kk] + _doppler_grid_refine(h, part * base, tgrid, span[dd], dic.kernels)
-        th = theta[dd, kk]
-        base = _phasors(dic, dw, tgrid)
+        m = np.flatnonzero(moving[dd])  # the pairs of the moving rows
+        if m.size == 0:
+            break
+        dm, km = dd[m], kk[m]
+        fit = np.einsum("dkl,dl->dk", a[dm], s[dm])
+        part = (flat[dm] - fit + a[dm, :, km] * s[dm, km][:, None]).reshape(-1, i, c)
+        h = a[dm, :, km].reshape(-1, i, c)[:, :, 0] * base[m, :, 0]  # h(theta) of the current atom, (M, I)
+        dw = domega[dm, km] + _doppler_grid_refine(h, part * base[m], tgrid, span[dm], dic.kernels)
+        th = theta[dm, km]
+        base[m] = _phasors(dic, dw, tgrid)
         if newton_steps:
-            rho = np.sum(part * base, axis=2)
+            rho = np.sum(part * base[m], axis=2)
             th = _newton_refine(dic, th, rho, newton_steps)
-        theta[dd, kk], domega[dd, kk] = th, dw
-        a[dd, :, kk] = _doppler_atoms(dic, th, dw, tgrid, np.conj(base))
-        s = _lstsq(a, flat[..., None], dic.kernels)[..., 0]
+        theta[dm, km], domega[dm, km] = th, dw
+        a[dm, :, km] = _doppler_atoms(dic, th, dw, tgrid, np.conj(base[m]))
+        rows = np.unique(dm)
+        s[rows] = _lstsq(a[rows], flat[rows][..., None], dic.kernels)[..., 0]
+        if r2 is not None:
+            r2_new = np.sum(np.abs(flat[rows] - np.einsum("dkl,dl->dk", a[rows], s[rows])) ** 2, axis=1)
+            moving[rows] = r2[rows] - r2_new >= tol * r2[rows]
+            r2[rows] = r2_new
     return theta, domega, s * valid, a
 
 
@@ -835,7 +847,7 @@ def _twiddles(nfft: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _compiled_omp(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_targets: int,
                   residual_threshold: np.ndarray, noise_var: float, relative_threshold: float, min_amplitude: float,
-                  newton_steps: int, cycles: int, detected: bool) -> DopplerOMPResult | None:
+                  newton_steps: int, cycles: int, detected: bool, refine_tol: float = 0.0) -> DopplerOMPResult | None:
     """:func:`omp_doppler` as one compiled call (:func:`rhs_env.kernels.omp_doppler`), or None where it does not apply.
 
     It applies with the dictionary's ``kernels="numba"``, Taylor-table atoms, separable chirp times
@@ -865,14 +877,14 @@ def _compiled_omp(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max
                               fine_w, int(max_targets),
                               np.ascontiguousarray(np.broadcast_to(np.asarray(residual_threshold, float), (d,))),
                               float(noise_var), float(relative_threshold), float(min_amplitude), int(newton_steps),
-                              int(cycles), bool(detected))
+                              int(cycles), float(refine_tol), bool(detected))
     return DopplerOMPResult(*out)
 
 
 def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_targets: int,
                 residual_threshold: np.ndarray, noise_var: float, relative_threshold: float = 0.0,
                 min_amplitude: float = 0.0, newton_steps: int = 2, cycles: int = 2,
-                detected: bool = False) -> DopplerOMPResult:
+                detected: bool = False, refine_tol: float = 0.0) -> DopplerOMPResult:
     """OMP over the slot x chirp data with a Doppler per atom (the swept-beam OMP of paper Alg. 1).
 
     Model: ``data[d, i, c] = sum_k s_k h_i(theta_k) exp(j omega_k t_ic) + noise``,
@@ -887,8 +899,9 @@ def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_t
        then fine Doppler over the whole sweep (:func:`_doppler_grid_refine`) and
        Newton steps on the angle (:func:`_new_atom`);
     3. least squares for every amplitude on the support; with several atoms,
-       ``cycles`` passes of :func:`joint_refine` (each atom re-fitted in angle and
-       Doppler against its own partial residual);
+       up to ``cycles`` passes of :func:`joint_refine` (each atom re-fitted in angle and
+       Doppler against its own partial residual; a row stops once a pass lowers its ``||R||^2``
+       by less than the fraction ``refine_tol``, ``refine_tol = 0``: always ``cycles`` passes);
     4. accept the new atom only if every ``|s_k| ||a_k|| >= min_amplitude``;
        continue while ``l < max_targets`` and ``||R||^2 >= max(delta_r, rel ||data||^2)``.
 
@@ -898,7 +911,7 @@ def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_t
     """
     data = np.asarray(data, complex)
     compiled = _compiled_omp(dic, data, tgrid, max_targets, residual_threshold, noise_var, relative_threshold,
-                             min_amplitude, newton_steps, cycles, detected)
+                             min_amplitude, newton_steps, cycles, detected, refine_tol)
     if compiled is not None:
         return compiled
     d, i, c = data.shape
@@ -926,7 +939,8 @@ def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_t
             k = np.flatnonzero(ok)
             th_r[k], om_r[k], s[k], a[k] = joint_refine(dic, data[rows[k]], tgrid, th_r[k], om_r[k], val_r[k],
                                                         np.full(k.size, fine_span), passes=cycles,
-                                                        newton_steps=newton_steps, atoms=a[k], amp=s[k])
+                                                        newton_steps=newton_steps, atoms=a[k], amp=s[k],
+                                                        tol=refine_tol)
             ok &= np.all((np.abs(s) * atom_norms(a, dic.kernels) >= min_amplitude) | ~val_r, axis=1)
         good = rows[ok]
         theta[good], omega[good], valid[good], amp[good], atoms[good] = th_r[ok], om_r[ok], val_r[ok], s[ok], a[ok]

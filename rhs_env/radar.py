@@ -584,7 +584,8 @@ class RadarSystem:
             res = omp_doppler(dic, yd[sel], self._chirp_index, cfg.estimation.max_targets, np.full(sel.size, self._delta_r),
                               y_var, rel, self._min_amp, cfg.estimation.newton_steps,
                               cycles=cfg.estimation.refine_passes,
-                              detected=bool(self._detectors))
+                              detected=bool(self._detectors),
+                              refine_tol=cfg.estimation.refine_tol)
             est.theta[sel], est.amp[sel], est.valid[sel], est.omega[sel] = res.theta, res.amp, res.valid, res.omega
             est.anorm[sel] = atom_norms(res.atoms, cfg.kernels)
             win_sel = win if win is None or sel.size == rd.size else win[sel]  # sel: every row, in order, or some

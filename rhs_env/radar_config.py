@@ -248,8 +248,10 @@ class AngleEstimationConfig:
         residual_rel_db: stop below this fraction of ``||iota||^2`` (the dynamic
             range of the angle model), dB (-200 .. 0).
         newton_steps: Newton refinements of each atom's angle (0 .. 10).
-        refine_passes: cyclic re-refinement passes of every atom in angle and Doppler against its
-            own partial residual, after each new atom (0 .. 10; :func:`rhs_env.point_cloud.joint_refine`).
+        refine_passes: the most cyclic re-refinement passes of every atom in angle and Doppler against
+            its own partial residual, after each new atom (0 .. 10; :func:`rhs_env.point_cloud.joint_refine`).
+        refine_tol: a range cell's refinement stops once a pass lowers its residual ``||R||^2`` by less
+            than this fraction of it ([0, 1]; 0: always ``refine_passes`` passes).
         min_snr_db: an atom whose amplitude SNR over the sweep, ``20 log10(|s| ||a|| / sigma_Y)``,
             is lower is rejected and ends the search, dB (-50 .. 100).
     """
@@ -260,6 +262,7 @@ class AngleEstimationConfig:
     residual_rel_db: float = -25.0
     newton_steps: int = 2
     refine_passes: int = 2
+    refine_tol: float = 0.0
     min_snr_db: float = 15.0
 
     def __post_init__(self) -> None:
@@ -270,6 +273,7 @@ class AngleEstimationConfig:
         check_range("residual_rel_db", self.residual_rel_db, -200.0, 0.0)
         check_int("newton_steps", self.newton_steps, 0, 10)
         check_int("refine_passes", self.refine_passes, 0, 10)
+        check_range("refine_tol", self.refine_tol, 0.0, 1.0)
         check_range("min_snr_db", self.min_snr_db, -50.0, 100.0)
 
 
@@ -373,6 +377,7 @@ class RadarConfig:
     #: fields added since the grouping -> the value that does what the code did before them (left out of
     #: :meth:`flat_dict` at that value: cache keys and seeds derived from it stay as they were)
     ADDED_FIELDS: ClassVar[MappingProxyType[str, Any]] = MappingProxyType({"estimation.refine_passes": 2,
+                                                                                     "estimation.refine_tol": 0.0,
                                                                                      "kernels": "numba"})
 
     antenna: str = "rhs"

@@ -45,6 +45,7 @@ PROFILES: dict[str, dict] = {
     "refine0": {"estimation": {"refine_passes": 0}},
     "oversampling2": {"estimation": {"oversampling": 2}},
     "newton1_refine1": {"estimation": {"newton_steps": 1, "refine_passes": 1}},
+    "refine8_converged": {"estimation": {"refine_passes": 8, "refine_tol": 0.003}},
     "iq": {"fidelity": "iq"},  # the reference synthesis path (the default is "range")
 }
 QUALITY = ("detection_rate", "false_points_per_scan", "point_rmse_m", "range_rmse_m", "angle_rmse_deg",

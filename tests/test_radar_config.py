@@ -65,7 +65,7 @@ def test_groups_hold_the_former_defaults_and_the_flat_view_is_the_former_dict():
     flat = cfg.flat_dict()
     assert {k: v for k, v in flat.items() if k not in ("rhs", "scan")} == FLAT_DEFAULTS
     # a field added since (no flat name) shows under its path only where it changes what the radar does
-    assert dict(RadarConfig.ADDED_FIELDS) == {"estimation.refine_passes": 2, "kernels": "numba"}
+    assert dict(RadarConfig.ADDED_FIELDS) == {"estimation.refine_passes": 2, "estimation.refine_tol": 0.0, "kernels": "numba"}
     changed = _build({"estimation": {"refine_passes": 1}}).flat_dict()
     assert changed["estimation.refine_passes"] == 1 and changed != flat
     assert flat["rhs"] == cfg.rhs.to_dict() and flat["scan"] == cfg.scan.to_dict()
