@@ -251,7 +251,12 @@ class AngleEstimationConfig:
         refine_passes: the most cyclic re-refinement passes of every atom in angle and Doppler against
             its own partial residual, after each new atom (0 .. 10; :func:`rhs_env.point_cloud.joint_refine`).
         refine_tol: a range cell's refinement stops once a pass lowers its residual ``||R||^2`` by less
-            than this fraction of it ([0, 1]; 0: always ``refine_passes`` passes).
+            than this fraction of it ([0, 1]; 0: always ``refine_passes`` passes). The passes are a
+            Jacobi iteration, each atom re-fitted with the others held: two targets a beamwidth apart
+            need tens of passes, well separated ones two or three. Until 2026-11 the radar ran two
+            fixed passes (``refine_passes=2, refine_tol=0``); on the Fig. 5b scenes the converged
+            default cuts the angle RMSE by a third and the false points by two thirds, for
+            about 4 % more time per highway radar-env step (``results/radar_profiles.md``).
         min_snr_db: an atom whose amplitude SNR over the sweep, ``20 log10(|s| ||a|| / sigma_Y)``,
             is lower is rejected and ends the search, dB (-50 .. 100).
     """
@@ -261,8 +266,8 @@ class AngleEstimationConfig:
     residual_pfa: float = 1e-3
     residual_rel_db: float = -25.0
     newton_steps: int = 2
-    refine_passes: int = 2
-    refine_tol: float = 0.0
+    refine_passes: int = 8
+    refine_tol: float = 0.01
     min_snr_db: float = 15.0
 
     def __post_init__(self) -> None:
