@@ -238,7 +238,8 @@ def footprint_detections(stat: np.ndarray, in_range: np.ndarray, alpha: np.ndarr
 
 # --------------------------------------------------------------------------- atoms (Taylor tables)
 #: order of the Taylor series of the one-way gains in u = sin(theta): the error term
-#: ``(|x - x_c| du)^(N + 1) / (N + 1)!`` is ~1e-19 for the 60-element RHS at the default candidate spacing
+#: ``(|x - x_c| du)^(N + 1) / (N + 1)!`` is ~1e-19 for the 60-element RHS at 4 candidates per 1-degree grid step
+#: and 2^11 times that at the default 2 (the second derivative, two orders fewer: ~1e-11 relative, measured)
 TAYLOR_ORDER = 10
 
 def taylor_tables(w2: np.ndarray, x: np.ndarray, candidates: np.ndarray,
@@ -921,6 +922,54 @@ def _fit_residual(y: np.ndarray, a: np.ndarray, s: np.ndarray) -> float:
 
 
 @njit
+def _partial_residuals(flat: np.ndarray, a: np.ndarray, s: np.ndarray, base: np.ndarray, dd: np.ndarray,
+                       kk: np.ndarray, sel: np.ndarray, n_i: int,
+                       fit: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`joint_refine`'s per-pair operands for the pairs ``sel`` of (dd, kk): the partial residual
+    ``part = data_d - sum_l a_l s_l + a_k s_k`` (M, I, C), ``comp = part base`` and ``h_i = a_k[i, 0] base[i, 0]``
+    (M, I). ``fit`` (I C,) is work space for the row's ``A_d s_d`` (once per row: its pairs are adjacent)."""
+    n_m = sel.size
+    n_q, n_l = a.shape[1], a.shape[2]
+    n_c = n_q // n_i
+    part = np.empty((n_m, n_i, n_c), np.complex128)
+    comp = np.empty((n_m, n_i, n_c), np.complex128)
+    h = np.empty((n_m, n_i), np.complex128)
+    for m in range(n_m):
+        p = sel[m]
+        d, k = dd[p], kk[p]
+        if m == 0 or dd[sel[m - 1]] != d:
+            for q in range(n_q):
+                acc = 0j
+                for l in range(n_l):
+                    acc += a[d, q, l] * s[d, l]
+                fit[q] = acc
+        for i in range(n_i):
+            for c in range(n_c):
+                q = i * n_c + c
+                v = flat[d, q] - fit[q] + a[d, q, k] * s[d, k]
+                part[m, i, c] = v
+                comp[m, i, c] = v * base[p, i, c]
+            h[m, i] = a[d, i * n_c, k] * base[p, i, 0]
+    return part, comp, h
+
+
+@njit
+def _refit_rows(flat: np.ndarray, a: np.ndarray, s: np.ndarray, rows: np.ndarray, r2: np.ndarray,
+                moving: np.ndarray, tol: float) -> None:
+    """Least squares for the amplitudes s of ``rows`` (in place, :func:`lstsq`); with ``tol > 0`` a row stays
+    ``moving`` only if its residual ``r2 = ||data_d - A_d s_d||^2`` fell by at least the fraction ``tol``."""
+    s_r = lstsq(_take3(a, rows), _take2(flat, rows))
+    for r in range(rows.size):
+        d = rows[r]
+        for l in range(s.shape[1]):
+            s[d, l] = s_r[r, l]
+        if tol > 0:
+            r2_new = _fit_residual(flat[d], a[d], s[d])
+            moving[d] = r2[d] - r2_new >= tol * r2[d]
+            r2[d] = r2_new
+
+
+@njit
 def joint_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
                  x: np.ndarray, flat: np.ndarray, tgrid: np.ndarray, t: np.ndarray, n_t: int, kern_re: np.ndarray,
                  kern_im: np.ndarray, w: np.ndarray, nfft: int, theta: np.ndarray, domega: np.ndarray,
@@ -959,38 +1008,16 @@ def joint_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step
         for d in range(n_d):
             r2[d] = _fit_residual(flat[d], a[d], s[d])
     for _ in range(passes):
-        sel = np.empty(n_p, np.int64)  # the pairs of the moving rows, row-major
-        n_m = 0
-        for p in range(n_p):
-            if moving[dd[p]]:
-                sel[n_m] = p
-                n_m += 1
+        sel = _indices(moving[dd])  # the pairs of the moving rows, row-major
+        n_m = sel.size
         if n_m == 0:
             break
-        sel = sel[:n_m]
-        part = np.empty((n_m, n_i, n_c), np.complex128)
-        comp = np.empty((n_m, n_i, n_c), np.complex128)
-        h = np.empty((n_m, n_i), np.complex128)
+        part, comp, h = _partial_residuals(flat, a, s, base, dd, kk, sel, n_i, fit)
         th = np.empty(n_m)
         span_m = np.empty(n_m)
         for m in range(n_m):
-            p = sel[m]
-            d, k = dd[p], kk[p]
-            if m == 0 or dd[sel[m - 1]] != d:  # the row's fit A_d s_d, once per row (its pairs are adjacent)
-                for q in range(n_q):
-                    acc = 0j
-                    for l in range(n_l):
-                        acc += a[d, q, l] * s[d, l]
-                    fit[q] = acc
-            for i in range(n_i):
-                for c in range(n_c):
-                    q = i * n_c + c
-                    v = flat[d, q] - fit[q] + a[d, q, k] * s[d, k]
-                    part[m, i, c] = v
-                    comp[m, i, c] = v * base[p, i, c]
-                h[m, i] = a[d, i * n_c, k] * base[p, i, 0]
-            th[m] = theta[d, k]
-            span_m[m] = span[d]
+            th[m] = theta[dd[sel[m]], kk[sel[m]]]
+            span_m[m] = span[dd[sel[m]]]
         dw = doppler_dtft_refine(h, comp, t, n_t, kern_re, kern_im, w, span_m, nfft)
         for m in range(n_m):
             p = sel[m]
@@ -1015,17 +1042,7 @@ def joint_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step
             if n_r == 0 or rows[n_r - 1] != d:
                 rows[n_r] = d
                 n_r += 1
-        rows = rows[:n_r]
-        s_r = lstsq(_take3(a, rows), _take2(flat, rows))
-        for r in range(n_r):
-            for l in range(n_l):
-                s[rows[r], l] = s_r[r, l]
-        if tol > 0:
-            for r in range(n_r):
-                d = rows[r]
-                r2_new = _fit_residual(flat[d], a[d], s[d])
-                moving[d] = r2[d] - r2_new >= tol * r2[d]
-                r2[d] = r2_new
+        _refit_rows(flat, a, s, rows[:n_r], r2, moving, tol)
     for d in range(n_d):
         for k in range(n_l):
             if not valid[d, k]:

@@ -254,18 +254,19 @@ class AngleEstimationConfig:
             than this fraction of it ([0, 1]; 0: always ``refine_passes`` passes). The passes are a
             Jacobi iteration, each atom re-fitted with the others held: two targets a beamwidth apart
             need tens of passes, well separated ones two or three. Until 2026-11 the radar ran two
-            fixed passes (``refine_passes=2, refine_tol=0``); on the Fig. 5b scenes the converged
-            default cuts the angle RMSE by a third and the false points by two thirds, for
-            about 4 % more time per highway radar-env step (``results/radar_profiles.md``).
+            fixed passes with ``oversampling=4, newton_steps=2`` (the ``fixed2_os4_newton2`` profile of
+            ``results/radar_profiles.md``); with the refinement converged, half as many candidates and
+            one Newton step give the same points, and on the Fig. 5b scenes the angle RMSE falls by a
+            third and the false points by two thirds at the same speed.
         min_snr_db: an atom whose amplitude SNR over the sweep, ``20 log10(|s| ||a|| / sigma_Y)``,
             is lower is rejected and ends the search, dB (-50 .. 100).
     """
 
-    oversampling: int = 4
+    oversampling: int = 2
     max_targets: int = 4
     residual_pfa: float = 1e-3
     residual_rel_db: float = -25.0
-    newton_steps: int = 2
+    newton_steps: int = 1
     refine_passes: int = 8
     refine_tol: float = 0.01
     min_snr_db: float = 15.0
