@@ -238,8 +238,8 @@ def footprint_detections(stat: np.ndarray, in_range: np.ndarray, alpha: np.ndarr
 
 # --------------------------------------------------------------------------- atoms (Taylor tables)
 #: order of the Taylor series of the one-way gains in u = sin(theta): the error term
-#: ``(|x - x_c| du)^(N + 1) / (N + 1)!`` is ~1e-19 for the 60-element RHS at 4 candidates per 1-degree grid step
-#: and 2^11 times that at the default 2 (the second derivative, two orders fewer: ~1e-11 relative, measured)
+#: ``(|x - x_c| du)^(N + 1) / (N + 1)!`` is ~1e-19 for the 60-element RHS at the default candidate spacing
+#: (at half the candidates, ``oversampling=2``, 2^11 times that; the second derivative ~1e-11 relative, measured)
 TAYLOR_ORDER = 10
 
 def taylor_tables(w2: np.ndarray, x: np.ndarray, candidates: np.ndarray,
