@@ -515,6 +515,8 @@ def run_drivers(args, slam: dict) -> dict[str, Any]:
         kw = {**policy_metadata(zip_path).get("env_kwargs", {}), "duration": args.driver_cycles / POLICY_HZ}
         if slam:
             kw["slam"] = slam
+        if args.radar:
+            kw["radar"] = {**kw.get("radar", {}), **args.radar}
         for driver in args.drivers:
             combos.append((env_id, driver, zip_path, kw))
             tasks += [(env_id, driver, str(zip_path), kw, int(seed)) for seed in args.driver_seeds]
@@ -674,6 +676,8 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, dict]:
     p.add_argument("--dense-spacing", type=float, default=12.0, help="dense: distance between pairs along the path (m)")
     p.add_argument("--particles", type=int, default=0, help="dense: particles (0: SlamConfig default)")
     p.add_argument("--slam", default="", help="JSON dict of SlamConfig overrides")
+    p.add_argument("--radar", default="", help="drivers part: JSON dict of radar overrides, as gym.make(..., radar=...) "
+                   "takes them, over the policy's env kwargs (e.g. '{\"estimation\": {\"refine_tol\": 0.01}}')")
     p.add_argument("--out", default="results/slam_accuracy", help="output path without extension")
     p.add_argument("--quick", action="store_true", help="small config for the tests: 1 seed, few cycles")
     p.add_argument("--no-progress", action="store_true")
@@ -681,6 +685,9 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, dict]:
     if args.workers < 1:
         p.error(f"--workers must be >= 1, got {args.workers}")
     slam = json.loads(args.slam) if args.slam else {}
+    args.radar = json.loads(args.radar) if args.radar else {}
+    if not isinstance(args.radar, dict):
+        p.error(f"--radar must be a JSON object of radar overrides, got {args.radar!r}")
     if args.quick:
         args.seeds, args.cycles, args.paper_cycles, args.dense_cycles = args.seeds[:1], 10, 6, 8
         args.driver_seeds, args.driver_cycles = args.driver_seeds[:1], 10
@@ -705,7 +712,7 @@ def main(argv: list[str] | None = None) -> int:
     args, slam = parse_args(argv)
     runners = {"highway": run_highway, "paper": run_paper, "dense": run_dense, "drivers": run_drivers}
     doc = {"command": " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])]),
-           "commit": _commit(), "seeds": args.seeds, "slam_overrides": slam, "parts": {}}
+           "commit": _commit(), "seeds": args.seeds, "slam_overrides": slam, "radar_overrides": args.radar, "parts": {}}
     for part in args.parts:
         doc["parts"][part] = runners[part](args, slam)
     out = Path(args.out)

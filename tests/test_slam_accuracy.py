@@ -83,6 +83,18 @@ def test_drivers_part_gives_the_same_runs_with_two_workers(capsys):
         slam_accuracy.parse_args(["--workers", "0"])
 
 
+def test_drivers_part_takes_radar_overrides():
+    """``--radar`` reaches the drivers' envs over the policy's own env kwargs; a non-object is refused."""
+    est = {"estimation": {"refine_passes": 8, "refine_tol": 0.01}}
+    argv = ["--parts", "drivers", "--drivers", "idm", "--driver-envs", "rhs-dense-v0", "--driver-seeds", "3",
+            "--driver-cycles", "2", "--slam", '{"n_particles": 10}', "--radar", json.dumps(est), "--no-progress"]
+    res = slam_accuracy.run_drivers(*slam_accuracy.parse_args(argv))
+    combo = res["combos"]["rhs-dense-v0/idm"]
+    assert combo["env_kwargs"]["radar"]["estimation"] == est["estimation"] and combo["runs"][0]["cycles"] >= 1
+    with pytest.raises(SystemExit):
+        slam_accuracy.parse_args(["--radar", "[1, 2]"])
+
+
 def _ring(v: np.ndarray, n: int = 24, r: float = 20.0) -> np.ndarray:
     """Points on a ring around the car with the Doppler of a world moving at -v relative to it."""
     b = np.linspace(-math.pi, math.pi, n, endpoint=False)
