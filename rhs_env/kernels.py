@@ -909,19 +909,6 @@ def doppler_dtft_refine(h: np.ndarray, r: np.ndarray, t: np.ndarray, n_t: int, k
 
 
 @njit
-def _fit_residual(y: np.ndarray, a: np.ndarray, s: np.ndarray) -> float:
-    """``||y - A s||^2`` of one row: y (I C,), a (I C, L), s (L,)."""
-    acc = 0.0
-    for q in range(y.size):
-        fit = 0j
-        for k in range(s.size):
-            fit += a[q, k] * s[k]
-        v = y[q] - fit
-        acc += v.real ** 2 + v.imag ** 2
-    return acc
-
-
-@njit
 def _partial_residuals(flat: np.ndarray, a: np.ndarray, s: np.ndarray, base: np.ndarray, dd: np.ndarray,
                        kk: np.ndarray, sel: np.ndarray, n_i: int,
                        fit: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -955,16 +942,17 @@ def _partial_residuals(flat: np.ndarray, a: np.ndarray, s: np.ndarray, base: np.
 
 @njit
 def _refit_rows(flat: np.ndarray, a: np.ndarray, s: np.ndarray, rows: np.ndarray, r2: np.ndarray,
-                moving: np.ndarray, tol: float) -> None:
+                moving: np.ndarray, tol: float, resid: np.ndarray) -> None:
     """Least squares for the amplitudes s of ``rows`` (in place, :func:`lstsq`); with ``tol > 0`` a row stays
-    ``moving`` only if its residual ``r2 = ||data_d - A_d s_d||^2`` fell by at least the fraction ``tol``."""
+    ``moving`` only if its residual ``r2 = ||data_d - A_d s_d||^2`` fell by at least the fraction ``tol``
+    (:func:`_residual`, ``resid`` (I, C) its work space)."""
     s_r = lstsq(_take3(a, rows), _take2(flat, rows))
     for r in range(rows.size):
         d = rows[r]
         for l in range(s.shape[1]):
             s[d, l] = s_r[r, l]
         if tol > 0:
-            r2_new = _fit_residual(flat[d], a[d], s[d])
+            r2_new = _residual(flat[d], a[d], s[d], resid)
             moving[d] = r2[d] - r2_new >= tol * r2[d]
             r2[d] = r2_new
 
@@ -1004,9 +992,10 @@ def joint_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step
     for p in range(n_p):
         moving[dd[p]] = True
     r2 = np.empty(n_d)  # ||data_d - A_d s_d||^2 of each row's current fit
+    resid = np.empty((n_i, n_c), np.complex128)
     if tol > 0:
         for d in range(n_d):
-            r2[d] = _fit_residual(flat[d], a[d], s[d])
+            r2[d] = _residual(flat[d], a[d], s[d], resid)
     for _ in range(passes):
         sel = _indices(moving[dd])  # the pairs of the moving rows, row-major
         n_m = sel.size
@@ -1042,7 +1031,7 @@ def joint_refine(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step
             if n_r == 0 or rows[n_r - 1] != d:
                 rows[n_r] = d
                 n_r += 1
-        _refit_rows(flat, a, s, rows[:n_r], r2, moving, tol)
+        _refit_rows(flat, a, s, rows[:n_r], r2, moving, tol, resid)
     for d in range(n_d):
         for k in range(n_l):
             if not valid[d, k]:
