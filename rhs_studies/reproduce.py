@@ -93,7 +93,7 @@ STEPS: tuple[Step, ...] = (
          "for comparison: measured on the code before it; the command is its closest equivalent at HEAD"),
     Step("slam_accuracy", "slam_accuracy.py", ("--parts", "highway", "paper", "dense", "drivers", "--workers", "2"),
          ("slam_accuracy.json",), 7200, "the tuned drives, and the three drivers (IDM + MOBIL, the shipped policy, "
-         "random actions) on both envs on 100 seeds held out from every tuning (1400-1499; ~35-50 min on 2 cores)"),
+         "random actions) on both envs on 100 seeds held out from every tuning (1600-1699; ~35-50 min on 2 cores)"),
     Step("slam_accuracy_before", "slam_accuracy.py",
          ("--slam", '{"variant": "fastslam1", "association": "nearest", "measurement_noise": "fixed"}',
           "--out", "results/slam_accuracy_before", "--no-progress"),

@@ -140,8 +140,9 @@ def test_shards_split_the_pending_units_into_their_own_cache_files(tmp_path):
 
 def test_radar_part_of_the_cache_keys_and_seeds_is_unchanged_by_the_config_grouping():
     """Cells are keyed (and seeded) by the flat radar dict of before RadarConfig was grouped: same values, same cache.
-    The keys changed once since, on purpose, with the default fidelity ("iq" -> "range": a new radar output, so the
-    cached cells of the IQ path are not reused)."""
-    for system, want in [(("rhs", None, 5.0), "14435d8983794c23"), (("phased", None, None), "56cc5c31272ff596"),
-                         (("rhs", 16, 2.0), "0d74d026f0bd0539")]:
+    The keys changed twice since, on purpose, each time with a new radar output whose cached cells must not be
+    reused: the default fidelity ("iq" -> "range") and the OMP's converged refinement (``estimation.refine_passes``
+    2 -> 8 with ``refine_tol`` 0.01)."""
+    for system, want in [(("rhs", None, 5.0), "57ccaa1cf2515fff"), (("phased", None, None), "dfc3248b38d246ee"),
+                         (("rhs", 16, 2.0), "be22e967f3d72ab5")]:
         assert cs._fingerprint(cs.radar_config(*system).flat_dict()) == want, system

@@ -107,21 +107,21 @@ def test_typical_scene_benchmark_runs(tmp_path):
 
 
 def test_refine_passes_reach_the_omp_and_the_profiles_table_flags_a_quality_change(tmp_path):
-    """estimation.refine_passes is the OMP's re-refinement count (2, the default, is the former fixed value; 0 gives
-    another point cloud of the same echoes); radar_profiles marks a metric outside the two-sample 95 % interval and
-    says whether the metrics that differ are better."""
+    """estimation.refine_passes is the OMP's most re-refinement passes (8 with the convergence stop, the default;
+    0 gives another point cloud of the same echoes); radar_profiles marks a metric outside the two-sample 95 %
+    interval and says whether the metrics that differ are better."""
     from rhs_env.radar import RadarSystem
     from rhs_studies import radar_profiles
     from rhs_studies.scenes import typical_scene
 
     scene, occ = typical_scene(np.random.default_rng(1))
     clouds = {}
-    for passes in (None, 2, 0):
+    for passes in (None, 8, 0):
         est = {} if passes is None else {"estimation": {"refine_passes": passes}}
         cfg = radar_profiles.radar_config(est, 5.0)
         clouds[passes] = RadarSystem(cfg, np.random.default_rng(0)).scan(scene, occ).points
-    assert np.array_equal(clouds[None], clouds[2])
-    assert clouds[0].shape != clouds[2].shape or not np.allclose(clouds[0], clouds[2])
+    assert np.array_equal(clouds[None], clouds[8])
+    assert clouds[0].shape != clouds[8].shape or not np.allclose(clouds[0], clouds[8])
     ref = {k: {"mean": 1.0, "ci95": 0.1} for k in radar_profiles.QUALITY}
     near = {**ref, "point_rmse_m": {"rmse": 1.12, "ci95": 0.1}}  # within sqrt(0.1^2 + 0.1^2) = 0.141
     far = {**ref, "doppler_rmse_mps": {"rmse": 1.2, "ci95": 0.1}}

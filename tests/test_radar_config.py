@@ -63,9 +63,12 @@ def test_groups_hold_the_former_defaults_and_the_flat_view_is_the_former_dict():
     assert isinstance(cfg.detection, DetectionConfig) and isinstance(cfg.estimation, AngleEstimationConfig)
     assert isinstance(cfg.uncertainty, UncertaintyConfig) and isinstance(cfg.mounting, MountingConfig)
     flat = cfg.flat_dict()
-    assert {k: v for k, v in flat.items() if k not in ("rhs", "scan")} == FLAT_DEFAULTS
-    # a field added since (no flat name) shows under its path only where it changes what the radar does
+    # a field added since (no flat name) shows under its path only where it changes what the radar does: the
+    # converged refinement (8 passes at most, the stop at 1 % of the residual) did
+    added = {"estimation.refine_passes": 8, "estimation.refine_tol": 0.01}
+    assert {k: v for k, v in flat.items() if k not in ("rhs", "scan")} == {**FLAT_DEFAULTS, **added}
     assert dict(RadarConfig.ADDED_FIELDS) == {"estimation.refine_passes": 2, "estimation.refine_tol": 0.0, "kernels": "numba"}
+    assert "estimation.refine_tol" not in _build({"estimation": {"refine_passes": 2, "refine_tol": 0.0}}).flat_dict()
     changed = _build({"estimation": {"refine_passes": 1}}).flat_dict()
     assert changed["estimation.refine_passes"] == 1 and changed != flat
     assert flat["rhs"] == cfg.rhs.to_dict() and flat["scan"] == cfg.scan.to_dict()
