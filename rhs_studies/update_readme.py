@@ -115,7 +115,7 @@ def _slam_drivers(d: dict) -> tuple[str, str]:
     return (f"SLAM driven by IDM + MOBIL, the shipped policy, random actions ({len(part['seeds'])} held-out seeds each, "
             "highway and dense env): worst episode RMSE (IDM, policy); random episodes lost (error > "
             f"{part['lost_m']:g} m); lost cycles flagged; false alarms",
-            f"{worst:.2f} m; {lost}/{len(random)}; {hit}; {alarms}/{good}")
+            f"{worst:.3f} m; {lost}/{len(random)}; {hit}; {alarms}/{good}")  # 3 decimals: the goal is 1 m
 
 
 def _registration(d: dict) -> tuple[str, str]:
