@@ -13,7 +13,8 @@ every section and printed beside it. Sections (``--sections``, default all):
   env's steps/s;
 * ``start``: seconds to the first step of ``rhs-highway-slam-v0`` in a new process (imports,
   make, reset, one step) with an empty kernel cache (cold, goal <= 30 s) and with the cache (warm,
-  goal <= 5 s);
+  goal <= 5 s), the median of ``--start-repeats`` runs (each run's seconds beside it: one cold start
+  moves by several seconds with the machine's state);
 * ``floor``: what the IQ path costs before any processing, per 4-radar scan: the
   noise of its 4 I C N samples (a scan of an empty scene) and their range FFT; the range
   path's (``fidelity="range"``) noise spectrum of the same empty scan; set
@@ -212,7 +213,8 @@ def bench_start(repeats: int = 1) -> dict:
                 whole.append(time.perf_counter() - t0)
                 inside.append(float(res.stdout.strip().splitlines()[-1]))
     out.update(cold_s=float(np.median(cold)), warm_s=float(np.median(warm)), cold_process_s=float(np.median(cold_p)),
-               warm_process_s=float(np.median(warm_p)), repeats=repeats)
+               warm_process_s=float(np.median(warm_p)), repeats=repeats, cold_runs_s=[round(v, 2) for v in cold],
+               warm_runs_s=[round(v, 2) for v in warm])
     out["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
     return out
 
@@ -424,7 +426,9 @@ def _md_start(result: dict) -> list[str]:
     return [f"First step of `rhs-highway-slam-v0` in a new process (imports, make, reset, one step; load "
             f"{st['load_average_start'][0]:.1f}): {st['cold_s']:.1f} s with an empty kernel cache (goal <= "
             f"{START_GOALS_S['cold_s']:g} s), {st['warm_s']:.1f} s with the cache (goal <= {START_GOALS_S['warm_s']:g} s); "
-            f"whole processes {st['cold_process_s']:.1f} s / {st['warm_process_s']:.1f} s.", ""]
+            f"whole processes {st['cold_process_s']:.1f} s / {st['warm_process_s']:.1f} s"
+            + (f"; median of {st['repeats']} (cold: {', '.join(f'{v:.1f}' for v in st['cold_runs_s'])} s)."
+               if st.get("repeats", 1) > 1 and "cold_runs_s" in st else "."), ""]
 
 
 def _md_ratios(result: dict) -> list[str]:
@@ -525,7 +529,7 @@ def _run_section(sec: str, args: argparse.Namespace) -> dict:
     if sec == "envs":
         return bench_envs(args.steps, args.seed, args.grid_deg, block=args.block)
     if sec == "start":
-        return bench_start()
+        return bench_start(args.start_repeats)
     if sec == "floor":
         return bench_floor(args.grid_deg, args.seed)
     if sec == "load":
@@ -552,8 +556,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--grid-deg", type=float, default=1.0)
     ap.add_argument("--train-steps", type=int, default=1024, help="PPO timesteps per env id (training section)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--start-repeats", type=int, default=3,
+                    help="cold and warm starts measured (start section; the median is the result)")
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmark.json"))
     args = ap.parse_args(argv)
+    if args.start_repeats < 1:
+        ap.error("--start-repeats must be at least 1")
     started = time.time()
     commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
     result: dict = {
