@@ -13,10 +13,10 @@ of drivers and each env the table gives
   drives do not dominate);
 * the pooled 3-dof pose NEES inside its 95 % chi-square interval, % of cycles, each run.
 
-    python scripts/slam_accuracy.py --parts drivers --driver-seeds $(seq 1000 1019) --out runs/base
-    python scripts/slam_accuracy.py --parts drivers --driver-seeds $(seq 1000 1019) --out runs/new \\
-        --radar '{"estimation": {"refine_passes": 8, "refine_tol": 0.01}}'
-    python scripts/compare_drives.py runs/base.json runs/new.json [--json runs/compare.json]
+    python scripts/slam_accuracy.py --parts drivers --driver-seeds $(seq 1000 1019) --workers 2 --out /tmp/rhs-slam/base
+    python scripts/slam_accuracy.py --parts drivers --driver-seeds $(seq 1000 1019) --workers 2 --out /tmp/rhs-slam/new \\
+        --radar '{"estimation": {"oversampling": 2, "newton_steps": 1}}'
+    python scripts/compare_drives.py /tmp/rhs-slam/base.json /tmp/rhs-slam/new.json [--json /tmp/rhs-slam/compare.json]
 """
 
 from __future__ import annotations
