@@ -256,8 +256,8 @@ class AngleEstimationConfig:
             need tens of passes, well separated ones two or three. Until 2026-11 the radar ran two
             fixed passes (``refine_passes=2, refine_tol=0``, the ``fixed2`` profile of
             ``results/radar_profiles.md``); the converged default cuts the Fig. 5b scenes' angle RMSE
-            by a third and their false points by two thirds, for about 4 % more time per highway
-            radar-env step, and lowers the SLAM's error on paired tuning drives (docs/design/physics.md).
+            by a third and their false points by two thirds, at some speed (``results/benchmark.json``),
+            and lowers the SLAM's error on paired tuning drives (docs/design/physics.md).
         min_snr_db: an atom whose amplitude SNR over the sweep, ``20 log10(|s| ||a|| / sigma_Y)``,
             is lower is rejected and ends the search, dB (-50 .. 100).
     """
