@@ -503,6 +503,15 @@ def _close_worker_envs() -> None:
         _WORKER_ENVS.popitem()[1].close()
 
 
+def _nested_update(base: dict, over: dict) -> dict:
+    """``base`` with ``over`` merged in group by group: ``{"scan": {"grid_deg": 5}}`` updated by
+    ``{"scan": {"sector_deg": 60}}`` keeps the grid (a plain ``{**base, **over}`` would drop it)."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _nested_update(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
 def run_drivers(args, slam: dict) -> dict[str, Any]:
     """Every driver of ``--drivers`` on every env of ``--driver-envs`` over ``--driver-seeds``, until each episode
     ends; the episodes spread over ``--workers`` processes (the same runs as one process, :func:`_driver_task`),
@@ -516,7 +525,7 @@ def run_drivers(args, slam: dict) -> dict[str, Any]:
         if slam:
             kw["slam"] = slam
         if args.radar:
-            kw["radar"] = {**kw.get("radar", {}), **args.radar}
+            kw["radar"] = _nested_update(kw.get("radar", {}), args.radar)
         for driver in args.drivers:
             combos.append((env_id, driver, zip_path, kw))
             tasks += [(env_id, driver, str(zip_path), kw, int(seed)) for seed in args.driver_seeds]

@@ -84,13 +84,15 @@ def test_drivers_part_gives_the_same_runs_with_two_workers(capsys):
 
 
 def test_drivers_part_takes_radar_overrides():
-    """``--radar`` reaches the drivers' envs over the policy's own env kwargs; a non-object is refused."""
-    est = {"estimation": {"refine_passes": 8, "refine_tol": 0.01}}
+    """``--radar`` reaches the drivers' envs merged group by group over the policy's own env kwargs (its
+    ``scan.grid_deg`` stays); a non-object is refused."""
+    est = {"estimation": {"refine_passes": 8, "refine_tol": 0.01}, "scan": {"sector_deg": 90.0}}
     argv = ["--parts", "drivers", "--drivers", "idm", "--driver-envs", "rhs-dense-v0", "--driver-seeds", "3",
             "--driver-cycles", "2", "--slam", '{"n_particles": 10}', "--radar", json.dumps(est), "--no-progress"]
     res = slam_accuracy.run_drivers(*slam_accuracy.parse_args(argv))
     combo = res["combos"]["rhs-dense-v0/idm"]
     assert combo["env_kwargs"]["radar"]["estimation"] == est["estimation"] and combo["runs"][0]["cycles"] >= 1
+    assert combo["env_kwargs"]["radar"]["scan"] == {"grid_deg": 5, "sector_deg": 90.0}
     with pytest.raises(SystemExit):
         slam_accuracy.parse_args(["--radar", "[1, 2]"])
 
