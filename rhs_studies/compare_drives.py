@@ -6,8 +6,8 @@ two results files here. Every drive (env, driver, seed) present in both is a pai
 of drivers and each env the table gives
 
 * the mean and worst episode position RMSE of each run, m;
-* the paired difference ``d = RMSE_new - RMSE_base`` averaged over the drives, with a 95 %
-  percentile-bootstrap interval (``--resamples`` resamples of the drives, seeded): an interval
+* the paired difference ``d = RMSE_new - RMSE_base`` averaged over the drives, with its 95 %
+  Student-t interval (:func:`rhs_common.stats.paired_difference`, the studies' one definition): an interval
   that excludes 0 says the setting moved the error on these drives;
 * the geometric mean of ``RMSE_new / RMSE_base`` (a typical drive's factor, which the few worst
   drives do not dominate);
@@ -28,6 +28,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+
+from rhs_common.stats import paired_difference
 
 #: the rows of the table: driver groups (IDM and policy together: the drives the accuracy goal is about)
 GROUPS: tuple[tuple[str, ...], ...] = (("idm", "policy"), ("idm",), ("policy",), ("random",))
@@ -72,32 +74,29 @@ def _nees_inside(runs: list[dict]) -> float:
     return sum(r.get("nees_inside", 0) for r in runs) / cycles if cycles else float("nan")
 
 
-def paired_row(base: dict[Drive, dict], new: dict[Drive, dict], drivers: tuple[str, ...], env: str | None,
-               resamples: int = 2000, seed: int = 0) -> PairedRow | None:
+def paired_row(base: dict[Drive, dict], new: dict[Drive, dict], drivers: tuple[str, ...],
+               env: str | None) -> PairedRow | None:
     """The paired statistics of the drives both runs share in one group (None when they share none).
 
-    ``d_i = RMSE_new,i - RMSE_base,i``; the interval is the 2.5 / 97.5 percentiles of the mean of
-    ``resamples`` bootstrap resamples of the ``d_i``; the geometric ratio is ``exp(mean(log(new / base)))``.
+    ``d_i = RMSE_new,i - RMSE_base,i`` with its Student-t interval (:func:`paired_difference`; NaN for one drive);
+    the geometric ratio is ``exp(mean(log(new / base)))``.
     """
     keys = sorted(k for k in base if k in new and k[1] in drivers and (env is None or k[0] == env))
     if not keys:
         return None
     x = np.array([base[k]["position_rmse_m"] for k in keys])
     y = np.array([new[k]["position_rmse_m"] for k in keys])
-    d = y - x
-    rng = np.random.default_rng(seed)
-    means = d[rng.integers(0, d.size, size=(resamples, d.size))].mean(axis=1)
-    lo, hi = np.percentile(means, [2.5, 97.5])
+    d = paired_difference(y, x)
     return PairedRow("+".join(drivers), env or "both", len(keys), float(x.mean()), float(y.mean()),
-                     float(x.max()), float(y.max()), float(d.mean()), (float(lo), float(hi)),
+                     float(x.max()), float(y.max()), d.mean, (d.low, d.high),
                      float(np.exp(np.mean(np.log(np.maximum(y, 1e-9) / np.maximum(x, 1e-9))))),
                      _nees_inside([base[k] for k in keys]), _nees_inside([new[k] for k in keys]))
 
 
-def compare(base: dict[Drive, dict], new: dict[Drive, dict], resamples: int = 2000) -> list[PairedRow]:
+def compare(base: dict[Drive, dict], new: dict[Drive, dict]) -> list[PairedRow]:
     """Every driver group of ``GROUPS`` on each env the runs share, then on both envs pooled."""
     envs = sorted({k[0] for k in base} & {k[0] for k in new})
-    rows = (paired_row(base, new, g, e, resamples) for g in GROUPS for e in [*envs, None])
+    rows = (paired_row(base, new, g, e) for g in GROUPS for e in [*envs, None])
     return [r for r in rows if r is not None]
 
 
@@ -116,16 +115,13 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("base", help="slam_accuracy results JSON of the reference setting")
     p.add_argument("new", help="slam_accuracy results JSON of the setting under test (same seeds)")
-    p.add_argument("--resamples", type=int, default=2000, help="bootstrap resamples of the paired differences")
     p.add_argument("--json", help="also write the rows to this JSON file")
     args = p.parse_args(argv)
-    if args.resamples < 100:
-        p.error("--resamples must be at least 100")
     try:
         base, new = load_drives(args.base), load_drives(args.new)
     except (OSError, ValueError) as err:
         p.error(str(err))
-    rows = compare(base, new, args.resamples)
+    rows = compare(base, new)
     if not rows:
         p.error("the two runs share no drive (env, driver, seed): run them on the same seeds")
     print(markdown(rows), end="")
