@@ -39,6 +39,7 @@ import numpy as np
 
 from agents.decision import held
 from agents.expert import HeadwayDriver
+from agents.lookahead import LookaheadDriver
 from agents.run_setup import parse_env_kwargs
 from rhs_env.registration import SLAM_ENV_SPECS
 
@@ -55,10 +56,11 @@ DEFAULT_ENV = "rhs-highway-slam-v0"
 
 
 def is_scripted(policy: str | Path) -> bool:
-    """``"random"``, ``"constant:<action>"``, ``"idm"``, ``"idm:<m/s>"``, ``"headway"`` or ``"headway:<k>"``: policies
-    that need no file."""
+    """``"random"``, ``"constant:<action>"``, ``"idm"``, ``"idm:<m/s>"``, ``"headway[:<k>]"`` or ``"lookahead[:<k>]"``:
+    policies that need no file."""
     text = str(policy)
-    return text in ("random", "idm", "headway") or text.startswith(("constant:", "idm:", "headway:"))
+    return (text in ("random", "idm", "headway", "lookahead")
+            or text.startswith(("constant:", "idm:", "headway:", "lookahead:")))
 
 
 class ConstantPolicy:
@@ -193,7 +195,8 @@ def make_env(env_id: str, kwargs: dict[str, Any], **extra: Any):
 
 def load_policy(policy: str | Path, env=None, seed: int = 0):
     """``"random"``, ``"constant:<action>"``, ``"idm[:<m/s>]"``, ``"headway[:<k>]"``
-    (:class:`agents.expert.HeadwayDriver`, the DAgger expert; with k, pulsed every k steps), or a
+    (:class:`agents.expert.HeadwayDriver`, the DAgger expert; with k, pulsed every k steps), ``"lookahead[:<k>]"``
+    (:class:`agents.lookahead.LookaheadDriver`, the rollout teacher), or a
     stable-baselines3 zip (PPO, DQN or a DAgger student: from the JSON beside it, else PPO and DQN tried in turn).
 
     With ``env``, the policy's observation space is checked against the env's. A zip whose JSON
@@ -205,8 +208,8 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
             raise ValueError(f"policy {policy!r} needs the env for its action space")
         if str(policy) == "random":
             return RandomPolicy(env.action_space, seed)
-        if str(policy).split(":", 1)[0] == "headway":
-            return _headway(str(policy), env)
+        if str(policy).split(":", 1)[0] in ("headway", "lookahead"):
+            return _privileged_driver(str(policy), env)
         if str(policy).split(":", 1)[0] == "idm":
             speed = None
             if ":" in str(policy):
@@ -247,16 +250,19 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
     return held(model, meta.get("decision_interval", 1), meta.get("decision_mode", "hold"))
 
 
-def _headway(policy: str, env):
+def _privileged_driver(policy: str, env):
     """``"headway"``: the HeadwayDriver deciding every step; ``"headway:<k>"``: deciding every k steps, IDLE
-    between (decision_mode pulse: how the DAgger students drive and how the expert labelled their states)."""
-    if ":" not in policy:
-        return HeadwayDriver(env)
+    between (decision_mode pulse: how the DAgger students drive and how the expert labelled their states);
+    ``"lookahead[:<k>]"`` the same for the :class:`agents.lookahead.LookaheadDriver` (the rollout teacher)."""
+    name, _, k_text = policy.partition(":")
+    driver = HeadwayDriver(env) if name == "headway" else LookaheadDriver(env)
+    if not k_text:
+        return driver
     try:
-        k = int(policy.split(":", 1)[1])
+        k = int(k_text)
     except ValueError:
-        raise ValueError(f"headway policy must be 'headway' or 'headway:<decision interval>', got {policy!r}") from None
-    return held(HeadwayDriver(env), k, "pulse")
+        raise ValueError(f"{name} policy must be '{name}' or '{name}:<decision interval>', got {policy!r}") from None
+    return held(driver, k, "pulse")
 
 
 def _load_rllib(path: Path, env=None):

@@ -73,6 +73,7 @@ import gymnasium as gym
 import numpy as np
 
 from agents.expert import HeadwayDriver, HeadwayDriverConfig
+from agents.lookahead import LookaheadDriver, LookaheadDriverConfig
 from rhs_common.validation import build, check_bool, check_int, check_range, check_types
 
 EXPERT_KEY = "expert_action"
@@ -104,6 +105,19 @@ class DaggerConfig:
         check_bool("label_between", self.label_between)
 
 
+#: the privileged drivers a student can learn from (hyperparameter ``teacher``): name -> (driver, its config)
+TEACHERS: dict[str, tuple[type, type]] = {"headway": (HeadwayDriver, HeadwayDriverConfig),
+                                          "lookahead": (LookaheadDriver, LookaheadDriverConfig)}
+
+
+def make_teacher(env: gym.Env, teacher: str = "headway", config: Any = None):
+    """The privileged driver ``teacher`` (:data:`TEACHERS`) on ``env`` with ``config`` (its config or a dict)."""
+    if teacher not in TEACHERS:
+        raise ValueError(f"teacher must be one of {sorted(TEACHERS)}, got {teacher!r}")
+    driver, config_cls = TEACHERS[teacher]
+    return driver(env, build(config_cls, config, "expert"))
+
+
 class ExpertActionInfo(gym.Wrapper):
     """Adds ``info["expert_action"]``: the :class:`HeadwayDriver`'s action in the state just observed.
 
@@ -122,11 +136,16 @@ class ExpertActionInfo(gym.Wrapper):
         True
     """
 
-    def __init__(self, env: gym.Env, expert: Any = None, between: int = 1):
+    def __init__(self, env: gym.Env, expert: Any = None, between: int = 1, teacher: str = "headway",
+                 every: int = 1):
         super().__init__(env)
-        self.driver = HeadwayDriver(env, expert)
+        self.driver = make_teacher(env, teacher, expert)
         check_int("between", between, 1, 1000)
+        check_int("every", every, 1, 1000)
         self.between = between
+        # label only the states a decision is taken in (every k-th step since the reset, and the last) unless the
+        # states between are labelled too: an expensive teacher (the lookahead driver) then runs once per decision
+        self.every = 1 if between > 1 else every
         self._steps = 0  # steps since the reset; (obs, label) since the last k-th step
         self._held: list[tuple[Any, int]] = []
 
@@ -137,10 +156,11 @@ class ExpertActionInfo(gym.Wrapper):
 
     def step(self, action):
         obs, reward, terminated, truncated, info = self.env.step(action)
-        label = self.driver.act()
+        self._steps += 1
+        decides = self._steps % self.every == 0 or terminated or truncated
+        label = self.driver.act() if decides else None  # None: a state no decision (and no label) is taken in
         info = {**info, EXPERT_KEY: label}
         if self.between > 1:
-            self._steps += 1
             if self._steps % self.between == 0 or terminated or truncated:
                 info[BETWEEN_KEY], self._held = self._held, []
             else:  # a state between two decisions: the student never decides here, the expert's label still holds
@@ -429,8 +449,12 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
     if resume and not (Path(out) / STATE_META).exists():
         raise ValueError(f"--resume: no finished DAgger round in {out} to continue from (no {STATE_META}); run "
                          "without --resume to start a new run")
-    expert = build(HeadwayDriverConfig, run.hp.get("expert"), "expert")
-    config = build(DaggerConfig, {k: v for k, v in run.hp.items() if k not in ("policy_kwargs", "expert")}, "dagger")
+    teacher = run.hp.get("teacher", "headway")
+    if teacher not in TEACHERS:
+        raise ValueError(f"hyperparameter teacher must be one of {sorted(TEACHERS)}, got {teacher!r}")
+    expert = build(TEACHERS[teacher][1], run.hp.get("expert"), "expert")
+    config = build(DaggerConfig, {k: v for k, v in run.hp.items() if k not in ("policy_kwargs", "expert", "teacher")},
+                   "dagger")
     check_train_args(run.timesteps, run.n_envs, seed, 0, 1, 0)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -439,7 +463,8 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
     rng = np.random.default_rng(seed)
     k = run.decision_interval
     venv = make_vec_env(env_id, run.n_envs, seed, run.env_kwargs, monitor_dir=out / "monitor",
-                        wrapper=partial(ExpertActionInfo, expert=expert, between=k if config.label_between else 1),
+                        wrapper=partial(ExpertActionInfo, expert=expert, between=k if config.label_between else 1,
+                                        teacher=teacher, every=k),
                         decision_interval=k,
                         decision_mode=run.decision_mode)
     decisions = -(-run.timesteps // k)
@@ -475,7 +500,7 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
                                        "total_timesteps": int(parent.get("total_timesteps", parent.get("timesteps", 0)))
                                        + decided * k})
     summary = run_summary("dagger", env_id, run, seed, decided, wall, out, timed_decisions=timed,
-                          dagger=asdict(config), expert=expert.to_dict(), iterations=records, interrupted=False,
+                          dagger=asdict(config), teacher=teacher, expert=expert.to_dict(), iterations=records, interrupted=False,
                           **extra)
     write_summary(out, summary)
     return summary
