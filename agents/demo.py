@@ -48,7 +48,8 @@ GIF_LEGEND = (
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env", default=None, help=f"env id (default: the policy's, else {DEFAULT_ENV})")
     parser.add_argument(
-        "--policy", default=str(SHIPPED_POLICY), help="SB3 zip, 'random', 'constant:ACTION', 'idm' or 'headway[:K]' (default: shipped)"
+        "--policy", default=str(SHIPPED_POLICY), help="SB3 zip, 'random', 'constant:ACTION', 'idm', 'headway[:K]' or "
+        "'lookahead[:K]' (default: shipped)"
     )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(

@@ -601,8 +601,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--policy",
         default=str(SHIPPED_POLICY),
-        help="SB3 zip, RLlib checkpoint dir, 'random', 'constant:ACTION', 'idm[:M/S]' (IDM + MOBIL driver) or "
-        "'headway[:K]' (the DAgger expert, deciding every K steps; default: shipped policy)",
+        help="SB3 zip, RLlib checkpoint dir, 'random', 'constant:ACTION', 'idm[:M/S]' (IDM + MOBIL driver), "
+        "'headway[:K]' (the DAgger expert, deciding every K steps) or 'lookahead[:K]' (the rollout teacher; "
+        "default: shipped policy)",
     )
     parser.add_argument("--env", default=None, help=f"env id (default: the policy's, else {DEFAULT_ENV})")
     parser.add_argument("--episodes", type=int, default=5)

@@ -12,13 +12,17 @@ decisions at 1 Hz in pulse mode; :mod:`agents.finetune`):
   (``agents/hyperparams/dagger_continue.yml``);
 * ``finetune_horizon_80k`` and ``dagger_continue_80k``: the longer-horizon fine-tune and its DAgger control with
   four times the budget (80k env steps each); the targets judge this pair when it was evaluated;
+* ``dagger_lookahead``: DAgger going on from the student with the lookahead teacher
+  (:class:`agents.lookahead.LookaheadDriver`: each meta-action forecast on a copy of the true traffic, the best
+  taken; ``agents/hyperparams/dagger_lookahead.yml``, 48k env steps), judged by the same targets against the 80k
+  DAgger continuation of the headway expert;
 * ``scratch``: PPO from scratch with the privileged critic (``finetune.yml`` without a student, with PPO's usual
   learning rate 5e-4, clip range 0.2, an entropy bonus 0.01 and the time-to-collision shaping of
   :mod:`agents.shaping`), on request (``--arms ... scratch``).
 
 Evaluation on ``--episodes`` seeds from ``--seed`` (3000..: never used in training, where the envs draw seeds
 0.. and 20000.., nor in any earlier selection), every policy on the same seeds; the scripted references
-(always SLOWER, IDM + MOBIL, the headway expert deciding at 1 Hz) on ``rhs-highway-v0``, which meets the same
+(always SLOWER, IDM + MOBIL, the headway expert and the lookahead teacher deciding at 1 Hz) on ``rhs-highway-v0``, which meets the same
 traffic for the same seed and actions. Each row: mean return with its t interval, collisions with a Wilson
 interval, mean speed; paired return differences (t intervals over the common seeds) against the student and the
 DAgger continuation. The learning curves (return and collision rate of the training episodes against env steps)
@@ -30,6 +34,11 @@ continuation.
 
     OMP_NUM_THREADS=1 python scripts/rl_finetune.py --train            # train the missing arms, then evaluate
     OMP_NUM_THREADS=1 python scripts/rl_finetune.py --runs runs/rl     # evaluate trained arms
+    OMP_NUM_THREADS=1 python scripts/rl_finetune.py --arms dagger_lookahead --keep student idm ...  # one new arm
+
+``--keep ROW ...`` takes those rows' episodes from the existing ``results/rl_finetune.json`` (same seeds) instead of
+driving them again: for policies and code unchanged since (the fingerprint test says whether the code changed); the
+result names the commit each kept row was driven at.
 """
 
 from __future__ import annotations
@@ -82,6 +91,7 @@ ARMS: dict[str, Arm] = {
                                "reward_shaping={ttc_s: 3.0, weight: 0.5}", False),
     "finetune_horizon_80k": Arm("finetune", HORIZON, True, LONG_STEPS),
     "dagger_continue_80k": Arm("dagger", "dagger_continue.yml", True, LONG_STEPS),
+    "dagger_lookahead": Arm("dagger", "dagger_lookahead.yml", True, 48000),
 }
 LABELS = {
     "student": "DAgger student (shipped, start of every arm)",
@@ -92,9 +102,11 @@ LABELS = {
     "dagger_continue": "DAgger continuation (control)",
     "dagger_continue_80k": f"DAgger continuation, {LONG_STEPS // 1000}k env steps (control)",
     "scratch": "PPO from scratch, privileged critic",
+    "dagger_lookahead": "DAgger from the lookahead teacher, 48k env steps",
     "slower": "always SLOWER (scripted)",
     "idm": "IDM + MOBIL (highway-env, scripted)",
     "headway": "HeadwayDriver at 1 Hz, IDLE between (the expert)",
+    "lookahead": "LookaheadDriver at 1 Hz, IDLE between (the rollout teacher)",
 }
 #: the fine-tune's targets: return vs IDM + MOBIL, collisions per episode, mean speed, paired gain over the student
 TARGET_VS_IDM, TARGET_COLLISIONS, TARGET_SPEED_MPS, TARGET_GAIN = 1.08, 0.02, 24.0, 3.0
@@ -227,6 +239,11 @@ def paired(a: list[dict[str, Any]], b: list[dict[str, Any]]) -> dict[str, float]
 HEADLINE_PAIRS = (("finetune_horizon_80k", "dagger_continue_80k"), ("finetune", "dagger_continue"))
 
 
+#: the student of the lookahead teacher, judged by the same targets against the DAgger continuation of the headway
+#: expert with the most env steps
+TEACHER_PAIR = ("dagger_lookahead", "dagger_continue_80k")
+
+
 def headline_arm(runs: dict[str, list[dict]]) -> tuple[str, str]:
     """The fine-tune the targets judge and its DAgger control: the longest budget evaluated."""
     for arm, control in HEADLINE_PAIRS:
@@ -295,26 +312,38 @@ def markdown(result: dict[str, Any]) -> str:
              "|---|---|---|---|---|"]
     for key, s in result["rows"].items():
         lines.append(_fmt_row(key, s, result["vs_student"].get(key)))
-    t = result.get("targets") or {}
-    if t:
+    kept = result.get("kept_rows") or {}
+    if kept:
+        lines += ["", "Rows kept from an earlier run of this script on the same seeds (policy and code unchanged since): "
+                  + ", ".join(f"{LABELS.get(k, k)} ({c[:7] if c else 'unknown commit'})" for k, c in kept.items()) + "."]
+    for t in (result.get("targets") or {}, result.get("targets_teacher") or {}):
+        if not t:
+            continue
         met = ", ".join(f"{k} {'met' if v else 'not met'}" for k, v in t["met"].items())
         name = LABELS.get(t.get("arm", "finetune"), t.get("arm", "finetune"))
+        against = t.get("gain_over_dagger_continue")
+        vs = "" if against is None else (f" ({against['mean']:+.1f} [{against['low']:+.1f}, {against['high']:+.1f}] over "
+                                         f"{LABELS.get(t['control'], t['control'])})")
         lines += ["", f"Targets judged on {name}: {t['return_vs_idm']:.3f}x IDM + MOBIL, {100 * t['collision_rate']:.0f} % collisions, "
-                  f"{t['mean_speed_mps']:.1f} m/s; targets: {met}."]
+                  f"{t['mean_speed_mps']:.1f} m/s{vs}; targets: {met}."]
     return "\n".join(lines) + "\n"
 
 
-def evaluate_rows(policies: dict[str, Path], seeds: list[int], workers: int) -> dict[str, list[dict]]:
-    """Every learned policy on the SLAM env and the scripted references on the ground-truth env, same seeds."""
+def evaluate_rows(policies: dict[str, Path], seeds: list[int], workers: int,
+                  skip: tuple[str, ...] = ()) -> dict[str, list[dict]]:
+    """Every learned policy on the SLAM env and the scripted references on the ground-truth env, same seeds
+    (the rows named in ``skip`` left out)."""
     from agents.evaluate import resolve_env
 
     _, student_kwargs = resolve_env(str(STUDENT))
-    # always SLOWER and IDM with highway-env's own action set, as the driving targets were set; the expert with the
-    # students' target speeds, as it taught them
-    scripted = {"slower": (f"constant:{SLOWER}", {}), "idm": ("idm", {}),
-                "headway": ("headway:5", {"action": student_kwargs.get("action")} if "action" in student_kwargs else {})}
+    # always SLOWER and IDM with highway-env's own action set, as the driving targets were set; the teachers with the
+    # students' target speeds, as they taught them
+    teach = {"action": student_kwargs.get("action")} if "action" in student_kwargs else {}
+    scripted = {"slower": (f"constant:{SLOWER}", {}), "idm": ("idm", {}), "headway": ("headway:5", teach),
+                "lookahead": ("lookahead:5", teach)}
+    scripted = {k: v for k, v in scripted.items() if k not in skip}
     runs: dict[str, list[dict]] = {}
-    for key, path in policies.items():
+    for key, path in {k: v for k, v in policies.items() if k not in skip}.items():
         env_id, kwargs = resolve_env(str(path))
         t0 = time.perf_counter()
         runs[key] = run_policy(str(path), env_id, kwargs, seeds, workers)
@@ -325,6 +354,24 @@ def evaluate_rows(policies: dict[str, Path], seeds: list[int], workers: int) -> 
 
 
 SLIM_KEYS = ("seed", "return", "steps", "crashed", "mean_speed", "position_rmse_m")
+
+
+def keep_rows(path: Path, rows: list[str], seeds: list[int]) -> dict[str, Any]:
+    """The episodes (``runs``) and learning curves of ``rows`` from an earlier result ``path`` on the same ``seeds``,
+    and the commit each was measured at (``commits``); ``ValueError`` when the file, a row or a seed is missing."""
+    if not path.exists():
+        raise ValueError(f"--keep: {path} does not exist")
+    old = json.loads(path.read_text())
+    missing = [r for r in rows if r not in old.get("runs", {})]
+    if missing:
+        raise ValueError(f"--keep: {path} has no rows {missing} (it has {sorted(old.get('runs', {}))})")
+    for r in rows:
+        if sorted(e["seed"] for e in old["runs"][r]) != sorted(seeds):
+            raise ValueError(f"--keep: row {r} of {path} was driven on other seeds than {seeds[0]}-{seeds[-1]}")
+    measured = old.get("provenance", {}).get("commit") or old.get("commit")
+    commits = {r: (old.get("kept_rows") or {}).get(r, measured) for r in rows}  # a row kept before keeps its commit
+    return {"runs": {r: old["runs"][r] for r in rows}, "curves": {r: c for r, c in old.get("curves", {}).items() if r in rows},
+            "commits": commits}
 
 
 def fingerprint() -> list[float]:
@@ -352,6 +399,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out-dir", type=Path, default=ROOT / "results")
     ap.add_argument("--ship-dir", type=Path, default=SHIPPED_DIR, help="where the arms' actor zips are copied")
+    ap.add_argument("--keep", nargs="+", default=[], metavar="ROW",
+                    help="rows (student, arms, slower, idm, headway, lookahead) taken from the existing "
+                         "rl_finetune.json of --out-dir instead of driven again: same seeds, for policies and code "
+                         "unchanged since (the result names the commit they were measured at)")
     args = ap.parse_args(argv)
     if args.episodes < 2:
         ap.error("--episodes must be >= 2 (intervals need two episodes)")
@@ -362,11 +413,20 @@ def main(argv: list[str] | None = None) -> int:
             train_arm(arm, runs_dir, args.timesteps, args.train_seed)
         if not (runs_dir / arm / "model.zip").exists():
             ap.error(f"{runs_dir / arm}/model.zip is missing: train it (--train) or leave {arm} out of --arms")
+    kept = [row for row in args.keep if row in args.arms]
+    if kept:
+        ap.error(f"--keep {' '.join(kept)}: a row kept cannot be in --arms (those are shipped and driven again)")
     shipped = {arm: ship_arm(arm, runs_dir, Path(args.ship_dir)) for arm in args.arms}
     seeds = list(range(args.seed, args.seed + args.episodes))
-    runs = evaluate_rows({"student": STUDENT, **shipped}, seeds, args.workers)
+    previous = keep_rows(Path(args.out_dir) / "rl_finetune.json", args.keep, seeds) if args.keep else {}
+    for row in args.keep:  # a kept arm's zip and training record are the shipped ones
+        if row in ARMS:
+            shipped[row] = Path(args.ship_dir) / f"{row}.zip"
+    runs = evaluate_rows({"student": STUDENT, **shipped}, seeds, args.workers, skip=tuple(args.keep))
+    runs = {**previous.get("runs", {}), **runs}
     rows = {key: row_summary(r) for key, r in runs.items()}
     curves = {arm: learning_curve(runs_dir / arm / "monitor") for arm in args.arms}
+    curves = {**{k: v for k, v in previous.get("curves", {}).items() if k in args.keep}, **curves}
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     plot(curves, out / "rl_finetune.png")
@@ -378,10 +438,13 @@ def main(argv: list[str] | None = None) -> int:
         "rows": rows,
         "vs_student": {k: paired(runs[k], runs["student"]) for k in runs if k != "student"},
         "targets": targets(rows, runs, *headline_arm(runs)),
+        "targets_teacher": targets(rows, runs, *TEACHER_PAIR) if TEACHER_PAIR[0] in rows else {},
         "training": training,
         "curves": curves,
         "runs": {k: [{f: r.get(f) for f in SLIM_KEYS} for r in v] for k, v in runs.items()},
     }
+    if args.keep:
+        result["kept_rows"] = previous["commits"]  # row -> the commit its episodes were driven at
     write_json(out / "rl_finetune.json", result, __file__, args, started, fingerprint, argv)
     (out / "rl_finetune.md").write_text(markdown(result))
     print(markdown(result))

@@ -251,6 +251,32 @@ def test_the_study_judges_the_longest_fine_tune_against_its_own_budgets_control(
     assert headline_arm(runs) == ("finetune", "dagger_continue")
 
 
+def test_the_study_keeps_earlier_rows_only_on_the_same_seeds_and_names_their_commit(tmp_path):
+    from rhs_studies.rl_finetune import keep_rows, markdown, row_summary
+
+    def runs_of(base: float, seeds=range(3000, 3010)) -> list[dict]:
+        return [{"seed": s, "return": base + s % 3, "crashed": False, "mean_speed": 24.0} for s in seeds]
+
+    earlier = tmp_path / "rl_finetune.json"
+    earlier.write_text(json.dumps({"provenance": {"commit": "a" * 40}, "kept_rows": {"idm": "b" * 40},
+                                   "runs": {"student": runs_of(150.0), "idm": runs_of(140.0)},
+                                   "curves": {"student": {"env_steps": [1]}}}))
+    seeds = list(range(3000, 3010))
+    kept = keep_rows(earlier, ["student", "idm"], seeds)
+    assert kept["commits"] == {"student": "a" * 40, "idm": "b" * 40}  # a row kept before keeps its first commit
+    assert kept["runs"]["student"][0]["return"] == 150.0 and kept["curves"] == {"student": {"env_steps": [1]}}
+    with pytest.raises(ValueError, match="no rows"):
+        keep_rows(earlier, ["headway"], seeds)
+    with pytest.raises(ValueError, match="other seeds"):
+        keep_rows(earlier, ["idm"], list(range(3000, 3020)))
+    with pytest.raises(ValueError, match="does not exist"):
+        keep_rows(tmp_path / "missing.json", ["idm"], seeds)
+    runs = {k: v for k, v in kept["runs"].items()}
+    result = {"seeds": seeds, "episodes": 10, "timesteps": 20000, "rows": {k: row_summary(v) for k, v in runs.items()},
+              "vs_student": {}, "kept_rows": kept["commits"]}
+    assert "IDM + MOBIL (highway-env, scripted) (bbbbbbb)" in markdown(result)
+
+
 def test_the_study_derives_a_control_yaml_with_the_keys_set(tmp_path):
     import yaml
 

@@ -1,0 +1,112 @@
+"""The lookahead teacher (agents.lookahead.LookaheadDriver): its forecast is the simulator's future, it steers away
+from a forecast crash, it labels DAgger's decisions only, and it drives as a scripted policy. No test measures time."""
+
+from __future__ import annotations
+
+import json
+
+import gymnasium as gym
+import pytest
+
+import rhs_env  # noqa: F401  (registers the ids)
+from agents.decision import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER
+from agents.evaluate import evaluate
+from agents.expert import HeadwayDriver
+from agents.imitation import EXPERT_KEY, ExpertActionInfo, make_teacher
+from agents.lookahead import LookaheadDriver, LookaheadDriverConfig
+from rhs_common.validation import build
+from test_imitation import _place, _road
+
+TRUTH = "rhs-highway-v0"
+#: every car copied, the env's own 3 frames per step: the forecast must then be the simulator's future exactly
+EXACT = {"horizon_s": 2.0, "frames_per_step": 0, "reach_ahead_m": 5000.0, "reach_behind_m": 5000.0}
+
+
+def test_config_is_validated_with_the_field_path():
+    with pytest.raises(ValueError, match=r"lookahead\.horizon_s must be in \(0\.0, 60\.0\]"):
+        build(LookaheadDriverConfig, {"horizon_s": 0}, "lookahead")
+    with pytest.raises(ValueError, match=r"expert\.headway\.headway_s"):
+        build(LookaheadDriverConfig, {"headway": {"headway_s": -1.0}}, "expert")
+    with pytest.raises(ValueError, match="teacher must be one of"):
+        make_teacher(gym.make(TRUTH, vehicles_count=2), "oracle")
+    with pytest.raises(ValueError, match="highway-env env"):
+        LookaheadDriver(gym.make("CartPole-v1"))
+
+
+@pytest.mark.parametrize("action", [FASTER, LANE_LEFT, SLOWER])
+def test_forecast_is_the_return_the_env_then_pays(action):
+    """``action`` now, the headway driver at the next decision (pulse, 1 Hz), over 2 s: the copy's return equals the
+    real env's, and driving the copy leaves the real road untouched."""
+    env = gym.make(TRUTH, vehicles_count=12, duration=10)
+    env.reset(seed=4)
+    for _ in range(3):
+        env.step(IDLE)
+    driver = LookaheadDriver(env, EXACT)
+    before = [tuple(v.position) for v in env.unwrapped.road.vehicles]
+    q = driver.forecast(action)
+    assert [tuple(v.position) for v in env.unwrapped.road.vehicles] == before
+    headway, total = HeadwayDriver(env), 0.0
+    for k in range(10):  # 2 s at 5 Hz
+        _, r, terminated, _, _ = env.step(action if k == 0 else (headway.act() if k % 5 == 0 else IDLE))
+        total += r
+        assert not terminated, "the scene was chosen to be crash-free over the horizon"
+    assert q == pytest.approx(total, rel=1e-12, abs=1e-12)
+
+
+def test_a_forecast_crash_is_avoided_where_the_headway_rule_drives_into_it():
+    """A car stopped 30 m ahead in the ego's lane at 25 m/s: SLOWER (20 m/s at best in 1 s) still hits it, the
+    free lane to the right does not; the forecast of the crash carries the penalty."""
+    env, ego = _road(lane=1, speed=25.0, speed_index=1)
+    _place(env, 1, 30.0, 0.0)
+    _place(env, 0, 2.0, 25.0)  # the left lane is taken alongside
+    driver = LookaheadDriver(env, {"horizon_s": 4.0})
+    assert driver.forecast(IDLE) < -50.0  # the crash penalty (100) minus at most 20 steps of reward
+    choice = driver.act()
+    assert choice == LANE_RIGHT
+    assert driver.forecast(choice) > 0.0
+
+
+def test_candidates_leave_out_the_actions_that_change_nothing():
+    env, ego = _road(lane=0, speed=30.0, speed_index=2)  # leftmost lane, top target speed of [20, 25, 30]
+    assert sorted(LookaheadDriver(env).candidates()) == sorted([IDLE, LANE_RIGHT, SLOWER])
+
+
+def test_dagger_labels_only_decisions_with_an_expensive_teacher():
+    """``every=k``: the teacher runs at the reset and every k-th step (and the last); the steps between carry None."""
+    env = ExpertActionInfo(gym.make(TRUTH, vehicles_count=5, duration=3), teacher="lookahead",
+                           expert={"horizon_s": 1.0}, every=5)
+    _, info = env.reset(seed=1)
+    labels = [info[EXPERT_KEY]]
+    for _ in range(10):
+        _, _, terminated, truncated, info = env.step(IDLE)
+        labels.append(info[EXPERT_KEY])
+        if terminated or truncated:
+            break
+    assert [lab is not None for lab in labels[:11]] == [True, False, False, False, False, True,
+                                                       False, False, False, False, True]
+    assert all(lab in range(5) for lab in labels if lab is not None)
+
+
+def test_lookahead_is_a_scripted_policy_that_drives_faster_than_its_base(tmp_path):
+    kw = {"vehicles_count": 15, "duration": 6, "action": {"type": "DiscreteMetaAction", "target_speeds": [20, 25, 30]}}
+    ahead = evaluate("lookahead:5", TRUTH, episodes=2, seed=7, env_kwargs=kw, progress=False)
+    base = evaluate("headway:5", TRUTH, episodes=2, seed=7, env_kwargs=kw, progress=False)
+    assert ahead["collision_rate"] == 0.0
+    assert ahead["return"]["mean"] > base["return"]["mean"]
+    assert ahead["mean_speed_mps"]["mean"] > base["mean_speed_mps"]["mean"]
+    json.dumps(ahead["runs"])  # a plain record
+
+
+def test_rhs_slam_train_dagger_from_the_lookahead_teacher(tmp_path):
+    from agents.train import train
+
+    hp = tmp_path / "dagger.yml"
+    hp.write_text(f"{TRUTH}:\n  policy: MlpPolicy\n  n_envs: 1\n  n_timesteps: 60\n  decision_interval: 5\n"
+                  "  decision_mode: pulse\n  iterations: 2\n  epochs: 2\n  batch_size: 8\n  teacher: lookahead\n"
+                  "  expert: {horizon_s: 1.0}\n  policy_kwargs:\n    net_arch: [16]\n")
+    out = train("dagger", TRUTH, None, tmp_path / "run", hyperparams=hp, env_kwargs={"vehicles_count": 5, "duration": 4},
+                progress=False)
+    assert out["teacher"] == "lookahead" and out["expert"]["horizon_s"] == 1.0
+    assert (tmp_path / "run" / "model.zip").exists()
+    last = out["iterations"][-1]
+    assert last["samples"] == last["decisions"] == 12  # one label per decision (60 steps / 5), none between
