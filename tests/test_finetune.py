@@ -271,7 +271,7 @@ def test_the_study_keeps_earlier_rows_only_on_the_same_seeds_and_names_their_com
         keep_rows(earlier, ["idm"], list(range(3000, 3020)))
     with pytest.raises(ValueError, match="does not exist"):
         keep_rows(tmp_path / "missing.json", ["idm"], seeds)
-    runs = {k: v for k, v in kept["runs"].items()}
+    runs = kept["runs"]
     result = {"seeds": seeds, "episodes": 10, "timesteps": 20000, "rows": {k: row_summary(v) for k, v in runs.items()},
               "vs_student": {}, "kept_rows": kept["commits"]}
     assert "IDM + MOBIL (highway-env, scripted) (bbbbbbb)" in markdown(result)
