@@ -7,6 +7,7 @@ import json
 
 import gymnasium as gym
 import pytest
+from test_imitation import _place, _road
 
 import rhs_env  # noqa: F401  (registers the ids)
 from agents.decision import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER
@@ -15,7 +16,6 @@ from agents.expert import HeadwayDriver
 from agents.imitation import EXPERT_KEY, ExpertActionInfo, make_teacher
 from agents.lookahead import LookaheadDriver, LookaheadDriverConfig
 from rhs_common.validation import build
-from test_imitation import _place, _road
 
 TRUTH = "rhs-highway-v0"
 #: every car copied, the env's own 3 frames per step: the forecast must then be the simulator's future exactly
