@@ -5,7 +5,7 @@ meta-action ``a`` drives the copy for ``horizon_s`` seconds: ``a`` now, then the
 second (pulse mode, IDLE between), as the ego will. highway-env's traffic (IDM + MOBIL) is deterministic given the
 state, so each copy is a forecast of what the action leads to. The score of ``a`` is the return of its forecast,
 
-    Q(a) = sum_{t < H} r_t  -  crash_penalty [crashed before H],
+    Q(a) = sum_{t < H} r_t  -  crash_penalty [crashed before H]  -  unsafe_penalty [min headway < min_headway_s],
 
 with r_t highway-env's normalised per-step reward (speed in ``reward_speed_range``, right lane, on road). The
 driver takes ``argmax_a Q(a)`` unless it beats the headway driver's own action by less than ``tie_margin``
@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from agents.decision import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER
-from agents.expert import HeadwayDriver, HeadwayDriverConfig
+from agents.expert import HeadwayDriver, HeadwayDriverConfig, bumper_gap
 from rhs_common.validation import build, check_range, check_types
 
 #: highway-env's meta-action names, in DiscreteMetaAction's order (LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER)
@@ -52,6 +52,8 @@ class LookaheadDriverConfig:
     decision_s: float = 1.0  # the forecast's base policy decides once per this period (pulse mode)
     crash_penalty: float = 100.0  # subtracted from a forecast that crashes (about an episode's remaining return)
     tie_margin: float = 0.5  # another action must beat the headway driver's by this much return
+    min_headway_s: float = 0.0  # a forecast whose ego comes closer than this time gap to a car ahead or behind ...
+    unsafe_penalty: float = 0.0  # ... loses this much (0: no margin asked)
     reach_ahead_m: float = 150.0  # traffic copied ahead of the ego
     reach_behind_m: float = 80.0  # and behind it
     frames_per_step: int = 1  # simulator frames per env step in a forecast (0: the env's, 15 Hz / 5 Hz = 3)
@@ -63,6 +65,8 @@ class LookaheadDriverConfig:
         check_range("decision_s", self.decision_s, 0.0, 10.0, low_open=True)
         check_range("crash_penalty", self.crash_penalty, 0.0, 1e6)
         check_range("tie_margin", self.tie_margin, 0.0, 1e3)
+        check_range("min_headway_s", self.min_headway_s, 0.0, 10.0)
+        check_range("unsafe_penalty", self.unsafe_penalty, 0.0, 1e6)
         check_range("reach_ahead_m", self.reach_ahead_m, 0.0, 5000.0)
         check_range("reach_behind_m", self.reach_behind_m, 0.0, 5000.0)
         check_range("frames_per_step", self.frames_per_step, 0, 100)
@@ -137,7 +141,7 @@ class LookaheadDriver:
         every = max(1, int(round(c.decision_s * pol_hz)))
         road, ego = self._copy()
         driver = HeadwayDriver(_Forecast(road, ego), self.config.headway)
-        total = 0.0
+        total, unsafe = 0.0, False
         for k in range(steps):
             act = action if k == 0 else (driver.act() if k % every == 0 else IDLE)
             if act != IDLE:
@@ -146,9 +150,21 @@ class LookaheadDriver:
                 road.act()
                 road.step(dt)
             if ego.crashed:
-                return total - c.crash_penalty
+                return total - c.crash_penalty - (c.unsafe_penalty if unsafe else 0.0)
             total += self._reward(ego, road)
-        return total
+            unsafe = unsafe or (c.unsafe_penalty > 0 and self._headway_s(ego, road) < c.min_headway_s)
+        return total - (c.unsafe_penalty if unsafe else 0.0)
+
+    @staticmethod
+    def _headway_s(ego, road) -> float:
+        """The smaller time gap of the ego's lane: to its leader at the ego's speed, to its follower at the follower's (s)."""
+        front, rear = road.neighbour_vehicles(ego, ego.lane_index)
+        out = float("inf")
+        if front is not None:
+            out = min(out, bumper_gap(ego, front) / max(ego.speed, 1.0))
+        if rear is not None:
+            out = min(out, bumper_gap(ego, rear) / max(rear.speed, 1.0))
+        return out
 
     def candidates(self) -> list[int]:
         """The meta-actions that change something: no lane change off the road, no speed step past the ends."""
