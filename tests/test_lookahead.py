@@ -19,7 +19,7 @@ from rhs_common.validation import build
 
 TRUTH = "rhs-highway-v0"
 #: every car copied, the env's own 3 frames per step: the forecast must then be the simulator's future exactly
-EXACT = {"horizon_s": 2.0, "frames_per_step": 0, "reach_ahead_m": 5000.0, "reach_behind_m": 5000.0}
+EXACT = {"horizon_s": 2.0, "frames_per_step": 0, "reach_ahead_m": 5000.0, "reach_behind_m": 5000.0, "unsafe_penalty": 0.0}
 
 
 def test_config_is_validated_with_the_field_path():
@@ -110,3 +110,14 @@ def test_rhs_slam_train_dagger_from_the_lookahead_teacher(tmp_path):
     assert (tmp_path / "run" / "model.zip").exists()
     last = out["iterations"][-1]
     assert last["samples"] == last["decisions"] == 12  # one label per decision (60 steps / 5), none between
+
+
+def test_a_forecast_that_follows_closer_than_the_margin_pays_the_penalty_once():
+    env, ego = _road(lane=2, speed=25.0, speed_index=1)
+    _place(env, 2, 20.0, 25.0)  # 15 m bumper gap at 25 m/s: a 0.6 s time gap
+    _place(env, 1, 2.0, 25.0)  # the left lane taken alongside
+    plain = LookaheadDriver(env, {"horizon_s": 2.0}).forecast(IDLE)
+    careful = LookaheadDriver(env, {"horizon_s": 2.0, "min_headway_s": 1.0, "unsafe_penalty": 7.0}).forecast(IDLE)
+    loose = LookaheadDriver(env, {"horizon_s": 2.0, "min_headway_s": 0.3, "unsafe_penalty": 7.0}).forecast(IDLE)
+    assert careful == pytest.approx(plain - 7.0, abs=1e-12)
+    assert loose == pytest.approx(plain, abs=1e-12)
