@@ -118,6 +118,14 @@ def make_teacher(env: gym.Env, teacher: str = "headway", config: Any = None):
     return driver(env, build(config_cls, config, "expert"))
 
 
+def teacher_config(hp: dict[str, Any]) -> tuple[str, Any]:
+    """The hyperparameters' ``teacher`` (default ``"headway"``) and its config built from ``expert``."""
+    teacher = hp.get("teacher", "headway")
+    if teacher not in TEACHERS:
+        raise ValueError(f"hyperparameter teacher must be one of {sorted(TEACHERS)}, got {teacher!r}")
+    return teacher, build(TEACHERS[teacher][1], hp.get("expert"), "expert")
+
+
 class ExpertActionInfo(gym.Wrapper):
     """Adds ``info["expert_action"]``: the :class:`HeadwayDriver`'s action in the state just observed.
 
@@ -449,10 +457,7 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
     if resume and not (Path(out) / STATE_META).exists():
         raise ValueError(f"--resume: no finished DAgger round in {out} to continue from (no {STATE_META}); run "
                          "without --resume to start a new run")
-    teacher = run.hp.get("teacher", "headway")
-    if teacher not in TEACHERS:
-        raise ValueError(f"hyperparameter teacher must be one of {sorted(TEACHERS)}, got {teacher!r}")
-    expert = build(TEACHERS[teacher][1], run.hp.get("expert"), "expert")
+    teacher, expert = teacher_config(run.hp)
     config = build(DaggerConfig, {k: v for k, v in run.hp.items() if k not in ("policy_kwargs", "expert", "teacher")},
                    "dagger")
     check_train_args(run.timesteps, run.n_envs, seed, 0, 1, 0)

@@ -194,7 +194,7 @@ class LookaheadDriver:
         if default not in cand:
             cand.append(default)
         q = {a: self.forecast(a) for a in cand}
-        best = max(q, key=q.get)
+        best = max(q, key=lambda a: q[a])
         return best if q[best] > q[default] + self.config.tie_margin else default
 
     def predict(self, obs, deterministic: bool = True):
