@@ -187,15 +187,19 @@ class LookaheadDriver:
             out.append(SLOWER)
         return out
 
-    def act(self) -> int:
-        """The meta-action for the current state."""
+    def decide(self) -> tuple[int, int, dict[int, float]]:
+        """The meta-action, the headway driver's own and the forecast return Q of every candidate."""
         default = self.base_driver.act()
         cand = self.candidates()
         if default not in cand:
             cand.append(default)
         q = {a: self.forecast(a) for a in cand}
         best = max(q, key=lambda a: q[a])
-        return best if q[best] > q[default] + self.config.tie_margin else default
+        return (best if q[best] > q[default] + self.config.tie_margin else default), default, q
+
+    def act(self) -> int:
+        """The meta-action for the current state."""
+        return self.decide()[0]
 
     def predict(self, obs, deterministic: bool = True):
         """SB3's ``predict`` signature; the observation is not used."""

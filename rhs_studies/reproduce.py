@@ -108,6 +108,8 @@ STEPS: tuple[Step, ...] = (
     Step("rl_finetune", "rl_finetune.py", ("--train",), ("rl_finetune.json",), 16000,
          "PPO fine-tune of the student with its controls (trains the arms missing in runs/rl: ~10-20 min per 20k "
          "env steps, ~45 min per 80k arm), then 100 held-out seeds per policy (~4 min each on 2 cores)"),
+    Step("teachers", "teachers.py", (), ("teachers.json",), 500,
+         "the headway driver against the lookahead teachers on validation seeds (rhs-highway-v0)"),
     Step("crash_analysis", "crash_analysis.py", (), ("crash_analysis.json",), 700,
          "the shipped radar + SLAM student's crashes against the expert's labels"),
     Step("detection_curves", "detection_curves.py", (), ("detection_curves.json",), 600),

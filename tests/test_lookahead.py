@@ -121,3 +121,18 @@ def test_a_forecast_that_follows_closer_than_the_margin_pays_the_penalty_once():
     loose = LookaheadDriver(env, {"horizon_s": 2.0, "min_headway_s": 0.3, "unsafe_penalty": 7.0}).forecast(IDLE)
     assert careful == pytest.approx(plain - 7.0, abs=1e-12)
     assert loose == pytest.approx(plain, abs=1e-12)
+
+
+def test_the_teachers_study_writes_its_table_with_the_decision_statistics(tmp_path):
+    from rhs_studies.teachers import main
+
+    assert main(["--episodes", "2", "--duration", "2", "--workers", "1", "--variants", "headway", "lookahead",
+                 "--out-dir", str(tmp_path)]) == 0
+    result = json.loads((tmp_path / "teachers.json").read_text())
+    row = result["rows"]["lookahead"]
+    assert row["decisions"] == 4 and 0.0 <= row["differs_from_headway"] <= 1.0 and 0.0 <= row["near_ties"] <= 1.0
+    assert "differs_from_headway" not in result["rows"]["headway"]
+    assert result["vs_headway"]["lookahead"]["n"] == 2
+    assert "| LookaheadDriver, 0.6 s margin (as shipped) |" in (tmp_path / "teachers.md").read_text()
+    with pytest.raises(SystemExit):
+        main(["--variants", "lookahead", "--out-dir", str(tmp_path)])

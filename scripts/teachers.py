@@ -1,0 +1,11 @@
+"""The privileged teachers on validation seeds: the headway driver against lookahead variants.
+
+Runs :mod:`rhs_studies.teachers` (its docstring has the options), as ``python -m rhs_studies.teachers`` does.
+"""
+
+import sys
+
+from rhs_studies.teachers import main
+
+if __name__ == "__main__":
+    sys.exit(main())
