@@ -155,31 +155,14 @@ def _rl_finetune(d: dict) -> tuple[str, str]:
             f"[{gain['low']:+.1f}, {gain['high']:+.1f}] (IDM + MOBIL: {rows['idm']['return']['mean']:.1f})")
 
 
-def _teacher_student(d: dict) -> tuple[str, str] | None:
-    """The student of the lookahead teacher (None when rl_finetune has not evaluated it)."""
-    t = d.get("targets_teacher") or {}
-    if not t:
-        return None
-    arm, rows = t["arm"], d["rows"]
-    s, gain, over = rows[arm], d["vs_student"][arm], t.get("gain_over_dagger_continue")
-    value = (f"{s['return']['mean']:.1f}, {s['collisions']}/{s['episodes']}, {gain['mean']:+.1f} "
-             f"[{gain['low']:+.1f}, {gain['high']:+.1f}]")
-    if over is not None:
-        value += f"; over the DAgger continuation: {over['mean']:+.1f} [{over['low']:+.1f}, {over['high']:+.1f}]"
-    if "lookahead" in rows:
-        value += f" (teacher: {rows['lookahead']['return']['mean']:.1f})"
-    return (f"DAgger from the lookahead teacher ({d['training'][arm]['timesteps']} env steps; {d['episodes']} held-out "
-            "seeds): return, collisions, paired gain over the student", value)
-
-
 def _benchmark(d: dict) -> tuple[str, str]:
     e = d["envs"]
     return ("Env steps per second, radar + SLAM env (ground-truth env), single env, one BLAS thread",
             f"{e['rhs-highway-slam-v0']['steps_per_s']:.1f} ({e['rhs-highway-v0']['steps_per_s']:.1f})")
 
 
-#: (results file, row builder): the rows of the README's headline table, in order (a builder's None: no row)
-HEADLINE: tuple[tuple[str, Callable[[dict], tuple[str, str] | None]], ...] = (
+#: (results file, row builder): the rows of the README's headline table, in order
+HEADLINE: tuple[tuple[str, Callable[[dict], tuple[str, str]]], ...] = (
     ("fig5a", _fig5a),
     ("slam_accuracy", _dense),
     ("slam_accuracy", _highway),
@@ -188,7 +171,6 @@ HEADLINE: tuple[tuple[str, Callable[[dict], tuple[str, str] | None]], ...] = (
     ("detection_curves", _detection),
     ("policies", _policies),
     ("rl_finetune", _rl_finetune),
-    ("rl_finetune", _teacher_student),
     ("benchmark", _benchmark),
 )
 
@@ -200,10 +182,7 @@ def headline(results_dir: Path, fingerprints: dict) -> str | None:
     for name, row in HEADLINE:
         if not (results_dir / f"{name}.json").exists():
             return None
-        built = row(_load(results_dir, name))
-        if built is None:  # a row of a result that does not hold that study (yet)
-            continue
-        what, value = built
+        what, value = row(_load(results_dir, name))
         lines.append(f"| {what} | {value} | [{Path(PAGE[name]).stem}]({PAGE[name]}) |")
         ok, why = verification(results_dir / f"{name}.json", fingerprints)
         if not ok and name not in unverified:
