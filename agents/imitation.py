@@ -3,7 +3,8 @@
 The student is a stable-baselines3 ``ActorCriticPolicy`` (the same network as
 PPO's, so the result is a PPO zip that ``rhs-slam evaluate`` / ``demo`` load)
 that sees only the env's observation (on ``rhs-highway-slam-v0``: the radar
-point cloud and the SLAM estimate). The expert, :class:`agents.expert.HeadwayDriver`,
+point cloud and the SLAM estimate). The expert, :class:`agents.expert.HeadwayDriver`
+(or, with the hyperparameter ``teacher: lookahead``, :class:`agents.lookahead.LookaheadDriver`),
 reads the simulator's true road state, which the student never sees
 ("learning by cheating": a privileged teacher, a sensor-only student).
 
@@ -54,8 +55,9 @@ pieces.
 
 Hyperparameters come from ``agents/hyperparams/dagger.yml`` (per env id:
 ``policy``, ``policy_kwargs``, ``n_envs``, ``n_timesteps``, ``env_kwargs`` and
-the fields of :class:`DaggerConfig`, plus ``expert``: fields of
-:class:`agents.expert.HeadwayDriverConfig`).
+the fields of :class:`DaggerConfig`, plus ``teacher`` (a name of :data:`TEACHERS`, default ``headway``) and
+``expert``: the fields of the teacher's config, :class:`agents.expert.HeadwayDriverConfig` or
+:class:`agents.lookahead.LookaheadDriverConfig`).
 """
 
 from __future__ import annotations
@@ -110,27 +112,33 @@ TEACHERS: dict[str, tuple[type, type]] = {"headway": (HeadwayDriver, HeadwayDriv
                                           "lookahead": (LookaheadDriver, LookaheadDriverConfig)}
 
 
-def make_teacher(env: gym.Env, teacher: str = "headway", config: Any = None):
-    """The privileged driver ``teacher`` (:data:`TEACHERS`) on ``env`` with ``config`` (its config or a dict)."""
+def _teacher_classes(teacher: str) -> tuple[type, type]:
     if teacher not in TEACHERS:
         raise ValueError(f"teacher must be one of {sorted(TEACHERS)}, got {teacher!r}")
-    driver, config_cls = TEACHERS[teacher]
+    return TEACHERS[teacher]
+
+
+def make_teacher(env: gym.Env, teacher: str = "headway", config: Any = None):
+    """The privileged driver ``teacher`` (:data:`TEACHERS`) on ``env`` with ``config`` (its config or a dict)."""
+    driver, config_cls = _teacher_classes(teacher)
     return driver(env, build(config_cls, config, "expert"))
 
 
 def teacher_config(hp: dict[str, Any]) -> tuple[str, Any]:
     """The hyperparameters' ``teacher`` (default ``"headway"``) and its config built from ``expert``."""
     teacher = hp.get("teacher", "headway")
-    if teacher not in TEACHERS:
-        raise ValueError(f"hyperparameter teacher must be one of {sorted(TEACHERS)}, got {teacher!r}")
-    return teacher, build(TEACHERS[teacher][1], hp.get("expert"), "expert")
+    return teacher, build(_teacher_classes(teacher)[1], hp.get("expert"), "expert")
 
 
 class ExpertActionInfo(gym.Wrapper):
-    """Adds ``info["expert_action"]``: the :class:`HeadwayDriver`'s action in the state just observed.
+    """Adds ``info["expert_action"]``: the teacher's action in the state just observed.
 
     Lives inside each (subprocess) env, so a vectorised collector gets the labels
-    with the observations. ``expert`` is a :class:`agents.expert.HeadwayDriverConfig` or a dict.
+    with the observations. ``teacher``: a name of :data:`TEACHERS` (the :class:`HeadwayDriver` by default);
+    ``expert``: its config (:class:`agents.expert.HeadwayDriverConfig`, ...) or a dict.
+    ``every = k`` (inside a :class:`agents.decision.HoldAction` of the same k, states between not labelled): the
+    teacher runs only where a decision is taken, at the reset, every k-th step and the episode's last; the other
+    steps carry ``None``.
     ``between = k`` (> 1; inside a :class:`agents.decision.HoldAction` of the same k): the info of
     every k-th step since the reset (and of the episode's last) also carries ``info["expert_between"]``,
     the ``(observation, expert action)`` of the steps since the previous one: the states between two
