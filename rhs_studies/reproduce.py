@@ -106,8 +106,9 @@ STEPS: tuple[Step, ...] = (
          "what the policies do is fingerprinted by the policies step"),
     Step("policies", "evaluate_policies.py", (), ("policies.json",), 220),
     Step("rl_finetune", "rl_finetune.py", ("--train",), ("rl_finetune.json",), 16000,
-         "PPO fine-tune of the student with its controls (trains the arms missing in runs/rl: ~10-20 min per 20k "
-         "env steps, ~45 min per 80k arm), then 100 held-out seeds per policy (~4 min each on 2 cores)"),
+         "PPO fine-tune of the student with its controls and the lookahead teacher's student (trains the arms missing "
+         "in runs/rl: ~10-20 min per 20k env steps, ~45 min per 80k arm, ~35 min for the lookahead's 48k), then 100 "
+         "held-out seeds per policy (~4 min each on 2 cores)"),
     Step("teachers", "teachers.py", (), ("teachers.json",), 500,
          "the headway driver against the lookahead teachers on validation seeds (rhs-highway-v0)"),
     Step("crash_analysis", "crash_analysis.py", (), ("crash_analysis.json",), 700,

@@ -408,17 +408,20 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--episodes must be >= 2 (intervals need two episodes)")
     started = time.time()
     runs_dir = Path(args.runs)
+    kept = [row for row in args.keep if row in args.arms]
+    if kept:
+        ap.error(f"--keep {' '.join(kept)}: a row kept cannot be in --arms (those are shipped and driven again)")
+    seeds = list(range(args.seed, args.seed + args.episodes))
+    try:
+        previous = keep_rows(Path(args.out_dir) / "rl_finetune.json", args.keep, seeds) if args.keep else {}
+    except ValueError as err:
+        ap.error(str(err))
     for arm in args.arms:
         if args.train and not (runs_dir / arm / "model.zip").exists():
             train_arm(arm, runs_dir, args.timesteps, args.train_seed)
         if not (runs_dir / arm / "model.zip").exists():
             ap.error(f"{runs_dir / arm}/model.zip is missing: train it (--train) or leave {arm} out of --arms")
-    kept = [row for row in args.keep if row in args.arms]
-    if kept:
-        ap.error(f"--keep {' '.join(kept)}: a row kept cannot be in --arms (those are shipped and driven again)")
     shipped = {arm: ship_arm(arm, runs_dir, Path(args.ship_dir)) for arm in args.arms}
-    seeds = list(range(args.seed, args.seed + args.episodes))
-    previous = keep_rows(Path(args.out_dir) / "rl_finetune.json", args.keep, seeds) if args.keep else {}
     for row in args.keep:  # a kept arm's zip and training record are the shipped ones
         if row in ARMS:
             shipped[row] = Path(args.ship_dir) / f"{row}.zip"

@@ -275,6 +275,12 @@ def test_the_study_keeps_earlier_rows_only_on_the_same_seeds_and_names_their_com
     result = {"seeds": seeds, "episodes": 10, "timesteps": 20000, "rows": {k: row_summary(v) for k, v in runs.items()},
               "vs_student": {}, "kept_rows": kept["commits"]}
     assert "IDM + MOBIL (highway-env, scripted) (bbbbbbb)" in markdown(result)
+    from rhs_studies.rl_finetune import main
+
+    for argv in (["--arms", "finetune", "--keep", "finetune"],  # a row both kept and driven again
+                 ["--arms", "finetune", "--keep", "idm", "--out-dir", str(tmp_path / "empty")]):  # nothing to keep
+        with pytest.raises(SystemExit):
+            main([*argv, "--runs", str(tmp_path / "runs")])
 
 
 def test_the_study_derives_a_control_yaml_with_the_keys_set(tmp_path):
