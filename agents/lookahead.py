@@ -43,7 +43,7 @@ import numpy as np
 
 from agents.decision import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER
 from agents.expert import HeadwayDriver, HeadwayDriverConfig, bumper_gap
-from rhs_common.validation import build, check_range, check_types
+from rhs_common.validation import build, check_int, check_range, check_types
 
 #: highway-env's meta-action names, in DiscreteMetaAction's order (LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER)
 META_ACTIONS = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
@@ -74,7 +74,7 @@ class LookaheadDriverConfig:
         check_range("unsafe_penalty", self.unsafe_penalty, 0.0, 1e6)
         check_range("reach_ahead_m", self.reach_ahead_m, 0.0, 5000.0)
         check_range("reach_behind_m", self.reach_behind_m, 0.0, 5000.0)
-        check_range("frames_per_step", self.frames_per_step, 0, 100)
+        check_int("frames_per_step", self.frames_per_step, 0, 100)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
