@@ -86,6 +86,13 @@ def bumper_gap(ego, other) -> float:
     return abs(ego.lane_distance_to(other)) - 0.5 * (ego.LENGTH + other.LENGTH)
 
 
+def check_highway_env(env, driver: str) -> None:
+    """``ValueError`` unless ``env`` (or the env it wraps) is a highway-env env with a road and an action type."""
+    base = env.unwrapped
+    if not hasattr(base, "road") or not hasattr(base, "action_type"):
+        raise ValueError(f"{driver} needs a highway-env env (env.unwrapped.road)")
+
+
 class HeadwayDriver:
     """Time-gap driver on the true road state (see the module docstring for the rule).
 
@@ -95,9 +102,7 @@ class HeadwayDriver:
     """
 
     def __init__(self, env, config: Any = None):
-        base = env.unwrapped
-        if not hasattr(base, "road") or not hasattr(base, "action_type"):
-            raise ValueError("the headway driver needs a highway-env env (env.unwrapped.road)")
+        check_highway_env(env, "the headway driver")
         self.env = env
         self.config = build(HeadwayDriverConfig, config, "expert")
 

@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from agents.decision import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER
-from agents.expert import HeadwayDriver, HeadwayDriverConfig, bumper_gap
+from agents.expert import HeadwayDriver, HeadwayDriverConfig, bumper_gap, check_highway_env
 from rhs_common.validation import build, check_int, check_range, check_types
 
 #: highway-env's meta-action names, in DiscreteMetaAction's order (LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER)
@@ -101,9 +101,7 @@ class LookaheadDriver:
     """
 
     def __init__(self, env, config: Any = None):
-        base = env.unwrapped
-        if not hasattr(base, "road") or not hasattr(base, "action_type"):
-            raise ValueError("the lookahead driver needs a highway-env env (env.unwrapped.road)")
+        check_highway_env(env, "the lookahead driver")
         self.env = env
         self.config = build(LookaheadDriverConfig, config, "lookahead")
         self.base_driver = HeadwayDriver(env, self.config.headway)

@@ -34,6 +34,7 @@ import numpy as np
 
 from rhs_common.stats import mean_interval, wilson_interval
 from rhs_studies.provenance import write_json
+from rhs_studies.rl_finetune import paired
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV_ID = "rhs-highway-v0"
@@ -141,15 +142,6 @@ def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def paired_vs(runs: list[dict[str, Any]], base: list[dict[str, Any]]) -> dict[str, float]:
-    from rhs_common.stats import paired_difference
-
-    by = {r["seed"]: r["return"] for r in base}
-    common = [r for r in runs if r["seed"] in by]
-    d = paired_difference([r["return"] for r in common], [by[r["seed"]] for r in common])
-    return {"mean": d.mean, "low": d.low, "high": d.high, "n": len(common)}
-
-
 def markdown(result: dict[str, Any]) -> str:
     seeds = result["seeds"]
     lines = [f"Validation seeds {seeds[0]}-{seeds[-1]} ({len(seeds)} episodes per teacher, {ENV_ID}, target speeds "
@@ -203,7 +195,7 @@ def main(argv: list[str] | None = None) -> int:
     result = {
         "env_id": ENV_ID, "action": ACTION, "seeds": seeds, "variants": {k: VARIANTS[k] for k in args.variants},
         "rows": {k: summarize(v) for k, v in runs.items()},
-        "vs_headway": {k: paired_vs(v, runs["headway"]) for k, v in runs.items() if k != "headway"},
+        "vs_headway": {k: paired(v, runs["headway"]) for k, v in runs.items() if k != "headway"},
         "runs": {k: [{f: r[f] for f in ("seed", "return", "crashed", "mean_speed", "steps")} for r in v]
                  for k, v in runs.items()},
     }
