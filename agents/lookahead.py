@@ -39,8 +39,6 @@ import copy
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-import numpy as np
-
 from agents.decision import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER
 from agents.expert import HeadwayDriver, HeadwayDriverConfig, bumper_gap, check_highway_env
 from rhs_common.validation import build, check_int, check_range, check_types
@@ -81,15 +79,24 @@ class LookaheadDriverConfig:
 
 
 class _Forecast:
-    """A copy of the road around the ego that the headway driver can read (``.unwrapped.road`` / ``.vehicle``)."""
+    """A copy of the road around the ego, read the way the env reads itself: ``.unwrapped.road`` / ``.vehicle`` for
+    the headway driver, and the env class's own reward (highway-env's ``_reward`` / ``_rewards``) on the copy."""
 
-    def __init__(self, road, ego):
-        self.road, self.vehicle = road, ego
+    def __init__(self, road, ego, env):
+        self.road, self.vehicle, self.config = road, ego, env.config
         self.action_type = None  # HeadwayDriver only checks that it exists
+        self._env_cls = type(env)
 
     @property
     def unwrapped(self) -> _Forecast:
         return self
+
+    def _rewards(self, action):
+        return self._env_cls._rewards(self, action)
+
+    def reward(self) -> float:
+        """The env's normalised per-step reward of the copy's state."""
+        return float(self._env_cls._reward(self, None))
 
 
 class LookaheadDriver:
@@ -121,19 +128,6 @@ class LookaheadDriver:
             road.vehicles = everyone
         return road_copy, memo[id(ego)]
 
-    def _reward(self, ego, road) -> float:
-        """highway-env's normalised reward of the ego's state (HighwayEnv._reward with the env's config)."""
-        cfg = self.env.unwrapped.config
-        lanes = road.network.all_side_lanes(ego.lane_index)
-        lane = ego.target_lane_index[2]
-        lo, hi = cfg["reward_speed_range"]
-        speed = float(np.clip((ego.speed * np.cos(ego.heading) - lo) / (hi - lo), 0.0, 1.0))
-        r = (cfg["collision_reward"] * float(ego.crashed) + cfg["right_lane_reward"] * lane / max(len(lanes) - 1, 1)
-             + cfg["high_speed_reward"] * speed)
-        if cfg.get("normalize_reward", True):
-            r = (r - cfg["collision_reward"]) / (cfg["high_speed_reward"] + cfg["right_lane_reward"] - cfg["collision_reward"])
-        return r * float(ego.on_road)
-
     def forecast(self, action: int) -> float:
         """Q(action): the return of ``action`` now, then the headway driver once per ``decision_s``, over the horizon."""
         base, c = self.env.unwrapped, self.config
@@ -143,7 +137,8 @@ class LookaheadDriver:
         steps = max(1, int(round(c.horizon_s * pol_hz)))
         every = max(1, int(round(c.decision_s * pol_hz)))
         road, ego = self._copy()
-        driver = HeadwayDriver(_Forecast(road, ego), self.config.headway)
+        sim = _Forecast(road, ego, base)
+        driver = HeadwayDriver(sim, self.config.headway)
         total, unsafe = 0.0, False
         for k in range(steps):
             act = action if k == 0 else (driver.act() if k % every == 0 else IDLE)
@@ -152,9 +147,10 @@ class LookaheadDriver:
             for _ in range(frames):
                 road.act()
                 road.step(dt)
-            if ego.crashed:
-                return total - c.crash_penalty - (c.unsafe_penalty if unsafe else 0.0)
-            total += self._reward(ego, road)
+            if ego.crashed:  # the episode ends here: no reward for this step, the crash penalty instead
+                total -= c.crash_penalty
+                break
+            total += sim.reward()
             unsafe = unsafe or (c.unsafe_penalty > 0 and self._headway_s(ego, road) < c.min_headway_s)
         return total - (c.unsafe_penalty if unsafe else 0.0)
 

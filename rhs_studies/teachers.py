@@ -32,9 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from rhs_common.stats import mean_interval, wilson_interval
 from rhs_studies.provenance import write_json
-from rhs_studies.rl_finetune import paired
+from rhs_studies.rl_finetune import paired, row_summary
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV_ID = "rhs-highway-v0"
@@ -76,7 +75,7 @@ def drive(variant: str, seed: int, duration: float | None = None) -> dict[str, A
     base: Any = env.unwrapped
     config = VARIANTS[variant]
     ahead = None if config is None else LookaheadDriver(env, config)
-    headway = HeadwayDriver(env)
+    headway = HeadwayDriver(env) if ahead is None else ahead.base_driver
     total, speeds, differs, gaps, decide_s = 0.0, [], [], [], 0.0
     crashed, k = False, 0
     while True:
@@ -123,16 +122,10 @@ def run_variant(variant: str, seeds: list[int], workers: int, duration: float | 
 
 
 def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
-    """Return (t interval), collisions (Wilson), speed, seconds per decision and the decision statistics."""
-    ret = mean_interval([r["return"] for r in runs])
-    crashes = sum(r["crashed"] for r in runs)
-    low, high = wilson_interval(crashes, len(runs))
-    out: dict[str, Any] = {
-        "episodes": len(runs), "return": {"mean": ret.mean, "half": ret.half_width},
-        "collisions": crashes, "collision_interval": [low, high],
-        "mean_speed_mps": float(np.mean([r["mean_speed"] for r in runs])),
-        "s_per_decision": float(np.mean([r["s_per_decision"] for r in runs])),
-    }
+    """:func:`rhs_studies.rl_finetune.row_summary` (return, collisions, speed), the seconds per decision and the
+    decision statistics of a lookahead."""
+    out = row_summary(runs)
+    out["s_per_decision"] = float(np.mean([r["s_per_decision"] for r in runs]))
     differs = [d for r in runs for d in r["differs"]]
     gaps = np.array([g for r in runs for g in r["gaps"]])
     if differs:
@@ -157,7 +150,7 @@ def markdown(result: dict[str, Any]) -> str:
         ties = f"{100 * s['near_ties']:.0f} %" if "near_ties" in s else ""
         lines.append(f"| {LABELS[key]} | {s['return']['mean']:.1f} +- {s['return']['half']:.1f} | {vs_text} | "
                      f"{s['collisions']}/{s['episodes']} [{100 * lo:.0f}-{100 * hi:.0f} %] | "
-                     f"{s['mean_speed_mps']:.1f} | {differ} | {ties} | {s['s_per_decision']:.3f} |")
+                     f"{s['mean_speed_mps']['mean']:.1f} | {differ} | {ties} | {s['s_per_decision']:.3f} |")
     lines += ["", "Near ties: decisions where the teacher's action's forecast returns less than 1 more than the next "
               "best action's over the 6 s horizon (about 0.03 per step)."]
     return "\n".join(lines) + "\n"
