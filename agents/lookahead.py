@@ -19,7 +19,7 @@ world. A crash ends an episode (all later reward is lost), so ``crash_penalty`` 
 remaining return.
 
 Cost: up to ``5 x horizon_s x policy_frequency x frames_per_step`` simulator frames per decision on the copied
-traffic (150 frames with the defaults, about 0.25 s per decision on one core, ``results/teachers.md``; the env's own 3 frames per step
+traffic (150 frames with the defaults, about 0.12 s per decision on one core, ``results/teachers.md``; the env's own 3 frames per step
 triple it). It reads ``env.unwrapped.road`` and ``.vehicle`` and ignores the
 observation, like :class:`agents.expert.HeadwayDriver`.
 
