@@ -150,6 +150,46 @@ def test_compiled_slam_matches_numpy_over_an_episode(slam):
     assert worst < 1e-6
 
 
+def _doppler_cases(rng: np.random.Generator, n_cases: int) -> list:
+    """Doppler fit inputs: static points around radars with a turning ego, traffic, few points, one line of sight."""
+    cases = []
+    for q in range(n_cases):
+        n = int(rng.integers(0, 40))
+        sensors = rng.choice([[2.5, 0.8], [2.5, -0.8], [-2.5, 0.8], [-2.5, -0.8]], n)
+        pts = np.column_stack([rng.uniform(-60, 60, (n, 2)), np.zeros(n), rng.uniform(1, 20, n)])
+        if q % 7 == 0 and n:  # one line of sight: rank-deficient
+            pts[:, :2] = sensors + np.outer(rng.uniform(5, 40, n), [1.0, 0.3])
+        v, w = rng.normal([20.0, 0.0], [5.0, 0.5]), rng.normal(0, 0.3)
+        d = pts[:, :2] - sensors
+        u = d / np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)[:, None]
+        pts[:, 2] = -(u @ v + w * (sensors[:, 0] * u[:, 1] - sensors[:, 1] * u[:, 0])) + rng.normal(0, 0.05, n)
+        pts[rng.random(n) < 0.3, 2] += rng.uniform(-10, 10)  # moving points
+        prior = {} if q % 3 == 0 else {"prior": v + rng.normal(0, 1, 2), "max_change": 2.0}
+        cases.append((pts, sensors, prior, q % 4 == 1))
+    return cases
+
+
+def test_compiled_doppler_fits_are_the_numpy_fits():
+    """The Doppler ego-motion fits (velocity, velocity + yaw rate, speed-only prior) compiled: the same draws, the same
+    hypotheses, the same None / fit as numpy on 300 clouds, fits within 1e-9."""
+    from slam.core.association import estimate_ego_velocity
+    from slam.core.pipeline import doppler_ego_motion
+
+    found = 0
+    for pts, sensors, prior, speed_only in _doppler_cases(np.random.default_rng(11), 300):
+        dop = np.column_stack([pts[:, :2] - sensors, pts[:, 2:]])
+        fits = [estimate_ego_velocity(dop, 0.25, np.random.default_rng(1), prior=prior.get("prior"),
+                                      max_change=prior.get("max_change", np.inf), kernels=k) for k in ("numpy", "numba")]
+        fits += [doppler_ego_motion(pts, sensors, 0.25, np.random.default_rng(2), speed_only=speed_only, kernels=k,
+                                    **prior) for k in ("numpy", "numba")]
+        for a, b in (fits[:2], fits[2:]):
+            assert (a is None) == (b is None)
+            if a is not None:
+                found += 1
+                np.testing.assert_allclose(b, a, rtol=0, atol=1e-9)
+    assert found > 300  # most clouds give a fit
+
+
 def test_compiled_icp_equals_the_numpy_fit():
     """The compiled ICP (brute-force neighbours, fused iterations) gives the cKDTree / numpy estimate."""
     from rhs_common.geometry import apply_motion
@@ -342,6 +382,14 @@ def test_kernels_as_python_under_disable_jit():
         np.add.at(info0, pp, np.einsum("kaj,kjb->kab", HtSi, H))
         np.add.at(g0, pp, np.einsum("kaj,kj->ka", HtSi, nu))
         assert np.allclose(info, info0, rtol=1e-13, atol=1e-13) and np.allclose(g, g0, rtol=1e-13, atol=1e-13)
+        from slam.core.pipeline import doppler_ego_motion
+        sensors = np.tile([[2.5, 0.8], [-2.5, -0.8]], (10, 1))
+        pts = np.column_stack([rng.uniform(-40, 40, (20, 2)), np.zeros(20), np.ones(20)])
+        d = pts[:, :2] - sensors
+        u = d / np.hypot(d[:, 0], d[:, 1])[:, None]
+        pts[:, 2] = -(u @ [15.0, 0.5] + 0.2 * (sensors[:, 0] * u[:, 1] - sensors[:, 1] * u[:, 0]))
+        fits = [doppler_ego_motion(pts, sensors, 0.25, np.random.default_rng(0), kernels=k) for k in ("numpy", "numba")]
+        assert np.allclose(fits[0], fits[1], atol=1e-9) and np.allclose(fits[1], [15.0, 0.5, 0.2], atol=1e-6)
         print("ok")
     """
     res = _run(code, NUMBA_DISABLE_JIT="1")

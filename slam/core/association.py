@@ -118,6 +118,7 @@ def estimate_ego_velocity(
     angular_bins: int = 24,
     prior: np.ndarray | None = None,
     max_change: float = np.inf,
+    kernels: str = "numpy",
 ) -> np.ndarray | None:
     """Ego velocity (2,) in the vehicle frame (m/s) from the Doppler of static points.
 
@@ -132,6 +133,8 @@ def estimate_ego_velocity(
     are rejected (bounded acceleration over a cycle). The winner is refined by
     least squares on its inliers. Returns ``None`` with fewer than
     ``min_inliers`` inliers or a degenerate geometry (one line of sight).
+    ``kernels="numba"``: the same hypotheses (the same draws of ``rng``) scored
+    and fitted in one compiled call (:func:`slam.core.kernels.doppler_ransac`).
     """
     pts = np.asarray(points, dtype=float)
     n = pts.shape[0] if pts.ndim == 2 else 0
@@ -143,6 +146,14 @@ def estimate_ego_velocity(
     vr = pts[:, 2]
     i = rng.integers(0, n, n_hypotheses)
     j = rng.integers(0, n, n_hypotheses)
+    sector = np.floor((b + np.pi) / (2 * np.pi) * angular_bins).astype(int) % angular_bins
+    if kernels == "numba":
+        from slam.core.kernels import doppler_ransac
+
+        found, sol = doppler_ransac(A, vr, np.stack([i, j], axis=1), threshold, sector, angular_bins, min_inliers,
+                                    np.inf, np.zeros(2) if prior is None else np.asarray(prior, float)[:2],
+                                    int(prior is not None), float(max_change))
+        return sol if found else None
     a1, a2 = A[i], A[j]
     det = a1[:, 0] * a2[:, 1] - a1[:, 1] * a2[:, 0]
     good = np.abs(det) > 1e-3
@@ -156,7 +167,6 @@ def estimate_ego_velocity(
     res = np.abs(vr[None, :] - V @ A.T)  # (H, N)
     inliers = res <= threshold
     count = inliers.sum(axis=1)
-    sector = np.floor((b + np.pi) / (2 * np.pi) * angular_bins).astype(int) % angular_bins
     onehot = np.zeros((n, angular_bins))
     onehot[np.arange(n), sector] = 1.0
     coverage = ((inliers.astype(float) @ onehot) > 0).sum(axis=1)

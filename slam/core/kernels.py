@@ -14,7 +14,7 @@ import numpy as np
 
 from rhs_common.jit import njit, sort_small
 
-__all__ = ["icp_fit", "icp_search", "mahalanobis_association", "proposal_information"]
+__all__ = ["doppler_ransac", "icp_fit", "icp_search", "mahalanobis_association", "proposal_information"]
 
 NEW = -1  # slam.association.NEW
 DROPPED = -2  # slam.association.DROPPED
@@ -250,3 +250,117 @@ def icp_search(src: np.ndarray, prev: np.ndarray, guess: np.ndarray, offsets: np
         if pairs and (not found or near > best_near or (near == best_near and -rmse > -best_rmse)):
             best, best_pairs, best_rmse, best_near, found = est, pairs, rmse, near, True
     return best, best_pairs, best_rmse, found
+
+
+@njit
+def _solve3(m: np.ndarray, b: np.ndarray, x: np.ndarray) -> float:
+    """``x = m^-1 b`` (3 x 3, Gaussian elimination with partial pivoting, as LAPACK's getrf / getrs: multipliers
+    by the pivot's reciprocal) and ``det(m)``; m and b are overwritten. Returns det (0 when singular, x unset)."""
+    det = 1.0
+    for k in range(3):
+        p = k
+        for i in range(k + 1, 3):
+            if abs(m[i, k]) > abs(m[p, k]):
+                p = i
+        if m[p, k] == 0.0:
+            return 0.0
+        if p != k:
+            det = -det
+            for j in range(3):
+                m[k, j], m[p, j] = m[p, j], m[k, j]
+            b[k], b[p] = b[p], b[k]
+        det *= m[k, k]
+        inv = 1.0 / m[k, k]
+        for i in range(k + 1, 3):
+            f = m[i, k] * inv
+            for j in range(k + 1, 3):
+                m[i, j] -= f * m[k, j]
+            b[i] -= f * b[k]
+    for k in range(2, -1, -1):
+        acc = b[k]
+        for j in range(k + 1, 3):
+            acc -= m[k, j] * x[j]
+        x[k] = acc / m[k, k]
+    return det
+
+
+@njit
+def doppler_ransac(A: np.ndarray, vr: np.ndarray, idx: np.ndarray, threshold: float, sector: np.ndarray,
+                   n_bins: int, min_inliers: int, max_yaw_rate: float, prior: np.ndarray, prior_mode: int,
+                   max_change: float) -> tuple[bool, np.ndarray]:
+    """The RANSAC of the Doppler ego-motion fits (``vr = A x``, x = v (2,) or (vx, vy, w) (3,)) in one call.
+
+    Each hypothesis h solves the rows ``idx[h]`` exactly (2 x 2: Cramer's rule as
+    :func:`slam.core.association.estimate_ego_velocity`; 3 x 3: :func:`_solve3`) and is kept where
+    ``|det| > 1e-3``, ``|w| <= max_yaw_rate`` (3 unknowns) and, with ``prior_mode`` 1, ``|v - prior| <= max_change``
+    or, with 2, ``||v| - |prior|| <= max_change``. Score ``coverage (N + 1) + count`` of its inliers
+    ``|vr_i - A_i x| <= threshold`` (coverage: the ``n_bins`` bearing sectors ``sector`` holding one); the first
+    best hypothesis' inliers, when at least ``min_inliers`` and of full rank, give the least-squares x
+    (``np.linalg.lstsq``, rcond ``eps max(K, k)`` as numpy's default). Returns (found, x).
+    """
+    n, k = A.shape
+    n_h = idx.shape[0]
+    x = np.empty(k)
+    best_x = np.zeros(k)
+    best = -1
+    m = np.empty((3, 3))
+    b = np.empty(3)
+    covered = np.zeros(n_bins, np.bool_)
+    for h in range(n_h):
+        if k == 2:
+            i, j = idx[h, 0], idx[h, 1]
+            det = A[i, 0] * A[j, 1] - A[i, 1] * A[j, 0]
+            if not abs(det) > 1e-3:
+                continue
+            x[0] = (vr[i] * A[j, 1] - vr[j] * A[i, 1]) / det
+            x[1] = (A[i, 0] * vr[j] - A[j, 0] * vr[i]) / det
+        else:
+            for r in range(3):
+                b[r] = vr[idx[h, r]]
+                for c in range(3):
+                    m[r, c] = A[idx[h, r], c]
+            if not abs(_solve3(m, b, x)) > 1e-3:
+                continue
+            if not abs(x[2]) <= max_yaw_rate:
+                continue
+        if prior_mode == 1 and not np.hypot(x[0] - prior[0], x[1] - prior[1]) <= max_change:
+            continue
+        if prior_mode == 2 and not abs(np.hypot(x[0], x[1]) - np.hypot(prior[0], prior[1])) <= max_change:
+            continue
+        count = 0
+        covered[:] = False
+        for q in range(n):
+            fit = 0.0
+            for c in range(k):
+                fit += x[c] * A[q, c]
+            if abs(vr[q] - fit) <= threshold:
+                count += 1
+                covered[sector[q]] = True
+        score = count
+        for s in range(n_bins):
+            if covered[s]:
+                score += n + 1
+        if score > best:
+            best = score
+            best_x[:] = x
+    if best < 0:
+        return False, best_x
+    keep = np.zeros(n, np.bool_)
+    for q in range(n):
+        fit = 0.0
+        for c in range(k):
+            fit += best_x[c] * A[q, c]
+        keep[q] = abs(vr[q] - fit) <= threshold
+    n_in = int(keep.sum())
+    if n_in < min_inliers:
+        return False, best_x
+    a_in = np.empty((n_in, k))
+    v_in = np.empty(n_in)
+    r = 0
+    for q in range(n):
+        if keep[q]:
+            a_in[r] = A[q]
+            v_in[r] = vr[q]
+            r += 1
+    sol, _, rank, _ = np.linalg.lstsq(a_in, v_in, np.finfo(np.float64).eps * max(n_in, k))
+    return rank >= k, sol

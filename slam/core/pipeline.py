@@ -232,6 +232,7 @@ def doppler_ego_motion(
     min_inliers: int = 5,
     angular_bins: int = 24,
     speed_only: bool = False,
+    kernels: str = "numpy",
 ) -> np.ndarray | None:
     """Ego velocity and yaw rate ``(vx, vy, w)`` (m/s, m/s, rad/s) from the Doppler of static points seen by
     radars off the vehicle's origin.
@@ -245,7 +246,9 @@ def doppler_ego_motion(
     velocity within ``max_change`` of it, or with ``speed_only`` the speed ``|v|`` within ``max_change``
     of ``|prior|`` (the direction free: a kinematic bicycle's slip angle follows the steering at once,
     :data:`SLIP_FREE`); ``|w| <= max_yaw_rate``; least squares on the inliers.
-    ``None`` with fewer than ``min_inliers`` inliers or a degenerate geometry.
+    ``None`` with fewer than ``min_inliers`` inliers or a degenerate geometry. ``kernels="numba"``: the same
+    hypotheses (the same draws of ``rng``) solved, scored and fitted in one compiled call
+    (:func:`slam.core.kernels.doppler_ransac`).
     """
     pts = np.asarray(points, dtype=float)
     n = len(pts)
@@ -256,6 +259,15 @@ def doppler_ego_motion(
     A = -np.column_stack([u[:, 0], u[:, 1], sensors[:, 0] * u[:, 1] - sensors[:, 1] * u[:, 0]])  # vr = A x
     vr = pts[:, 2]
     idx = rng.integers(0, n, (n_hypotheses, 3))
+    if kernels == "numba":
+        from slam.core.kernels import doppler_ransac
+
+        b = np.arctan2(pts[:, 1], pts[:, 0])
+        sector = np.floor((b + np.pi) / (2 * np.pi) * angular_bins).astype(int) % angular_bins
+        mode = 0 if prior is None else 2 if speed_only else 1
+        found, sol = doppler_ransac(A, vr, idx, threshold, sector, angular_bins, min_inliers, max_yaw_rate,
+                                    np.zeros(2) if prior is None else np.asarray(prior, float)[:2], mode, float(max_change))
+        return sol if found and abs(sol[2]) <= max_yaw_rate else None
     M = A[idx]  # (H, 3, 3)
     good = np.abs(np.linalg.det(M)) > 1e-3
     if not good.any():
@@ -604,7 +616,8 @@ class SlamPipeline:
             return fit if with_turn >= TURN_GAIN * max(without, 1) else None
 
         bound = self.max_accel_mps2 * dt + thr
-        found = turn(doppler_ego_motion(pts, sensors, 0.5 * thr, self.ransac_rng, prior=prior_v, max_change=bound))
+        found = turn(doppler_ego_motion(pts, sensors, 0.5 * thr, self.ransac_rng, prior=prior_v, max_change=bound,
+                                        kernels=self.config.kernels))
         if found is not None or not SLIP_FREE or self.velocity is None:
             return found
 
@@ -616,7 +629,7 @@ class SlamPipeline:
         if held >= RECHECK_BELOW * len(pts):  # the held state still explains most points: it stands
             return None
         retried = doppler_ego_motion(pts, sensors, 0.5 * thr, self.slip_rng, prior=prior_v, max_change=bound,
-                                     speed_only=True)
+                                     speed_only=True, kernels=self.config.kernels)
         # a retried fit without a turn ends a held turn (SLIP_TURN_END); one with a turn must beat the turn-free fit
         turning = abs(float(self.velocity[2])) >= TURN_RATE_MIN
         ends_turn = SLIP_TURN_END and turning and retried is not None and abs(retried[2]) < TURN_RATE_MIN
@@ -670,7 +683,8 @@ class SlamPipeline:
         # bounded acceleration: the new velocity lies within max_accel * dt of the last one
         prior_v = None if self.velocity is None else self.velocity[:2]
         v_dop = estimate_ego_velocity(
-            dop, 0.5 * thr, self.ransac_rng, prior=prior_v, max_change=self.max_accel_mps2 * dt + thr
+            dop, 0.5 * thr, self.ransac_rng, prior=prior_v, max_change=self.max_accel_mps2 * dt + thr,
+            kernels=self.config.kernels,
         )
         self.velocity_misses = 0 if v_dop is not None else self.velocity_misses + 1
         self.velocity_track = self.velocity_track + 1 if v_dop is not None else self.velocity_track
@@ -678,7 +692,7 @@ class SlamPipeline:
         if v_dop is None and prior_v is not None and not established:
             # no track yet, or lost for a while: re-acquire without the prior (an established track
             # holds its velocity first: an unconstrained fit in traffic can lock onto a platoon)
-            v_dop = estimate_ego_velocity(dop, 0.5 * thr, self.ransac_rng)
+            v_dop = estimate_ego_velocity(dop, 0.5 * thr, self.ransac_rng, kernels=self.config.kernels)
             self.velocity_track = 0
         if v_dop is None:
             # fewer than three points agree (a few landmarks): a car moves along its heading, so two
