@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rhs_common.blas import matmul_add
 from rhs_common.jit import njit
 
 __all__ = [
@@ -526,6 +527,23 @@ def tone_operands(g_mat: np.ndarray, omega: np.ndarray, wk: np.ndarray, chirps: 
             for k in range(n_k):
                 ep[p, c * n_k + k] = ph * wk[p, k]
     return gp, ep
+
+
+@njit
+def add_tone_products(gp: np.ndarray, ep: np.ndarray, bounds: np.ndarray, spec: np.ndarray, cgemm: int) -> None:
+    """``spec[r] += G_r @ E_r`` in place: ``spec[r, i, c, k] += sum_{p of radar r} G[i, p] E[p, c K + k]``.
+
+    The operands of :func:`tone_operands` (radar r's tones ``bounds[r]:bounds[r + 1]``, sorted by radar) and
+    spec (4, I, C, K) complex64, a view with unit stride along k (the searched bins of the FFT buffer). One
+    BLAS product per radar and chirp adds straight into the view (:func:`rhs_common.blas.matmul_add`,
+    ``cgemm`` its address): no temporary, no second pass.
+    """
+    n_c, n_k = spec.shape[2], spec.shape[3]
+    for r in range(spec.shape[0]):
+        lo, hi = bounds[r], bounds[r + 1]
+        if hi > lo:
+            for c in range(n_c):
+                matmul_add(gp[:, lo:hi], ep[lo:hi, c * n_k:(c + 1) * n_k], spec[r, :, c, :], cgemm)
 
 
 # --------------------------------------------------------------------------- OMP phases

@@ -377,13 +377,15 @@ class RadarSystem:
 
         With ``kernels="numba"`` the tone spectra and the operands of the product are built compiled
         (:func:`rhs_env.kernels.tone_spectra`, :func:`rhs_env.kernels.tone_operands`) and multiplied per radar
-        (its own tones only, no padding to the largest count); the noise stays numpy.
+        (its own tones only, no padding to the largest count), each product added by BLAS straight into the
+        spectrum (:func:`rhs_env.kernels.add_tone_products`); the noise stays numpy.
         """
         cfg = self.config
         i_slots, c, n, z, kb = cfg.scan.slots, cfg.waveform.chirps_per_slot, cfg.waveform.samples, cfg.waveform.zero_pad, self._bin_hi
         spec = self._noise_spectrum((4, i_slots, c))
         tones = self._echoes(scatterers, occluders)
         if tones is not None and cfg.kernels == "numba":
+            from rhs_common.blas import cgemm_address
             from rhs_env import kernels
             from rhs_env.point_cloud import window_exponentials
 
@@ -391,13 +393,9 @@ class RadarSystem:
             mu, coef = window_exponentials(cfg.waveform.window, n)
             wk = kernels.tone_spectra(mu, coef, n, z, kb, np.ascontiguousarray(f_tot / cfg.waveform.sample_rate_hz))
             gp, ep = kernels.tone_operands(g_mat, omega, wk, c)
-            sig = self._buffer("sig", (i_slots, c * kb), np.complex64)
             bounds = np.searchsorted(rr, np.arange(5))  # rr sorted: radar r's tones are lo_r:hi_r
-            for r in range(4):
-                lo, hi = int(bounds[r]), int(bounds[r + 1])
-                if hi > lo:  # that radar's own tones only: no product with padding
-                    np.matmul(gp[:, lo:hi], ep[lo:hi], out=sig)
-                    spec[r] += sig.reshape(spec.shape[1:])
+            # each radar's own tones only (no product with padding), added straight into the spectrum view
+            kernels.add_tone_products(gp, ep, bounds, spec, cgemm_address())
         elif tones is not None:
             rr, g_mat, omega, f_tot = tones
             wk = tone_spectra(cfg.waveform.window, n, z, kb, f_tot / cfg.waveform.sample_rate_hz)  # (P, K_b)
