@@ -154,7 +154,7 @@ def warm_cache(run: Callable[[], Any], probe: Any, key: str = "") -> bool:
     except AttributeError:  # no on-disk cache (not a cached dispatcher)
         return False
     digest = hashlib.sha256(f"{key}|{numba.__version__}".encode())
-    for module in ("rhs_env/kernels.py", "slam/core/kernels.py", "rhs_common/jit.py"):
+    for module in ("rhs_env/kernels.py", "slam/core/kernels.py", "rhs_common/jit.py", "rhs_common/native.py"):
         source = _PACKAGE_ROOT / module
         if source.is_file():
             digest.update(source.read_bytes())

@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rhs_common.blas import matmul_add
+from rhs_common.native import matmul_add
 from rhs_common.jit import njit
 
 __all__ = [
@@ -535,7 +535,7 @@ def add_tone_products(gp: np.ndarray, ep: np.ndarray, bounds: np.ndarray, spec: 
 
     The operands of :func:`tone_operands` (radar r's tones ``bounds[r]:bounds[r + 1]``, sorted by radar) and
     spec (4, I, C, K) complex64, a view with unit stride along k (the searched bins of the FFT buffer). One
-    BLAS product per radar and chirp adds straight into the view (:func:`rhs_common.blas.matmul_add`,
+    BLAS product per radar and chirp adds straight into the view (:func:`rhs_common.native.matmul_add`,
     ``cgemm`` its address): no temporary, no second pass.
     """
     n_c, n_k = spec.shape[2], spec.shape[3]

@@ -385,7 +385,7 @@ class RadarSystem:
         spec = self._noise_spectrum((4, i_slots, c))
         tones = self._echoes(scatterers, occluders)
         if tones is not None and cfg.kernels == "numba":
-            from rhs_common.blas import cgemm_address
+            from rhs_common.native import cgemm_address
             from rhs_env import kernels
             from rhs_env.point_cloud import window_exponentials
 

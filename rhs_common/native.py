@@ -1,4 +1,4 @@
-"""BLAS from compiled kernels: ``out += a @ b`` (complex64) straight into a strided view.
+"""Machine-level helpers of the compiled kernels: a BLAS product added straight into a strided view.
 
 A kernel that must add a product into part of a larger array (the radar's range spectrum, whose
 searched bins are a view of the FFT buffer) would otherwise form the product in a temporary and add
