@@ -791,7 +791,8 @@ def bin_amplitudes(a: np.ndarray, spec: np.ndarray, rd: np.ndarray, kk: np.ndarr
     ``s_d[:, w] = (A_d^H A_d + 1e-12 I)^-1 A_d^H y_dw`` with ``y_dw[(i, c)] = Y[rd_d, i, c, kk_dw]`` read from the
     spectrum Y (R, I, C, K) complex64 (no gathered copy), one Cholesky factor per row for its W bins. The sums over
     q = (i, c) of ``A^H A`` and ``A^H y`` run on split real and imaginary parts (:func:`_conj_dot`, vectorised;
-    ~1e-12 relative from the sums in order).
+    ~1e-12 relative from the sums in order). An all-zero atom (a row's unused target slot) has ``A^H y = 0``
+    without the sums: the same values (its Gram row and column are exact zeros).
     """
     n_d, n_q, n_l = a.shape
     n_w = kk.shape[1]
@@ -807,6 +808,7 @@ def bin_amplitudes(a: np.ndarray, spec: np.ndarray, rd: np.ndarray, kk: np.ndarr
     y_re = np.empty((n_w, n_q))
     y_im = np.empty((n_w, n_q))
     acc = np.empty((n_l, n_w), np.complex128)
+    zero = np.empty(n_l, np.bool_)
     for d in range(n_d):
         r = rd[d]
         for q in range(n_q):
@@ -817,6 +819,8 @@ def bin_amplitudes(a: np.ndarray, spec: np.ndarray, rd: np.ndarray, kk: np.ndarr
             for m in range(l, n_l):
                 gr, gi = _conj_dot(a_re[l], a_im[l], a_re[m], a_im[m])
                 gram[l, m] = complex(gr, gi)
+        for l in range(n_l):
+            zero[l] = gram[l, l].real == 0.0
         _cholesky_factor(gram, chol)
         for i in range(n_i):  # the W neighbouring bins of a cell (i, c) read together: one pass over Y's rows
             for c in range(n_c):
@@ -825,7 +829,11 @@ def bin_amplitudes(a: np.ndarray, spec: np.ndarray, rd: np.ndarray, kk: np.ndarr
                     v = spec[r, i, c, kk[d, w]]
                     y_re[w, q] = np.float64(v.real)
                     y_im[w, q] = np.float64(v.imag)
-        for l in range(n_l):  # A^H y of every atom l and bin w
+        for l in range(n_l):  # A^H y of every atom l and bin w (an all-zero atom, a padded target: exactly 0)
+            if zero[l]:
+                for w in range(n_w):
+                    acc[l, w] = 0j
+                continue
             for w in range(n_w):
                 sr, si = _conj_dot(a_re[l], a_im[l], y_re[w], y_im[w])
                 acc[l, w] = complex(sr, si)
