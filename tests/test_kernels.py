@@ -190,6 +190,41 @@ def test_compiled_doppler_fits_are_the_numpy_fits():
     assert found > 300  # most clouds give a fit
 
 
+def _filter_pair(rng: np.random.Generator):
+    """Two RBPF SLAMs (numpy, numba kernels) in one random state: 6 particles, 8 landmark slots, 5 observations."""
+    from slam.core.rbpf import Observations, RBPFSlam, SlamConfig
+
+    filters = [RBPFSlam(SlamConfig(n_particles=6, max_landmarks=8, kernels=k), rng=1) for k in ("numpy", "numba")]
+    P, L = filters[0].mean.shape[:2]
+    pose = np.column_stack([rng.normal(0, 3, (P, 2)), rng.uniform(-np.pi, np.pi, P)])
+    mean = rng.normal(0, 30, (P, L, 2))
+    a = rng.normal(0, 0.3, (P, L, 2, 2))
+    cov = a @ a.transpose(0, 1, 3, 2) + 0.01 * np.eye(2)
+    for f in filters:
+        f.pose, f.mean, f.cov = pose.copy(), mean.copy(), cov.copy()
+        f.cycle = 7
+    b = rng.normal(0, 0.2, (5, 2, 2))
+    obs = Observations(z=rng.normal(0, 30, (5, 2)), Q=b @ b.transpose(0, 2, 1) + 0.01 * np.eye(2), amp=np.ones(5))
+    pp = np.repeat(np.arange(P), 3)
+    mm = np.tile([0, 2, 4], P)
+    ll = np.concatenate([rng.choice(L, 3, replace=False) for _ in range(P)])  # distinct slots per particle
+    return filters, obs, pp, mm, ll
+
+
+def test_compiled_landmark_update_and_proposal_terms_are_the_numpy_values():
+    """The RBPF's per-pair Kalman update and proposal terms compiled: numpy's values bit for bit (state and returns)."""
+    rng = np.random.default_rng(8)
+    for _ in range(5):
+        filters, obs, pp, mm, ll = _filter_pair(rng)
+        terms = [f._proposal_terms(pp, mm, ll, obs) for f in filters]
+        for x, y in zip(*terms):
+            assert np.array_equal(x, y)
+        lik = [f._landmark_update(pp, mm, ll, obs) for f in filters]
+        assert np.array_equal(lik[0], lik[1])
+        for name in ("mean", "cov", "hits", "last_seen"):
+            assert np.array_equal(getattr(filters[0], name), getattr(filters[1], name)), name
+
+
 def test_compiled_icp_equals_the_numpy_fit():
     """The compiled ICP (brute-force neighbours, fused iterations) gives the cKDTree / numpy estimate."""
     from rhs_common.geometry import apply_motion
@@ -390,6 +425,12 @@ def test_kernels_as_python_under_disable_jit():
         pts[:, 2] = -(u @ [15.0, 0.5] + 0.2 * (sensors[:, 0] * u[:, 1] - sensors[:, 1] * u[:, 0]))
         fits = [doppler_ego_motion(pts, sensors, 0.25, np.random.default_rng(0), kernels=k) for k in ("numpy", "numba")]
         assert np.allclose(fits[0], fits[1], atol=1e-9) and np.allclose(fits[1], [15.0, 0.5, 0.2], atol=1e-6)
+        from tests.test_kernels import _filter_pair
+        filters, obs, pp, mm, ll = _filter_pair(rng)
+        lik = [f._landmark_update(pp, mm, ll, obs) for f in filters]
+        assert np.allclose(lik[0], lik[1], rtol=1e-12) and np.allclose(filters[0].mean, filters[1].mean, rtol=1e-12)
+        terms = [f._proposal_terms(pp, mm, ll, obs) for f in filters]
+        assert all(np.allclose(x, y, rtol=1e-12) for x, y in zip(*terms))
         print("ok")
     """
     res = _run(code, NUMBA_DISABLE_JIT="1")

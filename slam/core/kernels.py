@@ -14,7 +14,8 @@ import numpy as np
 
 from rhs_common.jit import njit, sort_small
 
-__all__ = ["doppler_ransac", "icp_fit", "icp_search", "mahalanobis_association", "proposal_information"]
+__all__ = ["doppler_ransac", "icp_fit", "icp_search", "landmark_update", "mahalanobis_association", "proposal_information",
+           "proposal_terms"]
 
 NEW = -1  # slam.association.NEW
 DROPPED = -2  # slam.association.DROPPED
@@ -364,3 +365,83 @@ def doppler_ransac(A: np.ndarray, vr: np.ndarray, idx: np.ndarray, threshold: fl
             r += 1
     sol, _, rank, _ = np.linalg.lstsq(a_in, v_in, np.finfo(np.float64).eps * max(n_in, k))
     return rank >= k, sol
+
+
+@njit
+def _rotate_sym2(c: float, s: float, b00: float, b01: float, b11: float) -> tuple[float, float, float]:
+    """:func:`slam.core.rbpf.rotate_sym2` for one matrix: ``R B R^T``, ``R = [[c, -s], [s, c]]``, term by term."""
+    cc, ss, cs = c * c, s * s, c * s
+    return cc * b00 - 2.0 * cs * b01 + ss * b11, cs * (b00 - b11) + (cc - ss) * b01, ss * b00 + 2.0 * cs * b01 + cc * b11
+
+
+@njit
+def landmark_update(pose: np.ndarray, cth: np.ndarray, sth: np.ndarray, z: np.ndarray, q: np.ndarray, mean: np.ndarray,
+                    cov: np.ndarray, hits: np.ndarray, last_seen: np.ndarray, pp: np.ndarray, ll: np.ndarray,
+                    cycle: int) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`slam.core.rbpf.RBPFSlam._landmark_update`'s Kalman update, pair by pair, in place.
+
+    For pair k (particle ``p = pp[k]``, its observation z_k (vehicle frame, covariance q_k (2, 2)), landmark
+    slot ``l = ll[k]``; ``cth, sth`` the cosine and sine of the particle's heading, from numpy):
+    ``nu = p_xy + R z - mu``, ``Q = R q R^T``, ``Lambda`` the landmark covariance (off-diagonal symmetrised),
+    ``S = Lambda + Q``, ``K = Lambda S^-1``, ``mu += K nu``, ``Lambda <- Lambda - K Lambda`` (symmetrised), hits
+    + 1, last seen at ``cycle``. Returns the Mahalanobis distance ``nu^T S^-1 nu`` and ``det S`` (floored at
+    1e-300) per pair: numpy's own operations in numpy's order, the same values. The pairs (p, l) are distinct.
+    """
+    n = pp.size
+    maha = np.empty(n)
+    det_s = np.empty(n)
+    for k in range(n):
+        p, l = pp[k], ll[k]
+        c, s = cth[k], sth[k]
+        z0, z1 = z[k, 0], z[k, 1]
+        nu0 = pose[k, 0] + (c * z0 - s * z1) - mean[p, l, 0]
+        nu1 = pose[k, 1] + (s * z0 + c * z1) - mean[p, l, 1]
+        q00, q01, q11 = _rotate_sym2(c, s, q[k, 0, 0], q[k, 0, 1], q[k, 1, 1])
+        l00, l01, l11 = cov[p, l, 0, 0], 0.5 * (cov[p, l, 0, 1] + cov[p, l, 1, 0]), cov[p, l, 1, 1]
+        a, b, d = l00 + q00, l01 + q01, l11 + q11
+        det = max(a * d - b * b, 1e-300)
+        i00, i01, i11 = d / det, -b / det, a / det
+        k00, k01 = l00 * i00 + l01 * i01, l00 * i01 + l01 * i11
+        k10, k11 = l01 * i00 + l11 * i01, l01 * i01 + l11 * i11
+        mean[p, l, 0] += k00 * nu0 + k01 * nu1
+        mean[p, l, 1] += k10 * nu0 + k11 * nu1
+        cov[p, l, 0, 0] = l00 - (k00 * l00 + k01 * l01)
+        cov[p, l, 1, 1] = l11 - (k10 * l01 + k11 * l11)
+        off = l01 - 0.5 * (k00 * l01 + k01 * l11 + k10 * l00 + k11 * l01)
+        cov[p, l, 0, 1] = off
+        cov[p, l, 1, 0] = off
+        hits[p, l] += 1
+        last_seen[p, l] = cycle
+        maha[k] = i00 * nu0 ** 2 + 2.0 * i01 * nu0 * nu1 + i11 * nu1 ** 2
+        det_s[k] = det
+    return maha, det_s
+
+
+@njit
+def proposal_terms(pose: np.ndarray, cth: np.ndarray, sth: np.ndarray, z: np.ndarray, q: np.ndarray, mean: np.ndarray,
+                   cov: np.ndarray, pp: np.ndarray, ll: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:meth:`slam.core.rbpf.RBPFSlam._proposal_terms` pair by pair: H (K, 2, 3), S^-1 (K, 2, 2), nu (K, 2), det S (K,).
+
+    At the particle's predicted pose (``pose[k]`` of pair k, ``cth, sth`` its heading's cosine and sine from numpy):
+    ``d = mu - p_xy``, ``h = R^T d``, ``nu = z - h``, ``S = R^T Lambda R + q``,
+    ``H = [[-c, -s, h_y], [s, -c, -h_x]]``; numpy's operations in numpy's order (the same values).
+    """
+    n = pp.size
+    H = np.zeros((n, 2, 3))
+    Si = np.empty((n, 2, 2))
+    nu = np.empty((n, 2))
+    det_s = np.empty(n)
+    for k in range(n):
+        p, l = pp[k], ll[k]
+        c, s = cth[k], sth[k]
+        d0, d1 = mean[p, l, 0] - pose[k, 0], mean[p, l, 1] - pose[k, 1]
+        hx, hy = c * d0 + s * d1, -s * d0 + c * d1
+        nu[k, 0], nu[k, 1] = z[k, 0] - hx, z[k, 1] - hy
+        l00, l01, l11 = _rotate_sym2(c, -s, cov[p, l, 0, 0], cov[p, l, 0, 1], cov[p, l, 1, 1])
+        a, b, dd = l00 + q[k, 0, 0], l01 + q[k, 0, 1], l11 + q[k, 1, 1]
+        det = max(a * dd - b * b, 1e-300)
+        Si[k, 0, 0], Si[k, 0, 1], Si[k, 1, 0], Si[k, 1, 1] = dd / det, -b / det, -b / det, a / det
+        H[k, 0, 0], H[k, 0, 1], H[k, 0, 2] = -c, -s, hy
+        H[k, 1, 0], H[k, 1, 1], H[k, 1, 2] = s, -c, -hx
+        det_s[k] = det
+    return H, Si, nu, det_s

@@ -517,6 +517,11 @@ class RBPFSlam:
         """Per matched pair at mu: H_k (K, 2, 3), S_k^-1 (K, 2, 2), nu_k (K, 2), log det S_k (K,)."""
         th = self.pose[pp, 2]
         cth, sth = np.cos(th), np.sin(th)
+        if self.config.kernels == "numba":  # the same operations pair by pair, compiled
+            from slam.core.kernels import proposal_terms
+
+            H, Si, nu, det = proposal_terms(self.pose[pp], cth, sth, obs.z[mm], obs.Q[mm], self.mean, self.cov, pp, ll)
+            return H, Si, nu, np.log(det)
         d = self.mean[pp, ll] - self.pose[pp, :2]
         hx, hy = cth * d[:, 0] + sth * d[:, 1], -sth * d[:, 0] + cth * d[:, 1]
         nu = obs.z[mm] - np.stack([hx, hy], axis=1)
@@ -576,6 +581,12 @@ class RBPFSlam:
         pose = self.pose[pp]
         cth, sth = np.cos(pose[:, 2]), np.sin(pose[:, 2])
         z = obs.z[mm]
+        if self.config.kernels == "numba":  # the same operations pair by pair, compiled, in place
+            from slam.core.kernels import landmark_update
+
+            maha, det = landmark_update(pose, cth, sth, z, obs.Q[mm], self.mean, self.cov, self.hits, self.last_seen,
+                                        pp, ll, self.cycle)
+            return -0.5 * maha - _LOG2PI - 0.5 * np.log(det)
         nu = pose[:, :2] + np.stack([cth * z[:, 0] - sth * z[:, 1], sth * z[:, 0] + cth * z[:, 1]], 1) - self.mean[pp, ll]
         q00, q01, q11 = rotate_sym2(cth, sth, obs.Q[mm, 0, 0], obs.Q[mm, 0, 1], obs.Q[mm, 1, 1])
         lam = self.cov[pp, ll]
