@@ -36,6 +36,11 @@ only the values in ``may_flip`` may miss it (a closed-loop episode flips the sam
 after its one decision that went the other way; a real change of the code moves others). The
 measured spread is written beside the tolerance.
 
+Machines accumulate: a step's recorded tolerance is merged with the new measurement (the larger rtol and
+atol, the union of may_flip, every machine's spread kept under its own labels, the machine's CPU named
+in ``measured``), so a tolerance measured on one CPU keeps holding there after it is measured on another
+(``--fresh`` replaces it instead).
+
     python scripts/fingerprint_tolerance.py                         # measure every step, print, record
     python scripts/fingerprint_tolerance.py --only fig5b fig5c --dry-run
     python scripts/fingerprint_tolerance.py --python oldest-deps=/path/to/oldest-venv/bin/python
@@ -136,8 +141,42 @@ def tolerance(recorded: list, runs: dict[str, list]) -> dict:
     rtol = max(SAFETY * max(round_off), ROUNDING_RTOL)
     return {"rtol": float(f"{rtol:.3g}"), "atol": float(f"{rtol * scale:.3g}"), "may_flip": sorted(may_flip),
             "spread": spread, "safety": SAFETY, "flip_rel": FLIP_REL,
-            "measured": {"commit": STATE_AT_START["commit"], "dirty": STATE_AT_START["dirty"],
+            "measured": {"commit": STATE_AT_START["commit"], "dirty": STATE_AT_START["dirty"], "machine": machine(),
                          "utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}}
+
+
+def machine() -> str:
+    """This machine's CPU model and widest SIMD level (``AMD EPYC avx512``), the label of its measurements."""
+    model, flags = "unknown CPU", ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name" and model == "unknown CPU":
+                model = value.strip()
+            elif key.strip() == "flags" and not flags:
+                flags = value
+    except OSError:
+        import platform
+
+        model = platform.processor() or model
+    level = "avx512" if "avx512f" in flags.split() else "avx2" if "avx2" in flags.split() else ""
+    return f"{model} {level}".strip()
+
+
+def merged(old: dict | None, new: dict) -> dict:
+    """``new`` combined with an earlier tolerance ``old`` measured on another machine: the larger rtol / atol, the
+    union of may_flip, both machines' spreads (the old labels kept, the new ones prefixed by ``new``'s machine)."""
+    if not old or old.get("measured", {}).get("machine") == new["measured"]["machine"]:
+        return new
+    out = dict(new)
+    out["rtol"], out["atol"] = max(old["rtol"], new["rtol"]), max(old["atol"], new["atol"])
+    out["may_flip"] = sorted(set(old.get("may_flip", [])) | set(new["may_flip"]))
+    tag = new["measured"]["machine"]
+    out["spread"] = {**old.get("spread", {}), **{f"{tag}: {k}": v for k, v in new["spread"].items()}}
+    out["environments"] = {**old.get("environments", {}), **{f"{tag}: {k}": v for k, v in new.get("environments", {}).items()}}
+    out["measured"] = {**new["measured"], "earlier": [*old.get("measured", {}).get("earlier", []),
+                                                      {k: v for k, v in old.get("measured", {}).items() if k != "earlier"}]}
+    return out
 
 
 def distinct_environments(environments: dict[str, dict[str, str]]) -> dict[str, dict[str, str]]:
@@ -156,6 +195,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="other environments' interpreters to include, each named by a label")
     ap.add_argument("--settings", nargs="+", choices=tuple(SETTINGS), default=list(SETTINGS))
     ap.add_argument("--dry-run", action="store_true", help="print the spread and tolerance, record nothing")
+    ap.add_argument("--fresh", action="store_true", help="replace the recorded tolerance (default: merge with it when it "
+                                                         "was measured on another machine)")
     ap.add_argument("--worker", nargs="*", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.worker is not None:
@@ -184,7 +225,7 @@ def main(argv: list[str] | None = None) -> int:
         flipped = max(v["flipped"] for v in tol["spread"].values())
         print(f"{s.name:28s} {len(fps[key]['values']):4d} {worst:14.2e} {flipped:8d} {tol['rtol']:9.2e} "
               f"{tol['atol']:9.2e} {len(tol['may_flip']):8d}")
-        fps[key]["tolerance"] = tol
+        fps[key]["tolerance"] = tol if a.fresh else merged(fps[key].get("tolerance"), tol)
     if not a.dry_run:
         FINGERPRINTS.write_text(json.dumps(dict(sorted(fps.items())), indent=1) + "\n")
         print(f"recorded in {FINGERPRINTS.relative_to(ROOT)}")

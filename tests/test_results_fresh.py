@@ -169,6 +169,23 @@ def test_the_tolerance_rule_on_measured_spreads():
     assert prov.fingerprint_matches({"values": recorded, "tolerance": tol}, runs["avx2-machine"])[0]
 
 
+def test_tolerances_of_two_machines_accumulate():
+    """A tolerance measured on a second CPU is merged with the first one's: both machines' flips and spreads hold."""
+    from rhs_studies import fingerprint_tolerance as ft
+
+    recorded = [1.0, 2.0, 3.0, 10.0]
+    first = ft.tolerance(recorded, {"native": [1.0, 2.0, 3.0, 12.0]})
+    first["measured"]["machine"] = "Intel Xeon avx512"
+    second = ft.tolerance(recorded, {"native": [1.0001, 2.5, 3.0, 10.0]})
+    second["measured"]["machine"] = "AMD EPYC avx512"
+    both = ft.merged(first, second)
+    assert both["may_flip"] == [1, 3] and both["rtol"] == max(first["rtol"], second["rtol"])
+    assert set(both["spread"]) == {"native", "AMD EPYC avx512: native"}
+    for machine_values in ([1.0, 2.0, 3.0, 12.0], [1.0001, 2.5, 3.0, 10.0]):
+        assert prov.fingerprint_matches({"values": recorded, "tolerance": both}, machine_values)[0]
+    assert ft.merged(second, second) is second  # the same machine again: the new measurement replaces it
+
+
 def test_the_tolerance_script_measures_a_step_in_subprocesses(capsys):
     """``fingerprint_tolerance --dry-run`` reruns a fingerprint under two settings and prints its row."""
     from rhs_studies import fingerprint_tolerance as ft
