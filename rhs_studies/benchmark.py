@@ -10,7 +10,7 @@ every section and printed beside it. Sections (``--sections``, default all):
   actions, with the radar's time per stage (synthesis, range/CFAR, OMP) and the SLAM's
   time per stage (registration, association, RBPF) at 100 particles, each stage before
   (numpy kernels) and after (compiled); goals: radar >= 0.75x and SLAM >= 0.67x the base
-  env's steps/s;
+  env's steps/s, each ratio with its 95 % bootstrap interval over the blocks (:func:`ratio_interval`);
 * ``start``: seconds to the first step of ``rhs-highway-slam-v0`` in a new process (imports,
   make, reset, one step) with an empty kernel cache (cold, goal <= 30 s) and with the cache (warm,
   goal <= 5 s), the median of ``--start-repeats`` runs (each run's seconds beside it: one cold start
@@ -125,7 +125,7 @@ def bench_envs(steps: int, seed: int, grid_deg: float, block: int = 5, numpy_ker
             _, _, term, trunc, _ = env.step(int(a))
             if term or trunc:
                 env.reset(seed=seed)
-        envs[label] = {"env": env, "dt": 0.0, "n": 0, "radar": [], "slam": []}
+        envs[label] = {"env": env, "dt": 0.0, "n": 0, "radar": [], "slam": [], "blocks": []}
     actions = actions[:steps]
     for lo in range(0, steps, block):
         for rec in envs.values():
@@ -140,7 +140,8 @@ def bench_envs(steps: int, seed: int, grid_deg: float, block: int = 5, numpy_ker
                     rec["radar"].append(info["radar_stage_times"])
                 if term or trunc:
                     env.reset(seed=seed + rec["n"])
-            rec["dt"] += time.perf_counter() - t0
+            rec["blocks"].append(time.perf_counter() - t0)
+            rec["dt"] += rec["blocks"][-1]
     out: dict = {"block_steps": block, "load_average_start": load_start}
     out["kinematics_observation_ms"] = _kinematics_observation_ms(envs["rhs-highway-v0"]["env"])
     for label, rec in envs.items():
@@ -157,12 +158,24 @@ def bench_envs(steps: int, seed: int, grid_deg: float, block: int = 5, numpy_ker
     out["radar_slam_added_over_base"] = out["radar_slam_added_ms"] / base
     out["radar_env_over_base"] = out["rhs-highway-radar-v0"]["steps_per_s"] / out["rhs-highway-v0"]["steps_per_s"]
     out["slam_env_over_base"] = out["rhs-highway-slam-v0"]["steps_per_s"] / out["rhs-highway-v0"]["steps_per_s"]
+    base_blocks = np.asarray(envs["rhs-highway-v0"]["blocks"])
+    for kind in ("radar", "slam"):
+        out[f"{kind}_env_over_base_ci"] = ratio_interval(base_blocks, np.asarray(envs[f"rhs-highway-{kind}-v0"]["blocks"]))
     if numpy_kernels:
         for kind in ("radar", "slam"):
             ref = out[f"rhs-highway-{kind}-v0 (numpy kernels)"]
             out[f"{kind}_env_over_base_numpy_kernels"] = ref["steps_per_s"] / out["rhs-highway-v0"]["steps_per_s"]
         out["stages_before_after"] = stages_before_after(out)
     return out
+
+
+def ratio_interval(base_blocks: np.ndarray, env_blocks: np.ndarray, resamples: int = 2000, seed: int = 0) -> list[float]:
+    """95 % bootstrap interval of ``sum(base) / sum(env)`` (the env's steps/s over the base's) over the round-robin
+    blocks, resampled in pairs (a block of each env ran back to back: the load both saw is shared)."""
+    rng = np.random.default_rng(seed)
+    pick = rng.integers(0, base_blocks.size, (resamples, base_blocks.size))
+    ratios = base_blocks[pick].sum(axis=1) / env_blocks[pick].sum(axis=1)
+    return [round(float(x), 4) for x in np.percentile(ratios, [2.5, 97.5])]
 
 
 def stages_before_after(envs: dict) -> dict:
@@ -411,9 +424,12 @@ def _md_envs(result: dict) -> list[str]:
     if "radar_env_over_base" in e:
         before = (f" (numpy kernels: radar {e['radar_env_over_base_numpy_kernels']:.2f} x, SLAM "
                   f"{e['slam_env_over_base_numpy_kernels']:.2f} x)" if "radar_env_over_base_numpy_kernels" in e else "")
-        lines.append(f"Steps/s over the base env: radar {e['radar_env_over_base']:.2f} x (goal >= "
-                     f"{GOALS['radar_env_over_base']}), SLAM {e['slam_env_over_base']:.2f} x (goal >= "
-                     f"{GOALS['slam_env_over_base']}){before}.")
+        ci = {k: (f" [{e[f'{k}_env_over_base_ci'][0]:.2f}, {e[f'{k}_env_over_base_ci'][1]:.2f}]"
+                  if f"{k}_env_over_base_ci" in e else "") for k in ("radar", "slam")}
+        lines.append(f"Steps/s over the base env: radar {e['radar_env_over_base']:.2f} x{ci['radar']} (goal >= "
+                     f"{GOALS['radar_env_over_base']}), SLAM {e['slam_env_over_base']:.2f} x{ci['slam']} (goal >= "
+                     f"{GOALS['slam_env_over_base']}){before}"
+                     + ("; in brackets the 95 % bootstrap interval over the round-robin blocks." if ci["radar"] else "."))
     if "stages_before_after" in e:
         lines += ["", "| stage of the SLAM env's step | numpy kernels (ms) | compiled (ms) |", "|---|---:|---:|"]
         for stage, v in e["stages_before_after"].items():
@@ -551,7 +567,7 @@ def _run_section(sec: str, args: argparse.Namespace) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sections", nargs="+", choices=SECTIONS, default=list(SECTIONS))
-    ap.add_argument("--steps", type=int, default=100, help="env steps per measurement (envs, load, vec)")
+    ap.add_argument("--steps", type=int, default=300, help="env steps per measurement (envs, load, vec)")
     ap.add_argument("--block", type=int, default=5, help="steps of one env before the next one's turn (envs)")
     ap.add_argument("--grid-deg", type=float, default=1.0)
     ap.add_argument("--train-steps", type=int, default=1024, help="PPO timesteps per env id (training section)")
@@ -591,7 +607,8 @@ def main(argv: list[str] | None = None) -> int:
     out.with_suffix(".md").write_text(markdown(result) + "\n")
     print(json.dumps(result, indent=2, default=float))
     for k, g in result["goals"].items():
-        print(f"{k}: {g['value']:.3f} (goal {g.get('sense', '>=')} {g['goal']}) {'met' if g['met'] else 'NOT met'}",
+        ci = f" [95 % {g['ci'][0]:.3f}, {g['ci'][1]:.3f}]" if "ci" in g else ""
+        print(f"{k}: {g['value']:.3f}{ci} (goal {g.get('sense', '>=')} {g['goal']}) {'met' if g['met'] else 'NOT met'}",
               file=sys.stderr)
     return 0
 
@@ -604,6 +621,8 @@ def _goals(result: dict) -> dict:
             if k in result.get(sec, {}):
                 v = float(result[sec][k])
                 found[k] = {"value": v, "goal": goal, "met": v >= goal}
+                if f"{k}_ci" in result[sec]:  # the 95 % interval over the round-robin blocks
+                    found[k]["ci"] = result[sec][f"{k}_ci"]
     for k, goal in START_GOALS_S.items():
         if k in result.get("start", {}):
             v = float(result["start"][k])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from rhs_studies import benchmark
@@ -69,3 +70,19 @@ def test_stage_table_and_start_line():
     assert "median of 3 (cold: 11.0, 12.0, 31.0 s)" in "\n".join(benchmark._md_start({"start": several}))
     with pytest.raises(SystemExit):
         benchmark.main(["--sections", "start", "--start-repeats", "0"])
+
+
+def test_ratio_interval_brackets_the_ratio_and_narrows_with_blocks():
+    """The bootstrap interval of base / env time over round-robin blocks holds the ratio; more blocks, narrower."""
+    from rhs_studies.benchmark import ratio_interval
+
+    rng = np.random.default_rng(0)
+    widths = []
+    for n in (20, 200):
+        base = rng.normal(1.0, 0.1, n)
+        env = base / 0.7 * rng.normal(1.0, 0.05, n)  # the env 0.7x the base's steps/s, its own noise on top
+        lo, hi = ratio_interval(base, env)
+        assert lo <= base.sum() / env.sum() <= hi and lo < 0.7 < hi + 0.02
+        widths.append(hi - lo)
+    assert widths[1] < 0.5 * widths[0]
+    assert ratio_interval(np.ones(10), np.full(10, 2.0)) == [0.5, 0.5]
