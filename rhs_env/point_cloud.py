@@ -580,9 +580,10 @@ def _dtft_kernel(n_t: int, nfft: int, half: int) -> tuple[np.ndarray, np.ndarray
 
 @functools.lru_cache(maxsize=16)
 def _dtft_kernel_split(n_t: int, nfft: int, half: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`_dtft_kernel` as the compiled search reads it: w, and the real and imaginary parts (2 half + 1, n_t) float64."""
+    """:func:`_dtft_kernel` as the compiled search reads it: w, and the real and imaginary parts (2 half + 1, n_t) float32
+    (the complex64 samples' own parts)."""
     w, kern = _dtft_kernel(n_t, nfft, half)
-    kt = kern.T.astype(complex)
+    kt = kern.T
     return w, np.ascontiguousarray(kt.real), np.ascontiguousarray(kt.imag)
 
 
