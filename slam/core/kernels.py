@@ -297,7 +297,7 @@ def doppler_ransac(A: np.ndarray, vr: np.ndarray, idx: np.ndarray, threshold: fl
     or, with 2, ``||v| - |prior|| <= max_change``. Score ``coverage (N + 1) + count`` of its inliers
     ``|vr_i - A_i x| <= threshold`` (coverage: the ``n_bins`` bearing sectors ``sector`` holding one); the first
     best hypothesis' inliers, when at least ``min_inliers`` and of full rank, give the least-squares x
-    (``np.linalg.lstsq``, rcond ``eps max(K, k)`` as numpy's default). Returns (found, x).
+    (:func:`_least_squares`, numpy's ``lstsq`` and ``matrix_rank`` to ~1e-15). Returns (found, x).
     """
     n, k = A.shape
     n_h = idx.shape[0]
@@ -329,7 +329,8 @@ def doppler_ransac(A: np.ndarray, vr: np.ndarray, idx: np.ndarray, threshold: fl
         if prior_mode == 2 and not abs(np.hypot(x[0], x[1]) - np.hypot(prior[0], prior[1])) <= max_change:
             continue
         count = 0
-        covered[:] = False
+        for b_ in range(n_bins):
+            covered[b_] = False
         for q in range(n):
             fit = 0.0
             for c in range(k):
@@ -343,7 +344,8 @@ def doppler_ransac(A: np.ndarray, vr: np.ndarray, idx: np.ndarray, threshold: fl
                 score += n + 1
         if score > best:
             best = score
-            best_x[:] = x
+            for c in range(k):
+                best_x[c] = x[c]
     if best < 0:
         return False, best_x
     keep = np.zeros(n, np.bool_)
@@ -360,11 +362,65 @@ def doppler_ransac(A: np.ndarray, vr: np.ndarray, idx: np.ndarray, threshold: fl
     r = 0
     for q in range(n):
         if keep[q]:
-            a_in[r] = A[q]
+            for c in range(k):  # element by element: a row assignment would compile numpy's shape-error path
+                a_in[r, c] = A[q, c]
             v_in[r] = vr[q]
             r += 1
-    sol, _, rank, _ = np.linalg.lstsq(a_in, v_in, np.finfo(np.float64).eps * max(n_in, k))
-    return rank >= k, sol
+    sol = np.zeros(k)
+    full_rank = _least_squares(a_in, v_in, sol)
+    return full_rank, sol
+
+
+@njit
+def _least_squares(a: np.ndarray, b: np.ndarray, x: np.ndarray) -> bool:
+    """``x = argmin ||a x - b||`` for a (N, k), k <= 3 columns, by Householder QR (a and b overwritten); False (x unset)
+    when a is rank-deficient: ``|R_jj| <= eps max(N, k) max_i |R_ii|`` (numpy's ``matrix_rank`` tolerance on R's
+    diagonal instead of the singular values: the same verdict on exactly dependent columns, a line of sight shared by
+    every point). A few dozen rows: the QR's ~1e-16 relative accuracy, without LAPACK's call (and its compile time)."""
+    n, k = a.shape
+    if n < k:
+        return False
+    for j in range(k):
+        norm = 0.0
+        for i in range(j, n):
+            norm += a[i, j] * a[i, j]
+        norm = np.sqrt(norm)
+        if norm == 0.0:
+            continue
+        alpha = -norm if a[j, j] >= 0 else norm  # v = a_j - alpha e_j, no cancellation
+        v0 = a[j, j] - alpha
+        vnorm2 = v0 * v0 + (norm * norm - a[j, j] * a[j, j])
+        a[j, j] = alpha
+        if vnorm2 == 0.0:
+            continue
+        for c in range(j + 1, k):  # a_c -= 2 v (v . a_c) / (v . v)
+            dot = v0 * a[j, c]
+            for i in range(j + 1, n):
+                dot += a[i, j] * a[i, c]
+            f = 2.0 * dot / vnorm2
+            a[j, c] -= f * v0
+            for i in range(j + 1, n):
+                a[i, c] -= f * a[i, j]
+        dot = v0 * b[j]
+        for i in range(j + 1, n):
+            dot += a[i, j] * b[i]
+        f = 2.0 * dot / vnorm2
+        b[j] -= f * v0
+        for i in range(j + 1, n):
+            b[i] -= f * a[i, j]
+    top = 0.0
+    for j in range(k):
+        top = max(top, abs(a[j, j]))
+    tol = np.finfo(np.float64).eps * max(n, k) * top
+    for j in range(k):
+        if not abs(a[j, j]) > tol:
+            return False
+    for j in range(k - 1, -1, -1):  # R x = Q^T b
+        acc = b[j]
+        for c in range(j + 1, k):
+            acc -= a[j, c] * x[c]
+        x[j] = acc / a[j, j]
+    return True
 
 
 @njit
