@@ -6,8 +6,11 @@ in the same floating-point order where the numpy code fixes one (comparisons of
 float32 statistics stay float32), so the compiled path reproduces the numpy
 reference to round-off. A few sums run in another order where that is much faster: the footprint
 statistic (:func:`footprint_statistic`: each footprint's 2-4 slots instead of a dense 0 / 1 product,
-within 1-2 float32 ulp) and the least squares' ``A^H A`` and ``A^H y`` (:func:`lstsq`,
-:func:`bin_amplitudes`: vectorised sums, ~1e-15 relative); the equivalence tests (same detections and
+within 1-2 float32 ulp), the least squares' ``A^H A`` and ``A^H y`` (:func:`lstsq`,
+:func:`bin_amplitudes`: vectorised sums, ~1e-15 relative), the narrow Doppler searches' DTFT
+(:func:`_dtft_row`: float32 sums of the complex64 values, the reference's own precision) and each radar's
+tone product (:func:`add_tone_products`: scipy's BLAS adds it into the spectrum, numpy's BLAS forms it in
+the reference: float32 round-off); the equivalence tests (same detections and
 point count, positions within 1 mm, Doppler within 1 cm/s) and the results' fingerprints hold.
 The numpy path stays selectable: ``RadarConfig(kernels="numpy")``
 (``gym.make(..., radar={"kernels": "numpy"})``).
@@ -37,7 +40,11 @@ Python 3.11, 2 cores shared with other jobs, load average 5-8):
   expected on a quiet machine, from 29.5 s; not yet rerun there). The points of the OMP's output
   (:func:`assemble_points`, :func:`range_offsets`), the line of sight (:func:`line_of_sight`) and the ICP's
   heading search (:func:`slam.core.kernels.icp_search`) add ~2 s to that first compile (0.9 + 0.2 + 0.3 + 0.5 s,
-  each alone in a fresh cache; the SLAM env's cold start 24.8 s -> 26.7 s, load ~1.8). Vector envs compile once, in the parent
+  each alone in a fresh cache; the SLAM env's cold start 24.8 s -> 26.7 s, load ~1.8). On a slower
+  machine (AMD EPYC, AVX-512, quiet) the same cold start took 38.6 s; the Doppler fits, the tone products'
+  BLAS call and the RBPF's per-pair kernels (:mod:`slam.core.kernels`) add ~2.5 s to it (the Doppler
+  fits' RANSAC kernel compiles in 2.0 s: a small QR instead of ``np.linalg.lstsq``, 3.6 s of compile
+  alone, and element-wise copies). Vector envs compile once, in the parent
   (``agents.run_setup.make_vec_env``,
   :func:`rhs_common.jit.warm_cache`).
 """

@@ -437,6 +437,9 @@ def test_kernels_as_python_under_disable_jit():
     assert res.returncode == 0 and res.stdout.strip().endswith("ok"), res.stderr[-3000:]
 
 
+LOCK = "rhs-slam-background-compile.lock"
+
+
 def test_cache_notice_once_then_silent(tmp_path):
     """A fresh cache compiles with the one-line notice; the next process loads the cache silently."""
     code = """
@@ -451,6 +454,60 @@ def test_cache_notice_once_then_silent(tmp_path):
     assert any(tmp_path.rglob("*.nbi"))  # the index of the cached machine code
     second = _run(code, NUMBA_CACHE_DIR=str(tmp_path))
     assert second.returncode == 0 and NOTICE not in second.stderr
+
+
+def test_background_precompile_leaves_the_env_only_the_radar_front_end_to_compile(tmp_path):
+    """After slam.gym.precompile's workload (what a SLAM env starts in a background process on a cold cache), a new
+    process's SLAM env compiles none of the kernels it covers: the OMP's joint refinement, the points, the SLAM's."""
+    work = _run("from slam.gym.precompile import main; main([])", NUMBA_CACHE_DIR=str(tmp_path))
+    assert work.returncode == 0, work.stderr[-3000:]
+    code = """
+        from rhs_common.jit import _numba
+        from numba.core import event
+        names = []
+        class Rec(event.Listener):
+            def on_start(self, ev):
+                names.append(ev.data["dispatcher"].py_func.__qualname__)
+            def on_end(self, ev):
+                pass
+        _numba()
+        event.register("numba:compile", Rec())
+        import gymnasium as gym, rhs_env
+        env = gym.make("rhs-highway-slam-v0")
+        env.reset(seed=0)
+        for _ in range(6):
+            env.step(1)
+        print(sorted(set(names)))
+    """
+    env_run = _run(code, NUMBA_CACHE_DIR=str(tmp_path), RHS_SLAM_BACKGROUND_COMPILE="0")
+    assert env_run.returncode == 0, env_run.stderr[-3000:]
+    compiled = set(eval(env_run.stdout.strip().splitlines()[-1]))
+    covered = {"joint_refine", "_keep_rows", "_refit_rows", "bin_amplitudes", "range_offsets", "assemble_points",
+               "landmark_update", "proposal_terms", "proposal_information", "mahalanobis_association", "icp_search",
+               "icp_fit", "doppler_ransac"}
+    assert not compiled & covered, compiled & covered
+    assert "omp_doppler" in compiled  # the env's own process still compiled the OMP's search: the cache was cold
+
+
+def test_background_precompile_starts_once_on_a_cold_cache_only(tmp_path, monkeypatch):
+    """slam.gym.precompile.start: one background process per cold cache (a lock), none when warm or switched off."""
+    import subprocess as sp
+
+    from slam.gym import precompile
+
+    started = []
+    monkeypatch.setattr(sp, "Popen", lambda *a, **k: started.append(a[0]))
+    index = tmp_path / "kernels.landmark_update-1.py311.nbi"
+    monkeypatch.setattr(precompile, "_probe_index", lambda: index)
+    monkeypatch.delenv("RHS_SLAM_BACKGROUND_COMPILE", raising=False)
+    assert precompile.start() and started[-1][-3:] == ["slam.gym.precompile", "--lock", str(tmp_path / LOCK)]
+    assert not precompile.start() and len(started) == 1  # the lock: one at a time
+    (tmp_path / LOCK).unlink()
+    monkeypatch.setenv("RHS_SLAM_BACKGROUND_COMPILE", "0")
+    assert not precompile.start()
+    monkeypatch.delenv("RHS_SLAM_BACKGROUND_COMPILE")
+    index.touch()  # a warm cache
+    assert not precompile.start() and len(started) == 1
 
 
 def test_read_only_install_caches_in_the_user_directory(tmp_path):

@@ -1,9 +1,16 @@
-"""Compiled kernels of the SLAM (numba): the RBPF's Mahalanobis association and FastSLAM 2.0 proposal sums, the ICP.
+"""Compiled kernels of the SLAM (numba): the RBPF's association, proposal and landmark update, the ICP, the Doppler fits.
 
 Each kernel computes what the numpy reference computes (:func:`slam.core.association.mahalanobis_associate`
-with the distances of :meth:`slam.core.rbpf.RBPFSlam._associate`; the fit of
-:class:`slam.core.registration.ICPRegistration` with its ``cKDTree`` queries), with the same variable names and floating-point
-order, per particle instead of on P x M x L tensors. ``SlamConfig(kernels="numpy")``
+with the distances of :meth:`slam.core.rbpf.RBPFSlam._associate`; the FastSLAM 2.0 proposal terms and sums and the
+landmarks' Kalman update of :class:`slam.core.rbpf.RBPFSlam`, bit for bit; the fit of
+:class:`slam.core.registration.ICPRegistration` with its ``cKDTree`` queries; the RANSAC Doppler ego-motion fits of
+:func:`slam.core.association.estimate_ego_velocity` and :func:`slam.core.pipeline.doppler_ego_motion`, the same
+hypotheses), with the same variable names and floating-point
+order, per particle or pair instead of on P x M x L tensors. What stays numpy: the per-particle 3 x 3 inverse,
+log-determinant and Cholesky factor of the proposal (LAPACK) and the particle-weighted landmark estimates (numpy's
+einsum, fused multiply-adds): a closed form there moves the results by round-off, and the filter's existence and hit
+thresholds (``exist >= min_existence`` on sums of equal weights) sit exactly on such ties, so a landmark appears or
+not by the last bit. ``SlamConfig(kernels="numpy")``
 (``gym.make(..., slam={"kernels": "numpy"})``) selects the reference; the costs of numba are
 listed in :mod:`rhs_env.kernels`.
 """

@@ -15,12 +15,16 @@ import gymnasium as gym
 from rhs_env.envs import RHSDenseEnv, RHSHighwayEnv, RHSPaperEnv
 from rhs_env.registration import route_kwargs, with_cheap_base_observation
 from rhs_env.wrappers import RadarObservation
+from slam.gym import precompile
 from slam.gym.metrics_info import SlamMetricsInfo
 from slam.gym.wrapper import SlamObservation
 
 
 def make_slam_env(env_cls: type[gym.Env], kwargs: dict[str, Any]) -> gym.Env:
-    """``env_cls`` (a highway-env scene) under the radar, SLAM and SLAM-metrics wrappers."""
+    """``env_cls`` (a highway-env scene) under the radar, SLAM and SLAM-metrics wrappers. On an empty kernel cache the
+    SLAM's kernels start compiling in a background process (:func:`slam.gym.precompile.start`) while this one compiles
+    the radar's."""
+    precompile.start()
     (radar_kw, slam_kw, metrics_kw), env_kw = route_kwargs(kwargs, RadarObservation, SlamObservation, SlamMetricsInfo)
     base = env_cls(**with_cheap_base_observation(env_kw))
     return SlamMetricsInfo(SlamObservation(RadarObservation(base, **radar_kw), **slam_kw), **metrics_kw)

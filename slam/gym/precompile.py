@@ -1,0 +1,178 @@
+"""Compile the SLAM's kernels in a second process while the first compiles the radar's (a cold start on two cores).
+
+On an empty kernel cache the first step of a SLAM env compiles every kernel in call order: the radar's
+(synthesis, detection, the OMP) first, then the SLAM's (:mod:`slam.core.kernels`: the Doppler fits, the
+ICP, the association, the proposal and the landmark update), one after the other on one core. The SLAM's
+kernels do not depend on the radar's, so :func:`start` (called by the SLAM env's constructor) runs
+:func:`workload` in a background process when their cache is cold: it drives a
+:class:`slam.core.pipeline.SlamPipeline` on synthetic clouds (static roadside points seen by the four
+radars, with their Doppler, from a car at 25 m/s) through the same code paths, so the same signatures
+compile and land in the on-disk cache, which the env's process then loads instead of compiling.
+
+One background process per cache at a time (a lock file beside the cache, stale after
+:data:`LOCK_STALE_S`); nothing runs with ``NUMBA_DISABLE_JIT=1``, with a warm cache, or with
+``RHS_SLAM_BACKGROUND_COMPILE=0``. The background process prints nothing and needs nothing from its
+parent: if the parent reaches a kernel first, it compiles it itself, as before.
+
+    python -m slam.gym.precompile     # the workload in this process (what the background process runs)
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["LOCK_STALE_S", "start", "workload"]
+
+#: a lock file older than this (s) belongs to a background compile that died: another may start
+LOCK_STALE_S = 300.0
+_ENV_SWITCH = "RHS_SLAM_BACKGROUND_COMPILE"
+
+
+def _probe_index() -> Path | None:
+    """The cache index of a kernel :func:`workload` compiles late (None without an on-disk cache)."""
+    from slam.core.kernels import landmark_update
+
+    try:
+        return Path(landmark_update._cache._cache_file._index_path)
+    except AttributeError:
+        return None
+
+
+def start() -> bool:
+    """Start :func:`workload` in a background process if the SLAM kernels' cache is cold; True if it started."""
+    if os.environ.get(_ENV_SWITCH, "1") == "0":
+        return False
+    from rhs_common.jit import _numba
+
+    if _numba().config.DISABLE_JIT:
+        return False
+    index = _probe_index()
+    if index is None or index.exists():
+        return False
+    lock = index.parent / "rhs-slam-background-compile.lock"
+    try:
+        index.parent.mkdir(parents=True, exist_ok=True)
+        if lock.exists() and time.time() - lock.stat().st_mtime < LOCK_STALE_S:
+            return False
+        lock.write_text(str(os.getpid()))
+    except OSError:  # a cache folder we may not write: nothing to share through it
+        return False
+    env = {**os.environ, _ENV_SWITCH: "0", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    subprocess.Popen([sys.executable, "-m", "slam.gym.precompile", "--lock", str(lock)], env=env,
+                     stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                     start_new_session=True)
+    return True
+
+
+def synthetic_cloud(pose: np.ndarray, velocity: np.ndarray, landmarks: np.ndarray, sensors: np.ndarray,
+                    rng: np.random.Generator) -> np.ndarray:
+    """Rows ``x, y, vr, amplitude, range std, angle std, radar`` (N, 7) of the static ``landmarks`` (world, m) seen
+    from ``pose`` (x, y, heading) at ``velocity`` (vehicle frame, m/s) by the radar ``sensors`` (4, 2) nearest each."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    d = landmarks - pose[:2]
+    p = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])  # vehicle frame
+    p = p[np.hypot(p[:, 0], p[:, 1]) < 90.0]
+    radar = np.argmin(np.linalg.norm(p[:, None, :] - sensors[None], axis=2), axis=1)
+    los = p - sensors[radar]
+    u = los / np.linalg.norm(los, axis=1, keepdims=True)
+    vr = -(u @ velocity) + rng.normal(0, 0.02, len(p))
+    xy = p + rng.normal(0, 0.03, p.shape)
+    n = len(p)
+    return np.column_stack([xy, vr, np.full(n, 20.0), np.full(n, 0.05), np.full(n, 0.002), radar.astype(float)])
+
+
+def radar_workload() -> None:
+    """The radar kernels the env's process reaches last on its first step, called as the radar calls them: the OMP's
+    joint refinement and row bookkeeping (:func:`rhs_env.kernels.joint_refine`, ``_keep_rows``, with the operands'
+    types of :func:`rhs_env.kernels.omp_doppler`) and the points (:meth:`rhs_env.radar.RadarSystem._target_bins`,
+    ``_assemble_points``) on synthetic targets; the env's process compiles the synthesis, the detector and the
+    OMP's search meanwhile."""
+    from rhs_env import kernels
+    from rhs_env.point_cloud import _narrow_dtft, _time_index
+    from rhs_env.radar import RadarSystem, _Targets
+    from rhs_env.radar_config import RadarConfig
+
+    cfg = RadarConfig()
+    radar = RadarSystem(cfg, np.random.default_rng(0))
+    dic = radar._groups[0][0]
+    tgrid = np.ascontiguousarray(radar._chirp_index, dtype=float)
+    table, u_c, x_c = dic._taylor
+    t, n_t, _ = _time_index(tgrid)
+    fine_w, fine_re, fine_im, nfft = _narrow_dtft(tgrid, np.array([min(np.pi, 8 * np.pi / float(tgrid.max() + 1))]))
+    n_i, n_c = tgrid.shape
+    n_q, n_l, n_d = n_i * n_c, cfg.estimation.max_targets, 2
+    rng = np.random.default_rng(1)
+    flat = rng.normal(size=(n_d, n_q)) + 1j * rng.normal(size=(n_d, n_q))
+    theta = np.zeros((n_d, n_l))
+    theta[:, :2] = [0.1, -0.2]
+    omega = np.zeros((n_d, n_l))
+    valid = np.zeros((n_d, n_l), np.bool_)
+    valid[:, :2] = True
+    atoms = np.zeros((n_d, n_q, n_l), np.complex128)
+    atoms[:, :, :2] = 1.0
+    amp = np.zeros((n_d, n_l), np.complex128)
+    kernels.joint_refine(table, u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2, dic._x, flat.copy(), tgrid,
+                         t, n_t, fine_re, fine_im, fine_w, nfft, theta.copy(), omega.copy(), valid.copy(),
+                         np.full(n_d, 0.05), int(cfg.estimation.refine_passes), int(cfg.estimation.newton_steps),
+                         atoms.copy(), amp.copy(), float(cfg.estimation.refine_tol))
+    r2, stop, active = kernels._start(flat, np.ones(n_d), 0.1, True)
+    rows = np.arange(n_d, dtype=np.int64)
+    resid = flat.reshape(n_d, n_i, n_c).copy()
+    kernels._keep_rows(rows, np.ones(n_d, np.bool_), theta.copy(), omega.copy(), valid.copy(), amp.copy(), atoms.copy(),
+                       theta, omega, valid, amp, atoms, flat, resid, r2, stop, active)
+    # the points: the radar's own methods on a detection per radar
+    rd = np.arange(4, dtype=np.int64)
+    kd = np.full(4, 40, np.int64)
+    spec = radar._noise_spectrum((4, n_i, n_c))
+    kk = radar._neighbour_bins(kd, spec.shape[-1])
+    win, _ = kernels.gather_bins(spec, rd, kk, kk.shape[1] // 2)
+    est = _Targets.empty(4, n_l)
+    est.valid[:, 0], est.amp[:, 0], est.anorm[:, 0] = True, 1.0, 1.0
+    est.tfrac[:] = radar._target_bins(spec, rd, kk, np.ones((4, n_q, n_l), complex), win)
+    radar._assemble_points(rd, kd, est)
+
+
+def workload(cycles: int = 8) -> None:
+    """The radar's last kernels (:func:`radar_workload`), then the SLAM env's pipeline (default configs, the four
+    radars' mounts) on ``cycles`` synthetic clouds."""
+    radar_workload()
+    from rhs_env.radar_config import RadarConfig
+    from slam.core.pipeline import SlamPipeline
+    from slam.core.registration import DEFAULT_REGISTRATION, make_registration
+    from slam.core.rbpf import SlamConfig
+
+    rng = np.random.default_rng(0)
+    sensors = RadarConfig().mounting.mounts()[0]
+    xs = np.arange(-100.0, 400.0, 9.0)
+    landmarks = np.concatenate([np.column_stack([xs, np.full(xs.size, 11.0)]),
+                                np.column_stack([xs + 4.0, np.full(xs.size, -9.0)])])
+    pipeline = SlamPipeline(make_registration(DEFAULT_REGISTRATION), SlamConfig(), np.random.default_rng(0),
+                            sensor_xy=sensors)
+    dt, speed = 0.2, 25.0
+    for k in range(cycles):
+        pose = np.array([speed * dt * k, 0.0, 0.0])
+        pipeline.step(synthetic_cloud(pose, np.array([speed, 0.0]), landmarks, sensors, rng), dt)
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--lock", help="the lock file to remove when done")
+    a = ap.parse_args(argv)
+    try:
+        workload()
+    finally:
+        if a.lock:
+            Path(a.lock).unlink(missing_ok=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
