@@ -44,7 +44,11 @@ Python 3.11, 2 cores shared with other jobs, load average 5-8):
   machine (AMD EPYC, AVX-512, quiet) the same cold start took 38.6 s; the Doppler fits, the tone products'
   BLAS call and the RBPF's per-pair kernels (:mod:`slam.core.kernels`) add ~2.5 s to it (the Doppler
   fits' RANSAC kernel compiles in 2.0 s: a small QR instead of ``np.linalg.lstsq``, 3.6 s of compile
-  alone, and element-wise copies). Vector envs compile once, in the parent
+  alone, and element-wise copies). A SLAM env on an empty cache now compiles on two cores: a background
+  process (:mod:`slam.gym.precompile`) takes the kernels the env reaches last (:func:`joint_refine`,
+  ``_keep_rows``, the points, the SLAM's) while the env compiles the synthesis, the detector and the OMP's
+  search: 45.4 s -> 28.4 s there (median of 3, ``benchmark.py --sections start``; the README's speed page has
+  the current run). Vector envs compile once, in the parent
   (``agents.run_setup.make_vec_env``,
   :func:`rhs_common.jit.warm_cache`).
 """
