@@ -38,12 +38,18 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     import numpy as np
 
-__all__ = ["KERNELS", "NOTICE", "njit", "sort_small", "warm_cache"]
+__all__ = ["KERNELS", "NOTICE", "njit", "numba_module", "sort_small", "warm_cache"]
 
 #: the kernel implementations a config may choose: compiled (default) or the numpy reference
 KERNELS = ("numba", "numpy")
 NOTICE = "rhs-slam: compiling the radar / SLAM kernels (first run on this machine, cached afterwards) ..."
 _PACKAGE_ROOT = Path(__file__).resolve().parent.parent
+
+
+def numba_module() -> Any:
+    """numba itself, imported as the kernels import it: after the cache directory is chosen, with the compile notice
+    registered (for code that extends numba or reads its config, e.g. :mod:`rhs_common.native`)."""
+    return _numba()
 
 
 def _writable(path: Path) -> bool:

@@ -42,9 +42,9 @@ def matmul_add(a: np.ndarray, b: np.ndarray, out: np.ndarray, cgemm: int) -> Non
 
 def _register() -> None:
     """The compiled :func:`matmul_add`: the cgemm call with the views' pointers and row strides."""
-    from rhs_common.jit import _numba
+    from rhs_common.jit import numba_module
 
-    _numba()  # numba's cache directory chosen first (rhs_common.jit)
+    numba_module()  # numba's cache directory chosen first (rhs_common.jit)
     from llvmlite import ir
     from numba import types
     from numba.extending import intrinsic, overload

@@ -882,6 +882,25 @@ def _compiled_omp(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max
     return DopplerOMPResult(*out)
 
 
+def warm_refinement_kernels(dic: AngleDictionary, tgrid: np.ndarray, max_targets: int, refine_passes: int,
+                            newton_steps: int, refine_tol: float) -> None:
+    """Compile (or load) the one-call OMP's refinement kernels (:func:`rhs_env.kernels.warm_refinement`) for the
+    dictionary ``dic`` and chirp times ``tgrid``, with the operands :func:`_compiled_omp` passes (nothing where the
+    one-call OMP does not apply)."""
+    fine = _narrow_dtft(tgrid, np.array([min(np.pi, 8 * np.pi / float(tgrid.max() + 1))]))
+    taylor = getattr(dic, "_taylor", None)
+    if taylor is None or dic.kernels != "numba" or fine is None:
+        return
+    from rhs_env import kernels
+
+    table, u_c, x_c = taylor
+    t, n_t, _ = _time_index(tgrid)
+    fine_w, fine_re, fine_im, nfft = fine
+    kernels.warm_refinement(table, u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2, dic._x,
+                            np.ascontiguousarray(tgrid, dtype=float), t, n_t, fine_re, fine_im, fine_w, nfft,
+                            int(max_targets), int(refine_passes), int(newton_steps), float(refine_tol))
+
+
 def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_targets: int,
                 residual_threshold: np.ndarray, noise_var: float, relative_threshold: float = 0.0,
                 min_amplitude: float = 0.0, newton_steps: int = 2, cycles: int = 2,

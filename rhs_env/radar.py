@@ -695,6 +695,31 @@ class RadarSystem:
         leak = np.where(same & (a2[None, :] > a2[:, None]), a2[None, :] * self._leak[dk], 0.0).max(axis=1)
         return a2 < 10 ** (cfg.detection.sidelobe_margin_db / 10) * leak
 
+    def warm_kernels(self) -> None:
+        """Compile (or load) the compiled kernels a first scan reaches last, with the scan's own operand types: the
+        OMP's joint refinement and row bookkeeping (:func:`rhs_env.point_cloud.warm_refinement_kernels`) and the
+        points (:meth:`_target_bins`, :meth:`_assemble_points`) of one synthetic target per radar. A background
+        process runs it (:mod:`slam.gym.precompile`) while an env's first scan compiles the synthesis, the detector
+        and the OMP's search; nothing to do with ``kernels="numpy"``."""
+        cfg = self.config
+        if cfg.kernels != "numba":
+            return
+        from rhs_env.kernels import gather_bins
+        from rhs_env.point_cloud import warm_refinement_kernels
+
+        for dic, _ in self._groups:
+            warm_refinement_kernels(dic, self._chirp_index, cfg.estimation.max_targets, cfg.estimation.refine_passes,
+                                    cfg.estimation.newton_steps, cfg.estimation.refine_tol)
+        n_i, n_c, n_l = cfg.scan.slots, cfg.waveform.chirps_per_slot, cfg.estimation.max_targets
+        rd, kd = np.arange(4, dtype=np.int64), np.full(4, 40, np.int64)
+        spec = self._noise_spectrum((4, n_i, n_c))
+        kk = self._neighbour_bins(kd, spec.shape[-1])
+        win, _ = gather_bins(spec, rd, kk, kk.shape[1] // 2)
+        est = _Targets.empty(4, n_l)
+        est.valid[:, 0], est.amp[:, 0], est.anorm[:, 0] = True, 1.0, 1.0
+        est.tfrac[:] = self._target_bins(spec, rd, kk, np.ones((4, n_i * n_c, n_l), complex), win)
+        self._assemble_points(rd, kd, est)
+
     def scan(self, scatterers: Scatterers, occluders: Occluders | None = None) -> PointCloud:
         """One sensing cycle of the four radars -> :class:`PointCloud` with ``stage_times``.
 

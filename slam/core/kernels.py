@@ -293,6 +293,29 @@ def _solve3(m: np.ndarray, b: np.ndarray, x: np.ndarray) -> float:
 
 
 @njit
+def _consensus(A: np.ndarray, vr: np.ndarray, x: np.ndarray, threshold: float, sector: np.ndarray,
+               covered: np.ndarray) -> int:
+    """RANSAC score ``coverage (N + 1) + count`` of the hypothesis x: its inliers ``|vr_i - A_i x| <= threshold``
+    and the bearing sectors holding one (``covered`` (n_bins,) work space)."""
+    n, k = A.shape
+    count = 0
+    for b in range(covered.size):
+        covered[b] = False
+    for q in range(n):
+        fit = 0.0
+        for c in range(k):
+            fit += x[c] * A[q, c]
+        if abs(vr[q] - fit) <= threshold:
+            count += 1
+            covered[sector[q]] = True
+    score = count
+    for b in range(covered.size):
+        if covered[b]:
+            score += n + 1
+    return score
+
+
+@njit
 def doppler_ransac(A: np.ndarray, vr: np.ndarray, idx: np.ndarray, threshold: float, sector: np.ndarray,
                    n_bins: int, min_inliers: int, max_yaw_rate: float, prior: np.ndarray, prior_mode: int,
                    max_change: float) -> tuple[bool, np.ndarray]:
@@ -335,20 +358,7 @@ def doppler_ransac(A: np.ndarray, vr: np.ndarray, idx: np.ndarray, threshold: fl
             continue
         if prior_mode == 2 and not abs(np.hypot(x[0], x[1]) - np.hypot(prior[0], prior[1])) <= max_change:
             continue
-        count = 0
-        for b_ in range(n_bins):
-            covered[b_] = False
-        for q in range(n):
-            fit = 0.0
-            for c in range(k):
-                fit += x[c] * A[q, c]
-            if abs(vr[q] - fit) <= threshold:
-                count += 1
-                covered[sector[q]] = True
-        score = count
-        for s in range(n_bins):
-            if covered[s]:
-                score += n + 1
+        score = _consensus(A, vr, x, threshold, sector, covered)
         if score > best:
             best = score
             for c in range(k):

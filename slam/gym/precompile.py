@@ -7,7 +7,9 @@ kernels do not depend on the radar's, so :func:`start` (called by the SLAM env's
 :func:`workload` in a background process when their cache is cold: it drives a
 :class:`slam.core.pipeline.SlamPipeline` on synthetic clouds (static roadside points seen by the four
 radars, with their Doppler, from a car at 25 m/s) through the same code paths, so the same signatures
-compile and land in the on-disk cache, which the env's process then loads instead of compiling.
+compile and land in the on-disk cache, which the env's process then loads instead of compiling. The radar's
+last kernels (the OMP's joint refinement, the points) come first, from
+:meth:`rhs_env.radar.RadarSystem.warm_kernels`.
 
 One background process per cache at a time (a lock file beside the cache, stale after
 :data:`LOCK_STALE_S`); nothing runs with ``NUMBA_DISABLE_JIT=1``, with a warm cache, or with
@@ -48,9 +50,9 @@ def start() -> bool:
     """Start :func:`workload` in a background process if the SLAM kernels' cache is cold; True if it started."""
     if os.environ.get(_ENV_SWITCH, "1") == "0":
         return False
-    from rhs_common.jit import _numba
+    from rhs_common.jit import numba_module
 
-    if _numba().config.DISABLE_JIT:
+    if numba_module().config.DISABLE_JIT:
         return False
     index = _probe_index()
     if index is None or index.exists():
@@ -87,66 +89,17 @@ def synthetic_cloud(pose: np.ndarray, velocity: np.ndarray, landmarks: np.ndarra
     return np.column_stack([xy, vr, np.full(n, 20.0), np.full(n, 0.05), np.full(n, 0.002), radar.astype(float)])
 
 
-def radar_workload() -> None:
-    """The radar kernels the env's process reaches last on its first step, called as the radar calls them: the OMP's
-    joint refinement and row bookkeeping (:func:`rhs_env.kernels.joint_refine`, ``_keep_rows``, with the operands'
-    types of :func:`rhs_env.kernels.omp_doppler`) and the points (:meth:`rhs_env.radar.RadarSystem._target_bins`,
-    ``_assemble_points``) on synthetic targets; the env's process compiles the synthesis, the detector and the
-    OMP's search meanwhile."""
-    from rhs_env import kernels
-    from rhs_env.point_cloud import _narrow_dtft, _time_index
-    from rhs_env.radar import RadarSystem, _Targets
-    from rhs_env.radar_config import RadarConfig
-
-    cfg = RadarConfig()
-    radar = RadarSystem(cfg, np.random.default_rng(0))
-    dic = radar._groups[0][0]
-    tgrid = np.ascontiguousarray(radar._chirp_index, dtype=float)
-    table, u_c, x_c = dic._taylor
-    t, n_t, _ = _time_index(tgrid)
-    fine_w, fine_re, fine_im, nfft = _narrow_dtft(tgrid, np.array([min(np.pi, 8 * np.pi / float(tgrid.max() + 1))]))
-    n_i, n_c = tgrid.shape
-    n_q, n_l, n_d = n_i * n_c, cfg.estimation.max_targets, 2
-    rng = np.random.default_rng(1)
-    flat = rng.normal(size=(n_d, n_q)) + 1j * rng.normal(size=(n_d, n_q))
-    theta = np.zeros((n_d, n_l))
-    theta[:, :2] = [0.1, -0.2]
-    omega = np.zeros((n_d, n_l))
-    valid = np.zeros((n_d, n_l), np.bool_)
-    valid[:, :2] = True
-    atoms = np.zeros((n_d, n_q, n_l), np.complex128)
-    atoms[:, :, :2] = 1.0
-    amp = np.zeros((n_d, n_l), np.complex128)
-    kernels.joint_refine(table, u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2, dic._x, flat.copy(), tgrid,
-                         t, n_t, fine_re, fine_im, fine_w, nfft, theta.copy(), omega.copy(), valid.copy(),
-                         np.full(n_d, 0.05), int(cfg.estimation.refine_passes), int(cfg.estimation.newton_steps),
-                         atoms.copy(), amp.copy(), float(cfg.estimation.refine_tol))
-    r2, stop, active = kernels._start(flat, np.ones(n_d), 0.1, True)
-    rows = np.arange(n_d, dtype=np.int64)
-    resid = flat.reshape(n_d, n_i, n_c).copy()
-    kernels._keep_rows(rows, np.ones(n_d, np.bool_), theta.copy(), omega.copy(), valid.copy(), amp.copy(), atoms.copy(),
-                       theta, omega, valid, amp, atoms, flat, resid, r2, stop, active)
-    # the points: the radar's own methods on a detection per radar
-    rd = np.arange(4, dtype=np.int64)
-    kd = np.full(4, 40, np.int64)
-    spec = radar._noise_spectrum((4, n_i, n_c))
-    kk = radar._neighbour_bins(kd, spec.shape[-1])
-    win, _ = kernels.gather_bins(spec, rd, kk, kk.shape[1] // 2)
-    est = _Targets.empty(4, n_l)
-    est.valid[:, 0], est.amp[:, 0], est.anorm[:, 0] = True, 1.0, 1.0
-    est.tfrac[:] = radar._target_bins(spec, rd, kk, np.ones((4, n_q, n_l), complex), win)
-    radar._assemble_points(rd, kd, est)
-
-
 def workload(cycles: int = 8) -> None:
-    """The radar's last kernels (:func:`radar_workload`), then the SLAM env's pipeline (default configs, the four
-    radars' mounts) on ``cycles`` synthetic clouds."""
-    radar_workload()
+    """The radar kernels a first scan reaches last (:meth:`rhs_env.radar.RadarSystem.warm_kernels`), then the SLAM env's
+    pipeline (default configs, the four radars' mounts) on ``cycles`` synthetic clouds."""
+    from rhs_env.radar import RadarSystem
     from rhs_env.radar_config import RadarConfig
-    from slam.core.pipeline import SlamPipeline
-    from slam.core.registration import DEFAULT_REGISTRATION, make_registration
-    from slam.core.rbpf import SlamConfig
 
+    from slam.core.pipeline import SlamPipeline
+    from slam.core.rbpf import SlamConfig
+    from slam.core.registration import DEFAULT_REGISTRATION, make_registration
+
+    RadarSystem(RadarConfig(), np.random.default_rng(0)).warm_kernels()
     rng = np.random.default_rng(0)
     sensors = RadarConfig().mounting.mounts()[0]
     xs = np.arange(-100.0, 400.0, 9.0)
