@@ -130,6 +130,7 @@ def bench_envs(steps: int, seed: int, grid_deg: float, block: int = 5, numpy_ker
                 env.reset(seed=seed)
         envs[label] = {"env": env, "dt": 0.0, "n": 0, "radar": [], "slam": [], "blocks": []}
     actions = actions[:steps]
+    compiled = _watch_compiles()
     for lo in range(0, steps, block):
         for rec in envs.values():
             env = rec["env"]
@@ -145,7 +146,9 @@ def bench_envs(steps: int, seed: int, grid_deg: float, block: int = 5, numpy_ker
                     env.reset(seed=seed + rec["n"])
             rec["blocks"].append(time.perf_counter() - t0)
             rec["dt"] += rec["blocks"][-1]
-    out: dict = {"block_steps": block, "load_average_start": load_start}
+    out: dict = {"block_steps": block, "load_average_start": load_start, "kernels_compiled_while_timed": sorted(compiled)}
+    if compiled:  # a compile inside a timed block would be counted as a step's cost
+        print(f"benchmark: warning: kernels compiled while timed: {sorted(compiled)}", file=sys.stderr)
     out["kinematics_observation_ms"] = _kinematics_observation_ms(envs["rhs-highway-v0"]["env"])
     for label, rec in envs.items():
         rec["env"].close()
@@ -170,6 +173,28 @@ def bench_envs(steps: int, seed: int, grid_deg: float, block: int = 5, numpy_ker
             out[f"{kind}_env_over_base_numpy_kernels"] = ref["steps_per_s"] / out["rhs-highway-v0"]["steps_per_s"]
         out["stages_before_after"] = stages_before_after(out)
     return out
+
+
+def _watch_compiles() -> set[str]:
+    """A set that collects the names of the project's kernels numba compiles from now on (none expected while timed)."""
+    from numba.core import event
+
+    from rhs_common.jit import numba_module
+
+    numba_module()
+    names: set[str] = set()
+
+    class _Listener(event.Listener):
+        def on_start(self, ev: Any) -> None:
+            func = getattr(ev.data.get("dispatcher"), "py_func", None)
+            if func is not None and func.__module__.split(".")[0] in ("rhs_env", "slam", "rhs_common"):
+                names.add(f"{func.__module__}.{func.__qualname__}")
+
+        def on_end(self, ev: Any) -> None:
+            pass
+
+    event.register("numba:compile", _Listener())
+    return names
 
 
 def ratio_interval(base_blocks: np.ndarray, env_blocks: np.ndarray, resamples: int = 2000, seed: int = 0) -> list[float]:

@@ -135,6 +135,13 @@ def log_sum_exp(a: np.ndarray) -> np.float64:
     return np.log1p(s) + np.log(k) + a_max
 
 
+def _pairs(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The matched (particle, observation) pairs of ``idx`` (P, M), row-major, as contiguous index arrays (``np.nonzero``'s
+    are strided views, contiguous only when they hold one pair or none: one layout keeps one compiled signature)."""
+    pp, mm = np.nonzero(idx >= 0)
+    return np.ascontiguousarray(pp), np.ascontiguousarray(mm)
+
+
 def rotate_sym2(c, s, b00, b01, b11):
     """Components of ``R B R^T`` for symmetric B, ``R = [[c, -s], [s, c]]`` (broadcasting)."""
     cc, ss, cs = c * c, s * s, c * s
@@ -498,7 +505,7 @@ class RBPFSlam:
         loglik = np.zeros(c.n_particles)
         if c.variant == "fastslam2" and self.cycle > 0:
             loglik, idx = self._sample_proposal(idx, obs)
-        pp, mm = np.nonzero(idx >= 0)
+        pp, mm = _pairs(idx)
         if pp.size:
             ll_pair = self._landmark_update(pp, mm, idx[pp, mm], obs)
             if c.variant == "fastslam1":
@@ -538,7 +545,7 @@ class RBPFSlam:
         """FastSLAM 2.0: sample every pose from its measurement-updated proposal (module docstring)."""
         c = self.config
         P = c.n_particles
-        pp, mm = np.nonzero(idx >= 0)
+        pp, mm = _pairs(idx)
         H, Si, nu, logdet = self._proposal_terms(pp, mm, idx[pp, mm], obs)
         prior_var = np.maximum(self.pose_var, 1e-18)
         ok = np.ones(pp.size, dtype=bool)
