@@ -50,16 +50,16 @@ def _register() -> None:
     from numba.extending import intrinsic, overload
 
     @intrinsic
-    def _cgemm_call(typingctx, addr, m, n, k, a, lda, b, ldb, c, ldc):  # noqa: ANN001, ANN202 (numba typing)
+    def _cgemm_call(typingctx, addr, m, n, k, a, lda, b, ldb, c, ldc):
         sig = types.void(addr, m, n, k, a, lda, b, ldb, c, ldc)
 
-        def codegen(context, builder, signature, args):  # noqa: ANN001, ANN202
+        def codegen(context, builder, signature, args):
             ptr = ir.IntType(8).as_pointer()
             i32 = ir.IntType(32)
             fnty = ir.FunctionType(ir.VoidType(), [ptr] * 13)
             fn = builder.inttoptr(args[0], fnty.as_pointer())
 
-            def int_ptr(value):  # noqa: ANN001, ANN202
+            def int_ptr(value):
                 slot = builder.alloca(i32)
                 builder.store(builder.trunc(value, i32), slot)
                 return builder.bitcast(slot, ptr)
@@ -78,9 +78,9 @@ def _register() -> None:
 
         return sig, codegen
 
-    @overload(matmul_add, jit_options={"cache": True})
-    def _matmul_add(a, b, out, cgemm):  # noqa: ANN001, ANN202
-        def impl(a, b, out, cgemm):  # noqa: ANN001, ANN202
+    @overload(matmul_add)
+    def _matmul_add(a, b, out, cgemm):
+        def impl(a, b, out, cgemm):
             m, k = a.shape
             n = b.shape[1]
             if m == 0 or n == 0 or k == 0:

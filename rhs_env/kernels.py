@@ -57,8 +57,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from rhs_common.native import matmul_add
 from rhs_common.jit import njit
+from rhs_common.native import matmul_add
 
 __all__ = [
     "TAYLOR_ORDER", "assemble_points", "atom_norms", "bin_amplitudes", "doppler_dtft_refine", "footprint_detections",

@@ -107,7 +107,6 @@ def bench_envs(steps: int, seed: int, grid_deg: float, block: int = 5, numpy_ker
     import gymnasium as gym
 
     import rhs_env  # noqa: F401  (registers the ids)
-
     from slam.gym.precompile import workload
 
     workload()  # every kernel compiled or loaded before the clock runs (some first run only once landmarks match)

@@ -94,7 +94,6 @@ def workload(cycles: int = 8) -> None:
     pipeline (default configs, the four radars' mounts) on ``cycles`` synthetic clouds."""
     from rhs_env.radar import RadarSystem
     from rhs_env.radar_config import RadarConfig
-
     from slam.core.pipeline import SlamPipeline
     from slam.core.rbpf import SlamConfig
     from slam.core.registration import DEFAULT_REGISTRATION, make_registration
