@@ -1,4 +1,4 @@
-"""Compile the SLAM's kernels in a second process while the first compiles the radar's (a cold start on two cores).
+"""Compile the kernels a SLAM env reaches last in a second process while the env compiles the first (a cold start on two cores).
 
 On an empty kernel cache the first step of a SLAM env compiles every kernel in call order: the radar's
 (synthesis, detection, the OMP) first, then the SLAM's (:mod:`slam.core.kernels`: the Doppler fits, the
@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["LOCK_STALE_S", "start", "workload"]
+__all__ = ["LOCK_STALE_S", "start", "synthetic_cloud", "workload"]
 
 #: a lock file older than this (s) belongs to a background compile that died: another may start
 LOCK_STALE_S = 300.0
