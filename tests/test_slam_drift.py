@@ -71,7 +71,11 @@ def test_the_drift_changes_the_reported_uncertainty_not_the_estimate():
     cov = a[-1][1]["slam_pose_cov"]
     assert cov.shape == (3, 3) and np.allclose(cov, cov.T)
     assert np.all(a[-1][1]["slam_pose_std"] > b[-1][1]["slam_pose_std"])
-    assert a[-1][1]["slam_pose_std"][1] > 0.05  # > 100 m driven: the heading drift shows across the road
+    # > 100 m driven: the heading drift shows across the road. What the drift adds to the particles' spread (in
+    # quadrature) is the model's, ~0.035 m after the 123 m of this drive, whatever the particles' own spread (0.036 m
+    # here; the total sat at 0.050 m, on the edge of a bound on it)
+    added = np.sqrt(a[-1][1]["slam_pose_std"][1] ** 2 - b[-1][1]["slam_pose_std"][1] ** 2)
+    assert 0.025 < added < 0.05
 
 
 def test_nees_of_a_nominal_drive_is_in_the_chi_square_band():
