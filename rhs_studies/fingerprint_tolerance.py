@@ -36,10 +36,10 @@ only the values in ``may_flip`` may miss it (a closed-loop episode flips the sam
 after its one decision that went the other way; a real change of the code moves others). The
 measured spread is written beside the tolerance.
 
-Machines accumulate: a step's recorded tolerance is merged with the new measurement (the larger rtol and
-atol, the union of may_flip, every machine's spread kept under its own labels, the machine's CPU named
-in ``measured``), so a tolerance measured on one CPU keeps holding there after it is measured on another
-(``--fresh`` replaces it instead).
+Machines accumulate: each step keeps every machine's own measurement under ``machines`` (named by its CPU,
+:func:`machine`; measuring again on a machine replaces that machine's), and its tolerance is derived from
+all of them (the larger rtol and atol, the union of may_flip, each machine's spread under its name), so a
+tolerance measured on one CPU keeps holding there after it is measured on another (``--fresh`` starts over).
 
     python scripts/fingerprint_tolerance.py                         # measure every step, print, record
     python scripts/fingerprint_tolerance.py --only fig5b fig5c --dry-run
@@ -163,20 +163,31 @@ def machine() -> str:
     return f"{model} {level}".strip()
 
 
+#: the keys of one machine's measurement kept under ``machines`` (the combined tolerance is derived from them)
+_PER_MACHINE = ("rtol", "atol", "may_flip", "spread", "environments", "measured")
+#: the name of a measurement recorded before machines were named
+EARLIER_MACHINE = "first machine (unnamed)"
+
+
 def merged(old: dict | None, new: dict) -> dict:
-    """``new`` combined with an earlier tolerance ``old`` measured on another machine: the larger rtol / atol, the
-    union of may_flip, both machines' spreads (the old labels kept, the new ones prefixed by ``new``'s machine)."""
-    if not old or old.get("measured", {}).get("machine") == new["measured"]["machine"]:
-        return new
-    out = dict(new)
-    out["rtol"], out["atol"] = max(old["rtol"], new["rtol"]), max(old["atol"], new["atol"])
-    out["may_flip"] = sorted(set(old.get("may_flip", [])) | set(new["may_flip"]))
+    """``new``'s measurement added to the machines an earlier tolerance ``old`` was measured on.
+
+    ``machines`` keeps each machine's own measurement (a new one on the same machine replaces it); the tolerance
+    itself is derived from all of them: the largest rtol and atol, the union of may_flip, every spread under
+    ``"<machine>: <setting>"``."""
+    machines = dict((old or {}).get("machines", {}))
+    if old and not machines:  # recorded before machines were named: one machine, whatever it was
+        machines[old.get("measured", {}).get("machine", EARLIER_MACHINE)] = {k: old[k] for k in _PER_MACHINE if k in old}
     tag = new["measured"]["machine"]
-    out["spread"] = {**old.get("spread", {}), **{f"{tag}: {k}": v for k, v in new["spread"].items()}}
-    out["environments"] = {**old.get("environments", {}), **{f"{tag}: {k}": v for k, v in new.get("environments", {}).items()}}
-    out["measured"] = {**new["measured"], "earlier": [*old.get("measured", {}).get("earlier", []),
-                                                      {k: v for k, v in old.get("measured", {}).items() if k != "earlier"}]}
-    return out
+    machines[tag] = {k: new[k] for k in _PER_MACHINE if k in new}
+    if len(machines) == 1:
+        return {**new, "machines": machines}
+    per = machines.values()
+    return {**new, "rtol": max(m["rtol"] for m in per), "atol": max(m["atol"] for m in per),
+            "may_flip": sorted(set().union(*(m.get("may_flip", []) for m in per))),
+            "spread": {f"{name}: {k}": v for name, m in machines.items() for k, v in m.get("spread", {}).items()},
+            "environments": {f"{name}: {k}": v for name, m in machines.items() for k, v in m.get("environments", {}).items()},
+            "machines": machines}
 
 
 def distinct_environments(environments: dict[str, dict[str, str]]) -> dict[str, dict[str, str]]:

@@ -92,7 +92,8 @@ def test_every_tolerance_was_measured_and_is_tight():
     for s in _fingerprinted():
         tol = fps[prov.script_name(s.script)].get("tolerance")
         assert tol and {"rtol", "atol", "may_flip", "spread"} <= set(tol), f"{s.name}: no measured tolerance"
-        assert {"native", "avx2-machine"} <= set(tol["spread"]), f"{s.name}: spread not measured across CPUs"
+        spreads = [m["spread"] for m in tol.get("machines", {}).values()] or [tol["spread"]]  # each machine's own
+        assert all({"native", "avx2-machine"} <= set(sp) for sp in spreads), f"{s.name}: spread not measured across CPUs"
         assert tol["rtol"] <= 0.05, f"{s.name}: rtol {tol['rtol']} is too loose to catch a real change"
         assert len(tol["may_flip"]) <= len(fps[prov.script_name(s.script)]["values"]) // 3, s.name
 
@@ -180,10 +181,16 @@ def test_tolerances_of_two_machines_accumulate():
     second["measured"]["machine"] = "AMD EPYC avx512"
     both = ft.merged(first, second)
     assert both["may_flip"] == [1, 3] and both["rtol"] == max(first["rtol"], second["rtol"])
-    assert set(both["spread"]) == {"native", "AMD EPYC avx512: native"}
+    assert set(both["spread"]) == {"Intel Xeon avx512: native", "AMD EPYC avx512: native"}
     for machine_values in ([1.0, 2.0, 3.0, 12.0], [1.0001, 2.5, 3.0, 10.0]):
         assert prov.fingerprint_matches({"values": recorded, "tolerance": both}, machine_values)[0]
-    assert ft.merged(second, second) is second  # the same machine again: the new measurement replaces it
+    again = ft.tolerance(recorded, {"native": [1.0, 2.0, 3.0, 10.0]})  # the second machine measured again
+    again["measured"]["machine"] = "AMD EPYC avx512"
+    now = ft.merged(both, again)  # replaces that machine's measurement, keeps the first machine's
+    assert set(now["machines"]) == {"Intel Xeon avx512", "AMD EPYC avx512"} and now["may_flip"] == [3]
+    assert prov.fingerprint_matches({"values": recorded, "tolerance": now}, [1.0, 2.0, 3.0, 12.0])[0]
+    unnamed = {k: v for k, v in first.items() if k != "measured"}  # recorded before machines were named
+    assert set(ft.merged(unnamed, second)["machines"]) == {ft.EARLIER_MACHINE, "AMD EPYC avx512"}
 
 
 def test_the_tolerance_script_measures_a_step_in_subprocesses(capsys):
