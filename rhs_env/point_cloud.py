@@ -846,6 +846,28 @@ def _twiddles(nfft: int) -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(e.real), np.ascontiguousarray(e.imag)
 
 
+def _compiled_operands(dic: AngleDictionary, tgrid: np.ndarray) -> tuple | None:
+    """The dictionary's and chirp times' operands of the one-call OMP's kernels (:func:`rhs_env.kernels.omp_doppler`,
+    :func:`rhs_env.kernels.warm_refinement`): the Taylor table, ``u_c``, ``x_c``, the first candidate and the step,
+    ``w2``, ``x``, the chirp times (contiguous), their time index ``t`` and count ``n_t``, the fine DTFT grid (re, im,
+    w) and its ``nfft``; None where the one-call OMP does not apply (numpy kernels, no Taylor table, chirp times
+    not ``t_ic = t_i + t_c``, a wide fine grid)."""
+    taylor = getattr(dic, "_taylor", None)
+    if taylor is None or dic.kernels != "numba":
+        return None
+    t_slot, t_chirp = tgrid[:, :1] - tgrid[0, 0], tgrid[0] - tgrid[0, 0]
+    if not np.array_equal(tgrid, tgrid[0, 0] + t_slot + t_chirp[None, :]):
+        return None
+    fine = _narrow_dtft(tgrid, np.array([min(np.pi, 8 * np.pi / float(tgrid.max() + 1))]))
+    if fine is None:
+        return None
+    table, u_c, x_c = taylor
+    t, n_t, _ = _time_index(tgrid)
+    fine_w, fine_re, fine_im, nfft = fine
+    return (table, u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2, dic._x,
+            np.ascontiguousarray(tgrid, dtype=float), t, n_t, fine_re, fine_im, fine_w, nfft)
+
+
 def _compiled_omp(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_targets: int,
                   residual_threshold: np.ndarray, noise_var: float, relative_threshold: float, min_amplitude: float,
                   newton_steps: int, cycles: int, detected: bool, refine_tol: float = 0.0) -> DopplerOMPResult | None:
@@ -854,26 +876,18 @@ def _compiled_omp(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max
     It applies with the dictionary's ``kernels="numba"``, Taylor-table atoms, separable chirp times
     (``t_ic = t_i + t_c``) and a narrow fine-Doppler grid; the other configurations keep the numpy steps.
     """
-    taylor = getattr(dic, "_taylor", None)
-    if taylor is None or dic.kernels != "numba" or data.shape[0] == 0:
-        return None
-    t_slot, t_chirp = tgrid[:, :1] - tgrid[0, 0], tgrid[0] - tgrid[0, 0]
-    if not np.array_equal(tgrid, tgrid[0, 0] + t_slot + t_chirp[None, :]):
-        return None
-    fine = _narrow_dtft(tgrid, np.array([min(np.pi, 8 * np.pi / float(tgrid.max() + 1))]))
-    if fine is None:
+    ops = _compiled_operands(dic, tgrid)
+    if ops is None or data.shape[0] == 0:
         return None
     from rhs_env import kernels
 
-    table, u_c, x_c = taylor
-    t, n_t, _ = _time_index(tgrid)
-    fine_w, fine_re, fine_im, nfft = fine
+    table, u_c, x_c, lo, step, w2, x, tgrid_c, t, n_t, fine_re, fine_im, fine_w, nfft = ops
     e_re, e_im = _twiddles(nfft)
     _, tab_re, tab_im = _dtft_kernel_split(n_t, nfft, nfft // 32)  # every narrow search: half <= nfft / 32
     d = data.shape[0]
-    out = kernels.omp_doppler(table, u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2, dic._x, dic.Hn_conj,
+    out = kernels.omp_doppler(table, u_c, x_c, lo, step, w2, x, dic.Hn_conj,
                               np.ascontiguousarray(dic.candidates, dtype=float), np.ascontiguousarray(data),
-                              np.ascontiguousarray(tgrid, dtype=float), t, n_t, nfft, e_re, e_im, tab_re, tab_im,
+                              tgrid_c, t, n_t, nfft, e_re, e_im, tab_re, tab_im,
                               fine_re, fine_im,
                               fine_w, int(max_targets),
                               np.ascontiguousarray(np.broadcast_to(np.asarray(residual_threshold, float), (d,))),
@@ -885,19 +899,15 @@ def _compiled_omp(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max
 def warm_refinement_kernels(dic: AngleDictionary, tgrid: np.ndarray, max_targets: int, refine_passes: int,
                             newton_steps: int, refine_tol: float) -> None:
     """Compile (or load) the one-call OMP's refinement kernels (:func:`rhs_env.kernels.warm_refinement`) for the
-    dictionary ``dic`` and chirp times ``tgrid``, with the operands :func:`_compiled_omp` passes (nothing where the
-    one-call OMP does not apply)."""
-    fine = _narrow_dtft(tgrid, np.array([min(np.pi, 8 * np.pi / float(tgrid.max() + 1))]))
-    taylor = getattr(dic, "_taylor", None)
-    if taylor is None or dic.kernels != "numba" or fine is None:
+    dictionary ``dic`` and chirp times ``tgrid``, with the operands :func:`_compiled_omp` passes
+    (:func:`_compiled_operands`; nothing where the one-call OMP does not apply)."""
+    ops = _compiled_operands(dic, tgrid)
+    if ops is None:
         return
     from rhs_env import kernels
 
-    table, u_c, x_c = taylor
-    t, n_t, _ = _time_index(tgrid)
-    fine_w, fine_re, fine_im, nfft = fine
-    kernels.warm_refinement(table, u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2, dic._x,
-                            np.ascontiguousarray(tgrid, dtype=float), t, n_t, fine_re, fine_im, fine_w, nfft,
+    table, u_c, x_c, lo, step, w2, x, tgrid_c, t, n_t, fine_re, fine_im, fine_w, nfft = ops
+    kernels.warm_refinement(table, u_c, x_c, lo, step, w2, x, tgrid_c, t, n_t, fine_re, fine_im, fine_w, nfft,
                             int(max_targets), int(refine_passes), int(newton_steps), float(refine_tol))
 
 

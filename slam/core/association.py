@@ -50,6 +50,7 @@ __all__ = [
     "NEW",
     "DROPPED",
     "static_mask",
+    "bearing_sectors",
     "estimate_ego_velocity",
     "cluster_points",
     "to_map_frame",
@@ -108,6 +109,12 @@ def static_mask(
     return np.abs(pts[:, 2] - vr_static) <= threshold
 
 
+def bearing_sectors(bearing: np.ndarray, angular_bins: int) -> np.ndarray:
+    """The sector (0 .. angular_bins - 1) of each bearing (rad, [-pi, pi)) among ``angular_bins`` equal ones from -pi:
+    the Doppler fits' coverage score counts the sectors holding an inlier."""
+    return np.floor((bearing + np.pi) / (2 * np.pi) * angular_bins).astype(int) % angular_bins
+
+
 def estimate_ego_velocity(
     points: np.ndarray,
     threshold: float = 0.5,
@@ -146,7 +153,7 @@ def estimate_ego_velocity(
     vr = pts[:, 2]
     i = rng.integers(0, n, n_hypotheses)
     j = rng.integers(0, n, n_hypotheses)
-    sector = np.floor((b + np.pi) / (2 * np.pi) * angular_bins).astype(int) % angular_bins
+    sector = bearing_sectors(b, angular_bins)
     if kernels == "numba":
         from slam.core.kernels import doppler_ransac
 

@@ -42,7 +42,7 @@ from scipy.spatial import cKDTree
 
 from rhs_common.geometry import apply_motion, points_in_frame
 from rhs_common.validation import check_int, check_range, check_types
-from slam.core.association import estimate_ego_velocity, point_covariance, static_mask
+from slam.core.association import bearing_sectors, estimate_ego_velocity, point_covariance, static_mask
 from slam.core.drift import DriftCovariance
 from slam.core.health import HealthConfig, TrackHealth
 from slam.core.rbpf import RBPFSlam, SlamConfig, SlamEstimate
@@ -259,11 +259,10 @@ def doppler_ego_motion(
     A = -np.column_stack([u[:, 0], u[:, 1], sensors[:, 0] * u[:, 1] - sensors[:, 1] * u[:, 0]])  # vr = A x
     vr = pts[:, 2]
     idx = rng.integers(0, n, (n_hypotheses, 3))
+    sector = bearing_sectors(np.arctan2(pts[:, 1], pts[:, 0]), angular_bins)
     if kernels == "numba":
         from slam.core.kernels import doppler_ransac
 
-        b = np.arctan2(pts[:, 1], pts[:, 0])
-        sector = np.floor((b + np.pi) / (2 * np.pi) * angular_bins).astype(int) % angular_bins
         mode = 0 if prior is None else 2 if speed_only else 1
         found, sol = doppler_ransac(A, vr, idx, threshold, sector, angular_bins, min_inliers, max_yaw_rate,
                                     np.zeros(2) if prior is None else np.asarray(prior, float)[:2], mode, float(max_change))
@@ -282,8 +281,6 @@ def doppler_ego_motion(
         return None
     X = X[ok]
     inliers = np.abs(vr[None, :] - X @ A.T) <= threshold  # (H, N)
-    b = np.arctan2(pts[:, 1], pts[:, 0])
-    sector = np.floor((b + np.pi) / (2 * np.pi) * angular_bins).astype(int) % angular_bins
     onehot = np.zeros((n, angular_bins))
     onehot[np.arange(n), sector] = 1.0
     score = ((inliers.astype(float) @ onehot) > 0).sum(axis=1) * (n + 1) + inliers.sum(axis=1)

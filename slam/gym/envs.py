@@ -22,8 +22,8 @@ from slam.gym.wrapper import SlamObservation
 
 def make_slam_env(env_cls: type[gym.Env], kwargs: dict[str, Any]) -> gym.Env:
     """``env_cls`` (a highway-env scene) under the radar, SLAM and SLAM-metrics wrappers. On an empty kernel cache the
-    SLAM's kernels start compiling in a background process (:func:`slam.gym.precompile.start`) while this one compiles
-    the radar's."""
+    kernels a first step reaches last (the OMP's refinement, the points, the SLAM's) start compiling in a background
+    process (:func:`slam.gym.precompile.start`) while this one compiles the rest."""
     precompile.start()
     (radar_kw, slam_kw, metrics_kw), env_kw = route_kwargs(kwargs, RadarObservation, SlamObservation, SlamMetricsInfo)
     base = env_cls(**with_cheap_base_observation(env_kw))
