@@ -29,21 +29,51 @@ workers only load (``agents.run_setup.make_vec_env`` does it before its subproce
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     import numpy as np
 
-__all__ = ["KERNELS", "NOTICE", "njit", "numba_module", "sort_small", "warm_cache"]
+__all__ = ["KERNELS", "NOTICE", "njit", "numba_module", "sort_small", "warm_cache", "watch_compiles"]
 
 #: the kernel implementations a config may choose: compiled (default) or the numpy reference
 KERNELS = ("numba", "numpy")
 NOTICE = "rhs-slam: compiling the radar / SLAM kernels (first run on this machine, cached afterwards) ..."
 _PACKAGE_ROOT = Path(__file__).resolve().parent.parent
+
+
+def _project_kernel(ev: Any) -> str:
+    """``module.name`` of the function a numba compile event is for when it is one of the project's kernels, else ""."""
+    func = getattr((ev.data or {}).get("dispatcher"), "py_func", None)
+    module = getattr(func, "__module__", "") or ""
+    if func is None or module.split(".")[0] not in ("rhs_env", "slam", "rhs_common"):
+        return ""
+    return f"{module}.{func.__qualname__}"
+
+
+@contextlib.contextmanager
+def watch_compiles() -> Iterator[set[str]]:
+    """The set of the project's kernels (``module.name``) numba compiles inside the ``with`` block."""
+    numba_module()
+    from numba.core import event
+
+    names: set[str] = set()
+
+    class _Collect(event.Listener):
+        def on_start(self, ev: Any) -> None:
+            if name := _project_kernel(ev):
+                names.add(name)
+
+        def on_end(self, ev: Any) -> None:
+            pass
+
+    with event.install_listener("numba:compile", _Collect()):
+        yield names
 
 
 def numba_module() -> Any:
@@ -90,11 +120,7 @@ def _numba() -> Any:
             announced = False
 
             def on_start(self, ev: Any) -> None:
-                if _CompileNotice.announced:
-                    return
-                disp = (ev.data or {}).get("dispatcher")
-                module = getattr(getattr(disp, "py_func", None), "__module__", "") or ""
-                if module.split(".")[0] in ("rhs_env", "slam", "rhs_common"):
+                if not _CompileNotice.announced and _project_kernel(ev):
                     _CompileNotice.announced = True
                     print(NOTICE, file=sys.stderr, flush=True)
 

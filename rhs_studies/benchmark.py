@@ -107,6 +107,7 @@ def bench_envs(steps: int, seed: int, grid_deg: float, block: int = 5, numpy_ker
     import gymnasium as gym
 
     import rhs_env  # noqa: F401  (registers the ids)
+    from rhs_common.jit import watch_compiles
     from slam.gym.precompile import workload
 
     workload()  # every kernel compiled or loaded before the clock runs (some first run only once landmarks match)
@@ -129,22 +130,10 @@ def bench_envs(steps: int, seed: int, grid_deg: float, block: int = 5, numpy_ker
                 env.reset(seed=seed)
         envs[label] = {"env": env, "dt": 0.0, "n": 0, "radar": [], "slam": [], "blocks": []}
     actions = actions[:steps]
-    compiled = _watch_compiles()
-    for lo in range(0, steps, block):
-        for rec in envs.values():
-            env = rec["env"]
-            t0 = time.perf_counter()
-            for a in actions[lo: lo + block]:
-                _, _, term, trunc, info = env.step(int(a))
-                rec["n"] += 1
-                if "slam_stage_times" in info:
-                    rec["slam"].append(info["slam_stage_times"])
-                if "radar_stage_times" in info:
-                    rec["radar"].append(info["radar_stage_times"])
-                if term or trunc:
-                    env.reset(seed=seed + rec["n"])
-            rec["blocks"].append(time.perf_counter() - t0)
-            rec["dt"] += rec["blocks"][-1]
+    with watch_compiles() as compiled:
+        for lo in range(0, steps, block):
+            for rec in envs.values():
+                _time_block(rec, actions[lo: lo + block], seed)
     out: dict = {"block_steps": block, "load_average_start": load_start, "kernels_compiled_while_timed": sorted(compiled)}
     if compiled:  # a compile inside a timed block would be counted as a step's cost
         print(f"benchmark: warning: kernels compiled while timed: {sorted(compiled)}", file=sys.stderr)
@@ -174,26 +163,22 @@ def bench_envs(steps: int, seed: int, grid_deg: float, block: int = 5, numpy_ker
     return out
 
 
-def _watch_compiles() -> set[str]:
-    """A set that collects the names of the project's kernels numba compiles from now on (none expected while timed)."""
-    from numba.core import event
-
-    from rhs_common.jit import numba_module
-
-    numba_module()
-    names: set[str] = set()
-
-    class _Listener(event.Listener):
-        def on_start(self, ev: Any) -> None:
-            func = getattr(ev.data.get("dispatcher"), "py_func", None)
-            if func is not None and func.__module__.split(".")[0] in ("rhs_env", "slam", "rhs_common"):
-                names.add(f"{func.__module__}.{func.__qualname__}")
-
-        def on_end(self, ev: Any) -> None:
-            pass
-
-    event.register("numba:compile", _Listener())
-    return names
+def _time_block(rec: dict[str, Any], actions: np.ndarray, seed: int) -> None:
+    """Step ``rec["env"]`` through ``actions``, one timed block (resets on episode end): its seconds, steps and stage times
+    into ``rec``."""
+    env = rec["env"]
+    t0 = time.perf_counter()
+    for a in actions:
+        _, _, term, trunc, info = env.step(int(a))
+        rec["n"] += 1
+        if "slam_stage_times" in info:
+            rec["slam"].append(info["slam_stage_times"])
+        if "radar_stage_times" in info:
+            rec["radar"].append(info["radar_stage_times"])
+        if term or trunc:
+            env.reset(seed=seed + rec["n"])
+    rec["blocks"].append(time.perf_counter() - t0)
+    rec["dt"] += rec["blocks"][-1]
 
 
 def ratio_interval(base_blocks: np.ndarray, env_blocks: np.ndarray, resamples: int = 2000, seed: int = 0) -> list[float]:

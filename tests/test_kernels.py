@@ -510,6 +510,25 @@ def test_background_precompile_starts_once_on_a_cold_cache_only(tmp_path, monkey
     assert not precompile.start() and len(started) == 1
 
 
+def test_watch_compiles_names_the_kernels_compiled_inside_the_block(tmp_path):
+    """rhs_common.jit.watch_compiles (the benchmark's check that nothing compiles while timed): inside the block the
+    kernels compiled on a cold cache, nothing once they are compiled, nothing after the block."""
+    code = """
+        import numpy as np
+        from rhs_common.jit import watch_compiles
+        from rhs_env.kernels import tone_spectra
+        args = (np.zeros(1), np.ones(1, complex), 8, 2, 4, np.array([0.1]))
+        with watch_compiles() as first:
+            tone_spectra(*args)
+        with watch_compiles() as again:
+            tone_spectra(*args)
+        print(sorted(first), sorted(again))
+    """
+    res = _run(code, NUMBA_CACHE_DIR=str(tmp_path))
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert res.stdout.strip().splitlines()[-1] == "['rhs_env.kernels.tone_spectra'] []"
+
+
 def test_read_only_install_caches_in_the_user_directory(tmp_path):
     """Where the package directory is not writable, the cache goes to the user cache directory."""
     code = f"""
