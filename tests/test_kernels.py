@@ -130,6 +130,28 @@ def test_taylor_atoms_match_the_direct_product():
         assert (np.abs(new[o] - ref[o]) / scale).max() < 1e-12, o
 
 
+
+@pytest.mark.parametrize("jitter", [0.0, 0.01], ids=["uniform", "non-uniform"])
+def test_taylor_table_kinds_match_the_direct_product(jitter):
+    """Uniform elements take the two-way gain's own series (2 I columns), others the one-way [t~ | r~] (4 I); both
+    give the direct product's h, h', h'' to 1e-13 (measured: <= 1e-14) (the kernels tell them apart by the table's width)."""
+    from rhs_env import kernels
+
+    dic = RadarSystem(RadarConfig(kernels="numpy"), np.random.default_rng(0)).dictionaries[0]
+    dic.antenna.positions_wl = dic.antenna.positions_wl + jitter * np.random.default_rng(2).standard_normal(dic._x.size)
+    dic._set_weights(dic.antenna)
+    table, u_c, x_c = kernels.taylor_tables(dic._w2, dic._x, dic.candidates)
+    n_i = dic.slots
+    assert table.shape == (dic.candidates.size, (kernels.PRODUCT_ORDER if jitter == 0 else kernels.TAYLOR_ORDER) + 1,
+                           n_i if jitter == 0 else 2 * n_i)
+    th = np.random.default_rng(1).uniform(dic.candidates[0], dic.candidates[-1], 300)
+    ref = dic._atom_rows(th, 2)
+    new = kernels.taylor_atoms(table.view(np.float64), u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2,
+                               dic._x, th, 2)
+    for o in range(3):
+        scale = np.abs(ref[o]).max(axis=1, keepdims=True)
+        assert (np.abs(new[o] - ref[o]) / scale).max() < 1e-13, o
+
 @pytest.mark.parametrize("slam", [{}, {"variant": "fastslam1"}, {"association": "nearest"}], ids=["default", "fastslam1", "nearest"])
 def test_compiled_slam_matches_numpy_over_an_episode(slam):
     """The SLAM env with compiled and numpy kernels: estimated poses within 1e-6 m over 25 steps."""
