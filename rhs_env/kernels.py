@@ -62,7 +62,7 @@ from rhs_common.native import matmul_add
 
 __all__ = [
     "PRODUCT_ORDER", "PRODUCT_SERIES_BOUND", "TAYLOR_ORDER",
-    "assemble_points", "atom_norms", "bin_amplitudes", "doppler_dtft_refine", "footprint_detections",
+    "angle_information", "assemble_points", "atom_norms", "bin_amplitudes", "doppler_dtft_refine", "footprint_detections",
     "footprint_statistic", "gather_bins", "joint_refine", "joint_rho", "line_of_sight", "lstsq", "newton_refine",
     "noise_samples", "noise_uniforms", "omp_doppler", "phasors", "range_offsets", "slot_projection", "slot_sums", "taylor_atoms",
     "taylor_tables", "tone_operands", "tone_spectra",
@@ -760,6 +760,31 @@ def atom_norms(a: np.ndarray) -> np.ndarray:
                 v = a[d, q, l]
                 out[d, l] += v.real * v.real + v.imag * v.imag
     return np.sqrt(out)
+
+
+@njit
+def angle_information(h: np.ndarray, h1: np.ndarray) -> np.ndarray:
+    """:func:`rhs_env.uncertainty.angle_information` per row of the atoms h and dh/dtheta (T, I): (T,) rad^-2.
+
+    ``g = ||P_perp h'||^2 / ||h||^2 = (||h'||^2 - |h^H h'|^2 / ||h||^2) / ||h||^2`` (floored at 1e-300 / ||h||^2),
+    the three sums in one pass over the slots (sequential: ~1e-16 relative to numpy's pairwise sums).
+    """
+    n_t, n_i = h.shape
+    out = np.empty(n_t)
+    for q in range(n_t):
+        nh = 0.0
+        n1 = 0.0
+        c_re = 0.0
+        c_im = 0.0
+        for i in range(n_i):
+            a = h[q, i]
+            b = h1[q, i]
+            nh += a.real * a.real + a.imag * a.imag
+            n1 += b.real * b.real + b.imag * b.imag
+            c_re += a.real * b.real + a.imag * b.imag  # conj(a) b
+            c_im += a.real * b.imag - a.imag * b.real
+        out[q] = max(n1 - (c_re * c_re + c_im * c_im) / nh, 1e-300) / nh
+    return out
 
 
 @njit

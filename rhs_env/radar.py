@@ -269,8 +269,8 @@ class RadarSystem:
         h = np.empty((i_slots, rr.size), complex)
         for g, (dic, _) in enumerate(self._groups):
             sel = self._radar_group[rr] == g
-            if np.any(sel):
-                h[:, sel] = dic.antenna.two_way_gain(th_k[sel])
+            if np.any(sel):  # compiled: the dictionary's series (the same gains to ~1e-15), else the direct product
+                h[:, sel] = dic.atoms(th_k[sel])[0] if cfg.kernels == "numba" else dic.antenna.two_way_gain(th_k[sel])
         omega = 4 * np.pi * v_k * cfg.waveform.chirp_s / lam  # rad per chirp
         f_tot = 2 * cfg.waveform.slope * r_k / SPEED_OF_LIGHT + 2 * v_k / lam  # Hz
         slot_t = np.arange(i_slots)[:, None] * (cfg.waveform.chirps_per_slot if cfg.waveform.slot_doppler else 0)

@@ -161,3 +161,16 @@ def test_fastslam2_beats_fastslam1_with_precise_measurements():
     a2 = np.mean([_run("fastslam2", s, T=60, particles=20)["ate_rmse_m"] for s in range(2)])
     a1 = np.mean([_run("fastslam1", s, T=60, particles=20)["ate_rmse_m"] for s in range(2)])
     assert a2 < 0.5 * a1, (a2, a1)
+
+
+@pytest.mark.parametrize("antenna", ["rhs", "phased"])
+def test_compiled_angle_information_matches_numpy(antenna):
+    """The compiled sums of the angle information (one pass over the slots) give numpy's values to 1e-12."""
+    from rhs_env.uncertainty import angle_information
+
+    dic = RadarSystem(RadarConfig(antenna=antenna, kernels="numpy"), np.random.default_rng(0)).dictionaries[0]
+    th = np.random.default_rng(3).uniform(dic.candidates[0], dic.candidates[-1], (7, 9))
+    ref = angle_information(dic, th)
+    got = angle_information(dic.use_kernels("numba"), th)
+    assert got.shape == th.shape and np.all(ref > 0)
+    np.testing.assert_allclose(got, ref, rtol=1e-12)

@@ -62,6 +62,8 @@ class SlamMetricsInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.map_gate_m = float(map_gate_m)
         self.landmarks_in_info = bool(landmarks_in_info)
         self.seen_ids: set[int] = set()
+        self._seen_key: tuple | None = None  # (count, origin) of the cached map-frame positions of the seen landmarks
+        self._seen_map = np.zeros((0, 2))
         self.anchor = np.zeros(3)  # the current map's truth: anchor (+) true pose (after a map break)
         self.breaks = 0
 
@@ -72,7 +74,7 @@ class SlamMetricsInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         obs, info = self.env.reset(seed=seed, options=options)
-        self.seen_ids = set()
+        self.seen_ids, self._seen_key = set(), None
         self.anchor, self.breaks = np.zeros(3), 0
         return obs, {**info, **self.metrics(int(info.get("slam_map_breaks", 0)))}
 
@@ -111,7 +113,7 @@ class SlamMetricsInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if rmse is not None and np.isfinite(rmse):  # absent, not None or NaN, until a landmark matches
             out["map_rmse_m"] = float(rmse)
         if self.landmarks_in_info:
-            out["true_landmarks"] = true_lm
+            out["true_landmarks"] = true_lm.copy()  # the cached array stays the wrapper's
             out["estimated_landmarks"] = est_lm
         return out
 
@@ -123,6 +125,9 @@ class SlamMetricsInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
         reach = float(getattr(radar_cfg, "max_range_m", 100.0))
         if len(lms):
             pose_w = world_pose(base.vehicle)
-            self.seen_ids.update(int(i) for i in lms.near(np.array([pose_w[0], -pose_w[1]]), reach))
-        ids = np.array(sorted(self.seen_ids), dtype=int)
-        return points_in_frame(lms.xy_world[ids], origin)
+            self.seen_ids.update(lms.near(np.array([pose_w[0], -pose_w[1]]), reach).tolist())
+        key = (len(self.seen_ids), *np.asarray(origin, dtype=float).tolist())
+        if self._seen_key != key:  # the set only grows within an episode: recomputed when it did (or at a new origin)
+            ids = np.array(sorted(self.seen_ids), dtype=int)
+            self._seen_key, self._seen_map = key, points_in_frame(lms.xy_world[ids], origin)
+        return self._seen_map
