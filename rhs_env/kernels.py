@@ -61,10 +61,10 @@ from rhs_common.jit import njit
 from rhs_common.native import matmul_add
 
 __all__ = [
-    "PRODUCT_ORDER", "PRODUCT_SERIES_BOUND", "TAYLOR_ORDER",
-    "angle_information", "assemble_points", "atom_norms", "bin_amplitudes", "doppler_dtft_refine", "footprint_detections",
-    "footprint_statistic", "gather_bins", "joint_refine", "joint_rho", "line_of_sight", "lstsq", "newton_refine",
-    "noise_samples", "noise_uniforms", "omp_doppler", "phasors", "range_offsets", "slot_projection", "slot_sums", "taylor_atoms",
+    "PRODUCT_ORDER", "PRODUCT_SERIES_BOUND", "TAYLOR_ORDER", "angle_information", "assemble_points", "atom_norms",
+    "bin_amplitudes", "doppler_dtft_refine", "face_scatterers", "footprint_detections", "footprint_statistic",
+    "gather_bins", "joint_refine", "joint_rho", "line_of_sight", "lstsq", "newton_refine", "noise_samples",
+    "noise_uniforms", "omp_doppler", "phasors", "range_offsets", "slot_projection", "slot_sums", "taylor_atoms",
     "taylor_tables", "tone_operands", "tone_spectra",
 ]
 
@@ -1747,6 +1747,84 @@ def warm_refinement(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, s
     _keep_rows(np.arange(n_d, dtype=np.int64), np.ones(n_d, np.bool_), theta.copy(), omega.copy(), valid.copy(),
                amp.copy(), atoms.copy(), theta, omega, valid, amp, atoms, flat, flat.reshape(n_d, n_i, n_c).copy(), r2,
                stop, active)
+
+
+# --------------------------------------------------------------------------- scene
+@njit
+def face_scatterers(pos: np.ndarray, heading: np.ndarray, vel: np.ndarray, yaw_rate: np.ndarray, length: np.ndarray,
+                    width: np.ndarray, ego: np.ndarray, points_per_face: int,
+                    vehicle_rcs: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`rhs_env.scene._face_scatterers`' points and occluders of V boxes, vehicle frame, in one pass.
+
+    World-frame boxes (``pos`` (V, 2), ``heading``, ``vel`` (V, 2), ``yaw_rate``, ``length``, ``width`` (V,)) seen
+    from the ego ``ego = (x, y, heading, vx, vy, yaw rate)``: centre ``c = R^T (pos - p_ego)``, faces f with
+    outward normals n_f and tangents t_f (the box's rotation by ``heading - heading_ego`` applied to
+    ``(1, 0), (0, 1), (-1, 0), (0, -1)`` and ``(0, 1), (-1, 0), (0, -1), (1, 0)``), half-extents
+    ``(L, W, L, W) / 2`` and lengths ``(W, L, W, L)``; ``mid = c + n_f half_f``; a face is visible when
+    ``cos_inc = -n_f . mid / |mid| > 1e-9`` and shares ``vehicle_rcs`` in proportion to ``len_f cos_inc`` over its
+    ``points_per_face`` points ``mid + t_f ((k + 1/2) / P - 1/2) len_f``, whose velocity is
+    ``R^T (v - v_ego) + w x (q - c) - w_ego x q``. Returns the points of the visible faces in (box, face,
+    point) order: xy, velocity (K, 2), rcs (K,), each point's box (K,) int64; and every face as an occluder
+    segment (corner, end) (4 V, 2, 2). The numpy reference's operations element by element.
+    """
+    n_v = pos.shape[0]
+    p = points_per_face
+    ct, st = np.cos(-ego[2]), np.sin(-ego[2])  # R^T = rotation(-heading_ego)
+    mids = np.empty((n_v, 4, 2))
+    tang = np.empty((n_v, 4, 2))
+    face_len = np.empty((n_v, 4))
+    weight = np.zeros((n_v, 4))
+    centre = np.empty((n_v, 2))
+    v_rel = np.empty((n_v, 2))
+    segments = np.empty((4 * n_v, 2, 2))
+    normal = np.empty(2)
+    n_vis = 0
+    for v in range(n_v):
+        d0, d1 = pos[v, 0] - ego[0], pos[v, 1] - ego[1]
+        centre[v, 0], centre[v, 1] = d0 * ct + d1 * -st, d0 * st + d1 * ct
+        e0, e1 = vel[v, 0] - ego[3], vel[v, 1] - ego[4]
+        v_rel[v, 0], v_rel[v, 1] = e0 * ct + e1 * -st, e0 * st + e1 * ct
+        cr, sr = np.cos(heading[v] - ego[2]), np.sin(heading[v] - ego[2])
+        for f in range(4):  # normals (cr, sr) turned by f quarter turns; tangents one quarter turn further
+            sign = 1.0 if f < 2 else -1.0
+            normal[0], normal[1] = (sign * cr, sign * sr) if f % 2 == 0 else (sign * -sr, sign * cr)
+            tang[v, f, 0], tang[v, f, 1] = -normal[1], normal[0]
+            half = (length[v] if f % 2 == 0 else width[v]) / 2
+            face_len[v, f] = width[v] if f % 2 == 0 else length[v]
+            m0 = centre[v, 0] + normal[0] * half
+            m1 = centre[v, 1] + normal[1] * half
+            mids[v, f, 0], mids[v, f, 1] = m0, m1
+            cos_inc = -(normal[0] * m0 + normal[1] * m1) / max(np.sqrt(m0 * m0 + m1 * m1), 1e-9)
+            if cos_inc > 1e-9:
+                weight[v, f] = face_len[v, f] * cos_inc
+            if weight[v, f] > 0:
+                n_vis += 1
+            h0, h1 = tang[v, f, 0] * (face_len[v, f] / 2), tang[v, f, 1] * (face_len[v, f] / 2)
+            segments[4 * v + f, 0, 0], segments[4 * v + f, 0, 1] = m0 - h0, m1 - h1
+            segments[4 * v + f, 1, 0], segments[4 * v + f, 1, 1] = m0 + h0, m1 + h1
+    xy = np.empty((n_vis * p, 2))
+    velocity = np.empty((n_vis * p, 2))
+    rcs = np.empty(n_vis * p)
+    box = np.empty(n_vis * p, np.int64)
+    q = 0
+    for v in range(n_v):
+        total = weight[v, 0] + weight[v, 1] + weight[v, 2] + weight[v, 3]
+        for f in range(4):
+            if weight[v, f] <= 0:
+                continue
+            share = weight[v, f] / total if total > 0 else 0.0
+            for k in range(p):
+                frac = (k + 0.5) / p - 0.5
+                x0 = mids[v, f, 0] + tang[v, f, 0] * (frac * face_len[v, f])
+                x1 = mids[v, f, 1] + tang[v, f, 1] * (frac * face_len[v, f])
+                xy[q, 0], xy[q, 1] = x0, x1
+                r0, r1 = x0 - centre[v, 0], x1 - centre[v, 1]
+                velocity[q, 0] = (v_rel[v, 0] + yaw_rate[v] * -r1) - ego[5] * -x1
+                velocity[q, 1] = (v_rel[v, 1] + yaw_rate[v] * r0) - ego[5] * x0
+                rcs[q] = vehicle_rcs * share / p
+                box[q] = v
+                q += 1
+    return xy, velocity, rcs, box, segments
 
 
 # --------------------------------------------------------------------------- line of sight

@@ -373,8 +373,8 @@ class RadarConfig:
         estimation: :class:`AngleEstimationConfig` (OMP per detection).
         uncertainty: :class:`UncertaintyConfig` (per-point std floors).
         mounting: :class:`MountingConfig` (vehicle box of the mounts).
-        kernels: implementation of the inner loops (detector, OMP, signal mixing, points): "numba"
-            (the default: compiled, :mod:`rhs_env.kernels`) or "numpy" (the reference); the same
+        kernels: implementation of the inner loops (detector, OMP, signal mixing, points, the scene's
+            vehicle faces): "numba" (the default: compiled, :mod:`rhs_env.kernels`) or "numpy" (the reference); the same
             results to round-off. Left out of :meth:`flat_dict` at its default.
     """
 

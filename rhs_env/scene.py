@@ -435,17 +435,26 @@ def _nearby_objects(road, ego, radius: float, include_obstacles: bool) -> tuple[
 
 
 def _face_scatterers(objs: list, ids: np.ndarray, static: np.ndarray, ego_motion: dict[str, np.ndarray],
-                     cfg: ScatterConfig) -> tuple[Scatterers, Occluders]:
+                     cfg: ScatterConfig, kernels: str = "numba") -> tuple[Scatterers, Occluders]:
     """Points on the visible faces of box objects and their four edges as occluders, vehicle frame.
 
     A face is visible when its outward normal points toward the ego centre; the
     object's ``vehicle_rcs_m2`` is shared among the ``points_per_face`` points of its
     visible faces in proportion to their projected widths. Velocities of the rigid
     motion, seen from the rotating ego frame: ``R^T (v_obj - v_ego) + w_obj x (q - c) - w_ego x q``.
+    ``kernels="numba"``: the same operations compiled (:func:`rhs_env.kernels.face_scatterers`), else numpy.
     """
     e_pos, e_head, e_vel, e_rate = (ego_motion[k][0] for k in ("pos", "heading", "vel", "yaw_rate"))
-    r_t = rotation(-e_head)  # world -> vehicle frame
     m = _motion_arrays(objs)
+    if kernels == "numba":
+        from rhs_env.kernels import face_scatterers
+
+        ego = np.array([e_pos[0], e_pos[1], e_head, e_vel[0], e_vel[1], e_rate], dtype=float)
+        xy, vel, rcs, box, segments = face_scatterers(m["pos"], m["heading"], m["vel"], m["yaw_rate"], m["length"],
+                                                      m["width"], ego, int(cfg.points_per_face), float(cfg.vehicle_rcs_m2))
+        return (Scatterers(xy=xy, velocity=vel, rcs=rcs, object_id=ids[box], is_static=static[box]),
+                Occluders(segments=segments, object_id=np.repeat(ids, 4)))
+    r_t = rotation(-e_head)  # world -> vehicle frame
     n_obj, p = len(objs), cfg.points_per_face
     c = (m["pos"] - e_pos) @ r_t.T  # (V, 2) centres in the vehicle frame
     rot = rotation(m["heading"] - e_head)  # (V, 2, 2) object -> vehicle frame
@@ -485,6 +494,7 @@ def scene_scatterers(
     env,
     ego=None,
     config: ScatterConfig | Mapping[str, Any] | None = None,
+    kernels: str = "numba",
 ) -> tuple[Scatterers, Occluders]:
     """Scatterers and occluders of a highway-env scene in the ego vehicle frame.
 
@@ -493,6 +503,8 @@ def scene_scatterers(
             ``env.unwrapped.landmarks`` when it is a :class:`Landmarks` (the RHS envs).
         ego: the observing vehicle; default ``env.unwrapped.vehicle``.
         config: :class:`ScatterConfig` (or a dict of its fields).
+        kernels: "numba" (the vehicles' faces compiled, :func:`rhs_env.kernels.face_scatterers`) or "numpy"
+            (the reference); the radar's ``RadarConfig.kernels`` in the envs.
 
     Returns:
         ``(Scatterers, Occluders)`` (``rhs_env.scatterers``), everything in the
@@ -520,7 +532,7 @@ def scene_scatterers(
     objs, ids, static = _nearby_objects(base.road, ego, cfg.max_range_m, cfg.include_obstacles)
     if not objs:
         return landmarks, Occluders(segments=np.zeros((0, 2, 2)), object_id=np.zeros(0, dtype=np.int64))
-    faces, occluders = _face_scatterers(objs, ids, static, em, cfg)
+    faces, occluders = _face_scatterers(objs, ids, static, em, cfg, kernels)
     fields = ("xy", "velocity", "rcs", "object_id", "is_static")
     return Scatterers(*(np.concatenate([getattr(landmarks, k), getattr(faces, k)]) for k in fields)), occluders
 

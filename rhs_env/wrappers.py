@@ -208,7 +208,7 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         assert self.radar is not None
         base = self._base
         ego = base.vehicle
-        scatterers, occluders = scene_scatterers(base, ego, self.scatter_config)
+        scatterers, occluders = scene_scatterers(base, ego, self.scatter_config, self.radar_config.kernels)
         cloud = self.radar.scan(scatterers, occluders)
         self.last_cloud, self.last_scatterers = cloud, scatterers
         self.stage_times = dict(getattr(cloud, "stage_times", {}) or {})

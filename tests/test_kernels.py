@@ -453,6 +453,11 @@ def test_kernels_as_python_under_disable_jit():
         assert np.allclose(lik[0], lik[1], rtol=1e-12) and np.allclose(filters[0].mean, filters[1].mean, rtol=1e-12)
         terms = [f._proposal_terms(pp, mm, ll, obs) for f in filters]
         assert all(np.allclose(x, y, rtol=1e-12) for x, y in zip(*terms))
+        from rhs_env.kernels import face_scatterers
+        xy, vel, rcs, box, seg = face_scatterers(np.array([[20.0, 3.0]]), np.array([0.1]), np.array([[20.0, 0.0]]),
+                                                 np.array([0.01]), np.array([5.0]), np.array([2.0]),
+                                                 np.array([0.0, 0.0, 0.0, 25.0, 0.0, 0.0]), 3, 10.0)
+        assert len(xy) == 3 and abs(rcs.sum() - 10.0) < 1e-9 and seg.shape == (4, 2, 2) and np.all(box == 0)
         print("ok")
     """
     res = _run(code, NUMBA_DISABLE_JIT="1")
