@@ -1770,61 +1770,51 @@ def face_scatterers(pos: np.ndarray, heading: np.ndarray, vel: np.ndarray, yaw_r
     n_v = pos.shape[0]
     p = points_per_face
     ct, st = np.cos(-ego[2]), np.sin(-ego[2])  # R^T = rotation(-heading_ego)
-    mids = np.empty((n_v, 4, 2))
-    tang = np.empty((n_v, 4, 2))
-    face_len = np.empty((n_v, 4))
-    weight = np.zeros((n_v, 4))
-    centre = np.empty((n_v, 2))
-    v_rel = np.empty((n_v, 2))
+    xy = np.empty((4 * n_v * p, 2))
+    velocity = np.empty((4 * n_v * p, 2))
+    rcs = np.empty(4 * n_v * p)
+    box = np.empty(4 * n_v * p, np.int64)
     segments = np.empty((4 * n_v, 2, 2))
-    normal = np.empty(2)
-    n_vis = 0
-    for v in range(n_v):
-        d0, d1 = pos[v, 0] - ego[0], pos[v, 1] - ego[1]
-        centre[v, 0], centre[v, 1] = d0 * ct + d1 * -st, d0 * st + d1 * ct
-        e0, e1 = vel[v, 0] - ego[3], vel[v, 1] - ego[4]
-        v_rel[v, 0], v_rel[v, 1] = e0 * ct + e1 * -st, e0 * st + e1 * ct
-        cr, sr = np.cos(heading[v] - ego[2]), np.sin(heading[v] - ego[2])
-        for f in range(4):  # normals (cr, sr) turned by f quarter turns; tangents one quarter turn further
-            sign = 1.0 if f < 2 else -1.0
-            normal[0], normal[1] = (sign * cr, sign * sr) if f % 2 == 0 else (sign * -sr, sign * cr)
-            tang[v, f, 0], tang[v, f, 1] = -normal[1], normal[0]
-            half = (length[v] if f % 2 == 0 else width[v]) / 2
-            face_len[v, f] = width[v] if f % 2 == 0 else length[v]
-            m0 = centre[v, 0] + normal[0] * half
-            m1 = centre[v, 1] + normal[1] * half
-            mids[v, f, 0], mids[v, f, 1] = m0, m1
-            cos_inc = -(normal[0] * m0 + normal[1] * m1) / max(np.sqrt(m0 * m0 + m1 * m1), 1e-9)
-            if cos_inc > 1e-9:
-                weight[v, f] = face_len[v, f] * cos_inc
-            if weight[v, f] > 0:
-                n_vis += 1
-            h0, h1 = tang[v, f, 0] * (face_len[v, f] / 2), tang[v, f, 1] * (face_len[v, f] / 2)
-            segments[4 * v + f, 0, 0], segments[4 * v + f, 0, 1] = m0 - h0, m1 - h1
-            segments[4 * v + f, 1, 0], segments[4 * v + f, 1, 1] = m0 + h0, m1 + h1
-    xy = np.empty((n_vis * p, 2))
-    velocity = np.empty((n_vis * p, 2))
-    rcs = np.empty(n_vis * p)
-    box = np.empty(n_vis * p, np.int64)
+    face = np.empty((4, 6))  # per face: mid x, mid y, tangent x, tangent y, length, weight
     q = 0
     for v in range(n_v):
-        total = weight[v, 0] + weight[v, 1] + weight[v, 2] + weight[v, 3]
+        d0, d1 = pos[v, 0] - ego[0], pos[v, 1] - ego[1]
+        c0, c1 = d0 * ct + d1 * -st, d0 * st + d1 * ct
+        e0, e1 = vel[v, 0] - ego[3], vel[v, 1] - ego[4]
+        w0, w1 = e0 * ct + e1 * -st, e0 * st + e1 * ct
+        cr, sr = np.cos(heading[v] - ego[2]), np.sin(heading[v] - ego[2])
+        total = 0.0
+        for f in range(4):  # normal (cr, sr) turned by f quarter turns, the tangent a quarter turn further
+            sign = 1.0 if f < 2 else -1.0
+            even = f % 2 == 0
+            n0 = sign * cr if even else sign * -sr
+            n1 = sign * sr if even else sign * cr
+            half = (length[v] if even else width[v]) / 2
+            flen = width[v] if even else length[v]
+            m0 = c0 + n0 * half
+            m1 = c1 + n1 * half
+            cos_inc = -(n0 * m0 + n1 * m1) / max(np.sqrt(m0 * m0 + m1 * m1), 1e-9)
+            wgt = flen * cos_inc if cos_inc > 1e-9 else 0.0
+            total += wgt
+            face[f, 0], face[f, 1], face[f, 2], face[f, 3], face[f, 4], face[f, 5] = m0, m1, -n1, n0, flen, wgt
+            h0, h1 = -n1 * (flen / 2), n0 * (flen / 2)
+            segments[4 * v + f, 0, 0], segments[4 * v + f, 0, 1] = m0 - h0, m1 - h1
+            segments[4 * v + f, 1, 0], segments[4 * v + f, 1, 1] = m0 + h0, m1 + h1
         for f in range(4):
-            if weight[v, f] <= 0:
+            if face[f, 5] <= 0:
                 continue
-            share = weight[v, f] / total if total > 0 else 0.0
+            share = face[f, 5] / total if total > 0 else 0.0
             for k in range(p):
                 frac = (k + 0.5) / p - 0.5
-                x0 = mids[v, f, 0] + tang[v, f, 0] * (frac * face_len[v, f])
-                x1 = mids[v, f, 1] + tang[v, f, 1] * (frac * face_len[v, f])
+                x0 = face[f, 0] + face[f, 2] * (frac * face[f, 4])
+                x1 = face[f, 1] + face[f, 3] * (frac * face[f, 4])
                 xy[q, 0], xy[q, 1] = x0, x1
-                r0, r1 = x0 - centre[v, 0], x1 - centre[v, 1]
-                velocity[q, 0] = (v_rel[v, 0] + yaw_rate[v] * -r1) - ego[5] * -x1
-                velocity[q, 1] = (v_rel[v, 1] + yaw_rate[v] * r0) - ego[5] * x0
+                velocity[q, 0] = (w0 + yaw_rate[v] * -(x1 - c1)) - ego[5] * -x1
+                velocity[q, 1] = (w1 + yaw_rate[v] * (x0 - c0)) - ego[5] * x0
                 rcs[q] = vehicle_rcs * share / p
                 box[q] = v
                 q += 1
-    return xy, velocity, rcs, box, segments
+    return xy[:q], velocity[:q], rcs[:q], box[:q], segments
 
 
 # --------------------------------------------------------------------------- line of sight
