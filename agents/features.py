@@ -78,8 +78,9 @@ class PointSetExtractor(BaseFeaturesExtractor):
     def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         feats = []
         for k in self.set_keys:
-            x = _scale_set(k, obs[k].float())
-            mask = obs[f"{k}_mask"].float().unsqueeze(-1)  # (B, N, 1)
+            x, mask = _used_slots(obs[k], obs[f"{k}_mask"])
+            x = _scale_set(k, x.float())
+            mask = mask.float().unsqueeze(-1)  # (B, N', 1)
             h = self.point_nets[k](x)  # (B, N, D)
             count = mask.sum(dim=1).clamp(min=1.0)
             mean = (h * mask).sum(dim=1) / count
@@ -90,6 +91,19 @@ class PointSetExtractor(BaseFeaturesExtractor):
         if self.box_net is not None:
             feats.append(self.box_net(_box_features(obs, self.box_keys)))
         return torch.cat(feats, dim=1)
+
+
+def _used_slots(points: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``points`` (B, N, F) and ``mask`` (B, N) cut after the last slot any set of the batch uses (at least one slot).
+
+    The envs fill a set from its first slot (~40 of the 256 point slots per scan): the per-point MLP then runs on
+    the used slots only (4-6x less work in PPO's updates). The pooled features are those of the full sets: a
+    padded slot weighs nothing in the masked mean and never wins the masked max (the mean's float32 sum may
+    differ in its last bit, its order of summation being another).
+    """
+    used = torch.nonzero(mask.reshape(mask.shape[0], -1).any(dim=0))
+    n = int(used[-1, 0]) + 1 if used.numel() else 1
+    return points[:, :n], mask[:, :n]
 
 
 def _box_features(obs: dict[str, torch.Tensor], keys: list[str]) -> torch.Tensor:

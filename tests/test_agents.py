@@ -231,6 +231,15 @@ def test_point_set_extractor_ignores_order_and_padding():
     empty = dict(sample)
     empty["points_mask"] = torch.zeros_like(sample["points_mask"])
     assert torch.isfinite(ext(empty)).all()
+    # the slots after the batch's last used one are cut: the same features as next to a set using every slot,
+    # and as with a scattered mask (slots used out of order)
+    full = {k: torch.cat([v, v]) for k, v in sample.items()}
+    full["points_mask"][1] = 1
+    assert torch.allclose(ext(full)[:1], f0, atol=1e-6)
+    scattered = dict(sample)
+    order = torch.randperm(sample["points"].shape[1])
+    scattered["points"], scattered["points_mask"] = sample["points"][:, order], sample["points_mask"][:, order]
+    assert torch.allclose(ext(scattered), f0, atol=1e-5)
 
 
 def test_grid_extractor_rasterises_points_doppler_and_landmarks():
