@@ -48,7 +48,8 @@ Python 3.11, 2 cores shared with other jobs, load average 5-8):
   process (:mod:`slam.gym.precompile`) takes the kernels the env reaches last (:func:`joint_refine`,
   ``_keep_rows``, the points, the SLAM's) while the env compiles the synthesis, the detector and the OMP's
   search: 45.4 s -> 28.4 s there (median of 3, ``benchmark.py --sections start``; the README's speed page has
-  the current run). Vector envs compile once, in the parent
+  the current run). The scene's vehicle faces (:func:`face_scatterers`, reached first, at ``reset``) add ~0.8 s
+  to the env's share. Vector envs compile once, in the parent
   (``agents.run_setup.make_vec_env``,
   :func:`rhs_common.jit.warm_cache`).
 """
@@ -61,11 +62,11 @@ from rhs_common.jit import njit
 from rhs_common.native import matmul_add
 
 __all__ = [
-    "PRODUCT_ORDER", "PRODUCT_SERIES_BOUND", "TAYLOR_ORDER", "angle_information", "assemble_points", "atom_norms",
-    "bin_amplitudes", "doppler_dtft_refine", "face_scatterers", "footprint_detections", "footprint_statistic",
-    "gather_bins", "joint_refine", "joint_rho", "line_of_sight", "lstsq", "newton_refine", "noise_samples",
-    "noise_uniforms", "omp_doppler", "phasors", "range_offsets", "slot_projection", "slot_sums", "taylor_atoms",
-    "taylor_tables", "tone_operands", "tone_spectra",
+    "PRODUCT_ORDER", "PRODUCT_SERIES_BOUND", "TABLE_WORK_MAX", "TAYLOR_ORDER", "angle_information", "assemble_points",
+    "atom_norms", "bin_amplitudes", "doppler_dtft_refine", "face_scatterers", "footprint_detections",
+    "footprint_statistic", "gather_bins", "joint_refine", "joint_rho", "line_of_sight", "lstsq", "newton_refine",
+    "noise_samples", "noise_uniforms", "omp_doppler", "phasors", "range_offsets", "slot_projection", "slot_sums",
+    "taylor_atoms", "taylor_tables", "tone_operands", "tone_spectra",
 ]
 
 
@@ -260,14 +261,24 @@ TAYLOR_ORDER = 10
 PRODUCT_ORDER = 12
 #: the largest remainder bound ``(max |y~| du / 2)^(N + 1) / (N + 1)!`` at which the two-way gain's own series is used
 PRODUCT_SERIES_BOUND = 1e-15
+#: the most candidates x elements x table columns (I_c M 2 I) a Taylor table is built for: ~4e6 for the default RHS;
+#: past it (thousands of elements) the build would take minutes and the atoms come from the direct product
+TABLE_WORK_MAX = 1e8
 
 
 def _series(weights: np.ndarray, xt: np.ndarray, u_c: np.ndarray, order: int) -> np.ndarray:
-    """``T[c, n, i] = sum_m weights_mi (j x~_m)^n exp(j x~_m u_c) / n!`` (I_c, N + 1, columns) complex128."""
+    """``T[c, n, i] = sum_m weights_mi (j x~_m)^n exp(j x~_m u_c) / n!`` (I_c, N + 1, columns) complex128.
+
+    In blocks of candidates whose temporaries stay near 32 MB (a 4096-element array has ~10^4 candidates).
+    """
     fact = np.cumprod(np.concatenate([[1.0], np.arange(1, order + 1)]))
     powers = (1j * xt[None, :]) ** np.arange(order + 1)[:, None] / fact[:, None]  # (N + 1, M)
-    a = np.exp(1j * np.outer(u_c, xt))  # (I_c, M)
-    return np.ascontiguousarray((a[:, None, :] * powers[None]) @ weights)
+    out = np.empty((u_c.size, order + 1, weights.shape[1]), complex)
+    block = max(1, 2**21 // (xt.size * (order + 1)))
+    for lo in range(0, u_c.size, block):
+        a = np.exp(1j * np.outer(u_c[lo:lo + block], xt))  # (block, M)
+        out[lo:lo + block] = (a[:, None, :] * powers[None]) @ weights
+    return out
 
 
 def _product_weights(w2: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:

@@ -317,13 +317,15 @@ class AngleDictionary:
         """Evaluate the atoms with ``kernels`` ("numba": :func:`rhs_env.kernels.taylor_atoms`, else numpy); returns self.
 
         The series pays where the array has more elements than it has terms (M > 2 (N + 1)); a
-        smaller array (the 10-element phased array) keeps the direct product.
+        smaller array (the 10-element phased array) keeps the direct product, and so does one whose table would
+        take more than :data:`rhs_env.kernels.TABLE_WORK_MAX` to build (thousands of elements).
         """
         self.kernels = kernels
         if kernels == "numba" and self._taylor is None:
-            from rhs_env.kernels import TAYLOR_ORDER, taylor_tables
+            from rhs_env.kernels import TABLE_WORK_MAX, TAYLOR_ORDER, taylor_tables
 
-            if self._x.size > 2 * (TAYLOR_ORDER + 1):
+            work = self.candidates.size * self._x.size * self._w2.shape[1]
+            if 2 * (TAYLOR_ORDER + 1) < self._x.size and work <= TABLE_WORK_MAX:
                 table, u_c, x_c = taylor_tables(self._w2, self._x, self.candidates)
                 self._taylor = (table.view(np.float64), u_c, x_c)  # re, im interleaved: the kernels' layout
         return self
@@ -383,7 +385,8 @@ class AngleDictionary:
         """:meth:`atoms` for a flat theta (T,), each (T, I) (not transposed).
 
         With ``kernels="numba"`` (:meth:`use_kernels`): the Taylor series of :func:`rhs_env.kernels.taylor_atoms`
-        (the same values to ~1e-15 relative, 13x less arithmetic than the product with ``[w_T | w_R]``).
+        (the same values to ~1e-14 relative; for a uniform array the two-way gain's own series, 13 x I coefficients
+        per angle against the product's 3 x M x 2 I complex multiply-adds).
         """
         taylor = getattr(self, "_taylor", None)  # (absent on the bare dictionaries of angle_crb)
         if taylor is not None and self.kernels == "numba":

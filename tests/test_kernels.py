@@ -679,3 +679,19 @@ def test_footprint_statistic_sums_each_footprints_slots():
         a, b = (r._detectors[0].statistic(view) for r in radars.values())
         np.testing.assert_allclose(b, a, rtol=1e-6)
         assert np.mean(a == b) > 0.9  # most cells bit for bit: sums of the same 2-4 terms
+
+
+def test_no_taylor_table_past_the_build_limit(monkeypatch):
+    """A dictionary whose table would exceed TABLE_WORK_MAX (thousands of elements) keeps the direct product: no
+    table, the compiled path's atoms are numpy's (a 4096-element table took 22 GB and a minute to build)."""
+    from rhs_env import kernels
+
+    dic = RadarSystem(RadarConfig(kernels="numpy"), np.random.default_rng(0)).dictionaries[0]
+    assert dic.candidates.size * dic._x.size * dic._w2.shape[1] <= kernels.TABLE_WORK_MAX  # the default builds one
+    monkeypatch.setattr(kernels, "TABLE_WORK_MAX", 1.0)
+    th = np.random.default_rng(1).uniform(-1.0, 1.0, 20)
+    ref = dic._atom_rows(th, 1)
+    dic.use_kernels("numba")
+    assert dic._taylor is None
+    for a, b in zip(dic._atom_rows(th, 1), ref):
+        np.testing.assert_array_equal(a, b)
