@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -138,8 +139,8 @@ def test_taylor_table_kinds_match_the_direct_product(jitter):
     from rhs_env import kernels
 
     dic = RadarSystem(RadarConfig(kernels="numpy"), np.random.default_rng(0)).dictionaries[0]
-    dic.antenna.positions_wl = dic.antenna.positions_wl + jitter * np.random.default_rng(2).standard_normal(dic._x.size)
-    dic._set_weights(dic.antenna)
+    jittered = dic.antenna.positions_wl + jitter * np.random.default_rng(2).standard_normal(dic._x.size)
+    dic._set_weights(dataclasses.replace(dic.antenna, positions_wl=jittered))  # a copy: the radar's antenna stays
     table, u_c, x_c = kernels.taylor_tables(dic._w2, dic._x, dic.candidates)
     n_i = dic.slots
     assert table.shape == (dic.candidates.size, (kernels.PRODUCT_ORDER if jitter == 0 else kernels.TAYLOR_ORDER) + 1,
