@@ -50,8 +50,11 @@ DAGGER_TRUTH_POLICY = DATA_DIR / "dagger_rhs_highway_truth.zip"
 #: PPO at its own budget (agents/hyperparams/ppo.yml, 40k env steps): results/policies.md compares
 PPO_POLICY = DATA_DIR / "ppo_rhs_highway_slam.zip"
 PPO_TRUTH_POLICY = DATA_DIR / "ppo_rhs_highway_truth.zip"
+#: the DAgger student continued for 80k more env steps from DAGGER_POLICY (rhs_studies/rl_finetune.py's
+#: ``dagger_continue_80k`` arm; 2 collisions in 200 fresh episodes against the student's 7)
+DAGGER_CONTINUED_POLICY = DATA_DIR / "rl" / "dagger_continue_80k.zip"
 #: the policy of ``rhs-slam demo`` / ``evaluate`` by default, and its ground-truth twin
-SHIPPED_POLICY, SHIPPED_TRUTH_POLICY = DAGGER_POLICY, DAGGER_TRUTH_POLICY
+SHIPPED_POLICY, SHIPPED_TRUTH_POLICY = DAGGER_CONTINUED_POLICY, DAGGER_TRUTH_POLICY
 DEFAULT_ENV = "rhs-highway-slam-v0"
 
 

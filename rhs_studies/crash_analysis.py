@@ -1,7 +1,8 @@
 """Why a student crashes: its last decisions against the expert's, and whether the radar saw what it hit.
 
 What limits learning to drive on radar SLAM? This script replays
-policies (default: the shipped radar + SLAM student, then the budget ablation) on held-out seeds with the
+policies (default: the radar + SLAM DAgger student, 80k env steps, the shipped policy's start; then the
+budget ablation) on held-out seeds with the
 DAgger expert (:class:`agents.expert.HeadwayDriver`, on the simulator state)
 labelling every state it reaches. For each collision it takes the student's last
 ``--window`` decisions before the crash (decisions every ``decision_interval`` env
@@ -23,11 +24,11 @@ so a vehicle at highway offset (dx, dy) from the ego lies at (dx, -dy) in that f
 (both rotated by the ego heading).
 
 Several ``--policy`` are replayed on the same seeds, the first being the reference
-(default: the shipped student and the same recipe at half its budget,
+(default: the 80k DAgger student and the same recipe at half its budget,
 ``agents/data/budget/``: the budget ablation); the collision counts of
 each against the first's are compared with Fisher's exact test (two-sided).
 
-    OMP_NUM_THREADS=1 python scripts/crash_analysis.py                   # shipped + budget ablation, seeds 1000-1049 and 2000-2049
+    OMP_NUM_THREADS=1 python scripts/crash_analysis.py                   # student + budget ablation, seeds 1000-1049 and 2000-2049
     python scripts/crash_analysis.py --policy agents/data/dagger_rhs_highway_slam.zip --seeds 2000 --episodes 20
 
 Writes ``results/crash_analysis.json`` (per policy: every episode's decisions summary and
@@ -51,7 +52,7 @@ from rhs_studies.provenance import write_json
 ROOT = Path(__file__).resolve().parent.parent
 
 DEFAULT_POLICY = "agents/data/dagger_rhs_highway_slam.zip"
-#: the same recipe (agents/hyperparams/dagger.yml, FINE_SPEEDS, 5-degree grid) at half the shipped student's env steps
+#: the same recipe (agents/hyperparams/dagger.yml, FINE_SPEEDS, 5-degree grid) at half the DAgger student's env steps
 BUDGET_ABLATION = "agents/data/budget/dagger_rhs_highway_slam_40k.zip"
 DEFAULT_SEEDS = (1000, 2000)
 CATEGORIES = ("seen, student disagreed", "not seen", "expert too")
@@ -280,7 +281,7 @@ def markdown(result: dict) -> str:
 
 
 def fingerprint() -> list[float]:
-    """The shipped student, one 2-second episode (10 steps) on seed 1000: return, steps, decisions, agreement."""
+    """The DAgger student, one 2-second episode (10 steps) on seed 1000: return, steps, decisions, agreement."""
     policy = str(ROOT / DEFAULT_POLICY)
     if not Path(policy).exists():
         return []

@@ -83,13 +83,20 @@ def run_policy(policy: str, env_id: str, env_kwargs: dict, seeds: list[int], wor
 
 
 def fingerprint() -> list[float]:
-    """The shipped SLAM and ground-truth policies, the all-around student and the PPO policies, one 2-second
-    episode (10 steps) each, seed 1000."""
-    from agents.evaluate import PPO_POLICY, PPO_TRUTH_POLICY, SHIPPED_POLICY, SHIPPED_TRUTH_POLICY, resolve_env
+    """The shipped policy, the DAgger SLAM and ground-truth students, the all-around student and the PPO policies,
+    one 2-second episode (10 steps) each, seed 1000."""
+    from agents.evaluate import (
+        DAGGER_POLICY,
+        PPO_POLICY,
+        PPO_TRUTH_POLICY,
+        SHIPPED_POLICY,
+        SHIPPED_TRUTH_POLICY,
+        resolve_env,
+    )
 
     out = []
     others = [p for p in (target_path("dagger", "truth_all_around"), PPO_POLICY, PPO_TRUTH_POLICY) if p.exists()]
-    for policy in (SHIPPED_POLICY, SHIPPED_TRUTH_POLICY, *others):
+    for policy in dict.fromkeys((SHIPPED_POLICY, DAGGER_POLICY, SHIPPED_TRUTH_POLICY, *others)):
         env_id, kwargs = resolve_env(str(policy))
         run = _chunk(str(policy), env_id, {**kwargs, "duration": 2}, [1000])[0]
         out += [run[k] for k in sorted(run) if isinstance(run[k], (int, float)) and not k.endswith("_s")]
@@ -186,16 +193,21 @@ def antenna_markdown(study: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def learned_specs(slam_policy: str, truth_policy: str, shipped_only: bool = False) -> list[tuple]:
-    """(key, label, observation, policy, env id, env kwargs) of the learned policies: the shipped pair (DAgger),
-    the all-around DAgger student and PPO with the same budget."""
+def learned_specs(slam_policy: str, truth_policy: str, shipped_only: bool = False,
+                  shipped_policy: str | None = None) -> list[tuple]:
+    """(key, label, observation, policy, env id, env kwargs) of the learned policies: the shipped policy (a DAgger
+    student continued past the students' budget) where it is not ``slam_policy``, the DAgger pair at one budget
+    (radar + SLAM and ground truth), the all-around DAgger student and PPO with the same budget."""
+    shipped_policy = shipped_policy or slam_policy
     from agents.evaluate import PPO_POLICY, PPO_TRUTH_POLICY, resolve_env
 
     slam_obs, truth_obs = "radar point cloud + SLAM", "highway-env Kinematics (truth)"
     specs = [
-        ("slam", "DAgger (shipped)", slam_obs, slam_policy, *resolve_env(slam_policy)),
+        ("slam", "DAgger", slam_obs, slam_policy, *resolve_env(slam_policy)),
         ("truth", "DAgger (ground truth)", truth_obs, truth_policy, *resolve_env(truth_policy)),
     ]
+    if Path(shipped_policy).resolve() != Path(slam_policy).resolve():
+        specs.insert(0, ("shipped", "DAgger, continued (shipped)", slam_obs, shipped_policy, *resolve_env(shipped_policy)))
     others = [("truth_all_around", "DAgger (ground truth, all around)", "Kinematics, 8 vehicles incl. behind (truth)",
                target_path("dagger", "truth_all_around"), "dagger"), ("ppo_slam", "PPO", slam_obs, PPO_POLICY, "ppo"),
               ("ppo_truth", "PPO (ground truth)", truth_obs, PPO_TRUTH_POLICY, "ppo")]  # fmt: skip
@@ -241,6 +253,26 @@ def _fmt(stats: dict, digits: int = 1, spread: bool = True) -> str:
     return text
 
 
+def _collisions(summary: dict) -> str:
+    """``rate (k/n) [low-high %]``: the collision rate with its 95 % Wilson interval."""
+    k, n = summary["collisions"], summary["episodes"]
+    low, high = wilson_interval(k, n)
+    return f"{summary['collision_rate']:.2f} ({k}/{n}) [{100 * low:.0f}-{100 * high:.0f} %]"
+
+
+def _vs_reference(row: dict, rows: list[dict], reference: str = "idm") -> str:
+    """The row's return minus the reference row's, paired over the seeds both drove (mean [low, high], 95 % t)."""
+    ref = next((r for r in rows if r["key"] == reference), None)
+    if ref is None or row is ref:
+        return ""
+    theirs = {run["seed"]: run["return"] for run in ref["runs"]}
+    pairs = [(run["return"], theirs[run["seed"]]) for run in row["runs"] if run["seed"] in theirs]
+    if len(pairs) < 2:
+        return "n/a"
+    mean, low, high = paired_difference(*zip(*pairs)).mean_low_high()
+    return f"{mean:+.1f} [{low:+.1f}, {high:+.1f}]"
+
+
 def markdown(result: dict) -> str:
     rows = result["rows"]
     lines = [
@@ -251,16 +283,16 @@ def markdown(result: dict) -> str:
         ),
         "",
         (
-            "| policy | observation | return | collision rate | mean speed (m/s) | episode length (steps) "
-            "| SLAM position RMSE (m) | SLAM map RMSE (m) |"
+            "| policy | observation | return | return - IDM + MOBIL (paired, 95 % CI) | collision rate [Wilson 95 %] "
+            "| mean speed (m/s) | episode length (steps) | SLAM position RMSE (m) | SLAM map RMSE (m) |"
         ),
-        "|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         s = r["summary"]
         lines.append(
-            f"| {r['label']} | {r['observation']} | {_fmt(s['return'])} | {s['collision_rate']:.2f} "
-            f"({s['collisions']}/{s['episodes']}) | {_fmt(s['mean_speed_mps'])} | {_fmt(s['episode_length'], 0)} "
+            f"| {r['label']} | {r['observation']} | {_fmt(s['return'])} | {_vs_reference(r, rows)} "
+            f"| {_collisions(s)} | {_fmt(s['mean_speed_mps'])} | {_fmt(s['episode_length'], 0)} "
             f"| {_fmt(s['position_rmse_m'], 2)} | {_fmt(s['map_rmse_m'], 2)} |"
         )
     slam_row = next(r for r in rows if r["key"] == "slam")
@@ -280,7 +312,8 @@ def markdown(result: dict) -> str:
         "(the traffic's) in the ego's seat with a desired speed of 30 m/s: a strong scripted reference. "
         "\"HeadwayDriver\" is the DAgger expert (agents/expert.py): meta-actions chosen from the true gaps "
         "and speeds; the DAgger students see only their observation. Same budget: both DAgger students and "
-        "both PPO policies saw the env-step counts listed under Training. highway-env's default Kinematics "
+        "both PPO policies saw the env-step counts listed under Training; the shipped policy is the radar + SLAM "
+        "student continued with DAgger past that budget (its start's steps plus its own). highway-env's default Kinematics "
         "observation lists the 4 nearest vehicles *ahead*: it hides the followers the expert checks before "
         "a lane change, which the radar's 360-degree point cloud shows; the all-around row observes 8 "
         "vehicles, behind as well.",
@@ -325,7 +358,7 @@ def markdown(result: dict) -> str:
         ]
     lines += [
         "",
-        f"Training (scripts/train_policy.py): {result['training_text']}",
+        f"Training (scripts/train_policy.py; the continuation: scripts/rl_finetune.py): {result['training_text']}",
     ]
     if result.get("antenna"):
         lines += ["", antenna_markdown(result["antenna"]).rstrip("\n")]
@@ -352,10 +385,12 @@ def rerun_antenna(args: argparse.Namespace, started: float, argv: list[str] | No
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--episodes", type=int, default=50)
+    ap.add_argument("--episodes", type=int, default=100)
     ap.add_argument("--seed", type=int, default=1000, help="first seed (training used 0.. and 10000..)")
     ap.add_argument("--workers", type=int, default=2, help="processes per policy")
-    ap.add_argument("--slam-policy", default=None, help="default: agents/data/dagger_rhs_highway_slam.zip (shipped)")
+    ap.add_argument("--slam-policy", default=None,
+                    help="the radar + SLAM student compared with --truth-policy at the same budget "
+                    "(default: agents/data/dagger_rhs_highway_slam.zip; the shipped policy gets its own row)")
     ap.add_argument("--truth-policy", default=None, help="default: agents/data/dagger_rhs_highway_truth.zip")
     ap.add_argument("--shipped-only", action="store_true", help="skip the all-around and PPO rows")
     ap.add_argument("--no-antenna", action="store_true", help="skip the antenna study (RHS vs phased-array students)")
@@ -376,6 +411,7 @@ def main(argv: list[str] | None = None) -> int:
         return rerun_antenna(args, started, argv)
 
     from agents.evaluate import (
+        DAGGER_POLICY,
         SHIPPED_POLICY,
         SHIPPED_TRUTH_POLICY,
         is_scripted,
@@ -384,7 +420,7 @@ def main(argv: list[str] | None = None) -> int:
         summarize,
     )
 
-    slam_policy = args.slam_policy or str(SHIPPED_POLICY)
+    slam_policy = args.slam_policy or str(DAGGER_POLICY)
     truth_policy = args.truth_policy or str(SHIPPED_TRUTH_POLICY)
     slam_env, slam_kwargs = resolve_env(slam_policy)
     truth_env, truth_kwargs = resolve_env(truth_policy)
@@ -393,7 +429,7 @@ def main(argv: list[str] | None = None) -> int:
     teacher_k = int(policy_metadata(SHIPPED_POLICY).get("decision_interval") or 1) if SHIPPED_POLICY.exists() else 1
     # the goal's references as issued: highway-env's action set (always SLOWER holds 20 m/s, not the students' 10)
     issued_kwargs = {k: v for k, v in truth_kwargs.items() if k != "action"}
-    specs = learned_specs(slam_policy, truth_policy, args.shipped_only) + [
+    specs = learned_specs(slam_policy, truth_policy, args.shipped_only, str(SHIPPED_POLICY)) + [
         ("random", "random", "(none)", "random", slam_env, slam_kwargs),
         ("headway", "HeadwayDriver (DAgger expert, scripted, 5 Hz)", "(simulator state)", "headway", truth_env,
          truth_kwargs),
@@ -424,8 +460,8 @@ def main(argv: list[str] | None = None) -> int:
         c_ratio, c_text, c_ok = c_slam / c_truth, f"{c_slam / c_truth:.2f}", c_slam <= COLLISION_AIM * c_truth
     else:
         c_ratio, c_text, c_ok = None, ("0/0" if c_slam == 0 else f"{c_slam:.2f} vs 0"), c_slam == 0
-    goals = {key: goal_of(by, key) for key in ("slam", "ppo_slam") if key in by}
-    goal = next((g for g in goals.values() if g["met"]), goals["slam"])
+    goals = {key: goal_of(by, key) for key in ("shipped", "slam", "ppo_slam") if key in by}
+    goal = next((g for g in goals.values() if g["met"]), goals.get("shipped", goals["slam"]))
     training = {}
     for key, _, _, policy, _, _ in specs:
         if is_scripted(policy):
@@ -433,11 +469,12 @@ def main(argv: list[str] | None = None) -> int:
         meta = policy_metadata(policy)
         training[key] = {
             k: meta.get(k)
-            for k in ("algo", "env_id", "env_kwargs", "timesteps", "n_envs", "wall_time_s", "steps_per_s")
+            for k in ("algo", "env_id", "env_kwargs", "timesteps", "n_envs", "wall_time_s", "steps_per_s", "init_policy")
         }
     training_text = "; ".join(
         f"{k} ({v['algo'] or 'ppo'}): {v['timesteps']} env steps on {v['env_id']} with {v['n_envs']} subprocess envs "
-        f"in {v['wall_time_s']} s "
+        + (f"continuing {v['init_policy']} " if v.get("init_policy") else "")
+        + f"in {v['wall_time_s']} s "
         f"({v['steps_per_s']} steps/s)" + (f", env kwargs `{json.dumps(v['env_kwargs'])}`" if v["env_kwargs"] else "")
         for k, v in training.items()
     )

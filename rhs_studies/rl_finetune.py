@@ -94,13 +94,13 @@ ARMS: dict[str, Arm] = {
     "dagger_lookahead": Arm("dagger", "dagger_lookahead.yml", True, 48000),
 }
 LABELS = {
-    "student": "DAgger student (shipped, start of every arm)",
+    "student": "DAgger student (start of every arm)",
     "finetune": "PPO fine-tune, privileged critic, decaying anchor",
     "finetune_no_anchor": "PPO fine-tune without the anchor (control)",
     "finetune_horizon": "PPO fine-tune, gamma 0.95 and time-to-collision shaping",
     "finetune_horizon_80k": f"PPO fine-tune, gamma 0.95 and time-to-collision shaping, {LONG_STEPS // 1000}k env steps",
     "dagger_continue": "DAgger continuation (control)",
-    "dagger_continue_80k": f"DAgger continuation, {LONG_STEPS // 1000}k env steps (control)",
+    "dagger_continue_80k": f"DAgger continuation, {LONG_STEPS // 1000}k env steps (control; the shipped policy)",
     "scratch": "PPO from scratch, privileged critic",
     "dagger_lookahead": "DAgger from the lookahead teacher, 48k env steps",
     "slower": "always SLOWER (scripted)",
@@ -403,7 +403,13 @@ def main(argv: list[str] | None = None) -> int:
                     help="rows (student, arms, slower, idm, headway, lookahead) taken from the existing "
                          "rl_finetune.json of --out-dir instead of driven again: same seeds, for policies and code "
                          "unchanged since (the result names the commit they were measured at)")
+    ap.add_argument("--render-only", action="store_true", help="rewrite rl_finetune.md from rl_finetune.json, no runs")
     args = ap.parse_args(argv)
+    if args.render_only:
+        text = markdown(json.loads((Path(args.out_dir) / "rl_finetune.json").read_text()))
+        (Path(args.out_dir) / "rl_finetune.md").write_text(text)
+        print(text)
+        return 0
     if args.episodes < 2:
         ap.error("--episodes must be >= 2 (intervals need two episodes)")
     started = time.time()

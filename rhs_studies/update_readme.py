@@ -138,10 +138,11 @@ def _detection(d: dict) -> tuple[str, str]:
 
 def _policies(d: dict) -> tuple[str, str]:
     rows = {r["key"]: r["summary"] for r in d["rows"]}
-    s, slower = rows["slam"], rows["slower"]
-    return (f"Driving on radar + SLAM (shipped DAgger student, {s['episodes']} seeds): return, collisions",
+    s, slower, idm = rows.get("shipped", rows["slam"]), rows["slower"], rows["idm"]
+    return (f"Driving on radar + SLAM (shipped policy, {s['episodes']} seeds): return, collisions",
             f"{s['return']['mean']:.1f}, {s['collisions']}/{s['episodes']} "
-            f"(always-SLOWER: {slower['return']['mean']:.1f}, {slower['collisions']}/{slower['episodes']})")
+            f"(always-SLOWER: {slower['return']['mean']:.1f}, {slower['collisions']}/{slower['episodes']}; "
+            f"IDM + MOBIL: {idm['return']['mean']:.1f}, {idm['collisions']}/{idm['episodes']})")
 
 
 def _rl_finetune(d: dict) -> tuple[str, str]:

@@ -406,9 +406,9 @@ def test_demo_rejects_bad_input(tmp_path):
 
 
 def test_shipped_policies_are_small_and_described():
-    from agents.evaluate import PPO_POLICY, PPO_TRUTH_POLICY
+    from agents.evaluate import DAGGER_POLICY, PPO_POLICY, PPO_TRUTH_POLICY
 
-    shipped = ((SHIPPED_POLICY, SLAM, "dagger"), (SHIPPED_TRUTH_POLICY, TRUTH, "dagger"),
+    shipped = ((SHIPPED_POLICY, SLAM, "dagger"), (DAGGER_POLICY, SLAM, "dagger"), (SHIPPED_TRUTH_POLICY, TRUTH, "dagger"),
                (PPO_POLICY, SLAM, "ppo"), (PPO_TRUTH_POLICY, TRUTH, "ppo"))  # fmt: skip
     for path, env_id, algo in shipped:
         assert path.exists(), f"{path} missing: run scripts/train_policy.py --algo {algo}"
@@ -416,8 +416,8 @@ def test_shipped_policies_are_small_and_described():
         meta = policy_metadata(path)
         assert meta["env_id"] == env_id and meta["algo"] == algo
         assert meta["timesteps"] > 0 and meta["wall_time_s"] > 0
-    # same simulation budget for the two students of each algorithm (issue 12: "trained with the same budget")
-    for slam_policy, truth_policy in ((SHIPPED_POLICY, SHIPPED_TRUTH_POLICY), (PPO_POLICY, PPO_TRUTH_POLICY)):
+    # same simulation budget for the two students of each algorithm (the shipped one continues the first)
+    for slam_policy, truth_policy in ((DAGGER_POLICY, SHIPPED_TRUTH_POLICY), (PPO_POLICY, PPO_TRUTH_POLICY)):
         assert abs(policy_metadata(slam_policy)["timesteps"] - policy_metadata(truth_policy)["timesteps"]) <= 1000
         # and the same action set: the observation is the only difference
         actions = [policy_metadata(p)["env_kwargs"].get("action") for p in (slam_policy, truth_policy)]

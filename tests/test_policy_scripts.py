@@ -12,13 +12,17 @@ SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
 
 
 def test_targets_merge_the_radar_settings_and_ship_where_evaluate_looks():
-    from agents.evaluate import PPO_POLICY, SHIPPED_POLICY, SHIPPED_TRUTH_POLICY
+    from agents.evaluate import DAGGER_POLICY, PPO_POLICY, SHIPPED_POLICY, SHIPPED_TRUTH_POLICY, policy_metadata
+    from rhs_studies.rl_finetune import SHIPPED_DIR
 
     grid = {"radar": {"scan": {"grid_deg": 5}}}
     assert train_policy.target_env_kwargs("slam", grid) == grid
     assert train_policy.target_env_kwargs("truth", grid) == {}
     assert train_policy.target_env_kwargs("dense_phased", grid) == {"radar": {"scan": {"grid_deg": 5}, "antenna": "phased"}}
-    assert train_policy.target_path("dagger", "slam") == SHIPPED_POLICY
+    assert train_policy.target_path("dagger", "slam") == DAGGER_POLICY
+    # the shipped policy is the study's DAgger continuation of that student, where the study ships its arms
+    assert SHIPPED_POLICY.parent == SHIPPED_DIR
+    assert (train_policy.ROOT / policy_metadata(SHIPPED_POLICY)["init_policy"]).resolve() == DAGGER_POLICY.resolve()
     assert train_policy.target_path("dagger", "truth") == SHIPPED_TRUTH_POLICY
     assert train_policy.target_path("ppo", "slam") == PPO_POLICY
     assert train_policy.target_env_kwargs("truth_all_around", grid)["observation"]["see_behind"] is True
