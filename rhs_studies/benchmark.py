@@ -11,6 +11,8 @@ every section and printed beside it. Sections (``--sections``, default all):
   time per stage (registration, association, RBPF) at 100 particles, each stage before
   (numpy kernels) and after (compiled); goals: radar >= 0.75x and SLAM >= 0.67x the base
   env's steps/s, each ratio with its 95 % bootstrap interval over the blocks (:func:`ratio_interval`);
+  ``--env-runs`` runs (default 3) in fresh processes, pooled (:func:`bench_envs_runs`: one
+  process's ratio moves between processes by more than its own interval);
 * ``start``: seconds to the first step of ``rhs-highway-slam-v0`` in a new process (imports,
   make, reset, one step) with an empty kernel cache (cold, goal <= 30 s) and with the cache (warm,
   goal <= 5 s), the median of ``--start-repeats`` runs (each run's seconds beside it: one cold start
@@ -79,6 +81,8 @@ ENV_RUNS: tuple[tuple[str, str, dict[str, str] | None], ...] = (
     ("rhs-highway-radar-v0 (numpy kernels)", "rhs-highway-radar-v0", {"kernels": "numpy"}),
     ("rhs-highway-slam-v0 (numpy kernels)", "rhs-highway-slam-v0", {"kernels": "numpy"}),
 )
+#: the envs every run of the ``envs`` section steps, pooled over runs (:func:`pool_env_runs`)
+POOLED_ENVS = ("rhs-highway-v0", "rhs-highway-radar-v0", "rhs-highway-slam-v0")
 
 
 def _kinematics_observation_ms(env, repeats: int = 20) -> float:
@@ -134,7 +138,9 @@ def bench_envs(steps: int, seed: int, grid_deg: float, block: int = 5, numpy_ker
         for lo in range(0, steps, block):
             for rec in envs.values():
                 _time_block(rec, actions[lo: lo + block], seed)
-    out: dict = {"block_steps": block, "load_average_start": load_start, "kernels_compiled_while_timed": sorted(compiled)}
+    out: dict = {"block_steps": block, "load_average_start": load_start, "kernels_compiled_while_timed": sorted(compiled),
+                 "blocks_s": {label: [round(t, 6) for t in rec["blocks"]] for label, rec in envs.items()
+                              if label in POOLED_ENVS}}
     if compiled:  # a compile inside a timed block would be counted as a step's cost
         print(f"benchmark: warning: kernels compiled while timed: {sorted(compiled)}", file=sys.stderr)
     out["kinematics_observation_ms"] = _kinematics_observation_ms(envs["rhs-highway-v0"]["env"])
@@ -145,20 +151,75 @@ def bench_envs(steps: int, seed: int, grid_deg: float, block: int = 5, numpy_ker
                       "radar_stage_ms": _mean_times(rec["radar"]) if rec["radar"] else None,
                       "slam_stage_ms": _mean_times(rec["slam"]) if rec["slam"] else None}
     out["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
-    base = out["rhs-highway-v0"]["ms_per_step"]
-    out["radar_added_ms"] = out["rhs-highway-radar-v0"]["ms_per_step"] - base
-    out["radar_slam_added_ms"] = out["rhs-highway-slam-v0"]["ms_per_step"] - base
-    out["radar_added_over_base"] = out["radar_added_ms"] / base
-    out["radar_slam_added_over_base"] = out["radar_slam_added_ms"] / base
-    out["radar_env_over_base"] = out["rhs-highway-radar-v0"]["steps_per_s"] / out["rhs-highway-v0"]["steps_per_s"]
-    out["slam_env_over_base"] = out["rhs-highway-slam-v0"]["steps_per_s"] / out["rhs-highway-v0"]["steps_per_s"]
-    base_blocks = np.asarray(envs["rhs-highway-v0"]["blocks"])
-    for kind in ("radar", "slam"):
-        out[f"{kind}_env_over_base_ci"] = ratio_interval(base_blocks, np.asarray(envs[f"rhs-highway-{kind}-v0"]["blocks"]))
+    _ratios(out)
     if numpy_kernels:
         for kind in ("radar", "slam"):
             ref = out[f"rhs-highway-{kind}-v0 (numpy kernels)"]
             out[f"{kind}_env_over_base_numpy_kernels"] = ref["steps_per_s"] / out["rhs-highway-v0"]["steps_per_s"]
+        out["stages_before_after"] = stages_before_after(out)
+    return out
+
+
+def _ratios(out: dict) -> None:
+    """Set ``out``'s added ms and env / base ratios from its three envs' ms per step and blocks."""
+    base = out["rhs-highway-v0"]["ms_per_step"]
+    for kind, env_id in (("radar", "rhs-highway-radar-v0"), ("radar_slam", "rhs-highway-slam-v0")):
+        out[f"{kind}_added_ms"] = out[env_id]["ms_per_step"] - base
+        out[f"{kind}_added_over_base"] = out[f"{kind}_added_ms"] / base
+    blocks = out["blocks_s"]
+    for kind in ("radar", "slam"):
+        env_id = f"rhs-highway-{kind}-v0"
+        out[f"{kind}_env_over_base"] = out[env_id]["steps_per_s"] / out["rhs-highway-v0"]["steps_per_s"]
+        out[f"{kind}_env_over_base_ci"] = ratio_interval(np.asarray(blocks["rhs-highway-v0"]), np.asarray(blocks[env_id]))
+
+
+def bench_envs_runs(steps: int, seed: int, grid_deg: float, block: int = 5, runs: int = 3) -> dict:
+    """:func:`bench_envs` in ``runs`` fresh processes, one after another, pooled.
+
+    One process's ratio moves between processes by more than its block interval shows (the base
+    env's interpreter-bound step moved 25-29 ms between runs on one machine while the compiled
+    radar moved less), so the headline pools them: steps/s and stage times over every run's timed
+    steps, each ratio ``sum(base blocks) / sum(env blocks)`` over every run, and its 95 % interval
+    from a two-level bootstrap (runs, then the blocks within each, :func:`ratio_interval`). The
+    first run also steps the numpy kernels (the stage table's "before"); ``runs`` lists each run's
+    ratios, ms per step and load.
+    """
+    results = []
+    for i in range(runs):
+        code = (f"import json; from rhs_studies.benchmark import bench_envs; print('RESULT ' + json.dumps(bench_envs("
+                f"{steps}, {seed}, {grid_deg}, block={block}, numpy_kernels={i == 0})))")
+        done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=False)
+        line = next((ln for ln in done.stdout.splitlines() if ln.startswith("RESULT ")), None)
+        if done.returncode or line is None:
+            raise RuntimeError(f"benchmark: envs run {i + 1} of {runs} failed:\n{done.stderr[-3000:]}")
+        results.append(json.loads(line[len("RESULT "):]))
+        print(f"benchmark: envs run {i + 1}/{runs}: radar {results[-1]['radar_env_over_base']:.3f} x, "
+              f"SLAM {results[-1]['slam_env_over_base']:.3f} x", file=sys.stderr)
+    return pool_env_runs(results)
+
+
+def pool_env_runs(results: list[dict]) -> dict:
+    """The first run's record (its numpy-kernel envs and stage table) with the three envs pooled over ``results``
+    (see :func:`bench_envs_runs`)."""
+    out = dict(results[0])
+    for env_id in POOLED_ENVS:
+        recs = [r[env_id] for r in results]
+        n, dt = sum(r["steps"] for r in recs), sum(r["steps"] * r["ms_per_step"] / 1e3 for r in recs)
+        stages = {k: ([r[k] for r in recs if r[k]] or None) for k in ("radar_stage_ms", "slam_stage_ms")}
+        out[env_id] = {"steps": n, "steps_per_s": n / dt, "ms_per_step": 1e3 * dt / n,
+                       **{k: (v if v is None else {s: float(np.mean([d.get(s, 0.0) for d in v])) for s in v[0]})
+                          for k, v in stages.items()}}
+    out["blocks_s"] = {env_id: [t for r in results for t in r["blocks_s"][env_id]] for env_id in POOLED_ENVS}
+    _ratios(out)
+    if len(results) > 1:
+        for kind in ("radar", "slam"):
+            env_id = f"rhs-highway-{kind}-v0"
+            out[f"{kind}_env_over_base_ci"] = ratio_interval_runs([np.asarray(r["blocks_s"]["rhs-highway-v0"]) for r in results],
+                                                                  [np.asarray(r["blocks_s"][env_id]) for r in results])
+    out["runs"] = [{"radar_env_over_base": r["radar_env_over_base"], "slam_env_over_base": r["slam_env_over_base"],
+                    "base_ms_per_step": r["rhs-highway-v0"]["ms_per_step"], "load_average_start": r["load_average_start"]}
+                   for r in results]
+    if "stages_before_after" in results[0]:
         out["stages_before_after"] = stages_before_after(out)
     return out
 
@@ -442,7 +503,15 @@ def _md_envs(result: dict) -> list[str]:
         lines.append(f"Steps/s over the base env: radar {e['radar_env_over_base']:.2f} x{ci['radar']} (goal >= "
                      f"{GOALS['radar_env_over_base']}), SLAM {e['slam_env_over_base']:.2f} x{ci['slam']} (goal >= "
                      f"{GOALS['slam_env_over_base']}){before}"
-                     + ("; in brackets the 95 % bootstrap interval over the round-robin blocks." if ci["radar"] else "."))
+                     + ("; in brackets the 95 % bootstrap interval over the round-robin blocks" if ci["radar"] else "")
+                     + (" of every run (runs resampled, then blocks)." if ci["radar"] and e.get("runs") else "."))
+    if len(e.get("runs") or []) > 1:
+        runs = e["runs"]
+        lines.append(f"Pooled over {len(runs)} runs in fresh processes, one after another; each run's radar / SLAM "
+                     "ratio (base ms per step, load): "
+                     + "; ".join(f"{r['radar_env_over_base']:.3f} / {r['slam_env_over_base']:.3f} "
+                                 f"({r['base_ms_per_step']:.1f} ms, {r['load_average_start'][0]:.1f})" for r in runs)
+                     + ". The stage table's numpy column comes from the first run.")
     if "stages_before_after" in e:
         lines += ["", "| stage of the SLAM env's step | numpy kernels (ms) | compiled (ms) |", "|---|---:|---:|"]
         for stage, v in e["stages_before_after"].items():
@@ -554,8 +623,27 @@ def markdown(result: dict) -> str:
     return "\n".join(lines)
 
 
+def ratio_interval_runs(base_runs: list[np.ndarray], env_runs: list[np.ndarray], resamples: int = 2000,
+                        seed: int = 0) -> list[float]:
+    """95 % two-level bootstrap interval of ``sum(base) / sum(env)`` over several runs' round-robin blocks: runs
+    resampled with replacement, then each picked run's blocks in pairs (:func:`ratio_interval`), so a spread
+    between runs widens the interval as the spread between blocks does."""
+    rng = np.random.default_rng(seed)
+    ratios = np.empty(resamples)
+    for i in range(resamples):
+        base = env = 0.0
+        for r in rng.integers(0, len(base_runs), len(base_runs)):
+            pick = rng.integers(0, base_runs[r].size, base_runs[r].size)
+            base += base_runs[r][pick].sum()
+            env += env_runs[r][pick].sum()
+        ratios[i] = base / env
+    return [round(float(x), 4) for x in np.percentile(ratios, [2.5, 97.5])]
+
+
 def _run_section(sec: str, args: argparse.Namespace) -> dict:
     if sec == "envs":
+        if args.env_runs > 1:
+            return bench_envs_runs(args.steps, args.seed, args.grid_deg, block=args.block, runs=args.env_runs)
         return bench_envs(args.steps, args.seed, args.grid_deg, block=args.block)
     if sec == "start":
         return bench_start(args.start_repeats)
@@ -582,6 +670,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sections", nargs="+", choices=SECTIONS, default=list(SECTIONS))
     ap.add_argument("--steps", type=int, default=300, help="env steps per measurement (envs, load, vec)")
     ap.add_argument("--block", type=int, default=5, help="steps of one env before the next one's turn (envs)")
+    ap.add_argument("--env-runs", type=int, default=3,
+                    help="envs: runs in fresh processes, pooled (1: one run in this process)")
     ap.add_argument("--grid-deg", type=float, default=1.0)
     ap.add_argument("--train-steps", type=int, default=1024, help="PPO timesteps per env id (training section)")
     ap.add_argument("--seed", type=int, default=0)
@@ -594,6 +684,8 @@ def main(argv: list[str] | None = None) -> int:
     os.environ["RHS_SLAM_BACKGROUND_COMPILE"] = "0"
     if args.start_repeats < 1:
         ap.error("--start-repeats must be at least 1")
+    if args.env_runs < 1:
+        ap.error("--env-runs must be at least 1")
     started = time.time()
     commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
     result: dict = {

@@ -86,3 +86,40 @@ def test_ratio_interval_brackets_the_ratio_and_narrows_with_blocks():
         widths.append(hi - lo)
     assert widths[1] < 0.5 * widths[0]
     assert ratio_interval(np.ones(10), np.full(10, 2.0)) == [0.5, 0.5]
+
+
+def test_pooled_runs_sum_the_blocks_and_widen_the_interval_with_the_spread_between_runs():
+    rng = np.random.default_rng(1)
+
+    def run(base_ms: float, env_ms: float) -> dict:
+        blocks = {"rhs-highway-v0": base_ms, "rhs-highway-radar-v0": env_ms, "rhs-highway-slam-v0": 1.1 * env_ms}
+        out: dict = {"blocks_s": {}, "load_average_start": [0.5, 0.5, 0.5]}
+        for env_id, ms in blocks.items():
+            b = 5 * ms / 1e3 * (1 + 0.01 * rng.standard_normal(60))
+            out["blocks_s"][env_id] = b.tolist()
+            out[env_id] = {"steps": 300, "steps_per_s": 300 / b.sum(), "ms_per_step": 1e3 * b.sum() / 300,
+                           "radar_stage_ms": {"omp": env_ms - base_ms}, "slam_stage_ms": None}
+        benchmark._ratios(out)
+        return out
+
+    same = benchmark.pool_env_runs([run(25.0, 35.0) for _ in range(3)])
+    apart = benchmark.pool_env_runs([run(25.0, 35.0), run(29.0, 37.0), run(27.0, 36.0)])
+    assert same["radar_env_over_base"] == pytest.approx(25 / 35, rel=0.01)
+    # the pooled ratio is total base time over total env time, between the runs' own ratios
+    assert min(r["radar_env_over_base"] for r in apart["runs"]) < apart["radar_env_over_base"] < max(
+        r["radar_env_over_base"] for r in apart["runs"])
+    assert apart["rhs-highway-v0"]["ms_per_step"] == pytest.approx(27.0, rel=0.01)
+    assert apart["rhs-highway-radar-v0"]["radar_stage_ms"]["omp"] == pytest.approx(np.mean([10.0, 8.0, 9.0]))
+    width = {k: d["radar_env_over_base_ci"][1] - d["radar_env_over_base_ci"][0] for k, d in (("same", same), ("apart", apart))}
+    assert width["apart"] > 3 * width["same"]
+    assert len(apart["runs"]) == 3 and len(apart["blocks_s"]["rhs-highway-v0"]) == 180
+
+
+def test_env_runs_in_fresh_processes_pool_into_one_record():
+    """Two tiny runs of the envs section (subprocesses) pool into the record the README's speed table reads."""
+    out = benchmark.bench_envs_runs(steps=4, seed=0, grid_deg=5.0, block=2, runs=2)
+    assert [out[env_id]["steps"] for env_id in benchmark.POOLED_ENVS] == [8, 8, 8]
+    assert len(out["runs"]) == 2 and "rhs-highway-slam-v0 (numpy kernels)" in out
+    assert 0 < out["radar_env_over_base_ci"][0] <= out["radar_env_over_base_ci"][1]
+    assert set(out["stages_before_after"]) and "Pooled over 2 runs" in "\n".join(
+        benchmark._md_envs({"envs": out, "settings": {"grid_deg": 5.0}}))
