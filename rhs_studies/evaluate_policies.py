@@ -266,10 +266,10 @@ def _vs_reference(row: dict, rows: list[dict], reference: str = "idm") -> str:
     if ref is None or row is ref:
         return ""
     theirs = {run["seed"]: run["return"] for run in ref["runs"]}
-    pairs = [(run["return"], theirs[run["seed"]]) for run in row["runs"] if run["seed"] in theirs]
-    if len(pairs) < 2:
+    ours = [run for run in row["runs"] if run["seed"] in theirs]
+    if len(ours) < 2:
         return "n/a"
-    mean, low, high = paired_difference(*zip(*pairs)).mean_low_high()
+    mean, low, high = paired_difference([r["return"] for r in ours], [theirs[r["seed"]] for r in ours]).mean_low_high()
     return f"{mean:+.1f} [{low:+.1f}, {high:+.1f}]"
 
 
