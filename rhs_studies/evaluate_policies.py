@@ -82,6 +82,33 @@ def run_policy(policy: str, env_id: str, env_kwargs: dict, seeds: list[int], wor
     return [run for part in results for run in part]
 
 
+def _same_policy(a: str, b: str) -> bool:
+    """Whether two policy strings name the same policy (a scripted name, or one file wherever the checkout lies)."""
+    if a == b:
+        return True
+    pa, pb = Path(a), Path(b)
+    return pa.suffix == ".zip" and pb.suffix == ".zip" and pa.parts[-3:] == pb.parts[-3:]
+
+
+def _contiguous(seeds: list[int]) -> list[list[int]]:
+    """``seeds`` split into runs of consecutive integers (what :func:`run_policy` drives in one call)."""
+    parts: list[list[int]] = []
+    for s in seeds:
+        if parts and s == parts[-1][-1] + 1:
+            parts[-1].append(s)
+        else:
+            parts.append([s])
+    return parts
+
+
+def kept_runs(previous: dict, policy: str, env_id: str, kwargs: dict) -> dict[int, dict]:
+    """Seed -> episode of an earlier ``policies.json`` row that drove the same policy on the same env and kwargs."""
+    for row in previous.get("rows", []):
+        if _same_policy(row["policy"], policy) and row["env_id"] == env_id and row["env_kwargs"] == kwargs:
+            return {run["seed"]: run for run in row["runs"]}
+    return {}
+
+
 def fingerprint() -> list[float]:
     """The shipped policy, the DAgger SLAM and ground-truth students, the all-around student and the PPO policies,
     one 2-second episode (10 steps) each, seed 1000."""
@@ -360,6 +387,13 @@ def markdown(result: dict) -> str:
         "",
         f"Training (scripts/train_policy.py; the continuation: scripts/rl_finetune.py): {result['training_text']}",
     ]
+    kept = result.get("kept_episodes")
+    if kept:
+        labels = {r["key"]: r["label"] for r in rows}
+        what = [f"{labels.get(k, k)} ({n} seeds)" for k, n in kept["rows"].items()] + (
+            ["the antenna study below"] if kept.get("antenna") else [])
+        lines += ["", f"Episodes kept from the run at {kept['commit'][:7]} (same policy, env and seeds; the results "
+                  f"fingerprint guards the code): {', '.join(what)}; the other episodes were driven at this file's commit."]
     if result.get("antenna"):
         lines += ["", antenna_markdown(result["antenna"]).rstrip("\n")]
     return "\n".join(lines) + "\n"
@@ -397,6 +431,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--antenna-episodes", type=int, default=50, help="seeds per policy in the antenna study")
     ap.add_argument("--out-dir", default=str(ROOT / "results"))
     ap.add_argument("--render-only", action="store_true", help="rewrite policies.md from policies.json, no runs")
+    ap.add_argument("--keep-episodes", action="store_true",
+                    help="reuse the episodes of --out-dir's policies.json for rows driving the same policy, env and env "
+                    "kwargs on the same seeds (policy and code unchanged since: the results fingerprint guards the "
+                    "code); drive only the missing seeds. The result names the rows and the commit they came from")
+    ap.add_argument("--keep-antenna", action="store_true",
+                    help="keep the antenna study of --out-dir's policies.json (same seeds), as --keep-episodes")
     ap.add_argument("--antenna-only", action="store_true",
                     help="rerun only the antenna study (e.g. after training its policies) into the existing policies.json")
     args = ap.parse_args(argv)
@@ -438,11 +478,18 @@ def main(argv: list[str] | None = None) -> int:
         ("slower", "always SLOWER (scripted)", "(none)", f"constant:{SLOWER}", truth_env, issued_kwargs),
         ("idm", "IDM + MOBIL (highway-env, scripted)", "(simulator state)", "idm", truth_env, issued_kwargs),
     ]
-    rows = []
+    previous = json.loads((Path(args.out_dir) / "policies.json").read_text()) if args.keep_episodes else {}
+    rows, kept = [], {}
     for key, label, obs, policy, env_id, kwargs in specs:
-        print(f"evaluate_policies: {label} on {env_id}, {len(seeds)} episodes ...", file=sys.stderr)
+        old = kept_runs(previous, policy, env_id, kwargs)
+        todo = [s for s in seeds if s not in old]
+        print(f"evaluate_policies: {label} on {env_id}, {len(todo)} episodes"
+              + (f" ({len(seeds) - len(todo)} kept)" if len(todo) < len(seeds) else "") + " ...", file=sys.stderr)
         t0 = time.perf_counter()
-        runs = run_policy(policy, env_id, kwargs, seeds, args.workers)
+        new = {run["seed"]: run for part in _contiguous(todo) for run in run_policy(policy, env_id, kwargs, part, args.workers)}
+        runs = [new[s] if s in new else old[s] for s in seeds]
+        if len(todo) < len(seeds):
+            kept[key] = len(seeds) - len(todo)
         wall = time.perf_counter() - t0
         summary = summarize(runs)
         print(
@@ -507,7 +554,13 @@ def main(argv: list[str] | None = None) -> int:
         "training": training,
         "training_text": training_text,
     }
-    if not args.no_antenna:
+    keep_antenna = args.keep_antenna and previous.get("antenna", {}).get("seeds") == list(
+        range(args.seed, args.seed + args.antenna_episodes))
+    if kept or keep_antenna:  # episodes of the same policies on the same seeds, driven at an earlier commit
+        result["kept_episodes"] = {"rows": kept, "antenna": keep_antenna, "commit": previous["provenance"]["commit"]}
+    if keep_antenna:
+        result["antenna"] = previous["antenna"]
+    elif not args.no_antenna:
         # every learned row already ran on its policy's own env (learned_specs resolves it)
         done = {r["policy"]: r["runs"] for r in rows if not is_scripted(r["policy"])}
         result["antenna"] = antenna_study(args.antenna_episodes, args.seed, args.workers, done)

@@ -225,3 +225,30 @@ def test_each_trained_entry_keeps_the_run_that_made_it(tmp_path, monkeypatch):
     assert both["dagger_dense"]["run"] == first["dagger_dense"]["run"]  # not re-attributed to the later run
     assert "dense_phased" in both["dagger_dense_phased"]["run"]["command"]
     assert "dense_phased" in both["provenance"]["command"]
+
+
+def test_kept_episodes_match_policy_env_and_kwargs_and_split_missing_seeds_into_runs():
+    from rhs_studies import evaluate_policies as ep
+
+    previous = {"rows": [
+        {"policy": "/elsewhere/agents/data/rl/x.zip", "env_id": "E", "env_kwargs": {"a": 1},
+         "runs": [{"seed": 1000, "return": 1.0}, {"seed": 1001, "return": 2.0}]},
+        {"policy": "idm", "env_id": "E", "env_kwargs": {}, "runs": [{"seed": 1000, "return": 3.0}]},
+    ]}
+    assert set(ep.kept_runs(previous, "/work/agents/data/rl/x.zip", "E", {"a": 1})) == {1000, 1001}
+    assert ep.kept_runs(previous, "/work/agents/data/rl/x.zip", "E", {"a": 2}) == {}  # other kwargs: driven again
+    assert ep.kept_runs(previous, "/work/agents/data/rl/y.zip", "E", {"a": 1}) == {}
+    assert ep.kept_runs(previous, "idm", "E", {})[1000]["return"] == 3.0
+    assert ep.kept_runs({}, "idm", "E", {}) == {}
+    assert ep._contiguous([1002, 1003, 1005, 1006, 1009]) == [[1002, 1003], [1005, 1006], [1009]]
+    assert ep._contiguous([]) == []
+
+
+def test_policies_table_pairs_returns_with_idm_by_seed_and_gives_wilson_intervals():
+    from rhs_studies import evaluate_policies as ep
+
+    idm = {"key": "idm", "runs": [{"seed": s, "return": 150.0 + s % 3} for s in range(10)]}
+    row = {"key": "x", "runs": [{"seed": s, "return": 155.0 + s % 3} for s in reversed(range(10))]}
+    assert ep._vs_reference(row, [row, idm]) == "+5.0 [+5.0, +5.0]"  # paired by seed, whatever the order
+    assert ep._vs_reference(idm, [row, idm]) == ""
+    assert ep._collisions({"collisions": 2, "episodes": 100, "collision_rate": 0.02}) == "0.02 (2/100) [1-7 %]"
