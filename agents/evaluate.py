@@ -18,9 +18,10 @@ was trained on unless asked otherwise. A policy trained with a ``decision_interv
 k > 1 (saved in the same JSON, :mod:`agents.decision`) is loaded as a
 :class:`agents.decision.HeldPolicy`: it decides every k env steps and repeats its
 action between, so every policy is scored per env step on the same seeds. The default policy is the shipped one,
-``agents/data/dagger_rhs_highway_slam.zip`` (with ``dagger_rhs_highway_slam.json``), a DAgger student of
-:class:`agents.expert.HeadwayDriver` (:mod:`agents.imitation`); ``ppo_rhs_highway_slam.zip`` beside it is PPO
-with the same budget (it learned always-SLOWER).
+``agents/data/rl/dagger_continue_80k.zip`` (with its ``.json`` record): the DAgger student of
+:class:`agents.expert.HeadwayDriver` (:mod:`agents.imitation`), ``agents/data/dagger_rhs_highway_slam.zip``,
+continued with DAgger for 80k more env steps; ``ppo_rhs_highway_slam.zip`` is PPO with the student's
+budget (it learned always-SLOWER).
 
 An evaluation estimated above an hour (:func:`estimate_hours`, from the measured steps/s) needs
 ``--yes``. SIGTERM or Ctrl-C stop it at once: the finished episodes are written (``interrupted``
