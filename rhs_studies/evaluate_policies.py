@@ -2,9 +2,12 @@
 
 Rows (every policy meets the same traffic: episode k uses seed ``--seed + k``):
 
-* ``DAgger (shipped)``: ``agents/data/dagger_rhs_highway_slam.zip`` (a student of
+* ``DAgger, continued (shipped)``: ``agents/data/rl/dagger_continue_80k.zip``, the
+  shipped policy (:data:`agents.evaluate.SHIPPED_POLICY`): the radar + SLAM student
+  below continued with DAgger for 80k more env steps;
+* ``DAgger``: ``agents/data/dagger_rhs_highway_slam.zip`` (a student of
   the HeadwayDriver, :mod:`agents.imitation`) on ``rhs-highway-slam-v0`` with the
-  env kwargs saved beside it (SLAM in the loop);
+  env kwargs saved beside it (SLAM in the loop), at the ground-truth student's budget;
 * ``DAgger (ground truth)``: ``agents/data/dagger_rhs_highway_truth.zip`` on
   ``rhs-highway-v0`` (highway-env Kinematics observation of the same scene), and
   on an all-around Kinematics observation (``agents/data/truth/``), when trained;
@@ -29,13 +32,15 @@ radar and SLAM wrappers draw their noise from child streams).
 Reward is highway-env's default (normalized to [0, 1] per step, 5 steps per
 second); a collision (``info["crashed"]``) ends the episode. Writes
 ``results/policies.json`` (every episode) and ``results/policies.md`` (the
-README table), and checks the aim: SLAM policy >= 80 % of the ground-truth
+README table; collision rates with 95 % Wilson intervals, returns paired by seed with
+IDM + MOBIL's), and checks the aim: SLAM policy >= 80 % of the ground-truth
 policy's mean return with a collision rate <= 1.5x its rate, and the goal of
 the driving targets: SLAM policy >= 1.1x the always-SLOWER return, collision rate <= 4 %,
 a higher mean speed than always-SLOWER, and within 10 % of the ground-truth
-policy's return.
+policy's return (for the shipped policy, the same-budget student and PPO).
 
-    OMP_NUM_THREADS=1 python scripts/evaluate_policies.py [--episodes 50] [--seed 1000] [--workers 2]
+    OMP_NUM_THREADS=1 python scripts/evaluate_policies.py [--episodes 100] [--seed 1000] [--workers 2]
+    python scripts/evaluate_policies.py --keep-episodes --keep-antenna   # drive only what the last run lacks
 """
 
 from __future__ import annotations
