@@ -305,6 +305,18 @@ def _vs_reference(row: dict, rows: list[dict], reference: str = "idm") -> str:
     return f"{mean:+.1f} [{low:+.1f}, {high:+.1f}]"
 
 
+def _shipped_vs_start(rows: list[dict]) -> list[str]:
+    """The shipped policy against the student it continues (``slam``), paired over the seeds; [] without both."""
+    by = {r["key"]: r for r in rows}
+    if "shipped" not in by or "slam" not in by:
+        return []
+    shipped, start = by["shipped"], by["slam"]
+    diff = _vs_reference(shipped, rows, reference="slam")
+    k1, k0, n = shipped["summary"]["collisions"], start["summary"]["collisions"], shipped["summary"]["episodes"]
+    return ["", f"{shipped['label']} - {start['label']} (its start), paired over the seeds: return {diff} (95 % CI); "
+            f"collisions {k1} against {k0} of {n}."]
+
+
 def markdown(result: dict) -> str:
     rows = result["rows"]
     lines = [
@@ -359,6 +371,7 @@ def markdown(result: dict) -> str:
             f"set the driving targets are set against (on the wider set, always SLOWER would hold {speeds[0]:g} m/s and "
             "return less).",
         ]
+    lines += _shipped_vs_start(rows)
     aim = result["aim"]
     ref = next((r for r in rows if r["key"] == "slower"), None)
     learned = [r for r in rows if r["key"] in ("slam", "truth")]

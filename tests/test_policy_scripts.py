@@ -252,3 +252,9 @@ def test_policies_table_pairs_returns_with_idm_by_seed_and_gives_wilson_interval
     assert ep._vs_reference(row, [row, idm]) == "+5.0 [+5.0, +5.0]"  # paired by seed, whatever the order
     assert ep._vs_reference(idm, [row, idm]) == ""
     assert ep._collisions({"collisions": 2, "episodes": 100, "collision_rate": 0.02}) == "0.02 (2/100) [1-7 %]"
+    # the shipped policy against the student it continues, on the same seeds
+    shipped = {"key": "shipped", "label": "S", "summary": {"collisions": 4, "episodes": 10}, "runs": row["runs"]}
+    start = {"key": "slam", "label": "D", "summary": {"collisions": 1, "episodes": 10}, "runs": idm["runs"]}
+    assert ep._shipped_vs_start([shipped, start, idm]) == [
+        "", "S - D (its start), paired over the seeds: return +5.0 [+5.0, +5.0] (95 % CI); collisions 4 against 1 of 10."]
+    assert ep._shipped_vs_start([start, idm]) == []
