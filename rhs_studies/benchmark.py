@@ -28,7 +28,9 @@ every section and printed beside it. Sections (``--sections``, default all):
   (the default) and with the process's own BLAS threads (``blas_threads=None``);
   goal >= 0.85x;
 * ``vec``: the radar env in ``SubprocVecEnv`` with 2 workers against 1 (total
-  env steps/s); goal >= 1.8x;
+  env steps/s); goal >= 1.8x; beside it the machine's own two-process scaling, the same
+  ratio for a pure-Python loop that shares nothing (:func:`machine_scaling`): the ceiling
+  a shared virtual machine gives any two processes;
 * ``radar``: one 4-radar scan of a typical scene (scripts/benchmark_radar.py),
   both synthesis fidelities;
 * ``patterns``: time to build the dtheta = 1 deg default library with each
@@ -439,7 +441,27 @@ def bench_vec(steps: int, seed: int, grid_deg: float) -> dict:
         venv.close()
         out[f"workers_{n}"] = {"steps_per_s": n * steps / dt, "steps_per_worker": steps}
     out["two_workers_over_one"] = out["workers_2"]["steps_per_s"] / out["workers_1"]["steps_per_s"]
+    out["machine_scaling"] = machine_scaling()
     return out
+
+
+#: the work of :func:`machine_scaling`: an integer sum in the interpreter (no memory traffic, no shared state)
+SPIN_CODE = "import time\nt = time.perf_counter()\ns = 0\nfor i in range(8_000_000):\n    s += i\nprint(time.perf_counter() - t)"
+
+
+def machine_scaling(repeats: int = 5) -> dict[str, Any]:
+    """Two processes of :data:`SPIN_CODE` at once against one alone, ``repeats`` times in turn: the
+    throughput ratio ``2 t_1 / max(t_2a, t_2b)`` of work that shares nothing, its median and range."""
+
+    def run(n: int) -> list[float]:
+        procs = [subprocess.Popen([sys.executable, "-c", SPIN_CODE], stdout=subprocess.PIPE, text=True) for _ in range(n)]
+        return [float(p.communicate()[0]) for p in procs]
+
+    ratios = []
+    for _ in range(repeats):
+        one = run(1)[0]
+        ratios.append(2 * one / max(run(2)))
+    return {"two_over_one_median": float(np.median(ratios)), "two_over_one_runs": [round(r, 3) for r in ratios]}
 
 
 def bench_training(timesteps: int, seed: int) -> dict:
@@ -553,7 +575,12 @@ def _md_ratios(result: dict) -> list[str]:
         v = result["vec"]
         lines += [f"SubprocVecEnv, radar env: 1 worker {v['workers_1']['steps_per_s']:.1f} steps/s, 2 workers "
                   f"{v['workers_2']['steps_per_s']:.1f} steps/s: {v['two_workers_over_one']:.2f} x (goal >= "
-                  f"{GOALS['two_workers_over_one']}).", ""]
+                  f"{GOALS['two_workers_over_one']})"
+                  + (f"; the machine's own two-process scaling in the same section (a pure-Python loop, "
+                     f"{len(v['machine_scaling']['two_over_one_runs'])} tries): median "
+                     f"{v['machine_scaling']['two_over_one_median']:.2f} x (range "
+                     f"{min(v['machine_scaling']['two_over_one_runs']):.2f}-{max(v['machine_scaling']['two_over_one_runs']):.2f})"
+                     if "machine_scaling" in v else "") + ".", ""]
     if "training" in result and "ppo_slam_over_base" in result["training"]:
         t = result["training"]
         if "default" in t:

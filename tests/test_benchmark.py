@@ -123,3 +123,8 @@ def test_env_runs_in_fresh_processes_pool_into_one_record():
     assert 0 < out["radar_env_over_base_ci"][0] <= out["radar_env_over_base_ci"][1]
     assert set(out["stages_before_after"]) and "Pooled over 2 runs" in "\n".join(
         benchmark._md_envs({"envs": out, "settings": {"grid_deg": 5.0}}))
+
+
+def test_machine_scaling_times_one_and_two_spin_processes():
+    m = benchmark.machine_scaling(repeats=1)
+    assert len(m["two_over_one_runs"]) == 1 and 0.2 < m["two_over_one_median"] < 4.0  # two cores: about 1-2
