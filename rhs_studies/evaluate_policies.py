@@ -292,17 +292,21 @@ def _collisions(summary: dict) -> str:
     return f"{summary['collision_rate']:.2f} ({k}/{n}) [{100 * low:.0f}-{100 * high:.0f} %]"
 
 
+def paired(a: list[dict[str, Any]], b: list[dict[str, Any]]) -> dict[str, float]:
+    """Paired return difference a - b of two policies' episodes over their common seeds (t interval)."""
+    by_b = {r["seed"]: r["return"] for r in b}
+    common = [r for r in a if r["seed"] in by_b]
+    d = paired_difference([r["return"] for r in common], [by_b[r["seed"]] for r in common])
+    return {"mean": d.mean, "low": d.low, "high": d.high, "n": len(common)}
+
+
 def _vs_reference(row: dict, rows: list[dict], reference: str = "idm") -> str:
     """The row's return minus the reference row's, paired over the seeds both drove (mean [low, high], 95 % t)."""
     ref = next((r for r in rows if r["key"] == reference), None)
     if ref is None or row is ref:
         return ""
-    theirs = {run["seed"]: run["return"] for run in ref["runs"]}
-    ours = [run for run in row["runs"] if run["seed"] in theirs]
-    if len(ours) < 2:
-        return "n/a"
-    mean, low, high = paired_difference([r["return"] for r in ours], [theirs[r["seed"]] for r in ours]).mean_low_high()
-    return f"{mean:+.1f} [{low:+.1f}, {high:+.1f}]"
+    d = paired(row["runs"], ref["runs"])
+    return "n/a" if d["n"] < 2 else f"{d['mean']:+.1f} [{d['low']:+.1f}, {d['high']:+.1f}]"
 
 
 def _shipped_vs_start(rows: list[dict]) -> list[str]:

@@ -55,8 +55,8 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from agents.decision import SLOWER
-from rhs_common.stats import mean_interval, paired_difference, wilson_interval
-from rhs_studies.evaluate_policies import run_policy
+from rhs_common.stats import mean_interval, wilson_interval
+from rhs_studies.evaluate_policies import paired, run_policy
 from rhs_studies.provenance import git_state, write_json
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -225,14 +225,6 @@ def row_summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
     return {"episodes": len(runs), "return": {"mean": ret.mean, "half": ret.half_width, "min": float(np.min(returns))},
             "collisions": crashes, "collision_rate": crashes / len(runs), "collision_interval": [low, high],
             "mean_speed_mps": {"mean": speed.mean, "half": speed.half_width}}
-
-
-def paired(a: list[dict[str, Any]], b: list[dict[str, Any]]) -> dict[str, float]:
-    """Paired return difference a - b over the common seeds (t interval)."""
-    by_b = {r["seed"]: r["return"] for r in b}
-    common = [r for r in a if r["seed"] in by_b]
-    d = paired_difference([r["return"] for r in common], [by_b[r["seed"]] for r in common])
-    return {"mean": d.mean, "low": d.low, "high": d.high, "n": len(common)}
 
 
 #: (fine-tune arm, its DAgger control of the same budget), the first pair present is the one the targets judge
