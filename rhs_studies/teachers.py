@@ -1,5 +1,5 @@
-"""The privileged teachers on validation seeds: the headway driver against lookahead variants, and why a student
-cannot copy the fastest one.
+"""The privileged teachers on validation seeds: the headway driver against faster settings of itself and lookahead
+variants, and why a student cannot copy the fastest lookahead.
 
 Every teacher drives ``rhs-highway-v0`` with the students' target speeds ([10, 15, 20, 25, 30] m/s), deciding once a
 second in pulse mode (IDLE between), as the radar + SLAM students drive, on the validation seeds (4000..: never used
@@ -11,6 +11,11 @@ in training, where the envs draw seeds 0.. and 20000.., nor by the held-out eval
 * ``lookahead_no_margin``: no time-gap margin (it may follow at any gap that does not crash);
 * ``lookahead_margin_1s``: a 1 s margin;
 * ``lookahead_tie_1``: the headway driver's action unless another forecast returns 1 more.
+
+And variants of the headway driver itself (:class:`agents.expert.HeadwayDriverConfig`): ``headway_cruise30`` chooses
+target speeds up to 30 m/s (cruise speed 30 instead of 25) and accelerates with a 1 m/s margin (instead of 2);
+``headway_cruise30_h1.2`` also holds a 1.2 s time gap (instead of 1.5). A student that sees the road through radar
+points copied the headway driver to within 1 of its return, so a faster headway driver is a teacher it can follow.
 
 Per variant: mean return with its t interval, collisions with a Wilson interval, mean speed, seconds per decision.
 At every decision of the lookahead variants' own drives: the share where the teacher differs from the headway
@@ -39,16 +44,21 @@ ROOT = Path(__file__).resolve().parent.parent
 ENV_ID = "rhs-highway-v0"
 ACTION = {"type": "DiscreteMetaAction", "target_speeds": [10, 15, 20, 25, 30]}
 DECISION_STEPS = 5  # env steps per decision (1 Hz at highway-env's 5 Hz)
-#: variant -> LookaheadDriver config (None: the headway driver itself)
-VARIANTS: dict[str, dict[str, float] | None] = {
-    "headway": None,
-    "lookahead": {},
-    "lookahead_no_margin": {"min_headway_s": 0.0, "unsafe_penalty": 0.0},
-    "lookahead_margin_1s": {"min_headway_s": 1.0},
-    "lookahead_tie_1": {"tie_margin": 1.0},
+#: variant -> (driver, config): "headway" a :class:`agents.expert.HeadwayDriver` with these
+#: :class:`agents.expert.HeadwayDriverConfig` fields, "lookahead" a :class:`agents.lookahead.LookaheadDriver`
+VARIANTS: dict[str, tuple[str, dict[str, float]]] = {
+    "headway": ("headway", {}),
+    "headway_cruise30": ("headway", {"cruise_speed_mps": 30.0, "margin_mps": 1.0}),
+    "headway_cruise30_h1.2": ("headway", {"cruise_speed_mps": 30.0, "margin_mps": 1.0, "headway_s": 1.2}),
+    "lookahead": ("lookahead", {}),
+    "lookahead_no_margin": ("lookahead", {"min_headway_s": 0.0, "unsafe_penalty": 0.0}),
+    "lookahead_margin_1s": ("lookahead", {"min_headway_s": 1.0}),
+    "lookahead_tie_1": ("lookahead", {"tie_margin": 1.0}),
 }
 LABELS = {
     "headway": "HeadwayDriver (the shipped students' expert)",
+    "headway_cruise30": "HeadwayDriver up to 30 m/s, 1 m/s margin",
+    "headway_cruise30_h1.2": "HeadwayDriver up to 30 m/s, 1 m/s margin, 1.2 s headway",
     "lookahead": "LookaheadDriver, 0.6 s margin (as shipped)",
     "lookahead_no_margin": "LookaheadDriver without a time-gap margin",
     "lookahead_margin_1s": "LookaheadDriver, 1 s margin",
@@ -73,9 +83,9 @@ def drive(variant: str, seed: int, duration: float | None = None) -> dict[str, A
     env = gym.make(ENV_ID, **kwargs)
     env.reset(seed=seed)
     base: Any = env.unwrapped
-    config = VARIANTS[variant]
-    ahead = None if config is None else LookaheadDriver(env, config)
-    headway = HeadwayDriver(env) if ahead is None else ahead.base_driver
+    driver, config = VARIANTS[variant]
+    ahead = LookaheadDriver(env, config) if driver == "lookahead" else None
+    headway = HeadwayDriver(env, config) if ahead is None else ahead.base_driver
     total, speeds, differs, gaps, decide_s = 0.0, [], [], [], 0.0
     crashed, k = False, 0
     while True:
@@ -186,7 +196,8 @@ def main(argv: list[str] | None = None) -> int:
         runs[variant] = run_variant(variant, seeds, args.workers, args.duration)
         print(f"teachers: {variant}: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     result = {
-        "env_id": ENV_ID, "action": ACTION, "seeds": seeds, "variants": {k: VARIANTS[k] for k in args.variants},
+        "env_id": ENV_ID, "action": ACTION, "seeds": seeds,
+        "variants": {k: {"driver": VARIANTS[k][0], "config": VARIANTS[k][1]} for k in args.variants},
         "rows": {k: summarize(v) for k, v in runs.items()},
         "vs_headway": {k: paired(v, runs["headway"]) for k, v in runs.items() if k != "headway"},
         "runs": {k: [{f: r[f] for f in ("seed", "return", "crashed", "mean_speed", "steps")} for r in v]
