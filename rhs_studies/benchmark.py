@@ -464,7 +464,7 @@ def machine_scaling(repeats: int = 5) -> dict[str, Any]:
     return {"two_over_one_median": float(np.median(ratios)), "two_over_one_runs": [round(r, 3) for r in ratios]}
 
 
-def bench_training(timesteps: int, seed: int) -> dict:
+def bench_training(timesteps: int, seed: int, repeats: int = 3) -> dict:
     """PPO steps/s with 2 subprocess envs on rhs-highway-slam-v0 and on rhs-highway-v0.
 
     The speed that hours of training run at is the steady rate: env steps per second from the second
@@ -473,39 +473,63 @@ def bench_training(timesteps: int, seed: int) -> dict:
     kernel warm-up, model, learning) less its timesteps at the steady rate; the first run in the process (the
     SLAM env with ``update_threads_auto``) also carries the process's one-time costs (imports, the forkserver with
     its preloaded modules, the first kernel-cache loads: ~12 s against ~3-4 s for a later run, load ~1). Each env
-    id runs twice,
-    interleaved: with the default (the learner's one torch thread throughout) and with ``update_threads="auto"``
+    id runs with the default (the learner's one torch thread throughout) and with ``update_threads="auto"``
     (the updates also take the cores of the waiting env workers: faster on a quiet machine, much slower on a
-    busy one, see :func:`agents.run_setup.update_threads_for`).
+    busy one, see :func:`agents.run_setup.update_threads_for`), the four runs in turn, ``repeats`` rounds: one
+    run's steady rate moved by ~15 % between runs, so each rate is pooled over the rounds (their steps over their
+    time: the harmonic mean of the rounds' rates, each round having the same steps), and each round's ratio is kept
+    (``ratio_runs``).
     """
     import tempfile
 
     from agents.train import train
 
-    out: dict[str, Any] = {}
-    for label, threads in (("update_threads_auto", "auto"), ("default", None)):
-        for env_id in ("rhs-highway-slam-v0", "rhs-highway-v0"):
-            with tempfile.TemporaryDirectory() as tmp:
-                s = train("ppo", env_id, timesteps, tmp, seed=seed, n_envs=2, eval_freq=10**9,
-                          checkpoint_freq=10**9, progress=False, update_threads=threads)
-            t = s["timing"]
-            whole = t["setup_s"] + t["learn_s"]
-            steady = t["steady_steps_per_s"] or s["steps_per_s"]
-            r = {"n_envs": 2, "timesteps": s["timesteps"], "update_threads": t["update_threads"],
-                 "steady_steps_per_s": steady, "steps_per_s_learn": s["steps_per_s"],
-                 "steady_collect_s_per_rollout": t["steady_collect_s_per_rollout"],
-                 "steady_update_s_per_rollout": t["steady_update_s_per_rollout"],
-                 "setup_s": t["setup_s"], "learn_s": t["learn_s"], "whole_run_s": round(whole, 3),
-                 "startup_s": round(whole - s["timesteps"] / steady, 3)}
-            out.setdefault(label, {})[env_id] = r
-    for runs in list(out.values()):
-        slam, base = runs["rhs-highway-slam-v0"], runs["rhs-highway-v0"]
-        runs["ppo_slam_over_base"] = slam["steady_steps_per_s"] / base["steady_steps_per_s"]
-        runs["ppo_slam_over_base_learn_wall"] = slam["steps_per_s_learn"] / base["steps_per_s_learn"]
+    rounds: dict[str, dict[str, list[dict]]] = {}
+    for _ in range(repeats):
+        for label, threads in (("update_threads_auto", "auto"), ("default", None)):
+            for env_id in ("rhs-highway-slam-v0", "rhs-highway-v0"):
+                with tempfile.TemporaryDirectory() as tmp:
+                    s = train("ppo", env_id, timesteps, tmp, seed=seed, n_envs=2, eval_freq=10**9,
+                              checkpoint_freq=10**9, progress=False, update_threads=threads)
+                t = s["timing"]
+                whole = t["setup_s"] + t["learn_s"]
+                steady = t["steady_steps_per_s"] or s["steps_per_s"]
+                r = {"n_envs": 2, "timesteps": s["timesteps"], "update_threads": t["update_threads"],
+                     "steady_steps_per_s": steady, "steps_per_s_learn": s["steps_per_s"],
+                     "steady_collect_s_per_rollout": t["steady_collect_s_per_rollout"],
+                     "steady_update_s_per_rollout": t["steady_update_s_per_rollout"],
+                     "setup_s": t["setup_s"], "learn_s": t["learn_s"], "whole_run_s": round(whole, 3),
+                     "startup_s": round(whole - s["timesteps"] / steady, 3)}
+                rounds.setdefault(label, {}).setdefault(env_id, []).append(r)
+    out: dict[str, Any] = {"repeats": repeats}
+    for label, by_env in rounds.items():
+        out[label] = {env_id: _pooled_training(runs) for env_id, runs in by_env.items()}
+        slam, base = out[label]["rhs-highway-slam-v0"], out[label]["rhs-highway-v0"]
+        out[label]["ppo_slam_over_base"] = slam["steady_steps_per_s"] / base["steady_steps_per_s"]
+        out[label]["ppo_slam_over_base_learn_wall"] = slam["steps_per_s_learn"] / base["steps_per_s_learn"]
+        out[label]["ratio_runs"] = [round(a["steady_steps_per_s"] / b["steady_steps_per_s"], 3)
+                                    for a, b in zip(by_env["rhs-highway-slam-v0"], by_env["rhs-highway-v0"])]
     for env_id in ("rhs-highway-slam-v0", "rhs-highway-v0"):
         out[env_id] = out["default"][env_id]
     out["ppo_slam_over_base"] = out["default"]["ppo_slam_over_base"]
     return out
+
+
+def _pooled_training(runs: list[dict]) -> dict:
+    """One env id's PPO runs pooled: rates as the harmonic mean (equal steps per run), times as the mean, and each
+    run's steady rate (``steady_runs``)."""
+
+    def harmonic(key: str) -> float:
+        return float(len(runs) / sum(1.0 / r[key] for r in runs))
+
+    pooled = {k: runs[0][k] for k in ("n_envs", "timesteps", "update_threads")}
+    pooled.update({k: harmonic(k) for k in ("steady_steps_per_s", "steps_per_s_learn")})
+    for k in ("steady_collect_s_per_rollout", "steady_update_s_per_rollout", "setup_s", "learn_s", "whole_run_s",
+              "startup_s"):
+        vals = [r[k] for r in runs if r[k] is not None]
+        pooled[k] = round(float(np.mean(vals)), 3) if vals else None
+    pooled["steady_runs"] = [round(r["steady_steps_per_s"], 2) for r in runs]
+    return pooled
 
 
 def _fmt(d: dict | None) -> str:
@@ -592,10 +616,14 @@ def _md_ratios(result: dict) -> list[str]:
                     lines.append(f"| `{k}` | {r['update_threads'] or 1} | {r['steady_steps_per_s']:.1f} | "
                                  f"{r['steady_collect_s_per_rollout']:.2f} / {r['steady_update_s_per_rollout']:.2f} | "
                                  f"{r['startup_s']:.1f} |")
+            rounds = (f" Pooled over {t['repeats']} rounds of the four runs (steady rates: harmonic mean); each "
+                      f"round's ratio: {', '.join(f'{x:.2f}' for x in t['default']['ratio_runs'])} (auto: "
+                      f"{', '.join(f'{x:.2f}' for x in t['update_threads_auto']['ratio_runs'])})."
+                      if t.get("repeats", 1) > 1 else "")
             lines += [f"PPO on the SLAM env over the base env, steady rate: {t['ppo_slam_over_base']:.2f} x (goal >= "
                       f"{GOALS['ppo_slam_over_base']}; with update_threads='auto': "
                       f"{t['update_threads_auto']['ppo_slam_over_base']:.2f} x). Start-up: the run's wall time less its "
-                      "steps at the steady rate.", ""]
+                      "steps at the steady rate." + rounds, ""]
         else:
             lines += ["| PPO, 2 subprocess envs | steps/s |", "|---|---:|"]
             lines += [f"| `{k}` | {t[k]['steps_per_s']:.1f} |" for k in ("rhs-highway-slam-v0", "rhs-highway-v0")]
@@ -698,7 +726,7 @@ def _run_section(sec: str, args: argparse.Namespace) -> dict:
         from rhs_studies.benchmark_patterns import benchmark_patterns
 
         return benchmark_patterns(grid_deg=1.0)
-    return bench_training(args.train_steps, args.seed)
+    return bench_training(args.train_steps, args.seed, args.train_repeats)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -710,6 +738,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="envs: runs in fresh processes, pooled (1: one run in this process)")
     ap.add_argument("--grid-deg", type=float, default=1.0)
     ap.add_argument("--train-steps", type=int, default=1024, help="PPO timesteps per env id (training section)")
+    ap.add_argument("--train-repeats", type=int, default=3,
+                    help="training: rounds of the four PPO runs, pooled")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--start-repeats", type=int, default=3,
                     help="cold and warm starts measured (start section; the median is the result)")
@@ -722,6 +752,8 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--start-repeats must be at least 1")
     if args.env_runs < 1:
         ap.error("--env-runs must be at least 1")
+    if args.train_repeats < 1:
+        ap.error("--train-repeats must be at least 1")
     started = time.time()
     commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
     result: dict = {

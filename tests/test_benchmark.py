@@ -128,3 +128,27 @@ def test_env_runs_in_fresh_processes_pool_into_one_record():
 def test_machine_scaling_times_one_and_two_spin_processes():
     m = benchmark.machine_scaling(repeats=1)
     assert len(m["two_over_one_runs"]) == 1 and 0.2 < m["two_over_one_median"] < 4.0  # two cores: about 1-2
+
+
+def test_training_rounds_pool_each_rate_and_keep_each_rounds_ratio(monkeypatch):
+    import agents.train
+
+    rates = iter([30.0, 50.0, 40.0, 60.0, 20.0, 50.0, 40.0, 60.0])  # (slam, base) x (auto, default) x 2 rounds
+
+    def fake_train(algo, env_id, timesteps, out, **kwargs):
+        rate = next(rates)
+        timing = {"update_threads": 2 if kwargs["update_threads"] else None, "setup_s": 1.0, "learn_s": timesteps / rate,
+                  "steady_steps_per_s": rate, "steady_collect_s_per_rollout": 5.0, "steady_update_s_per_rollout": 0.1}
+        return {"timesteps": timesteps, "steps_per_s": rate, "timing": timing}
+
+    monkeypatch.setattr(agents.train, "train", fake_train)
+    t = benchmark.bench_training(512, seed=0, repeats=2)
+    slam = t["default"]["rhs-highway-slam-v0"]
+    assert slam["steady_runs"] == [40.0, 40.0] and slam["steady_steps_per_s"] == pytest.approx(40.0)
+    auto_slam = t["update_threads_auto"]["rhs-highway-slam-v0"]
+    assert auto_slam["steady_steps_per_s"] == pytest.approx(2 / (1 / 30 + 1 / 20))  # steps over time: harmonic mean
+    assert t["update_threads_auto"]["ratio_runs"] == [0.6, 0.4]
+    assert t["ppo_slam_over_base"] == pytest.approx(40.0 / 60.0) and t["repeats"] == 2
+    assert t["rhs-highway-v0"] is t["default"]["rhs-highway-v0"]
+    text = "\n".join(benchmark._md_ratios({"training": t}))
+    assert "0.67 x" in text and "Pooled over 2 rounds" in text and "0.60, 0.40" in text
