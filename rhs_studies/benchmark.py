@@ -553,10 +553,10 @@ def _md_envs(result: dict) -> list[str]:
     if "radar_env_over_base" in e:
         before = (f" (numpy kernels: radar {e['radar_env_over_base_numpy_kernels']:.2f} x, SLAM "
                   f"{e['slam_env_over_base_numpy_kernels']:.2f} x)" if "radar_env_over_base_numpy_kernels" in e else "")
-        ci = {k: (f" [{e[f'{k}_env_over_base_ci'][0]:.2f}, {e[f'{k}_env_over_base_ci'][1]:.2f}]"
+        ci = {k: (f" [{e[f'{k}_env_over_base_ci'][0]:.3f}, {e[f'{k}_env_over_base_ci'][1]:.3f}]"
                   if f"{k}_env_over_base_ci" in e else "") for k in ("radar", "slam")}
-        lines.append(f"Steps/s over the base env: radar {e['radar_env_over_base']:.2f} x{ci['radar']} (goal >= "
-                     f"{GOALS['radar_env_over_base']}), SLAM {e['slam_env_over_base']:.2f} x{ci['slam']} (goal >= "
+        lines.append(f"Steps/s over the base env: radar {e['radar_env_over_base']:.3f} x{ci['radar']} (goal >= "
+                     f"{GOALS['radar_env_over_base']}), SLAM {e['slam_env_over_base']:.3f} x{ci['slam']} (goal >= "
                      f"{GOALS['slam_env_over_base']}){before}"
                      + ("; in brackets the 95 % bootstrap interval over the round-robin blocks" if ci["radar"] else "")
                      + (" of every run (runs resampled, then blocks)." if ci["radar"] and e.get("runs") else "."))
@@ -620,9 +620,9 @@ def _md_ratios(result: dict) -> list[str]:
                       f"round's ratio: {', '.join(f'{x:.2f}' for x in t['default']['ratio_runs'])} (auto: "
                       f"{', '.join(f'{x:.2f}' for x in t['update_threads_auto']['ratio_runs'])})."
                       if t.get("repeats", 1) > 1 else "")
-            lines += [f"PPO on the SLAM env over the base env, steady rate: {t['ppo_slam_over_base']:.2f} x (goal >= "
+            lines += [f"PPO on the SLAM env over the base env, steady rate: {t['ppo_slam_over_base']:.3f} x (goal >= "
                       f"{GOALS['ppo_slam_over_base']}; with update_threads='auto': "
-                      f"{t['update_threads_auto']['ppo_slam_over_base']:.2f} x). Start-up: the run's wall time less its "
+                      f"{t['update_threads_auto']['ppo_slam_over_base']:.3f} x). Start-up: the run's wall time less its "
                       "steps at the steady rate." + rounds, ""]
         else:
             lines += ["| PPO, 2 subprocess envs | steps/s |", "|---|---:|"]

@@ -151,4 +151,4 @@ def test_training_rounds_pool_each_rate_and_keep_each_rounds_ratio(monkeypatch):
     assert t["ppo_slam_over_base"] == pytest.approx(40.0 / 60.0) and t["repeats"] == 2
     assert t["rhs-highway-v0"] is t["default"]["rhs-highway-v0"]
     text = "\n".join(benchmark._md_ratios({"training": t}))
-    assert "0.67 x" in text and "Pooled over 2 rounds" in text and "0.60, 0.40" in text
+    assert "0.667 x" in text and "Pooled over 2 rounds" in text and "0.60, 0.40" in text
