@@ -15,7 +15,8 @@ in training, where the envs draw seeds 0.. and 20000.., nor by the held-out eval
 And variants of the headway driver itself (:class:`agents.expert.HeadwayDriverConfig`): ``headway_cruise30`` chooses
 target speeds up to 30 m/s (cruise speed 30 instead of 25) and accelerates with a 1 m/s margin (instead of 2);
 ``headway_cruise30_h1.2`` also holds a 1.2 s time gap (instead of 1.5). A student that sees the road through radar
-points copied the headway driver to within 1 of its return, so a faster headway driver is a teacher it can follow.
+points copied the headway driver to within 1 of its return; copying the 30 m/s one, it crashed in 7 of 50 validation
+episodes (``agents/hyperparams/dagger_cruise30.yml`` has the run): 5 m/s faster than the traffic, its mistakes crash.
 
 Per variant: mean return with its t interval, collisions with a Wilson interval, mean speed, seconds per decision.
 At every decision of the lookahead variants' own drives: the share where the teacher differs from the headway
