@@ -420,7 +420,7 @@ class RadarSystem:
         sqrt(-ln(1 - u1))``, phase ``2 pi u2``), the uniforms as 24-bit fractions
         of the generator's raw 64-bit draws (one draw gives u1 and u2 for two
         samples; cheaper than ``Generator.random`` in float32), the window
-        folded into the radius, then one in-place zero-padded FFT per chirp. With ``kernels="numba"`` the
+        folded into the radius, then one zero-padded FFT per chirp. With ``kernels="numba"`` the
         elementwise passes around numpy's ``log1p``, ``cos`` and ``sin`` (uniforms, radius, window, products)
         run fused (:func:`rhs_env.kernels.noise_uniforms`, :func:`rhs_env.kernels.noise_samples`) and the FFT
         pads each row itself (``n = Z N / D``: no zeros written to memory, 0.1-0.3 ms less per scan): the same

@@ -129,8 +129,11 @@ def test_the_teachers_study_writes_its_table_with_the_decision_statistics(tmp_pa
     from rhs_studies.teachers import main
 
     assert main(["--episodes", "2", "--duration", "2", "--workers", "1", "--variants", "headway", "lookahead",
-                 "--out-dir", str(tmp_path)]) == 0
+                 "headway_cruise30", "--out-dir", str(tmp_path)]) == 0
     result = json.loads((tmp_path / "teachers.json").read_text())
+    assert result["variants"]["headway_cruise30"] == {"driver": "headway",
+                                                      "config": {"cruise_speed_mps": 30.0, "margin_mps": 1.0}}
+    assert "differs_from_headway" not in result["rows"]["headway_cruise30"]  # a headway driver: no forecasts
     row = result["rows"]["lookahead"]
     assert row["decisions"] == 4 and 0.0 <= row["differs_from_headway"] <= 1.0 and 0.0 <= row["near_ties"] <= 1.0
     assert "differs_from_headway" not in result["rows"]["headway"]
