@@ -16,7 +16,8 @@ And variants of the headway driver itself (:class:`agents.expert.HeadwayDriverCo
 target speeds up to 30 m/s (cruise speed 30 instead of 25) and accelerates with a 1 m/s margin (instead of 2);
 ``headway_cruise30_h1.2`` also holds a 1.2 s time gap (instead of 1.5). A student that sees the road through radar
 points copied the headway driver to within 1 of its return; copying the 30 m/s one, it crashed in 7 of 50 validation
-episodes (``agents/hyperparams/dagger_cruise30.yml`` has the run): 5 m/s faster than the traffic, its mistakes crash.
+episodes after 40k env steps and again after 80k (``agents/hyperparams/dagger_cruise30.yml`` has the runs): 5 m/s
+faster than the traffic, its mistakes crash.
 
 Per variant: mean return with its t interval, collisions with a Wilson interval, mean speed, seconds per decision.
 At every decision of the lookahead variants' own drives: the share where the teacher differs from the headway
