@@ -141,3 +141,21 @@ def test_the_teachers_study_writes_its_table_with_the_decision_statistics(tmp_pa
     assert "| LookaheadDriver, 0.6 s margin (as shipped) |" in (tmp_path / "teachers.md").read_text()
     with pytest.raises(SystemExit):
         main(["--variants", "lookahead", "--out-dir", str(tmp_path)])
+
+
+def test_a_headway_variant_of_the_teachers_study_drives_with_its_own_settings(monkeypatch):
+    import agents.expert
+    from rhs_studies.teachers import VARIANTS, drive
+
+    made = []
+
+    class Recording(agents.expert.HeadwayDriver):
+        def __init__(self, env, config=None):
+            super().__init__(env, config)
+            made.append(self.config)
+
+    monkeypatch.setattr(agents.expert, "HeadwayDriver", Recording)
+    run = drive("headway_cruise30", 4000, duration=0.4)
+    assert run["steps"] == 2 and len(made) == 1
+    assert made[0].cruise_speed_mps == 30.0 and made[0].margin_mps == 1.0
+    assert VARIANTS["headway_cruise30"] == ("headway", {"cruise_speed_mps": 30.0, "margin_mps": 1.0})
