@@ -178,7 +178,8 @@ def category(rec: dict[str, Any]) -> str:
     return "seen, student disagreed" if (rec.get("hazard_points") or 0) > 0 else "not seen"
 
 
-def _chunk(policy: str, seeds: list[int], margin: float, window: int, env_kwargs: dict | None = None) -> list[dict]:
+def _chunk(policy: str, seeds: list[int], margin: float, window: int, env_kwargs: dict | None = None,
+           expert: dict | None = None) -> list[dict]:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import rhs_env  # noqa: F401
     from agents.decision import HeldPolicy
@@ -190,19 +191,20 @@ def _chunk(policy: str, seeds: list[int], margin: float, window: int, env_kwargs
     try:
         model = load_policy(policy, env, 0)
         k = model.k if isinstance(model, HeldPolicy) else 1
-        labelled = LabelledPolicy(model, HeadwayDriver(env), env, k)
+        labelled = LabelledPolicy(model, HeadwayDriver(env, expert), env, k)
         return [run_labelled(env, labelled, s, margin, window) for s in seeds]
     finally:
         env.close()
 
 
-def run_seeds(policy: str, seeds: list[int], margin: float, window: int, workers: int) -> list[dict]:
+def run_seeds(policy: str, seeds: list[int], margin: float, window: int, workers: int,
+              expert: dict | None = None) -> list[dict]:
     """Episodes on ``seeds``, in ``workers`` contiguous chunks (:func:`rhs_env.parallel.parallel_map`)."""
     from rhs_env.parallel import parallel_map
 
     k = -(-len(seeds) // workers)
     parts = [seeds[i : i + k] for i in range(0, len(seeds), k)]
-    done = parallel_map(_chunk, [(policy, part, margin, window) for part in parts], workers)
+    done = parallel_map(_chunk, [(policy, part, margin, window, None, expert) for part in parts], workers)
     return [r for part in done for r in part]
 
 
@@ -245,8 +247,10 @@ def _block_text(lo: int, hi: int) -> str:
 def markdown(result: dict) -> str:
     """The README text: one summary row per policy, then every crash with the student's and expert's decisions."""
     blocks = _blocks(result)
+    expert = result.get("expert")
+    teacher = f"; the expert: the headway driver with {json.dumps(expert)}" if expert else ""
     lines = [f"Seeds {', '.join(_block_text(*b) for b in blocks)}; agreement: the share of the student's decisions "
-             "that match the expert's label, on its own states (in the episodes that crash).", "",
+             f"that match the expert's label, on its own states (in the episodes that crash){teacher}.", "",
              "| policy | training env steps | " + " | ".join(f"collisions, seeds {_block_text(*b)}" for b in blocks)
              + " | collisions, all | Fisher p vs first | agreement | categories (seen, student disagreed / not seen / expert too) |",
              "|---|---:|" + "---:|" * len(blocks) + "---:|---:|---|---|"]
@@ -299,6 +303,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--margin-m", type=float, default=1.0, help="the hit vehicle's box grown by this each side, m")
     ap.add_argument("--window", type=int, default=3, help="the student's last decisions before a crash that are examined")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--expert", type=json.loads, default=None, metavar="JSON",
+                    help='the headway driver\'s settings (agents.expert.HeadwayDriverConfig), e.g. '
+                         '\'{"cruise_speed_mps": 30, "margin_mps": 1}\' for the faster teacher (default: its defaults)')
     ap.add_argument("--out", default=str(ROOT / "results" / "crash_analysis.json"))
     args = ap.parse_args(argv)
     if args.episodes < 1:
@@ -317,10 +324,10 @@ def main(argv: list[str] | None = None) -> int:
     policies = []
     for policy in args.policy:
         print(f"crash_analysis: {policy} on {len(seeds)} seeds", file=sys.stderr)
-        runs = run_seeds(policy, seeds, args.margin_m, args.window, args.workers)
+        runs = run_seeds(policy, seeds, args.margin_m, args.window, args.workers, args.expert)
         policies.append({"policy": policy, "timesteps": training_steps(policy), "summary": summarize(runs), "runs": runs})
     result = {"seed_starts": args.seeds, "episodes": args.episodes, "margin_m": args.margin_m, "window": args.window,
-              "policies": policies}
+              "expert": args.expert, "policies": policies}
     out = Path(args.out)
     write_json(out, result, __file__, args, started, fingerprint, argv)
     out.with_suffix(".md").write_text(markdown(result))

@@ -56,6 +56,22 @@ def test_summary_and_markdown():
     assert "| `p.zip` | 40000 | 1/2 | 1/2 | - | 80.0 % (70.0 %) | 1 / 0 / 0 |" in md
     assert "| `q.zip` | - | 0/2 | 0/2 | 1.000 | 92.5 % | 0 / 0 / 0 |" in md
     assert "| p (40000) | 2001 | IDLE, LANE_LEFT | IDLE, SLOWER | 85 | (6.5, 4.0) | 2 | seen, student disagreed |" in md
+    assert "the expert: the headway driver" not in md
+    faster = ca.markdown({"seed_starts": [2000], "episodes": 2, "margin_m": 1.0, "window": 2,
+                          "expert": {"cruise_speed_mps": 30.0}, "policies": [{"policy": "q.zip", "timesteps": None,
+                                                                               "summary": ca.summarize(clean), "runs": clean}]})
+    assert 'the expert: the headway driver with {"cruise_speed_mps": 30.0}.' in faster
+
+
+def test_expert_settings_reach_the_labelling_driver(monkeypatch, tmp_path):
+    seen = []
+    monkeypatch.setattr(ca, "run_seeds", lambda policy, seeds, margin, window, workers, expert=None: seen.append(expert) or [])
+    monkeypatch.setattr(ca, "write_json", lambda out, result, *a: None)
+    monkeypatch.setattr(ca, "markdown", lambda result: "")
+    monkeypatch.setattr(ca, "summarize", lambda runs: {})
+    ca.main(["--policy", __file__, "--episodes", "1", "--expert", '{"cruise_speed_mps": 30, "margin_mps": 1}',
+             "--out", str(tmp_path / "crash.json")])
+    assert seen == [{"cruise_speed_mps": 30, "margin_mps": 1}]
 
 
 def test_fisher_p_separates_9_from_1_in_100():
