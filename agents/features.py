@@ -9,6 +9,7 @@ x, y / 50 m, radial velocity / 30 m/s, amplitude -> log10(1 + a) / 3, range and
 angle std -> log10(std) / 6 (std floored at 1e-6), radar index / 3. A point set
 with fewer columns (policies trained on x, y, radial velocity, amplitude) uses the
 first scales only.
+The SLAM's Doppler ``velocity`` (when the env adds it) is scaled by 30 m/s, 5 m/s and 0.5 rad/s.
 Of the SLAM ``pose`` only the lateral offset y and the heading are used: the
 along-road x grows without bound over an episode (about 1 km in 40 s) and says
 nothing about the traffic around the vehicle.
@@ -25,7 +26,7 @@ from torch import nn
 # per-column scale of known set keys (x, y, radial velocity, amplitude, range std, angle std, radar)
 # and (x, y): a number divides, None is log10(1 + a) / 3, "log" is log10(max(x, 1e-6)) / 6
 SET_SCALES = {"points": (50.0, 50.0, 30.0, None, "log", "log", 3.0), "landmarks": (50.0, 50.0)}
-BOX_SCALES = {"pose": (100.0, 10.0, np.pi), "pose_std": (5.0, 5.0, 0.5)}
+BOX_SCALES = {"pose": (100.0, 10.0, np.pi), "pose_std": (5.0, 5.0, 0.5), "velocity": (30.0, 5.0, 0.5)}
 # columns of a Box key that the extractor uses (default: all)
 BOX_COLUMNS = {"pose": (1, 2)}
 

@@ -548,7 +548,8 @@ def load_student(model, path: str | Path) -> dict[str, Any]:
     """Copy the weights of the student zip ``path`` into ``model``'s policy; returns the zip's metadata (or {}).
 
     Raises ``FileNotFoundError`` for a missing zip and ``ValueError`` when its observation space or
-    network differs from ``model``'s (a continuation needs the same student).
+    network differs from ``model``'s (a continuation needs the same student), except for Box keys that
+    ``model``'s observation adds (:func:`widened_state`).
     """
     from stable_baselines3 import PPO
 
@@ -558,14 +559,54 @@ def load_student(model, path: str | Path) -> dict[str, Any]:
     if not path.exists():
         raise FileNotFoundError(f"init_policy: no such student zip: {path}")
     parent = PPO.load(path, device="cpu")
+    state = parent.policy.state_dict()
     if parent.observation_space != model.observation_space:
-        raise ValueError(f"init_policy: {path} was trained on another observation space "
-                         f"({parent.observation_space} vs {model.observation_space})")
+        state = widened_state(parent, model, path)
     try:
-        model.policy.load_state_dict(parent.policy.state_dict())
+        model.policy.load_state_dict(state)
     except RuntimeError as exc:
         raise ValueError(f"init_policy: {path} has another network than the YAML's policy_kwargs: {exc}") from None
     return policy_metadata(path)
+
+
+def widened_state(parent, model, path: str | Path) -> dict[str, Any]:
+    """``parent``'s weights for ``model``, whose observation has Box keys that ``parent``'s lacks (e.g. ``velocity``).
+
+    The new keys enter :class:`agents.features.PointSetExtractor`'s ``box_net`` only: its first layer gets zero
+    weights on their columns and ``parent``'s on the others, so ``model`` starts as the same function of the
+    observation as ``parent`` and learns what the new keys add. Any other difference of the observation spaces
+    (a key removed or changed, a new point set) is a ``ValueError``.
+    """
+    import torch
+    from gymnasium import spaces
+
+    from agents.features import PointSetExtractor
+
+    old, new = parent.observation_space, model.observation_space
+    extra = [k for k in new.spaces if k not in old.spaces]
+    shared = all(k in new.spaces and new[k] == old[k] for k in old.spaces)
+    if not (isinstance(old, spaces.Dict) and isinstance(new, spaces.Dict) and shared and extra
+            and all(isinstance(new[k], spaces.Box) and not k.endswith("_mask") and f"{k}_mask" not in new.spaces
+                    for k in extra)):
+        raise ValueError(f"init_policy: {path} was trained on another observation space "
+                         f"({old} vs {new})")
+
+    def columns(space) -> dict[str, slice]:
+        out, at = {}, 0
+        for k in (k for k in space.spaces if not k.endswith("_mask") and f"{k}_mask" not in space.spaces):
+            width = PointSetExtractor._box_width(k, space[k])
+            out[k], at = slice(at, at + width), at + width
+        return out
+
+    old_cols, new_cols = columns(old), columns(new)
+    state, target = parent.policy.state_dict(), model.policy.state_dict()
+    for name, value in target.items():
+        if name.endswith("box_net.0.weight") and name in state and state[name].shape != value.shape:
+            w = torch.zeros_like(value)
+            for k, cols in old_cols.items():
+                w[:, new_cols[k]] = state[name][:, cols]
+            state[name] = w
+    return state
 
 
 def _new(data: Dataset, start: int) -> tuple[Any, np.ndarray]:

@@ -13,7 +13,11 @@ Observation, adding to the radar's keys:
 * ``landmarks`` (L_max, 2): estimated landmarks in the *estimated vehicle frame*, nearest first;
 * ``landmarks_mask`` (L_max,);
 * with ``health_in_obs=True`` (off by default: the shipped policies were trained without it)
-  ``slam_health`` (1,) and ``slam_lost`` (1,).
+  ``slam_health`` (1,) and ``slam_lost`` (1,);
+* with ``velocity_in_obs=True`` (off by default, likewise) ``velocity`` (3,): the ego velocity the pipeline
+  fits to the Doppler of static points (:mod:`slam.core.pipeline`, step 1), vx, vy (m/s, vehicle frame, x
+  forward) and yaw rate (rad/s); zeros until the first fit. A car's own speed, which one frame of points
+  gives a policy only through the static points' Doppler.
 
 ``info`` always gets the track health (:mod:`slam.core.health`): ``slam_health`` in [0, 1],
 ``slam_lost`` (the filter has lost the car since a loss it has not relocalised from),
@@ -71,6 +75,7 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         max_landmarks: L_max, rows of the ``landmarks`` observation, [1, 4096].
         stage_times_in_info: add ``slam_stage_times`` to ``info`` (non-deterministic values).
         health_in_obs: add ``slam_health`` and ``slam_lost`` to the observation.
+        velocity_in_obs: add ``velocity`` (the Doppler ego velocity: vx, vy m/s, yaw rate rad/s) to the observation.
         blas_threads: BLAS / OpenMP threads inside ``step`` / ``reset``, restored after
             each call (:mod:`rhs_common.threads`); default 1, ``None`` leaves them alone.
 
@@ -95,11 +100,12 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         stage_times_in_info: bool = False,
         blas_threads: int | None = 1,
         health_in_obs: bool = False,
+        velocity_in_obs: bool = False,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self, slam=slam, registration=registration, icp=icp, pipeline=pipeline,
             max_landmarks=max_landmarks, stage_times_in_info=stage_times_in_info, blas_threads=blas_threads,
-            health_in_obs=health_in_obs,
+            health_in_obs=health_in_obs, velocity_in_obs=velocity_in_obs,
         )
         gym.ObservationWrapper.__init__(self, env)
         space = env.observation_space
@@ -109,6 +115,8 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         check_bool("stage_times_in_info", stage_times_in_info)
         check_bool("health_in_obs", health_in_obs)
         self.health_in_obs = bool(health_in_obs)
+        check_bool("velocity_in_obs", velocity_in_obs)
+        self.velocity_in_obs = bool(velocity_in_obs)
         self.blas_threads = check_blas_threads(blas_threads)
         self.slam_config = build(SlamConfig, slam, "slam")
         self.icp_config = build(ICPConfig, icp, "icp")
@@ -136,6 +144,7 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
                     if self.health_in_obs
                     else {}
                 ),
+                **({"velocity": spaces.Box(-big, big, (3,), np.float32)} if self.velocity_in_obs else {}),
             }
         )
         self._reset_state()
@@ -219,6 +228,9 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             health = self.pipeline.health
             out["slam_health"] = np.array([health.health], dtype=np.float32)
             out["slam_lost"] = np.array([int(health.lost)], dtype=np.int8)
+        if self.velocity_in_obs:
+            v = self.pipeline.velocity
+            out["velocity"] = np.zeros(3, np.float32) if v is None else np.asarray(v, dtype=np.float32)
         return out
 
     def _with_info(self, info: dict[str, Any]) -> dict[str, Any]:
