@@ -320,3 +320,56 @@ def test_labels_between_decisions_come_with_the_next_decision_and_add_samples_no
     assert 30 < last["samples"] <= 90  # an episode cut short by a crash has fewer states between
     with pytest.raises(TypeError, match="label_between"):
         DaggerConfig(label_between="yes")
+
+
+class _Sets(gym.Env):
+    """A point set and a pose (and, with ``velocity``, a third Box key): what a student's extractor reads."""
+
+    def __init__(self, velocity: bool = False, drop_pose: bool = False):
+        keys = {"points": gym.spaces.Box(-50.0, 50.0, (8, 7), np.float32), "points_mask": gym.spaces.MultiBinary(8)}
+        if not drop_pose:
+            keys["pose"] = gym.spaces.Box(-1e5, 1e5, (3,), np.float32)
+        keys["pose_std"] = gym.spaces.Box(0.0, 1e5, (3,), np.float32)
+        if velocity:
+            keys["velocity"] = gym.spaces.Box(-1e5, 1e5, (3,), np.float32)
+        self.observation_space = gym.spaces.Dict(keys)
+        self.action_space = gym.spaces.Discrete(5)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return self.observation_space.sample(), {}
+
+    def step(self, action):
+        return self.observation_space.sample(), 0.0, False, False, {}
+
+
+def test_a_student_continues_onto_an_added_box_key_as_the_same_function(tmp_path):
+    """``velocity_in_obs``: the parent's weights, zero on the new key's columns: the same logits whatever it holds."""
+    import torch
+    from stable_baselines3 import PPO
+
+    from agents.features import PointSetExtractor
+    from agents.imitation import load_student
+
+    kw = {"features_extractor_class": PointSetExtractor, "features_extractor_kwargs": {"point_dim": 8, "box_dim": 4},
+          "net_arch": [8]}
+    parent = PPO("MultiInputPolicy", _Sets(), seed=1, device="cpu", policy_kwargs=kw, n_steps=16, batch_size=16)
+    parent.save(tmp_path / "parent.zip")
+    child = PPO("MultiInputPolicy", _Sets(velocity=True), seed=2, device="cpu", policy_kwargs=kw, n_steps=16,
+                batch_size=16)
+    load_student(child, tmp_path / "parent.zip")
+    space = child.observation_space
+    space.seed(0)
+    for _ in range(4):
+        obs = space.sample()
+        old = {k: v for k, v in obs.items() if k != "velocity"}
+        with torch.no_grad():
+            a = child.policy.get_distribution(child.policy.obs_to_tensor(obs)[0]).distribution.logits
+            b = parent.policy.get_distribution(parent.policy.obs_to_tensor(old)[0]).distribution.logits
+        assert torch.allclose(a, b, atol=1e-6)
+    w = child.policy.state_dict()["features_extractor.box_net.0.weight"]
+    assert w.shape == (4, 2 + 3 + 3) and torch.all(w[:, 5:] == 0) and torch.any(w[:, :5] != 0)  # pose: y, heading
+    dropped = PPO("MultiInputPolicy", _Sets(velocity=True, drop_pose=True), device="cpu", policy_kwargs=kw,
+                  n_steps=16, batch_size=16)
+    with pytest.raises(ValueError, match="another observation space"):
+        load_student(dropped, tmp_path / "parent.zip")

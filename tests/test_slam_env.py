@@ -132,6 +132,21 @@ def test_observation_keys_shapes_dtypes(env_id):
     env.close()
 
 
+def test_doppler_velocity_in_the_observation_is_opt_in_and_reads_the_car_speed():
+    env = make(HIGHWAY_SLAM, velocity_in_obs=True)
+    assert set(env.observation_space.spaces) == SLAM_KEYS | {"velocity"}
+    steps = rollout(env, seed=3, steps=6)
+    speed = float(env.unwrapped.vehicle.speed)
+    for obs in (s[0] for s in steps):
+        assert env.observation_space.contains(obs) and obs["velocity"].dtype == np.float32
+    vx, vy, yaw_rate = steps[-1][0]["velocity"]
+    assert abs(vx - speed) < 0.5 and abs(vy) < 0.5 and abs(yaw_rate) < 0.05  # straight, at the car's speed (m/s)
+    env.close()
+    assert "velocity" not in make(HIGHWAY_SLAM).observation_space.spaces
+    with pytest.raises((TypeError, ValueError), match="velocity_in_obs"):
+        make(HIGHWAY_SLAM, velocity_in_obs="yes")
+
+
 def test_reset_pose_is_map_origin_and_info_is_consistent():
     env = make(PAPER)
     obs, info = env.reset(seed=0)
