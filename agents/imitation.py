@@ -583,13 +583,14 @@ def widened_state(parent, model, path: str | Path) -> dict[str, Any]:
     from agents.features import PointSetExtractor
 
     old, new = parent.observation_space, model.observation_space
+    error = ValueError(f"init_policy: {path} was trained on another observation space ({old} vs {new})")
+    if not (isinstance(old, spaces.Dict) and isinstance(new, spaces.Dict)):
+        raise error
     extra = [k for k in new.spaces if k not in old.spaces]
     shared = all(k in new.spaces and new[k] == old[k] for k in old.spaces)
-    if not (isinstance(old, spaces.Dict) and isinstance(new, spaces.Dict) and shared and extra
-            and all(isinstance(new[k], spaces.Box) and not k.endswith("_mask") and f"{k}_mask" not in new.spaces
-                    for k in extra)):
-        raise ValueError(f"init_policy: {path} was trained on another observation space "
-                         f"({old} vs {new})")
+    if not (shared and extra and all(isinstance(new[k], spaces.Box) and not k.endswith("_mask")
+                                     and f"{k}_mask" not in new.spaces for k in extra)):
+        raise error
 
     def columns(space) -> dict[str, slice]:
         out, at = {}, 0
@@ -600,12 +601,15 @@ def widened_state(parent, model, path: str | Path) -> dict[str, Any]:
 
     old_cols, new_cols = columns(old), columns(new)
     state, target = parent.policy.state_dict(), model.policy.state_dict()
+    widened = False
     for name, value in target.items():
         if name.endswith("box_net.0.weight") and name in state and state[name].shape != value.shape:
             w = torch.zeros_like(value)
             for k, cols in old_cols.items():
                 w[:, new_cols[k]] = state[name][:, cols]
-            state[name] = w
+            state[name], widened = w, True
+    if not widened:  # not a PointSetExtractor student: nothing takes the new keys in
+        raise error
     return state
 
 

@@ -373,3 +373,9 @@ def test_a_student_continues_onto_an_added_box_key_as_the_same_function(tmp_path
                   n_steps=16, batch_size=16)
     with pytest.raises(ValueError, match="another observation space"):
         load_student(dropped, tmp_path / "parent.zip")
+    flat = PPO("MlpPolicy", gym.make("CartPole-v1"), device="cpu", n_steps=16, batch_size=16)
+    with pytest.raises(ValueError, match="another observation space"):
+        load_student(flat, tmp_path / "parent.zip")
+    combined = PPO("MultiInputPolicy", _Sets(velocity=True), device="cpu", n_steps=16, batch_size=16)
+    with pytest.raises(ValueError, match="another observation space"):  # SB3's extractor: no box_net to widen
+        load_student(combined, tmp_path / "parent.zip")
