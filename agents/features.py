@@ -47,12 +47,24 @@ def _scale_set(key: str, x: torch.Tensor) -> torch.Tensor:
     return torch.stack(cols, dim=-1)
 
 
+def box_layout(space: gym.spaces.Dict) -> dict[str, slice]:
+    """The columns of each Box key (every key that is neither a set ``K`` with a ``K_mask`` nor a mask) in the
+    vector :class:`PointSetExtractor`'s box layer reads, in the space's key order."""
+    out, at = {}, 0
+    for k in space.spaces:
+        if not k.endswith("_mask") and f"{k}_mask" not in space.spaces:
+            width = PointSetExtractor._box_width(k, space[k])
+            out[k], at = slice(at, at + width), at + width
+    return out
+
+
 class PointSetExtractor(BaseFeaturesExtractor):
     """Masked PointNet over every ``K`` / ``K_mask`` pair, concatenated with the flattened other keys."""
 
     def __init__(self, observation_space: gym.spaces.Dict, point_dim: int = 64, box_dim: int = 32):
         set_keys = [k for k in observation_space.spaces if f"{k}_mask" in observation_space.spaces]
-        box_keys = [k for k in observation_space.spaces if k not in set_keys and not k.endswith("_mask")]
+        layout = box_layout(observation_space)
+        box_keys = list(layout)
         total = 2 * point_dim * len(set_keys) + (box_dim if box_keys else 0)
         super().__init__(observation_space, features_dim=total)
         self.set_keys, self.box_keys = set_keys, box_keys
@@ -67,7 +79,7 @@ class PointSetExtractor(BaseFeaturesExtractor):
                 for k in set_keys
             }
         )
-        box_in = sum(self._box_width(k, observation_space[k]) for k in box_keys)
+        box_in = sum(cols.stop - cols.start for cols in layout.values())
         self.box_net = nn.Sequential(nn.Linear(box_in, box_dim), nn.ReLU()) if box_keys else None
 
     @staticmethod

@@ -559,9 +559,8 @@ def load_student(model, path: str | Path) -> dict[str, Any]:
     if not path.exists():
         raise FileNotFoundError(f"init_policy: no such student zip: {path}")
     parent = PPO.load(path, device="cpu")
-    state = parent.policy.state_dict()
-    if parent.observation_space != model.observation_space:
-        state = widened_state(parent, model, path)
+    same = parent.observation_space == model.observation_space
+    state = parent.policy.state_dict() if same else widened_state(parent, model, path)
     try:
         model.policy.load_state_dict(state)
     except RuntimeError as exc:
@@ -580,26 +579,17 @@ def widened_state(parent, model, path: str | Path) -> dict[str, Any]:
     import torch
     from gymnasium import spaces
 
-    from agents.features import PointSetExtractor
+    from agents.features import box_layout
 
     old, new = parent.observation_space, model.observation_space
     error = ValueError(f"init_policy: {path} was trained on another observation space ({old} vs {new})")
     if not (isinstance(old, spaces.Dict) and isinstance(new, spaces.Dict)):
         raise error
+    old_cols, new_cols = box_layout(old), box_layout(new)
     extra = [k for k in new.spaces if k not in old.spaces]
     shared = all(k in new.spaces and new[k] == old[k] for k in old.spaces)
-    if not (shared and extra and all(isinstance(new[k], spaces.Box) and not k.endswith("_mask")
-                                     and f"{k}_mask" not in new.spaces for k in extra)):
+    if not (shared and extra and all(isinstance(new[k], spaces.Box) and k in new_cols for k in extra)):
         raise error
-
-    def columns(space) -> dict[str, slice]:
-        out, at = {}, 0
-        for k in (k for k in space.spaces if not k.endswith("_mask") and f"{k}_mask" not in space.spaces):
-            width = PointSetExtractor._box_width(k, space[k])
-            out[k], at = slice(at, at + width), at + width
-        return out
-
-    old_cols, new_cols = columns(old), columns(new)
     state, target = parent.policy.state_dict(), model.policy.state_dict()
     widened = False
     for name, value in target.items():

@@ -78,3 +78,26 @@ def test_fisher_p_separates_9_from_1_in_100():
     a, b = {"collisions": 9, "episodes": 100}, {"collisions": 1, "episodes": 100}
     assert ca.fisher_p(a, b) == pytest.approx(0.0183, abs=5e-4)
     assert ca.fisher_p(a, a) == pytest.approx(1.0)
+
+
+def test_run_seeds_labels_with_a_headway_driver_of_those_settings(monkeypatch):
+    """run_seeds -> _chunk -> HeadwayDriver(env, expert): the settings reach the driver that labels the decisions."""
+    import agents.evaluate
+    import agents.expert
+
+    class Env:
+        def close(self):
+            pass
+
+    made = []
+    monkeypatch.setattr(agents.evaluate, "resolve_env", lambda policy, env_id, kwargs: ("rhs-highway-slam-v0", {}))
+    monkeypatch.setattr(agents.evaluate, "make_env", lambda env_id, kwargs: Env())
+    monkeypatch.setattr(agents.evaluate, "load_policy", lambda policy, env, seed: SimpleNamespace())
+    monkeypatch.setattr(agents.expert, "HeadwayDriver", lambda env, config=None: made.append(config) or "driver")
+    monkeypatch.setattr(ca, "run_labelled", lambda env, labelled, seed, margin, window: {"seed": seed,
+                                                                                       "expert": labelled.expert})
+    runs = ca.run_seeds("p.zip", [7, 8], 1.0, 3, 1, {"cruise_speed_mps": 30})
+    assert made == [{"cruise_speed_mps": 30}] and [r["seed"] for r in runs] == [7, 8]
+    made.clear()
+    ca.run_seeds("p.zip", [7], 1.0, 3, 1)
+    assert made == [None]  # the driver's defaults
