@@ -275,13 +275,15 @@ def warm_kernels(env_id: str, env_kwargs: dict[str, Any], steps: int = WARM_STEP
 
     On an empty kernel cache each worker would compile every kernel itself; this steps one env of
     ``env_id`` (with ``env_kwargs``) ``steps`` times in this process, once per cache and config
-    (:func:`rhs_common.jit.warm_cache`), so the workers load the cache. The base highway env has no kernels.
+    (:func:`rhs_common.jit.warm_cache`), so the workers load the cache. Where the SLAM env's background compile
+    was still compiling the one-call OMP (:data:`rhs_env.kernels.omp_doppler_tiered`), it waits for that and steps
+    once more, so the workers start on it. The base highway env has no kernels.
     """
     import gymnasium as gym
 
     import rhs_env  # noqa: F401
     from rhs_common.jit import warm_cache
-    from rhs_env.kernels import lstsq
+    from rhs_env.kernels import lstsq, omp_doppler_tiered
     from rhs_env.registration import HIGHWAY_ID
 
     bare = env_id.split(":", 1)[-1]
@@ -293,7 +295,9 @@ def warm_kernels(env_id: str, env_kwargs: dict[str, Any], steps: int = WARM_STEP
         try:
             env.reset(seed=0)
             env.action_space.seed(0)
-            for n in range(steps):
+            for n in range(steps + 1):
+                if n == steps and not omp_doppler_tiered.wait_for_background():
+                    break  # else one step more, on the one-call OMP the background compile cached
                 _, _, term, trunc, _ = env.step(env.action_space.sample())
                 if term or trunc:
                     env.reset(seed=n + 1)

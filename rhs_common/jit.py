@@ -23,6 +23,13 @@ Vector envs. Worker processes started on an empty cache would each compile every
 (seconds of CPU per worker); :func:`warm_cache` runs a workload once in the parent first, so the
 workers only load (``agents.run_setup.make_vec_env`` does it before its subprocess workers start).
 
+Tiers. A kernel that strings ten compiled stages together (the OMP) costs seconds more to compile than
+its stages (numba links every callee's code into the caller's module and optimises the whole tree
+again). :class:`Tiered` runs such a kernel's own source in the interpreter on its compiled stages
+(:func:`python_body`: the same stages, in the same order, on the same arrays) while a background
+process compiles it (:func:`background_compile_running`: a lock file beside the kernel's cache), and the
+compiled kernel from then on.
+
 ``NUMBA_DISABLE_JIT=1`` runs the kernels as the plain Python functions they are
 (the tests use it to cover their source).
 """
@@ -32,6 +39,8 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import time
+import types
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -39,12 +48,19 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     import numpy as np
 
-__all__ = ["KERNELS", "NOTICE", "njit", "numba_module", "sort_small", "warm_cache", "watch_compiles"]
+__all__ = [
+    "COMPILE_LOCK", "KERNELS", "LOCK_STALE_S", "NOTICE", "Tiered", "background_compile_running", "cache_index", "njit",
+    "numba_module", "python_body", "sort_small", "warm_cache", "watch_compiles",
+]
 
 #: the kernel implementations a config may choose: compiled (default) or the numpy reference
 KERNELS = ("numba", "numpy")
 NOTICE = "rhs-slam: compiling the radar / SLAM kernels (first run on this machine, cached afterwards) ..."
 _PACKAGE_ROOT = Path(__file__).resolve().parent.parent
+#: the lock file a background compile keeps beside the cache index of the kernel it compiles last
+COMPILE_LOCK = "rhs-slam-background-compile.lock"
+#: a lock file older than this (s) belongs to a background compile that died: another may start
+LOCK_STALE_S = 300.0
 
 
 def _project_kernel(ev: Any) -> str:
@@ -179,12 +195,10 @@ def warm_cache(run: Callable[[], Any], probe: Any, key: str = "") -> bool:
     import hashlib
 
     numba = _numba()
-    if numba.config.DISABLE_JIT:
+    index = cache_index(probe)
+    if numba.config.DISABLE_JIT or index is None:  # no on-disk cache
         return False
-    try:
-        folder = Path(probe._cache._cache_file._index_path).parent
-    except AttributeError:  # no on-disk cache (not a cached dispatcher)
-        return False
+    folder = index.parent
     digest = hashlib.sha256(f"{key}|{numba.__version__}".encode())
     for module in ("rhs_env/kernels.py", "slam/core/kernels.py", "rhs_common/jit.py", "rhs_common/native.py"):
         source = _PACKAGE_ROOT / module
@@ -200,3 +214,109 @@ def warm_cache(run: Callable[[], Any], probe: Any, key: str = "") -> bool:
     except OSError:  # a cache folder we may not write: the next parent warms again
         pass
     return True
+
+
+def cache_index(kernel: Any) -> Path | None:
+    """The on-disk cache index of a compiled kernel (written once a first signature is compiled); None without one."""
+    try:
+        return Path(kernel._cache._cache_file._index_path)
+    except AttributeError:  # not a cached dispatcher (NUMBA_DISABLE_JIT=1, a plain function)
+        return None
+
+
+def background_compile_running(kernel: Any) -> bool:
+    """Whether a background compile holds the lock beside ``kernel``'s cache (:data:`COMPILE_LOCK`, written by
+    :func:`slam.gym.precompile.start`): the file exists, is younger than :data:`LOCK_STALE_S` and names a live process."""
+    index = cache_index(kernel)
+    if index is None:
+        return False
+    lock = index.parent / COMPILE_LOCK
+    try:
+        pid = lock.read_text().strip()
+        age = time.time() - lock.stat().st_mtime
+    except OSError:
+        return False
+    if age > LOCK_STALE_S:
+        return False
+    if pid.isdigit() and sys.platform != "win32":  # (os.kill(pid, 0) on Windows is a Ctrl-C)
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            return False
+        except PermissionError:  # alive, another user's
+            pass
+    return True
+
+
+def python_body(kernel: Any, *python_callees: str) -> Callable:
+    """``kernel``'s own source run by the interpreter; the kernels it calls stay compiled, except ``python_callees``
+    (names of module-level kernels it calls), which run as Python bodies too.
+
+    Every floating-point operation of the callees runs in their compiled code; the body itself copies,
+    selects and loops, so it computes the same bits as the compiled kernel (tested for the OMP). A plain
+    function (``NUMBA_DISABLE_JIT=1``) is returned as it is.
+
+    Example:
+        >>> import numpy as np
+        >>> from rhs_common.jit import njit, python_body
+        >>> double = njit(lambda v: 2.0 * v)
+        >>> def total(v):
+        ...     return double(v).sum()
+        >>> body = python_body(njit(total))
+        >>> float(body(np.arange(3.0)))
+        6.0
+    """
+    func = getattr(kernel, "py_func", kernel)
+    if func is kernel and not python_callees:
+        return func
+    scope = dict(func.__globals__)
+    for name in python_callees:
+        scope[name] = getattr(scope[name], "py_func", scope[name])
+    return types.FunctionType(func.__code__, scope, func.__name__, func.__defaults__, func.__closure__)
+
+
+class Tiered:
+    """A compiled kernel that, while a background process compiles it, runs as its :func:`python_body`.
+
+    ``mode``: ``"auto"`` (default) calls the compiled kernel once it is compiled in this process, or its
+    cache index exists (the call loads it), or no background compile is running
+    (:func:`background_compile_running`: then this process compiles it, as any kernel); else the Python body
+    with ``python_callees`` as Python too. ``"compiled"`` and ``"python"`` force one tier (the background
+    compile uses both). Once compiled, the check is one attribute read.
+    """
+
+    def __init__(self, kernel: Any, *python_callees: str) -> None:
+        self.kernel = kernel
+        self.python_callees = python_callees
+        self.mode = "auto"
+        self._compiled = False
+        self._body: Callable | None = None
+
+    def __call__(self, *args: Any) -> Any:
+        if self.use_compiled():
+            return self.kernel(*args)
+        if self._body is None:
+            self._body = python_body(self.kernel, *self.python_callees)
+        return self._body(*args)
+
+    def wait_for_background(self, timeout_s: float = LOCK_STALE_S, poll_s: float = 0.1) -> bool:
+        """Block while a background compile of this kernel runs (at most ``timeout_s``); True if one was running (the
+        calls so far may have run the Python body: the next one runs the compiled kernel, loaded or compiled here)."""
+        if self._compiled or self.mode != "auto" or not background_compile_running(self.kernel):
+            return False
+        deadline = time.monotonic() + timeout_s
+        while background_compile_running(self.kernel) and time.monotonic() < deadline:
+            time.sleep(poll_s)
+        return True
+
+    def use_compiled(self) -> bool:
+        """Whether the next call runs the compiled kernel (see the class docstring)."""
+        if self.mode != "auto":
+            return self.mode == "compiled"
+        if self._compiled:
+            return True
+        index = cache_index(self.kernel)
+        ready = (index is None or bool(self.kernel.signatures) or index.exists()
+                 or not background_compile_running(self.kernel))
+        self._compiled = ready
+        return ready

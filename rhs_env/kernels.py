@@ -58,7 +58,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rhs_common.jit import njit
+from rhs_common.jit import Tiered, njit, python_body
 from rhs_common.native import matmul_add
 
 __all__ = [
@@ -1735,12 +1735,21 @@ def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step:
     return theta, omega, amp, valid, atoms, r2
 
 
+#: :func:`omp_doppler` as the radar calls it (:func:`rhs_env.point_cloud.omp_doppler`): compiled, except while a
+#: background process compiles it on a cold cache (:mod:`slam.gym.precompile`), when its body and
+#: :func:`joint_refine`'s run in Python on their compiled stages (:class:`rhs_common.jit.Tiered`): the same bits,
+#: and the env's first step skips the ~8 s numba spends linking and optimising the one-call kernel's tree again.
+omp_doppler_tiered = Tiered(omp_doppler, "joint_refine")
+
+
 def warm_refinement(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
                     x: np.ndarray, tgrid: np.ndarray, t: np.ndarray, n_t: int, fine_re: np.ndarray, fine_im: np.ndarray,
                     fine_w: np.ndarray, nfft: int, max_targets: int, passes: int, newton_steps: int, tol: float) -> None:
-    """Compile (or load) :func:`joint_refine` and ``_keep_rows`` with the operand types :func:`omp_doppler` passes them,
-    on two synthetic rows of two targets (the dictionary's operands as :func:`rhs_env.point_cloud.warm_refinement_kernels`
-    gives them): what a background compile (:mod:`slam.gym.precompile`) runs while a first scan compiles the search."""
+    """Compile (or load) :func:`joint_refine`'s stages and ``_keep_rows`` with the operand types :func:`omp_doppler`
+    passes them, on two synthetic rows of two targets (the dictionary's operands as
+    :func:`rhs_env.point_cloud.warm_refinement_kernels` gives them): what a background compile
+    (:mod:`slam.gym.precompile`) runs while a first scan compiles the search, which then runs :func:`joint_refine`'s body
+    on them (:data:`omp_doppler_tiered`)."""
     n_i, n_c = tgrid.shape
     n_q, n_l, n_d = n_i * n_c, max_targets, 2
     rng = np.random.default_rng(1)
@@ -1753,9 +1762,9 @@ def warm_refinement(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, s
     atoms = np.zeros((n_d, n_q, n_l), np.complex128)
     atoms[:, :, :2] = 1.0
     amp = np.zeros((n_d, n_l), np.complex128)
-    joint_refine(table, u_c, x_c, lo, step, w2, x, flat.copy(), tgrid, t, n_t, fine_re, fine_im, fine_w, nfft,
-                 theta.copy(), omega.copy(), valid.copy(), np.full(n_d, 0.05), passes, newton_steps, atoms.copy(),
-                 amp.copy(), tol)
+    python_body(joint_refine)(table, u_c, x_c, lo, step, w2, x, flat.copy(), tgrid, t, n_t, fine_re, fine_im, fine_w,
+                              nfft, theta.copy(), omega.copy(), valid.copy(), np.full(n_d, 0.05), passes, newton_steps,
+                              atoms.copy(), amp.copy(), tol)
     r2, stop, active = _start(flat, np.ones(n_d), 0.1, True)
     _keep_rows(np.arange(n_d, dtype=np.int64), np.ones(n_d, np.bool_), theta.copy(), omega.copy(), valid.copy(),
                amp.copy(), atoms.copy(), theta, omega, valid, amp, atoms, flat, flat.reshape(n_d, n_i, n_c).copy(), r2,

@@ -874,7 +874,9 @@ def _compiled_operands(dic: AngleDictionary, tgrid: np.ndarray) -> tuple | None:
 def _compiled_omp(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_targets: int,
                   residual_threshold: np.ndarray, noise_var: float, relative_threshold: float, min_amplitude: float,
                   newton_steps: int, cycles: int, detected: bool, refine_tol: float = 0.0) -> DopplerOMPResult | None:
-    """:func:`omp_doppler` as one compiled call (:func:`rhs_env.kernels.omp_doppler`), or None where it does not apply.
+    """:func:`omp_doppler` as one compiled call (:func:`rhs_env.kernels.omp_doppler`; its Python body on the compiled
+    stages while a background process compiles it, :data:`rhs_env.kernels.omp_doppler_tiered`), or None where it
+    does not apply.
 
     It applies with the dictionary's ``kernels="numba"``, Taylor-table atoms, separable chirp times
     (``t_ic = t_i + t_c``) and a narrow fine-Doppler grid; the other configurations keep the numpy steps.
@@ -888,14 +890,13 @@ def _compiled_omp(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max
     e_re, e_im = _twiddles(nfft)
     _, tab_re, tab_im = _dtft_kernel_split(n_t, nfft, nfft // 32)  # every narrow search: half <= nfft / 32
     d = data.shape[0]
-    out = kernels.omp_doppler(table, u_c, x_c, lo, step, w2, x, dic.Hn_conj,
-                              np.ascontiguousarray(dic.candidates, dtype=float), np.ascontiguousarray(data),
-                              tgrid_c, t, n_t, nfft, e_re, e_im, tab_re, tab_im,
-                              fine_re, fine_im,
-                              fine_w, int(max_targets),
-                              np.ascontiguousarray(np.broadcast_to(np.asarray(residual_threshold, float), (d,))),
-                              float(noise_var), float(relative_threshold), float(min_amplitude), int(newton_steps),
-                              int(cycles), float(refine_tol), bool(detected))
+    out = kernels.omp_doppler_tiered(table, u_c, x_c, lo, step, w2, x, dic.Hn_conj,
+                                     np.ascontiguousarray(dic.candidates, dtype=float), np.ascontiguousarray(data),
+                                     tgrid_c, t, n_t, nfft, e_re, e_im, tab_re, tab_im, fine_re, fine_im, fine_w,
+                                     int(max_targets),
+                                     np.ascontiguousarray(np.broadcast_to(np.asarray(residual_threshold, float), (d,))),
+                                     float(noise_var), float(relative_threshold), float(min_amplitude),
+                                     int(newton_steps), int(cycles), float(refine_tol), bool(detected))
     return DopplerOMPResult(*out)
 
 

@@ -700,8 +700,8 @@ class RadarSystem:
 
     def warm_kernels(self) -> None:
         """Compile (or load) the compiled kernels a first scan reaches last, with the scan's own operand types: the
-        OMP's joint refinement and row bookkeeping (:func:`rhs_env.point_cloud.warm_refinement_kernels`) and the
-        points (:meth:`_target_bins`, :meth:`_assemble_points`) of one synthetic target per radar. A background
+        OMP's joint refinement's stages and row bookkeeping (:func:`rhs_env.point_cloud.warm_refinement_kernels`) and
+        the points (:meth:`_target_bins`, :meth:`_assemble_points`) of one synthetic target per radar. A background
         process runs it (:mod:`slam.gym.precompile`) while an env's first scan compiles the synthesis, the detector
         and the OMP's search; nothing to do with ``kernels="numpy"``."""
         cfg = self.config
@@ -722,6 +722,22 @@ class RadarSystem:
         est.valid[:, 0], est.amp[:, 0], est.anorm[:, 0] = True, 1.0, 1.0
         est.tfrac[:] = self._target_bins(spec, rd, kk, np.ones((4, n_i * n_c, n_l), complex), win)
         self._assemble_points(rd, kd, est)
+
+    def warm_one_call_omp(self) -> None:
+        """Compile (or load) the one-call OMP (:func:`rhs_env.kernels.omp_doppler`) with the scan's own operand types,
+        on noise in four detected cells: the last thing a background compile does (:mod:`slam.gym.precompile`), after
+        which an env's scans switch from its Python body to it (:data:`rhs_env.kernels.omp_doppler_tiered`)."""
+        if self.config.kernels != "numba":
+            return
+        from rhs_env.kernels import omp_doppler_tiered
+
+        rd, kd = np.arange(4, dtype=np.int64), np.full(4, 40, np.int64)
+        spec = self._noise_spectrum((4, self.config.scan.slots, self.config.waveform.chirps_per_slot))
+        mode, omp_doppler_tiered.mode = omp_doppler_tiered.mode, "compiled"
+        try:
+            self._estimate_angles(spec, rd, kd)
+        finally:
+            omp_doppler_tiered.mode = mode
 
     def scan(self, scatterers: Scatterers, occluders: Occluders | None = None) -> PointCloud:
         """One sensing cycle of the four radars -> :class:`PointCloud` with ``stage_times``.

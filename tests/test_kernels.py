@@ -486,7 +486,8 @@ def test_cache_notice_once_then_silent(tmp_path):
 
 def test_background_precompile_leaves_the_env_only_the_radar_front_end_to_compile(tmp_path):
     """After slam.gym.precompile's workload (what a SLAM env starts in a background process on a cold cache), a new
-    process's SLAM env compiles none of the kernels it covers: the OMP's joint refinement, the points, the SLAM's."""
+    process's SLAM env compiles none of the kernels it covers: the OMP's refinement and the one-call OMP, the points,
+    the SLAM's; and its scans run the one-call OMP."""
     work = _run("from slam.gym.precompile import main; main([])", NUMBA_CACHE_DIR=str(tmp_path))
     assert work.returncode == 0, work.stderr[-3000:]
     code = """
@@ -501,41 +502,120 @@ def test_background_precompile_leaves_the_env_only_the_radar_front_end_to_compil
         _numba()
         event.register("numba:compile", Rec())
         import gymnasium as gym, rhs_env
+        from rhs_env.kernels import omp_doppler_tiered
         env = gym.make("rhs-highway-slam-v0")
         env.reset(seed=0)
         for _ in range(6):
             env.step(1)
-        print(sorted(set(names)))
+        print(omp_doppler_tiered._compiled, sorted(set(names)))
     """
     env_run = _run(code, NUMBA_CACHE_DIR=str(tmp_path), RHS_SLAM_BACKGROUND_COMPILE="0")
     assert env_run.returncode == 0, env_run.stderr[-3000:]
-    compiled = set(eval(env_run.stdout.strip().splitlines()[-1]))
-    covered = {"joint_refine", "_keep_rows", "_refit_rows", "bin_amplitudes", "range_offsets", "assemble_points",
-               "landmark_update", "proposal_terms", "proposal_information", "mahalanobis_association", "icp_search",
-               "icp_fit", "doppler_ransac"}
+    one_call, names = env_run.stdout.strip().splitlines()[-1].split(" ", 1)
+    compiled = set(eval(names))
+    covered = {"omp_doppler", "_new_atoms", "joint_refine", "_keep_rows", "_refit_rows", "bin_amplitudes",
+               "range_offsets", "assemble_points", "landmark_update", "proposal_terms", "proposal_information",
+               "mahalanobis_association", "icp_search", "icp_fit", "doppler_ransac"}
     assert not compiled & covered, compiled & covered
-    assert "omp_doppler" in compiled  # the env's own process still compiled the OMP's search: the cache was cold
+    assert one_call == "True"
+    assert "footprint_detections" in compiled  # the env's own process still compiled the detector: the cache was cold
+
+
+def _fake_kernel(folder: Path, compiled: bool = False):
+    """A stand-in for a cached numba dispatcher: its cache index path under ``folder`` and its signatures."""
+    from types import SimpleNamespace
+
+    index = SimpleNamespace(_index_path=str(folder / "kernels.omp_doppler-1658.py311.nbi"))
+    return SimpleNamespace(_cache=SimpleNamespace(_cache_file=index), signatures=[("sig",)] if compiled else [],
+                           py_func=lambda: "python body")
 
 
 def test_background_precompile_starts_once_on_a_cold_cache_only(tmp_path, monkeypatch):
-    """slam.gym.precompile.start: one background process per cold cache (a lock), none when warm or switched off."""
+    """slam.gym.precompile.start: one background process per cold cache (a lock holding its pid), none while one runs,
+    when warm or switched off."""
     import subprocess as sp
+    from types import SimpleNamespace
 
     from slam.gym import precompile
 
     started = []
-    monkeypatch.setattr(sp, "Popen", lambda *a, **k: started.append(a[0]))
-    index = tmp_path / "kernels.landmark_update-1.py311.nbi"
-    monkeypatch.setattr(precompile, "_probe_index", lambda: index)
+    monkeypatch.setattr(sp, "Popen", lambda *a, **k: started.append(a[0]) or SimpleNamespace(pid=os.getpid()))
+    omp, last = _fake_kernel(tmp_path), _fake_kernel(tmp_path / "slam")
+    monkeypatch.setattr(precompile, "_probes", lambda: (omp, last))
     monkeypatch.delenv("RHS_SLAM_BACKGROUND_COMPILE", raising=False)
     assert precompile.start() and started[-1][-3:] == ["slam.gym.precompile", "--lock", str(tmp_path / LOCK)]
+    assert (tmp_path / LOCK).read_text() == str(os.getpid())  # the background process' pid
     assert not precompile.start() and len(started) == 1  # the lock: one at a time
     (tmp_path / LOCK).unlink()
     monkeypatch.setenv("RHS_SLAM_BACKGROUND_COMPILE", "0")
     assert not precompile.start()
     monkeypatch.delenv("RHS_SLAM_BACKGROUND_COMPILE")
-    index.touch()  # a warm cache
-    assert not precompile.start() and len(started) == 1
+    Path(omp._cache._cache_file._index_path).touch()  # the radar's kernels cached, the SLAM's not: still cold
+    assert precompile.start() and len(started) == 2
+    (tmp_path / LOCK).unlink()
+    (tmp_path / "slam").mkdir()
+    Path(last._cache._cache_file._index_path).touch()  # a warm cache
+    assert not precompile.start() and len(started) == 2
+
+
+def test_tiered_kernel_runs_its_python_body_only_while_a_background_compile_runs(tmp_path):
+    """rhs_common.jit.Tiered: the Python body while a live process holds the lock beside the kernel's cache and the
+    cache has no index; the compiled kernel once the index exists, the lock goes, its process dies or it goes stale."""
+    from rhs_common.jit import COMPILE_LOCK, LOCK_STALE_S, Tiered, background_compile_running
+
+    kernel = _fake_kernel(tmp_path)
+    lock = tmp_path / COMPILE_LOCK
+    assert not background_compile_running(kernel) and Tiered(kernel).use_compiled()  # no lock: compile here
+    lock.write_text(str(os.getpid()))  # a live process
+    tier = Tiered(kernel)
+    assert background_compile_running(kernel) and not tier.use_compiled() and not tier._compiled
+    tier.mode = "compiled"
+    assert tier.use_compiled() and not tier._compiled  # a forced tier is not remembered
+    tier.mode = "auto"
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    lock.write_text(dead.stdout.strip())  # a process that has exited
+    assert not background_compile_running(kernel) and tier.use_compiled() and tier._compiled
+    lock.write_text(str(os.getpid()))
+    os.utime(lock, (0, os.path.getmtime(lock) - LOCK_STALE_S - 1))  # a lock left by a compile that died
+    assert not background_compile_running(kernel) and Tiered(kernel).use_compiled()
+    lock.write_text(str(os.getpid()))
+    Path(kernel._cache._cache_file._index_path).touch()  # the background compile has cached it
+    assert Tiered(kernel).use_compiled()
+    assert Tiered(_fake_kernel(tmp_path / "other", compiled=True)).use_compiled()  # compiled in this process
+
+
+def test_tiered_omp_computes_the_compiled_omps_bits_on_30_scenes(monkeypatch):
+    """The OMP's Python body on its compiled stages (what a scan runs while the background compile builds the one-call
+    kernel) returns exactly the one-call kernel's numbers: the same points, bit for bit, on every scene."""
+    from rhs_env import kernels
+
+    radar = RadarSystem(RadarConfig(), np.random.default_rng(7))
+    tier = kernels.omp_doppler_tiered
+    rng = np.random.default_rng(99)
+    n_points = 0
+    for _ in range(30):
+        spec = radar.synthesize_spectrum(*_scene(rng))
+        clouds = {}
+        for mode in ("compiled", "python"):
+            monkeypatch.setattr(tier, "mode", mode)
+            clouds[mode] = radar.process_spectrum(spec)[0]
+        np.testing.assert_array_equal(clouds["compiled"].points, clouds["python"].points)
+        np.testing.assert_array_equal(clouds["compiled"].radar, clouds["python"].radar)
+        n_points += len(clouds["python"])
+    assert n_points > 60  # the scenes do produce points
+    assert tier._body.__globals__["joint_refine"] is kernels.joint_refine.py_func  # the python tier ran, refinement too
+
+
+def test_python_body_swaps_only_the_named_callees():
+    """rhs_common.jit.python_body: the kernel's own function, its named callees as Python, the others compiled."""
+    from rhs_common.jit import python_body
+    from rhs_env import kernels
+
+    body = python_body(kernels.omp_doppler, "joint_refine")
+    assert body.__code__ is kernels.omp_doppler.py_func.__code__
+    assert body.__globals__["joint_refine"] is kernels.joint_refine.py_func
+    assert body.__globals__["_new_atoms"] is kernels._new_atoms  # still the compiled kernel
+    assert kernels.joint_refine is not kernels.joint_refine.py_func  # the module itself is untouched
 
 
 def test_watch_compiles_names_the_kernels_compiled_inside_the_block(tmp_path):

@@ -4,71 +4,77 @@ On an empty kernel cache the first step of a SLAM env compiles every kernel in c
 (synthesis, detection, the OMP) first, then the SLAM's (:mod:`slam.core.kernels`: the Doppler fits, the
 ICP, the association, the proposal and the landmark update), one after the other on one core. The SLAM's
 kernels do not depend on the radar's, so :func:`start` (called by the SLAM env's constructor) runs
-:func:`workload` in a background process when their cache is cold: it drives a
-:class:`slam.core.pipeline.SlamPipeline` on synthetic clouds (static roadside points seen by the four
-radars, with their Doppler, from a car at 25 m/s) through the same code paths, so the same signatures
-compile and land in the on-disk cache, which the env's process then loads instead of compiling. The radar's
-last kernels (the OMP's joint refinement, the points) come first, from
-:meth:`rhs_env.radar.RadarSystem.warm_kernels`.
+:func:`workload` in a background process when their cache is cold, in three parts:
 
-One background process per cache at a time (a lock file beside the cache, stale after
-:data:`LOCK_STALE_S`); nothing runs with ``NUMBA_DISABLE_JIT=1``, with a warm cache, or with
-``RHS_SLAM_BACKGROUND_COMPILE=0``. The background process prints nothing and needs nothing from its
-parent: if the parent reaches a kernel first, it compiles it itself, as before.
+1. the radar's last stages (the OMP's joint refinement's stages, the points) from
+   :meth:`rhs_env.radar.RadarSystem.warm_kernels`;
+2. a :class:`slam.core.pipeline.SlamPipeline` on synthetic clouds (static roadside points seen by the four
+   radars, with their Doppler, from a car at 25 m/s), through the same code paths, so the same signatures
+   compile and land in the on-disk cache, which the env's process then loads instead of compiling;
+3. the one-call OMP (:meth:`rhs_env.radar.RadarSystem.warm_one_call_omp`): until it is in the cache the env's
+   scans run its body in Python on the compiled stages (:data:`rhs_env.kernels.omp_doppler_tiered`, the same
+   bits), so the env's first step does not wait for the ~8 s numba spends linking the OMP's whole tree.
+
+One background process per cache at a time: a lock file (:data:`rhs_common.jit.COMPILE_LOCK`, holding the
+background process' pid) beside the one-call OMP's cache index, stale after
+:data:`rhs_common.jit.LOCK_STALE_S` or once that process is gone; nothing runs with ``NUMBA_DISABLE_JIT=1``,
+with a warm cache, or with ``RHS_SLAM_BACKGROUND_COMPILE=0``. The background process prints nothing and needs
+nothing from its parent: if the parent reaches a kernel first, it compiles it itself, as before.
 
     python -m slam.gym.precompile     # the workload in this process (what the background process runs)
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-__all__ = ["LOCK_STALE_S", "start", "synthetic_cloud", "workload"]
+__all__ = ["start", "synthetic_cloud", "workload"]
 
-#: a lock file older than this (s) belongs to a background compile that died: another may start
-LOCK_STALE_S = 300.0
 _ENV_SWITCH = "RHS_SLAM_BACKGROUND_COMPILE"
 
 
-def _probe_index() -> Path | None:
-    """The cache index of a kernel :func:`workload` compiles late (None without an on-disk cache)."""
+def _probes() -> tuple[Any, Any]:
+    """The kernels :func:`workload` compiles last, each of its kernel module: the one-call OMP (whose cache folder
+    holds the lock) and the RBPF's landmark update."""
+    from rhs_env.kernels import omp_doppler
     from slam.core.kernels import landmark_update
 
-    try:
-        return Path(landmark_update._cache._cache_file._index_path)
-    except AttributeError:
-        return None
+    return omp_doppler, landmark_update
 
 
 def start() -> bool:
-    """Start :func:`workload` in a background process if the SLAM kernels' cache is cold; True if it started."""
+    """Start :func:`workload` in a background process if the kernels' cache is cold; True if it started."""
     if os.environ.get(_ENV_SWITCH, "1") == "0":
         return False
-    from rhs_common.jit import numba_module
+    from rhs_common.jit import COMPILE_LOCK, background_compile_running, cache_index, numba_module
 
     if numba_module().config.DISABLE_JIT:
         return False
-    index = _probe_index()
-    if index is None or index.exists():
+    omp, last = _probes()
+    omp_index, last_index = cache_index(omp), cache_index(last)
+    if omp_index is None or last_index is None or (omp_index.exists() and last_index.exists()):
         return False
-    lock = index.parent / "rhs-slam-background-compile.lock"
+    lock = omp_index.parent / COMPILE_LOCK
+    if background_compile_running(omp):
+        return False
     try:
-        index.parent.mkdir(parents=True, exist_ok=True)
-        if lock.exists() and time.time() - lock.stat().st_mtime < LOCK_STALE_S:
-            return False
+        lock.parent.mkdir(parents=True, exist_ok=True)
         lock.write_text(str(os.getpid()))
     except OSError:  # a cache folder we may not write: nothing to share through it
         return False
     env = {**os.environ, _ENV_SWITCH: "0", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-    subprocess.Popen([sys.executable, "-m", "slam.gym.precompile", "--lock", str(lock)], env=env,
-                     stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                     start_new_session=True)
+    proc = subprocess.Popen([sys.executable, "-m", "slam.gym.precompile", "--lock", str(lock)], env=env,
+                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    with contextlib.suppress(OSError):
+        lock.write_text(str(proc.pid))  # the lock now lives as long as the background process
     return True
 
 
@@ -90,15 +96,17 @@ def synthetic_cloud(pose: np.ndarray, velocity: np.ndarray, landmarks: np.ndarra
 
 
 def workload(cycles: int = 8) -> None:
-    """The radar kernels a first scan reaches last (:meth:`rhs_env.radar.RadarSystem.warm_kernels`), then the SLAM env's
-    pipeline (default configs, the four radars' mounts) on ``cycles`` synthetic clouds."""
+    """The radar kernels a first scan reaches last (:meth:`rhs_env.radar.RadarSystem.warm_kernels`), the SLAM env's
+    pipeline (default configs, the four radars' mounts) on ``cycles`` synthetic clouds, then the one-call OMP
+    (:meth:`rhs_env.radar.RadarSystem.warm_one_call_omp`)."""
     from rhs_env.radar import RadarSystem
     from rhs_env.radar_config import RadarConfig
     from slam.core.pipeline import SlamPipeline
     from slam.core.rbpf import SlamConfig
     from slam.core.registration import DEFAULT_REGISTRATION, make_registration
 
-    RadarSystem(RadarConfig(), np.random.default_rng(0)).warm_kernels()
+    radar = RadarSystem(RadarConfig(), np.random.default_rng(0))
+    radar.warm_kernels()
     rng = np.random.default_rng(0)
     sensors = RadarConfig().mounting.mounts()[0]
     xs = np.arange(-100.0, 400.0, 9.0)
@@ -110,6 +118,7 @@ def workload(cycles: int = 8) -> None:
     for k in range(cycles):
         pose = np.array([speed * dt * k, 0.0, 0.0])
         pipeline.step(synthetic_cloud(pose, np.array([speed, 0.0]), landmarks, sensors, rng), dt)
+    radar.warm_one_call_omp()
 
 
 def main(argv: list[str] | None = None) -> int:
