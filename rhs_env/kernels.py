@@ -49,7 +49,12 @@ Python 3.11, 2 cores shared with other jobs, load average 5-8):
   ``_keep_rows``, the points, the SLAM's) while the env compiles the synthesis, the detector and the OMP's
   search: 45.4 s -> 28.4 s there (median of 3, ``benchmark.py --sections start``; the README's speed page has
   the current run). The scene's vehicle faces (:func:`face_scatterers`, reached first, at ``reset``) add ~0.8 s
-  to the env's share. Vector envs compile once, in the parent
+  to the env's share. Of the env's share, the one-call OMP's own compile was ~8 s (19.0 s with its callees; 6.1 s
+  alone with every callee cached): numba links each callee's code into the caller's module and optimises and
+  generates the whole tree again. So on a cold cache the background compiles it last, and until then the env's
+  scans run its body (and :func:`joint_refine`'s) in Python on the compiled stages
+  (:data:`omp_doppler_tiered`, :class:`rhs_common.jit.Tiered`): the same numbers bit for bit, ~2x the OMP's time
+  for the first tens of steps. Vector envs compile once, in the parent
   (``agents.run_setup.make_vec_env``,
   :func:`rhs_common.jit.warm_cache`).
 """

@@ -595,7 +595,11 @@ def _md_start(result: dict) -> list[str]:
             f"{START_GOALS_S['cold_s']:g} s), {st['warm_s']:.1f} s with the cache (goal <= {START_GOALS_S['warm_s']:g} s); "
             f"whole processes {st['cold_process_s']:.1f} s / {st['warm_process_s']:.1f} s"
             + (f"; median of {st['repeats']} (cold: {', '.join(f'{v:.1f}' for v in st['cold_runs_s'])} s)."
-               if st.get("repeats", 1) > 1 and "cold_runs_s" in st else "."), ""]
+               if st.get("repeats", 1) > 1 and "cold_runs_s" in st else ".")
+            + (" The cold process' background compile ended "
+               f"{', '.join(f'{v:.1f}' for v in st['background_runs_s'])} s after that process started (it compiles "
+               "the one-call OMP last: the first scans run its Python body on the compiled stages, the same numbers)."
+               if st.get("background_runs_s") else ""), ""]
 
 
 def _md_ratios(result: dict) -> list[str]:

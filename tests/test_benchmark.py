@@ -68,6 +68,7 @@ def test_stage_table_and_start_line():
     assert not benchmark._goals({"start": {**start, "warm_s": 6.0}})["start_warm_s"]["met"]
     several = {**start, "repeats": 3, "cold_runs_s": [11.0, 12.0, 31.0]}  # the median decides, every run is shown
     assert "median of 3 (cold: 11.0, 12.0, 31.0 s)" in "\n".join(benchmark._md_start({"start": several}))
+    assert "background compile ended 40.0 s after" in "\n".join(benchmark._md_start({"start": {**start, "background_runs_s": [40.0]}}))
     with pytest.raises(SystemExit):
         benchmark.main(["--sections", "start", "--start-repeats", "0"])
 
