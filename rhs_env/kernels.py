@@ -1477,7 +1477,28 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
     Doppler (:func:`_doppler_peak`) on ``q_t = sum conj(h_i) rc_it`` (:func:`slot_sums`), Newton steps on the angle.
     """
     n_d, n_i, n_c = res.shape
-    t_span = float(n_t)
+    w0, rc, th = _coarse_atoms(res, tgrid, hn_conj, candidates, step)
+    span, dwell, wide = _search_widths(res, noise_var, float(n_t))
+    sub = _indices(wide)
+    if sub.size:
+        _joint_search(res, sub, w0, th, span, dwell, hn_conj, candidates, step, tgrid, rc)
+    h = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, np.int64(0))[0]
+    w = _fine_doppler(h, rc, t, w0, span, n_t, nfft, e_re, e_im, tab_re, tab_im)
+    comp = phasors(w, tgrid, -1.0)
+    if newton_steps:
+        rho_n = np.empty((n_d, n_i), np.complex128)
+        slot_projection(res, comp, rho_n)
+        th = newton_refine(table, u_c, x_c, lo, step, w2, x, th, rho_n, newton_steps)
+    _conjugate(comp)  # exp(j omega t)
+    return th, w, comp
+
+
+@njit
+def _coarse_atoms(res: np.ndarray, tgrid: np.ndarray, hn_conj: np.ndarray, candidates: np.ndarray,
+                  step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The coarse Doppler ``w0 = arg sum R[i, c+1] R*[i, c]`` (D,), ``rc = R exp(-j w0 t)`` (D, I, C) and the angle of
+    the best candidate of ``|H_n^H rho|^2``, ``rho_i = sum_c rc_ic`` (one complex64 product), of residuals R (D, I, C)."""
+    n_d, n_i, n_c = res.shape
     th = np.empty(n_d)
     w0 = np.empty(n_d)
     for d in range(n_d):
@@ -1499,11 +1520,15 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
     corr = _power(np.dot(rho, hn_conj))
     for d in range(n_d):
         th[d] = _angle_peak(corr[d], candidates, step)[1]
-    span, dwell, wide = _search_widths(res, noise_var, t_span)
-    sub = _indices(wide)
-    if sub.size:
-        _joint_search(res, sub, w0, th, span, dwell, hn_conj, candidates, step, tgrid, rc)
-    h = taylor_atoms(table, u_c, x_c, lo, step, w2, x, th, np.int64(0))[0]
+    return w0, rc, th
+
+
+@njit
+def _fine_doppler(h: np.ndarray, rc: np.ndarray, t: np.ndarray, w0: np.ndarray, span: np.ndarray, n_t: int, nfft: int,
+                  e_re: np.ndarray, e_im: np.ndarray, tab_re: np.ndarray, tab_im: np.ndarray) -> np.ndarray:
+    """``w0 +`` the Doppler peak (:func:`_doppler_peak`, within ``span``) of ``q_t = sum conj(h_i) rc_it``
+    (:func:`slot_sums`) of each row (D,)."""
+    n_d = w0.size
     q_re = np.empty(n_t)
     q_im = np.empty(n_t)
     buf_re = np.empty(nfft)
@@ -1512,16 +1537,17 @@ def _new_atoms(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: 
     for d in range(n_d):
         slot_sums(h[d], rc[d], t, q_re, q_im)
         w[d] = w0[d] + _doppler_peak(q_re, q_im, span[d], nfft, e_re, e_im, buf_re, buf_im, tab_re, tab_im)
-    comp = phasors(w, tgrid, -1.0)
-    if newton_steps:
-        rho_n = np.empty((n_d, n_i), np.complex128)
-        slot_projection(res, comp, rho_n)
-        th = newton_refine(table, u_c, x_c, lo, step, w2, x, th, rho_n, newton_steps)
-    for d in range(n_d):  # exp(j omega t): comp conjugated in place
-        for i in range(n_i):
+    return w
+
+
+@njit
+def _conjugate(z: np.ndarray) -> None:
+    """``z = conj(z)`` of a 3-D complex array, in place."""
+    n_a, n_b, n_c = z.shape
+    for a in range(n_a):
+        for b in range(n_b):
             for c in range(n_c):
-                comp[d, i, c] = np.conj(comp[d, i, c])
-    return th, w, comp
+                z[a, b, c] = np.conj(z[a, b, c])
 
 
 @njit
@@ -1744,7 +1770,7 @@ def omp_doppler(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step:
 #: background process compiles it on a cold cache (:mod:`slam.gym.precompile`), when its body and
 #: :func:`joint_refine`'s run in Python on their compiled stages (:class:`rhs_common.jit.Tiered`): the same bits,
 #: and the env's first step skips the ~8 s numba spends linking and optimising the one-call kernel's tree again.
-omp_doppler_tiered = Tiered(omp_doppler, "joint_refine")
+omp_doppler_tiered = Tiered(omp_doppler, "joint_refine", "_new_atoms")
 
 
 def warm_refinement(table: np.ndarray, u_c: np.ndarray, x_c: float, lo: float, step: float, w2: np.ndarray,
