@@ -42,6 +42,7 @@ groups ``waveform`` (B, T_c, f_s, C, window, zero padding), ``link`` (P_t, F, T0
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass
@@ -188,12 +189,6 @@ class RadarSystem:
         looks = config.scan.slots * wf.chirps_per_slot
         self._p_noise = looks * config.noise_power_w * self._win_energy  # mean of P per cell, pure noise
         self._rank = max(1, round(det.rank * 2 * det.train))
-        if det.mode == "cfar" and det.method == "os":
-            self._alpha = os_cfar_alpha(det.pfa, looks, 2 * det.train, self._rank)
-        elif det.mode == "cfar":
-            self._alpha = cfar_alpha(det.pfa, looks, 2 * det.train)
-        else:
-            self._alpha = 10 ** (det.fixed_threshold_db / 10)
         cells = config.scan.slots * wf.chirps_per_slot
         y_var = config.noise_power_w * self._win_energy
         self._detectors = ([FootprintDetector(dic, config, y_var, self._leak, self._window) for dic, _ in self._groups]
@@ -512,6 +507,19 @@ class RadarSystem:
         p = np.einsum("ricb,ricb->rb", f, f)
         return p.reshape(p.shape[0], -1, 2).sum(axis=-1, dtype=np.float64)
 
+    @functools.cached_property
+    def _alpha(self) -> float:
+        """The slot-summed statistic's threshold multiplier (:meth:`_threshold`): OS-CFAR's (:func:`os_cfar_alpha`,
+        ~0.5 s of quadrature, so computed on first use: the default footprint detector has its own), CA-CFAR's, or the
+        fixed threshold."""
+        det = self.config.detection
+        looks = self.config.scan.slots * self.config.waveform.chirps_per_slot
+        if det.mode == "cfar" and det.method == "os":
+            return os_cfar_alpha(det.pfa, looks, 2 * det.train, self._rank)
+        if det.mode == "cfar":
+            return cfar_alpha(det.pfa, looks, 2 * det.train)
+        return float(10 ** (det.fixed_threshold_db / 10))
+
     def _threshold(self, prof: np.ndarray) -> np.ndarray:
         """Detection threshold per cell of the profile: OS / CA CFAR (noise estimate clipped to [floor, cap]) or fixed."""
         cfg = self.config
@@ -698,12 +706,12 @@ class RadarSystem:
         leak = np.where(same & (a2[None, :] > a2[:, None]), a2[None, :] * self._leak[dk], 0.0).max(axis=1)
         return a2 < 10 ** (cfg.detection.sidelobe_margin_db / 10) * leak
 
-    def warm_kernels(self) -> None:
+    def warm_kernels(self, points: bool = True) -> None:
         """Compile (or load) the compiled kernels a first scan reaches last, with the scan's own operand types: the
-        OMP's joint refinement's stages and row bookkeeping (:func:`rhs_env.point_cloud.warm_refinement_kernels`) and
-        the points (:meth:`_target_bins`, :meth:`_assemble_points`) of one synthetic target per radar. A background
-        process runs it (:mod:`slam.gym.precompile`) while an env's first scan compiles the synthesis, the detector
-        and the OMP's search; nothing to do with ``kernels="numpy"``."""
+        OMP's joint refinement's stages and row bookkeeping (:func:`rhs_env.point_cloud.warm_refinement_kernels`) and,
+        with ``points``, the points (:meth:`_target_bins`, :meth:`_assemble_points`) of one synthetic target per radar.
+        A background process runs it (:mod:`slam.gym.precompile`) while an env's first scan compiles the synthesis, the
+        detector and the OMP's search; nothing to do with ``kernels="numpy"``."""
         cfg = self.config
         if cfg.kernels != "numba":
             return
@@ -713,6 +721,8 @@ class RadarSystem:
         for dic, _ in self._groups:
             warm_refinement_kernels(dic, self._chirp_index, cfg.estimation.max_targets, cfg.estimation.refine_passes,
                                     cfg.estimation.newton_steps, cfg.estimation.refine_tol)
+        if not points:
+            return
         n_i, n_c, n_l = cfg.scan.slots, cfg.waveform.chirps_per_slot, cfg.estimation.max_targets
         rd, kd = np.arange(4, dtype=np.int64), np.full(4, 40, np.int64)
         spec = self._noise_spectrum((4, n_i, n_c))

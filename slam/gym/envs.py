@@ -12,34 +12,38 @@ from typing import Any
 
 import gymnasium as gym
 
-from rhs_env.envs import RHSDenseEnv, RHSHighwayEnv, RHSPaperEnv
-from rhs_env.registration import route_kwargs, with_cheap_base_observation
-from rhs_env.wrappers import RadarObservation
 from slam.gym import precompile
-from slam.gym.metrics_info import SlamMetricsInfo
-from slam.gym.wrapper import SlamObservation
 
 
-def make_slam_env(env_cls: type[gym.Env], kwargs: dict[str, Any]) -> gym.Env:
-    """``env_cls`` (a highway-env scene) under the radar, SLAM and SLAM-metrics wrappers. On an empty kernel cache the
-    kernels a first step reaches last (the OMP's refinement, the points, the SLAM's) start compiling in a background
-    process (:func:`slam.gym.precompile.start`) while this one compiles the rest."""
+def make_slam_env(env_cls: type[gym.Env] | str, kwargs: dict[str, Any]) -> gym.Env:
+    """``env_cls`` (a highway-env scene, or its class name in :mod:`rhs_env.envs`) under the radar, SLAM and
+    SLAM-metrics wrappers. On an empty kernel cache the kernels a first step reaches last (the OMP's refinement, the
+    points, the SLAM's) start compiling in a background process (:func:`slam.gym.precompile.start`) while this one
+    compiles the rest: first thing, before this module imports the scene and the wrappers (~2 s), so the
+    background's own imports run beside them."""
     precompile.start()
+    from rhs_env import envs
+    from rhs_env.registration import route_kwargs, with_cheap_base_observation
+    from rhs_env.wrappers import RadarObservation
+    from slam.gym.metrics_info import SlamMetricsInfo
+    from slam.gym.wrapper import SlamObservation
+
+    scene = getattr(envs, env_cls) if isinstance(env_cls, str) else env_cls
     (radar_kw, slam_kw, metrics_kw), env_kw = route_kwargs(kwargs, RadarObservation, SlamObservation, SlamMetricsInfo)
-    base = env_cls(**with_cheap_base_observation(env_kw))
+    base = scene(**with_cheap_base_observation(env_kw))
     return SlamMetricsInfo(SlamObservation(RadarObservation(base, **radar_kw), **slam_kw), **metrics_kw)
 
 
 def make_highway_slam(**kwargs: Any) -> gym.Env:
     """``rhs-highway-slam-v0``: the highway scene with traffic and roadside landmarks."""
-    return make_slam_env(RHSHighwayEnv, kwargs)
+    return make_slam_env("RHSHighwayEnv", kwargs)
 
 
 def make_dense_slam(**kwargs: Any) -> gym.Env:
     """``rhs-dense-v0``: the highway with a dense roadside (:data:`rhs_env.scene.DENSE_LANDMARKS`)."""
-    return make_slam_env(RHSDenseEnv, kwargs)
+    return make_slam_env("RHSDenseEnv", kwargs)
 
 
 def make_paper_slam(**kwargs: Any) -> gym.Env:
     """``rhs-paper-v0``: the paper's Fig. 5c scene (50 cycles)."""
-    return make_slam_env(RHSPaperEnv, kwargs)
+    return make_slam_env("RHSPaperEnv", kwargs)
