@@ -157,9 +157,13 @@ def _rl_finetune(d: dict) -> tuple[str, str]:
 
 
 def _benchmark(d: dict) -> tuple[str, str]:
-    e = d["envs"]
-    return ("Env steps per second, radar + SLAM env (ground-truth env), single env, one BLAS thread",
-            f"{e['rhs-highway-slam-v0']['steps_per_s']:.1f} ({e['rhs-highway-v0']['steps_per_s']:.1f})")
+    e, st = d["envs"], d.get("start")
+    label = "Env steps per second, radar + SLAM env (ground-truth env), single env, one BLAS thread"
+    value = f"{e['rhs-highway-slam-v0']['steps_per_s']:.1f} ({e['rhs-highway-v0']['steps_per_s']:.1f})"
+    if st:
+        label += "; its first step in a new process, empty / warm kernel cache"
+        value += f"; {st['cold_s']:.1f} s / {st['warm_s']:.1f} s"
+    return label, value
 
 
 #: (results file, row builder): the rows of the README's headline table, in order
