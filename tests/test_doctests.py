@@ -10,6 +10,7 @@ import pytest
 MODULES = (
     "rhs_common.validation",
     "rhs_common.timing",
+    "rhs_common.jit",
     "rhs_env.radar_config",
     "rhs_env.wrappers",
     "slam.gym.wrapper",

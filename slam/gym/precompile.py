@@ -16,9 +16,9 @@ kernels do not depend on the radar's, so :func:`start` (called by the SLAM env's
 3. the points and the one-call OMP (:meth:`rhs_env.radar.RadarSystem.warm_one_call_omp`): until the one-call
    OMP is in the cache the env's scans run its body in Python on the compiled stages
    (:data:`rhs_env.kernels.omp_doppler_tiered`, the same bits), so the env's first step does not wait for the
-   ~8 s numba spends linking the OMP's whole tree. The env compiles the points itself (~3 s, reached after
-   the OMP): with them here the background reached the SLAM's kernels after the env did (measured: 30.5 s to
-   the first step against ~27 s).
+   6-8 s numba spends linking the OMP's whole tree again. The env compiles the points itself (~3 s, reached
+   after the OMP): with the points before the SLAM's kernels, the background reached those after the env did,
+   which then compiled them itself (docs/results/speed.md, cold start).
 
 One background process per cache at a time: a lock file (:data:`rhs_common.jit.COMPILE_LOCK`, holding the
 background process' pid) beside the one-call OMP's cache index, stale after
