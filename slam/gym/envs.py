@@ -19,8 +19,8 @@ def make_slam_env(env_cls: type[gym.Env] | str, kwargs: dict[str, Any]) -> gym.E
     """``env_cls`` (a highway-env scene, or its class name in :mod:`rhs_env.envs`) under the radar, SLAM and
     SLAM-metrics wrappers. On an empty kernel cache the kernels a first step reaches last (the SLAM's, the OMP's
     refinement stages, then the one-call OMP) start compiling in a background process
-    (:func:`slam.gym.precompile.start`) while this one compiles the rest: first thing, before this module imports the scene and the wrappers (~2 s), so the
-    background's own imports run beside them."""
+    (:func:`slam.gym.precompile.start`) while this one compiles the rest: first thing, before this module imports
+    the scene and the wrappers (~2 s), so the background's own imports run beside them."""
     precompile.start()
     from rhs_env import envs
     from rhs_env.registration import route_kwargs, with_cheap_base_observation
