@@ -293,15 +293,19 @@ def warm_kernels(env_id: str, env_kwargs: dict[str, Any], steps: int = WARM_STEP
 
     def run() -> None:
         env = gym.make(bare, **env_kwargs)
+
+        def step(n: int) -> None:
+            _, _, term, trunc, _ = env.step(env.action_space.sample())
+            if term or trunc:
+                env.reset(seed=n + 1)
+
         try:
             env.reset(seed=0)
             env.action_space.seed(0)
-            for n in range(steps + 1):
-                if n == steps and not omp_doppler_tiered.wait_for_background():
-                    break  # else one step more, on the one-call OMP the background compile cached
-                _, _, term, trunc, _ = env.step(env.action_space.sample())
-                if term or trunc:
-                    env.reset(seed=n + 1)
+            for n in range(steps):
+                step(n)
+            if omp_doppler_tiered.wait_for_background():
+                step(steps)  # one step more, on the one-call OMP the background compile cached
         finally:
             env.close()
 

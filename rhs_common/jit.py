@@ -49,8 +49,8 @@ if TYPE_CHECKING:
     import numpy as np
 
 __all__ = [
-    "COMPILE_LOCK", "KERNELS", "LOCK_STALE_S", "NOTICE", "Tiered", "background_compile_running", "cache_index", "njit",
-    "numba_module", "python_body", "sort_small", "warm_cache", "watch_compiles",
+    "COMPILE_LOCK", "KERNELS", "LOCK_STALE_S", "NOTICE", "Tiered", "background_compile_running", "cache_index",
+    "compile_lock", "njit", "numba_module", "python_body", "sort_small", "warm_cache", "watch_compiles",
 ]
 
 #: the kernel implementations a config may choose: compiled (default) or the numpy reference
@@ -224,13 +224,18 @@ def cache_index(kernel: Any) -> Path | None:
         return None
 
 
-def background_compile_running(kernel: Any) -> bool:
-    """Whether a background compile holds the lock beside ``kernel``'s cache (:data:`COMPILE_LOCK`, written by
-    :func:`slam.gym.precompile.start`): the file exists, is younger than :data:`LOCK_STALE_S` and names a live process."""
+def compile_lock(kernel: Any) -> Path | None:
+    """The background compile's lock file beside ``kernel``'s cache index (:data:`COMPILE_LOCK`); None without a cache."""
     index = cache_index(kernel)
-    if index is None:
+    return None if index is None else index.parent / COMPILE_LOCK
+
+
+def background_compile_running(kernel: Any) -> bool:
+    """Whether a background compile holds :func:`compile_lock` of ``kernel`` (written by
+    :func:`slam.gym.precompile.start`): the file exists, is younger than :data:`LOCK_STALE_S` and names a live process."""
+    lock = compile_lock(kernel)
+    if lock is None:
         return False
-    lock = index.parent / COMPILE_LOCK
     try:
         pid = lock.read_text().strip()
         age = time.time() - lock.stat().st_mtime

@@ -706,48 +706,57 @@ class RadarSystem:
         leak = np.where(same & (a2[None, :] > a2[:, None]), a2[None, :] * self._leak[dk], 0.0).max(axis=1)
         return a2 < 10 ** (cfg.detection.sidelobe_margin_db / 10) * leak
 
-    def warm_kernels(self, points: bool = True) -> None:
-        """Compile (or load) the compiled kernels a first scan reaches last, with the scan's own operand types: the
-        OMP's joint refinement's stages and row bookkeeping (:func:`rhs_env.point_cloud.warm_refinement_kernels`) and,
-        with ``points``, the points (:meth:`_target_bins`, :meth:`_assemble_points`) of one synthetic target per radar.
-        A background process runs it (:mod:`slam.gym.precompile`) while an env's first scan compiles the synthesis, the
-        detector and the OMP's search; nothing to do with ``kernels="numpy"``."""
+    def warm_refinement(self) -> None:
+        """Compile (or load) the OMP's joint refinement's stages and row bookkeeping with the scan's own operand types
+        (:func:`rhs_env.point_cloud.warm_refinement_kernels`): the first part of a background compile's radar work
+        (:mod:`slam.gym.precompile`), while an env's first scan compiles the synthesis, the detector and the OMP's
+        search. Each ``warm_*`` method does nothing with ``kernels="numpy"``."""
         cfg = self.config
         if cfg.kernels != "numba":
             return
-        from rhs_env.kernels import gather_bins
         from rhs_env.point_cloud import warm_refinement_kernels
 
         for dic, _ in self._groups:
             warm_refinement_kernels(dic, self._chirp_index, cfg.estimation.max_targets, cfg.estimation.refine_passes,
                                     cfg.estimation.newton_steps, cfg.estimation.refine_tol)
-        if not points:
+
+    def warm_points(self) -> None:
+        """Compile (or load) the points' kernels (:meth:`_target_bins`, :meth:`_assemble_points`) on one synthetic
+        target in each of the four cells of :meth:`_warm_cells`."""
+        cfg = self.config
+        if cfg.kernels != "numba":
             return
-        n_i, n_c, n_l = cfg.scan.slots, cfg.waveform.chirps_per_slot, cfg.estimation.max_targets
-        rd, kd = np.arange(4, dtype=np.int64), np.full(4, 40, np.int64)
-        spec = self._noise_spectrum((4, n_i, n_c))
+        from rhs_env.kernels import gather_bins
+
+        n_q, n_l = cfg.scan.slots * cfg.waveform.chirps_per_slot, cfg.estimation.max_targets
+        rd, kd, spec = self._warm_cells()
         kk = self._neighbour_bins(kd, spec.shape[-1])
         win, _ = gather_bins(spec, rd, kk, kk.shape[1] // 2)
         est = _Targets.empty(4, n_l)
         est.valid[:, 0], est.amp[:, 0], est.anorm[:, 0] = True, 1.0, 1.0
-        est.tfrac[:] = self._target_bins(spec, rd, kk, np.ones((4, n_i * n_c, n_l), complex), win)
+        est.tfrac[:] = self._target_bins(spec, rd, kk, np.ones((4, n_q, n_l), complex), win)
         self._assemble_points(rd, kd, est)
 
     def warm_one_call_omp(self) -> None:
         """Compile (or load) the one-call OMP (:func:`rhs_env.kernels.omp_doppler`) with the scan's own operand types,
-        on noise in four detected cells: the last thing a background compile does (:mod:`slam.gym.precompile`), after
-        which an env's scans switch from its Python body to it (:data:`rhs_env.kernels.omp_doppler_tiered`)."""
+        on the noise of :meth:`_warm_cells`: the last thing a background compile does, after which an env's scans
+        switch from its Python body to it (:data:`rhs_env.kernels.omp_doppler_tiered`)."""
         if self.config.kernels != "numba":
             return
         from rhs_env.kernels import omp_doppler_tiered
 
-        rd, kd = np.arange(4, dtype=np.int64), np.full(4, 40, np.int64)
-        spec = self._noise_spectrum((4, self.config.scan.slots, self.config.waveform.chirps_per_slot))
+        rd, kd, spec = self._warm_cells()
         mode, omp_doppler_tiered.mode = omp_doppler_tiered.mode, "compiled"
         try:
             self._estimate_angles(spec, rd, kd)
         finally:
             omp_doppler_tiered.mode = mode
+
+    def _warm_cells(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Cells (radar ``rd``, bin ``kd``), bin 40 of each radar, and a noise spectrum to warm kernels on."""
+        cfg = self.config
+        spec = self._noise_spectrum((4, cfg.scan.slots, cfg.waveform.chirps_per_slot))
+        return np.arange(4, dtype=np.int64), np.full(4, 40, np.int64), spec
 
     def scan(self, scatterers: Scatterers, occluders: Occluders | None = None) -> PointCloud:
         """One sensing cycle of the four radars -> :class:`PointCloud` with ``stage_times``.

@@ -10,10 +10,10 @@ kernels do not depend on the radar's, so :func:`start` (called by the SLAM env's
    radars, with their Doppler, from a car at 25 m/s), through the same code paths, so the same signatures
    compile and land in the on-disk cache, which the env's process then loads instead of compiling (first: they
    need none of the radar's kernels, which the env is compiling meanwhile);
-2. the OMP's joint refinement's stages and row bookkeeping
-   (:meth:`rhs_env.radar.RadarSystem.warm_kernels` without the points), by when the env has cached the Taylor
-   atoms they call;
-3. the points and the one-call OMP (:meth:`rhs_env.radar.RadarSystem.warm_one_call_omp`): until the one-call
+2. the OMP's joint refinement's stages and row bookkeeping (:meth:`rhs_env.radar.RadarSystem.warm_refinement`),
+   by when the env has cached the Taylor atoms they call;
+3. the points (:meth:`rhs_env.radar.RadarSystem.warm_points`) and the one-call OMP
+   (:meth:`rhs_env.radar.RadarSystem.warm_one_call_omp`): until the one-call
    OMP is in the cache the env's scans run its body in Python on the compiled stages
    (:data:`rhs_env.kernels.omp_doppler_tiered`, the same bits), so the env's first step does not wait for the
    6-8 s numba spends linking the OMP's whole tree again. The env compiles the points itself (~3 s, reached
@@ -58,15 +58,14 @@ def start() -> bool:
     """Start :func:`workload` in a background process if the kernels' cache is cold; True if it started."""
     if os.environ.get(_ENV_SWITCH, "1") == "0":
         return False
-    from rhs_common.jit import COMPILE_LOCK, background_compile_running, cache_index, numba_module
+    from rhs_common.jit import background_compile_running, cache_index, compile_lock, numba_module
 
     if numba_module().config.DISABLE_JIT:
         return False
     omp, last = _probes()
-    omp_index, last_index = cache_index(omp), cache_index(last)
-    if omp_index is None or last_index is None or (omp_index.exists() and last_index.exists()):
+    omp_index, last_index, lock = cache_index(omp), cache_index(last), compile_lock(omp)
+    if omp_index is None or last_index is None or lock is None or (omp_index.exists() and last_index.exists()):
         return False
-    lock = omp_index.parent / COMPILE_LOCK
     if background_compile_running(omp):
         return False
     try:
@@ -102,8 +101,7 @@ def synthetic_cloud(pose: np.ndarray, velocity: np.ndarray, landmarks: np.ndarra
 
 def workload(cycles: int = 8) -> None:
     """The SLAM env's pipeline (default configs, the four radars' mounts) on ``cycles`` synthetic clouds, the OMP's
-    refinement stages (:meth:`rhs_env.radar.RadarSystem.warm_kernels`), then the points and the one-call OMP
-    (:meth:`rhs_env.radar.RadarSystem.warm_one_call_omp`)."""
+    refinement stages, then the points and the one-call OMP (:class:`rhs_env.radar.RadarSystem`'s ``warm_*``)."""
     from rhs_env.radar_config import RadarConfig
     from slam.core.pipeline import SlamPipeline
     from slam.core.rbpf import SlamConfig
@@ -123,8 +121,8 @@ def workload(cycles: int = 8) -> None:
     from rhs_env.radar import RadarSystem  # (~1 s of imports: after the SLAM's kernels)
 
     radar = RadarSystem(RadarConfig(), np.random.default_rng(0))
-    radar.warm_kernels(points=False)
-    radar.warm_kernels()
+    radar.warm_refinement()
+    radar.warm_points()
     radar.warm_one_call_omp()
 
 
