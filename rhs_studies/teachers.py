@@ -14,7 +14,10 @@ in training, where the envs draw seeds 0.. and 20000.., nor by the held-out eval
 
 And variants of the headway driver itself (:class:`agents.expert.HeadwayDriverConfig`): ``headway_cruise30`` chooses
 target speeds up to 30 m/s (cruise speed 30 instead of 25) and accelerates with a 1 m/s margin (instead of 2);
-``headway_cruise30_h1.2`` also holds a 1.2 s time gap (instead of 1.5). A student that sees the road through radar
+``headway_cruise30_h1.2`` also holds a 1.2 s time gap (instead of 1.5); ``headway_cruise30_gap`` a 2.0 s time gap and
+1.5 s (instead of 1.0 s) to a faster follower in a lane it changes into (the teacher of
+``agents/hyperparams/dagger_cruise30_gap.yml``), and ``headway_cruise30_gap_d5`` the same with a 5 m standstill gap
+``d0`` (instead of 8 m). A student that sees the road through radar
 points copied the headway driver to within 1 of its return; copying the 30 m/s one, it crashed in 7 of 50 validation
 episodes after 40k env steps and again after 80k (``agents/hyperparams/dagger_cruise30.yml`` has the runs): 5 m/s
 faster than the traffic, its mistakes crash.
@@ -52,6 +55,10 @@ VARIANTS: dict[str, tuple[str, dict[str, float]]] = {
     "headway": ("headway", {}),
     "headway_cruise30": ("headway", {"cruise_speed_mps": 30.0, "margin_mps": 1.0}),
     "headway_cruise30_h1.2": ("headway", {"cruise_speed_mps": 30.0, "margin_mps": 1.0, "headway_s": 1.2}),
+    "headway_cruise30_gap": ("headway", {"cruise_speed_mps": 30.0, "margin_mps": 1.0, "headway_s": 2.0,
+                                         "rear_headway_s": 1.5}),
+    "headway_cruise30_gap_d5": ("headway", {"cruise_speed_mps": 30.0, "margin_mps": 1.0, "headway_s": 2.0,
+                                            "rear_headway_s": 1.5, "standstill_gap_m": 5.0}),
     "lookahead": ("lookahead", {}),
     "lookahead_no_margin": ("lookahead", {"min_headway_s": 0.0, "unsafe_penalty": 0.0}),
     "lookahead_margin_1s": ("lookahead", {"min_headway_s": 1.0}),
@@ -61,6 +68,9 @@ LABELS = {
     "headway": "HeadwayDriver (the shipped students' expert)",
     "headway_cruise30": "HeadwayDriver up to 30 m/s, 1 m/s margin",
     "headway_cruise30_h1.2": "HeadwayDriver up to 30 m/s, 1 m/s margin, 1.2 s headway",
+    "headway_cruise30_gap": "HeadwayDriver up to 30 m/s, 1 m/s margin, 2.0 s headway, 1.5 s to a follower",
+    "headway_cruise30_gap_d5": "HeadwayDriver up to 30 m/s, 1 m/s margin, 2.0 s headway, 1.5 s to a follower, 5 m "
+                               "standstill gap",
     "lookahead": "LookaheadDriver, 0.6 s margin (as shipped)",
     "lookahead_no_margin": "LookaheadDriver without a time-gap margin",
     "lookahead_margin_1s": "LookaheadDriver, 1 s margin",

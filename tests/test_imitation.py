@@ -82,6 +82,22 @@ def test_slow_leader_close_ahead_with_side_lanes_blocked_means_slower():
     assert HeadwayDriver(env, {"cruise_speed_mps": 30.0}).act() == IDLE
 
 
+def test_standstill_gap_sets_how_near_the_driver_follows():
+    """v_safe = v_f + (g - d0) / T: at a 10 m bumper gap behind a 23 m/s leader and T = 2 s, d0 = 8 m gives 24 m/s
+    (below the 25 m/s target: SLOWER), d0 = 5 m gives 25.5 m/s (hold 25 m/s: IDLE)."""
+    def scene():
+        env, ego = _road(lane=2, speed=25.0, speed_index=1)
+        _place(env, 2, 15.0, 23.0)  # bumper gap 15 - 5 = 10 m
+        _place(env, 1, 2.0, 25.0)  # alongside, left: no lane change
+        return env
+
+    far = HeadwayDriver(scene(), {"headway_s": 2.0, "standstill_gap_m": 8.0})
+    near = HeadwayDriver(scene(), {"headway_s": 2.0, "standstill_gap_m": 5.0})
+    assert near.safe_speed(("0", "1", 2)) - far.safe_speed(("0", "1", 2)) == pytest.approx(3.0 / 2.0)
+    assert far.act() == SLOWER
+    assert near.act() == IDLE
+
+
 def test_overtakes_left_only_for_a_clear_gain_and_never_into_a_closing_follower():
     env, ego = _road(lane=2, speed=25.0, speed_index=1)
     _place(env, 2, 15.0, 21.0)  # slow leader in the right lane: v_safe = 21 + (10 - 8) / 1.5 = 22.3

@@ -159,3 +159,16 @@ def test_a_headway_variant_of_the_teachers_study_drives_with_its_own_settings(mo
     assert run["steps"] == 2 and len(made) == 1
     assert made[0].cruise_speed_mps == 30.0 and made[0].margin_mps == 1.0
     assert VARIANTS["headway_cruise30"] == ("headway", {"cruise_speed_mps": 30.0, "margin_mps": 1.0})
+
+
+@pytest.mark.parametrize(("variant", "hyperparams"), [("headway_cruise30_gap", "dagger_cruise30_gap.yml"),
+                                                      ("headway_cruise30_gap_d5", "dagger_cruise30_close.yml")])
+def test_teachers_study_variants_are_the_teachers_of_the_30_mps_students(variant, hyperparams):
+    """The study measures the teacher each 30 m/s student's YAML trains with (its ``expert`` entry)."""
+    import yaml
+
+    from agents.run_setup import HYPERPARAMS_DIR
+    from rhs_studies.teachers import VARIANTS
+
+    table = yaml.safe_load((HYPERPARAMS_DIR / hyperparams).read_text())
+    assert VARIANTS[variant] == ("headway", table["rhs-highway-slam-v0"]["expert"])
