@@ -51,14 +51,14 @@ ACTION = {"type": "DiscreteMetaAction", "target_speeds": [10, 15, 20, 25, 30]}
 DECISION_STEPS = 5  # env steps per decision (1 Hz at highway-env's 5 Hz)
 #: variant -> (driver, config): "headway" a :class:`agents.expert.HeadwayDriver` with these
 #: :class:`agents.expert.HeadwayDriverConfig` fields, "lookahead" a :class:`agents.lookahead.LookaheadDriver`
+_CRUISE30 = {"cruise_speed_mps": 30.0, "margin_mps": 1.0}
+_CRUISE30_GAP = {**_CRUISE30, "headway_s": 2.0, "rear_headway_s": 1.5}
 VARIANTS: dict[str, tuple[str, dict[str, float]]] = {
     "headway": ("headway", {}),
-    "headway_cruise30": ("headway", {"cruise_speed_mps": 30.0, "margin_mps": 1.0}),
-    "headway_cruise30_h1.2": ("headway", {"cruise_speed_mps": 30.0, "margin_mps": 1.0, "headway_s": 1.2}),
-    "headway_cruise30_gap": ("headway", {"cruise_speed_mps": 30.0, "margin_mps": 1.0, "headway_s": 2.0,
-                                         "rear_headway_s": 1.5}),
-    "headway_cruise30_gap_d5": ("headway", {"cruise_speed_mps": 30.0, "margin_mps": 1.0, "headway_s": 2.0,
-                                            "rear_headway_s": 1.5, "standstill_gap_m": 5.0}),
+    "headway_cruise30": ("headway", _CRUISE30),
+    "headway_cruise30_h1.2": ("headway", {**_CRUISE30, "headway_s": 1.2}),
+    "headway_cruise30_gap": ("headway", _CRUISE30_GAP),
+    "headway_cruise30_gap_d5": ("headway", {**_CRUISE30_GAP, "standstill_gap_m": 5.0}),
     "lookahead": ("lookahead", {}),
     "lookahead_no_margin": ("lookahead", {"min_headway_s": 0.0, "unsafe_penalty": 0.0}),
     "lookahead_margin_1s": ("lookahead", {"min_headway_s": 1.0}),

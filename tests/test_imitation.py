@@ -86,7 +86,7 @@ def test_standstill_gap_sets_how_near_the_driver_follows():
     """v_safe = v_f + (g - d0) / T: at a 10 m bumper gap behind a 23 m/s leader and T = 2 s, d0 = 8 m gives 24 m/s
     (below the 25 m/s target: SLOWER), d0 = 5 m gives 25.5 m/s (hold 25 m/s: IDLE)."""
     def scene():
-        env, ego = _road(lane=2, speed=25.0, speed_index=1)
+        env, _ = _road(lane=2, speed=25.0, speed_index=1)
         _place(env, 2, 15.0, 23.0)  # bumper gap 15 - 5 = 10 m
         _place(env, 1, 2.0, 25.0)  # alongside, left: no lane change
         return env
