@@ -42,6 +42,7 @@ from agents.decision import held
 from agents.expert import HeadwayDriver
 from agents.lookahead import LookaheadDriver
 from agents.run_setup import parse_env_kwargs
+from agents.shield import ShieldedPolicy, check_shield_env, shield_record
 from rhs_env.registration import SLAM_ENV_SPECS
 
 DATA_DIR = Path(__file__).parent / "data"
@@ -251,7 +252,12 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
         check_spaces(model, env, path)
         model = PointColumnAdapter.wrap(model, env)
     meta = policy_metadata(path)
-    return held(model, meta.get("decision_interval", 1), meta.get("decision_mode", "hold"))
+    policy_ = held(model, meta.get("decision_interval", 1), meta.get("decision_mode", "hold"))
+    if meta.get("shield") is None:
+        return policy_
+    if env is not None:
+        check_shield_env(env.observation_space)
+    return ShieldedPolicy(policy_, meta["shield"])
 
 
 def _privileged_driver(policy: str, env):
@@ -281,7 +287,12 @@ def _load_rllib(path: Path, env=None):
     if env is not None:
         check_spaces(model, env, path)
     meta = policy_metadata(path)
-    return held(model, meta.get("decision_interval", 1), meta.get("decision_mode", "hold"))
+    policy_ = held(model, meta.get("decision_interval", 1), meta.get("decision_mode", "hold"))
+    if meta.get("shield") is None:
+        return policy_
+    if env is not None:
+        check_shield_env(env.observation_space)
+    return ShieldedPolicy(policy_, meta["shield"])
 
 
 class PointColumnAdapter:
@@ -421,6 +432,7 @@ def run_episode(
             bar.update(1)
         done = terminated or truncated
     map_rmse = info.get("map_rmse_m")  # absent until a landmark is matched
+    shield = model_shield(policy)
     return {
         "seed": seed,
         "return": total,
@@ -439,6 +451,7 @@ def run_episode(
         "estimated_xy": est_xy,
         "landmarks_true": np.asarray(info.get("true_landmarks", np.zeros((0, 2)))).reshape(-1, 2).tolist(),
         "landmarks_est": np.asarray(info.get("estimated_landmarks", np.zeros((0, 2)))).reshape(-1, 2).tolist(),
+        "shield_overrides": None if shield is None else dict(shield.overrides),
     }
 
 
@@ -455,7 +468,19 @@ def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
         "position_rmse_m": _stats([r["position_rmse_m"] for r in runs]),
         "heading_rmse_rad": _stats([r["heading_rmse_rad"] for r in runs]),
         "map_rmse_m": _stats([r["map_rmse_m"] for r in runs]),
+        "shield_overrides": _override_totals(runs),
     }
+
+
+def model_shield(policy: Any):
+    """The :class:`agents.shield.RadarShield` a loaded policy drives through, or None."""
+    return policy.shield if isinstance(policy, ShieldedPolicy) else None
+
+
+def _override_totals(runs: list[dict[str, Any]]) -> dict[str, int] | None:
+    """The shield's replacements (:mod:`agents.shield`) summed over episodes, per reason; None when unshielded."""
+    counts: list[dict[str, int]] = [r["shield_overrides"] for r in runs if r.get("shield_overrides") is not None]
+    return {k: int(sum(c[k] for c in counts)) for k in counts[0]} if counts else None
 
 
 #: env steps per second on the project's 2-core machine (results/benchmark.md, default radar): the
@@ -493,8 +518,12 @@ def evaluate(
     progress: bool = True,
     deterministic: bool = True,
     max_hours: float | None = MAX_UNCONFIRMED_HOURS,
+    shield: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Evaluate ``policy`` on ``episodes`` seeded episodes; returns the JSON-ready summary.
+
+    ``shield`` (a :class:`agents.shield.ShieldConfig` as a dict, ``{}`` for its defaults) drives the policy
+    through the radar safety shield, in place of any shield saved beside it.
 
     ``env_id`` / ``env_kwargs`` default to the ones saved beside the policy (:func:`resolve_env`).
     An evaluation estimated (:func:`estimate_hours`) longer than ``max_hours`` is refused with a
@@ -514,7 +543,7 @@ def evaluate(
     previous = {}
     interrupted = None
     runs: list[dict[str, Any]] = []
-    env = None
+    env = model = None
     try:
         for sig in (signal.SIGTERM, signal.SIGINT):
             try:
@@ -523,6 +552,10 @@ def evaluate(
                 pass
         env = make_env(env_id, kwargs)
         model = load_policy(policy, env, seed)
+        if shield is not None:
+            check_shield_env(env.observation_space)
+            model = ShieldedPolicy(getattr(model, "model", model) if isinstance(model, ShieldedPolicy) else model,
+                                   shield)
         per_episode = episode_steps(env)
         hours = estimate_hours(env_id, episodes, per_episode)
         if max_hours is not None and hours > max_hours:
@@ -548,6 +581,7 @@ def evaluate(
         "seed": seed,
         "seeds": [seed + k for k in range(len(runs))],
         "deterministic": deterministic,
+        "shield": None if model_shield(model) is None else shield_record(model_shield(model).config),
         "interrupted": interrupted,
         **summarize(runs),
         "runs": runs,
@@ -616,6 +650,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--env-kwargs", default=None, help="JSON dict passed to gym.make, merged over the policy's saved env kwargs"
     )
     parser.add_argument("--stochastic", action="store_true", help="sample actions instead of the greedy action")
+    parser.add_argument(
+        "--shield", nargs="?", const="{}", default=None, metavar="JSON",
+        help="drive through the radar safety shield (agents.shield; optional JSON of ShieldConfig fields, e.g. "
+        "'{\"front_time_s\": 1.5}'), in place of a shield saved beside the policy",
+    )
     parser.add_argument("--out", required=True, help="output JSON file")
     parser.add_argument("--figure", default=None, help="output PNG (default: the --out path with .png)")
     parser.add_argument("--no-progress", action="store_true")
@@ -642,6 +681,7 @@ def run(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
             deterministic=not args.stochastic,
             max_hours=None if args.yes else MAX_UNCONFIRMED_HOURS,
+            shield=None if args.shield is None else parse_shield(args.shield),
         )
     except (ValueError, TypeError, FileNotFoundError, json.JSONDecodeError) as exc:
         print(f"rhs-slam evaluate: error: {exc}", file=sys.stderr)
@@ -662,6 +702,18 @@ def run(args: argparse.Namespace) -> int:
               f"{args.episodes} episodes; wrote them to {out}", file=sys.stderr)
         return 128 + int(signal.Signals[summary["interrupted"]])
     return 0
+
+
+def parse_shield(text: str) -> dict[str, Any]:
+    """``--shield``'s JSON object of :class:`agents.shield.ShieldConfig` fields, validated."""
+    from agents.shield import ShieldConfig
+    from rhs_common.validation import build
+
+    value = json.loads(text)
+    if not isinstance(value, dict):
+        raise TypeError(f"--shield must be a JSON object of ShieldConfig fields, got {text!r}")
+    build(ShieldConfig, value, "shield")
+    return value
 
 
 def json_default(value: Any) -> Any:

@@ -16,6 +16,7 @@ MODULES = (
     "slam.gym.wrapper",
     "slam.gym.metrics_info",
     "agents.decision",
+    "agents.shield",
 )
 
 
