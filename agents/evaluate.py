@@ -206,7 +206,8 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
 
     With ``env``, the policy's observation space is checked against the env's. A zip whose JSON
     has ``decision_interval`` k > 1 comes back as a :class:`agents.decision.HeldPolicy` (decides every
-    k ``predict`` calls; :func:`run_episode` resets it at each episode start).
+    k ``predict`` calls; :func:`run_episode` resets it at each episode start); one whose JSON has a
+    ``shield`` (a fine-tune trained under it, :mod:`agents.shield`) behind a :class:`agents.shield.ShieldedPolicy`.
     """
     if is_scripted(policy):
         if env is None:
@@ -252,12 +253,17 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
         check_spaces(model, env, path)
         model = PointColumnAdapter.wrap(model, env)
     meta = policy_metadata(path)
-    policy_ = held(model, meta.get("decision_interval", 1), meta.get("decision_mode", "hold"))
+    return _with_saved_shield(held(model, meta.get("decision_interval", 1), meta.get("decision_mode", "hold")),
+                              meta, env)
+
+
+def _with_saved_shield(policy: Any, meta: dict[str, Any], env=None) -> Any:
+    """``policy`` behind the radar shield saved in its record (``meta["shield"]``), else itself."""
     if meta.get("shield") is None:
-        return policy_
+        return policy
     if env is not None:
         check_shield_env(env.observation_space)
-    return ShieldedPolicy(policy_, meta["shield"])
+    return ShieldedPolicy(policy, meta["shield"])
 
 
 def _privileged_driver(policy: str, env):
@@ -278,7 +284,7 @@ def _privileged_driver(policy: str, env):
 def _load_rllib(path: Path, env=None):
     """The RLModule of an RLlib checkpoint directory (``rhs-slam train --backend rllib``); a run with a decision
     interval k > 1 (``decision_interval`` in the JSON beside the directory) comes back as a
-    :class:`agents.decision.HeldPolicy`, as a zip does."""
+    :class:`agents.decision.HeldPolicy`, and one trained under the shield behind it, as a zip does."""
     from agents.rllib_policy import MODULE_SUBDIR, RLlibPolicy, is_rllib_checkpoint
 
     if not is_rllib_checkpoint(path):
@@ -287,12 +293,8 @@ def _load_rllib(path: Path, env=None):
     if env is not None:
         check_spaces(model, env, path)
     meta = policy_metadata(path)
-    policy_ = held(model, meta.get("decision_interval", 1), meta.get("decision_mode", "hold"))
-    if meta.get("shield") is None:
-        return policy_
-    if env is not None:
-        check_shield_env(env.observation_space)
-    return ShieldedPolicy(policy_, meta["shield"])
+    return _with_saved_shield(held(model, meta.get("decision_interval", 1), meta.get("decision_mode", "hold")),
+                              meta, env)
 
 
 class PointColumnAdapter:

@@ -37,7 +37,10 @@ own rate, so ``gamma`` is per second. Hyperparameters: ``agents/hyperparams/fine
 (PPO's arguments plus the fields of :class:`FinetuneConfig`). Without ``--init-policy``
 the same stage is PPO from scratch with the privileged critic (no anchor, no correction). A
 ``reward_shaping`` entry (``{ttc_s, weight}``, :mod:`agents.shaping`) adds a time-to-collision penalty to the
-training reward; evaluation keeps highway-env's.
+training reward; evaluation keeps highway-env's. A ``shield`` entry (:class:`agents.shield.ShieldConfig` fields,
+``{}`` for the defaults) trains under the radar safety shield (:class:`agents.shield.ShieldAction` at every env
+step, so PPO learns what the shield lets through) and saves it beside the model: ``rhs-slam evaluate`` and the
+demo then drive the policy through the same shield.
 """
 
 from __future__ import annotations
@@ -274,9 +277,14 @@ class AnchoredPPO(PPO):
         self.logger.record("anchor/kl", float(np.mean(kls)))
 
 
-def training_wrapper(env: gym.Env, privileged: bool, shaping: dict[str, Any] | None) -> gym.Env:
-    """The fine-tune's wrappers of each training env: the privileged key (for the critic), then the reward shaping
-    (:class:`agents.shaping.TimeToCollisionShaping`; None: highway-env's reward)."""
+def training_wrapper(env: gym.Env, privileged: bool, shaping: dict[str, Any] | None,
+                     shield: dict[str, Any] | None = None) -> gym.Env:
+    """The fine-tune's wrappers of each training env: the radar shield (None: none), the privileged key (for the
+    critic), then the reward shaping (:class:`agents.shaping.TimeToCollisionShaping`; None: highway-env's reward)."""
+    if shield is not None:
+        from agents.shield import ShieldAction
+
+        env = ShieldAction(env, shield)
     if privileged:
         env = PrivilegedObservation(env)
     if shaping is not None:
@@ -329,8 +337,10 @@ def measure_prior(env_id: str, env_kwargs: dict[str, Any], student: PPO, run: An
 
 
 def _settings(env_id: str, timesteps: int | None, n_envs: int | None, hyperparams: str | Path | None,
-              env_kwargs: dict | None, init_policy: str | Path | None) -> tuple[Any, FinetuneConfig, dict, dict | None]:
-    """The run's settings, the :class:`FinetuneConfig`, PPO's own arguments and the reward shaping (or None)."""
+              env_kwargs: dict | None, init_policy: str | Path | None
+              ) -> tuple[Any, FinetuneConfig, dict, dict | None, dict | None]:
+    """The run's settings, the :class:`FinetuneConfig`, PPO's own arguments, the reward shaping and the shield
+    (each None when the YAML has none; the shield as its full record)."""
     from agents.imitation import continued_env_kwargs
     from agents.run_setup import run_settings
 
@@ -340,13 +350,29 @@ def _settings(env_id: str, timesteps: int | None, n_envs: int | None, hyperparam
         env_kwargs = continued_env_kwargs(env_id, env_kwargs, init_policy)
     run = run_settings("finetune", env_id, timesteps, n_envs, hyperparams, env_kwargs)
     config = build(FinetuneConfig, {k: v for k, v in run.hp.items() if k in FINETUNE_KEYS}, "finetune")
-    ppo_args = {k: v for k, v in run.hp.items() if k not in (*FINETUNE_KEYS, "reward_shaping")}
+    ppo_args = {k: v for k, v in run.hp.items() if k not in (*FINETUNE_KEYS, "reward_shaping", "shield")}
     shaping = run.hp.get("reward_shaping")
     if shaping is not None:
         from agents.shaping import ShapingConfig
 
         build(ShapingConfig, shaping, "reward_shaping")  # a wrong value fails here, not in a worker
-    return run, config, ppo_args, shaping
+    shield = run.hp.get("shield")
+    if shield is not None:
+        from agents.shield import ShieldConfig, check_shield_env, shield_record
+
+        shield = shield_record(build(ShieldConfig, shield, "shield"))
+        check_shield_env(_observation_space(env_id, run.env_kwargs))
+    return run, config, ppo_args, shaping, shield
+
+
+def _observation_space(env_id: str, env_kwargs: dict[str, Any]) -> gym.Space:
+    from agents.evaluate import make_env
+
+    env = make_env(env_id, env_kwargs)
+    try:
+        return env.observation_space
+    finally:
+        env.close()
 
 
 def _start_from(model: AnchoredPPO, student: PPO | None, config: FinetuneConfig) -> None:
@@ -402,14 +428,15 @@ def train_finetune(env_id: str, timesteps: int | None, out: str | Path, init_pol
         write_summary,
     )
 
-    run, config, ppo_args, shaping = _settings(env_id, timesteps, n_envs, hyperparams, env_kwargs, init_policy)
+    run, config, ppo_args, shaping, shield = _settings(env_id, timesteps, n_envs, hyperparams, env_kwargs,
+                                                       init_policy)
     check_train_args(run.timesteps, run.n_envs, seed, 0, 1, checkpoint_freq)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     limit_threads(torch_threads)
     torch.manual_seed(seed)
     k = run.decision_interval
-    record: dict[str, Any] = {"finetune": asdict(config), "reward_shaping": shaping}
+    record: dict[str, Any] = {"finetune": asdict(config), "reward_shaping": shaping, "shield": shield}
     student = None
     if init_policy is not None:
         student = PPO.load(init_policy, device="cpu")
@@ -420,7 +447,7 @@ def train_finetune(env_id: str, timesteps: int | None, out: str | Path, init_pol
             power = float(dagger.get("class_weight_power", 0.0))
             record["class_prior"] = measure_prior(env_id, run.env_kwargs, student, run, config, power,
                                                   bool(dagger.get("label_between", False)), seed + 20_000)
-    wrapper = partial(training_wrapper, privileged=config.privileged_critic, shaping=shaping)
+    wrapper = partial(training_wrapper, privileged=config.privileged_critic, shaping=shaping, shield=shield)
     venv = make_vec_env(env_id, run.n_envs, seed, run.env_kwargs, monitor_dir=out / "monitor", decision_interval=k,
                         decision_mode=run.decision_mode, wrapper=wrapper)
     decisions = -(-run.timesteps // k)

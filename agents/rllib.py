@@ -93,24 +93,30 @@ from agents.rllib_policy import (  # noqa: F401  (re-exported: the checkpoint si
 
 
 def env_config(env_kwargs: dict[str, Any], decision_interval: int = 1, decision_mode: str = "hold",
-               privileged: bool = False) -> dict[str, Any]:
+               privileged: bool = False, shield: dict[str, Any] | None = None) -> dict[str, Any]:
     """The ``env_config`` every Ray worker rebuilds its env from (:func:`make_env`): the ``gym.make`` kwargs and the
     wrappers, so a runner on another machine samples exactly the env the driver describes."""
     from agents.decision import check_decision_interval, check_decision_mode
 
     return {"env_kwargs": dict(env_kwargs), "decision_interval": check_decision_interval(decision_interval),
-            "decision_mode": check_decision_mode(decision_mode), "privileged": bool(privileged)}
+            "decision_mode": check_decision_mode(decision_mode), "privileged": bool(privileged),
+            "shield": None if shield is None else dict(shield)}
 
 
 def make_env(env_id: str, config: dict[str, Any] | None = None) -> gym.Env:
-    """The creator registered with ``ray.tune.register_env``: ``gym.make(env_id, **env_kwargs)``, then (``privileged``)
-    :class:`agents.privileged.PrivilegedObservation` and (``decision_interval`` k > 1)
-    :class:`agents.decision.HoldAction` with ``decision_mode``'s fill, in the order the SB3 backend wraps them."""
+    """The creator registered with ``ray.tune.register_env``: ``gym.make(env_id, **env_kwargs)``, then (``shield``)
+    :class:`agents.shield.ShieldAction`, (``privileged``) :class:`agents.privileged.PrivilegedObservation` and
+    (``decision_interval`` k > 1) :class:`agents.decision.HoldAction` with ``decision_mode``'s fill, in the order
+    the SB3 backend wraps them."""
     import rhs_env  # noqa: F401  (registers the rhs ids in this worker)
     from agents.decision import HoldAction, fill_action
 
     cfg = env_config(**{"env_kwargs": {}, **dict(config or {})})
     env = gym.make(env_id, **cfg["env_kwargs"])
+    if cfg["shield"] is not None:
+        from agents.shield import ShieldAction
+
+        env = ShieldAction(env, cfg["shield"])
     if cfg["privileged"]:
         from agents.privileged import PrivilegedObservation
 
@@ -552,7 +558,13 @@ def train_rllib(
     k = check_decision_interval(decision_interval)
     mode = check_decision_mode(decision_mode)
     model_config = model_settings(hp.get("policy_kwargs") or {})
-    ppo_hp = {key: v for key, v in hp.items() if key != "policy_kwargs"}
+    ppo_hp = {key: v for key, v in hp.items() if key not in ("policy_kwargs", "shield")}
+    shield = None
+    if hp.get("shield") is not None:
+        from agents.shield import ShieldConfig, shield_record
+        from rhs_common.validation import build
+
+        shield = shield_record(build(ShieldConfig, hp["shield"], "shield"))
     finetune = None
     if algo == "finetune":
         from agents.finetune import FINETUNE_KEYS, FinetuneConfig
@@ -569,7 +581,7 @@ def train_rllib(
         if finetune is not None else None
     privileged = bool(finetune is not None and finetune.privileged_critic)
     run = {"env_id": env_id, "timesteps": timesteps, "decisions": decisions, "k": k, "mode": mode,
-           "env_cfg": env_config(env_kwargs, k, mode, privileged), "settings": settings,
+           "env_cfg": env_config(env_kwargs, k, mode, privileged, shield), "settings": settings,
            "model_config": model_config, "num_env_runners": num_env_runners, "address": address, "seed": seed,
            "eval_interval": max(0, eval_freq) // (batch * k) if eval_freq else 0, "eval_episodes": eval_episodes,
            "checkpoint_freq": checkpoint_freq, "progress": progress, "hp": hp, "algo": algo, "finetune": finetune,
@@ -727,6 +739,7 @@ def _summary(out: Path, env_kwargs: dict[str, Any], run: dict[str, Any], steps: 
         "recent_episodes": {key: history[-1][key] for key in ("episode_return_mean", "episode_len_mean", "crash_rate")},
         "model": str(out / CHECKPOINT_DIR),
     }
+    summary["shield"] = run["env_cfg"]["shield"]
     if finetune is not None:
         from dataclasses import asdict
 

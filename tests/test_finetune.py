@@ -163,9 +163,12 @@ def test_privileged_features_read_the_true_road():
     env.close()
 
 
-def test_finetune_cli_trains_and_exports_a_plain_student(tmp_path):
-    """End to end on the small SLAM env: a student zip -> measured prior -> PPO with the anchor -> a plain zip."""
+@pytest.mark.parametrize("shield", [None, {"front_time_s": 1.5}], ids=["plain", "shielded"])
+def test_finetune_cli_trains_and_exports_a_plain_student(tmp_path, shield):
+    """End to end on the small SLAM env: a student zip -> measured prior -> PPO with the anchor -> a plain zip;
+    with a ``shield`` entry, PPO trains under the radar shield and the policy is loaded behind it."""
     from agents.evaluate import load_policy, make_env
+    from agents.shield import ShieldedPolicy
     from agents.train import train
 
     env_id = "rhs-highway-slam-v0"
@@ -183,7 +186,7 @@ def test_finetune_cli_trains_and_exports_a_plain_student(tmp_path):
     hp = tmp_path / "finetune.yml"
     hp.write_text(tiny_hyperparams(env_id, n_envs=1, n_timesteps=80, decision_interval=5, decision_mode="pulse",
                                    n_steps=8, batch_size=8, n_epochs=2, gamma=0.8, anchor_coef=1.0,
-                                   anchor_fraction=0.5, prior_steps=30))
+                                   anchor_fraction=0.5, prior_steps=30, **({} if shield is None else {"shield": shield})))
     out = tmp_path / "run"
     summary = train("finetune", env_id, None, out, hyperparams=hp, init_policy=zip_path, progress=False,
                     checkpoint_freq=0)
@@ -191,12 +194,16 @@ def test_finetune_cli_trains_and_exports_a_plain_student(tmp_path):
     assert sum(summary["class_prior"]["label_counts"]) == 30
     saved = json.loads((out / "model.json").read_text())
     assert saved["decision_interval"] == 5 and saved["decision_mode"] == "pulse"
+    assert (saved["shield"] is None) == (shield is None)
+    if shield is not None:
+        assert saved["shield"]["front_time_s"] == 1.5 and saved["shield"]["min_points"] == 2  # the full record
     model = PPO.load(out / "model.zip", device="cpu")
     assert PRIVILEGED_KEY not in model.observation_space.spaces  # the deployed actor needs only the sensors
     full = AnchoredPPO.load(out / "finetune_full.zip", device="cpu")
     assert PRIVILEGED_KEY in full.observation_space.spaces
     env = make_env(env_id, kwargs)
     policy = load_policy(out / "model.zip", env)
+    assert isinstance(policy, ShieldedPolicy) == (shield is not None)
     obs, _ = env.reset(seed=1)
     action, _ = policy.predict(obs, deterministic=True)
     assert int(np.asarray(action).reshape(-1)[0]) in range(5)

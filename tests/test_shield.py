@@ -143,3 +143,18 @@ def test_evaluate_cli_shield_flag(tmp_path, capsys):
     rc = cli_main(["evaluate", "--policy", "constant:1", "--env", "rhs-highway-radar-v0", "--episodes", "1",
                    "--shield", '{"front_gap_m": -2}', "--out", str(out), "--no-progress"])
     assert rc == 2 and "shield.front_gap_m" in capsys.readouterr().err
+
+
+def test_both_training_backends_wrap_the_shield_inside_the_decision_interval():
+    from agents.decision import HoldAction
+    from agents.finetune import training_wrapper
+    from agents.rllib import env_config, make_env
+
+    kw = small_env_kwargs(slam=False, vehicles_count=5, duration=2)
+    env = make_env("rhs-highway-radar-v0", env_config(kw, 5, "pulse", False, {"front_time_s": 1.5}))
+    assert isinstance(env, HoldAction) and isinstance(env.env, ShieldAction)
+    assert env.env.shield.config.front_time_s == 1.5
+    env.close()
+    sb3 = training_wrapper(gym.make("rhs-highway-radar-v0", **kw), privileged=False, shaping=None, shield={})
+    assert isinstance(sb3, ShieldAction)
+    sb3.close()
