@@ -38,6 +38,7 @@ entries as the stable-baselines3 backend (``agents/hyperparams/ppo.yml`` / ``fin
   | ``anchor_coef`` / ``anchor_fraction`` | the learner's anchor (``learner_config_dict["finetune"]``) |
   | ``anchor_epochs`` | 0: no anchor; else the term is in every minibatch's loss |
   | ``correct_class_prior`` / ``prior_steps`` | the student corrected with SB3 before its actor is copied |
+  | ``shield`` / ``reward_shaping`` | the creator's ``ShieldAction`` / ``TimeToCollisionShaping`` |
 
   Two differences from the SB3 fine-tune: the anchor is a term of the PPO loss on each
   minibatch (RLlib's loss is one function) instead of ``anchor_epochs`` separate passes after
@@ -93,21 +94,22 @@ from agents.rllib_policy import (  # noqa: F401  (re-exported: the checkpoint si
 
 
 def env_config(env_kwargs: dict[str, Any], decision_interval: int = 1, decision_mode: str = "hold",
-               privileged: bool = False, shield: dict[str, Any] | None = None) -> dict[str, Any]:
+               privileged: bool = False, shield: dict[str, Any] | None = None,
+               shaping: dict[str, Any] | None = None) -> dict[str, Any]:
     """The ``env_config`` every Ray worker rebuilds its env from (:func:`make_env`): the ``gym.make`` kwargs and the
     wrappers, so a runner on another machine samples exactly the env the driver describes."""
     from agents.decision import check_decision_interval, check_decision_mode
 
     return {"env_kwargs": dict(env_kwargs), "decision_interval": check_decision_interval(decision_interval),
             "decision_mode": check_decision_mode(decision_mode), "privileged": bool(privileged),
-            "shield": None if shield is None else dict(shield)}
+            "shield": None if shield is None else dict(shield), "shaping": None if shaping is None else dict(shaping)}
 
 
 def make_env(env_id: str, config: dict[str, Any] | None = None) -> gym.Env:
     """The creator registered with ``ray.tune.register_env``: ``gym.make(env_id, **env_kwargs)``, then (``shield``)
-    :class:`agents.shield.ShieldAction`, (``privileged``) :class:`agents.privileged.PrivilegedObservation` and
-    (``decision_interval`` k > 1) :class:`agents.decision.HoldAction` with ``decision_mode``'s fill, in the order
-    the SB3 backend wraps them."""
+    :class:`agents.shield.ShieldAction`, (``privileged``) :class:`agents.privileged.PrivilegedObservation`,
+    (``shaping``) :class:`agents.shaping.TimeToCollisionShaping` and (``decision_interval`` k > 1)
+    :class:`agents.decision.HoldAction` with ``decision_mode``'s fill, in the order the SB3 backend wraps them."""
     import rhs_env  # noqa: F401  (registers the rhs ids in this worker)
     from agents.decision import HoldAction, fill_action
 
@@ -121,6 +123,10 @@ def make_env(env_id: str, config: dict[str, Any] | None = None) -> gym.Env:
         from agents.privileged import PrivilegedObservation
 
         env = PrivilegedObservation(env)
+    if cfg["shaping"] is not None:
+        from agents.shaping import TimeToCollisionShaping
+
+        env = TimeToCollisionShaping(env, cfg["shaping"])
     if cfg["decision_interval"] > 1:
         env = HoldAction(env, cfg["decision_interval"], fill_action(cfg["decision_mode"]))
     return env
@@ -558,13 +564,20 @@ def train_rllib(
     k = check_decision_interval(decision_interval)
     mode = check_decision_mode(decision_mode)
     model_config = model_settings(hp.get("policy_kwargs") or {})
-    ppo_hp = {key: v for key, v in hp.items() if key not in ("policy_kwargs", "shield")}
-    shield = None
+    ppo_hp = {key: v for key, v in hp.items() if key not in ("policy_kwargs", "shield", "reward_shaping")}
+    shield = shaping = None
     if hp.get("shield") is not None:
         from agents.shield import ShieldConfig, shield_record
         from rhs_common.validation import build
 
         shield = shield_record(build(ShieldConfig, hp["shield"], "shield"))
+    if hp.get("reward_shaping") is not None:
+        from dataclasses import asdict
+
+        from agents.shaping import ShapingConfig
+        from rhs_common.validation import build
+
+        shaping = asdict(build(ShapingConfig, hp["reward_shaping"], "reward_shaping"))
     finetune = None
     if algo == "finetune":
         from agents.finetune import FINETUNE_KEYS, FinetuneConfig
@@ -581,7 +594,7 @@ def train_rllib(
         if finetune is not None else None
     privileged = bool(finetune is not None and finetune.privileged_critic)
     run = {"env_id": env_id, "timesteps": timesteps, "decisions": decisions, "k": k, "mode": mode,
-           "env_cfg": env_config(env_kwargs, k, mode, privileged, shield), "settings": settings,
+           "env_cfg": env_config(env_kwargs, k, mode, privileged, shield, shaping), "settings": settings,
            "model_config": model_config, "num_env_runners": num_env_runners, "address": address, "seed": seed,
            "eval_interval": max(0, eval_freq) // (batch * k) if eval_freq else 0, "eval_episodes": eval_episodes,
            "checkpoint_freq": checkpoint_freq, "progress": progress, "hp": hp, "algo": algo, "finetune": finetune,
@@ -739,7 +752,7 @@ def _summary(out: Path, env_kwargs: dict[str, Any], run: dict[str, Any], steps: 
         "recent_episodes": {key: history[-1][key] for key in ("episode_return_mean", "episode_len_mean", "crash_rate")},
         "model": str(out / CHECKPOINT_DIR),
     }
-    summary["shield"] = run["env_cfg"]["shield"]
+    summary["shield"], summary["reward_shaping"] = run["env_cfg"]["shield"], run["env_cfg"]["shaping"]
     if finetune is not None:
         from dataclasses import asdict
 
