@@ -17,11 +17,15 @@ them (key by key, top level), so the policy always meets the observation it
 was trained on unless asked otherwise. A policy trained with a ``decision_interval``
 k > 1 (saved in the same JSON, :mod:`agents.decision`) is loaded as a
 :class:`agents.decision.HeldPolicy`: it decides every k env steps and repeats its
-action between, so every policy is scored per env step on the same seeds. The default policy is the shipped one,
-``agents/data/rl/dagger_continue_80k.zip`` (with its ``.json`` record): the DAgger student of
+action between, so every policy is scored per env step on the same seeds. A record with a ``shield``
+(:mod:`agents.shield`) drives the policy behind the radar safety shield; ``--shield`` puts any policy behind
+it, ``--no-shield`` drives a shielded one without. The default policy is the shipped one,
+``agents/data/rl/dagger_cruise30_close.zip`` (with its ``.json`` record): the DAgger student of
 :class:`agents.expert.HeadwayDriver` (:mod:`agents.imitation`), ``agents/data/dagger_rhs_highway_slam.zip``,
-continued with DAgger for 80k more env steps; ``ppo_rhs_highway_slam.zip`` is PPO with the student's
-budget (it learned always-SLOWER).
+continued with DAgger for 80k env steps (``rl/dagger_continue_80k.zip``), then 40k with the headway driver
+at 30 m/s and a 2.0 s gap (``rl/dagger_cruise30_gap.zip``) and 40k more with it following at 5 m
+(``agents/hyperparams/dagger_cruise30_close.yml``), driven behind the radar shield;
+``ppo_rhs_highway_slam.zip`` is PPO with the student's budget (it learned always-SLOWER).
 
 An evaluation estimated above an hour (:func:`estimate_hours`, from the measured steps/s) needs
 ``--yes``. SIGTERM or Ctrl-C stop it at once: the finished episodes are written (``interrupted``
@@ -55,8 +59,12 @@ PPO_TRUTH_POLICY = DATA_DIR / "ppo_rhs_highway_truth.zip"
 #: the DAgger student continued for 80k more env steps from DAGGER_POLICY (rhs_studies/rl_finetune.py's
 #: ``dagger_continue_80k`` arm; 2 collisions in 200 fresh episodes against the student's 7)
 DAGGER_CONTINUED_POLICY = DATA_DIR / "rl" / "dagger_continue_80k.zip"
+#: DAgger continued from DAGGER_CONTINUED_POLICY with the 30 m/s headway teacher: 2.0 s gap (dagger_cruise30_gap.yml),
+#: then 5 m standstill gap (dagger_cruise30_close.yml); the second's record drives it behind the radar shield
+DAGGER_CRUISE30_GAP_POLICY = DATA_DIR / "rl" / "dagger_cruise30_gap.zip"
+DAGGER_CRUISE30_CLOSE_POLICY = DATA_DIR / "rl" / "dagger_cruise30_close.zip"
 #: the policy of ``rhs-slam demo`` / ``evaluate`` by default, and its ground-truth twin
-SHIPPED_POLICY, SHIPPED_TRUTH_POLICY = DAGGER_CONTINUED_POLICY, DAGGER_TRUTH_POLICY
+SHIPPED_POLICY, SHIPPED_TRUTH_POLICY = DAGGER_CRUISE30_CLOSE_POLICY, DAGGER_TRUTH_POLICY
 DEFAULT_ENV = "rhs-highway-slam-v0"
 
 
@@ -520,12 +528,13 @@ def evaluate(
     progress: bool = True,
     deterministic: bool = True,
     max_hours: float | None = MAX_UNCONFIRMED_HOURS,
-    shield: dict[str, Any] | None = None,
+    shield: dict[str, Any] | bool | None = None,
 ) -> dict[str, Any]:
     """Evaluate ``policy`` on ``episodes`` seeded episodes; returns the JSON-ready summary.
 
     ``shield`` (a :class:`agents.shield.ShieldConfig` as a dict, ``{}`` for its defaults) drives the policy
-    through the radar safety shield, in place of any shield saved beside it.
+    through the radar safety shield (``True``: its defaults), in place of any shield saved beside it; ``False`` drives it without one
+    (None: as its record says).
 
     ``env_id`` / ``env_kwargs`` default to the ones saved beside the policy (:func:`resolve_env`).
     An evaluation estimated (:func:`estimate_hours`) longer than ``max_hours`` is refused with a
@@ -554,10 +563,11 @@ def evaluate(
                 pass
         env = make_env(env_id, kwargs)
         model = load_policy(policy, env, seed)
-        if shield is not None:
+        if isinstance(model, ShieldedPolicy) and shield is not None:
+            model = model.model  # the saved shield is replaced or dropped
+        if shield is not None and shield is not False:
             check_shield_env(env.observation_space)
-            model = ShieldedPolicy(getattr(model, "model", model) if isinstance(model, ShieldedPolicy) else model,
-                                   shield)
+            model = ShieldedPolicy(model, {} if shield is True else shield)
         per_episode = episode_steps(env)
         hours = estimate_hours(env_id, episodes, per_episode)
         if max_hours is not None and hours > max_hours:
@@ -657,6 +667,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="drive through the radar safety shield (agents.shield; optional JSON of ShieldConfig fields, e.g. "
         "'{\"front_time_s\": 1.5}'), in place of a shield saved beside the policy",
     )
+    parser.add_argument("--no-shield", action="store_true",
+                        help="drive a policy saved with the shield (the shipped one) without it")
     parser.add_argument("--out", required=True, help="output JSON file")
     parser.add_argument("--figure", default=None, help="output PNG (default: the --out path with .png)")
     parser.add_argument("--no-progress", action="store_true")
@@ -683,7 +695,7 @@ def run(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
             deterministic=not args.stochastic,
             max_hours=None if args.yes else MAX_UNCONFIRMED_HOURS,
-            shield=None if args.shield is None else parse_shield(args.shield),
+            shield=False if args.no_shield else None if args.shield is None else parse_shield(args.shield),
         )
     except (ValueError, TypeError, FileNotFoundError, json.JSONDecodeError) as exc:
         print(f"rhs-slam evaluate: error: {exc}", file=sys.stderr)

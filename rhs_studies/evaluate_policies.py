@@ -2,9 +2,12 @@
 
 Rows (every policy meets the same traffic: episode k uses seed ``--seed + k``):
 
-* ``DAgger, continued (shipped)``: ``agents/data/rl/dagger_continue_80k.zip``, the
-  shipped policy (:data:`agents.evaluate.SHIPPED_POLICY`): the radar + SLAM student
-  below continued with DAgger for 80k more env steps;
+* ``DAgger, continued, radar shield (shipped)``: ``agents/data/rl/dagger_cruise30_close.zip``, the
+  shipped policy (:data:`agents.evaluate.SHIPPED_POLICY`): the radar + SLAM student below continued
+  with DAgger for 80k env steps, then 40k + 40k with the headway driver at 30 m/s (2.0 s gap, then
+  5 m standstill gap), driven behind the radar safety shield (:mod:`agents.shield`, saved in its record);
+* ``DAgger, continued 80k (shipped before)``: ``agents/data/rl/dagger_continue_80k.zip``, the first
+  continuation alone;
 * ``DAgger``: ``agents/data/dagger_rhs_highway_slam.zip`` (a student of
   the HeadwayDriver, :mod:`agents.imitation`) on ``rhs-highway-slam-v0`` with the
   env kwargs saved beside it (SLAM in the loop), at the ground-truth student's budget;
@@ -239,7 +242,15 @@ def learned_specs(slam_policy: str, truth_policy: str, shipped_only: bool = Fals
         ("truth", "DAgger (ground truth)", truth_obs, truth_policy, *resolve_env(truth_policy)),
     ]
     if Path(shipped_policy).resolve() != Path(slam_policy).resolve():
-        specs.insert(0, ("shipped", "DAgger, continued (shipped)", slam_obs, shipped_policy, *resolve_env(shipped_policy)))
+        from agents.evaluate import DAGGER_CONTINUED_POLICY, policy_metadata
+
+        shielded = policy_metadata(shipped_policy).get("shield") is not None
+        label = f"DAgger, continued{', radar shield' if shielded else ''} (shipped)"
+        specs.insert(0, ("shipped", label, slam_obs, shipped_policy, *resolve_env(shipped_policy)))
+        before = str(DAGGER_CONTINUED_POLICY)
+        if Path(before).exists() and Path(before).resolve() != Path(shipped_policy).resolve():
+            specs.insert(1, ("continued_80k", "DAgger, continued 80k (shipped before)", slam_obs, before,
+                             *resolve_env(before)))
     others = [("truth_all_around", "DAgger (ground truth, all around)", "Kinematics, 8 vehicles incl. behind (truth)",
                target_path("dagger", "truth_all_around"), "dagger"), ("ppo_slam", "PPO", slam_obs, PPO_POLICY, "ppo"),
               ("ppo_truth", "PPO (ground truth)", truth_obs, PPO_TRUTH_POLICY, "ppo")]  # fmt: skip

@@ -339,8 +339,9 @@ def run_dense(args, slam: dict) -> dict[str, Any]:
             "cycles": args.dense_cycles, "spacing_m": args.dense_spacing}
 
 
-#: the drivers part: env id -> the learned driver (agents/data): on the highway the shipped policy (the DAgger
-#: student continued, agents.evaluate.SHIPPED_POLICY), on the dense road its DAgger student; every driver on an env
+#: the drivers part: env id -> the learned driver (agents/data): on the highway the DAgger student continued 80k
+#: (agents.evaluate.DAGGER_CONTINUED_POLICY, the shipped policy before the shielded 30 m/s student), on the dense
+#: road its DAgger student; every driver on an env
 #: runs with that policy's env kwargs (its radar grid and target speeds), so the drivers see one env
 DRIVER_ENVS = {"rhs-highway-slam-v0": "rl/dagger_continue_80k.zip", "rhs-dense-v0": "antenna/dagger_rhs_highway_dense.zip"}
 DRIVERS = ("idm", "policy", "random")
@@ -668,7 +669,7 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, dict]:
     p.add_argument("--parts", nargs="+", choices=("highway", "paper", "dense", "drivers"),
                    default=["highway", "paper", "dense"])
     p.add_argument("--drivers", nargs="+", choices=DRIVERS, default=list(DRIVERS),
-                   help="drivers part: highway-env's IDM + MOBIL, the shipped policy (dense road: its DAgger student), "
+                   help="drivers part: highway-env's IDM + MOBIL, the DAgger student continued 80k (dense road: its DAgger student), "
                         "uniformly random actions")
     p.add_argument("--driver-envs", nargs="+", choices=tuple(DRIVER_ENVS), default=list(DRIVER_ENVS))
     p.add_argument("--driver-seeds", type=int, nargs="+", default=list(range(1600, 1700)),

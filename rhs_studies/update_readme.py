@@ -112,7 +112,7 @@ def _slam_drivers(d: dict) -> tuple[str, str]:
     good = sum(r["cycles_below_good"] for c in combos for r in c["runs"])
     alarms = sum(r["cycles_below_good_flagged"] for c in combos for r in c["runs"])
     hit = f"{flagged}/{above}" if above else "none"
-    return (f"SLAM driven by IDM + MOBIL, the shipped policy, random actions ({len(part['seeds'])} held-out seeds each, "
+    return (f"SLAM driven by IDM + MOBIL, a DAgger student, random actions ({len(part['seeds'])} held-out seeds each, "
             "highway and dense env): worst episode RMSE (IDM, policy); random episodes lost (error > "
             f"{part['lost_m']:g} m); lost cycles flagged; false alarms",
             f"{worst:.3f} m; {lost}/{len(random)}; {hit}; {alarms}/{good}")  # 3 decimals: the goal is 1 m
