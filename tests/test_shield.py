@@ -159,3 +159,16 @@ def test_both_training_backends_wrap_the_shield_inside_the_decision_interval():
     sb3 = training_wrapper(gym.make("rhs-highway-radar-v0", **kw), privileged=False, shaping=None, shield={})
     assert isinstance(sb3, ShieldAction)
     sb3.close()
+
+
+def test_sensing_study_compares_the_radar_leader_with_the_truth():
+    from rhs_studies.shield_sensing import markdown, measure
+
+    r = measure([4050])
+    assert r["steps"] > 0 and r["doppler"]["points_on_vehicles"] > 0
+    assert abs(r["doppler"]["median_error_mps"]) < 0.5  # most points carry their car's Doppler
+    assert 0.0 <= r["doppler"]["share_off_by_3_mps"] < 0.3 and 0.0 <= r["ghost_scan_share"] <= 1.0
+    a = r["front_alarms"]
+    # two-point objects alarm no more spuriously than single points (ghosts are single points)
+    assert a["object"]["spurious"] <= a["point"]["spurious"]
+    assert "tracked leader (the shield)" in markdown(r)
