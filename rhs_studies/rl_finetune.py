@@ -367,11 +367,12 @@ def keep_rows(path: Path, rows: list[str], seeds: list[int]) -> dict[str, Any]:
 
 
 def fingerprint() -> list[float]:
-    """The student and each shipped arm, one 2-second episode (10 steps) on seed 3000."""
+    """The student and each shipped arm, one 2-second episode (10 steps) on seed 3000 (the other zips beside the
+    arms, the 30 m/s students, are not this study's)."""
     from agents.evaluate import resolve_env
 
     out: list[float] = []
-    for path in [STUDENT, *sorted(SHIPPED_DIR.glob("*.zip"))]:
+    for path in [STUDENT, *sorted(p for p in SHIPPED_DIR.glob("*.zip") if p.stem in ARMS)]:
         env_id, kwargs = resolve_env(str(path))
         run = run_policy(str(path), env_id, {**kwargs, "duration": 2}, [3000], 1)[0]
         out += [float(run[k]) for k in SLIM_KEYS[1:] if isinstance(run.get(k), (int, float))]
