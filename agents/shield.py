@@ -22,16 +22,21 @@ on the near face of the other car), ``c`` its closing speed (m/s, positive when 
 ``d`` a standstill gap (m) and ``T`` a time gap (s): ``front_gap_m`` / ``front_time_s`` in the ego's
 path, ``lane_gap_m`` / ``lane_time_s`` in a target lane.
 
-Single radar points are not objects: the scans carry ghosts (a roadside post's echo placed at the
-wrong angle by the sweep's sidelobes, about one per scan in the ego's path) and per-point Doppler has
-heavy tails (10 % of the points on cars are off by more than 3 m/s; at the range of a roadside
-post the joint angle-Doppler OMP can give a car ahead the post's Doppler). So:
+Single radar points are not objects: the scans carry ghosts (points where no vehicle is, e.g. a roadside
+post's echo placed at a wrong angle: 13 % of the scans have one in the ego's path within 40 m) and per-point
+Doppler has heavy tails (8 % of the points on vehicles are off by more than 3 m/s; where a car ahead and a
+post share a range, the joint angle-Doppler OMP can give the car the post's Doppler). So:
 
 * an **object** is a point with at least ``min_points`` points (itself included) of the same region
   within ``cluster_m`` along the road; its closing speed is the median of ``-v_r`` over them;
 * the **leader** (the nearest object in the ego's path) is tracked: its gaps over the last
   ``track_steps`` env steps (``dt_s`` apart; a jump of more than ``track_jump_m`` starts a new track)
   give its closing speed as minus the least-squares slope, once three are there.
+
+``python scripts/shield_sensing.py`` (:mod:`rhs_studies.shield_sensing`) measures these on 2000 env steps of
+validation seeds against the simulator: the front rule alarmed where the truth did not in 170 steps from single
+points, 76 from two-point objects and 79 from the tracked leader, and missed 20, 23 and 16 of the truth's alarms;
+the tracked closing speed is within -1.5 / +1.9 m/s of the true one in 90 % of the steps with a leader within 40 m.
 
 Points go from the vehicle frame (x forward, y left) to road-aligned offsets with the SLAM
 heading ``h`` (the map frame starts along the road): ``X = x cos h - y sin h``,
