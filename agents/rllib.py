@@ -565,19 +565,7 @@ def train_rllib(
     mode = check_decision_mode(decision_mode)
     model_config = model_settings(hp.get("policy_kwargs") or {})
     ppo_hp = {key: v for key, v in hp.items() if key not in ("policy_kwargs", "shield", "reward_shaping")}
-    shield = shaping = None
-    if hp.get("shield") is not None:
-        from agents.shield import ShieldConfig, shield_record
-        from rhs_common.validation import build
-
-        shield = shield_record(build(ShieldConfig, hp["shield"], "shield"))
-    if hp.get("reward_shaping") is not None:
-        from dataclasses import asdict
-
-        from agents.shaping import ShapingConfig
-        from rhs_common.validation import build
-
-        shaping = asdict(build(ShapingConfig, hp["reward_shaping"], "reward_shaping"))
+    shield, shaping = _wrapper_settings(hp)
     finetune = None
     if algo == "finetune":
         from agents.finetune import FINETUNE_KEYS, FinetuneConfig
@@ -607,6 +595,20 @@ def train_rllib(
             import ray
 
             ray.shutdown()
+
+
+def _wrapper_settings(hp: dict[str, Any]) -> tuple[dict[str, Any] | None, dict[str, Any] | None]:
+    """The YAML entry's ``shield`` and ``reward_shaping`` as full, validated records (None where absent)."""
+    from dataclasses import asdict
+
+    from agents.shaping import ShapingConfig
+    from agents.shield import ShieldConfig
+    from rhs_common.validation import build
+
+    shield = None if hp.get("shield") is None else asdict(build(ShieldConfig, hp["shield"], "shield"))
+    shaping = None if hp.get("reward_shaping") is None else asdict(
+        build(ShapingConfig, hp["reward_shaping"], "reward_shaping"))
+    return shield, shaping
 
 
 def _finetune_start(env_id: str, env_kwargs: dict[str, Any], config: Any, init_policy: str | Path | None, k: int,
