@@ -215,7 +215,8 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
     With ``env``, the policy's observation space is checked against the env's. A zip whose JSON
     has ``decision_interval`` k > 1 comes back as a :class:`agents.decision.HeldPolicy` (decides every
     k ``predict`` calls; :func:`run_episode` resets it at each episode start); one whose JSON has a
-    ``shield`` (a fine-tune trained under it, :mod:`agents.shield`) behind a :class:`agents.shield.ShieldedPolicy`.
+    ``shield`` (the shipped policy, or a fine-tune trained under it: :mod:`agents.shield`) behind a
+    :class:`agents.shield.ShieldedPolicy`.
     """
     if is_scripted(policy):
         if env is None:
@@ -532,9 +533,9 @@ def evaluate(
 ) -> dict[str, Any]:
     """Evaluate ``policy`` on ``episodes`` seeded episodes; returns the JSON-ready summary.
 
-    ``shield`` (a :class:`agents.shield.ShieldConfig` as a dict, ``{}`` for its defaults) drives the policy
-    through the radar safety shield (``True``: its defaults), in place of any shield saved beside it; ``False`` drives it without one
-    (None: as its record says).
+    ``shield`` (a :class:`agents.shield.ShieldConfig` as a dict; ``{}`` or ``True``: its defaults) drives the
+    policy through the radar safety shield, in place of any shield saved beside it; ``False`` drives it without
+    one; None: as its record says.
 
     ``env_id`` / ``env_kwargs`` default to the ones saved beside the policy (:func:`resolve_env`).
     An evaluation estimated (:func:`estimate_hours`) longer than ``max_hours`` is refused with a

@@ -229,7 +229,7 @@ class ShieldedPolicy:
 
     def predict(self, obs, *args, **kwargs):
         action, state = self.model.predict(obs, *args, **kwargs)
-        return self.shield.filter(obs, int(np.asarray(action)))[0], state
+        return self.shield.filter(obs, int(np.asarray(action).reshape(-1)[0]))[0], state
 
     def __getattr__(self, name):
         return getattr(self.model, name)
@@ -263,7 +263,7 @@ class ShieldAction(gym.Wrapper):
     def step(self, action):
         reason = None
         if self._obs is not None:
-            action, reason = self.shield.filter(self._obs, int(np.asarray(action)))
+            action, reason = self.shield.filter(self._obs, int(np.asarray(action).reshape(-1)[0]))
         obs, reward, terminated, truncated, info = self.env.step(action)
         self._obs = obs
         return obs, reward, terminated, truncated, {**info, "shield": reason}
