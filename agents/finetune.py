@@ -356,11 +356,10 @@ def _settings(env_id: str, timesteps: int | None, n_envs: int | None, hyperparam
         from agents.shaping import ShapingConfig
 
         build(ShapingConfig, shaping, "reward_shaping")  # a wrong value fails here, not in a worker
-    shield = run.hp.get("shield")
-    if shield is not None:
-        from agents.shield import ShieldConfig, check_shield_env, shield_record
+    from agents.shield import check_shield_env, shield_record
 
-        shield = shield_record(build(ShieldConfig, shield, "shield"))
+    shield = shield_record(run.hp.get("shield"))
+    if shield is not None:
         check_shield_env(_observation_space(env_id, run.env_kwargs))
     return run, config, ppo_args, shaping, shield
 

@@ -602,10 +602,10 @@ def _wrapper_settings(hp: dict[str, Any]) -> tuple[dict[str, Any] | None, dict[s
     from dataclasses import asdict
 
     from agents.shaping import ShapingConfig
-    from agents.shield import ShieldConfig
+    from agents.shield import shield_record
     from rhs_common.validation import build
 
-    shield = None if hp.get("shield") is None else asdict(build(ShieldConfig, hp["shield"], "shield"))
+    shield = shield_record(hp.get("shield"))
     shaping = None if hp.get("reward_shaping") is None else asdict(
         build(ShapingConfig, hp["reward_shaping"], "reward_shaping"))
     return shield, shaping

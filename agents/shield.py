@@ -133,6 +133,17 @@ def objects(x: np.ndarray, closing: np.ndarray, min_points: int, reach: float) -
     return x[keep], np.nanmedian(np.where(near[keep], closing[None, :], np.nan), axis=1)
 
 
+def nearest_object(x: np.ndarray, closing: np.ndarray, min_points: int, reach: float,
+                   half_length: float) -> tuple[float, float] | None:
+    """The gap ``min(X) - half_length`` (m) to the nearest of :func:`objects` and its median closing speed (m/s),
+    or None when the points hold no object."""
+    xs, cs = objects(x, closing, min_points, reach)
+    if len(xs) == 0:
+        return None
+    i = int(np.argmin(xs))
+    return float(xs[i]) - half_length, float(cs[i])
+
+
 class RadarShield:
     """The shield of the module docstring, one episode at a time: :meth:`reset`, then :meth:`filter` each step."""
 
@@ -150,17 +161,16 @@ class RadarShield:
         """The leader's gap (m) and closing speed (m/s) from the path's points (``x`` m, Doppler ``closing``
         m/s), the track updated; None (and the track dropped) when the path holds no object."""
         cfg = self.config
-        xs, cs = objects(x, closing, cfg.min_points, cfg.cluster_m)
-        if len(xs) == 0:
+        nearest = nearest_object(x, closing, cfg.min_points, cfg.cluster_m, cfg.ego_half_length_m)
+        if nearest is None:
             self.track.clear()
             return None
-        i = int(np.argmin(xs))
-        gap = float(xs[i]) - cfg.ego_half_length_m
+        gap, doppler = nearest
         if self.track and abs(gap - self.track[-1]) > cfg.track_jump_m:
             self.track.clear()
         self.track.append(gap)
         if len(self.track) < 3:
-            return gap, float(cs[i])
+            return gap, doppler
         t = cfg.dt_s * np.arange(len(self.track))
         return gap, -float(np.polyfit(t, np.asarray(self.track), 1)[0])
 
@@ -277,6 +287,7 @@ def check_shield_env(space: gym.Space) -> None:
                          "(rhs-highway-radar-v0, rhs-highway-slam-v0, ...); this env has none")
 
 
-def shield_record(config: ShieldConfig) -> dict[str, Any]:
-    """The config as the JSON beside a policy keeps it (``"shield"``), every field named."""
-    return asdict(config)
+def shield_record(config: ShieldConfig | dict[str, Any] | None) -> dict[str, Any] | None:
+    """A shield entry (a config, or a YAML / JSON dict of its fields, validated: errors name ``shield.<field>``) as
+    the record beside a policy keeps it, every field named; None for no shield."""
+    return None if config is None else asdict(build(ShieldConfig, config, "shield"))

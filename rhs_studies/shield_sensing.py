@@ -62,21 +62,11 @@ def _unsafe(lead: tuple[float, float] | None, d: float, t: float) -> bool:
     return lead is not None and lead[0] < d + t * max(lead[1], 0.0)
 
 
-def _nearest(x: np.ndarray, closing: np.ndarray, k: int, reach: float, half_length: float):
-    from agents.shield import objects
-
-    xs, cs = objects(x, closing, k, reach)
-    if len(xs) == 0:
-        return None
-    i = int(np.argmin(xs))
-    return float(xs[i]) - half_length, float(cs[i])
-
-
 def measure(seeds: list[int]) -> dict[str, Any]:
     """The statistics of the module docstring over full episodes on ``seeds``."""
     from agents.evaluate import SHIPPED_POLICY, load_policy, make_env, resolve_env
     from agents.expert import bumper_gap
-    from agents.shield import RadarShield, ShieldedPolicy, road_offsets
+    from agents.shield import RadarShield, ShieldedPolicy, nearest_object, road_offsets
 
     env_id, kwargs = resolve_env(SHIPPED_POLICY)
     env = make_env(env_id, kwargs)
@@ -110,8 +100,8 @@ def measure(seeds: list[int]) -> dict[str, Any]:
                 front, _ = base.road.neighbour_vehicles(ego, ego.lane_index)
                 truth = None if front is None else (bumper_gap(ego, front), ego.speed - front.speed)
                 x, c = big_x[path], -v_r[path]
-                leads = {"point": _nearest(x, c, 1, cfg.cluster_m, cfg.ego_half_length_m),
-                         "object": _nearest(x, c, cfg.min_points, cfg.cluster_m, cfg.ego_half_length_m),
+                leads = {"point": nearest_object(x, c, 1, cfg.cluster_m, cfg.ego_half_length_m),
+                         "object": nearest_object(x, c, cfg.min_points, cfg.cluster_m, cfg.ego_half_length_m),
                          "tracked": shield.leader(x, c)}
                 for name, lead in leads.items():
                     r, u = _unsafe(lead, d, t), _unsafe(truth, d, t)
