@@ -24,6 +24,13 @@ pulled back towards it early, when the critic is still untrained; from
 ``anchor_fraction * T`` on the training is pure PPO (:class:`AnchoredPPO`).
 ``anchor_coef: 0`` is the control without the anchor.
 
+**A critic warm-up.** The privileged critic starts untrained, so the first advantages
+``A = sum_l (gamma lambda)^l delta_l`` are noise and the first policy-gradient steps
+move the student at random. For the first ``critic_warmup_fraction * T`` env steps only
+the critic learns (the actor's parameters take no gradient, :func:`critic_warming`); the
+actor then starts from the student with a critic that has seen ``critic_warmup_fraction * T``
+env steps of its returns (the usual value pre-training of fine-tuning from imitation).
+
 **The student's logits corrected for its class weights.** DAgger fits the student by
 weighted maximum likelihood with ``w_a = (n / (K n_a)) ** p`` (:func:`agents.imitation.class_weights`);
 its softmax is then ``pi_w(a|o) ~ w_a pi(a|o)``, biased towards the rare actions. The
@@ -75,6 +82,7 @@ class FinetuneConfig:
     correct_class_prior: bool = True  # subtract log w_a from the student's action logits before starting
     prior_steps: int = 2000  # env steps the student drives to measure the expert's label frequencies n_a
     privileged_critic: bool = True  # the critic also reads agents.privileged's ground truth
+    critic_warmup_fraction: float = 0.0  # only the critic learns over this fraction of the run (1: never the actor)
 
     def __post_init__(self) -> None:
         check_types(self)
@@ -84,6 +92,7 @@ class FinetuneConfig:
         check_bool("correct_class_prior", self.correct_class_prior)
         check_int("prior_steps", self.prior_steps, 1, 10**7)
         check_bool("privileged_critic", self.privileged_critic)
+        check_range("critic_warmup_fraction", self.critic_warmup_fraction, 0.0, 1.0)
 
 
 FINETUNE_KEYS = tuple(f.name for f in fields(FinetuneConfig))
@@ -235,12 +244,32 @@ def anchor_coef(config: FinetuneConfig, progress: float) -> float:
     return float(config.anchor_coef * max(0.0, 1.0 - progress / config.anchor_fraction))
 
 
+def critic_warming(config: FinetuneConfig, progress: float) -> bool:
+    """Whether the update at ``progress = t / T`` trains the critic alone (the critic warm-up of the module docstring).
+
+    >>> [critic_warming(FinetuneConfig(critic_warmup_fraction=0.25), t) for t in (0.0, 0.2, 0.25, 1.0)]
+    [True, True, False, False]
+    >>> critic_warming(FinetuneConfig(critic_warmup_fraction=1.0), 1.0)
+    True
+    """
+    fraction = config.critic_warmup_fraction
+    return progress < fraction or fraction >= 1.0
+
+
+def actor_parameters(policy: nn.Module) -> list[nn.Parameter]:
+    """The parameters of ``policy``'s actor: its feature extractor, policy MLP and action head (for a policy that
+    shares its extractor with the critic, the shared extractor too)."""
+    prefixes = ("features_extractor.", "pi_features_extractor.", "mlp_extractor.policy_net.", "action_net.")
+    return [param for name, param in policy.named_parameters() if name.startswith(prefixes)]
+
+
 class AnchoredPPO(PPO):
-    """PPO whose every update is followed by ``anchor_epochs`` passes minimising lambda(t) KL(teacher || pi).
+    """PPO whose every update is followed by ``anchor_epochs`` passes minimising lambda(t) KL(teacher || pi), and
+    whose updates during the critic warm-up leave the actor alone (:func:`critic_warming`).
 
     ``teacher`` (a frozen actor-critic on the observation without the privileged key) and
     ``finetune`` (a :class:`FinetuneConfig`) are set by :func:`train_finetune` after construction;
-    without a teacher it is plain PPO. Logs ``anchor/coef`` and ``anchor/kl``.
+    without a teacher it is plain PPO. Logs ``anchor/coef``, ``anchor/kl`` and ``finetune/critic_warmup``.
     """
 
     teacher: ActorCriticPolicy | None = None
@@ -250,12 +279,22 @@ class AnchoredPPO(PPO):
         return [*super()._excluded_save_params(), "teacher"]
 
     def train(self) -> None:
-        super().train()
+        progress = 1.0 - self._current_progress_remaining
+        warming = critic_warming(self.finetune, progress)
+        self.logger.record("finetune/critic_warmup", float(warming))
+        frozen = actor_parameters(self.policy) if warming else []
+        for param in frozen:
+            param.requires_grad_(False)  # no gradient: Adam leaves the actor as it is
+        try:
+            super().train()
+        finally:
+            for param in frozen:
+                param.requires_grad_(True)
         if self.teacher is None:
             return
-        coef = anchor_coef(self.finetune, 1.0 - self._current_progress_remaining)
+        coef = anchor_coef(self.finetune, progress)
         self.logger.record("anchor/coef", coef)
-        if coef <= 0 or self.finetune.anchor_epochs == 0:
+        if coef <= 0 or self.finetune.anchor_epochs == 0 or warming:
             return
         self.policy.set_training_mode(True)
         kls = []

@@ -37,6 +37,7 @@ entries as the stable-baselines3 backend (``agents/hyperparams/ppo.yml`` / ``fin
   | ``privileged_critic`` | the creator's ``PrivilegedObservation`` and the module's critic |
   | ``anchor_coef`` / ``anchor_fraction`` | the learner's anchor (``learner_config_dict["finetune"]``) |
   | ``anchor_epochs`` | 0: no anchor; else the term is in every minibatch's loss |
+  | ``critic_warmup_fraction`` | the learner detaches the actor's logits in the loss while it lasts |
   | ``correct_class_prior`` / ``prior_steps`` | the student corrected with SB3 before its actor is copied |
   | ``shield`` / ``reward_shaping`` | the creator's ``ShieldAction`` / ``TimeToCollisionShaping`` |
 
@@ -357,7 +358,9 @@ if TorchRLModule is not None:
         the run's (``learner_config_dict["anchor_total_steps"]``); the other fields of the
         :class:`agents.finetune.FinetuneConfig` come in ``learner_config_dict["finetune"]``. The teacher is a frozen
         copy of the module as :meth:`start_from` leaves it (the student's actor); without one it is plain PPO.
-        Logs ``anchor_coef`` (with a teacher) and ``anchor_kl`` (while ``lambda > 0``) per module.
+        Logs ``anchor_coef`` (with a teacher) and ``anchor_kl`` (while ``lambda > 0``) per module. During the
+        critic warm-up (``critic_warmup_fraction``) the loss sees the actor's logits detached, so only the critic
+        learns (``critic_warmup`` logged 1).
         """
 
         teacher: Any = None
@@ -388,9 +391,20 @@ if TorchRLModule is not None:
                 return 0.0
             return anchor_coef(FinetuneConfig(**fields), self.progress)
 
+        def critic_warming(self) -> bool:
+            """Whether this update trains the critic alone (:func:`agents.finetune.critic_warming`)."""
+            from agents.finetune import FinetuneConfig, critic_warming
+
+            fields = self.config.learner_config_dict.get("finetune")
+            return bool(fields) and critic_warming(FinetuneConfig(**fields), self.progress)
+
         def compute_loss_for_module(self, *, module_id, config, batch, fwd_out):
+            warming = self.critic_warming()
+            if warming:  # the actor's logits without their graph: the loss reaches the critic only
+                fwd_out = {**fwd_out, Columns.ACTION_DIST_INPUTS: fwd_out[Columns.ACTION_DIST_INPUTS].detach()}
+            self.metrics.log_value((module_id, "critic_warmup"), float(warming), window=1)
             loss = super().compute_loss_for_module(module_id=module_id, config=config, batch=batch, fwd_out=fwd_out)
-            if self.teacher is None:
+            if self.teacher is None or warming:
                 return loss
             coef = self.anchor_coef()
             self.metrics.log_value((module_id, "anchor_coef"), coef, window=1)

@@ -62,7 +62,7 @@ HP_NUMBERS: dict[str, tuple[bool, float, float]] = {
     "exploration_final_eps": (False, 0.0, 1.0), "tau": (False, 0.0, 1.0), "decision_interval": (True, 1, 10_000),
     "iterations": (True, 1, 10_000), "beta_decay": (False, 0.0, 1.0), "epochs": (True, 1, 100_000),
     "class_weight_power": (False, 0.0, 100.0), "anchor_coef": (False, 0.0, 1e3), "anchor_fraction": (False, 0.0, 1.0),
-    "anchor_epochs": (True, 0, 100), "prior_steps": (True, 1, 10**7),
+    "anchor_epochs": (True, 0, 100), "prior_steps": (True, 1, 10**7), "critic_warmup_fraction": (False, 0.0, 1.0),
 }
 #: numbers that may also be written ``lin_<number>`` (a linear schedule down to 0)
 HP_SCHEDULES = {"learning_rate": 1.0, "clip_range": 100.0}

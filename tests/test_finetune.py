@@ -17,6 +17,7 @@ from agents.finetune import (
     AnchoredPPO,
     FinetuneConfig,
     PrivilegedCriticPolicy,
+    actor_parameters,
     anchor_coef,
     correct_class_prior,
     export_actor,
@@ -129,6 +130,28 @@ def _kl_after_training(coef: float) -> float:
 
 def test_the_anchor_pulls_the_policy_towards_the_teacher():
     assert _kl_after_training(20.0) < 0.5 * _kl_after_training(0.0)
+
+
+def test_the_critic_warm_up_trains_the_critic_and_leaves_the_actor():
+    torch.manual_seed(0)
+    model = AnchoredPPO("MultiInputPolicy", reward_two_env(), n_steps=64, batch_size=32, n_epochs=4, learning_rate=3e-3,
+                        seed=0, policy_kwargs={**POLICY_KWARGS, "share_features_extractor": False}, device="cpu")
+    model.finetune = FinetuneConfig(critic_warmup_fraction=0.5)
+    actor = {name: p.detach().clone() for name, p in model.policy.named_parameters()
+             if any(p is q for q in actor_parameters(model.policy))}
+    critic = {name: p.detach().clone() for name, p in model.policy.named_parameters() if name not in actor}
+    assert actor and critic and any(name.startswith("vf_features_extractor.") for name in critic)
+    model.learn(total_timesteps=128)  # two updates at t / T = 0.5 and 1.0: only the first is the warm-up
+    changed = {name for name, p in model.policy.named_parameters()
+               if not torch.equal(p.detach(), (actor | critic)[name])}
+    assert changed & set(critic) and changed & set(actor)
+    model.finetune = FinetuneConfig(critic_warmup_fraction=1.0)
+    actor = {name: p.detach().clone() for name, p in model.policy.named_parameters() if name in actor}
+    model.learn(total_timesteps=128)
+    assert all(torch.equal(p.detach(), actor[name]) for name, p in model.policy.named_parameters() if name in actor)
+    assert all(p.requires_grad for p in model.policy.parameters())  # unfrozen after each update
+    with pytest.raises(ValueError, match="critic_warmup_fraction"):
+        FinetuneConfig(critic_warmup_fraction=1.5)
 
 
 def test_privileged_features_read_the_true_road():

@@ -231,8 +231,9 @@ def _start_module(state: dict) -> PointSetPPOModule:
     return module
 
 
-def _kl_after_training(coef: float) -> tuple[float, list[float]]:
-    """KL(start || trained) on fresh observations after 4 PPO iterations of 64 decisions, anchor ``coef``."""
+def _kl_after_training(coef: float, warmup: float = 0.0) -> tuple[float, list[float]]:
+    """KL(start || trained) on fresh observations after 4 PPO iterations of 64 decisions, anchor ``coef``, critic
+    warm-up over ``warmup`` of the run; with ``coef`` 0, the second list is the ``critic_warmup`` flag per update."""
     import copy
 
     from agents.finetune import FinetuneConfig
@@ -243,7 +244,7 @@ def _kl_after_training(coef: float) -> tuple[float, list[float]]:
         gym.register(env_id, entry_point=reward_two_env)
     settings = ppo_settings({"n_steps": 64, "batch_size": 32, "n_epochs": 4, "learning_rate": 3e-3,
                              "gamma": 0.9}, n_envs=1, timesteps=256)
-    finetune = FinetuneConfig(anchor_coef=coef, anchor_fraction=1.0)
+    finetune = FinetuneConfig(anchor_coef=coef, anchor_fraction=1.0, critic_warmup_fraction=warmup)
     learner_config = {"anchor_total_steps": 256, "finetune": {**finetune.__dict__}}
     algo = build_config(env_id, env_config({}), settings, MODEL, 0, 0, learner_config=learner_config).build_algo()
     try:
@@ -254,7 +255,8 @@ def _kl_after_training(coef: float) -> tuple[float, list[float]]:
         obs = _obs(without_privileged(SPACE), 4, seed=4)
         with torch.no_grad():  # the runner samples with the student's actor from the first step
             torch.testing.assert_close(sampler.actor_logits(obs), _start_module(start).actor_logits(obs))
-        coefs = [algo.train()["learners"]["default_policy"].get("anchor_coef", 0.0) for _ in range(4)]
+        key = "anchor_coef" if coef > 0 else "critic_warmup"
+        coefs = [algo.train()["learners"]["default_policy"].get(key, 0.0) for _ in range(4)]
         trained = next(iter(algo.learner_group.foreach_learner(lambda learner: copy.deepcopy(
             learner.module["default_policy"].unwrapped())))).get()
     finally:
@@ -274,6 +276,11 @@ def test_the_anchor_in_the_learner_loss_pulls_the_policy_towards_the_student():
     # lambda(t) = 20 (1 - t / T) with t the decisions sampled before each update: 64, 128, 192, 256 of 256
     assert coefs == pytest.approx([15.0, 10.0, 5.0, 0.0])
     assert free > 0.01 and held_kl < 0.5 * free
+
+
+def test_the_critic_warm_up_in_the_learner_leaves_the_actor_alone():
+    kl, warming = _kl_after_training(0.0, warmup=1.0)
+    assert warming == [1.0] * 4 and kl == pytest.approx(0.0, abs=1e-9)
 
 
 def test_finetune_on_rllib_trains_from_the_student_and_exports_a_plain_zip(tmp_path):
