@@ -37,7 +37,7 @@ entries as the stable-baselines3 backend (``agents/hyperparams/ppo.yml`` / ``fin
   | ``privileged_critic`` | the creator's ``PrivilegedObservation`` and the module's critic |
   | ``anchor_coef`` / ``anchor_fraction`` | the learner's anchor (``learner_config_dict["finetune"]``) |
   | ``anchor_epochs`` | 0: no anchor; else the term is in every minibatch's loss |
-  | ``critic_warmup_fraction`` | the learner detaches the actor's logits in the loss while it lasts |
+  | ``critic_warmup_fraction`` | the actor's logits detached in the loss while it lasts (a shared encoder learns) |
   | ``correct_class_prior`` / ``prior_steps`` | the student corrected with SB3 before its actor is copied |
   | ``shield`` / ``reward_shaping`` | the creator's ``ShieldAction`` / ``TimeToCollisionShaping`` |
 

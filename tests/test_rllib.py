@@ -280,7 +280,10 @@ def test_the_anchor_in_the_learner_loss_pulls_the_policy_towards_the_student():
 
 def test_the_critic_warm_up_in_the_learner_leaves_the_actor_alone():
     kl, warming = _kl_after_training(0.0, warmup=1.0)
-    assert warming == [1.0] * 4 and kl == pytest.approx(0.0, abs=1e-9)
+    assert warming == [1.0] * 4, warming
+    # the same 4 updates without the warm-up move the actor by KL > 0.01 (the test above); this module shares its
+    # encoder with the critic (no privileged key), which the value loss alone nudges
+    assert kl < 1e-4
 
 
 def test_finetune_on_rllib_trains_from_the_student_and_exports_a_plain_zip(tmp_path):
