@@ -20,6 +20,17 @@ decisions at 1 Hz in pulse mode; :mod:`agents.finetune`):
   learning rate 5e-4, clip range 0.2, an entropy bonus 0.01 and the time-to-collision shaping of
   :mod:`agents.shaping`), on request (``--arms ... scratch``).
 
+Arms under the radar safety shield (:mod:`agents.shield`), from the shipped policy (``shipped``: the 30 m/s DAgger
+student that drives behind the shield, :data:`agents.evaluate.SHIPPED_POLICY`) instead of the student above, and
+evaluated behind the shield their records keep:
+
+* ``shield_finetune``: the fine-tune under the shield (``agents/hyperparams/finetune_shielded.yml``: gamma 0.95 and
+  the time-to-collision shaping, as ``finetune_horizon``), 20k env steps;
+* ``shield_warmup``: the same with a critic warm-up (the first 20 % of the run trains the critic alone), larger
+  rollouts, a bolder step and no shaping (``agents/hyperparams/finetune_warmup.yml``), 60k env steps;
+* ``shield_scratch``: PPO from scratch under the shield (``finetune_shielded.yml`` without a student, on the shipped
+  policy's env kwargs), 60k env steps.
+
 Evaluation on ``--episodes`` seeds from ``--seed`` (3000..: never used in training, where the envs draw seeds
 0.. and 20000.., nor in any earlier selection), every policy on the same seeds; the scripted references
 (always SLOWER, IDM + MOBIL, the headway expert and the lookahead teacher deciding at 1 Hz) on ``rhs-highway-v0``, which meets the same
@@ -29,8 +40,9 @@ DAgger continuation. The learning curves (return and collision rate of the train
 come from each run's ``monitor/`` files; ``results/rl_finetune.png`` draws them.
 
 Targets for the fine-tune on the held-out seeds: return >= 1.08x IDM + MOBIL, collisions <= 2 per 100, mean speed
->= 24 m/s, a paired gain over the student >= +3 with its 95 % interval above 0, and more than the DAgger
-continuation.
+>= 24 m/s, a paired gain over its start (the student, or the shipped policy for the shield arms) >= +3 with its 95 %
+interval above 0, and more than the DAgger continuation (the shield arms have none: the shipped policy is itself
+DAgger continued). Paired differences in the table are against each row's start.
 
     OMP_NUM_THREADS=1 python scripts/rl_finetune.py --train            # train the missing arms, then evaluate
     OMP_NUM_THREADS=1 python scripts/rl_finetune.py --runs runs/rl     # evaluate trained arms
@@ -62,6 +74,10 @@ from rhs_studies.provenance import git_state, write_json
 ROOT = Path(__file__).resolve().parent.parent
 ENV_ID = "rhs-highway-slam-v0"
 STUDENT = ROOT / "agents" / "data" / "dagger_rhs_highway_slam.zip"
+#: the shipped policy (the 30 m/s DAgger student behind the radar shield): the start of the shield arms
+SHIPPED_START = ROOT / "agents" / "data" / "rl" / "dagger_cruise30_close.zip"
+#: the rows the arms start from
+STARTS = {"student": STUDENT, "shipped": SHIPPED_START}
 #: where the trained arms are kept (the actor zips and their training records)
 SHIPPED_DIR = ROOT / "agents" / "data" / "rl"
 HYPERPARAMS = ROOT / "agents" / "hyperparams"
@@ -77,6 +93,9 @@ class Arm(NamedTuple):
     from_student: bool
     #: env steps; None: the study's ``--timesteps``
     timesteps: int | None = None
+    #: the row it starts from (a key of :data:`STARTS`), whose env kwargs it trains on; its paired differences are
+    #: against that row
+    start: str = "student"
 
 
 HORIZON = "finetune.yml:gamma=0.95;reward_shaping={ttc_s: 3.0, weight: 0.5}"
@@ -92,6 +111,9 @@ ARMS: dict[str, Arm] = {
     "finetune_horizon_80k": Arm("finetune", HORIZON, True, LONG_STEPS),
     "dagger_continue_80k": Arm("dagger", "dagger_continue.yml", True, LONG_STEPS),
     "dagger_lookahead": Arm("dagger", "dagger_lookahead.yml", True, 48000),
+    "shield_finetune": Arm("finetune", "finetune_shielded.yml", True, 20000, "shipped"),
+    "shield_warmup": Arm("finetune", "finetune_warmup.yml", True, 60000, "shipped"),
+    "shield_scratch": Arm("finetune", "finetune_shielded.yml", False, 60000, "shipped"),
 }
 LABELS = {
     "student": "DAgger student (start of every arm)",
@@ -107,6 +129,10 @@ LABELS = {
     "idm": "IDM + MOBIL (highway-env, scripted)",
     "headway": "HeadwayDriver at 1 Hz, IDLE between (the expert)",
     "lookahead": "LookaheadDriver at 1 Hz, IDLE between (the rollout teacher)",
+    "shipped": "Shipped policy: 30 m/s DAgger student behind the radar shield (start of the shield arms)",
+    "shield_finetune": "PPO fine-tune under the shield, gamma 0.95 and time-to-collision shaping, 20k env steps",
+    "shield_warmup": "PPO fine-tune under the shield with a critic warm-up, 60k env steps",
+    "shield_scratch": "PPO from scratch under the shield, 60k env steps",
 }
 #: the fine-tune's targets: return vs IDM + MOBIL, collisions per episode, mean speed, paired gain over the student
 TARGET_VS_IDM, TARGET_COLLISIONS, TARGET_SPEED_MPS, TARGET_GAIN = 1.08, 0.02, 24.0, 3.0
@@ -139,23 +165,33 @@ def _rel(path: Path) -> str:
     return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
 
 
-def train_arm(arm: str, runs: Path, timesteps: int, seed: int) -> dict[str, Any]:
-    """Train ``arm`` into ``runs/arm`` with ``rhs-slam train`` in a subprocess (``timesteps`` env steps unless the
-    arm sets its own); its record (command, commit, wall)."""
-    algo, spec, from_student, own_steps = ARMS[arm]
+def train_command(arm: str, runs: Path, timesteps: int, seed: int) -> list[str]:
+    """``python -m rhs_slam train ...`` for ``arm`` into ``runs/arm`` (``timesteps`` env steps unless the arm sets
+    its own): from its start with ``--init-policy``, or from scratch on the start's env kwargs."""
+    algo, spec, from_student, own_steps, start = ARMS[arm]
     out = runs / arm
     steps = own_steps or timesteps
     cmd = [sys.executable, "-m", "rhs_slam", "train", "--algo", algo, "--env", ENV_ID, "--timesteps", str(steps),
            "--seed", str(seed), "--out", _rel(out), "--no-progress", "--hyperparams", _rel(hyperparams_file(spec, runs, arm))]
     if from_student:
-        cmd += ["--init-policy", str(STUDENT.relative_to(ROOT))]
+        cmd += ["--init-policy", str(STARTS[start].relative_to(ROOT))]
+    elif start != "student":  # from scratch on the start's env (its action set and radar)
+        from agents.evaluate import resolve_env
+
+        cmd += ["--env-kwargs", json.dumps(resolve_env(str(STARTS[start]))[1])]
+    return cmd
+
+
+def train_arm(arm: str, runs: Path, timesteps: int, seed: int) -> dict[str, Any]:
+    """Train ``arm`` with :func:`train_command` in a subprocess; its record (command, commit, wall)."""
+    cmd = train_command(arm, runs, timesteps, seed)
     print(f"rl_finetune: training {arm}: {' '.join(cmd[1:])}", file=sys.stderr)
     state = git_state()  # the code the run starts from
     t0 = time.perf_counter()
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, cwd=ROOT)
     record = {"command": cmd[1:], "commit": state.get("commit"), "dirty": state.get("dirty"),
               "wall_s": round(time.perf_counter() - t0, 1)}
-    (out / "run.json").write_text(json.dumps(record, indent=1))
+    (runs / arm / "run.json").write_text(json.dumps(record, indent=1))
     return record
 
 
@@ -236,6 +272,15 @@ HEADLINE_PAIRS = (("finetune_horizon_80k", "dagger_continue_80k"), ("finetune", 
 TEACHER_PAIR = ("dagger_lookahead", "dagger_continue_80k")
 
 
+#: the shield arms the targets judge, in order of preference (the first evaluated; no DAgger control of their own)
+SHIELD_ARMS = ("shield_warmup", "shield_finetune")
+
+
+def start_of(row: str) -> str:
+    """The row ``row`` is compared with: its arm's start, else the DAgger student."""
+    return ARMS[row].start if row in ARMS else "student"
+
+
 def headline_arm(runs: dict[str, list[dict]]) -> tuple[str, str]:
     """The fine-tune the targets judge and its DAgger control: the longest budget evaluated."""
     for arm, control in HEADLINE_PAIRS:
@@ -245,12 +290,12 @@ def headline_arm(runs: dict[str, list[dict]]) -> tuple[str, str]:
 
 
 def targets(rows: dict[str, dict[str, Any]], runs: dict[str, list[dict]], arm: str = "finetune",
-            control: str = "dagger_continue") -> dict[str, Any]:
-    """The fine-tune's targets against IDM + MOBIL, the student and the DAgger continuation ``control``."""
+            control: str | None = "dagger_continue") -> dict[str, Any]:
+    """The fine-tune's targets against IDM + MOBIL, its start and the DAgger continuation ``control`` (None: none)."""
     if arm not in rows:
         return {}
     s = rows[arm]
-    gain = paired(runs[arm], runs["student"])
+    gain = paired(runs[arm], runs[start_of(arm)])
     out: dict[str, Any] = {
         "arm": arm, "control": control,
         "return_vs_idm": s["return"]["mean"] / rows["idm"]["return"]["mean"],
@@ -271,17 +316,23 @@ def targets(rows: dict[str, dict[str, Any]], runs: dict[str, list[dict]], arm: s
 
 
 def plot(curves: dict[str, dict[str, list[float]]], path: Path) -> None:
-    """Return and collision rate of the training episodes against env steps, one line per arm."""
+    """Return and collision rate of the training episodes against env steps, one line per arm; one row of panels
+    per start (the DAgger student's arms, the shield arms)."""
     import matplotlib.pyplot as plt
 
-    fig, (ax_r, ax_c) = plt.subplots(1, 2, figsize=(10, 3.6))
-    for arm, curve in curves.items():
-        if curve["env_steps"]:
-            ax_r.plot(curve["env_steps"], curve["return"], label=LABELS.get(arm, arm))
-            ax_c.plot(curve["env_steps"], curve["collision_rate"], label=LABELS.get(arm, arm))
-    ax_r.set(xlabel="env steps", ylabel=f"episode return (mean of {CURVE_WINDOW})", title="Training episodes: return")
-    ax_c.set(xlabel="env steps", ylabel=f"collision rate (of {CURVE_WINDOW})", title="Training episodes: collisions")
-    ax_r.legend(fontsize=7)
+    starts = [s for s in STARTS if any(start_of(arm) == s for arm in curves)] or ["student"]
+    fig, axes = plt.subplots(len(starts), 2, figsize=(10, 3.6 * len(starts)), squeeze=False)
+    for (ax_r, ax_c), start in zip(axes, starts, strict=True):
+        for arm, curve in curves.items():
+            if curve["env_steps"] and start_of(arm) == start:
+                ax_r.plot(curve["env_steps"], curve["return"], label=LABELS.get(arm, arm))
+                ax_c.plot(curve["env_steps"], curve["collision_rate"], label=LABELS.get(arm, arm))
+        where = "from the DAgger student" if start == "student" else "under the shield"
+        ax_r.set(xlabel="env steps", ylabel=f"episode return (mean of {CURVE_WINDOW})",
+                 title=f"Training episodes {where}: return")
+        ax_c.set(xlabel="env steps", ylabel=f"collision rate (of {CURVE_WINDOW})",
+                 title=f"Training episodes {where}: collisions")
+        ax_r.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -298,9 +349,10 @@ def _fmt_row(key: str, s: dict[str, Any], gain: dict[str, float] | None) -> str:
 def markdown(result: dict[str, Any]) -> str:
     """The results table: one row per policy, paired differences against the student."""
     lines = [f"Held-out seeds {result['seeds'][0]}-{result['seeds'][-1]} ({result['episodes']} episodes, "
-             f"{ENV_ID}); each arm {result['timesteps']} env steps from the same student unless its label gives "
-             "another budget.", "",
-             "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs student (paired, 95 % CI) |",
+             f"{ENV_ID}); each arm {result['timesteps']} env steps from the DAgger student unless its label gives "
+             "another budget or start; the shield arms start from the shipped policy and drive behind the shield. "
+             "Paired differences are against each row's start (the DAgger student for the references).", "",
+             "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs its start (paired, 95 % CI) |",
              "|---|---|---|---|---|"]
     for key, s in result["rows"].items():
         lines.append(_fmt_row(key, s, result["vs_student"].get(key)))
@@ -308,14 +360,16 @@ def markdown(result: dict[str, Any]) -> str:
     if kept:
         lines += ["", "Rows kept from an earlier run of this script on the same seeds (policy and code unchanged since): "
                   + ", ".join(f"{LABELS.get(k, k)} ({c[:7] if c else 'unknown commit'})" for k, c in kept.items()) + "."]
-    for t in (result.get("targets") or {}, result.get("targets_teacher") or {}):
+    for t in (result.get("targets") or {}, result.get("targets_teacher") or {}, result.get("targets_shield") or {}):
         if not t:
             continue
         met = ", ".join(f"{k} {'met' if v else 'not met'}" for k, v in t["met"].items())
         name = LABELS.get(t.get("arm", "finetune"), t.get("arm", "finetune"))
         against = t.get("gain_over_dagger_continue")
-        vs = "" if against is None else (f" ({against['mean']:+.1f} [{against['low']:+.1f}, {against['high']:+.1f}] over "
-                                         f"{LABELS.get(t['control'], t['control'])})")
+        gain = t["gain_over_student"]
+        vs = f" ({gain['mean']:+.1f} [{gain['low']:+.1f}, {gain['high']:+.1f}] over its start"
+        vs += ")" if against is None else (f"; {against['mean']:+.1f} [{against['low']:+.1f}, {against['high']:+.1f}] "
+                                           f"over {LABELS.get(t['control'], t['control'])})")
         lines += ["", f"Targets judged on {name}: {t['return_vs_idm']:.3f}x IDM + MOBIL, {100 * t['collision_rate']:.0f} % collisions, "
                   f"{t['mean_speed_mps']:.1f} m/s{vs}; targets: {met}."]
     return "\n".join(lines) + "\n"
@@ -367,12 +421,12 @@ def keep_rows(path: Path, rows: list[str], seeds: list[int]) -> dict[str, Any]:
 
 
 def fingerprint() -> list[float]:
-    """The student and each shipped arm, one 2-second episode (10 steps) on seed 3000 (the other zips beside the
-    arms, the 30 m/s students, are not this study's)."""
+    """The starts and each shipped arm, one 2-second episode (10 steps) on seed 3000 (the other zips beside the
+    arms are not this study's)."""
     from agents.evaluate import resolve_env
 
     out: list[float] = []
-    for path in [STUDENT, *sorted(p for p in SHIPPED_DIR.glob("*.zip") if p.stem in ARMS)]:
+    for path in [*STARTS.values(), *sorted(p for p in SHIPPED_DIR.glob("*.zip") if p.stem in ARMS)]:
         env_id, kwargs = resolve_env(str(path))
         run = run_policy(str(path), env_id, {**kwargs, "duration": 2}, [3000], 1)[0]
         out += [float(run[k]) for k in SLIM_KEYS[1:] if isinstance(run.get(k), (int, float))]
@@ -393,7 +447,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out-dir", type=Path, default=ROOT / "results")
     ap.add_argument("--ship-dir", type=Path, default=SHIPPED_DIR, help="where the arms' actor zips are copied")
     ap.add_argument("--keep", nargs="+", default=[], metavar="ROW",
-                    help="rows (student, arms, slower, idm, headway, lookahead) taken from the existing "
+                    help="rows (student, shipped, arms, slower, idm, headway, lookahead) taken from the existing "
                          "rl_finetune.json of --out-dir instead of driven again: same seeds, for policies and code "
                          "unchanged since (the result names the commit they were measured at)")
     ap.add_argument("--render-only", action="store_true", help="rewrite rl_finetune.md from rl_finetune.json, no runs")
@@ -424,7 +478,7 @@ def main(argv: list[str] | None = None) -> int:
     for row in args.keep:  # a kept arm's zip and training record are the shipped ones
         if row in ARMS:
             shipped[row] = Path(args.ship_dir) / f"{row}.zip"
-    runs = evaluate_rows({"student": STUDENT, **shipped}, seeds, args.workers, skip=tuple(args.keep))
+    runs = evaluate_rows({**STARTS, **shipped}, seeds, args.workers, skip=tuple(args.keep))
     runs = {**previous.get("runs", {}), **runs}
     rows = {key: row_summary(r) for key, r in runs.items()}
     curves = {arm: learning_curve(runs_dir / arm / "monitor") for arm in args.arms}
@@ -438,9 +492,10 @@ def main(argv: list[str] | None = None) -> int:
     result = {
         "env_id": ENV_ID, "episodes": args.episodes, "seeds": seeds, "timesteps": args.timesteps,
         "rows": rows,
-        "vs_student": {k: paired(runs[k], runs["student"]) for k in runs if k != "student"},
+        "vs_student": {k: paired(runs[k], runs[start_of(k)]) for k in runs if k != "student"},
         "targets": targets(rows, runs, *headline_arm(runs)),
         "targets_teacher": targets(rows, runs, *TEACHER_PAIR) if TEACHER_PAIR[0] in rows else {},
+        "targets_shield": next((targets(rows, runs, arm, None) for arm in SHIELD_ARMS if arm in rows), {}),
         "training": training,
         "curves": curves,
         "runs": {k: [{f: r.get(f) for f in SLIM_KEYS} for r in v] for k, v in runs.items()},

@@ -279,6 +279,27 @@ def test_the_study_judges_the_longest_fine_tune_against_its_own_budgets_control(
     assert t["met"]["gain_over_student"] and t["met"]["beats_dagger_continue"] and t["met"]["mean_speed"]
     del runs["finetune_horizon_80k"]
     assert headline_arm(runs) == ("finetune", "dagger_continue")
+    # a shield arm is judged against its own start (the shipped policy) and has no DAgger control
+    runs.update(shipped=runs_of(158.0), shield_warmup=runs_of(161.5))
+    t = targets({k: row_summary(v) for k, v in runs.items()}, runs, "shield_warmup", None)
+    assert ARMS["shield_warmup"].start == "shipped" and t["gain_over_student"]["mean"] == pytest.approx(3.5)
+    assert t["met"]["gain_over_student"] and not t["met"]["beats_dagger_continue"]
+
+
+def test_the_study_trains_each_arm_from_its_start(tmp_path):
+    from agents.evaluate import resolve_env
+    from rhs_studies.rl_finetune import ROOT, SHIPPED_START, STUDENT, train_command
+
+    def flag(cmd: list[str], name: str) -> str | None:
+        return cmd[cmd.index(name) + 1] if name in cmd else None
+
+    assert flag(train_command("finetune", tmp_path, 20000, 0), "--init-policy") == str(STUDENT.relative_to(ROOT))
+    warmup = train_command("shield_warmup", tmp_path, 20000, 0)
+    assert flag(warmup, "--init-policy") == str(SHIPPED_START.relative_to(ROOT)) and flag(warmup, "--timesteps") == "60000"
+    scratch = train_command("shield_scratch", tmp_path, 20000, 0)  # from scratch on the shipped policy's env
+    assert "--init-policy" not in scratch
+    assert json.loads(flag(scratch, "--env-kwargs")) == resolve_env(str(SHIPPED_START))[1]
+    assert "--env-kwargs" not in train_command("scratch", tmp_path, 20000, 0)  # the first study's scratch: defaults
 
 
 def test_the_study_keeps_earlier_rows_only_on_the_same_seeds_and_names_their_commit(tmp_path):
