@@ -146,14 +146,19 @@ def _policies(d: dict) -> tuple[str, str]:
 
 
 def _rl_finetune(d: dict) -> tuple[str, str]:
-    arm = d["targets"].get("arm", "finetune")
+    shield = d.get("targets_shield") or {}
+    arm = shield.get("arm") or d["targets"].get("arm", "finetune")
     rows, gain = d["rows"], d["vs_student"][arm]
     s = rows[arm]
     steps = d["training"][arm]["timesteps"]
-    return (f"PPO fine-tune of the student, privileged critic ({steps} env steps; {d['episodes']} held-out "
-            "seeds): return, collisions, paired gain over the student",
+    start = "shipped" if shield else "student"
+    what = ("PPO fine-tune of the shipped policy under the radar shield" if shield
+            else "PPO fine-tune of the student, privileged critic")
+    return (f"{what} ({steps} env steps; {d['episodes']} held-out seeds): return, collisions, paired gain over "
+            "its start",
             f"{s['return']['mean']:.1f}, {s['collisions']}/{s['episodes']}, {gain['mean']:+.1f} "
-            f"[{gain['low']:+.1f}, {gain['high']:+.1f}] (IDM + MOBIL: {rows['idm']['return']['mean']:.1f})")
+            f"[{gain['low']:+.1f}, {gain['high']:+.1f}] (start: {rows[start]['return']['mean']:.1f}; "
+            f"IDM + MOBIL: {rows['idm']['return']['mean']:.1f})")
 
 
 def _benchmark(d: dict) -> tuple[str, str]:

@@ -209,7 +209,8 @@ def test_finetune_cli_trains_and_exports_a_plain_student(tmp_path, shield):
     hp = tmp_path / "finetune.yml"
     hp.write_text(tiny_hyperparams(env_id, n_envs=1, n_timesteps=80, decision_interval=5, decision_mode="pulse",
                                    n_steps=8, batch_size=8, n_epochs=2, gamma=0.8, anchor_coef=1.0,
-                                   anchor_fraction=0.5, prior_steps=30, **({} if shield is None else {"shield": shield})))
+                                   anchor_fraction=0.5, prior_steps=30,
+                                   **({} if shield is None else {"shield": shield, "critic_warmup_fraction": 1.0})))
     out = tmp_path / "run"
     summary = train("finetune", env_id, None, out, hyperparams=hp, init_policy=zip_path, progress=False,
                     checkpoint_freq=0)
@@ -222,6 +223,10 @@ def test_finetune_cli_trains_and_exports_a_plain_student(tmp_path, shield):
         assert saved["shield"]["front_time_s"] == 1.5 and saved["shield"]["min_points"] == 2  # the full record
     model = PPO.load(out / "model.zip", device="cpu")
     assert PRIVILEGED_KEY not in model.observation_space.spaces  # the deployed actor needs only the sensors
+    if shield is not None:  # a warm-up over the whole run: the actor is the student, its head's bias corrected
+        assert saved["finetune"]["critic_warmup_fraction"] == 1.0
+        trained, start = model.policy.state_dict(), student.policy.state_dict()
+        assert all(torch.equal(trained[k], start[k]) for k in start if "action_net.bias" not in k and "value" not in k)
     full = AnchoredPPO.load(out / "finetune_full.zip", device="cpu")
     assert PRIVILEGED_KEY in full.observation_space.spaces
     env = make_env(env_id, kwargs)
