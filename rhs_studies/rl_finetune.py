@@ -321,7 +321,8 @@ def plot(curves: dict[str, dict[str, list[float]]], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     starts = [s for s in STARTS if any(start_of(arm) == s for arm in curves)] or ["student"]
-    fig, axes = plt.subplots(len(starts), 2, figsize=(10, 3.6 * len(starts)), squeeze=False)
+    fig, axes = plt.subplots(len(starts), 2, figsize=(11, 4.6 * len(starts)), squeeze=False,
+                             gridspec_kw={"hspace": 0.8, "wspace": 0.25})
     for (ax_r, ax_c), start in zip(axes, starts, strict=True):
         for arm, curve in curves.items():
             if curve["env_steps"] and start_of(arm) == start:
@@ -332,9 +333,10 @@ def plot(curves: dict[str, dict[str, list[float]]], path: Path) -> None:
                  title=f"Training episodes {where}: return")
         ax_c.set(xlabel="env steps", ylabel=f"collision rate (of {CURVE_WINDOW})",
                  title=f"Training episodes {where}: collisions")
-        ax_r.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
+        for ax in (ax_r, ax_c):
+            ax.xaxis.set_major_formatter(lambda x, _: f"{x / 1000:.0f}k")
+        ax_r.legend(fontsize=7, loc="upper center", bbox_to_anchor=(1.12, -0.2), ncol=2)  # under both panels
+    fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
 
 
@@ -450,11 +452,14 @@ def main(argv: list[str] | None = None) -> int:
                     help="rows (student, shipped, arms, slower, idm, headway, lookahead) taken from the existing "
                          "rl_finetune.json of --out-dir instead of driven again: same seeds, for policies and code "
                          "unchanged since (the result names the commit they were measured at)")
-    ap.add_argument("--render-only", action="store_true", help="rewrite rl_finetune.md from rl_finetune.json, no runs")
+    ap.add_argument("--render-only", action="store_true",
+                    help="rewrite rl_finetune.md and .png from rl_finetune.json, no runs")
     args = ap.parse_args(argv)
     if args.render_only:
-        text = markdown(json.loads((Path(args.out_dir) / "rl_finetune.json").read_text()))
+        result = json.loads((Path(args.out_dir) / "rl_finetune.json").read_text())
+        text = markdown(result)
         (Path(args.out_dir) / "rl_finetune.md").write_text(text)
+        plot(result.get("curves") or {}, Path(args.out_dir) / "rl_finetune.png")
         print(text)
         return 0
     if args.episodes < 2:
