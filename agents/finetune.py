@@ -247,8 +247,8 @@ def anchor_coef(config: FinetuneConfig, progress: float) -> float:
 def critic_warming(config: FinetuneConfig, progress: float) -> bool:
     """Whether the update at ``progress = t / T`` trains the critic alone (the critic warm-up of the module docstring).
 
-    >>> [critic_warming(FinetuneConfig(critic_warmup_fraction=0.25), t) for t in (0.0, 0.2, 0.25, 1.0)]
-    [True, True, False, False]
+    >>> tuple(critic_warming(FinetuneConfig(critic_warmup_fraction=0.25), t) for t in (0.0, 0.2, 0.25, 1.0))
+    (True, True, False, False)
     >>> critic_warming(FinetuneConfig(critic_warmup_fraction=1.0), 1.0)
     True
     """
