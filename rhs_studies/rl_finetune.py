@@ -29,7 +29,9 @@ evaluated behind the shield their records keep:
 * ``shield_warmup``: the same with a critic warm-up (the first 20 % of the run trains the critic alone), larger
   rollouts, a bolder step and no shaping (``agents/hyperparams/finetune_warmup.yml``), 60k env steps;
 * ``shield_scratch``: PPO from scratch under the shield (``finetune_shielded.yml`` without a student, on the shipped
-  policy's env kwargs), 60k env steps.
+  policy's env kwargs), 60k env steps;
+* ``shield_scratch_explore``: the same with the ``scratch`` arm's PPO settings (learning rate 5e-4, clip range 0.2,
+  entropy bonus 0.01), 60k env steps.
 
 Evaluation on ``--episodes`` seeds from ``--seed`` (3000..: never used in training, where the envs draw seeds
 0.. and 20000.., nor in any earlier selection), every policy on the same seeds; the scripted references
@@ -114,6 +116,8 @@ ARMS: dict[str, Arm] = {
     "shield_finetune": Arm("finetune", "finetune_shielded.yml", True, 20000, "shipped"),
     "shield_warmup": Arm("finetune", "finetune_warmup.yml", True, 60000, "shipped"),
     "shield_scratch": Arm("finetune", "finetune_shielded.yml", False, 60000, "shipped"),
+    "shield_scratch_explore": Arm("finetune", "finetune_shielded.yml:learning_rate=5.0e-4;clip_range=0.2;ent_coef=0.01",
+                                  False, 60000, "shipped"),
 }
 LABELS = {
     "student": "DAgger student (start of every arm)",
@@ -133,6 +137,7 @@ LABELS = {
     "shield_finetune": "PPO fine-tune under the shield, gamma 0.95 and time-to-collision shaping, 20k env steps",
     "shield_warmup": "PPO fine-tune under the shield with a critic warm-up, 60k env steps",
     "shield_scratch": "PPO from scratch under the shield, 60k env steps",
+    "shield_scratch_explore": "PPO from scratch under the shield, learning rate 5e-4, clip 0.2, entropy 0.01, 60k env steps",
 }
 #: the fine-tune's targets: return vs IDM + MOBIL, collisions per episode, mean speed, paired gain over the student
 TARGET_VS_IDM, TARGET_COLLISIONS, TARGET_SPEED_MPS, TARGET_GAIN = 1.08, 0.02, 24.0, 3.0
