@@ -69,6 +69,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from agents.decision import SLOWER
+from agents.evaluate import DAGGER_CRUISE30_CLOSE_POLICY
 from rhs_common.stats import mean_interval, wilson_interval
 from rhs_studies.evaluate_policies import paired, run_policy
 from rhs_studies.provenance import git_state, write_json
@@ -77,7 +78,7 @@ ROOT = Path(__file__).resolve().parent.parent
 ENV_ID = "rhs-highway-slam-v0"
 STUDENT = ROOT / "agents" / "data" / "dagger_rhs_highway_slam.zip"
 #: the shipped policy (the 30 m/s DAgger student behind the radar shield): the start of the shield arms
-SHIPPED_START = ROOT / "agents" / "data" / "rl" / "dagger_cruise30_close.zip"
+SHIPPED_START = DAGGER_CRUISE30_CLOSE_POLICY
 #: the rows the arms start from
 STARTS = {"student": STUDENT, "shipped": SHIPPED_START}
 #: where the trained arms are kept (the actor zips and their training records)
@@ -120,7 +121,7 @@ ARMS: dict[str, Arm] = {
                                   False, 60000, "shipped"),
 }
 LABELS = {
-    "student": "DAgger student (start of every arm)",
+    "student": "DAgger student (start of the arms above the shield's)",
     "finetune": "PPO fine-tune, privileged critic, decaying anchor",
     "finetune_no_anchor": "PPO fine-tune without the anchor (control)",
     "finetune_horizon": "PPO fine-tune, gamma 0.95 and time-to-collision shaping",
@@ -354,7 +355,7 @@ def _fmt_row(key: str, s: dict[str, Any], gain: dict[str, float] | None) -> str:
 
 
 def markdown(result: dict[str, Any]) -> str:
-    """The results table: one row per policy, paired differences against the student."""
+    """The results table: one row per policy, paired differences against each row's start (:func:`start_of`)."""
     lines = [f"Held-out seeds {result['seeds'][0]}-{result['seeds'][-1]} ({result['episodes']} episodes, "
              f"{ENV_ID}); each arm {result['timesteps']} env steps from the DAgger student unless its label gives "
              "another budget or start; the shield arms start from the shipped policy and drive behind the shield. "
