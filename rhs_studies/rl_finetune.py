@@ -28,6 +28,8 @@ evaluated behind the shield their records keep:
   the time-to-collision shaping, as ``finetune_horizon``), 20k env steps;
 * ``shield_warmup``: the same with a critic warm-up (the first 20 % of the run trains the critic alone), larger
   rollouts, a bolder step and no shaping (``agents/hyperparams/finetune_warmup.yml``), 60k env steps;
+* ``shield_explore``: the warm-up fine-tune without the anchor, with an entropy bonus of 0.02 and learning rate
+  3e-4 (exploration the shield makes safe), 40k env steps;
 * ``shield_scratch``: PPO from scratch under the shield (``finetune_shielded.yml`` without a student, on the shipped
   policy's env kwargs), 60k env steps;
 * ``shield_scratch_explore``: the same with the ``scratch`` arm's PPO settings (learning rate 5e-4, clip range 0.2,
@@ -116,6 +118,8 @@ ARMS: dict[str, Arm] = {
     "dagger_lookahead": Arm("dagger", "dagger_lookahead.yml", True, 48000),
     "shield_finetune": Arm("finetune", "finetune_shielded.yml", True, 20000, "shipped"),
     "shield_warmup": Arm("finetune", "finetune_warmup.yml", True, 60000, "shipped"),
+    "shield_explore": Arm("finetune", "finetune_warmup.yml:anchor_coef=0;ent_coef=0.02;learning_rate=3.0e-4", True,
+                          40000, "shipped"),
     "shield_scratch": Arm("finetune", "finetune_shielded.yml", False, 60000, "shipped"),
     "shield_scratch_explore": Arm("finetune", "finetune_shielded.yml:learning_rate=5.0e-4;clip_range=0.2;ent_coef=0.01",
                                   False, 60000, "shipped"),
@@ -137,6 +141,7 @@ LABELS = {
     "shipped": "Shipped policy: 30 m/s DAgger student behind the radar shield (start of the shield arms)",
     "shield_finetune": "PPO fine-tune under the shield, gamma 0.95 and time-to-collision shaping, 20k env steps",
     "shield_warmup": "PPO fine-tune under the shield with a critic warm-up, 60k env steps",
+    "shield_explore": "PPO fine-tune under the shield, critic warm-up, no anchor, entropy 0.02, 40k env steps",
     "shield_scratch": "PPO from scratch under the shield, 60k env steps",
     "shield_scratch_explore": "PPO from scratch under the shield, learning rate 5e-4, clip 0.2, entropy 0.01, 60k env steps",
 }
