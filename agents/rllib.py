@@ -383,20 +383,27 @@ if TorchRLModule is not None:
             total = float(self.config.learner_config_dict.get("anchor_total_steps") or 1)
             self.progress = min(1.0, float(timesteps.get(NUM_ENV_STEPS_SAMPLED_LIFETIME, 0)) / total)
 
-        def anchor_coef(self) -> float:
-            from agents.finetune import FinetuneConfig, anchor_coef
+        def finetune_config(self) -> Any:
+            """The :class:`agents.finetune.FinetuneConfig` of ``learner_config_dict["finetune"]``; None for plain PPO."""
+            from agents.finetune import FinetuneConfig
 
             fields = self.config.learner_config_dict.get("finetune")
-            if self.teacher is None or not fields or fields.get("anchor_epochs", 1) == 0:
+            return FinetuneConfig(**fields) if fields else None
+
+        def anchor_coef(self) -> float:
+            from agents.finetune import anchor_coef
+
+            config = self.finetune_config()
+            if self.teacher is None or config is None or config.anchor_epochs == 0:
                 return 0.0
-            return anchor_coef(FinetuneConfig(**fields), self.progress)
+            return anchor_coef(config, self.progress)
 
         def critic_warming(self) -> bool:
             """Whether this update trains the critic alone (:func:`agents.finetune.critic_warming`)."""
-            from agents.finetune import FinetuneConfig, critic_warming
+            from agents.finetune import critic_warming
 
-            fields = self.config.learner_config_dict.get("finetune")
-            return bool(fields) and critic_warming(FinetuneConfig(**fields), self.progress)
+            config = self.finetune_config()
+            return config is not None and critic_warming(config, self.progress)
 
         def compute_loss_for_module(self, *, module_id, config, batch, fwd_out):
             warming = self.critic_warming()

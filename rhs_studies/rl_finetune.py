@@ -71,7 +71,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from agents.decision import SLOWER
-from agents.evaluate import DAGGER_CRUISE30_CLOSE_POLICY
+from agents.evaluate import DAGGER_CRUISE30_CLOSE_POLICY, resolve_env
 from rhs_common.stats import mean_interval, wilson_interval
 from rhs_studies.evaluate_policies import paired, run_policy
 from rhs_studies.provenance import git_state, write_json
@@ -187,8 +187,6 @@ def train_command(arm: str, runs: Path, timesteps: int, seed: int) -> list[str]:
     if from_student:
         cmd += ["--init-policy", str(STARTS[start].relative_to(ROOT))]
     elif start != "student":  # from scratch on the start's env (its action set and radar)
-        from agents.evaluate import resolve_env
-
         cmd += ["--env-kwargs", json.dumps(resolve_env(str(STARTS[start]))[1])]
     return cmd
 
@@ -393,8 +391,6 @@ def evaluate_rows(policies: dict[str, Path], seeds: list[int], workers: int,
                   skip: tuple[str, ...] = ()) -> dict[str, list[dict]]:
     """Every learned policy on the SLAM env and the scripted references on the ground-truth env, same seeds
     (the rows named in ``skip`` left out)."""
-    from agents.evaluate import resolve_env
-
     _, student_kwargs = resolve_env(str(STUDENT))
     # always SLOWER and IDM with highway-env's own action set, as the driving targets were set; the teachers with the
     # students' target speeds, as they taught them
@@ -437,8 +433,6 @@ def keep_rows(path: Path, rows: list[str], seeds: list[int]) -> dict[str, Any]:
 def fingerprint() -> list[float]:
     """The starts and each shipped arm, one 2-second episode (10 steps) on seed 3000 (the other zips beside the
     arms are not this study's)."""
-    from agents.evaluate import resolve_env
-
     out: list[float] = []
     for path in [*STARTS.values(), *sorted(p for p in SHIPPED_DIR.glob("*.zip") if p.stem in ARMS)]:
         env_id, kwargs = resolve_env(str(path))
