@@ -381,7 +381,7 @@ def _settings(env_id: str, timesteps: int | None, n_envs: int | None, hyperparam
     """The run's settings, the :class:`FinetuneConfig`, PPO's own arguments, the reward shaping and the shield
     (each None when the YAML has none; the shield as its full record)."""
     from agents.imitation import continued_env_kwargs
-    from agents.run_setup import run_settings
+    from agents.run_setup import observation_space, run_settings
 
     if init_policy is not None:
         if not Path(init_policy).exists():
@@ -399,18 +399,8 @@ def _settings(env_id: str, timesteps: int | None, n_envs: int | None, hyperparam
 
     shield = shield_record(run.hp.get("shield"))
     if shield is not None:
-        check_shield_env(_observation_space(env_id, run.env_kwargs))
+        check_shield_env(observation_space(env_id, run.env_kwargs))
     return run, config, ppo_args, shaping, shield
-
-
-def _observation_space(env_id: str, env_kwargs: dict[str, Any]) -> gym.Space:
-    from agents.evaluate import make_env
-
-    env = make_env(env_id, env_kwargs)
-    try:
-        return env.observation_space
-    finally:
-        env.close()
 
 
 def _start_from(model: AnchoredPPO, student: PPO | None, config: FinetuneConfig) -> None:

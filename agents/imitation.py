@@ -53,6 +53,13 @@ episodes (their simulator state is not saved), so a resumed run is the same
 algorithm, not the same numbers. A student of many hours can so be trained in
 pieces.
 
+**Under the shield** (``shield``: :class:`agents.shield.ShieldConfig` fields, ``{}`` for the defaults): every env
+step's action, the student's or the expert's, goes through :class:`agents.shield.ShieldAction` before the env
+takes it, so the rounds visit the states the student reaches *behind the shield* (the ones it is driven in), and
+the labels stay the expert's own actions; the shield is saved beside the model, so ``rhs-slam evaluate`` and the
+demo drive the student through it. This is the DAgger continuation that a PPO fine-tune under the shield is
+compared with at the same env-step budget.
+
 Hyperparameters come from ``agents/hyperparams/dagger.yml`` (per env id:
 ``policy``, ``policy_kwargs``, ``n_envs``, ``n_timesteps``, ``env_kwargs`` and
 the fields of :class:`DaggerConfig`, plus ``teacher`` (a name of :data:`TEACHERS`, default ``headway``) and
@@ -76,6 +83,7 @@ import numpy as np
 
 from agents.expert import HeadwayDriver, HeadwayDriverConfig
 from agents.lookahead import LookaheadDriver, LookaheadDriverConfig
+from agents.shield import ShieldAction, check_shield_env, shield_record
 from rhs_common.validation import build, check_bool, check_int, check_range, check_types
 
 EXPERT_KEY = "expert_action"
@@ -182,6 +190,15 @@ class ExpertActionInfo(gym.Wrapper):
             else:  # a state between two decisions: the student never decides here, the expert's label still holds
                 self._held.append((_copy(obs), label))
         return obs, reward, terminated, truncated, info
+
+
+def labelled_env(env: gym.Env, expert: Any = None, between: int = 1, teacher: str = "headway", every: int = 1,
+                 shield: dict[str, Any] | None = None) -> gym.Env:
+    """A DAgger run's wrappers of each env: the radar shield (:class:`agents.shield.ShieldAction`; None: none), then
+    :class:`ExpertActionInfo` (its arguments), so the teacher labels the states that the shielded driving reaches."""
+    if shield is not None:
+        env = ShieldAction(env, shield)
+    return ExpertActionInfo(env, expert, between=between, teacher=teacher, every=every)
 
 
 def _copy(obs: Any) -> Any:
@@ -457,7 +474,15 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
     import torch
     from stable_baselines3 import PPO
 
-    from agents.run_setup import check_train_args, limit_threads, make_vec_env, run_settings, run_summary, write_summary
+    from agents.run_setup import (
+        check_train_args,
+        limit_threads,
+        make_vec_env,
+        observation_space,
+        run_settings,
+        run_summary,
+        write_summary,
+    )
 
     if init_policy is not None:
         env_kwargs = continued_env_kwargs(env_id, env_kwargs, init_policy)
@@ -466,8 +491,11 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
         raise ValueError(f"--resume: no finished DAgger round in {out} to continue from (no {STATE_META}); run "
                          "without --resume to start a new run")
     teacher, expert = teacher_config(run.hp)
-    config = build(DaggerConfig, {k: v for k, v in run.hp.items() if k not in ("policy_kwargs", "expert", "teacher")},
-                   "dagger")
+    config = build(DaggerConfig, {k: v for k, v in run.hp.items()
+                                  if k not in ("policy_kwargs", "expert", "teacher", "shield")}, "dagger")
+    shield = shield_record(run.hp.get("shield"))
+    if shield is not None:
+        check_shield_env(observation_space(env_id, run.env_kwargs))
     check_train_args(run.timesteps, run.n_envs, seed, 0, 1, 0)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -476,8 +504,8 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
     rng = np.random.default_rng(seed)
     k = run.decision_interval
     venv = make_vec_env(env_id, run.n_envs, seed, run.env_kwargs, monitor_dir=out / "monitor",
-                        wrapper=partial(ExpertActionInfo, expert=expert, between=k if config.label_between else 1,
-                                        teacher=teacher, every=k),
+                        wrapper=partial(labelled_env, expert=expert, between=k if config.label_between else 1,
+                                        teacher=teacher, every=k, shield=shield),
                         decision_interval=k,
                         decision_mode=run.decision_mode)
     decisions = -(-run.timesteps // k)
@@ -514,7 +542,7 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
                                        + decided * k})
     summary = run_summary("dagger", env_id, run, seed, decided, wall, out, timed_decisions=timed,
                           dagger=asdict(config), teacher=teacher, expert=expert.to_dict(), iterations=records, interrupted=False,
-                          **extra)
+                          shield=shield, **extra)
     write_summary(out, summary)
     return summary
 

@@ -224,6 +224,17 @@ def _preload_forkserver() -> None:
         multiprocessing.set_forkserver_preload(["__main__", *FORKSERVER_PRELOAD])
 
 
+def observation_space(env_id: str, env_kwargs: dict[str, Any]) -> Any:
+    """``env_id``'s observation space with ``env_kwargs`` (one env built and closed), to check a run's settings."""
+    from agents.evaluate import make_env
+
+    env = make_env(env_id, env_kwargs)
+    try:
+        return env.observation_space
+    finally:
+        env.close()
+
+
 def make_vec_env(
     env_id: str,
     n_envs: int,

@@ -395,3 +395,34 @@ def test_a_student_continues_onto_an_added_box_key_as_the_same_function(tmp_path
     combined = PPO("MultiInputPolicy", _Sets(velocity=True), device="cpu", n_steps=16, batch_size=16)
     with pytest.raises(ValueError, match="another observation space"):  # SB3's extractor: no box_net to widen
         load_student(combined, tmp_path / "parent.zip")
+
+
+def test_dagger_under_the_shield_drives_through_it_and_saves_it(tmp_path):
+    """``shield`` in the YAML: every collected step goes through the radar shield (its info key is there), the
+    labels stay the teacher's, and the record keeps the full shield so evaluation drives the student behind it."""
+    from agents.imitation import labelled_env
+    from agents.shield import ShieldAction, ShieldedPolicy
+    from agents.train import train
+
+    radar = "rhs-highway-radar-v0"
+    kw = {"vehicles_count": 5, "duration": 4}
+    env = labelled_env(gym.make(radar, **kw), shield={"front_time_s": 1.5})
+    assert isinstance(env, ExpertActionInfo) and isinstance(env.env, ShieldAction)
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(FASTER)
+    assert "shield" in info and info[EXPERT_KEY] in range(5)
+    assert not isinstance(labelled_env(gym.make(TRUTH, **kw)).env, ShieldAction)  # no shield entry: none
+
+    hp = tmp_path / "dagger.yml"
+    base = (f"{radar}:\n  policy: MultiInputPolicy\n  n_envs: 1\n  n_timesteps: 40\n  iterations: 2\n"
+            "  epochs: 1\n  batch_size: 16\n  policy_kwargs:\n    net_arch: [8]\n")
+    hp.write_text(base + "  shield: {front_time_s: 1.5}\n")
+    summary = train("dagger", radar, None, tmp_path / "run", hyperparams=hp, env_kwargs=kw, progress=False)
+    assert summary["shield"]["front_time_s"] == 1.5 and summary["shield"]["min_points"] == 2  # the full record
+    assert isinstance(load_policy(tmp_path / "run" / "model.zip", gym.make(radar, **kw)), ShieldedPolicy)
+    hp.write_text(base + "  shield: {front_time_s: -1.0}\n")
+    with pytest.raises(ValueError, match="shield.front_time_s"):
+        train("dagger", radar, None, tmp_path / "bad", hyperparams=hp, env_kwargs=kw, progress=False)
+    hp.write_text(base.replace(radar, TRUTH).replace("MultiInputPolicy", "MlpPolicy") + "  shield: {}\n")
+    with pytest.raises(ValueError, match="points"):
+        train("dagger", TRUTH, None, tmp_path / "truth", hyperparams=hp, env_kwargs=kw, progress=False)
