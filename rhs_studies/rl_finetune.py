@@ -30,6 +30,9 @@ evaluated behind the shield their records keep:
   rollouts, a bolder step and no shaping (``agents/hyperparams/finetune_warmup.yml``), 60k env steps;
 * ``shield_explore``: the warm-up fine-tune without the anchor, with an entropy bonus of 0.02 and learning rate
   3e-4 (exploration the shield makes safe), 40k env steps;
+* ``shield_flank_explore``: ``shield_explore`` trained again under the shield with its flank rule (one radar point
+  beside the ego blocks a lane change, :mod:`agents.shield`), which the arms above were trained without (they are
+  driven behind it);
 * ``shield_dagger``: their DAgger control, DAgger going on from the shipped policy with its own teacher, the
   student's actions driven through the shield (``agents/hyperparams/dagger_shielded.yml``), 40k env steps;
 * ``shield_scratch``: PPO from scratch under the shield (``finetune_shielded.yml`` without a student, on the shipped
@@ -108,6 +111,8 @@ class Arm(NamedTuple):
 HORIZON = "finetune.yml:gamma=0.95;reward_shaping={ttc_s: 3.0, weight: 0.5}"
 #: a longer budget for the best fine-tune setting and its DAgger control (same env steps each)
 LONG_STEPS = 80000
+#: the exploring fine-tune under the shield: the warm-up recipe without the anchor, entropy 0.02, learning rate 3e-4
+SHIELD_EXPLORE = "finetune_warmup.yml:anchor_coef=0;ent_coef=0.02;learning_rate=3.0e-4"
 ARMS: dict[str, Arm] = {
     "finetune": Arm("finetune", "finetune.yml", True),
     "finetune_no_anchor": Arm("finetune", "finetune.yml:anchor_coef=0", True),
@@ -120,8 +125,8 @@ ARMS: dict[str, Arm] = {
     "dagger_lookahead": Arm("dagger", "dagger_lookahead.yml", True, 48000),
     "shield_finetune": Arm("finetune", "finetune_shielded.yml", True, 20000, "shipped"),
     "shield_warmup": Arm("finetune", "finetune_warmup.yml", True, 60000, "shipped"),
-    "shield_explore": Arm("finetune", "finetune_warmup.yml:anchor_coef=0;ent_coef=0.02;learning_rate=3.0e-4", True,
-                          40000, "shipped"),
+    "shield_explore": Arm("finetune", SHIELD_EXPLORE, True, 40000, "shipped"),
+    "shield_flank_explore": Arm("finetune", SHIELD_EXPLORE, True, 40000, "shipped"),
     "shield_dagger": Arm("dagger", "dagger_shielded.yml", True, 40000, "shipped"),
     "shield_scratch": Arm("finetune", "finetune_shielded.yml", False, 60000, "shipped"),
     "shield_scratch_explore": Arm("finetune", "finetune_shielded.yml:learning_rate=5.0e-4;clip_range=0.2;ent_coef=0.01",
@@ -145,6 +150,7 @@ LABELS = {
     "shield_finetune": "PPO fine-tune under the shield, gamma 0.95 and time-to-collision shaping, 20k env steps",
     "shield_warmup": "PPO fine-tune under the shield with a critic warm-up, 60k env steps",
     "shield_explore": "PPO fine-tune under the shield, critic warm-up, no anchor, entropy 0.02, 40k env steps",
+    "shield_flank_explore": "The same, trained under the shield with its flank rule, 40k env steps",
     "shield_dagger": "DAgger continuation under the shield, 40k env steps (control of the shield fine-tunes)",
     "shield_scratch": "PPO from scratch under the shield, 60k env steps",
     "shield_scratch_explore": "PPO from scratch under the shield, learning rate 5e-4, clip 0.2, entropy 0.01, 60k env steps",

@@ -50,6 +50,16 @@ def test_lane_change_is_vetoed_by_a_car_closing_in_the_target_lane_behind():
     assert RadarShield().filter(scan((-12.0, 3.5, 2.0)), LANE_LEFT) == (LANE_LEFT, None)  # falling back
 
 
+def test_one_point_alongside_blocks_a_lane_change_and_one_farther_does_not():
+    flank = scan((-0.5, 3.0, 1.0), per_car=1)  # a car beside the ego shows one point of its flank
+    assert RadarShield().filter(flank, LANE_LEFT) == (IDLE, "lane")
+    assert RadarShield().filter(flank, LANE_RIGHT) == (LANE_RIGHT, None)  # the other side is free
+    assert RadarShield({"alongside_m": 0.0}).filter(flank, LANE_LEFT) == (LANE_LEFT, None)  # the rule off
+    assert RadarShield().filter(flank, IDLE) == (IDLE, None)  # beside, not in the path: no braking
+    far = scan((12.0, 3.0, 1.0), per_car=1)  # one point 12 m ahead in the left lane: a ghost, not an object
+    assert RadarShield().filter(far, LANE_LEFT) == (LANE_LEFT, None)
+
+
 def test_lanes_come_from_the_slam_lateral_offset_and_the_path_from_its_heading():
     car = (14.0, 2.6, -6.0)  # 11.5 m ahead, 2.6 m left of the ego, closing at 6 m/s: in a lane's 4 + 1.5 * 6 = 13 m
     # on its lane's centre the ego sees the car in the left lane; 1 m right of it (SLAM offset -1 m), in its own
@@ -92,7 +102,8 @@ def test_objects_need_min_points_within_reach_and_take_their_median_closing():
 
 
 @pytest.mark.parametrize(("field", "value"), [("front_time_s", -1.0), ("min_points", 0), ("track_steps", 2),
-                                              ("lane_width_m", 0.0), ("dt_s", float("nan"))])
+                                              ("lane_width_m", 0.0), ("dt_s", float("nan")),
+                                              ("alongside_m", -1.0)])
 def test_bad_config_names_the_field(field, value):
     with pytest.raises(ValueError, match=f"shield.{field}"):
         RadarShield({field: value})
