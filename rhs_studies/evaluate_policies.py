@@ -109,10 +109,23 @@ def _contiguous(seeds: list[int]) -> list[list[int]]:
     return parts
 
 
-def kept_runs(previous: dict, policy: str, env_id: str, kwargs: dict) -> dict[int, dict]:
-    """Seed -> episode of an earlier ``policies.json`` row that drove the same policy on the same env and kwargs."""
+def saved_shield(policy: str) -> dict[str, Any] | None:
+    """The radar shield a policy drives behind (:func:`agents.shield.shield_record` of its record's ``shield``: every
+    field, the present defaults filled in), or None."""
+    from agents.evaluate import policy_metadata
+    from agents.shield import shield_record
+
+    return shield_record(policy_metadata(policy).get("shield"))
+
+
+def kept_runs(previous: dict, policy: str, env_id: str, kwargs: dict,
+              shield: dict[str, Any] | None = None) -> dict[int, dict]:
+    """Seed -> episode of an earlier ``policies.json`` row that drove the same policy on the same env and kwargs,
+    behind the same shield (``shield``: :func:`saved_shield`; a row without a ``shield`` entry drove none, or one
+    from before its fields were recorded, and is driven again)."""
     for row in previous.get("rows", []):
-        if _same_policy(row["policy"], policy) and row["env_id"] == env_id and row["env_kwargs"] == kwargs:
+        if (_same_policy(row["policy"], policy) and row["env_id"] == env_id and row["env_kwargs"] == kwargs
+                and row.get("shield") == shield):
             return {run["seed"]: run for run in row["runs"]}
     return {}
 
@@ -514,7 +527,8 @@ def main(argv: list[str] | None = None) -> int:
     previous = json.loads((Path(args.out_dir) / "policies.json").read_text()) if args.keep_episodes else {}
     rows, kept = [], {}
     for key, label, obs, policy, env_id, kwargs in specs:
-        old = kept_runs(previous, policy, env_id, kwargs)
+        shield = saved_shield(policy)
+        old = kept_runs(previous, policy, env_id, kwargs, shield)
         todo = [s for s in seeds if s not in old]
         print(f"evaluate_policies: {label} on {env_id}, {len(todo)} episodes"
               + (f" ({len(seeds) - len(todo)} kept)" if len(todo) < len(seeds) else "") + " ...", file=sys.stderr)
@@ -532,7 +546,8 @@ def main(argv: list[str] | None = None) -> int:
         slim = [{k: v for k, v in r.items() if k not in ("true_xy", "estimated_xy", "landmarks_true",
                                                           "landmarks_est", "position_error_m")} for r in runs]  # fmt: skip
         rows.append({"key": key, "label": label, "observation": obs, "policy": policy, "env_id": env_id,
-                     "env_kwargs": kwargs, "wall_s": round(wall, 1), "summary": summary, "runs": slim})  # fmt: skip
+                     "env_kwargs": kwargs, "shield": shield, "wall_s": round(wall, 1), "summary": summary,
+                     "runs": slim})  # fmt: skip
     by = {r["key"]: r["summary"] for r in rows}
     ret_ratio = by["slam"]["return"]["mean"] / by["truth"]["return"]["mean"]
     c_slam, c_truth = by["slam"]["collision_rate"], by["truth"]["collision_rate"]

@@ -423,6 +423,16 @@ def evaluate_rows(policies: dict[str, Path], seeds: list[int], workers: int,
 SLIM_KEYS = ("seed", "return", "steps", "crashed", "mean_speed", "position_rmse_m")
 
 
+def table_order(runs: dict[str, Any]) -> dict[str, Any]:
+    """``runs`` in the table's order: the starts, the arms (as :data:`ARMS` lists them), then the references.
+
+    >>> list(table_order({"idm": 0, "shield_explore": 0, "shipped": 0, "finetune": 0}))
+    ['shipped', 'finetune', 'shield_explore', 'idm']
+    """
+    order = [*STARTS, *ARMS, *LABELS]
+    return dict(sorted(runs.items(), key=lambda kv: order.index(kv[0]) if kv[0] in order else len(order)))
+
+
 def keep_rows(path: Path, rows: list[str], seeds: list[int]) -> dict[str, Any]:
     """The episodes (``runs``) and learning curves of ``rows`` from an earlier result ``path`` on the same ``seeds``,
     and the commit each was measured at (``commits``); ``ValueError`` when the file, a row or a seed is missing."""
@@ -469,6 +479,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="rows (student, shipped, arms, slower, idm, headway, lookahead) taken from the existing "
                          "rl_finetune.json of --out-dir instead of driven again: same seeds, for policies and code "
                          "unchanged since (the result names the commit they were measured at)")
+    ap.add_argument("--redrive", nargs="+", default=[], metavar="ARM", choices=list(ARMS),
+                    help="arms driven again from their shipped zips in --ship-dir, their training records and learning "
+                         "curves taken from the existing rl_finetune.json: for trained policies whose evaluation code "
+                         "changed (e.g. the shield they drive behind); no run folder needed")
     ap.add_argument("--render-only", action="store_true",
                     help="rewrite rl_finetune.md and .png from rl_finetune.json, no runs")
     args = ap.parse_args(argv)
@@ -486,6 +500,12 @@ def main(argv: list[str] | None = None) -> int:
     kept = [row for row in args.keep if row in args.arms]
     if kept:
         ap.error(f"--keep {' '.join(kept)}: a row kept cannot be in --arms (those are shipped and driven again)")
+    both = [row for row in args.redrive if row in args.arms or row in args.keep]
+    if both:
+        ap.error(f"--redrive {' '.join(both)}: an arm driven again cannot be in --arms or --keep as well")
+    missing = [row for row in args.redrive if not (Path(args.ship_dir) / f"{row}.zip").exists()]
+    if missing:
+        ap.error(f"--redrive {' '.join(missing)}: no shipped zip in {args.ship_dir} (train and ship the arm first)")
     seeds = list(range(args.seed, args.seed + args.episodes))
     try:
         previous = keep_rows(Path(args.out_dir) / "rl_finetune.json", args.keep, seeds) if args.keep else {}
@@ -497,14 +517,19 @@ def main(argv: list[str] | None = None) -> int:
         if not (runs_dir / arm / "model.zip").exists():
             ap.error(f"{runs_dir / arm}/model.zip is missing: train it (--train) or leave {arm} out of --arms")
     shipped = {arm: ship_arm(arm, runs_dir, Path(args.ship_dir)) for arm in args.arms}
+    shipped.update({arm: Path(args.ship_dir) / f"{arm}.zip" for arm in args.redrive})
     for row in args.keep:  # a kept arm's zip and training record are the shipped ones
         if row in ARMS:
             shipped[row] = Path(args.ship_dir) / f"{row}.zip"
     runs = evaluate_rows({**STARTS, **shipped}, seeds, args.workers, skip=tuple(args.keep))
-    runs = {**previous.get("runs", {}), **runs}
+    runs = table_order({**previous.get("runs", {}), **runs})
     rows = {key: row_summary(r) for key, r in runs.items()}
     curves = {arm: learning_curve(runs_dir / arm / "monitor") for arm in args.arms}
-    curves = {**{k: v for k, v in previous.get("curves", {}).items() if k in args.keep}, **curves}
+    earlier_curves = previous.get("curves", {})
+    if args.redrive:  # the curves of the arms driven again: from their training, in the earlier result
+        earlier_curves = {**json.loads((Path(args.out_dir) / "rl_finetune.json").read_text()).get("curves", {}),
+                          **earlier_curves}
+    curves = {**{k: v for k, v in earlier_curves.items() if k in (*args.keep, *args.redrive)}, **curves}
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     plot(curves, out / "rl_finetune.png")

@@ -268,7 +268,7 @@ def test_the_study_pairs_by_seed_and_bounds_collisions():
 
 
 def test_the_study_judges_the_longest_fine_tune_against_its_own_budgets_control():
-    from rhs_studies.rl_finetune import ARMS, headline_arm, row_summary, targets
+    from rhs_studies.rl_finetune import ARMS, SHIELD_ARMS, SHIELD_CONTROL, headline_arm, row_summary, targets
 
     def runs_of(base: float, crash_seed: int = -1) -> list[dict]:
         return [{"seed": s, "return": base + s % 3, "crashed": s == crash_seed, "mean_speed": 24.5} for s in range(10)]
@@ -284,11 +284,13 @@ def test_the_study_judges_the_longest_fine_tune_against_its_own_budgets_control(
     assert t["met"]["gain_over_student"] and t["met"]["beats_dagger_continue"] and t["met"]["mean_speed"]
     del runs["finetune_horizon_80k"]
     assert headline_arm(runs) == ("finetune", "dagger_continue")
-    # a shield arm is judged against its own start (the shipped policy) and has no DAgger control
-    runs.update(shipped=runs_of(158.0), shield_warmup=runs_of(161.5))
-    t = targets({k: row_summary(v) for k, v in runs.items()}, runs, "shield_warmup", None)
+    # a shield arm is judged against its own start (the shipped policy) and the DAgger continuation under the shield
+    runs.update(shipped=runs_of(158.0), shield_warmup=runs_of(161.5), shield_dagger=runs_of(162.0, 4))
+    t = targets({k: row_summary(v) for k, v in runs.items()}, runs, "shield_warmup", SHIELD_CONTROL)
     assert ARMS["shield_warmup"].start == "shipped" and t["gain_over_student"]["mean"] == pytest.approx(3.5)
+    assert t["gain_over_dagger_continue"]["mean"] == pytest.approx(-0.5)
     assert t["met"]["gain_over_student"] and not t["met"]["beats_dagger_continue"]
+    assert ARMS[SHIELD_CONTROL].start == "shipped" and ARMS[SHIELD_CONTROL].timesteps == ARMS[SHIELD_ARMS[0]].timesteps
 
 
 def test_the_study_trains_each_arm_from_its_start(tmp_path):
@@ -334,7 +336,9 @@ def test_the_study_keeps_earlier_rows_only_on_the_same_seeds_and_names_their_com
     from rhs_studies.rl_finetune import main
 
     for argv in (["--arms", "finetune", "--keep", "finetune"],  # a row both kept and driven again
-                 ["--arms", "finetune", "--keep", "idm", "--out-dir", str(tmp_path / "empty")]):  # nothing to keep
+                 ["--arms", "finetune", "--keep", "idm", "--out-dir", str(tmp_path / "empty")],  # nothing to keep
+                 ["--arms", "finetune", "--redrive", "finetune"],  # an arm both trained and driven again
+                 ["--arms", "finetune", "--redrive", "shield_explore", "--ship-dir", str(tmp_path)]):  # no zip
         with pytest.raises(SystemExit):
             main([*argv, "--runs", str(tmp_path / "runs")])
 

@@ -248,6 +248,17 @@ def test_kept_episodes_match_policy_env_and_kwargs_and_split_missing_seeds_into_
     assert ep.kept_runs(previous, "/work/agents/data/rl/y.zip", "E", {"a": 1}) == {}
     assert ep.kept_runs(previous, "idm", "E", {})[1000]["return"] == 3.0
     assert ep.kept_runs({}, "idm", "E", {}) == {}
+    # behind the radar shield: kept only behind the same shield, every field recorded
+    from agents.shield import shield_record
+
+    shield = shield_record({})
+    previous["rows"][0]["shield"] = shield_record({"alongside_m": 0.0})
+    assert ep.kept_runs(previous, "/work/agents/data/rl/x.zip", "E", {"a": 1}, shield) == {}  # another shield
+    previous["rows"][0]["shield"] = shield
+    assert set(ep.kept_runs(previous, "/work/agents/data/rl/x.zip", "E", {"a": 1}, shield)) == {1000, 1001}
+    assert ep.kept_runs(previous, "/work/agents/data/rl/x.zip", "E", {"a": 1}) == {}  # a shielded row, none asked
+    assert ep.saved_shield("idm") is None
+    assert ep.saved_shield(str(ep.ROOT / "agents/data/rl/dagger_cruise30_close.zip")) == shield  # the shipped one
     assert ep._contiguous([1002, 1003, 1005, 1006, 1009]) == [[1002, 1003], [1005, 1006], [1009]]
     assert ep._contiguous([]) == []
 
