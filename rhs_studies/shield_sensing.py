@@ -13,7 +13,11 @@ the radar points with the simulator:
   radar estimates of the leader: the nearest single point with its own Doppler; the nearest two-point object with
   its median Doppler (:func:`agents.shield.objects`); and the shield's tracked leader
   (:meth:`agents.shield.RadarShield.leader`). Counted: steps where the radar alarms and the truth does not (spurious)
-  and the reverse (missed), and the tracked closing speed's error quantiles for leaders within 40 m.
+  and the reverse (missed), and the tracked closing speed's error quantiles for leaders within 40 m;
+* **flanks**: per env step and side, whether a vehicle is beside the ego in the adjacent lane (its centre within
+  ``alongside_m + 2.5`` m along the ego and one lane over, simulator) and how many radar points the shield's lane rule
+  finds alongside there (``|X| <= alongside_m`` in that lane's band): with a car beside, the steps with 0, 1 and 2
+  or more points (one point is the flank rule's case); with none, the steps with a point there anyway (ghosts).
 
     python scripts/shield_sensing.py                       # 10 episodes (2000 env steps), ~2 min on one core
     python scripts/shield_sensing.py --episodes 3 --seed 4050 --json /tmp/sensing.json
@@ -79,6 +83,8 @@ def measure(seeds: list[int]) -> dict[str, Any]:
     ghosts = steps = 0
     alarms = {name: {"spurious": 0, "missed": 0, "both": 0} for name in ("point", "object", "tracked")}
     closing_err: list[float] = []
+    w = cfg.lane_width_m
+    flank = {"beside_points": [0, 0, 0], "empty_steps": 0, "empty_with_point": 0}  # beside: 0 / 1 / 2+ points
     try:
         for seed in seeds:
             policy.reset()
@@ -87,13 +93,25 @@ def measure(seeds: list[int]) -> dict[str, Any]:
             done = False
             while not done:
                 base = env.unwrapped
-                big_x, big_y, v_r, _ = road_offsets(obs)
+                big_x, big_y, v_r, p_y = road_offsets(obs)
                 points = np.asarray(obs["points"], float)[np.asarray(obs["points_mask"]) > 0][:, :2]
                 centres, radial = _vehicles_in_ego_frame(base)
                 dist = _box_distance(points, centres) if len(centres) else np.full((len(points), 0), np.inf)
                 nearest = dist.argmin(axis=1) if dist.shape[1] else np.zeros(len(points), int)
                 on_car = dist.min(axis=1) <= NEAR_BOX_M if dist.shape[1] else np.zeros(len(points), bool)
                 dop_err.append(v_r[on_car] - radial[nearest[on_car]])
+                offset = p_y - w * np.round(p_y / w)
+                for side in (1.0, -1.0):  # left, right
+                    lateral = (big_y + offset) * side
+                    n = int(np.sum((lateral > w / 2) & (lateral < w / 2 + cfg.lane_band_m)
+                                   & (np.abs(big_x) <= cfg.alongside_m)))
+                    beside = np.any((np.abs(centres[:, 0]) <= cfg.alongside_m + HALF_LENGTH_M)
+                                    & (centres[:, 1] * side > w / 2) & (centres[:, 1] * side < 1.5 * w))
+                    if beside:
+                        flank["beside_points"][min(n, 2)] += 1
+                    else:
+                        flank["empty_steps"] += 1
+                        flank["empty_with_point"] += n > 0
                 path = (big_x > 0) & (np.abs(big_y) < cfg.path_half_width_m)
                 ghosts += bool(np.any(path & (big_x < PATH_RANGE_M) & ~on_car))
                 ego = base.vehicle
@@ -126,6 +144,7 @@ def measure(seeds: list[int]) -> dict[str, Any]:
         "ghost_scan_share": ghosts / max(steps, 1),
         "front_alarms": alarms,
         "tracked_closing_error_mps": {"p5": q[0], "median": q[1], "p95": q[2], "n": len(closing_err)},
+        "flanks": flank,
     }  # fmt: skip
 
 
@@ -147,6 +166,13 @@ def markdown(r: dict[str, Any]) -> str:
     if ce["n"]:
         lines.append(f"| tracked closing speed minus true, 5 / 50 / 95 % (m/s, {ce['n']} steps) | "
                      f"{ce['p5']:+.1f} / {ce['median']:+.1f} / {ce['p95']:+.1f} |")
+    f = r.get("flanks")
+    if f:
+        b = f["beside_points"]
+        lines += [f"| a car beside the ego one lane over: side-steps with 0 / 1 / 2+ points alongside | "
+                  f"{b[0]} / {b[1]} / {b[2]} |",
+                  f"| no car beside: side-steps with a point alongside (ghosts) | "
+                  f"{f['empty_with_point']} of {f['empty_steps']} |"]
     return "\n".join(lines) + "\n"
 
 

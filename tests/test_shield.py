@@ -183,3 +183,7 @@ def test_sensing_study_compares_the_radar_leader_with_the_truth():
     # two-point objects alarm no more spuriously than single points (ghosts are single points)
     assert a["object"]["spurious"] <= a["point"]["spurious"]
     assert "tracked leader (the shield)" in markdown(r)
+    f = r["flanks"]  # every env step counts once per side
+    assert sum(f["beside_points"]) + f["empty_steps"] == 2 * r["steps"]
+    # a car beside gives points alongside far more often than an empty flank does (ghosts)
+    assert sum(f["beside_points"][1:]) / max(sum(f["beside_points"]), 1) > 5 * f["empty_with_point"] / f["empty_steps"]
