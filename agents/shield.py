@@ -30,11 +30,12 @@ post share a range, the joint angle-Doppler OMP can give the car the post's Dopp
 * an **object** is a point with at least ``min_points`` points (itself included) of the same region
   within ``cluster_m`` along the road; its closing speed is the median of ``-v_r`` over them;
 * except **alongside** the ego (``|X| <= alongside_m`` in a target lane), where one point is enough: a car beside
-  the ego shows the radars its flank, often as a single point (on 8 episodes of analysis seeds 5000-5007 behind the
-  shipped policy, 112 of the 847 env steps with a car beside the ego in an adjacent lane gave exactly one point
-  there), while a ghost there is rare (3 of 2353 steps with no car beside gave a point). A lane change into such a
-  car was the commonest crash of the fastest fine-tune behind the shield (3 of its 4 crashes on 60 episodes of
-  those seeds, each with one point on the car it hit); ``alongside_m = 0`` turns this off;
+  the ego shows the radars its flank, often as a single point, while a ghost there is rare (below: of 663 side-steps
+  with a car beside the ego one lane over, 100 had exactly one point alongside and 399 two or more; of 3337 with
+  none, 14 had a point there). A lane change into such a car was the commonest crash of the fastest PPO fine-tune
+  behind the shield (``agents/data/rl/shield_explore.zip``: 3 of its 4 crashes on analysis seeds 5000-5059,
+  inspected step by step, each with one point on the car it hit; with this rule 1 of 60); ``alongside_m = 0`` turns
+  it off;
 * the **leader** (the nearest object in the ego's path) is tracked: its gaps over the last
   ``track_steps`` env steps (``dt_s`` apart; a jump of more than ``track_jump_m`` starts a new track)
   give its closing speed as minus the least-squares slope, once three are there.
@@ -42,7 +43,8 @@ post share a range, the joint angle-Doppler OMP can give the car the post's Dopp
 ``python scripts/shield_sensing.py`` (:mod:`rhs_studies.shield_sensing`) measures these on 2000 env steps of
 validation seeds against the simulator: the front rule alarmed where the truth did not in 170 steps from single
 points, 76 from two-point objects and 79 from the tracked leader, and missed 20, 23 and 16 of the truth's alarms;
-the tracked closing speed is within -1.5 / +1.9 m/s of the true one in 90 % of the steps with a leader within 40 m.
+the tracked closing speed is within -1.5 / +1.9 m/s of the true one in 90 % of the steps with a leader within 40 m;
+and the flank counts above.
 
 Points go from the vehicle frame (x forward, y left) to road-aligned offsets with the SLAM
 heading ``h`` (the map frame starts along the road): ``X = x cos h - y sin h``,

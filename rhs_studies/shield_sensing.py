@@ -84,7 +84,8 @@ def measure(seeds: list[int]) -> dict[str, Any]:
     alarms = {name: {"spurious": 0, "missed": 0, "both": 0} for name in ("point", "object", "tracked")}
     closing_err: list[float] = []
     w = cfg.lane_width_m
-    flank = {"beside_points": [0, 0, 0], "empty_steps": 0, "empty_with_point": 0}  # beside: 0 / 1 / 2+ points
+    beside_points = [0, 0, 0]  # side-steps with a car beside the ego and 0 / 1 / 2+ points alongside
+    empty_steps = empty_with_point = 0  # side-steps with no car beside, and those with a point alongside
     try:
         for seed in seeds:
             policy.reset()
@@ -108,10 +109,10 @@ def measure(seeds: list[int]) -> dict[str, Any]:
                     beside = np.any((np.abs(centres[:, 0]) <= cfg.alongside_m + HALF_LENGTH_M)
                                     & (centres[:, 1] * side > w / 2) & (centres[:, 1] * side < 1.5 * w))
                     if beside:
-                        flank["beside_points"][min(n, 2)] += 1
+                        beside_points[min(n, 2)] += 1
                     else:
-                        flank["empty_steps"] += 1
-                        flank["empty_with_point"] += n > 0
+                        empty_steps += 1
+                        empty_with_point += n > 0
                 path = (big_x > 0) & (np.abs(big_y) < cfg.path_half_width_m)
                 ghosts += bool(np.any(path & (big_x < PATH_RANGE_M) & ~on_car))
                 ego = base.vehicle
@@ -144,7 +145,7 @@ def measure(seeds: list[int]) -> dict[str, Any]:
         "ghost_scan_share": ghosts / max(steps, 1),
         "front_alarms": alarms,
         "tracked_closing_error_mps": {"p5": q[0], "median": q[1], "p95": q[2], "n": len(closing_err)},
-        "flanks": flank,
+        "flanks": {"beside_points": beside_points, "empty_steps": empty_steps, "empty_with_point": empty_with_point},
     }  # fmt: skip
 
 
