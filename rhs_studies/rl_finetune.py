@@ -292,7 +292,8 @@ TEACHER_PAIR = ("dagger_lookahead", "dagger_continue_80k")
 
 
 #: the shield arms the targets judge, in order of preference (the first evaluated; chosen on the validation seeds
-#: 4000-4049, where shield_explore led: +3.2 +- 2.5 paired against the shipped policy) and their DAgger control
+#: 4000-4049, where shield_explore led: +3.2 +- 2.5 paired against the shipped policy, 0 / 50 collisions, before and
+#: after the flank rule; shield_flank_explore +1.7 +- 2.6 with 1 / 50) and their DAgger control
 SHIELD_ARMS = ("shield_explore", "shield_warmup", "shield_finetune")
 SHIELD_CONTROL = "shield_dagger"
 

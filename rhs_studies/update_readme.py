@@ -154,10 +154,13 @@ def _rl_finetune(d: dict) -> tuple[str, str]:
     start = "shipped" if shield else "student"
     what = ("PPO fine-tune of the shipped policy under the radar shield" if shield
             else "PPO fine-tune of the student, privileged critic")
+    control = shield.get("gain_over_dagger_continue")
+    against = ("" if control is None else
+               f"; vs the DAgger control: {control['mean']:+.1f} [{control['low']:+.1f}, {control['high']:+.1f}]")
     return (f"{what} ({steps} env steps; {d['episodes']} held-out seeds): return, collisions, paired gain over "
-            "its start",
+            "its start" + ("" if control is None else " and over DAgger at the same budget"),
             f"{s['return']['mean']:.1f}, {s['collisions']}/{s['episodes']}, {gain['mean']:+.1f} "
-            f"[{gain['low']:+.1f}, {gain['high']:+.1f}] (start: {rows[start]['return']['mean']:.1f}; "
+            f"[{gain['low']:+.1f}, {gain['high']:+.1f}]{against} (start: {rows[start]['return']['mean']:.1f}; "
             f"IDM + MOBIL: {rows['idm']['return']['mean']:.1f})")
 
 
