@@ -226,9 +226,11 @@ def _preload_forkserver() -> None:
 
 def observation_space(env_id: str, env_kwargs: dict[str, Any]) -> Any:
     """``env_id``'s observation space with ``env_kwargs`` (one env built and closed), to check a run's settings."""
-    from agents.evaluate import make_env
+    import gymnasium as gym
 
-    env = make_env(env_id, env_kwargs)
+    import rhs_env  # noqa: F401  (registers the ids)
+
+    env = gym.make(env_id, **env_kwargs)
     try:
         return env.observation_space
     finally:
