@@ -456,6 +456,20 @@ class RoundLog:
         (self.out / "iterations.json").write_text(json.dumps(self.records, indent=2))
 
 
+def dagger_settings(env_id: str, hp: dict[str, Any], env_kwargs: dict[str, Any]
+                    ) -> tuple[DaggerConfig, dict[str, Any] | None]:
+    """The run's :class:`DaggerConfig` and its shield record (None: none) from the YAML entry ``hp``, validated
+    (errors name ``dagger.<field>`` / ``shield.<field>``; a shield on an env without radar points is refused)."""
+    from agents.run_setup import observation_space
+
+    config = build(DaggerConfig, {k: v for k, v in hp.items()
+                                  if k not in ("policy_kwargs", "expert", "teacher", "shield")}, "dagger")
+    shield = shield_record(hp.get("shield"))
+    if shield is not None:
+        check_shield_env(observation_space(env_id, env_kwargs))
+    return config, shield
+
+
 def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int = 0, n_envs: int | None = None,
                  hyperparams: str | Path | None = None, env_kwargs: dict | None = None,
                  progress: bool = True, torch_threads: int | None = 1,
@@ -474,15 +488,7 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
     import torch
     from stable_baselines3 import PPO
 
-    from agents.run_setup import (
-        check_train_args,
-        limit_threads,
-        make_vec_env,
-        observation_space,
-        run_settings,
-        run_summary,
-        write_summary,
-    )
+    from agents.run_setup import check_train_args, limit_threads, make_vec_env, run_settings, run_summary, write_summary
 
     if init_policy is not None:
         env_kwargs = continued_env_kwargs(env_id, env_kwargs, init_policy)
@@ -491,11 +497,7 @@ def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int 
         raise ValueError(f"--resume: no finished DAgger round in {out} to continue from (no {STATE_META}); run "
                          "without --resume to start a new run")
     teacher, expert = teacher_config(run.hp)
-    config = build(DaggerConfig, {k: v for k, v in run.hp.items()
-                                  if k not in ("policy_kwargs", "expert", "teacher", "shield")}, "dagger")
-    shield = shield_record(run.hp.get("shield"))
-    if shield is not None:
-        check_shield_env(observation_space(env_id, run.env_kwargs))
+    config, shield = dagger_settings(env_id, run.hp, run.env_kwargs)
     check_train_args(run.timesteps, run.n_envs, seed, 0, 1, 0)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
