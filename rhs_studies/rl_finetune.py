@@ -150,7 +150,8 @@ LABELS = {
     "shield_finetune": "PPO fine-tune under the shield, gamma 0.95 and time-to-collision shaping, 20k env steps",
     "shield_warmup": "PPO fine-tune under the shield with a critic warm-up, 60k env steps",
     "shield_explore": "PPO fine-tune under the shield, critic warm-up, no anchor, entropy 0.02, 40k env steps",
-    "shield_flank_explore": "The same, trained under the shield with its flank rule, 40k env steps",
+    "shield_flank_explore": "PPO fine-tune trained under the shield with its flank rule, warm-up, no anchor, entropy 0.02, "
+                            "40k env steps",
     "shield_dagger": "DAgger continuation under the shield, 40k env steps (control of the shield fine-tunes)",
     "shield_scratch": "PPO from scratch under the shield, 60k env steps",
     "shield_scratch_explore": "PPO from scratch under the shield, learning rate 5e-4, clip 0.2, entropy 0.01, 60k env steps",
