@@ -381,7 +381,7 @@ def _settings(env_id: str, timesteps: int | None, n_envs: int | None, hyperparam
     """The run's settings, the :class:`FinetuneConfig`, PPO's own arguments, the reward shaping and the shield
     (each None when the YAML has none; the shield as its full record)."""
     from agents.imitation import continued_env_kwargs
-    from agents.run_setup import observation_space, run_settings
+    from agents.run_setup import run_settings, shield_setting
 
     if init_policy is not None:
         if not Path(init_policy).exists():
@@ -395,12 +395,7 @@ def _settings(env_id: str, timesteps: int | None, n_envs: int | None, hyperparam
         from agents.shaping import ShapingConfig
 
         build(ShapingConfig, shaping, "reward_shaping")  # a wrong value fails here, not in a worker
-    from agents.shield import check_shield_env, shield_record
-
-    shield = shield_record(run.hp.get("shield"))
-    if shield is not None:
-        check_shield_env(observation_space(env_id, run.env_kwargs))
-    return run, config, ppo_args, shaping, shield
+    return run, config, ppo_args, shaping, shield_setting(env_id, run.hp, run.env_kwargs)
 
 
 def _start_from(model: AnchoredPPO, student: PPO | None, config: FinetuneConfig) -> None:

@@ -83,7 +83,7 @@ import numpy as np
 
 from agents.expert import HeadwayDriver, HeadwayDriverConfig
 from agents.lookahead import LookaheadDriver, LookaheadDriverConfig
-from agents.shield import ShieldAction, check_shield_env, shield_record
+from agents.shield import ShieldAction
 from rhs_common.validation import build, check_bool, check_int, check_range, check_types
 
 EXPERT_KEY = "expert_action"
@@ -460,14 +460,11 @@ def dagger_settings(env_id: str, hp: dict[str, Any], env_kwargs: dict[str, Any]
                     ) -> tuple[DaggerConfig, dict[str, Any] | None]:
     """The run's :class:`DaggerConfig` and its shield record (None: none) from the YAML entry ``hp``, validated
     (errors name ``dagger.<field>`` / ``shield.<field>``; a shield on an env without radar points is refused)."""
-    from agents.run_setup import observation_space
+    from agents.run_setup import shield_setting
 
     config = build(DaggerConfig, {k: v for k, v in hp.items()
                                   if k not in ("policy_kwargs", "expert", "teacher", "shield")}, "dagger")
-    shield = shield_record(hp.get("shield"))
-    if shield is not None:
-        check_shield_env(observation_space(env_id, env_kwargs))
-    return config, shield
+    return config, shield_setting(env_id, hp, env_kwargs)
 
 
 def train_dagger(env_id: str, timesteps: int | None, out: str | Path, seed: int = 0, n_envs: int | None = None,

@@ -224,17 +224,24 @@ def _preload_forkserver() -> None:
         multiprocessing.set_forkserver_preload(["__main__", *FORKSERVER_PRELOAD])
 
 
-def observation_space(env_id: str, env_kwargs: dict[str, Any]) -> Any:
-    """``env_id``'s observation space with ``env_kwargs`` (one env built and closed), to check a run's settings."""
+def shield_setting(env_id: str, hp: dict[str, Any], env_kwargs: dict[str, Any]) -> dict[str, Any] | None:
+    """The run's radar shield (the YAML entry ``hp``'s ``shield``) as its full record (None: none), validated: a wrong
+    field names ``shield.<field>``, and an env without radar points (one built with ``env_kwargs``) is refused."""
+    from agents.shield import check_shield_env, shield_record
+
+    shield = shield_record(hp.get("shield"))
+    if shield is None:
+        return None
     import gymnasium as gym
 
     import rhs_env  # noqa: F401  (registers the ids)
 
     env = gym.make(env_id, **env_kwargs)
     try:
-        return env.observation_space
+        check_shield_env(env.observation_space)
     finally:
         env.close()
+    return shield
 
 
 def make_vec_env(

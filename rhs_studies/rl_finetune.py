@@ -527,11 +527,11 @@ def main(argv: list[str] | None = None) -> int:
     runs = table_order({**previous.get("runs", {}), **runs})
     rows = {key: row_summary(r) for key, r in runs.items()}
     curves = {arm: learning_curve(runs_dir / arm / "monitor") for arm in args.arms}
-    earlier_curves = previous.get("curves", {})
-    if args.redrive:  # the curves of the arms driven again: from their training, in the earlier result
-        earlier_curves = {**json.loads((Path(args.out_dir) / "rl_finetune.json").read_text()).get("curves", {}),
-                          **earlier_curves}
-    curves = {**{k: v for k, v in earlier_curves.items() if k in (*args.keep, *args.redrive)}, **curves}
+    earlier = dict(previous.get("curves", {}))  # the kept rows'
+    if args.redrive:  # the arms driven again keep the curves of their training, from the earlier result
+        saved = json.loads((Path(args.out_dir) / "rl_finetune.json").read_text()).get("curves", {})
+        earlier.update({k: v for k, v in saved.items() if k in args.redrive})
+    curves = {**earlier, **curves}
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     plot(curves, out / "rl_finetune.png")
