@@ -426,3 +426,4 @@ def test_dagger_under_the_shield_drives_through_it_and_saves_it(tmp_path):
     hp.write_text(base.replace(radar, TRUTH).replace("MultiInputPolicy", "MlpPolicy") + "  shield: {}\n")
     with pytest.raises(ValueError, match="points"):
         train("dagger", TRUTH, None, tmp_path / "truth", hyperparams=hp, env_kwargs=kw, progress=False)
+    assert not (tmp_path / "truth").exists()  # refused with the settings, before any env or folder is made
