@@ -1,0 +1,153 @@
+"""A fresh test of the RL study's shield fine-tune: chosen on new validation seeds, judged once on new test seeds.
+
+The RL study (:mod:`rhs_studies.rl_finetune`) judged its shield fine-tunes on seeds 3000-3099 after it had looked
+at them more than once (the shield changed between looks), and chose between its two exploring fine-tunes on only
+50 validation episodes. This study repeats the choice and the test on seeds nothing has been trained, chosen, tuned
+or judged on, with a protocol fixed before any of them was driven:
+
+1. **Choice** on the validation seeds (``--validation-seed``, 7000..): the start (the shipped policy) and each
+   candidate (:data:`CANDIDATES`); the candidate with the highest paired return gain over the start (the same as
+   the highest mean return: the seeds are common) is chosen. Nothing else is read from these seeds.
+2. **Test** on the test seeds (``--seed``, 6000..), driven once: the chosen arm, its start, the DAgger control of the
+   same budget (:data:`rhs_studies.rl_finetune.SHIELD_CONTROL`) and IDM + MOBIL. The targets are the RL study's
+   (:func:`rhs_studies.rl_finetune.targets`): return >= 1.08x IDM + MOBIL, collisions <= 2 per 100, mean speed
+   >= 24 m/s, a paired gain over the start >= +3 with its 95 % interval above 0, more than the DAgger control.
+
+The arms are the RL study's shipped zips (``agents/data/rl``), each driven behind the shield its record keeps.
+
+    OMP_NUM_THREADS=1 python scripts/rl_confirm.py                     # 100 + 100 episodes per row, ~35 min
+    OMP_NUM_THREADS=1 python scripts/rl_confirm.py --episodes 4 --validation-episodes 4 --out-dir /tmp/c
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from rhs_studies.evaluate_policies import paired
+from rhs_studies.provenance import write_json
+from rhs_studies.rl_finetune import (
+    LABELS,
+    SHIELD_CONTROL,
+    SHIPPED_DIR,
+    STARTS,
+    evaluate_rows,
+    row_summary,
+    targets,
+)
+from rhs_studies.rl_finetune import fingerprint as study_fingerprint
+
+ROOT = Path(__file__).resolve().parent.parent
+#: the exploring fine-tunes the choice is between (the RL study's two best shield arms on its seeds)
+CANDIDATES = ("shield_explore", "shield_flank_explore")
+#: the rows besides the candidates: their start, on both seed sets
+START = "shipped"
+
+
+def choose(runs: dict[str, list[dict]], candidates: tuple[str, ...] = CANDIDATES) -> tuple[str, dict[str, Any]]:
+    """The candidate with the highest paired gain over :data:`START` on the validation episodes ``runs``, and
+    each candidate's gain.
+
+    >>> ep = lambda *r: [{"seed": s, "return": x} for s, x in enumerate(r)]
+    >>> choose({"shipped": ep(1, 2), "a": ep(2, 3), "b": ep(3, 3)}, ("a", "b"))[0]
+    'b'
+    """
+    gains = {arm: paired(runs[arm], runs[START]) for arm in candidates}
+    return max(candidates, key=lambda arm: gains[arm]["mean"]), gains
+
+
+def _policies(rows: tuple[str, ...], ship_dir: Path) -> dict[str, Path]:
+    return {row: STARTS[row] if row in STARTS else ship_dir / f"{row}.zip" for row in rows}
+
+
+def markdown(result: dict[str, Any]) -> str:
+    """The choice and the test, one paragraph and one table."""
+    v, t = result["validation"], result["test"]
+    gains = "; ".join(f"{LABELS.get(a, a)} {g['mean']:+.1f} [{g['low']:+.1f}, {g['high']:+.1f}]"
+                      for a, g in v["gains"].items())
+    lines = [f"Choice on validation seeds {v['seeds'][0]}-{v['seeds'][-1]} ({len(v['seeds'])} episodes), paired gain "
+             f"over the shipped policy: {gains}. Chosen: **{LABELS.get(v['chosen'], v['chosen'])}**.", "",
+             f"Test on seeds {t['seeds'][0]}-{t['seeds'][-1]} ({len(t['seeds'])} episodes, driven once):", "",
+             "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs the shipped policy (paired, 95 % CI) |",
+             "|---|---|---|---|---|"]
+    for key, s in t["rows"].items():
+        g = t["vs_start"].get(key)
+        diff = "" if g is None else f"{g['mean']:+.1f} [{g['low']:+.1f}, {g['high']:+.1f}]"
+        lo, hi = s["collision_interval"]
+        lines.append(f"| {LABELS.get(key, key)} | {s['return']['mean']:.1f} +- {s['return']['half']:.1f} | "
+                     f"{s['collisions']}/{s['episodes']} [{100 * lo:.0f}-{100 * hi:.0f} %] | "
+                     f"{s['mean_speed_mps']['mean']:.1f} | {diff} |")
+    tg = t["targets"]
+    ctrl = tg["gain_over_dagger_continue"]
+    met = ", ".join(f"{k} {'met' if ok else 'not met'}" for k, ok in tg["met"].items())
+    lines += ["", f"Targets judged on the chosen arm: {tg['return_vs_idm']:.3f}x IDM + MOBIL, "
+              f"{100 * tg['collision_rate']:.0f} % collisions, {tg['mean_speed_mps']:.1f} m/s, "
+              f"{tg['gain_over_student']['mean']:+.1f} [{tg['gain_over_student']['low']:+.1f}, "
+              f"{tg['gain_over_student']['high']:+.1f}] over the shipped policy, {ctrl['mean']:+.1f} "
+              f"[{ctrl['low']:+.1f}, {ctrl['high']:+.1f}] over the DAgger control; targets: {met}."]
+    return "\n".join(lines) + "\n"
+
+
+def confirm(validation_seeds: list[int], test_seeds: list[int], workers: int, ship_dir: Path = SHIPPED_DIR,
+            candidates: tuple[str, ...] = CANDIDATES) -> dict[str, Any]:
+    """Steps 1 and 2 of the protocol (the module's docstring); the result without provenance."""
+    t0 = time.perf_counter()
+    val = evaluate_rows(_policies((START, *candidates), ship_dir), validation_seeds, workers,
+                        skip=("slower", "idm", "headway", "lookahead"))
+    chosen, gains = choose(val, candidates)
+    print(f"rl_confirm: chose {chosen} ({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
+    test = evaluate_rows(_policies((START, chosen, SHIELD_CONTROL), ship_dir), test_seeds, workers,
+                         skip=("slower", "headway", "lookahead"))
+    rows = {k: row_summary(r) for k, r in test.items()}
+    slim = ("seed", "return", "crashed", "mean_speed")
+    return {
+        "candidates": list(candidates),
+        "validation": {"seeds": validation_seeds, "gains": gains, "chosen": chosen,
+                       "rows": {k: row_summary(r) for k, r in val.items()},
+                       "runs": {k: [{f: e.get(f) for f in slim} for e in r] for k, r in val.items()}},
+        "test": {"seeds": test_seeds, "rows": rows,
+                 "vs_start": {k: paired(r, test[START]) for k, r in test.items() if k not in (START, "idm")},
+                 "targets": targets(rows, test, chosen, SHIELD_CONTROL),
+                 "runs": {k: [{f: e.get(f) for f in slim} for e in r] for k, r in test.items()}},
+    }
+
+
+def fingerprint() -> list[float]:
+    """The RL study's: the same starts and shipped zips on one short episode (this study drives nothing else)."""
+    return study_fingerprint()
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--validation-seed", type=int, default=7000, help="first validation seed (the choice)")
+    ap.add_argument("--validation-episodes", type=int, default=100)
+    ap.add_argument("--seed", type=int, default=6000, help="first test seed")
+    ap.add_argument("--episodes", type=int, default=100, help="test episodes")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--ship-dir", type=Path, default=SHIPPED_DIR, help="the RL study's shipped arms")
+    ap.add_argument("--out-dir", type=Path, default=ROOT / "results")
+    args = ap.parse_args(argv)
+    if args.episodes < 2 or args.validation_episodes < 2:
+        ap.error("--episodes and --validation-episodes must be >= 2 (intervals need two episodes)")
+    val = list(range(args.validation_seed, args.validation_seed + args.validation_episodes))
+    test = list(range(args.seed, args.seed + args.episodes))
+    if set(val) & set(test):
+        ap.error(f"the validation seeds {val[0]}-{val[-1]} overlap the test seeds {test[0]}-{test[-1]}")
+    missing = [a for a in (*CANDIDATES, SHIELD_CONTROL) if not (Path(args.ship_dir) / f"{a}.zip").exists()]
+    if missing:
+        ap.error(f"no shipped zip for {missing} in {args.ship_dir}: run scripts/rl_finetune.py first")
+    started = time.time()
+    result = confirm(val, test, args.workers, Path(args.ship_dir))
+    out = Path(args.out_dir)
+    write_json(out / "rl_confirm.json", result, __file__, args, started, fingerprint, argv)
+    text = markdown(result)
+    (out / "rl_confirm.md").write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,11 @@
+"""A fresh test of the RL study's shield fine-tune: chosen on new validation seeds, judged once on new test seeds.
+
+Runs :mod:`rhs_studies.rl_confirm` (its docstring has the protocol and the options), as ``python -m rhs_studies.rl_confirm`` does.
+"""
+
+import sys
+
+from rhs_studies.rl_confirm import main
+
+if __name__ == "__main__":
+    sys.exit(main())
