@@ -319,7 +319,7 @@ class AnchoredPPO(PPO):
 def training_wrapper(env: gym.Env, privileged: bool, shaping: dict[str, Any] | None,
                      shield: dict[str, Any] | None = None) -> gym.Env:
     """The fine-tune's wrappers of each training env: the radar shield (None: none), the privileged key (for the
-    critic), then the reward shaping (:class:`agents.shaping.TimeToCollisionShaping`; None: highway-env's reward)."""
+    critic), then the reward shaping (:class:`agents.shaping.RewardShaping`; None: highway-env's reward)."""
     if shield is not None:
         from agents.shield import ShieldAction
 
@@ -327,9 +327,9 @@ def training_wrapper(env: gym.Env, privileged: bool, shaping: dict[str, Any] | N
     if privileged:
         env = PrivilegedObservation(env)
     if shaping is not None:
-        from agents.shaping import TimeToCollisionShaping
+        from agents.shaping import RewardShaping
 
-        env = TimeToCollisionShaping(env, shaping)
+        env = RewardShaping(env, shaping)
     return env
 
 

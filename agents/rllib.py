@@ -39,7 +39,7 @@ entries as the stable-baselines3 backend (``agents/hyperparams/ppo.yml`` / ``fin
   | ``anchor_epochs`` | 0: no anchor; else the term is in every minibatch's loss |
   | ``critic_warmup_fraction`` | the actor's logits detached in the loss while it lasts (a shared encoder learns) |
   | ``correct_class_prior`` / ``prior_steps`` | the student corrected with SB3 before its actor is copied |
-  | ``shield`` / ``reward_shaping`` | the creator's ``ShieldAction`` / ``TimeToCollisionShaping`` |
+  | ``shield`` / ``reward_shaping`` | the creator's ``ShieldAction`` / ``RewardShaping`` |
 
   Two differences from the SB3 fine-tune: the anchor is a term of the PPO loss on each
   minibatch (RLlib's loss is one function) instead of ``anchor_epochs`` separate passes after
@@ -109,7 +109,7 @@ def env_config(env_kwargs: dict[str, Any], decision_interval: int = 1, decision_
 def make_env(env_id: str, config: dict[str, Any] | None = None) -> gym.Env:
     """The creator registered with ``ray.tune.register_env``: ``gym.make(env_id, **env_kwargs)``, then (``shield``)
     :class:`agents.shield.ShieldAction`, (``privileged``) :class:`agents.privileged.PrivilegedObservation`,
-    (``shaping``) :class:`agents.shaping.TimeToCollisionShaping` and (``decision_interval`` k > 1)
+    (``shaping``) :class:`agents.shaping.RewardShaping` and (``decision_interval`` k > 1)
     :class:`agents.decision.HoldAction` with ``decision_mode``'s fill, in the order the SB3 backend wraps them."""
     import rhs_env  # noqa: F401  (registers the rhs ids in this worker)
     from agents.decision import HoldAction, fill_action
@@ -125,9 +125,9 @@ def make_env(env_id: str, config: dict[str, Any] | None = None) -> gym.Env:
 
         env = PrivilegedObservation(env)
     if cfg["shaping"] is not None:
-        from agents.shaping import TimeToCollisionShaping
+        from agents.shaping import RewardShaping
 
-        env = TimeToCollisionShaping(env, cfg["shaping"])
+        env = RewardShaping(env, cfg["shaping"])
     if cfg["decision_interval"] > 1:
         env = HoldAction(env, cfg["decision_interval"], fill_action(cfg["decision_mode"]))
     return env

@@ -1,4 +1,5 @@
-"""Time-to-collision reward shaping for training (the evaluation keeps highway-env's reward).
+"""Reward shaping for training: a time-to-collision penalty and a cost of the shield's interventions (the
+evaluation keeps highway-env's reward).
 
 highway-env's reward pays speed a little every step and a crash only by ending the
 episode: at 1 Hz a crash costs the rewards the episode would still have paid, seconds
@@ -13,6 +14,15 @@ with ``g`` the bumper gap to the leader in the ego's lane (m), the closing speed
 the penalty at TTC = 0 (in units of highway-env's normalised per-step reward, which lies in
 [0, 1]). An open road or a leader pulling away costs nothing. The leader is read from the
 simulator (the reward is a training signal, never an observation).
+
+Under the radar safety shield (:mod:`agents.shield`) a policy can leave the braking and the
+lane checks to the shield: PPO from scratch learns one action (FASTER, or LANE_RIGHT) and the
+shield does the rest. The intervention cost makes the shield's work the policy's loss:
+
+    r'' = r' - c * [the shield replaced the step's action]
+
+with ``c = shield_cost`` per replaced env step (``info["shield"]`` is not None; 0: off). The
+shield wraps the env inside this wrapper, so its reasons reach it.
 
 The wrapper sits outside the ``Monitor`` of :func:`agents.run_setup.make_vec_env`, so the
 monitor files and the learning curves keep the unshaped return; ``info["shaping"]`` is the
@@ -36,11 +46,13 @@ class ShapingConfig:
 
     ttc_s: float = 3.0  # T0: time to collision below which the penalty starts, s
     weight: float = 0.5  # w: the penalty at TTC = 0, per env step (highway-env's normalised reward is in [0, 1])
+    shield_cost: float = 0.0  # c: the cost of an env step whose action the shield replaced (0: off)
 
     def __post_init__(self) -> None:
         check_types(self)
         check_range("ttc_s", self.ttc_s, 0.0, 60.0, low_open=True)
         check_range("weight", self.weight, 0.0, 100.0)
+        check_range("shield_cost", self.shield_cost, 0.0, 100.0)
 
 
 def time_to_collision(env: gym.Env) -> float:
@@ -66,12 +78,13 @@ def ttc_penalty(ttc: float, config: ShapingConfig) -> float:
     return config.weight * max(0.0, 1.0 - ttc / config.ttc_s)
 
 
-class TimeToCollisionShaping(gym.Wrapper):
-    """Subtract :func:`ttc_penalty` of the state reached from each step's reward (see the module docstring).
+class RewardShaping(gym.Wrapper):
+    """Subtract :func:`ttc_penalty` of the state reached and, for a step the shield replaced, ``shield_cost`` from
+    each step's reward (see the module docstring); ``info["shaping"]`` is the sum subtracted (<= 0).
 
     Example:
         >>> import gymnasium as gym, rhs_env
-        >>> env = TimeToCollisionShaping(gym.make("rhs-highway-v0", vehicles_count=5), {"ttc_s": 3.0})
+        >>> env = RewardShaping(gym.make("rhs-highway-v0", vehicles_count=5), {"ttc_s": 3.0})
         >>> _ = env.reset(seed=0)
         >>> _, reward, *_, info = env.step(1)
         >>> info["shaping"] <= 0.0
@@ -85,4 +98,6 @@ class TimeToCollisionShaping(gym.Wrapper):
     def step(self, action):
         obs, reward, terminated, truncated, info = self.env.step(action)
         penalty = 0.0 if info.get("crashed") else ttc_penalty(time_to_collision(self.env), self.config)
+        if info.get("shield") is not None:
+            penalty += self.config.shield_cost
         return obs, float(reward) - penalty, terminated, truncated, {**info, "shaping": -penalty}

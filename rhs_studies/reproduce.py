@@ -109,6 +109,8 @@ STEPS: tuple[Step, ...] = (
          "PPO fine-tune of the student with its controls and the lookahead teacher's student (trains the arms missing "
          "in runs/rl: ~10-20 min per 20k env steps, ~45 min per 80k arm, ~35 min for the lookahead's 48k), then 100 "
          "held-out seeds per policy (~4 min each on 2 cores)"),
+    Step("rl_confirm", "rl_confirm.py", (), ("rl_confirm.json",), 2100,
+         "the RL study's two exploring shield fine-tunes: the choice on fresh validation seeds, one test on fresh seeds"),
     Step("teachers", "teachers.py", (), ("teachers.json",), 500,
          "the headway driver against the lookahead teachers on validation seeds (rhs-highway-v0)"),
     Step("crash_analysis", "crash_analysis.py", (), ("crash_analysis.json",), 700,

@@ -38,7 +38,10 @@ evaluated behind the shield their records keep:
 * ``shield_scratch``: PPO from scratch under the shield (``finetune_shielded.yml`` without a student, on the shipped
   policy's env kwargs), 60k env steps;
 * ``shield_scratch_explore``: the same with the ``scratch`` arm's PPO settings (learning rate 5e-4, clip range 0.2,
-  entropy bonus 0.01), 60k env steps.
+  entropy bonus 0.01), 60k env steps;
+* ``shield_scratch_cost``: ``shield_scratch_explore`` with a cost of 0.5 for every env step whose action the shield
+  replaced (:mod:`agents.shaping`'s ``shield_cost``: the braking and the vetoes left to the shield become the
+  policy's loss), 60k env steps.
 
 Evaluation on ``--episodes`` seeds from ``--seed`` (3000..: never used in training, where the envs draw seeds
 0.. and 20000.., nor in any earlier selection), every policy on the same seeds; the scripted references
@@ -113,6 +116,8 @@ HORIZON = "finetune.yml:gamma=0.95;reward_shaping={ttc_s: 3.0, weight: 0.5}"
 LONG_STEPS = 80000
 #: the exploring fine-tune under the shield: the warm-up recipe without the anchor, entropy 0.02, learning rate 3e-4
 SHIELD_EXPLORE = "finetune_warmup.yml:anchor_coef=0;ent_coef=0.02;learning_rate=3.0e-4"
+#: PPO from scratch under the shield with PPO's usual settings (the first study's ``scratch`` arm)
+SCRATCH_EXPLORE = "finetune_shielded.yml:learning_rate=5.0e-4;clip_range=0.2;ent_coef=0.01"
 ARMS: dict[str, Arm] = {
     "finetune": Arm("finetune", "finetune.yml", True),
     "finetune_no_anchor": Arm("finetune", "finetune.yml:anchor_coef=0", True),
@@ -129,8 +134,9 @@ ARMS: dict[str, Arm] = {
     "shield_flank_explore": Arm("finetune", SHIELD_EXPLORE, True, 40000, "shipped"),
     "shield_dagger": Arm("dagger", "dagger_shielded.yml", True, 40000, "shipped"),
     "shield_scratch": Arm("finetune", "finetune_shielded.yml", False, 60000, "shipped"),
-    "shield_scratch_explore": Arm("finetune", "finetune_shielded.yml:learning_rate=5.0e-4;clip_range=0.2;ent_coef=0.01",
-                                  False, 60000, "shipped"),
+    "shield_scratch_explore": Arm("finetune", SCRATCH_EXPLORE, False, 60000, "shipped"),
+    "shield_scratch_cost": Arm("finetune", SCRATCH_EXPLORE + ";reward_shaping={ttc_s: 3.0, weight: 0.5, shield_cost: 0.5}",
+                               False, 60000, "shipped"),
 }
 LABELS = {
     "student": "DAgger student (start of the arms above the shield's)",
@@ -155,6 +161,8 @@ LABELS = {
     "shield_dagger": "DAgger continuation under the shield, 40k env steps (control of the shield fine-tunes)",
     "shield_scratch": "PPO from scratch under the shield, 60k env steps",
     "shield_scratch_explore": "PPO from scratch under the shield, learning rate 5e-4, clip 0.2, entropy 0.01, 60k env steps",
+    "shield_scratch_cost": "PPO from scratch under the shield, as above, each shield intervention costing 0.5, 60k env "
+                           "steps",
 }
 #: the fine-tune's targets: return vs IDM + MOBIL, collisions per episode, mean speed, paired gain over the student
 TARGET_VS_IDM, TARGET_COLLISIONS, TARGET_SPEED_MPS, TARGET_GAIN = 1.08, 0.02, 24.0, 3.0

@@ -72,6 +72,7 @@ PAGE = {
     "registration": "docs/results/registration.md",
     "policies": "docs/results/driving.md",
     "rl_finetune": "docs/results/driving.md",
+    "rl_confirm": "docs/results/driving.md",
     "benchmark": "docs/results/speed.md",
     "detection_curves": "docs/results/detection.md",
 }
@@ -145,23 +146,19 @@ def _policies(d: dict) -> tuple[str, str]:
             f"IDM + MOBIL: {idm['return']['mean']:.1f}, {idm['collisions']}/{idm['episodes']})")
 
 
-def _rl_finetune(d: dict) -> tuple[str, str]:
-    shield = d.get("targets_shield") or {}
-    arm = shield.get("arm") or d["targets"].get("arm", "finetune")
-    rows, gain = d["rows"], d["vs_student"][arm]
-    s = rows[arm]
-    steps = d["training"][arm]["timesteps"]
-    start = "shipped" if shield else "student"
-    what = ("PPO fine-tune of the shipped policy under the radar shield" if shield
-            else "PPO fine-tune of the student, privileged critic")
-    control = shield.get("gain_over_dagger_continue")
-    against = ("" if control is None else
-               f"; vs the DAgger control: {control['mean']:+.1f} [{control['low']:+.1f}, {control['high']:+.1f}]")
-    return (f"{what} ({steps} env steps; {d['episodes']} held-out seeds): return, collisions, paired gain over "
-            "its start" + ("" if control is None else " and over DAgger at the same budget"),
+def _rl_confirm(d: dict) -> tuple[str, str]:
+    from rhs_studies.rl_finetune import ARMS
+
+    v, t = d["validation"], d["test"]
+    arm, tg = v["chosen"], t["targets"]
+    s, gain, control = t["rows"][arm], tg["gain_over_student"], tg["gain_over_dagger_continue"]
+    return (f"PPO fine-tune of the shipped DAgger student under the radar shield ({ARMS[arm].timesteps // 1000}k env "
+            f"steps; chosen on {len(v['seeds'])} validation seeds, tested once on {len(t['seeds'])} fresh seeds): "
+            "return, collisions, paired gain over its start and over DAgger at the same budget",
             f"{s['return']['mean']:.1f}, {s['collisions']}/{s['episodes']}, {gain['mean']:+.1f} "
-            f"[{gain['low']:+.1f}, {gain['high']:+.1f}]{against} (start: {rows[start]['return']['mean']:.1f}; "
-            f"IDM + MOBIL: {rows['idm']['return']['mean']:.1f})")
+            f"[{gain['low']:+.1f}, {gain['high']:+.1f}]; vs the DAgger control: {control['mean']:+.1f} "
+            f"[{control['low']:+.1f}, {control['high']:+.1f}] (start: {t['rows']['shipped']['return']['mean']:.1f}; "
+            f"IDM + MOBIL: {t['rows']['idm']['return']['mean']:.1f})")
 
 
 def _benchmark(d: dict) -> tuple[str, str]:
@@ -183,7 +180,7 @@ HEADLINE: tuple[tuple[str, Callable[[dict], tuple[str, str]]], ...] = (
     ("registration", _registration),
     ("detection_curves", _detection),
     ("policies", _policies),
-    ("rl_finetune", _rl_finetune),
+    ("rl_confirm", _rl_confirm),
     ("benchmark", _benchmark),
 )
 

@@ -360,9 +360,9 @@ def test_the_study_derives_a_control_yaml_with_the_keys_set(tmp_path):
 
 def test_time_to_collision_shaping_penalises_closing_in_on_a_leader():
     import rhs_env  # noqa: F401
-    from agents.shaping import ShapingConfig, TimeToCollisionShaping, time_to_collision, ttc_penalty
+    from agents.shaping import RewardShaping, ShapingConfig, time_to_collision, ttc_penalty
 
-    env = TimeToCollisionShaping(gym.make("rhs-highway-v0", vehicles_count=3), {"ttc_s": 3.0, "weight": 0.5})
+    env = RewardShaping(gym.make("rhs-highway-v0", vehicles_count=3), {"ttc_s": 3.0, "weight": 0.5})
     env.reset(seed=0)
     base = env.unwrapped
     ego = base.vehicle
@@ -378,5 +378,62 @@ def test_time_to_collision_shaping_penalises_closing_in_on_a_leader():
     leader.speed = ego.speed + 5.0  # pulling away: no danger
     assert time_to_collision(env) == float("inf")
     with pytest.raises(ValueError, match="reward_shaping.ttc_s"):
-        TimeToCollisionShaping(env.env, {"ttc_s": 0.0})
+        RewardShaping(env.env, {"ttc_s": 0.0})
     env.close()
+
+
+def test_the_shield_cost_is_charged_on_the_steps_the_shield_replaced():
+    import rhs_env  # noqa: F401
+    from agents.shaping import RewardShaping
+
+    class Shielded(gym.Wrapper):  # the shield's report, one replaced step in two
+        n = 0
+
+        def step(self, action):
+            obs, reward, terminated, truncated, info = self.env.step(action)
+            self.n += 1
+            return obs, reward, terminated, truncated, {**info, "shield": "front" if self.n % 2 else None}
+
+    def shaped(cost: float) -> list[float]:
+        env = RewardShaping(Shielded(gym.make("rhs-highway-v0", vehicles_count=3)),
+                            {"ttc_s": 3.0, "weight": 0.0, "shield_cost": cost})
+        env.reset(seed=0)
+        out = [env.step(1)[4]["shaping"] for _ in range(4)]
+        env.close()
+        return out
+
+    assert shaped(0.0) == [0.0] * 4  # off by default
+    assert shaped(0.7) == pytest.approx([-0.7, 0.0, -0.7, 0.0])
+    with pytest.raises(ValueError, match="reward_shaping.shield_cost"):
+        RewardShaping(gym.make("rhs-highway-v0", vehicles_count=3), {"shield_cost": -1.0})
+
+
+def test_the_confirmation_chooses_on_validation_seeds_and_judges_the_choice_once_on_other_seeds(monkeypatch, tmp_path):
+    """rl_confirm: the candidate with the higher validation gain is the one the test drives and judges; the
+    validation seeds never reach the test, and the test drives the start, the DAgger control and IDM + MOBIL."""
+    from rhs_studies import rl_confirm
+
+    calls = []
+    base = {"shipped": 160.0, "shield_explore": 161.0, "shield_flank_explore": 163.0, "shield_dagger": 160.5,
+            "idm": 150.0}
+
+    def fake_rows(policies, seeds, workers, skip=()):
+        keys = [*policies, *(k for k in ("slower", "idm", "headway", "lookahead") if k not in skip)]
+        calls.append((keys, list(seeds)))
+        # on the test seeds the other candidate would win: the test must not choose again
+        shift = {"shield_explore": 5.0} if seeds[0] < 7000 else {}
+        return {k: [{"seed": s, "return": base[k] + shift.get(k, 0.0) + s % 3, "crashed": s == seeds[0] and k == "idm",
+                     "mean_speed": 24.5} for s in seeds] for k in keys}
+
+    monkeypatch.setattr(rl_confirm, "evaluate_rows", fake_rows)
+    result = rl_confirm.confirm(list(range(7000, 7010)), list(range(6000, 6010)), 1)
+    (val_keys, val_seeds), (test_keys, test_seeds) = calls
+    assert val_keys == ["shipped", "shield_explore", "shield_flank_explore"] and val_seeds[0] == 7000
+    assert result["validation"]["chosen"] == "shield_flank_explore"
+    assert test_keys == ["shipped", "shield_flank_explore", "shield_dagger", "idm"] and test_seeds[0] == 6000
+    t = result["test"]["targets"]
+    assert t["arm"] == "shield_flank_explore" and t["gain_over_student"]["mean"] == pytest.approx(3.0)
+    assert t["gain_over_dagger_continue"]["mean"] == pytest.approx(2.5) and t["met"]["gain_over_student"]
+    assert "Chosen: **" in rl_confirm.markdown(result)
+    with pytest.raises(SystemExit):  # validation and test seeds must not overlap
+        rl_confirm.main(["--validation-seed", "6050", "--out-dir", str(tmp_path)])

@@ -160,11 +160,11 @@ def test_both_training_backends_wrap_the_shield_inside_the_decision_interval():
     from agents.decision import HoldAction
     from agents.finetune import training_wrapper
     from agents.rllib import env_config, make_env
-    from agents.shaping import TimeToCollisionShaping
+    from agents.shaping import RewardShaping
 
     kw = small_env_kwargs(slam=False, vehicles_count=5, duration=2)
     env = make_env("rhs-highway-radar-v0", env_config(kw, 5, "pulse", False, {"front_time_s": 1.5}, {"ttc_s": 2.0}))
-    assert isinstance(env, HoldAction) and isinstance(env.env, TimeToCollisionShaping)
+    assert isinstance(env, HoldAction) and isinstance(env.env, RewardShaping)
     assert isinstance(env.env.env, ShieldAction) and env.env.env.shield.config.front_time_s == 1.5
     env.close()
     sb3 = training_wrapper(gym.make("rhs-highway-radar-v0", **kw), privileged=False, shaping=None, shield={})
