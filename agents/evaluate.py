@@ -398,6 +398,14 @@ def episode_steps(env) -> int | None:
         return None
 
 
+def seed_sampling(seed: int) -> None:
+    """Seed torch's global generator, which stable-baselines3 samples a policy's actions from, so that an episode's
+    sampled actions depend on its seed alone (not on the episodes a process ran before it)."""
+    import torch
+
+    torch.manual_seed(seed)
+
+
 def run_episode(
     env,
     policy,
@@ -411,10 +419,13 @@ def run_episode(
 
     ``frames`` collects ``env.render()`` per step; ``trace`` the ``(obs, info)`` of the reset and of
     every step; ``bar`` (a tqdm bar) is advanced by one per step. A policy with a ``reset()``
-    (:class:`agents.decision.HeldPolicy`) is reset first.
+    (:class:`agents.decision.HeldPolicy`) is reset first; with ``deterministic=False`` the sampling is seeded with
+    ``seed`` (:func:`seed_sampling`).
     """
     if callable(getattr(policy, "reset", None)):
         policy.reset()
+    if not deterministic:
+        seed_sampling(seed)
     obs, info = env.reset(seed=seed)
     if frames is not None:
         frames.append(env.render())

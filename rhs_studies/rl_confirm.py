@@ -13,21 +13,36 @@ or judged on, with a protocol fixed before any of them was driven:
    (:func:`rhs_studies.rl_finetune.targets`): return >= 1.08x IDM + MOBIL, collisions <= 2 per 100, mean speed
    >= 24 m/s, a paired gain over the start >= +3 with its 95 % interval above 0, more than the DAgger control.
 
-The arms are the RL study's shipped zips (``agents/data/rl``), each driven behind the shield its record keeps.
+The same for PPO from scratch under the shield (``--parts scratch``): its greedy policies are one-action reflexes
+(the RL study's table), so the policy judged is the one PPO optimises, actions sampled (seeded by the episode's
+seed, :func:`agents.evaluate.seed_sampling`):
 
-    OMP_NUM_THREADS=1 python scripts/rl_confirm.py                     # 100 + 100 episodes per row, ~35 min
+3. **Choice** on the validation seeds between :data:`SCRATCH_CANDIDATES`, sampled: the highest mean return.
+4. **Test** on the test seeds: the chosen arm sampled and greedy, against IDM + MOBIL. Targets: return >= 1.0x
+   IDM + MOBIL (:data:`SCRATCH_VS_IDM`) with collisions <= 4 per 100 (:data:`SCRATCH_COLLISIONS`).
+
+The arms are the RL study's shipped zips (``agents/data/rl``), each driven behind the shield its record keeps.
+``--parts`` runs some of the two parts; the other's result is kept from the existing ``rl_confirm.json`` (same
+seeds; the result names the commit it was driven at).
+
+    OMP_NUM_THREADS=1 python scripts/rl_confirm.py                     # 100 + 100 episodes per row, ~1 h
+    OMP_NUM_THREADS=1 python scripts/rl_confirm.py --parts scratch     # PPO from scratch only, ~30 min
     OMP_NUM_THREADS=1 python scripts/rl_confirm.py --episodes 4 --validation-episodes 4 --out-dir /tmp/c
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
-from rhs_studies.evaluate_policies import paired
+import numpy as np
+
+from agents.evaluate import resolve_env
+from rhs_studies.evaluate_policies import paired, run_policy
 from rhs_studies.provenance import write_json
 from rhs_studies.rl_finetune import (
     LABELS,
@@ -45,6 +60,12 @@ ROOT = Path(__file__).resolve().parent.parent
 CANDIDATES = ("shield_explore", "shield_flank_explore")
 #: the rows besides the candidates: their start, on both seed sets
 START = "shipped"
+#: PPO from scratch under the shield, the RL study's three arms
+SCRATCH_CANDIDATES = ("shield_scratch", "shield_scratch_explore", "shield_scratch_cost")
+#: PPO from scratch's targets: return vs IDM + MOBIL, collisions per episode
+SCRATCH_VS_IDM, SCRATCH_COLLISIONS = 1.0, 0.04
+SLIM = ("seed", "return", "crashed", "mean_speed")
+PARTS = ("finetune", "scratch")
 
 
 def choose(runs: dict[str, list[dict]], candidates: tuple[str, ...] = CANDIDATES) -> tuple[str, dict[str, Any]]:
@@ -88,7 +109,41 @@ def markdown(result: dict[str, Any]) -> str:
               f"{tg['gain_over_student']['mean']:+.1f} [{tg['gain_over_student']['low']:+.1f}, "
               f"{tg['gain_over_student']['high']:+.1f}] over the shipped policy, {ctrl['mean']:+.1f} "
               f"[{ctrl['low']:+.1f}, {ctrl['high']:+.1f}] over the DAgger control; targets: {met}."]
+    if "scratch" in result:
+        lines += ["", *scratch_markdown(result["scratch"])]
+    kept = result.get("kept_parts") or {}
+    if kept:
+        lines += ["", "Parts kept from an earlier run of this script on the same seeds: "
+                  + ", ".join(f"{part} ({commit[:7] if commit else 'unknown commit'})" for part, commit in kept.items())
+                  + "."]
     return "\n".join(lines) + "\n"
+
+
+def scratch_markdown(part: dict[str, Any]) -> list[str]:
+    """The PPO-from-scratch part: its choice, its test table and its targets."""
+    v, t = part["validation"], part["test"]
+    means = "; ".join(f"{LABELS.get(a, a)} {r['return']['mean']:.1f} ({r['collisions']}/{r['episodes']})"
+                      for a, r in v["rows"].items())
+    name = LABELS.get(v["chosen"], v["chosen"])
+    lines = [f"PPO from scratch under the shield, actions sampled, on the validation seeds {v['seeds'][0]}-"
+             f"{v['seeds'][-1]}: {means}. Chosen: **{name}**.", "",
+             f"Test on seeds {t['seeds'][0]}-{t['seeds'][-1]} ({len(t['seeds'])} episodes):", "",
+             "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs IDM + MOBIL (paired, 95 % CI) |",
+             "|---|---|---|---|---|"]
+    label = {"sampled": f"{name}, actions sampled", "greedy": f"{name}, greedy actions", "idm": LABELS["idm"]}
+    for key, s in t["rows"].items():
+        g = t["vs_idm"].get(key)
+        diff = "" if g is None else f"{g['mean']:+.1f} [{g['low']:+.1f}, {g['high']:+.1f}]"
+        lo, hi = s["collision_interval"]
+        lines.append(f"| {label[key]} | {s['return']['mean']:.1f} +- {s['return']['half']:.1f} | "
+                     f"{s['collisions']}/{s['episodes']} [{100 * lo:.0f}-{100 * hi:.0f} %] | "
+                     f"{s['mean_speed_mps']['mean']:.1f} | {diff} |")
+    tg = t["targets"]
+    met = ", ".join(f"{k} {'met' if ok else 'not met'}" for k, ok in tg["met"].items())
+    lines += ["", f"Targets judged on the chosen arm, actions sampled: {tg['return_vs_idm']:.3f}x IDM + MOBIL "
+              f"(>= {SCRATCH_VS_IDM:g}), {100 * tg['collision_rate']:.0f} % collisions (<= {100 * SCRATCH_COLLISIONS:g} %); "
+              f"targets: {met}."]
+    return lines
 
 
 def confirm(validation_seeds: list[int], test_seeds: list[int], workers: int, ship_dir: Path = SHIPPED_DIR,
@@ -102,17 +157,79 @@ def confirm(validation_seeds: list[int], test_seeds: list[int], workers: int, sh
     test = evaluate_rows(_policies((START, chosen, SHIELD_CONTROL), ship_dir), test_seeds, workers,
                          skip=("slower", "headway", "lookahead"))
     rows = {k: row_summary(r) for k, r in test.items()}
-    slim = ("seed", "return", "crashed", "mean_speed")
     return {
         "candidates": list(candidates),
         "validation": {"seeds": validation_seeds, "gains": gains, "chosen": chosen,
                        "rows": {k: row_summary(r) for k, r in val.items()},
-                       "runs": {k: [{f: e.get(f) for f in slim} for e in r] for k, r in val.items()}},
+                       "runs": _slim(val)},
         "test": {"seeds": test_seeds, "rows": rows,
                  "vs_start": {k: paired(r, test[START]) for k, r in test.items() if k not in (START, "idm")},
                  "targets": targets(rows, test, chosen, SHIELD_CONTROL),
-                 "runs": {k: [{f: e.get(f) for f in slim} for e in r] for k, r in test.items()}},
+                 "runs": _slim(test)},
     }
+
+
+def _slim(runs: dict[str, list[dict]]) -> dict[str, list[dict]]:
+    return {k: [{f: e.get(f) for f in SLIM} for e in r] for k, r in runs.items()}
+
+
+def _drive(arm: str, seeds: list[int], workers: int, ship_dir: Path, deterministic: bool) -> list[dict]:
+    path = str(ship_dir / f"{arm}.zip")
+    env_id, kwargs = resolve_env(path)
+    return run_policy(path, env_id, kwargs, seeds, workers, deterministic)
+
+
+def confirm_scratch(validation_seeds: list[int], test_seeds: list[int], workers: int, ship_dir: Path = SHIPPED_DIR,
+                    idm: list[dict] | None = None, candidates: tuple[str, ...] = SCRATCH_CANDIDATES) -> dict[str, Any]:
+    """Steps 3 and 4 of the protocol (the module's docstring); ``idm``: IDM + MOBIL's test episodes when driven
+    already (the first part's), else driven here."""
+    val = {arm: _drive(arm, validation_seeds, workers, ship_dir, False) for arm in candidates}
+    chosen = max(candidates, key=lambda arm: float(np.mean([e["return"] for e in val[arm]])))
+    print(f"rl_confirm: chose {chosen} from scratch", file=sys.stderr)
+    test = {"sampled": _drive(chosen, test_seeds, workers, ship_dir, False),
+            "greedy": _drive(chosen, test_seeds, workers, ship_dir, True),
+            "idm": idm if idm is not None else run_policy("idm", "rhs-highway-v0", {}, test_seeds, workers)}
+    rows = {k: row_summary(r) for k, r in test.items()}
+    s = rows["sampled"]
+    vs_idm = s["return"]["mean"] / rows["idm"]["return"]["mean"]
+    return {
+        "candidates": list(candidates),
+        "validation": {"seeds": validation_seeds, "chosen": chosen,
+                       "rows": {k: row_summary(r) for k, r in val.items()}, "runs": _slim(val)},
+        "test": {"seeds": test_seeds, "rows": rows, "vs_idm": {k: paired(r, test["idm"]) for k, r in test.items()
+                                                              if k != "idm"},
+                 "targets": {"arm": chosen, "return_vs_idm": vs_idm, "collision_rate": s["collision_rate"],
+                             "met": {"return_vs_idm": vs_idm >= SCRATCH_VS_IDM,
+                                     "collisions": s["collision_rate"] <= SCRATCH_COLLISIONS}},
+                 "runs": _slim(test)},
+    }
+
+
+def kept_parts(path: Path, parts: list[str], validation: list[int], test: list[int]) -> tuple[dict, dict[str, str]]:
+    """The ``parts`` of an earlier result ``path`` on the same seeds, and the commit each was driven at;
+    ``ValueError`` when the file, a part or a seed is missing."""
+    if not parts:
+        return {}, {}
+    if not path.exists():
+        raise ValueError(f"--parts: {path} does not exist, so {parts} cannot be kept (run every part)")
+    old = json.loads(path.read_text())
+    commit = old.get("provenance", {}).get("commit")
+    result, kept = {}, {}
+    for part in parts:
+        block = {k: old[k] for k in ("candidates", "validation", "test") if k in old} if part == "finetune" \
+            else old.get("scratch")
+        if not block or block["validation"]["seeds"] != validation or block["test"]["seeds"] != test:
+            raise ValueError(f"--parts: {path} has no {part} part on the validation seeds {validation[0]}-"
+                             f"{validation[-1]} and test seeds {test[0]}-{test[-1]}")
+        result.update(block if part == "finetune" else {"scratch": block})
+        kept[part] = (old.get("kept_parts") or {}).get(part, commit)
+    return result, kept
+
+
+def _idm_runs(result: dict[str, Any], test: list[int]) -> list[dict] | None:
+    """IDM + MOBIL's test episodes from the fine-tune part, when it has them on ``test``."""
+    runs = result.get("test", {}).get("runs", {}).get("idm")
+    return runs if runs and [e["seed"] for e in runs] == test else None
 
 
 def fingerprint() -> list[float]:
@@ -129,6 +246,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--ship-dir", type=Path, default=SHIPPED_DIR, help="the RL study's shipped arms")
     ap.add_argument("--out-dir", type=Path, default=ROOT / "results")
+    ap.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS),
+                    help="the parts driven (the others kept from the existing rl_confirm.json, same seeds)")
     args = ap.parse_args(argv)
     if args.episodes < 2 or args.validation_episodes < 2:
         ap.error("--episodes and --validation-episodes must be >= 2 (intervals need two episodes)")
@@ -136,12 +255,22 @@ def main(argv: list[str] | None = None) -> int:
     test = list(range(args.seed, args.seed + args.episodes))
     if set(val) & set(test):
         ap.error(f"the validation seeds {val[0]}-{val[-1]} overlap the test seeds {test[0]}-{test[-1]}")
-    missing = [a for a in (*CANDIDATES, SHIELD_CONTROL) if not (Path(args.ship_dir) / f"{a}.zip").exists()]
+    arms = [*CANDIDATES, SHIELD_CONTROL] * ("finetune" in args.parts) + [*SCRATCH_CANDIDATES] * ("scratch" in args.parts)
+    missing = [a for a in arms if not (Path(args.ship_dir) / f"{a}.zip").exists()]
     if missing:
         ap.error(f"no shipped zip for {missing} in {args.ship_dir}: run scripts/rl_finetune.py first")
-    started = time.time()
-    result = confirm(val, test, args.workers, Path(args.ship_dir))
     out = Path(args.out_dir)
+    try:
+        result, kept = kept_parts(out / "rl_confirm.json", [p for p in PARTS if p not in args.parts], val, test)
+    except ValueError as err:
+        ap.error(str(err))
+    started = time.time()
+    if "finetune" in args.parts:
+        result.update(confirm(val, test, args.workers, Path(args.ship_dir)))
+    if "scratch" in args.parts:
+        result["scratch"] = confirm_scratch(val, test, args.workers, Path(args.ship_dir), idm=_idm_runs(result, test))
+    if kept:
+        result["kept_parts"] = kept
     write_json(out / "rl_confirm.json", result, __file__, args, started, fingerprint, argv)
     text = markdown(result)
     (out / "rl_confirm.md").write_text(text)

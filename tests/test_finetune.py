@@ -437,3 +437,36 @@ def test_the_confirmation_chooses_on_validation_seeds_and_judges_the_choice_once
     assert "Chosen: **" in rl_confirm.markdown(result)
     with pytest.raises(SystemExit):  # validation and test seeds must not overlap
         rl_confirm.main(["--validation-seed", "6050", "--out-dir", str(tmp_path)])
+
+    # PPO from scratch: chosen on its sampled actions on the validation seeds, tested sampled and greedy against
+    # the fine-tune part's IDM + MOBIL episodes
+    driven = []
+
+    def fake_drive(arm, seeds, workers, ship_dir, deterministic):
+        driven.append((arm, seeds[0], deterministic))
+        mean = {"shield_scratch": 150.0, "shield_scratch_explore": 155.0, "shield_scratch_cost": 152.0}[arm]
+        mean -= 8.0 * deterministic  # greedy: the reflex
+        return [{"seed": s, "return": mean + s % 3, "crashed": False, "mean_speed": 20.0} for s in seeds]
+
+    monkeypatch.setattr(rl_confirm, "_drive", fake_drive)
+    idm = result["test"]["runs"]["idm"]
+    part = rl_confirm.confirm_scratch(list(range(7000, 7010)), list(range(6000, 6010)), 1, idm=idm)
+    assert [d for d in driven if d[1] == 7000] == [(a, 7000, False) for a in rl_confirm.SCRATCH_CANDIDATES]
+    assert part["validation"]["chosen"] == "shield_scratch_explore"
+    assert [d for d in driven if d[1] == 6000] == [("shield_scratch_explore", 6000, False),
+                                                   ("shield_scratch_explore", 6000, True)]
+    t = part["test"]
+    assert t["runs"]["idm"] == idm and t["targets"]["return_vs_idm"] == pytest.approx(156.0 / 151.0, rel=1e-3)
+    assert t["targets"]["met"] == {"return_vs_idm": True, "collisions": True}
+    assert "greedy actions" in "\n".join(rl_confirm.scratch_markdown(part))
+    # a part kept must be on the same seeds
+    (tmp_path / "rl_confirm.json").write_text(json.dumps({**result, "provenance": {"commit": "c" * 40}}))
+    kept, commits = rl_confirm.kept_parts(tmp_path / "rl_confirm.json", ["finetune"], list(range(7000, 7010)),
+                                          list(range(6000, 6010)))
+    assert kept["validation"]["chosen"] == "shield_flank_explore" and commits == {"finetune": "c" * 40}
+    with pytest.raises(ValueError, match="no finetune part"):
+        rl_confirm.kept_parts(tmp_path / "rl_confirm.json", ["finetune"], list(range(7000, 7020)),
+                              list(range(6000, 6010)))
+    with pytest.raises(ValueError, match="no scratch part"):
+        rl_confirm.kept_parts(tmp_path / "rl_confirm.json", ["scratch"], list(range(7000, 7010)),
+                              list(range(6000, 6010)))
