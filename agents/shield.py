@@ -36,6 +36,9 @@ post share a range, the joint angle-Doppler OMP can give the car the post's Dopp
   behind the shield (``agents/data/rl/shield_explore.zip``: 3 of its 4 crashes on analysis seeds 5000-5059,
   inspected step by step, each with one point on the car it hit; with this rule 1 of 60); ``alongside_m = 0`` turns
   it off;
+* a car in a target lane shows the radars its flank, so its points need not lie on its near end: with
+  ``lane_body_m = b`` the gap of a target-lane object is ``|X| - L_half - b`` (``b`` up to a car's length, 5 m;
+  0, the default, takes the points as the near end, as in the ego's path);
 * the **leader** (the nearest object in the ego's path) is tracked: its gaps over the last
   ``track_steps`` env steps (``dt_s`` apart; a jump of more than ``track_jump_m`` starts a new track)
   give its closing speed as minus the least-squares slope, once three are there.
@@ -99,6 +102,7 @@ class ShieldConfig:
     min_points: int = 2  # points that make an object
     cluster_m: float = 3.0  # along-road reach of an object's points
     alongside_m: float = 5.0  # |X| within which one point in a target lane blocks a lane change (0: off)
+    lane_body_m: float = 0.0  # how far past a target-lane car's near end its points may lie (its flank), m
     track_steps: int = 5  # leader gaps in its closing-speed fit
     track_jump_m: float = 3.0  # a gap change that starts a new leader track
     dt_s: float = 0.2  # env step (the envs' 5 Hz)
@@ -107,7 +111,7 @@ class ShieldConfig:
 
     def __post_init__(self) -> None:
         check_types(self)
-        for name in ("front_gap_m", "lane_gap_m", "ego_half_length_m", "alongside_m"):
+        for name in ("front_gap_m", "lane_gap_m", "ego_half_length_m", "alongside_m", "lane_body_m"):
             check_range(name, getattr(self, name), 0.0, 100.0)
         for name in ("front_time_s", "lane_time_s"):
             check_range(name, getattr(self, name), 0.0, 10.0)
@@ -191,7 +195,7 @@ class RadarShield:
         if cfg.alongside_m > 0 and np.any(np.abs(big_x) <= cfg.alongside_m):  # one point beside the ego: its flank
             return True
         xs, cs = objects(big_x, closing, cfg.min_points, cfg.cluster_m)
-        gap = np.abs(xs) - cfg.ego_half_length_m
+        gap = np.abs(xs) - cfg.ego_half_length_m - cfg.lane_body_m
         return bool(np.any(gap < cfg.lane_gap_m + cfg.lane_time_s * np.maximum(cs, 0.0)))
 
     def filter(self, obs: dict[str, np.ndarray], action: int) -> tuple[int, str | None]:

@@ -1,4 +1,5 @@
-"""A fresh test of the RL study's shield fine-tune: chosen on new validation seeds, judged once on new test seeds.
+"""A fresh test of the RL study's shield arms (the fine-tune, PPO from scratch): chosen on new validation seeds,
+judged once on new test seeds.
 
 The RL study (:mod:`rhs_studies.rl_finetune`) judged its shield fine-tunes on seeds 3000-3099 after it had looked
 at them more than once (the shield changed between looks), and chose between its two exploring fine-tunes on only

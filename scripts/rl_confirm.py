@@ -1,4 +1,5 @@
-"""A fresh test of the RL study's shield fine-tune: chosen on new validation seeds, judged once on new test seeds.
+"""A fresh test of the RL study's shield arms (the fine-tune, PPO from scratch): chosen on new validation seeds,
+judged once on new test seeds.
 
 Runs :mod:`rhs_studies.rl_confirm` (its docstring has the protocol and the options), as ``python -m rhs_studies.rl_confirm`` does.
 """

@@ -60,6 +60,14 @@ def test_one_point_alongside_blocks_a_lane_change_and_one_farther_does_not():
     assert RadarShield().filter(far, LANE_LEFT) == (LANE_LEFT, None)
 
 
+def test_lane_body_counts_a_target_lane_car_from_its_points_far_end():
+    ahead = scan((9.0, 3.5, -1.0))  # two points 9 m ahead on the left, pulling away: 6.5 m from the bumper, needs 4
+    assert RadarShield().filter(ahead, LANE_LEFT) == (LANE_LEFT, None)
+    # the points may lie on the car's flank up to its far end: 6.5 - 5 = 1.5 m of gap is too little
+    assert RadarShield({"lane_body_m": 5.0}).filter(ahead, LANE_LEFT) == (IDLE, "lane")
+    assert RadarShield({"lane_body_m": 5.0}).filter(scan((9.0, 0.0, 1.0)), IDLE) == (IDLE, None)  # not the path's
+
+
 def test_lanes_come_from_the_slam_lateral_offset_and_the_path_from_its_heading():
     car = (14.0, 2.6, -6.0)  # 11.5 m ahead, 2.6 m left of the ego, closing at 6 m/s: in a lane's 4 + 1.5 * 6 = 13 m
     # on its lane's centre the ego sees the car in the left lane; 1 m right of it (SLAM offset -1 m), in its own
@@ -103,7 +111,7 @@ def test_objects_need_min_points_within_reach_and_take_their_median_closing():
 
 @pytest.mark.parametrize(("field", "value"), [("front_time_s", -1.0), ("min_points", 0), ("track_steps", 2),
                                               ("lane_width_m", 0.0), ("dt_s", float("nan")),
-                                              ("alongside_m", -1.0)])
+                                              ("alongside_m", -1.0), ("lane_body_m", -0.5)])
 def test_bad_config_names_the_field(field, value):
     with pytest.raises(ValueError, match=f"shield.{field}"):
         RadarShield({field: value})
