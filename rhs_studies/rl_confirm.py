@@ -215,7 +215,8 @@ def kept_parts(path: Path, parts: list[str], validation: list[int], test: list[i
         raise ValueError(f"--parts: {path} does not exist, so {parts} cannot be kept (run every part)")
     old = json.loads(path.read_text())
     commit = old.get("provenance", {}).get("commit")
-    result, kept = {}, {}
+    result: dict[str, Any] = {}
+    kept: dict[str, str] = {}
     for part in parts:
         block = {k: old[k] for k in ("candidates", "validation", "test") if k in old} if part == "finetune" \
             else old.get("scratch")

@@ -152,7 +152,7 @@ def _rl_confirm(d: dict) -> tuple[str, str]:
     v, t = d["validation"], d["test"]
     arm, tg = v["chosen"], t["targets"]
     s, gain, control = t["rows"][arm], tg["gain_over_student"], tg["gain_over_dagger_continue"]
-    return (f"PPO fine-tune of the shipped DAgger student under the radar shield ({ARMS[arm].timesteps // 1000}k env "
+    return (f"PPO fine-tune of the shipped DAgger student under the radar shield ({ARMS[arm].timesteps} env "
             f"steps; chosen on {len(v['seeds'])} validation seeds, tested once on {len(t['seeds'])} fresh seeds): "
             "return, collisions, paired gain over its start and over DAgger at the same budget",
             f"{s['return']['mean']:.1f}, {s['collisions']}/{s['episodes']}, {gain['mean']:+.1f} "
