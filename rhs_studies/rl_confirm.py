@@ -52,6 +52,7 @@ from rhs_studies.rl_finetune import (
     STARTS,
     evaluate_rows,
     row_summary,
+    table_row,
     targets,
 )
 from rhs_studies.rl_finetune import fingerprint as study_fingerprint
@@ -95,13 +96,7 @@ def markdown(result: dict[str, Any]) -> str:
              f"Test on seeds {t['seeds'][0]}-{t['seeds'][-1]} ({len(t['seeds'])} episodes, driven once):", "",
              "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs the shipped policy (paired, 95 % CI) |",
              "|---|---|---|---|---|"]
-    for key, s in t["rows"].items():
-        g = t["vs_start"].get(key)
-        diff = "" if g is None else f"{g['mean']:+.1f} [{g['low']:+.1f}, {g['high']:+.1f}]"
-        lo, hi = s["collision_interval"]
-        lines.append(f"| {LABELS.get(key, key)} | {s['return']['mean']:.1f} +- {s['return']['half']:.1f} | "
-                     f"{s['collisions']}/{s['episodes']} [{100 * lo:.0f}-{100 * hi:.0f} %] | "
-                     f"{s['mean_speed_mps']['mean']:.1f} | {diff} |")
+    lines += [table_row(key, s, t["vs_start"].get(key)) for key, s in t["rows"].items()]
     tg = t["targets"]
     ctrl = tg["gain_over_dagger_continue"]
     met = ", ".join(f"{k} {'met' if ok else 'not met'}" for k, ok in tg["met"].items())
@@ -132,13 +127,7 @@ def scratch_markdown(part: dict[str, Any]) -> list[str]:
              "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs IDM + MOBIL (paired, 95 % CI) |",
              "|---|---|---|---|---|"]
     label = {"sampled": f"{name}, actions sampled", "greedy": f"{name}, greedy actions", "idm": LABELS["idm"]}
-    for key, s in t["rows"].items():
-        g = t["vs_idm"].get(key)
-        diff = "" if g is None else f"{g['mean']:+.1f} [{g['low']:+.1f}, {g['high']:+.1f}]"
-        lo, hi = s["collision_interval"]
-        lines.append(f"| {label[key]} | {s['return']['mean']:.1f} +- {s['return']['half']:.1f} | "
-                     f"{s['collisions']}/{s['episodes']} [{100 * lo:.0f}-{100 * hi:.0f} %] | "
-                     f"{s['mean_speed_mps']['mean']:.1f} | {diff} |")
+    lines += [table_row(key, s, t["vs_idm"].get(key), label[key]) for key, s in t["rows"].items()]
     tg = t["targets"]
     met = ", ".join(f"{k} {'met' if ok else 'not met'}" for k, ok in tg["met"].items())
     lines += ["", f"Targets judged on the chosen arm, actions sampled: {tg['return_vs_idm']:.3f}x IDM + MOBIL "

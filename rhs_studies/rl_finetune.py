@@ -373,10 +373,12 @@ def plot(curves: dict[str, dict[str, list[float]]], path: Path) -> None:
     plt.close(fig)
 
 
-def _fmt_row(key: str, s: dict[str, Any], gain: dict[str, float] | None) -> str:
+def table_row(key: str, s: dict[str, Any], gain: dict[str, float] | None, label: str | None = None) -> str:
+    """One row of a results table: the policy (``label``, else its :data:`LABELS` entry), its :func:`row_summary`
+    ``s`` and its paired difference ``gain`` (None: blank)."""
     lo, hi = s["collision_interval"]
     diff = "" if gain is None else f"{gain['mean']:+.1f} [{gain['low']:+.1f}, {gain['high']:+.1f}]"
-    return (f"| {LABELS.get(key, key)} | {s['return']['mean']:.1f} +- {s['return']['half']:.1f} | "
+    return (f"| {label or LABELS.get(key, key)} | {s['return']['mean']:.1f} +- {s['return']['half']:.1f} | "
             f"{s['collisions']}/{s['episodes']} [{100 * lo:.0f}-{100 * hi:.0f} %] | "
             f"{s['mean_speed_mps']['mean']:.1f} | {diff} |")
 
@@ -390,7 +392,7 @@ def markdown(result: dict[str, Any]) -> str:
              "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs its start (paired, 95 % CI) |",
              "|---|---|---|---|---|"]
     for key, s in result["rows"].items():
-        lines.append(_fmt_row(key, s, result["vs_student"].get(key)))
+        lines.append(table_row(key, s, result["vs_student"].get(key)))
     kept = result.get("kept_rows") or {}
     if kept:
         lines += ["", "Rows kept from an earlier run of this script on the same seeds (policy and code unchanged since): "
