@@ -69,27 +69,31 @@ REWARD_AIM, COLLISION_AIM = 0.8, 1.5
 GOAL_VS_SLOWER, GOAL_COLLISIONS, GOAL_VS_TRUTH = 1.1, 0.04, 0.9
 
 
-def _chunk(policy: str, env_id: str, env_kwargs: dict, seeds: list[int], deterministic: bool = True) -> list[dict]:
+def _chunk(policy: str, env_id: str, env_kwargs: dict, seeds: list[int], deterministic: bool = True,
+           shield: dict | None = None) -> list[dict]:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     from agents.evaluate import evaluate
 
-    s = evaluate(policy, env_id, len(seeds), seeds[0], env_kwargs, progress=False, deterministic=deterministic)
+    s = evaluate(policy, env_id, len(seeds), seeds[0], env_kwargs, progress=False, deterministic=deterministic,
+                 shield=shield)
     return s["runs"]
 
 
 def run_policy(policy: str, env_id: str, env_kwargs: dict, seeds: list[int], workers: int,
-               deterministic: bool = True) -> list[dict]:
+               deterministic: bool = True, shield: dict | None = None) -> list[dict]:
     """Episodes on ``seeds`` (contiguous), split over ``workers`` processes; greedy actions, or (``deterministic``
-    False) sampled, seeded by each episode's seed."""
+    False) sampled, seeded by each episode's seed; ``shield`` (a :class:`agents.shield.ShieldConfig` as a dict) in
+    place of the shield saved beside the policy (None: as its record says)."""
     if workers <= 1:
-        return _chunk(policy, env_id, env_kwargs, seeds, deterministic)
+        return _chunk(policy, env_id, env_kwargs, seeds, deterministic, shield)
     k = -(-len(seeds) // workers)
     parts = [seeds[i : i + k] for i in range(0, len(seeds), k)]
     from rhs_env.parallel import single_threaded_worker
 
     n = len(parts)
     with ProcessPoolExecutor(max_workers=n, initializer=single_threaded_worker) as pool:
-        results = list(pool.map(_chunk, [policy] * n, [env_id] * n, [env_kwargs] * n, parts, [deterministic] * n))
+        results = list(pool.map(_chunk, [policy] * n, [env_id] * n, [env_kwargs] * n, parts, [deterministic] * n,
+                                [shield] * n))
     return [run for part in results for run in part]
 
 
