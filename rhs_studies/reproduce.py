@@ -111,6 +111,9 @@ STEPS: tuple[Step, ...] = (
          "held-out seeds per policy (~4 min each on 2 cores)"),
     Step("rl_confirm", "rl_confirm.py", (), ("rl_confirm.json",), 2100,
          "the RL study's two exploring shield fine-tunes: the choice on fresh validation seeds, one test on fresh seeds"),
+    Step("rl_lane_test", "rl_lane_test.py", (), ("rl_lane_test.json",), 2700,
+         "the chosen fine-tune behind two stricter lane rules of the shield: the choice on validation seeds, one test "
+         "on fresh seeds"),
     Step("teachers", "teachers.py", (), ("teachers.json",), 500,
          "the headway driver against the lookahead teachers on validation seeds (rhs-highway-v0)"),
     Step("crash_analysis", "crash_analysis.py", (), ("crash_analysis.json",), 700,

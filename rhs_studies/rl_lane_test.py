@@ -17,6 +17,10 @@ whether a stricter rule closes the gap, with a protocol fixed before any of its 
    study's (:func:`rhs_studies.rl_finetune.targets`): return >= 1.08x IDM + MOBIL, collisions <= 2 per 100, mean
    speed >= 24 m/s, a paired gain over the start >= +3 with its 95 % interval above 0, more than the DAgger control.
 
+``--ship`` (after the test, from its ``rl_lane_test.json``) ships the fine-tune behind the chosen rule when every
+target was met: its zip copied to ``agents/data/rl/<fine-tune>_<rule>.zip`` with its record, the shield changed to the
+rule's and the study that chose it named (:func:`ship`); :data:`agents.evaluate.SHIPPED_POLICY` points there.
+
 Test seeds that overlap a set the project's policies were chosen, tuned or judged on (:data:`USED_SEEDS`) are refused.
 
     OMP_NUM_THREADS=1 python scripts/rl_lane_test.py                 # 2 x 100 + 4 x 100 episodes, ~45 min
@@ -27,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -144,6 +149,34 @@ def markdown(result: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def shipped_path(result: dict[str, Any], ship_dir: Path = SHIPPED_DIR) -> Path:
+    """Where :func:`ship` writes the fine-tune behind the chosen rule: ``<fine-tune>_<rule>.zip``."""
+    return ship_dir / f"{result['finetune']}_{result['validation']['chosen']}.zip"
+
+
+def ship(result: dict[str, Any], results_file: Path, ship_dir: Path = SHIPPED_DIR) -> Path:
+    """The fine-tune of ``result`` behind its chosen rule as a policy of its own (:func:`shipped_path`): the zip
+    copied, the record the fine-tune's with the shield's rule fields changed and ``shipped_by`` naming the study;
+    ``ValueError`` unless every target was met on the test seeds."""
+    failed = [k for k, ok in result["test"]["targets"]["met"].items() if not ok]
+    if failed:
+        raise ValueError(f"{results_file}: targets not met on the test seeds: {failed}; nothing shipped")
+    source, out = ship_dir / f"{result['finetune']}.zip", shipped_path(result, ship_dir)
+    record = policy_metadata(source)
+    rule = result["validation"]["rule"]
+    record["shield"] = {**record["shield"], **rule}
+    record["model"] = str(out.relative_to(ROOT)) if out.is_relative_to(ROOT) else str(out)
+    t = result["test"]
+    record["shipped_by"] = {"study": str(results_file.relative_to(ROOT)) if results_file.is_relative_to(ROOT)
+                            else str(results_file), "copied_from": str(source.name), "shield_rule": rule,
+                            "commit": result.get("provenance", {}).get("commit"),
+                            "validation_seeds": [result["validation"]["seeds"][0], result["validation"]["seeds"][-1]],
+                            "test_seeds": [t["seeds"][0], t["seeds"][-1]]}
+    shutil.copyfile(source, out)
+    out.with_suffix(".json").write_text(json.dumps(record, indent=2) + "\n")
+    return out
+
+
 def fingerprint() -> list[float]:
     """The RL study's: the same starts and shipped zips on one short episode."""
     return study_fingerprint()
@@ -158,7 +191,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--ship-dir", type=Path, default=SHIPPED_DIR, help="the RL study's shipped arms")
     ap.add_argument("--out-dir", type=Path, default=ROOT / "results")
+    ap.add_argument("--ship", action="store_true",
+                    help="drive nothing: ship the fine-tune behind the rule chosen in --out-dir's rl_lane_test.json, "
+                    "if it met every target")
     args = ap.parse_args(argv)
+    if args.ship:
+        path = Path(args.out_dir) / "rl_lane_test.json"
+        if not path.exists():
+            ap.error(f"--ship: {path} does not exist (run the study first)")
+        try:
+            print(f"rl_lane_test: shipped {ship(json.loads(path.read_text()), path, Path(args.ship_dir))}")
+        except ValueError as err:
+            ap.error(str(err))
+        return 0
     if args.episodes < 2 or args.validation_episodes < 2:
         ap.error("--episodes and --validation-episodes must be >= 2 (intervals need two episodes)")
     val = list(range(args.validation_seed, args.validation_seed + args.validation_episodes))

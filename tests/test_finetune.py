@@ -470,3 +470,57 @@ def test_the_confirmation_chooses_on_validation_seeds_and_judges_the_choice_once
     with pytest.raises(ValueError, match="no scratch part"):
         rl_confirm.kept_parts(tmp_path / "rl_confirm.json", ["scratch"], list(range(7000, 7010)),
                               list(range(6000, 6010)))
+
+
+def test_the_lane_test_chooses_the_rule_on_validation_seeds_and_drives_the_fine_tune_behind_it_once(monkeypatch, tmp_path):
+    """rl_lane_test: each rule changes one field of the shield saved with the fine-tune; the rule with the fewest
+    validation collisions is the one the test drives; the test drives the start, the DAgger control and IDM + MOBIL
+    with their own shields; used seeds are refused."""
+    from agents.evaluate import policy_metadata
+    from rhs_studies import rl_lane_test
+
+    saved = policy_metadata(rl_lane_test.SHIPPED_DIR / f"{rl_lane_test.FINETUNE}.zip")["shield"]
+    shields = []
+
+    def fake_run(policy, env_id, kwargs, seeds, workers, deterministic=True, shield=None):
+        shields.append((seeds[0], shield))
+        bad = seeds[0] < 8000 and shield["lane_gap_m"] != saved["lane_gap_m"]  # the gap rule crashes on validation
+        return [{"seed": s, "return": 170.0 + s % 3, "crashed": bad and s == seeds[0], "mean_speed": 25.0}
+                for s in seeds]
+
+    def fake_rows(policies, seeds, workers, skip=()):
+        keys = [*policies, *(k for k in ("slower", "idm", "headway", "lookahead") if k not in skip)]
+        assert seeds[0] == 8000 and keys == ["shipped", "shield_dagger", "idm"]
+        return {k: [{"seed": s, "return": 160.0 + s % 3, "crashed": False, "mean_speed": 23.0} for s in seeds]
+                for k in keys}
+
+    monkeypatch.setattr(rl_lane_test, "run_policy", fake_run)
+    monkeypatch.setattr(rl_lane_test, "evaluate_rows", fake_rows)
+    result = rl_lane_test.lane_test(list(range(7000, 7010)), list(range(8000, 8010)), 1)
+    assert [s for s, _ in shields] == [7000, 7000, 8000]
+    for (_, shield), rule in zip(shields, rl_lane_test.LANE_RULES.values()):
+        assert shield == {**saved, **rule} and shield != saved  # one field changed, the rest as saved
+    assert result["validation"]["chosen"] == "lane_time" and shields[2][1] == {**saved, "lane_time_s": 2.5}
+    t = result["test"]["targets"]
+    assert t["arm"] == rl_lane_test.FINETUNE and t["gain_over_student"]["mean"] == pytest.approx(10.0)
+    assert t["met"]["gain_over_student"] and t["met"]["collisions"]
+    assert "Chosen: **lane_time_s 2.5**" in rl_lane_test.markdown(result)
+    with pytest.raises(SystemExit):  # a test set the project has judged on already
+        rl_lane_test.main(["--seed", "6050", "--out-dir", str(tmp_path)])
+    # shipping: refused unless every target was met; else the same zip, the record's shield with the rule's field
+    import shutil
+
+    for suffix in (".zip", ".json"):
+        shutil.copyfile(rl_lane_test.SHIPPED_DIR / f"{rl_lane_test.FINETUNE}{suffix}",
+                        tmp_path / f"{rl_lane_test.FINETUNE}{suffix}")
+    result["test"]["targets"]["met"]["return_vs_idm"] = False
+    with pytest.raises(ValueError, match="return_vs_idm"):
+        rl_lane_test.ship(result, tmp_path / "rl_lane_test.json", tmp_path)
+    result["test"]["targets"]["met"] = dict.fromkeys(result["test"]["targets"]["met"], True)
+    out = rl_lane_test.ship(result, tmp_path / "rl_lane_test.json", tmp_path)
+    assert out.name == f"{rl_lane_test.FINETUNE}_lane_time.zip"
+    assert out.read_bytes() == (tmp_path / f"{rl_lane_test.FINETUNE}.zip").read_bytes()
+    record = policy_metadata(out)
+    assert record["shield"] == {**saved, "lane_time_s": 2.5} and record["shipped_by"]["shield_rule"] == {"lane_time_s": 2.5}
+    assert {k: v for k, v in record.items() if k not in ("shield", "model", "shipped_by")} == \
+        {k: v for k, v in policy_metadata(tmp_path / f"{rl_lane_test.FINETUNE}.zip").items() if k not in ("shield", "model")}
