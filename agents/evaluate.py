@@ -20,11 +20,14 @@ k > 1 (saved in the same JSON, :mod:`agents.decision`) is loaded as a
 action between, so every policy is scored per env step on the same seeds. A record with a ``shield``
 (:mod:`agents.shield`) drives the policy behind the radar safety shield; ``--shield`` puts any policy behind
 it, ``--no-shield`` drives a shielded one without. The default policy is the shipped one,
-``agents/data/rl/dagger_cruise30_close.zip`` (with its ``.json`` record): the DAgger student of
+``agents/data/rl/shield_flank_explore_lane_time.zip`` (with its ``.json`` record): a PPO fine-tune (privileged
+critic, 40k env steps, :mod:`agents.finetune`) of the DAgger student below, trained and driven behind the radar
+shield, whose lane-change rule (``lane_time_s`` 2.5) was chosen on validation seeds (:mod:`rhs_studies.rl_lane_test`).
+Its start, ``agents/data/rl/dagger_cruise30_close.zip``, is the DAgger student of
 :class:`agents.expert.HeadwayDriver` (:mod:`agents.imitation`), ``agents/data/dagger_rhs_highway_slam.zip``,
 continued with DAgger for 80k env steps (``rl/dagger_continue_80k.zip``), then 40k with the headway driver
 at 30 m/s and a 2.0 s gap (``rl/dagger_cruise30_gap.zip``) and 40k more with it following at 5 m
-(``agents/hyperparams/dagger_cruise30_close.yml``), driven behind the radar shield;
+(``agents/hyperparams/dagger_cruise30_close.yml``), driven behind the radar shield (the policy shipped before);
 ``ppo_rhs_highway_slam.zip`` is PPO with the student's budget (it learned always-SLOWER).
 
 An evaluation estimated above an hour (:func:`estimate_hours`, from the measured steps/s) needs
@@ -63,8 +66,11 @@ DAGGER_CONTINUED_POLICY = DATA_DIR / "rl" / "dagger_continue_80k.zip"
 #: then 5 m standstill gap (dagger_cruise30_close.yml); the second's record drives it behind the radar shield
 DAGGER_CRUISE30_GAP_POLICY = DATA_DIR / "rl" / "dagger_cruise30_gap.zip"
 DAGGER_CRUISE30_CLOSE_POLICY = DATA_DIR / "rl" / "dagger_cruise30_close.zip"
-#: the policy of ``rhs-slam demo`` / ``evaluate`` by default, and its ground-truth twin
-SHIPPED_POLICY, SHIPPED_TRUTH_POLICY = DAGGER_CRUISE30_CLOSE_POLICY, DAGGER_TRUTH_POLICY
+#: the PPO fine-tune of DAGGER_CRUISE30_CLOSE_POLICY under the shield (rhs_studies/rl_finetune.py's
+#: ``shield_flank_explore`` arm) behind the lane rule rhs_studies/rl_lane_test.py chose and tested (``--ship``)
+RL_FINETUNE_POLICY = DATA_DIR / "rl" / "shield_flank_explore_lane_time.zip"
+#: the policy of ``rhs-slam demo`` / ``evaluate`` by default, and the ground-truth student of the same expert
+SHIPPED_POLICY, SHIPPED_TRUTH_POLICY = RL_FINETUNE_POLICY, DAGGER_TRUTH_POLICY
 DEFAULT_ENV = "rhs-highway-slam-v0"
 
 

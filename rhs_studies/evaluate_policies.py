@@ -262,15 +262,15 @@ def learned_specs(slam_policy: str, truth_policy: str, shipped_only: bool = Fals
         ("truth", "DAgger (ground truth)", truth_obs, truth_policy, *resolve_env(truth_policy)),
     ]
     if Path(shipped_policy).resolve() != Path(slam_policy).resolve():
-        from agents.evaluate import DAGGER_CONTINUED_POLICY, policy_metadata
+        from agents.evaluate import DAGGER_CONTINUED_POLICY, DAGGER_CRUISE30_CLOSE_POLICY
 
-        shielded = policy_metadata(shipped_policy).get("shield") is not None
-        label = f"DAgger, continued{', radar shield' if shielded else ''} (shipped)"
-        specs.insert(0, ("shipped", label, slam_obs, shipped_policy, *resolve_env(shipped_policy)))
-        before = str(DAGGER_CONTINUED_POLICY)
-        if Path(before).exists() and Path(before).resolve() != Path(shipped_policy).resolve():
-            specs.insert(1, ("continued_80k", "DAgger, continued 80k (shipped before)", slam_obs, before,
-                             *resolve_env(before)))
+        before = [(k, str(p)) for k, p in (("shield_student", DAGGER_CRUISE30_CLOSE_POLICY),
+                                           ("continued_80k", DAGGER_CONTINUED_POLICY))
+                  if p.exists() and p.resolve() != Path(shipped_policy).resolve()]
+        specs = [("shipped", f"{continued_label(shipped_policy)} (shipped)", slam_obs, shipped_policy,
+                  *resolve_env(shipped_policy)),
+                 *((key, f"{continued_label(path)} (shipped before)", slam_obs, path, *resolve_env(path))
+                   for key, path in before), *specs]
     others = [("truth_all_around", "DAgger (ground truth, all around)", "Kinematics, 8 vehicles incl. behind (truth)",
                target_path("dagger", "truth_all_around"), "dagger"), ("ppo_slam", "PPO", slam_obs, PPO_POLICY, "ppo"),
               ("ppo_truth", "PPO (ground truth)", truth_obs, PPO_TRUTH_POLICY, "ppo")]  # fmt: skip
@@ -281,6 +281,17 @@ def learned_specs(slam_policy: str, truth_policy: str, shipped_only: bool = Fals
             print(f"evaluate_policies: {path} is missing (scripts/train_policy.py --algo {algo}); row left out",
                   file=sys.stderr)
     return specs
+
+
+def continued_label(policy: str) -> str:
+    """The policies table's name of a policy that continues the DAgger student: its algorithm, budget and shield."""
+    from agents.evaluate import policy_metadata
+
+    meta = policy_metadata(policy)
+    shield = ", radar shield" if meta.get("shield") is not None else ""
+    if meta.get("algo") == "finetune":
+        return f"PPO fine-tune of the DAgger student{shield}"
+    return f"DAgger, continued{shield}" if shield else f"DAgger, continued {meta.get('timesteps', 0) // 1000}k"
 
 
 def goal_of(by: dict[str, dict], key: str) -> dict:

@@ -1,6 +1,7 @@
 """What the radar shield can trust in a scan: Doppler errors, ghosts, and how the shield's leader estimate alarms.
 
-Drives the shipped student *without* the shield (:data:`agents.evaluate.SHIPPED_POLICY`, ``shield=False``) on
+Drives the DAgger student the shield was built for *without* it (:data:`agents.evaluate.DAGGER_CRUISE30_CLOSE_POLICY`,
+``shield=False``; the shipped policy until its RL fine-tune replaced it) on
 validation seeds (4050..: never used in training or in the held-out evaluations) and, at every env step, compares
 the radar points with the simulator:
 
@@ -68,13 +69,14 @@ def _unsafe(lead: tuple[float, float] | None, d: float, t: float) -> bool:
 
 def measure(seeds: list[int]) -> dict[str, Any]:
     """The statistics of the module docstring over full episodes on ``seeds``."""
-    from agents.evaluate import SHIPPED_POLICY, load_policy, make_env, resolve_env
+    from agents.evaluate import DAGGER_CRUISE30_CLOSE_POLICY as STUDENT
+    from agents.evaluate import load_policy, make_env, resolve_env
     from agents.expert import bumper_gap
     from agents.shield import RadarShield, ShieldedPolicy, nearest_object, road_offsets
 
-    env_id, kwargs = resolve_env(SHIPPED_POLICY)
+    env_id, kwargs = resolve_env(STUDENT)
     env = make_env(env_id, kwargs)
-    policy = load_policy(SHIPPED_POLICY, env)
+    policy = load_policy(STUDENT, env)
     if isinstance(policy, ShieldedPolicy):
         policy = policy.model  # the student alone: the states it reaches without help
     cfg = RadarShield().config
@@ -139,7 +141,7 @@ def measure(seeds: list[int]) -> dict[str, Any]:
     err = np.concatenate(dop_err) if dop_err else np.zeros(0)
     q = np.percentile(closing_err, [5, 50, 95]).tolist() if closing_err else [None] * 3
     return {
-        "seeds": seeds, "steps": steps, "policy": str(SHIPPED_POLICY), "shield_config": cfg.__dict__,
+        "seeds": seeds, "steps": steps, "policy": str(STUDENT), "shield_config": cfg.__dict__,
         "doppler": {"points_on_vehicles": int(err.size), "median_error_mps": float(np.median(err)) if err.size else None,
                     "share_off_by_3_mps": float(np.mean(np.abs(err) > 3.0)) if err.size else None},
         "ghost_scan_share": ghosts / max(steps, 1),

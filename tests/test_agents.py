@@ -408,7 +408,7 @@ def test_demo_rejects_bad_input(tmp_path):
 def test_shipped_policies_are_small_and_described():
     from agents.evaluate import DAGGER_POLICY, PPO_POLICY, PPO_TRUTH_POLICY
 
-    shipped = ((SHIPPED_POLICY, SLAM, "dagger"), (DAGGER_POLICY, SLAM, "dagger"), (SHIPPED_TRUTH_POLICY, TRUTH, "dagger"),
+    shipped = ((SHIPPED_POLICY, SLAM, "finetune"), (DAGGER_POLICY, SLAM, "dagger"), (SHIPPED_TRUTH_POLICY, TRUTH, "dagger"),
                (PPO_POLICY, SLAM, "ppo"), (PPO_TRUTH_POLICY, TRUTH, "ppo"))  # fmt: skip
     for path, env_id, algo in shipped:
         assert path.exists(), f"{path} missing: run scripts/train_policy.py --algo {algo}"

@@ -20,17 +20,25 @@ def test_targets_merge_the_radar_settings_and_ship_where_evaluate_looks():
     assert train_policy.target_env_kwargs("truth", grid) == {}
     assert train_policy.target_env_kwargs("dense_phased", grid) == {"radar": {"scan": {"grid_deg": 5}, "antenna": "phased"}}
     assert train_policy.target_path("dagger", "slam") == DAGGER_POLICY
-    # the shipped policy continues that student (through the study's DAgger continuation and the 30 m/s teacher's
-    # two students), where the study ships its arms; every link of the chain is shipped
+    # the shipped policy (the RL fine-tune) continues that student (through the study's DAgger continuation and the
+    # 30 m/s teacher's two students), where the study ships its arms; every link of the chain is shipped
     assert SHIPPED_POLICY.parent == SHIPPED_DIR
     chain, link = [], SHIPPED_POLICY
-    while link.resolve() != DAGGER_POLICY.resolve() and len(chain) < 5:
+    while link.resolve() != DAGGER_POLICY.resolve() and len(chain) < 6:
         chain.append(link)
         link = train_policy.ROOT / policy_metadata(link)["init_policy"]
         assert link.exists(), f"{chain[-1]} continues {link}, which is not shipped"
-    assert link.resolve() == DAGGER_POLICY.resolve() and len(chain) == 3
-    assert [p.name for p in chain] == ["dagger_cruise30_close.zip", "dagger_cruise30_gap.zip", "dagger_continue_80k.zip"]
-    assert policy_metadata(SHIPPED_POLICY)["shield"]["min_points"] >= 2  # driven behind the radar shield
+    assert link.resolve() == DAGGER_POLICY.resolve() and len(chain) == 4
+    assert [p.name for p in chain] == ["shield_flank_explore_lane_time.zip", "dagger_cruise30_close.zip",
+                                       "dagger_cruise30_gap.zip", "dagger_continue_80k.zip"]
+    shipped = policy_metadata(SHIPPED_POLICY)
+    assert shipped["shield"]["min_points"] >= 2 and shipped["algo"] == "finetune"  # RL, behind the radar shield
+    # the shipped fine-tune is the study's arm behind the lane rule its study chose and tested: same weights, the
+    # record the arm's but for the shield's rule and the study named
+    arm = SHIPPED_DIR / shipped["shipped_by"]["copied_from"]
+    assert SHIPPED_POLICY.read_bytes() == arm.read_bytes()
+    rule = shipped["shipped_by"]["shield_rule"]
+    assert shipped["shield"] == {**policy_metadata(arm)["shield"], **rule} and rule
     assert train_policy.target_path("dagger", "truth") == SHIPPED_TRUTH_POLICY
     assert train_policy.target_path("ppo", "slam") == PPO_POLICY
     assert train_policy.target_env_kwargs("truth_all_around", grid)["observation"]["see_behind"] is True
