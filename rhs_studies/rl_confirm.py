@@ -6,7 +6,7 @@ at them more than once (the shield changed between looks), and chose between its
 50 validation episodes. This study repeats the choice and the test on seeds nothing has been trained, chosen, tuned
 or judged on, with a protocol fixed before any of them was driven:
 
-1. **Choice** on the validation seeds (``--validation-seed``, 7000..): the start (the shipped policy) and each
+1. **Choice** on the validation seeds (``--validation-seed``, 7000..): the start (the shield student, shipped then) and each
    candidate (:data:`CANDIDATES`); the candidate with the highest paired return gain over the start (the same as
    the highest mean return: the seeds are common) is chosen. Nothing else is read from these seeds.
 2. **Test** on the test seeds (``--seed``, 6000..), driven once: the chosen arm, its start, the DAgger control of the
@@ -82,7 +82,8 @@ def choose(runs: dict[str, list[dict]], candidates: tuple[str, ...] = CANDIDATES
     return max(candidates, key=lambda arm: gains[arm]["mean"]), gains
 
 
-def _policies(rows: tuple[str, ...], ship_dir: Path) -> dict[str, Path]:
+def arm_policies(rows: tuple[str, ...], ship_dir: Path) -> dict[str, Path]:
+    """The policy file of each row: a start's, else the arm's zip in ``ship_dir``."""
     return {row: STARTS[row] if row in STARTS else ship_dir / f"{row}.zip" for row in rows}
 
 
@@ -92,9 +93,9 @@ def markdown(result: dict[str, Any]) -> str:
     gains = "; ".join(f"{LABELS.get(a, a)} {g['mean']:+.1f} [{g['low']:+.1f}, {g['high']:+.1f}]"
                       for a, g in v["gains"].items())
     lines = [f"Choice on validation seeds {v['seeds'][0]}-{v['seeds'][-1]} ({len(v['seeds'])} episodes), paired gain "
-             f"over the shipped policy: {gains}. Chosen: **{LABELS.get(v['chosen'], v['chosen'])}**.", "",
+             f"over the shield student: {gains}. Chosen: **{LABELS.get(v['chosen'], v['chosen'])}**.", "",
              f"Test on seeds {t['seeds'][0]}-{t['seeds'][-1]} ({len(t['seeds'])} episodes, driven once):", "",
-             "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs the shipped policy (paired, 95 % CI) |",
+             "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs the shield student (paired, 95 % CI) |",
              "|---|---|---|---|---|"]
     lines += [table_row(key, s, t["vs_start"].get(key)) for key, s in t["rows"].items()]
     tg = t["targets"]
@@ -103,7 +104,7 @@ def markdown(result: dict[str, Any]) -> str:
     lines += ["", f"Targets judged on the chosen arm: {tg['return_vs_idm']:.3f}x IDM + MOBIL, "
               f"{100 * tg['collision_rate']:.0f} % collisions, {tg['mean_speed_mps']:.1f} m/s, "
               f"{tg['gain_over_student']['mean']:+.1f} [{tg['gain_over_student']['low']:+.1f}, "
-              f"{tg['gain_over_student']['high']:+.1f}] over the shipped policy, {ctrl['mean']:+.1f} "
+              f"{tg['gain_over_student']['high']:+.1f}] over the shield student, {ctrl['mean']:+.1f} "
               f"[{ctrl['low']:+.1f}, {ctrl['high']:+.1f}] over the DAgger control; targets: {met}."]
     if "scratch" in result:
         lines += ["", *scratch_markdown(result["scratch"])]
@@ -140,26 +141,27 @@ def confirm(validation_seeds: list[int], test_seeds: list[int], workers: int, sh
             candidates: tuple[str, ...] = CANDIDATES) -> dict[str, Any]:
     """Steps 1 and 2 of the protocol (the module's docstring); the result without provenance."""
     t0 = time.perf_counter()
-    val = evaluate_rows(_policies((START, *candidates), ship_dir), validation_seeds, workers,
+    val = evaluate_rows(arm_policies((START, *candidates), ship_dir), validation_seeds, workers,
                         skip=("slower", "idm", "headway", "lookahead"))
     chosen, gains = choose(val, candidates)
     print(f"rl_confirm: chose {chosen} ({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
-    test = evaluate_rows(_policies((START, chosen, SHIELD_CONTROL), ship_dir), test_seeds, workers,
+    test = evaluate_rows(arm_policies((START, chosen, SHIELD_CONTROL), ship_dir), test_seeds, workers,
                          skip=("slower", "headway", "lookahead"))
     rows = {k: row_summary(r) for k, r in test.items()}
     return {
         "candidates": list(candidates),
         "validation": {"seeds": validation_seeds, "gains": gains, "chosen": chosen,
                        "rows": {k: row_summary(r) for k, r in val.items()},
-                       "runs": _slim(val)},
+                       "runs": slim_runs(val)},
         "test": {"seeds": test_seeds, "rows": rows,
                  "vs_start": {k: paired(r, test[START]) for k, r in test.items() if k not in (START, "idm")},
                  "targets": targets(rows, test, chosen, SHIELD_CONTROL),
-                 "runs": _slim(test)},
+                 "runs": slim_runs(test)},
     }
 
 
-def _slim(runs: dict[str, list[dict]]) -> dict[str, list[dict]]:
+def slim_runs(runs: dict[str, list[dict]]) -> dict[str, list[dict]]:
+    """Each row's episodes with only the fields the results keep (:data:`SLIM`)."""
     return {k: [{f: e.get(f) for f in SLIM} for e in r] for k, r in runs.items()}
 
 
@@ -185,13 +187,13 @@ def confirm_scratch(validation_seeds: list[int], test_seeds: list[int], workers:
     return {
         "candidates": list(candidates),
         "validation": {"seeds": validation_seeds, "chosen": chosen,
-                       "rows": {k: row_summary(r) for k, r in val.items()}, "runs": _slim(val)},
+                       "rows": {k: row_summary(r) for k, r in val.items()}, "runs": slim_runs(val)},
         "test": {"seeds": test_seeds, "rows": rows, "vs_idm": {k: paired(r, test["idm"]) for k, r in test.items()
                                                               if k != "idm"},
                  "targets": {"arm": chosen, "return_vs_idm": vs_idm, "collision_rate": s["collision_rate"],
                              "met": {"return_vs_idm": vs_idm >= SCRATCH_VS_IDM,
                                      "collisions": s["collision_rate"] <= SCRATCH_COLLISIONS}},
-                 "runs": _slim(test)},
+                 "runs": slim_runs(test)},
     }
 
 

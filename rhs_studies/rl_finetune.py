@@ -20,7 +20,7 @@ decisions at 1 Hz in pulse mode; :mod:`agents.finetune`):
   learning rate 5e-4, clip range 0.2, an entropy bonus 0.01 and the time-to-collision shaping of
   :mod:`agents.shaping`), on request (``--arms ... scratch``).
 
-Arms under the radar safety shield (:mod:`agents.shield`), from the shipped policy (``shipped``: the 30 m/s DAgger
+Arms under the radar safety shield (:mod:`agents.shield`), from the shield student (``shipped``: the 30 m/s DAgger
 student that drives behind the shield, :data:`agents.evaluate.SHIPPED_POLICY`) instead of the student above, and
 evaluated behind the shield their records keep:
 
@@ -33,7 +33,7 @@ evaluated behind the shield their records keep:
 * ``shield_flank_explore``: ``shield_explore`` trained again under the shield with its flank rule (one radar point
   beside the ego blocks a lane change, :mod:`agents.shield`), which the arms above were trained without (they are
   driven behind it);
-* ``shield_dagger``: their DAgger control, DAgger going on from the shipped policy with its own teacher, the
+* ``shield_dagger``: their DAgger control, DAgger going on from the shield student with its own teacher, the
   student's actions driven through the shield (``agents/hyperparams/dagger_shielded.yml``), 40k env steps;
 * ``shield_scratch``: PPO from scratch under the shield (``finetune_shielded.yml`` without a student, on the shipped
   policy's env kwargs), 60k env steps;
@@ -52,7 +52,7 @@ DAgger continuation. The learning curves (return and collision rate of the train
 come from each run's ``monitor/`` files; ``results/rl_finetune.png`` draws them.
 
 Targets for the fine-tune on the held-out seeds: return >= 1.08x IDM + MOBIL, collisions <= 2 per 100, mean speed
->= 24 m/s, a paired gain over its start (the student, or the shipped policy for the shield arms) >= +3 with its 95 %
+>= 24 m/s, a paired gain over its start (the student, or the shield student for the shield arms) >= +3 with its 95 %
 interval above 0, and more than the DAgger continuation (``shield_dagger`` for the shield arms). Paired
 differences in the table are against each row's start.
 
@@ -89,7 +89,8 @@ from rhs_studies.provenance import git_state, write_json
 ROOT = Path(__file__).resolve().parent.parent
 ENV_ID = "rhs-highway-slam-v0"
 STUDENT = ROOT / "agents" / "data" / "dagger_rhs_highway_slam.zip"
-#: the shipped policy (the 30 m/s DAgger student behind the radar shield): the start of the shield arms
+#: the shield student (the 30 m/s DAgger student behind the radar shield, shipped until the RL fine-tune of it
+#: replaced it): the start of the shield arms
 SHIPPED_START = DAGGER_CRUISE30_CLOSE_POLICY
 #: the rows the arms start from
 STARTS = {"student": STUDENT, "shipped": SHIPPED_START}
@@ -147,14 +148,15 @@ LABELS = {
     "finetune_horizon": "PPO fine-tune, gamma 0.95 and time-to-collision shaping",
     "finetune_horizon_80k": f"PPO fine-tune, gamma 0.95 and time-to-collision shaping, {LONG_STEPS // 1000}k env steps",
     "dagger_continue": "DAgger continuation (control)",
-    "dagger_continue_80k": f"DAgger continuation, {LONG_STEPS // 1000}k env steps (control; the shipped policy)",
+    "dagger_continue_80k": f"DAgger continuation, {LONG_STEPS // 1000}k env steps (control; shipped before the shield student)",
     "scratch": "PPO from scratch, privileged critic",
     "dagger_lookahead": "DAgger from the lookahead teacher, 48k env steps",
     "slower": "always SLOWER (scripted)",
     "idm": "IDM + MOBIL (highway-env, scripted)",
     "headway": "HeadwayDriver at 1 Hz, IDLE between (the expert)",
     "lookahead": "LookaheadDriver at 1 Hz, IDLE between (the rollout teacher)",
-    "shipped": "Shipped policy: 30 m/s DAgger student behind the radar shield (start of the shield arms)",
+    "shipped": "Shield student: 30 m/s DAgger student behind the radar shield (start of the shield arms; shipped before "
+               "the RL fine-tune)",
     "shield_finetune": "PPO fine-tune under the shield, gamma 0.95 and time-to-collision shaping, 20k env steps",
     "shield_warmup": "PPO fine-tune under the shield with a critic warm-up, 60k env steps",
     "shield_explore": "PPO fine-tune under the shield, critic warm-up, no anchor, entropy 0.02, 40k env steps",
@@ -303,7 +305,7 @@ TEACHER_PAIR = ("dagger_lookahead", "dagger_continue_80k")
 
 
 #: the shield arms the targets judge, in order of preference (the first evaluated; chosen on the validation seeds
-#: 4000-4049, where shield_explore led: +3.2 +- 2.5 paired against the shipped policy, 0 / 50 collisions, before and
+#: 4000-4049, where shield_explore led: +3.2 +- 2.5 paired against the shield student, 0 / 50 collisions, before and
 #: after the flank rule; shield_flank_explore +1.7 +- 2.6 with 1 / 50) and their DAgger control
 SHIELD_ARMS = ("shield_explore", "shield_warmup", "shield_finetune")
 SHIELD_CONTROL = "shield_dagger"
@@ -387,7 +389,7 @@ def markdown(result: dict[str, Any]) -> str:
     """The results table: one row per policy, paired differences against each row's start (:func:`start_of`)."""
     lines = [f"Held-out seeds {result['seeds'][0]}-{result['seeds'][-1]} ({result['episodes']} episodes, "
              f"{ENV_ID}); each arm {result['timesteps']} env steps from the DAgger student unless its label gives "
-             "another budget or start; the shield arms start from the shipped policy and drive behind the shield. "
+             "another budget or start; the shield arms start from the shield student and drive behind the shield. "
              "Paired differences are against each row's start (the DAgger student for the references).", "",
              "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs its start (paired, 95 % CI) |",
              "|---|---|---|---|---|"]

@@ -12,7 +12,7 @@ whether a stricter rule closes the gap, with a protocol fixed before any of its 
    in the fine-tune's record). The rule with the fewest collisions is chosen, ties broken by the higher mean return.
    The fine-tune behind its own rule on the same seeds (from ``rl_confirm.json``) is shown beside them, not chosen.
 2. **Test** on the test seeds (``--seed``, 8000..), driven once: the fine-tune behind the chosen rule, its start
-   (the shipped policy, behind its own shield), the DAgger control of the same budget
+   (the shield student, shipped then, behind its own shield), the DAgger control of the same budget
    (:data:`rhs_studies.rl_finetune.SHIELD_CONTROL`, behind its own shield) and IDM + MOBIL. The targets are the RL
    study's (:func:`rhs_studies.rl_finetune.targets`): return >= 1.08x IDM + MOBIL, collisions <= 2 per 100, mean
    speed >= 24 m/s, a paired gain over the start >= +3 with its 95 % interval above 0, more than the DAgger control.
@@ -42,7 +42,7 @@ import numpy as np
 from agents.evaluate import policy_metadata, resolve_env
 from rhs_studies.evaluate_policies import paired, run_policy
 from rhs_studies.provenance import write_json
-from rhs_studies.rl_confirm import START, _policies, _slim
+from rhs_studies.rl_confirm import START, arm_policies, slim_runs
 from rhs_studies.rl_finetune import LABELS, SHIELD_CONTROL, SHIPPED_DIR, evaluate_rows, row_summary, table_row, targets
 from rhs_studies.rl_finetune import fingerprint as study_fingerprint
 
@@ -96,17 +96,17 @@ def lane_test(validation_seeds: list[int], test_seeds: list[int], workers: int, 
     chosen = choose(val)
     print(f"rl_lane_test: chose {chosen} ({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
     test = {FINETUNE: drive_with_rule(LANE_RULES[chosen], test_seeds, workers, ship_dir),
-            **evaluate_rows(_policies((START, SHIELD_CONTROL), ship_dir), test_seeds, workers,
+            **evaluate_rows(arm_policies((START, SHIELD_CONTROL), ship_dir), test_seeds, workers,
                             skip=("slower", "headway", "lookahead"))}
     rows = {k: row_summary(r) for k, r in test.items()}
     shown = {**({"own_rule": baseline} if baseline else {}), **val}
     return {
         "finetune": FINETUNE, "lane_rules": LANE_RULES,
         "validation": {"seeds": validation_seeds, "chosen": chosen, "rule": LANE_RULES[chosen],
-                       "rows": {k: row_summary(r) for k, r in shown.items()}, "runs": _slim(val)},
+                       "rows": {k: row_summary(r) for k, r in shown.items()}, "runs": slim_runs(val)},
         "test": {"seeds": test_seeds, "rows": rows,
                  "vs_start": {k: paired(r, test[START]) for k, r in test.items() if k not in (START, "idm")},
-                 "targets": targets(rows, test, FINETUNE, SHIELD_CONTROL), "runs": _slim(test)},
+                 "targets": targets(rows, test, FINETUNE, SHIELD_CONTROL), "runs": slim_runs(test)},
     }
 
 
@@ -134,7 +134,7 @@ def markdown(result: dict[str, Any]) -> str:
     lines = [f"{name} on validation seeds {v['seeds'][0]}-{v['seeds'][-1]} behind each lane rule (return, "
              f"collisions): {shown}. Chosen: **{rule_text(v['rule'])}**.", "",
              f"Test on seeds {t['seeds'][0]}-{t['seeds'][-1]} ({len(t['seeds'])} episodes, driven once):", "",
-             "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs the shipped policy (paired, 95 % CI) |",
+             "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs the shield student (paired, 95 % CI) |",
              "|---|---|---|---|---|"]
     label = {result["finetune"]: f"{name}, shield with {rule_text(v['rule'])}"}
     lines += [table_row(key, s, t["vs_start"].get(key), label.get(key)) for key, s in t["rows"].items()]
@@ -144,7 +144,7 @@ def markdown(result: dict[str, Any]) -> str:
     lines += ["", f"Targets judged on the fine-tune behind the chosen rule: {tg['return_vs_idm']:.3f}x IDM + MOBIL, "
               f"{100 * tg['collision_rate']:.0f} % collisions, {tg['mean_speed_mps']:.1f} m/s, "
               f"{tg['gain_over_student']['mean']:+.1f} [{tg['gain_over_student']['low']:+.1f}, "
-              f"{tg['gain_over_student']['high']:+.1f}] over the shipped policy, {ctrl['mean']:+.1f} "
+              f"{tg['gain_over_student']['high']:+.1f}] over the shield student, {ctrl['mean']:+.1f} "
               f"[{ctrl['low']:+.1f}, {ctrl['high']:+.1f}] over the DAgger control; targets: {met}."]
     return "\n".join(lines) + "\n"
 

@@ -73,6 +73,7 @@ PAGE = {
     "policies": "docs/results/driving.md",
     "rl_finetune": "docs/results/driving.md",
     "rl_confirm": "docs/results/driving.md",
+    "rl_lane_test": "docs/results/driving.md",
     "benchmark": "docs/results/speed.md",
     "detection_curves": "docs/results/detection.md",
 }
@@ -152,13 +153,29 @@ def _rl_confirm(d: dict) -> tuple[str, str]:
     v, t = d["validation"], d["test"]
     arm, tg = v["chosen"], t["targets"]
     s, gain, control = t["rows"][arm], tg["gain_over_student"], tg["gain_over_dagger_continue"]
-    return (f"PPO fine-tune of the shipped DAgger student under the radar shield ({ARMS[arm].timesteps} env "
-            f"steps; chosen on {len(v['seeds'])} validation seeds, tested once on {len(t['seeds'])} fresh seeds): "
-            "return, collisions, paired gain over its start and over DAgger at the same budget",
+    return (f"PPO fine-tune of the DAgger student behind the radar shield ({ARMS[arm].timesteps} env "
+            f"steps; chosen on {len(v['seeds'])} validation seeds, tested once on {len(t['seeds'])} fresh seeds, "
+            "behind the shield it trained with): return, collisions, paired gain over its start and over DAgger at "
+            "the same budget",
             f"{s['return']['mean']:.1f}, {s['collisions']}/{s['episodes']}, {gain['mean']:+.1f} "
             f"[{gain['low']:+.1f}, {gain['high']:+.1f}]; vs the DAgger control: {control['mean']:+.1f} "
             f"[{control['low']:+.1f}, {control['high']:+.1f}] (start: {t['rows']['shipped']['return']['mean']:.1f}; "
             f"IDM + MOBIL: {t['rows']['idm']['return']['mean']:.1f})")
+
+
+def _rl_lane_test(d: dict) -> tuple[str, str]:
+    v, t = d["validation"], d["test"]
+    tg = t["targets"]
+    s, gain, control = t["rows"][d["finetune"]], tg["gain_over_student"], tg["gain_over_dagger_continue"]
+    rule = ", ".join(f"{k} {x:g}" for k, x in v["rule"].items())
+    return (f"The same fine-tune behind a stricter lane rule of the shield ({rule}, chosen on {len(v['seeds'])} "
+            f"validation seeds, tested once on {len(t['seeds'])} fresh seeds; the shipped policy): return, "
+            "collisions, speed, paired gain over its start and over the DAgger control",
+            f"{s['return']['mean']:.1f}, {s['collisions']}/{s['episodes']}, {s['mean_speed_mps']['mean']:.1f} m/s, "
+            f"{gain['mean']:+.1f} [{gain['low']:+.1f}, {gain['high']:+.1f}]; vs the DAgger control: "
+            f"{control['mean']:+.1f} [{control['low']:+.1f}, {control['high']:+.1f}] (start: "
+            f"{t['rows']['shipped']['return']['mean']:.1f}, {t['rows']['shipped']['collisions']}/"
+            f"{t['rows']['shipped']['episodes']}; IDM + MOBIL: {t['rows']['idm']['return']['mean']:.1f})")
 
 
 def _benchmark(d: dict) -> tuple[str, str]:
@@ -181,6 +198,7 @@ HEADLINE: tuple[tuple[str, Callable[[dict], tuple[str, str]]], ...] = (
     ("detection_curves", _detection),
     ("policies", _policies),
     ("rl_confirm", _rl_confirm),
+    ("rl_lane_test", _rl_lane_test),
     ("benchmark", _benchmark),
 )
 
