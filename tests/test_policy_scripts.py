@@ -285,3 +285,17 @@ def test_policies_table_pairs_returns_with_idm_by_seed_and_gives_wilson_interval
     assert ep._shipped_vs_start([shipped, start, idm]) == [
         "", "S - D (its start), paired over the seeds: return +5.0 [+5.0, +5.0] (95 % CI); collisions 4 against 1 of 10."]
     assert ep._shipped_vs_start([start, idm]) == []
+
+
+def test_the_policies_table_names_the_shipped_policy_and_those_shipped_before_it():
+    """The shipped RL fine-tune heads the table, the policies shipped before it follow, each named from its record."""
+    from agents.evaluate import DAGGER_POLICY, SHIPPED_POLICY, SHIPPED_TRUTH_POLICY
+
+    specs = evaluate_policies.learned_specs(str(DAGGER_POLICY), str(SHIPPED_TRUTH_POLICY), True, str(SHIPPED_POLICY))
+    assert [s[0] for s in specs] == ["shipped", "shield_student", "continued_80k", "slam", "truth"]
+    assert [s[1] for s in specs[:3]] == ["PPO fine-tune of the DAgger student, radar shield (shipped)",
+                                         "DAgger, continued, radar shield (shipped before)",
+                                         "DAgger, continued 80k (shipped before)"]
+    # the student itself shipped: no continuation rows
+    assert [s[0] for s in evaluate_policies.learned_specs(str(DAGGER_POLICY), str(SHIPPED_TRUTH_POLICY), True)] == \
+        ["slam", "truth"]
