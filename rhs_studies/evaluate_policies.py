@@ -402,8 +402,9 @@ def markdown(result: dict) -> str:
         "(the traffic's) in the ego's seat with a desired speed of 30 m/s: a strong scripted reference. "
         "\"HeadwayDriver\" is the DAgger expert (agents/expert.py): meta-actions chosen from the true gaps "
         "and speeds; the DAgger students see only their observation. Same budget: both DAgger students and "
-        "both PPO policies saw the env-step counts listed under Training; the shipped policy is the radar + SLAM "
-        "student continued with DAgger past that budget (its start's steps plus its own). highway-env's default Kinematics "
+        "both PPO policies saw the env-step counts listed under Training; the shipped policy and those shipped "
+        "before it continue the radar + SLAM student past that budget (DAgger, then for the shipped one a PPO "
+        "fine-tune; its start's steps plus its own). highway-env's default Kinematics "
         "observation lists the 4 nearest vehicles *ahead*: it hides the followers the expert checks before "
         "a lane change, which the radar's 360-degree point cloud shows; the all-around row observes 8 "
         "vehicles, behind as well.",
