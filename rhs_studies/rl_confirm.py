@@ -230,28 +230,41 @@ def fingerprint() -> list[float]:
     return study_fingerprint()
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def study_arguments(ap: argparse.ArgumentParser, test_seed: int) -> None:
+    """The options of a study on fresh seeds (this one, :mod:`rhs_studies.rl_lane_test`): its validation and test
+    seeds, workers and folders."""
     ap.add_argument("--validation-seed", type=int, default=7000, help="first validation seed (the choice)")
     ap.add_argument("--validation-episodes", type=int, default=100)
-    ap.add_argument("--seed", type=int, default=6000, help="first test seed")
+    ap.add_argument("--seed", type=int, default=test_seed, help="first test seed")
     ap.add_argument("--episodes", type=int, default=100, help="test episodes")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--ship-dir", type=Path, default=SHIPPED_DIR, help="the RL study's shipped arms")
     ap.add_argument("--out-dir", type=Path, default=ROOT / "results")
-    ap.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS),
-                    help="the parts driven (the others kept from the existing rl_confirm.json, same seeds)")
-    args = ap.parse_args(argv)
+
+
+def seed_sets(ap: argparse.ArgumentParser, args: argparse.Namespace, arms: list[str]) -> tuple[list[int], list[int]]:
+    """The validation and test seeds of :func:`study_arguments`' options; ``ap.error`` when a set has fewer than two
+    episodes, the sets overlap, or an arm of ``arms`` has no zip in ``--ship-dir``."""
     if args.episodes < 2 or args.validation_episodes < 2:
         ap.error("--episodes and --validation-episodes must be >= 2 (intervals need two episodes)")
     val = list(range(args.validation_seed, args.validation_seed + args.validation_episodes))
     test = list(range(args.seed, args.seed + args.episodes))
     if set(val) & set(test):
         ap.error(f"the validation seeds {val[0]}-{val[-1]} overlap the test seeds {test[0]}-{test[-1]}")
-    arms = [*CANDIDATES, SHIELD_CONTROL] * ("finetune" in args.parts) + [*SCRATCH_CANDIDATES] * ("scratch" in args.parts)
     missing = [a for a in arms if not (Path(args.ship_dir) / f"{a}.zip").exists()]
     if missing:
         ap.error(f"no shipped zip for {missing} in {args.ship_dir}: run scripts/rl_finetune.py first")
+    return val, test
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    study_arguments(ap, test_seed=6000)
+    ap.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS),
+                    help="the parts driven (the others kept from the existing rl_confirm.json, same seeds)")
+    args = ap.parse_args(argv)
+    arms = [*CANDIDATES, SHIELD_CONTROL] * ("finetune" in args.parts) + [*SCRATCH_CANDIDATES] * ("scratch" in args.parts)
+    val, test = seed_sets(ap, args, arms)
     out = Path(args.out_dir)
     try:
         result, kept = kept_parts(out / "rl_confirm.json", [p for p in PARTS if p not in args.parts], val, test)

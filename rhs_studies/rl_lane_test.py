@@ -42,7 +42,7 @@ import numpy as np
 from agents.evaluate import policy_metadata, resolve_env
 from rhs_studies.evaluate_policies import paired, run_policy
 from rhs_studies.provenance import write_json
-from rhs_studies.rl_confirm import START, arm_policies, slim_runs
+from rhs_studies.rl_confirm import START, arm_policies, seed_sets, slim_runs, study_arguments
 from rhs_studies.rl_finetune import LABELS, SHIELD_CONTROL, SHIPPED_DIR, evaluate_rows, row_summary, table_row, targets
 from rhs_studies.rl_finetune import fingerprint as study_fingerprint
 
@@ -185,13 +185,7 @@ def fingerprint() -> list[float]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--validation-seed", type=int, default=7000, help="first validation seed (the choice)")
-    ap.add_argument("--validation-episodes", type=int, default=100)
-    ap.add_argument("--seed", type=int, default=8000, help="first test seed")
-    ap.add_argument("--episodes", type=int, default=100, help="test episodes")
-    ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--ship-dir", type=Path, default=SHIPPED_DIR, help="the RL study's shipped arms")
-    ap.add_argument("--out-dir", type=Path, default=ROOT / "results")
+    study_arguments(ap, test_seed=8000)
     ap.add_argument("--ship", action="store_true",
                     help="drive nothing: ship the fine-tune behind the rule chosen in --out-dir's rl_lane_test.json, "
                     "if it met every target")
@@ -205,17 +199,9 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as err:
             ap.error(str(err))
         return 0
-    if args.episodes < 2 or args.validation_episodes < 2:
-        ap.error("--episodes and --validation-episodes must be >= 2 (intervals need two episodes)")
-    val = list(range(args.validation_seed, args.validation_seed + args.validation_episodes))
-    test = list(range(args.seed, args.seed + args.episodes))
-    if set(val) & set(test):
-        ap.error(f"the validation seeds {val[0]}-{val[-1]} overlap the test seeds {test[0]}-{test[-1]}")
+    val, test = seed_sets(ap, args, [FINETUNE, SHIELD_CONTROL])
     if overlap(test):
         ap.error(f"the test seeds {test[0]}-{test[-1]} overlap seeds already used {overlap(test)}: choose fresh ones")
-    missing = [a for a in (FINETUNE, SHIELD_CONTROL) if not (Path(args.ship_dir) / f"{a}.zip").exists()]
-    if missing:
-        ap.error(f"no shipped zip for {missing} in {args.ship_dir}: run scripts/rl_finetune.py first")
     out = Path(args.out_dir)
     started = time.time()
     result = lane_test(val, test, args.workers, Path(args.ship_dir),
