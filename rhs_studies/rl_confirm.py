@@ -51,6 +51,7 @@ from rhs_studies.rl_finetune import (
     SHIPPED_DIR,
     STARTS,
     evaluate_rows,
+    paired_text,
     row_summary,
     table_row,
     targets,
@@ -90,7 +91,7 @@ def arm_policies(rows: tuple[str, ...], ship_dir: Path) -> dict[str, Path]:
 def markdown(result: dict[str, Any]) -> str:
     """The choice and the test, one paragraph and one table."""
     v, t = result["validation"], result["test"]
-    gains = "; ".join(f"{LABELS.get(a, a)} {g['mean']:+.1f} [{g['low']:+.1f}, {g['high']:+.1f}]"
+    gains = "; ".join(f"{LABELS.get(a, a)} {paired_text(g)}"
                       for a, g in v["gains"].items())
     lines = [f"Choice on validation seeds {v['seeds'][0]}-{v['seeds'][-1]} ({len(v['seeds'])} episodes), paired gain "
              f"over the shield student: {gains}. Chosen: **{LABELS.get(v['chosen'], v['chosen'])}**.", "",
@@ -98,14 +99,7 @@ def markdown(result: dict[str, Any]) -> str:
              "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs the shield student (paired, 95 % CI) |",
              "|---|---|---|---|---|"]
     lines += [table_row(key, s, t["vs_start"].get(key)) for key, s in t["rows"].items()]
-    tg = t["targets"]
-    ctrl = tg["gain_over_dagger_continue"]
-    met = ", ".join(f"{k} {'met' if ok else 'not met'}" for k, ok in tg["met"].items())
-    lines += ["", f"Targets judged on the chosen arm: {tg['return_vs_idm']:.3f}x IDM + MOBIL, "
-              f"{100 * tg['collision_rate']:.0f} % collisions, {tg['mean_speed_mps']:.1f} m/s, "
-              f"{tg['gain_over_student']['mean']:+.1f} [{tg['gain_over_student']['low']:+.1f}, "
-              f"{tg['gain_over_student']['high']:+.1f}] over the shield student, {ctrl['mean']:+.1f} "
-              f"[{ctrl['low']:+.1f}, {ctrl['high']:+.1f}] over the DAgger control; targets: {met}."]
+    lines += ["", targets_line(t["targets"], "the chosen arm")]
     if "scratch" in result:
         lines += ["", *scratch_markdown(result["scratch"])]
     kept = result.get("kept_parts") or {}
@@ -114,6 +108,15 @@ def markdown(result: dict[str, Any]) -> str:
                   + ", ".join(f"{part} ({commit[:7] if commit else 'unknown commit'})" for part, commit in kept.items())
                   + "."]
     return "\n".join(lines) + "\n"
+
+
+def targets_line(tg: dict[str, Any], judged: str) -> str:
+    """The fine-tune's targets (:func:`rhs_studies.rl_finetune.targets`) on the test seeds, judged on ``judged``."""
+    met = ", ".join(f"{k} {'met' if ok else 'not met'}" for k, ok in tg["met"].items())
+    return (f"Targets judged on {judged}: {tg['return_vs_idm']:.3f}x IDM + MOBIL, "
+            f"{100 * tg['collision_rate']:.0f} % collisions, {tg['mean_speed_mps']:.1f} m/s, "
+            f"{paired_text(tg['gain_over_student'])} over the shield student, "
+            f"{paired_text(tg['gain_over_dagger_continue'])} over the DAgger control; targets: {met}.")
 
 
 def scratch_markdown(part: dict[str, Any]) -> list[str]:
@@ -165,21 +168,24 @@ def slim_runs(runs: dict[str, list[dict]]) -> dict[str, list[dict]]:
     return {k: [{f: e.get(f) for f in SLIM} for e in r] for k, r in runs.items()}
 
 
-def _drive(arm: str, seeds: list[int], workers: int, ship_dir: Path, deterministic: bool) -> list[dict]:
+def drive_arm(arm: str, seeds: list[int], workers: int, ship_dir: Path = SHIPPED_DIR, deterministic: bool = True,
+              shield: dict[str, Any] | None = None) -> list[dict]:
+    """The arm's zip in ``ship_dir`` on ``seeds``, on its saved env; greedy or sampled actions, behind ``shield``
+    (None: the shield its record keeps; :func:`rhs_studies.evaluate_policies.run_policy`)."""
     path = str(ship_dir / f"{arm}.zip")
     env_id, kwargs = resolve_env(path)
-    return run_policy(path, env_id, kwargs, seeds, workers, deterministic)
+    return run_policy(path, env_id, kwargs, seeds, workers, deterministic, shield)
 
 
 def confirm_scratch(validation_seeds: list[int], test_seeds: list[int], workers: int, ship_dir: Path = SHIPPED_DIR,
                     idm: list[dict] | None = None, candidates: tuple[str, ...] = SCRATCH_CANDIDATES) -> dict[str, Any]:
     """Steps 3 and 4 of the protocol (the module's docstring); ``idm``: IDM + MOBIL's test episodes when driven
     already (the first part's), else driven here."""
-    val = {arm: _drive(arm, validation_seeds, workers, ship_dir, False) for arm in candidates}
+    val = {arm: drive_arm(arm, validation_seeds, workers, ship_dir, False) for arm in candidates}
     chosen = max(candidates, key=lambda arm: float(np.mean([e["return"] for e in val[arm]])))
     print(f"rl_confirm: chose {chosen} from scratch", file=sys.stderr)
-    test = {"sampled": _drive(chosen, test_seeds, workers, ship_dir, False),
-            "greedy": _drive(chosen, test_seeds, workers, ship_dir, True),
+    test = {"sampled": drive_arm(chosen, test_seeds, workers, ship_dir, False),
+            "greedy": drive_arm(chosen, test_seeds, workers, ship_dir, True),
             "idm": idm if idm is not None else run_policy("idm", "rhs-highway-v0", {}, test_seeds, workers)}
     rows = {k: row_summary(r) for k, r in test.items()}
     s = rows["sampled"]

@@ -21,7 +21,8 @@ decisions at 1 Hz in pulse mode; :mod:`agents.finetune`):
   :mod:`agents.shaping`), on request (``--arms ... scratch``).
 
 Arms under the radar safety shield (:mod:`agents.shield`), from the shield student (``shipped``: the 30 m/s DAgger
-student that drives behind the shield, :data:`agents.evaluate.SHIPPED_POLICY`) instead of the student above, and
+student that drives behind the shield, :data:`agents.evaluate.DAGGER_CRUISE30_CLOSE_POLICY`) instead of the student
+above, and
 evaluated behind the shield their records keep:
 
 * ``shield_finetune``: the fine-tune under the shield (``agents/hyperparams/finetune_shielded.yml``: gamma 0.95 and
@@ -375,11 +376,20 @@ def plot(curves: dict[str, dict[str, list[float]]], path: Path) -> None:
     plt.close(fig)
 
 
+def paired_text(d: dict[str, float]) -> str:
+    """A paired difference (:func:`rhs_studies.evaluate_policies.paired`) as mean [low, high].
+
+    >>> paired_text({"mean": 3.14, "low": 1.5, "high": 4.72})
+    '+3.1 [+1.5, +4.7]'
+    """
+    return f"{d['mean']:+.1f} [{d['low']:+.1f}, {d['high']:+.1f}]"
+
+
 def table_row(key: str, s: dict[str, Any], gain: dict[str, float] | None, label: str | None = None) -> str:
     """One row of a results table: the policy (``label``, else its :data:`LABELS` entry), its :func:`row_summary`
     ``s`` and its paired difference ``gain`` (None: blank)."""
     lo, hi = s["collision_interval"]
-    diff = "" if gain is None else f"{gain['mean']:+.1f} [{gain['low']:+.1f}, {gain['high']:+.1f}]"
+    diff = "" if gain is None else paired_text(gain)
     return (f"| {label or LABELS.get(key, key)} | {s['return']['mean']:.1f} +- {s['return']['half']:.1f} | "
             f"{s['collisions']}/{s['episodes']} [{100 * lo:.0f}-{100 * hi:.0f} %] | "
             f"{s['mean_speed_mps']['mean']:.1f} | {diff} |")
@@ -406,9 +416,8 @@ def markdown(result: dict[str, Any]) -> str:
         name = LABELS.get(t.get("arm", "finetune"), t.get("arm", "finetune"))
         against = t.get("gain_over_dagger_continue")
         gain = t["gain_over_student"]
-        vs = f" ({gain['mean']:+.1f} [{gain['low']:+.1f}, {gain['high']:+.1f}] over its start"
-        vs += ")" if against is None else (f"; {against['mean']:+.1f} [{against['low']:+.1f}, {against['high']:+.1f}] "
-                                           f"over {LABELS.get(t['control'], t['control'])})")
+        vs = f" ({paired_text(gain)} over its start"
+        vs += ")" if against is None else f"; {paired_text(against)} over {LABELS.get(t['control'], t['control'])})"
         lines += ["", f"Targets judged on {name}: {t['return_vs_idm']:.3f}x IDM + MOBIL, {100 * t['collision_rate']:.0f} % collisions, "
                   f"{t['mean_speed_mps']:.1f} m/s{vs}; targets: {met}."]
     return "\n".join(lines) + "\n"

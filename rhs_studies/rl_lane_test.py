@@ -39,10 +39,10 @@ from typing import Any
 
 import numpy as np
 
-from agents.evaluate import policy_metadata, resolve_env
-from rhs_studies.evaluate_policies import paired, run_policy
+from agents.evaluate import policy_metadata
+from rhs_studies.evaluate_policies import paired
 from rhs_studies.provenance import write_json
-from rhs_studies.rl_confirm import START, arm_policies, seed_sets, slim_runs, study_arguments
+from rhs_studies.rl_confirm import START, arm_policies, drive_arm, seed_sets, slim_runs, study_arguments, targets_line
 from rhs_studies.rl_finetune import LABELS, SHIELD_CONTROL, SHIPPED_DIR, evaluate_rows, row_summary, table_row, targets
 from rhs_studies.rl_finetune import fingerprint as study_fingerprint
 
@@ -73,10 +73,8 @@ def choose(runs: dict[str, list[dict]]) -> str:
 def drive_with_rule(rule: dict[str, float], seeds: list[int], workers: int, ship_dir: Path = SHIPPED_DIR,
                     arm: str = FINETUNE) -> list[dict]:
     """``arm`` on ``seeds`` behind the shield saved in its record with the fields of ``rule`` changed."""
-    path = ship_dir / f"{arm}.zip"
-    env_id, kwargs = resolve_env(str(path))
-    shield = {**policy_metadata(path)["shield"], **rule}
-    return run_policy(str(path), env_id, kwargs, seeds, workers, shield=shield)
+    shield = {**policy_metadata(ship_dir / f"{arm}.zip")["shield"], **rule}
+    return drive_arm(arm, seeds, workers, ship_dir, shield=shield)
 
 
 def overlap(seeds: list[int]) -> list[tuple[int, int]]:
@@ -139,14 +137,7 @@ def markdown(result: dict[str, Any]) -> str:
              "|---|---|---|---|---|"]
     label = {result["finetune"]: f"{name}, shield with {rule_text(v['rule'])}"}
     lines += [table_row(key, s, t["vs_start"].get(key), label.get(key)) for key, s in t["rows"].items()]
-    tg = t["targets"]
-    ctrl = tg["gain_over_dagger_continue"]
-    met = ", ".join(f"{k} {'met' if ok else 'not met'}" for k, ok in tg["met"].items())
-    lines += ["", f"Targets judged on the fine-tune behind the chosen rule: {tg['return_vs_idm']:.3f}x IDM + MOBIL, "
-              f"{100 * tg['collision_rate']:.0f} % collisions, {tg['mean_speed_mps']:.1f} m/s, "
-              f"{tg['gain_over_student']['mean']:+.1f} [{tg['gain_over_student']['low']:+.1f}, "
-              f"{tg['gain_over_student']['high']:+.1f}] over the shield student, {ctrl['mean']:+.1f} "
-              f"[{ctrl['low']:+.1f}, {ctrl['high']:+.1f}] over the DAgger control; targets: {met}."]
+    lines += ["", targets_line(t["targets"], "the fine-tune behind the chosen rule")]
     return "\n".join(lines) + "\n"
 
 

@@ -148,7 +148,7 @@ def _policies(d: dict) -> tuple[str, str]:
 
 
 def _rl_confirm(d: dict) -> tuple[str, str]:
-    from rhs_studies.rl_finetune import ARMS
+    from rhs_studies.rl_finetune import ARMS, paired_text
 
     v, t = d["validation"], d["test"]
     arm, tg = v["chosen"], t["targets"]
@@ -157,13 +157,14 @@ def _rl_confirm(d: dict) -> tuple[str, str]:
             f"steps; chosen on {len(v['seeds'])} validation seeds, tested once on {len(t['seeds'])} fresh seeds, "
             "behind the shield it trained with): return, collisions, paired gain over its start and over DAgger at "
             "the same budget",
-            f"{s['return']['mean']:.1f}, {s['collisions']}/{s['episodes']}, {gain['mean']:+.1f} "
-            f"[{gain['low']:+.1f}, {gain['high']:+.1f}]; vs the DAgger control: {control['mean']:+.1f} "
-            f"[{control['low']:+.1f}, {control['high']:+.1f}] (start: {t['rows']['shipped']['return']['mean']:.1f}; "
+            f"{s['return']['mean']:.1f}, {s['collisions']}/{s['episodes']}, {paired_text(gain)}; vs the DAgger "
+            f"control: {paired_text(control)} (start: {t['rows']['shipped']['return']['mean']:.1f}; "
             f"IDM + MOBIL: {t['rows']['idm']['return']['mean']:.1f})")
 
 
 def _rl_lane_test(d: dict) -> tuple[str, str]:
+    from rhs_studies.rl_finetune import paired_text
+
     v, t = d["validation"], d["test"]
     tg = t["targets"]
     s, gain, control = t["rows"][d["finetune"]], tg["gain_over_student"], tg["gain_over_dagger_continue"]
@@ -172,8 +173,7 @@ def _rl_lane_test(d: dict) -> tuple[str, str]:
             f"validation seeds, tested once on {len(t['seeds'])} fresh seeds; the shipped policy): return, "
             "collisions, speed, paired gain over its start and over the DAgger control",
             f"{s['return']['mean']:.1f}, {s['collisions']}/{s['episodes']}, {s['mean_speed_mps']['mean']:.1f} m/s, "
-            f"{gain['mean']:+.1f} [{gain['low']:+.1f}, {gain['high']:+.1f}]; vs the DAgger control: "
-            f"{control['mean']:+.1f} [{control['low']:+.1f}, {control['high']:+.1f}] (start: "
+            f"{paired_text(gain)}; vs the DAgger control: {paired_text(control)} (start: "
             f"{t['rows']['shipped']['return']['mean']:.1f}, {t['rows']['shipped']['collisions']}/"
             f"{t['rows']['shipped']['episodes']}; IDM + MOBIL: {t['rows']['idm']['return']['mean']:.1f})")
 

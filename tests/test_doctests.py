@@ -17,6 +17,9 @@ MODULES = (
     "slam.gym.metrics_info",
     "agents.decision",
     "agents.shield",
+    "rhs_studies.rl_finetune",
+    "rhs_studies.rl_confirm",
+    "rhs_studies.rl_lane_test",
 )
 
 

@@ -448,7 +448,7 @@ def test_the_confirmation_chooses_on_validation_seeds_and_judges_the_choice_once
         mean -= 8.0 * deterministic  # greedy: the reflex
         return [{"seed": s, "return": mean + s % 3, "crashed": False, "mean_speed": 20.0} for s in seeds]
 
-    monkeypatch.setattr(rl_confirm, "_drive", fake_drive)
+    monkeypatch.setattr(rl_confirm, "drive_arm", fake_drive)
     idm = result["test"]["runs"]["idm"]
     part = rl_confirm.confirm_scratch(list(range(7000, 7010)), list(range(6000, 6010)), 1, idm=idm)
     assert [d for d in driven if d[1] == 7000] == [(a, 7000, False) for a in rl_confirm.SCRATCH_CANDIDATES]
@@ -477,7 +477,7 @@ def test_the_lane_test_chooses_the_rule_on_validation_seeds_and_drives_the_fine_
     validation collisions is the one the test drives; the test drives the start, the DAgger control and IDM + MOBIL
     with their own shields; used seeds are refused."""
     from agents.evaluate import policy_metadata
-    from rhs_studies import rl_lane_test
+    from rhs_studies import rl_confirm, rl_lane_test
 
     saved = policy_metadata(rl_lane_test.SHIPPED_DIR / f"{rl_lane_test.FINETUNE}.zip")["shield"]
     shields = []
@@ -494,7 +494,7 @@ def test_the_lane_test_chooses_the_rule_on_validation_seeds_and_drives_the_fine_
         return {k: [{"seed": s, "return": 160.0 + s % 3, "crashed": False, "mean_speed": 23.0} for s in seeds]
                 for k in keys}
 
-    monkeypatch.setattr(rl_lane_test, "run_policy", fake_run)
+    monkeypatch.setattr(rl_confirm, "run_policy", fake_run)  # drive_arm's
     monkeypatch.setattr(rl_lane_test, "evaluate_rows", fake_rows)
     result = rl_lane_test.lane_test(list(range(7000, 7010)), list(range(8000, 8010)), 1)
     assert [s for s, _ in shields] == [7000, 7000, 8000]
