@@ -47,6 +47,8 @@ def load_hyperparams(algo: str, env_id: str, path: str | Path | None = None) -> 
     if "policy" not in hp:
         raise ValueError(f"{path}: entry {key!r} has no 'policy'")
     check_hyperparams(hp, f"{path}: {key}")
+    if isinstance(hp.get("policy_kwargs"), str):  # refused here, naming the file, before anything else reads it
+        eval_policy_kwargs(hp["policy_kwargs"], f"{path}: {key}.policy_kwargs")
     return hp
 
 
@@ -126,25 +128,14 @@ def _resolve_schedules(hp: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def eval_policy_kwargs(text: str) -> dict[str, Any]:
-    """A zoo-style ``policy_kwargs`` string -> dict, evaluated with the names rl-baselines3-zoo offers.
+def eval_policy_kwargs(text: str, where: str = "policy_kwargs") -> dict[str, Any]:
+    """A zoo-style ``policy_kwargs`` string -> dict, parsed without running it
+    (:func:`agents.policy_kwargs.parse_policy_kwargs`: literals, ``dict(...)`` and a fixed set of names such as
+    ``nn.ReLU`` or ``importlib.import_module('agents.features').PointSetExtractor``; ``ValueError`` naming
+    ``where`` for anything else)."""
+    from agents.policy_kwargs import parse_policy_kwargs
 
-    rl-baselines3-zoo ``eval``s such strings in its own module (``importlib``, ``nn``, ``th``
-    in scope); the same string works here, with nothing else in scope (no builtins but ``dict``).
-    """
-    import importlib
-
-    import torch
-    from torch import nn
-
-    names = {"dict": dict, "importlib": importlib, "nn": nn, "th": torch}
-    try:
-        value = eval(text, {"__builtins__": {}}, names)
-    except Exception as exc:
-        raise ValueError(f"policy_kwargs: cannot evaluate {text!r}: {exc}") from None
-    if not isinstance(value, dict):
-        raise ValueError(f"policy_kwargs must evaluate to a dict, got {type(value).__name__}")  # noqa: TRY004
-    return value
+    return parse_policy_kwargs(text, where)
 
 
 def resolve_policy_kwargs(kwargs: dict[str, Any] | str) -> dict[str, Any]:
