@@ -21,6 +21,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "scenario": ("slam.gym.scenario_cli", "SLAM on a scripted run from a scenario JSON file"),
     "train": ("agents.train", "train a driving agent with stable-baselines3"),
     "evaluate": ("agents.evaluate", "evaluate a driving policy with SLAM metrics"),
+    "record": ("agents.record", "drive a policy and write the episodes as a Minari dataset"),
 }
 
 
