@@ -13,7 +13,14 @@ compiling again. Where numba keeps it: ``NUMBA_CACHE_DIR`` when the user sets it
 else next to the source (``__pycache__``) when the package directory is writable;
 else (a read-only install: a system site-packages, a container layer) this module
 points ``NUMBA_CACHE_DIR`` at the user cache directory
-(``platformdirs.user_cache_dir("rhs-slam")/numba``) before numba is imported.
+(:func:`rhs_common.cache_dir.cache_subdir`: ``$RHS_SLAM_CACHE/numba`` or
+``platformdirs.user_cache_dir("rhs-slam")/numba``, a private temporary folder with one warning when
+that cannot be written) before numba is imported; a ``NUMBA_CACHE_DIR`` that cannot be written
+falls back the same way.
+
+Bad cache files. A truncated or overwritten ``.nbi`` / ``.nbc`` file of a kernel is removed and the
+kernel compiled again (one :class:`KernelCacheWarning` per process), and a cache folder that turns
+out unwritable leaves the kernels compiled in memory (:func:`_checked_cache`).
 
 Notice. The first compile of a kernel in a process prints one line to stderr
 (:data:`NOTICE`), once per process: a new install compiles every kernel once
@@ -49,8 +56,9 @@ if TYPE_CHECKING:
     import numpy as np
 
 __all__ = [
-    "COMPILE_LOCK", "KERNELS", "LOCK_STALE_S", "NOTICE", "Tiered", "background_compile_running", "cache_index",
-    "compile_lock", "njit", "numba_module", "python_body", "sort_small", "warm_cache", "watch_compiles",
+    "COMPILE_LOCK", "KERNELS", "LOCK_STALE_S", "NOTICE", "KernelCacheWarning", "Tiered", "background_compile_running",
+    "cache_index", "compile_lock", "discard_cache_entry", "njit", "numba_module", "python_body", "sort_small",
+    "warm_cache", "watch_compiles",
 ]
 
 #: the kernel implementations a config may choose: compiled (default) or the numpy reference
@@ -105,13 +113,21 @@ def _writable(path: Path) -> bool:
 
 
 def _configure_cache() -> None:
-    """Point ``NUMBA_CACHE_DIR`` at the user cache directory when the package directory is read-only."""
-    if os.environ.get("NUMBA_CACHE_DIR") or _writable(_PACKAGE_ROOT / "rhs_env"):
-        return
-    import platformdirs
+    """Point ``NUMBA_CACHE_DIR`` at the project's cache folder (:func:`rhs_common.cache_dir.cache_subdir`) when the
+    package directory is read-only, or at the temporary fallback when the user's ``NUMBA_CACHE_DIR`` is unwritable."""
+    from rhs_common.cache_dir import cache_subdir, fallback_root, unusable_reason
 
-    path = Path(platformdirs.user_cache_dir("rhs-slam")) / "numba"
-    path.mkdir(parents=True, exist_ok=True)
+    user = os.environ.get("NUMBA_CACHE_DIR")
+    if user:
+        reason = unusable_reason(Path(user))
+        if reason is None:
+            return
+        path = fallback_root(f"NUMBA_CACHE_DIR={user}", reason, "NUMBA_CACHE_DIR") / "numba"
+        path.mkdir(parents=True, exist_ok=True)
+    elif _writable(_PACKAGE_ROOT / "rhs_env"):
+        return
+    else:
+        path = cache_subdir("numba")
     os.environ["NUMBA_CACHE_DIR"] = str(path)
     if "numba" in sys.modules:  # imported before us: its config is read, tell it too
         from numba.core import config
@@ -148,12 +164,105 @@ def _numba() -> Any:
     return _NUMBA
 
 
+class KernelCacheWarning(UserWarning):
+    """A numba cache entry was unreadable (removed, the kernel compiled again) or the cache could not be written."""
+
+
+_CACHE_WARNED = False
+
+
+def _warn_cache_once(message: str) -> None:
+    """One :class:`KernelCacheWarning` per process (a cache with every entry bad says it once)."""
+    global _CACHE_WARNED
+    if not _CACHE_WARNED:
+        _CACHE_WARNED = True
+        import warnings
+
+        warnings.warn(message, KernelCacheWarning, stacklevel=4)
+
+
+def discard_cache_entry(cache: Any) -> list[Path]:
+    """Delete the on-disk cache files of one kernel (its index ``.nbi`` and data ``.nbc`` files); the paths deleted.
+
+    Args:
+        cache: the kernel's numba cache (``dispatcher._cache``).
+
+    Returns:
+        The files removed.
+    """
+    import glob
+
+    index = Path(cache._cache_file._index_path)
+    removed = []
+    for name in [index, *index.parent.glob(glob.escape(index.name[: -len(".nbi")]) + ".*.nbc")]:
+        try:
+            name.unlink()
+            removed.append(name)
+        except FileNotFoundError:
+            pass
+        except OSError as exc:  # read-only cache: numba compiles in memory and fails to save (warned)
+            _warn_cache_once(f"rhs-slam: cannot remove the bad numba cache file {name} ({exc.strerror}); delete "
+                             f"{index.parent} or set NUMBA_CACHE_DIR to a writable folder")
+    return removed
+
+
+_CHECKED_CACHE: Any = None
+
+
+def _checked_cache() -> type:
+    """numba's ``FunctionCache`` that treats an unreadable entry as missing and an unwritable cache as no cache.
+
+    A truncated or overwritten ``.nbi`` / ``.nbc`` file (``UnpicklingError``, ``EOFError``, an LLVM error while
+    linking it) is deleted (:func:`discard_cache_entry`) and the kernel compiled again, which writes a good entry;
+    a cache folder that cannot be written leaves the kernel compiled in memory. Each with one warning per process.
+    """
+    global _CHECKED_CACHE
+    if _CHECKED_CACHE is None:
+        from numba.core.caching import FunctionCache
+
+        class CheckedCache(FunctionCache):
+            def load_overload(self, sig: Any, target_context: Any) -> Any:
+                try:
+                    return super().load_overload(sig, target_context)
+                except Exception as exc:  # (any failure to read an entry: compile instead)
+                    index = Path(self._cache_file._index_path)
+                    discard_cache_entry(self)
+                    _warn_cache_once(
+                        f"rhs-slam: the numba cache of {self._py_func.__module__}.{self._py_func.__qualname__} in "
+                        f"{index.parent} was unreadable ({type(exc).__name__}: {exc}); removed it, compiling again")
+                    return None
+
+            def save_overload(self, sig: Any, data: Any) -> None:
+                try:
+                    super().save_overload(sig, data)
+                except Exception as exc:  # (an unwritable or vanished cache folder: run uncached)
+                    _warn_cache_once(f"rhs-slam: cannot write the numba cache in {self._cache_path} ({exc}); the "
+                                     f"kernels run compiled but are compiled again next run; set NUMBA_CACHE_DIR to a "
+                                     f"writable folder")
+
+        _CHECKED_CACHE = CheckedCache
+    return _CHECKED_CACHE
+
+
+def _jit(func: Callable, options: dict[str, Any]) -> Any:
+    """``numba.njit(**options)(func)`` with ``cache=True`` served by :func:`_checked_cache`."""
+    options = dict(options)
+    cache = options.pop("cache")
+    dispatcher = _numba().njit(cache=False, **options)(func)
+    if cache and hasattr(dispatcher, "enable_caching"):  # (NUMBA_DISABLE_JIT=1 returns the function itself)
+        dispatcher._cache = _checked_cache()(dispatcher.py_func)
+    return dispatcher
+
+
 def njit(func: Callable | None = None, **options: Any) -> Any:
-    """``numba.njit`` with the project's defaults: ``cache=True``, ``error_model="numpy"`` (x / 0 -> inf, as numpy)."""
+    """``numba.njit`` with the project's defaults: ``cache=True``, ``error_model="numpy"`` (x / 0 -> inf, as numpy).
+
+    The cache recovers from bad files by itself (:func:`_checked_cache`).
+    """
     options = {"cache": True, "error_model": "numpy", **options}
     if func is None:
-        return lambda f: _numba().njit(**options)(f)
-    return _numba().njit(**options)(func)
+        return lambda f: _jit(f, options)
+    return _jit(func, options)
 
 
 def _sort_small(v: np.ndarray) -> None:

@@ -27,6 +27,7 @@ twins in different directions, so the two-way pattern can suppress both.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -35,6 +36,10 @@ import numpy as np
 from rhs_common.validation import check_int, check_range, check_types
 
 SPEED_OF_LIGHT = 299_792_458.0  # m/s
+#: carriers accepted, Hz: the microwave and millimetre-wave radar bands (1 Hz would be a 300 000 km wavelength)
+CARRIER_RANGE_HZ = (1e9, 3e11)
+#: the band the radar is designed for (24 GHz ISM); a carrier outside it is accepted with a warning
+SPEC_BAND_HZ = (24.0e9, 24.25e9)
 
 ANTENNA_KINDS = ("rhs", "phased", "random", "hologram")
 PHASED_ARRAY_COST_RATIO = 6  # one phased-array element costs six RHS elements (paper footnote)
@@ -51,7 +56,8 @@ class RHSConfig:
         tx_feed: element index of the Tx feed (negative counts from the end).
         rx_feed: element index of the Rx feed (default -1: the last element,
             opposite to the Tx feed, so that the one-way twins do not coincide).
-        carrier_hz: carrier frequency f_c (default 24.125 GHz, band centre).
+        carrier_hz: carrier frequency f_c (default 24.125 GHz, band centre); 1 .. 300 GHz, outside
+            the 24.00-24.25 GHz band with a ``UserWarning``.
     """
 
     elements: int = 60
@@ -68,11 +74,19 @@ class RHSConfig:
         check_range("refractive_index", self.refractive_index, 1.0, 10.0)
         check_int("tx_feed", self.tx_feed, -self.elements, self.elements - 1)
         check_int("rx_feed", self.rx_feed, -self.elements, self.elements - 1)
-        check_range("carrier_hz", self.carrier_hz, 0.0, None, low_open=True)
+        check_range("carrier_hz", self.carrier_hz, *CARRIER_RANGE_HZ)
+        if not SPEC_BAND_HZ[0] <= self.carrier_hz <= SPEC_BAND_HZ[1]:
+            warnings.warn(f"carrier_hz={self.carrier_hz:g} Hz is outside the 24.00-24.25 GHz ISM band the radar is "
+                          "designed for (SPEC: f_c = 24.125 GHz); the patterns scale with the wavelength, the link "
+                          "budget and the Doppler follow it", UserWarning, stacklevel=3)
         # Normalise negative feed indices so equal geometries hash equally.
         object.__setattr__(self, "elements", int(self.elements))
         object.__setattr__(self, "tx_feed", int(self.tx_feed) % self.elements)
         object.__setattr__(self, "rx_feed", int(self.rx_feed) % self.elements)
+        if self.tx_feed == self.rx_feed:  # SPEC section 2: the twin beam of a shared feed cannot be suppressed
+            raise ValueError(f"tx_feed and rx_feed must be different elements (the two-way pattern of one feed keeps "
+                             f"its one-way twin beam at full gain), got both {self.tx_feed}; the default is "
+                             f"tx_feed=0, rx_feed=-1 (the last element, {self.elements - 1})")
 
     @property
     def wavelength(self) -> float:

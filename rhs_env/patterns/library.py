@@ -8,8 +8,17 @@ the carrier is left out; the scan grid; the method and all its settings) and
 whose fields differ from the expected ones, is refused with a ``ValueError`` naming it.
 
 Lookup order of :func:`get_library`: the libraries shipped in ``rhs_env/patterns/data``,
-then the user cache (``platformdirs.user_cache_dir("rhs-slam")`` or ``$RHS_SLAM_CACHE``),
-else the library is built (progress bar) and written to the cache.
+then the user cache (:func:`rhs_common.cache_dir.cache_subdir`: ``$RHS_SLAM_CACHE`` or
+``platformdirs.user_cache_dir("rhs-slam")``, a temporary folder with one warning when neither can be
+written), else the library is built (progress bar) and written to the cache.
+
+Verification. Every file is checked when loaded (:func:`load`): a readable ``.npz`` with the four
+arrays, the config hash, the format version, the arrays against the config (grid centres of the scan,
+``(I, M)`` amplitudes, finite, in [0, 1]) and the config against the one asked for (elements, feeds,
+grid, method, settings); a bad file raises ``ValueError`` naming it and the fix. The shipped files are
+also checked byte for byte against the sha256 recorded beside them (:data:`CHECKSUMS`): a damaged one is
+refused (reinstall, or delete it to build the library into the user cache), never skipped in silence.
+A cached file that fails is deleted and built again, with one :class:`LibraryRebuildWarning`.
 
 A build that :func:`estimate_build_s` puts above :data:`MAX_IMPLICIT_BUILD_S` is not started
 by a lookup (``gym.make`` with a fine grid or many elements would otherwise block for minutes
@@ -24,18 +33,23 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from rhs_common.cache_dir import CACHE_ENV as _CACHE_ENV
+from rhs_common.cache_dir import cache_subdir
 from rhs_common.validation import check_choice, config_json
 from rhs_env.array_models import RHSConfig, ScanConfig, check_amplitudes
 
 METHODS = ("fast", "sdr")
 DATA_DIR = Path(__file__).resolve().parent / "data"
-CACHE_ENV = "RHS_SLAM_CACHE"
+#: the sha256 of every shipped file, by name, with the hash of its config (written by :func:`write_checksums`)
+CHECKSUMS = "checksums.json"
+CACHE_ENV = _CACHE_ENV
 #: set to 1 to let a lookup start a build longer than MAX_IMPLICIT_BUILD_S
 BUILD_ENV = "RHS_SLAM_BUILD_PATTERNS"
 #: longest build (estimated, s) a lookup starts without being asked to
@@ -130,25 +144,77 @@ class PatternLibrary:
         return path
 
 
+class LibraryRebuildWarning(UserWarning):
+    """A cached pattern library failed verification: it was deleted and is built again."""
+
+
+def rebuild_command(fields: dict[str, Any], out: Path | None = None) -> str:
+    """The ``rhs-slam patterns`` command line that builds the library of ``fields`` (defaults left out).
+
+    Args:
+        fields: a library's fields (:func:`library_fields`).
+        out: the file to write, if any.
+
+    Returns:
+        The command, e.g. ``rhs-slam patterns --grid-deg 5``.
+    """
+    flags = {"elements": "--elements", "spacing_wl": "--spacing-wl", "refractive_index": "--refractive-index",
+             "tx_feed": "--tx-feed", "rx_feed": "--rx-feed", "grid_deg": "--grid-deg", "sector_deg": "--sector-deg"}
+    try:
+        default = library_fields(RHSConfig(), ScanConfig(grid_deg=float(fields["scan"]["grid_deg"])))
+        given = {**fields["rhs"], **fields["scan"]}
+        base = {**default["rhs"], **default["scan"]}
+        if given.get("rx_feed") == int(given.get("elements", 0)) - 1:
+            given = {**given, "rx_feed": base["rx_feed"]}  # the default, -1: the last element
+        parts = ["rhs-slam patterns", *(f"{flag} {given[k]:g}" for k, flag in flags.items()
+                                        if k in given and (given[k] != base[k] or k == "grid_deg"))]
+        if fields.get("method", "fast") != "fast":
+            parts.append(f"--method {fields['method']}")
+    except (KeyError, TypeError, ValueError):
+        parts = ["rhs-slam patterns"]
+    if out is not None:
+        parts += ["--no-cache", f"--out {out}"]
+    return " ".join(parts)
+
+
+def _refuse(path: Path, problem: str) -> ValueError:
+    """The error of an unusable library file: names it and how to get a good one."""
+    return ValueError(f"pattern library {path}: {problem}; rebuild it with `rhs-slam patterns --out {path}` "
+                      f"(with the radar's --elements / --grid-deg / feed options)")
+
+
 def _read_fields(path: Path) -> dict[str, Any]:
     """The fields of a library file, after checking its stored hash (ValueError naming the file)."""
+    if not path.is_file():
+        raise _refuse(path, "no such file" if not path.exists() else "not a regular file")
     try:
         with np.load(path, allow_pickle=False) as z:
             blob = json.loads(str(z["config"]))
-    except (OSError, KeyError, ValueError) as exc:
-        raise ValueError(f"pattern library {path}: unreadable or missing 'config' ({exc})") from None
-    if not isinstance(blob, dict) or "fields" not in blob or "sha256" not in blob:
-        raise ValueError(f"pattern library {path}: config must hold 'fields' and 'sha256'")
+    except Exception as exc:  # (BadZipFile, EOFError, pickle or JSON errors: any is a bad file)
+        raise _refuse(path, f"not a readable pattern library .npz ({type(exc).__name__}: {exc})") from None
+    if not isinstance(blob, dict) or not isinstance(blob.get("fields"), dict) or "sha256" not in blob:
+        raise _refuse(path, "config must hold 'fields' and 'sha256'")
     if fields_hash(blob["fields"]) != blob["sha256"]:
-        raise ValueError(f"pattern library {path}: config hash mismatch (file modified or corrupt)")
+        raise _refuse(path, "config hash mismatch (file modified or corrupt)")
+    if blob["fields"].get("format") != FORMAT_VERSION:
+        raise _refuse(path, f"format {blob['fields'].get('format')!r}, this rhs-slam reads format {FORMAT_VERSION}")
     return blob["fields"]
+
+
+def _configs(path: Path, fields: dict[str, Any]) -> tuple[RHSConfig, ScanConfig]:
+    """The radar and scan configs a library's fields describe (ValueError naming the file when they are invalid)."""
+    try:
+        return RHSConfig(**fields["rhs"]), ScanConfig(**fields["scan"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise _refuse(path, f"invalid config in the file ({exc})") from None
 
 
 def load(path: str | os.PathLike[str], expected_config: dict[str, Any] | None = None) -> PatternLibrary:
     """Load and verify a library file.
 
-    Raises ``ValueError`` naming ``path`` if the stored hash does not match its config,
-    if ``expected_config`` (a fields dict) differs from it, or if the arrays are malformed.
+    Raises ``ValueError`` naming ``path`` and the fix if the file is not a readable library, if the stored hash
+    does not match its config, if ``expected_config`` (a fields dict) differs from it, or if the arrays do not
+    match the config (shapes, grid centres, amplitudes in [0, 1]).
     """
     path = Path(path)
     fields = _read_fields(path)
@@ -157,41 +223,102 @@ def load(path: str | os.PathLike[str], expected_config: dict[str, Any] | None = 
             k for k in set(fields) | set(expected_config) if fields.get(k) != expected_config.get(k)
         )
         raise ValueError(f"pattern library {path}: config differs from the expected one in {diff}")
-    with np.load(path, allow_pickle=False) as z:
-        try:
-            lib = PatternLibrary(z["angles_deg"], z["tx"], z["rx"], fields, path)
-        except (KeyError, ValueError) as exc:
-            raise ValueError(f"pattern library {path}: {exc}") from None
-    m = fields["rhs"]["elements"]
-    expect_angles = ScanConfig(**fields["scan"]).angles_deg
-    if lib.tx.shape[1] != m or not np.allclose(lib.angles_deg, expect_angles):
-        raise ValueError(f"pattern library {path}: arrays do not match its config (M={m}, grids)")
+    config, scan = _configs(path, fields)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: np.asarray(z[k]) for k in ("angles_deg", "tx", "rx")}
+    except Exception as exc:  # (a damaged member: BadZipFile, zlib.error, a bad CRC)
+        raise _refuse(path, f"unreadable arrays ({type(exc).__name__}: {exc})") from None
+    expect_angles = scan.angles_deg
+    if arrays["angles_deg"].shape != expect_angles.shape or not np.allclose(arrays["angles_deg"], expect_angles):
+        raise _refuse(path, f"angles_deg do not match its grid ({scan.slots} grids of {scan.grid_deg:g} deg)")
+    try:
+        lib = PatternLibrary(arrays["angles_deg"], arrays["tx"], arrays["rx"], fields, path)
+    except (TypeError, ValueError) as exc:
+        raise _refuse(path, str(exc)) from None
+    if lib.tx.shape != (scan.slots, config.elements):
+        raise _refuse(path, f"arrays do not match its config (M={config.elements}, {scan.slots} grids)")
     return lib
 
 
 def cache_dir() -> Path:
-    """``$RHS_SLAM_CACHE`` or ``platformdirs.user_cache_dir("rhs-slam")``, joined with ``patterns``."""
-    env = os.environ.get(CACHE_ENV)
-    if env:
-        return Path(env) / "patterns"
-    import platformdirs
-
-    return Path(platformdirs.user_cache_dir("rhs-slam")) / "patterns"
+    """The ``patterns`` folder of the project's cache (:func:`rhs_common.cache_dir.cache_subdir`, writable)."""
+    return cache_subdir("patterns")
 
 
 def cache_path(fields: dict[str, Any]) -> Path:
     return cache_dir() / f"patterns_{fields_hash(fields)[:20]}.npz"
 
 
+def file_sha256(path: Path) -> str:
+    """sha256 hex digest of a file's bytes."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def write_checksums(directory: Path) -> Path:
+    """Record every library of ``directory`` in its :data:`CHECKSUMS` file (file sha256 and config hash).
+
+    Args:
+        directory: a folder of library files (``DATA_DIR`` for the shipped ones).
+
+    Returns:
+        The checksums file written.
+    """
+    entries = {}
+    for p in sorted(directory.glob("*.npz")):
+        entries[p.name] = {"sha256": file_sha256(p), "config_sha256": fields_hash(_read_fields(p))}
+    out = directory / CHECKSUMS
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(entries, indent=1, sort_keys=True) + "\n")
+    os.replace(tmp, out)
+    return out
+
+
+def _shipped_checksums(directory: Path) -> dict[str, dict[str, str]]:
+    """The :data:`CHECKSUMS` record of ``directory`` (ValueError naming it when damaged)."""
+    record = directory / CHECKSUMS
+    try:
+        entries = json.loads(record.read_text())
+        if not isinstance(entries, dict) or not all(
+                isinstance(e, dict) and isinstance(e.get("sha256"), str) and isinstance(e.get("config_sha256"), str)
+                for e in entries.values()):
+            raise ValueError("not a map of file name to sha256 and config_sha256")
+    except FileNotFoundError:
+        return {}
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"the record of the shipped pattern libraries {record} is damaged ({exc}); reinstall "
+                         f"rhs-slam") from None
+    return entries
+
+
 def find_shipped(fields: dict[str, Any]) -> Path | None:
-    """The shipped file in ``DATA_DIR`` whose config equals ``fields`` (files with bad hashes are skipped)."""
-    want = config_json(fields)
-    for p in sorted(DATA_DIR.glob("*.npz")):
-        try:
-            if config_json(_read_fields(p)) == want:
-                return p
-        except ValueError:
+    """The shipped file in ``DATA_DIR`` whose config equals ``fields``, verified byte for byte; None when none is.
+
+    Only files recorded in :data:`CHECKSUMS` count; a recorded file that was deleted counts as not shipped (the
+    library is then built into the user cache). Raises ``ValueError`` naming the file and the fix when its bytes
+    differ from the recorded sha256 (truncated, replaced, edited).
+    """
+    want = fields_hash(fields)
+    for name, entry in sorted(_shipped_checksums(DATA_DIR).items()):
+        if entry["config_sha256"] != want:
             continue
+        path = DATA_DIR / name
+        if not path.exists():
+            return None
+        try:
+            ok = path.is_file() and file_sha256(path) == entry["sha256"]
+        except OSError:
+            ok = False
+        if not ok:
+            raise ValueError(
+                f"the shipped pattern library {path} is damaged (its sha256 differs from the one in "
+                f"{DATA_DIR / CHECKSUMS}); reinstall rhs-slam (in a source checkout: `git checkout -- {path}`), or "
+                f"delete the file and run `{rebuild_command(fields)}` to build the library into the user cache")
+        return path
     return None
 
 
@@ -250,7 +377,8 @@ def get_library(
 ) -> PatternLibrary:
     """The library of (config, scan, method, settings): shipped, cached, or built once and cached.
 
-    A cached file that fails verification raises ``ValueError`` naming it (delete it to rebuild).
+    A shipped file that fails verification raises ``ValueError`` naming it and the fix; a cached one is deleted and
+    built again (one :class:`LibraryRebuildWarning`).
     A build estimated (:func:`estimate_build_s`) above ``max_build_s`` seconds raises ``ValueError``
     naming ``radar.rhs.elements`` and ``radar.scan.grid_deg`` with the estimate, unless
     ``max_build_s`` is None or ``$RHS_SLAM_BUILD_PATTERNS`` is 1.
@@ -262,8 +390,13 @@ def get_library(
     if shipped is not None:
         return load(shipped, fields)
     path = cache_path(fields)
-    if path.exists():
-        return load(path, fields)
+    if path.exists() or path.is_symlink():
+        try:
+            return load(path, fields)
+        except ValueError as exc:
+            path.unlink(missing_ok=True)
+            warnings.warn(f"rhs-slam: the cached pattern library {path} failed verification ({exc}); deleted it, "
+                          f"building the library again", LibraryRebuildWarning, stacklevel=2)
     estimate = estimate_build_s(config, scan, method, workers)
     if max_build_s is not None and estimate > max_build_s and os.environ.get(BUILD_ENV) != "1":
         raise ValueError(

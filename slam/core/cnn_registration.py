@@ -12,13 +12,24 @@ into the current frame with a motion *prior* (constant velocity from the last
 estimate), so the network regresses the residual motion, a bounded quantity,
 whatever the vehicle speed and cycle length. With a zero prior this is exactly
 the paper's formulation.
+
+Weights files are verified when loaded (:func:`load_weights`): read with ``torch.load(weights_only=True)``
+(no code runs from the file), checked for the ``state_dict`` / ``meta`` layout, a grid map and scale that
+make sense, and tensors of the shapes the network of that grid has; the record written beside them
+(``<name>.json``, :func:`weights_record`: sha256 of the file, the grid, the network sizes) must match when
+present, and must exist for the shipped weights. A bad file raises ``ValueError`` (``FileNotFoundError`` when
+missing) naming it and how to regenerate it (:data:`TRAIN_COMMAND`).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
+import math
+import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -26,6 +37,8 @@ from rhs_common.geometry import compose, points_in_frame
 from rhs_common.validation import check_int, check_range, check_types
 
 DEFAULT_WEIGHTS = Path(__file__).parent.parent / "data" / "registration_cnn.pt"
+#: how the weights are made (``rhs_studies.train_registration``)
+TRAIN_COMMAND = "python scripts/train_registration.py"
 
 
 @dataclass(frozen=True)
@@ -113,9 +126,123 @@ class CNNTrainConfig:
         check_int("epochs", self.epochs, 1, 10_000)
         check_int("batch_size", self.batch_size, 1, 65_536)
         check_range("learning_rate", self.learning_rate, 0.0, 1.0, low_open=True)
-        check_range("gamma_r", self.gamma_r, 0.0, None)
+        check_range("gamma_r", self.gamma_r, 0.0, 1e6)
         check_int("channels", self.channels, 1, 256)
         check_int("hidden", self.hidden, 1, 4096)
+
+
+def weights_record(path: str | Path) -> Path:
+    """The record written beside a weights file (``registration_cnn.pt`` -> ``registration_cnn.json``)."""
+    return Path(path).with_suffix(".json")
+
+
+def _file_sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == Path(b).resolve()
+    except OSError:
+        return False
+
+
+def _refuse_weights(path: Path, problem: str, shipped: bool) -> ValueError:
+    fix = ("reinstall rhs-slam (in a source checkout: `git checkout -- slam/data`), or regenerate them with "
+           f"`{TRAIN_COMMAND}`") if shipped else f"regenerate them with `{TRAIN_COMMAND} --out {path}`"
+    return ValueError(f"CNN registration weights {path}: {problem}; {fix}")
+
+
+def _record_for(path: Path, state: dict[str, Any], meta: dict[str, Any]) -> dict[str, Any]:
+    """What :func:`weights_record` holds for a weights file: its sha256, grid and network sizes."""
+    return {"file": path.name, "sha256": _file_sha256(path), "grid": meta["grid"], "channels": meta["channels"],
+            "hidden": meta["hidden"], "tensors": {k: list(v.shape) for k, v in state.items()},
+            "made_by": TRAIN_COMMAND}
+
+
+def _check_meta(meta: Any) -> GridMapConfig:
+    """The grid map of a weights file's ``meta`` after checking its entries (ValueError with the reason)."""
+    if not isinstance(meta, dict) or not {"grid", "scale", "channels", "hidden"} <= set(meta):
+        raise ValueError("'meta' must hold grid, scale, channels and hidden")
+    if not isinstance(meta["grid"], dict) or set(meta["grid"]) != {"cells", "cell_m"}:
+        raise ValueError(f"meta grid must hold cells and cell_m, got {meta['grid']!r}")
+    grid = GridMapConfig(**meta["grid"])
+    scale = meta["scale"]
+    if (not isinstance(scale, list) or len(scale) != 3
+            or not all(isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in scale)):
+        raise ValueError(f"meta scale must be 3 positive finite numbers, got {scale!r}")
+    for name in ("channels", "hidden"):
+        if not isinstance(meta[name], int) or not 1 <= meta[name] <= 4096:
+            raise ValueError(f"meta {name} must be an integer in [1, 4096], got {meta[name]!r}")
+    return grid
+
+
+def load_weights(path: str | Path, shipped: bool = False) -> tuple[dict[str, Any], dict[str, Any], GridMapConfig]:
+    """Read and verify a weights file (module docstring): its state dict, meta and grid map.
+
+    Args:
+        path: the ``.pt`` file (:func:`train_cnn` writes it).
+        shipped: whether it is the shipped file, whose record (:func:`weights_record`) must exist and match.
+
+    Returns:
+        ``(state_dict, meta, grid)``.
+
+    Raises:
+        FileNotFoundError: no file at ``path``.
+        ValueError: the file or its record is damaged or made for another network (names the file and the fix).
+    """
+    torch = _torch()
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"CNN registration weights not found at {path}; train them with {TRAIN_COMMAND}")
+    if not path.is_file():
+        raise _refuse_weights(path, "not a regular file", shipped)
+    record_path = weights_record(path)
+    record = None
+    if record_path.is_file():
+        try:
+            record = json.loads(record_path.read_text())
+        except (OSError, ValueError) as exc:
+            raise _refuse_weights(path, f"its record {record_path} is unreadable ({exc})", shipped) from None
+        if not isinstance(record, dict) or not isinstance(record.get("sha256"), str):
+            raise _refuse_weights(path, f"its record {record_path} holds no sha256", shipped)
+        if _file_sha256(path) != record["sha256"]:
+            raise _refuse_weights(path, f"the file's sha256 differs from the one in {record_path} (truncated, "
+                                        f"replaced or edited)", shipped)
+    elif shipped:
+        raise _refuse_weights(path, f"its record {record_path} (the file's sha256) is missing", shipped)
+    try:
+        blob = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # (PytorchStreamReader, UnpicklingError, EOFError: any is a bad file)
+        message = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        raise _refuse_weights(path, f"not a readable weights file ({type(exc).__name__}: {message[:200]})",
+                              shipped) from None
+    if not isinstance(blob, dict) or not isinstance(blob.get("state_dict"), dict) or "meta" not in blob:
+        raise _refuse_weights(path, "the file must hold a dict with 'state_dict' and 'meta'", shipped)
+    try:
+        grid = _check_meta(blob["meta"])
+    except (TypeError, ValueError) as exc:
+        raise _refuse_weights(path, f"bad meta ({exc})", shipped) from None
+    meta, state = blob["meta"], blob["state_dict"]
+    expect = {k: tuple(v.shape) for k, v in build_network(grid, meta["channels"], hidden=meta["hidden"])
+              .state_dict().items()}
+    got = {k: tuple(getattr(v, "shape", ())) for k, v in state.items()}
+    if got != expect:
+        wrong = sorted(k for k in set(got) | set(expect) if got.get(k) != expect.get(k))
+        raise _refuse_weights(path, f"tensors {wrong} do not fit the network of its grid {meta['grid']} "
+                                    f"(made for another grid map or network)", shipped)
+    if not all(bool(torch.isfinite(v).all()) for v in state.values()):
+        raise _refuse_weights(path, "non-finite weights", shipped)
+    if record is not None:
+        for key in ("grid", "channels", "hidden"):
+            if key in record and record[key] != meta[key]:
+                raise _refuse_weights(path, f"{key} {meta[key]!r} differs from {record[key]!r} in {record_path}",
+                                      shipped)
+    return state, meta, grid
 
 
 class CNNRegistration:
@@ -128,19 +255,14 @@ class CNNRegistration:
     def __init__(self, weights: str | Path | None = None, grid: GridMapConfig | None = None):
         torch = _torch()
         path = Path(weights) if weights is not None else DEFAULT_WEIGHTS
-        if not path.exists():
-            raise FileNotFoundError(
-                f"CNN registration weights not found at {path}; train them with scripts/train_registration.py"
-            )
-        blob = torch.load(path, map_location="cpu", weights_only=False)
-        meta = blob["meta"]
-        self.grid = grid or GridMapConfig(**meta["grid"])
+        state, meta, weights_grid = load_weights(path, shipped=weights is None or _same_file(path, DEFAULT_WEIGHTS))
+        self.grid = grid or weights_grid
         if asdict(self.grid) != meta["grid"]:
             raise ValueError(f"{path}: weights were trained for grid {meta['grid']}, not {asdict(self.grid)}")
         self.scale = np.asarray(meta["scale"], dtype=float)
         self.meta = meta
         self.net = build_network(self.grid, meta["channels"], hidden=meta["hidden"])
-        self.net.load_state_dict(blob["state_dict"])
+        self.net.load_state_dict(state)
         self.net.eval()
         torch.set_num_threads(max(1, torch.get_num_threads()))
 
@@ -223,6 +345,12 @@ def train_cnn(
         Path(out).parent.mkdir(parents=True, exist_ok=True)
         # float16 halves the shipped file; the loss of precision is far below the regression error.
         state = {k: v.half() for k, v in net.state_dict().items()}
-        torch.save({"state_dict": state, "meta": meta}, out)
-        _ = json.dumps(meta)  # meta must stay JSON-serialisable (shown by the training script)
+        out = Path(out)
+        tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+        torch.save({"state_dict": state, "meta": meta}, tmp)
+        os.replace(tmp, out)
+        record = weights_record(out)
+        tmp_record = record.with_name(f".{record.name}.{os.getpid()}.tmp")
+        tmp_record.write_text(json.dumps(_record_for(out, state, meta), indent=1, sort_keys=True) + "\n")
+        os.replace(tmp_record, record)  # (meta must stay JSON-serialisable: the record holds its grid)
     return {"history": history, "scale": scale, "net": net}
