@@ -48,10 +48,12 @@ def freeze(spec: str) -> list[str]:
         pip = [str(venv / "bin" / "python"), "-m", "pip", "--disable-pip-version-check", "-q"]
         subprocess.run([*pip, "install", TORCH], check=True)
         subprocess.run([*pip, "install", "-e", _extras_known(spec)], cwd=ROOT, check=True)
-        out = subprocess.run([*pip, "freeze", "--exclude-editable"], check=True, capture_output=True, text=True).stdout
+        # --all: setuptools too (the test extra's: the wheel test builds with it); pip itself is the installer's
+        out = subprocess.run([*pip, "freeze", "--all", "--exclude-editable"], check=True, capture_output=True,
+                             text=True).stdout
     lines = []
     for line in out.splitlines():
-        if "==" not in line or line.startswith("-e"):
+        if "==" not in line or line.startswith(("-e", "pip==")):
             continue
         name, version = line.split("==", 1)
         lines.append(f"{name}=={version.split('+', 1)[0]}")
