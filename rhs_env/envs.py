@@ -134,6 +134,7 @@ class RHSHighwayEnv(HighwayEnv):
                 "screen_width": 600,
                 "screen_height": 200,  # room for the roadside landmarks
                 "landmarks": LandmarkConfig().to_dict(),
+                "sim": "highway-env",  # or "compiled": rhs_env.traffic's core steps the traffic
             },
         )
         return config
@@ -175,6 +176,33 @@ class RHSHighwayEnv(HighwayEnv):
         result = super().step(action)
         self._ended = self._ended or bool(result[2] or result[3])
         return result
+
+    # ---- traffic: highway-env's Python, or the compiled core (config "sim", :mod:`rhs_env.traffic`)
+    def _compiled_traffic(self) -> Any:
+        """The env's :class:`rhs_env.traffic.engine.CompiledTraffic` when ``sim="compiled"``, else None."""
+        if self.config.get("sim") != "compiled":
+            return None
+        traffic = getattr(self, "_traffic", None)
+        if traffic is None or traffic[0] is not self.road:  # a new scene (reset): pack it again
+            from rhs_env.traffic.engine import CompiledTraffic
+
+            traffic = self._traffic = (self.road, CompiledTraffic())
+        return traffic[1]
+
+    def _simulate(self, action: Any = None) -> None:
+        traffic = self._compiled_traffic()
+        if traffic is None:
+            super()._simulate(action)
+        else:
+            traffic.simulate(self, action)
+
+    def _rewards(self, action: Any) -> dict[str, float]:
+        traffic = self._compiled_traffic()
+        return super()._rewards(action) if traffic is None else traffic.rewards(self)
+
+    def _reward(self, action: Any) -> float:
+        traffic = self._compiled_traffic()
+        return super()._reward(action) if traffic is None else traffic.reward(self)
 
     # ---- configuration
     def configure(self, config: dict | None) -> None:

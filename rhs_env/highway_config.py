@@ -177,6 +177,29 @@ def _check_offscreen_rendering(c: MutableMapping[str, Any]) -> None:
         raise TypeError(f"offscreen_rendering must be None, True or False, got {v!r} ({type(v).__name__})")
 
 
+#: the values of the ``sim`` key (:mod:`rhs_env.traffic`): highway-env's own Python, or the compiled core
+SIMS = ("highway-env", "compiled")
+
+
+def _check_sim(c: MutableMapping[str, Any]) -> None:
+    """``sim``: one of :data:`SIMS`; ``"compiled"`` needs what the core ports (``DiscreteMetaAction``, one
+    controlled vehicle, IDM traffic, no trajectories, no manual control)."""
+    check_choice("sim", c["sim"], SIMS)
+    if c["sim"] != "compiled":
+        return
+    needs = {
+        "action.type": (c["action"].get("type"), "DiscreteMetaAction"),
+        "controlled_vehicles": (c.get("controlled_vehicles", 1), 1),
+        "other_vehicles_type": (c.get("other_vehicles_type"), "highway_env.vehicle.behavior.IDMVehicle"),
+        "show_trajectories": (bool(c.get("show_trajectories", False)), False),
+        "manual_control": (bool(c.get("manual_control", False)), False),
+    }
+    for key, (value, wanted) in needs.items():
+        if value != wanted:
+            raise ValueError(f"sim='compiled' needs {key}={wanted!r}, got {value!r}; use sim='highway-env' "
+                             "(highway-env's own code) for this config")
+
+
 def _check_screen(key: str) -> Callable[[MutableMapping[str, Any]], None]:
     def check_pixels(c: MutableMapping[str, Any]) -> None:
         check_int(key, c[key], 1, 4096)  # pixels
@@ -194,6 +217,7 @@ CHECKS: dict[str, Callable[[MutableMapping[str, Any]], None]] = {
     "centering_position": _check_centering_position,
     "policy_frequency": _check_policy_frequency,
     "offscreen_rendering": _check_offscreen_rendering,
+    "sim": _check_sim,
     "screen_width": _check_screen("screen_width"),
     "screen_height": _check_screen("screen_height"),
 }

@@ -1,0 +1,110 @@
+"""The compiled traffic core (``sim="compiled"``) against highway-env, its oracle: the same scene, the same actions.
+
+The full alignment (50 seeds x 200 steps) is ``scripts/traffic_alignment.py``; here a few short episodes per
+scene, the option's validation, the write-back the radar and users read, and the scenes the core refuses.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import rhs_env  # noqa: F401  (registers the ids)
+from rhs_env.traffic import core
+from rhs_env.traffic.alignment import align_episode, make_scene
+from rhs_env.traffic.engine import UnsupportedScene
+
+#: tolerances of the alignment (positions m, speeds m/s, rewards)
+POSITION_TOL, SPEED_TOL, REWARD_TOL = 1e-6, 1e-6, 1e-9
+
+
+@pytest.mark.parametrize(("scene", "seeds"), [("highway", (0, 1, 2)), ("dense", (3,)), ("paper", (4,))])
+def test_alignment_with_highway_env(scene, seeds):
+    """The same lane changes, crashes and terminations; positions, speeds and rewards to the tolerances."""
+    for seed in seeds:
+        r = align_episode(scene, seed, 60)
+        assert r.agrees, r
+        assert r.terminated_at == r.terminated_at_compiled
+        assert r.max_position_diff_m <= POSITION_TOL and r.max_speed_diff_mps <= SPEED_TOL, r
+        assert r.max_reward_diff <= REWARD_TOL, r
+        assert r.lane_changes > 0  # the episode exercised MOBIL / the ego's lane changes
+
+
+def test_crashes_align():
+    """An episode with crashes (the ego's random actions run into traffic): the same crash flags and impacts."""
+    r = align_episode("highway", 0, 40)
+    assert r.terminated_at > 0 and r.crashed_vehicles >= 2, r  # seed 0 crashes at step 21 (highway-env's run)
+    assert r.agrees and r.terminated_at == r.terminated_at_compiled, r
+
+
+def test_sim_option_is_validated():
+    with pytest.raises(ValueError, match="sim must be one of"):
+        gym.make("rhs-highway-v0", sim="fast")
+    with pytest.raises(ValueError, match="sim='compiled' needs action.type='DiscreteMetaAction'"):
+        gym.make("rhs-highway-v0", sim="compiled", action={"type": "ContinuousAction"})
+    with pytest.raises(ValueError, match="other_vehicles_type"):
+        gym.make("rhs-highway-v0", sim="compiled", other_vehicles_type="highway_env.vehicle.behavior.LinearVehicle")
+    assert gym.make("rhs-highway-v0").unwrapped.config["sim"] == "highway-env"  # the default is the original
+
+
+def test_objects_are_written_back():
+    """After a step the vehicle objects hold the stepped state (what the observation, the radar and users read)."""
+    env = make_scene("highway", "compiled", vehicles_count=10)
+    env.reset(seed=7)
+    before = [v.position.copy() for v in env.road.vehicles]
+    position_arrays = [v.position for v in env.road.vehicles]
+    env.step(1)
+    state = env._compiled_traffic().state
+    assert state is not None
+    for i, v in enumerate(env.road.vehicles):
+        assert v.position is position_arrays[i]  # updated in place
+        assert not np.array_equal(v.position, before[i])
+        assert (v.position[0], v.position[1], v.speed) == (state.f[i, core.X], state.f[i, core.Y], state.f[i, core.V])
+        assert v.lane is env.road.network.get_lane(v.lane_index)
+    assert env.vehicle.speed_index == state.k[state.ctrl, core.SPEED_INDEX]
+
+
+def test_swapped_vehicle_repacks():
+    """Replacing a vehicle in ``road.vehicles`` (the IDM ego of ``agents.evaluate``) packs the scene again."""
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    envs = [make_scene("highway", sim, vehicles_count=10) for sim in ("highway-env", "compiled")]
+    for env in envs:
+        env.reset(seed=2)
+        env.step(1)
+        ego = env.vehicle
+        idm = IDMVehicle.create_from(ego)
+        env.road.vehicles[env.road.vehicles.index(ego)] = idm
+        env.controlled_vehicles = [idm]
+        env.action_type.controlled_vehicle = idm
+        for _ in range(10):
+            env.step(3)
+    a, b = ([(v.position.copy(), v.speed, v.lane_index[2]) for v in env.road.vehicles] for env in envs)
+    for (pa, va, la), (pb, vb, lb) in zip(a, b, strict=True):
+        assert la == lb and abs(va - vb) <= SPEED_TOL and np.abs(pa - pb).max() <= POSITION_TOL
+
+
+def test_unsupported_scene_is_refused():
+    from highway_env.vehicle.objects import Obstacle
+
+    env = make_scene("highway", "compiled", vehicles_count=3)
+    env.reset(seed=0)
+    env.road.objects.append(Obstacle(env.road, [50.0, 0.0]))
+    with pytest.raises(UnsupportedScene, match="road objects.*sim='highway-env'"):
+        env.step(1)
+
+
+def test_kernel_python_body_matches_compiled():
+    """The kernels run as Python (``py_func``) give the compiled numbers (the same source covers both)."""
+    env = make_scene("highway", "compiled", vehicles_count=12)
+    env.reset(seed=5)
+    env.step(1)
+    s = env._compiled_traffic().state
+    args = [a.copy() for a in (s.f, s.k, s.p, s.lanes, s.speeds)]
+    core.simulate(*args, 3, 0, core.ACTION_CODES["FASTER"], s.ctrl, 1 / 15)
+    python = getattr(core.simulate, "py_func", core.simulate)
+    py_args = [a.copy() for a in (s.f, s.k, s.p, s.lanes, s.speeds)]
+    python(*py_args, 3, 0, core.ACTION_CODES["FASTER"], s.ctrl, 1 / 15)
+    np.testing.assert_allclose(py_args[0], args[0], rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(py_args[1], args[1])
