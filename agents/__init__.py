@@ -1,1 +1,3 @@
 """Driving agents: training, evaluation, policies, the demo."""
+
+__all__: list[str] = []

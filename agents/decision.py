@@ -39,6 +39,11 @@ from typing import Any
 
 import gymnasium as gym
 
+__all__ = [
+    "DECISION_MODES", "FASTER", "HeldPolicy", "HoldAction", "IDLE", "LANE_LEFT", "LANE_RIGHT", "MAX_DECISION_INTERVAL",
+    "SLOWER", "check_decision_interval", "check_decision_mode", "fill_action", "held",
+]
+
 #: largest accepted interval (a 40 s episode at 5 Hz has 200 steps)
 MAX_DECISION_INTERVAL = 1000
 #: how the steps between decisions are filled: the action repeated, or IDLE after it

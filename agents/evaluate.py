@@ -52,6 +52,16 @@ from agents.run_setup import parse_env_kwargs
 from agents.shield import ShieldedPolicy, check_shield_env, shield_record
 from rhs_env.registration import SLAM_ENV_SPECS
 
+__all__ = [
+    "ConstantPolicy", "DAGGER_CONTINUED_POLICY", "DAGGER_CRUISE30_CLOSE_POLICY", "DAGGER_CRUISE30_GAP_POLICY",
+    "DAGGER_POLICY", "DAGGER_TRUTH_POLICY", "DATA_DIR", "DEFAULT_ENV", "IDMMobilPolicy", "Interrupted",
+    "MAX_UNCONFIRMED_HOURS", "PPO_POLICY", "PPO_TRUTH_POLICY", "PointColumnAdapter", "RADAR_STEPS_PER_S",
+    "RL_FINETUNE_POLICY", "RandomPolicy", "SHIPPED_POLICY", "SHIPPED_TRUTH_POLICY", "SLAM_ENV_IDS", "STEPS_PER_S",
+    "check_spaces", "configure", "env_action", "episode_steps", "estimate_hours", "evaluate", "is_scripted",
+    "json_default", "load_policy", "make_env", "model_shield", "parse_env_kwargs", "parse_shield", "plot_summary",
+    "policy_metadata", "resolve_env", "run", "run_episode", "seed_sampling", "summarize",
+]
+
 DATA_DIR = Path(__file__).parent / "data"
 #: DAgger students of agents.expert.HeadwayDriver, 80k env steps each: on radar + SLAM (shipped) and ground truth
 DAGGER_POLICY = DATA_DIR / "dagger_rhs_highway_slam.zip"

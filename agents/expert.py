@@ -54,6 +54,8 @@ import numpy as np
 from agents.decision import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER
 from rhs_common.validation import build, check_range, check_types
 
+__all__ = ["HeadwayDriver", "HeadwayDriverConfig", "bumper_gap", "check_highway_env"]
+
 
 @dataclass(frozen=True)
 class HeadwayDriverConfig:

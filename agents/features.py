@@ -23,6 +23,10 @@ import torch
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
+__all__ = [
+    "BOX_COLUMNS", "BOX_SCALES", "FEATURE_EXTRACTORS", "GridExtractor", "PointSetExtractor", "SET_SCALES", "box_layout",
+]
+
 # per-column scale of known set keys (x, y, radial velocity, amplitude, range std, angle std, radar)
 # and (x, y): a number divides, None is log10(1 + a) / 3, "log" is log10(max(x, 1e-6)) / 6
 SET_SCALES = {"points": (50.0, 50.0, 30.0, None, "log", "log", 3.0), "landmarks": (50.0, 50.0)}

@@ -493,5 +493,8 @@ def train_finetune(env_id: str, timesteps: int | None, out: str | Path, init_pol
     return summary
 
 
-__all__ = ["AnchoredPPO", "FinetuneConfig", "PrivilegedCriticPolicy", "anchor_coef", "correct_class_prior",
-           "export_actor", "label_frequencies", "load_actor", "train_finetune"]
+__all__ = [
+    "ActorFeatures", "AnchoredPPO", "CriticFeatures", "FinetuneConfig", "PrivilegedCriticPolicy", "actor_parameters",
+    "anchor_coef", "correct_class_prior", "critic_warming", "export_actor", "label_frequencies", "load_actor",
+    "measure_prior", "train_finetune", "training_wrapper",
+]

@@ -86,6 +86,13 @@ from agents.lookahead import LookaheadDriver, LookaheadDriverConfig
 from agents.shield import ShieldAction
 from rhs_common.validation import build, check_bool, check_int, check_range, check_types
 
+__all__ = [
+    "BETWEEN_KEY", "DaggerConfig", "Dataset", "EXPERT_KEY", "ExpertActionInfo", "RoundLog", "STATE_DATA", "STATE_META",
+    "STATE_WEIGHTS", "TEACHERS", "agreement", "class_weights", "collect", "continued_env_kwargs", "dagger_rounds",
+    "dagger_settings", "fit", "labelled_env", "load_round_state", "load_student", "make_teacher", "save_round_state",
+    "teacher_config", "train_dagger", "widened_state",
+]
+
 EXPERT_KEY = "expert_action"
 BETWEEN_KEY = "expert_between"
 

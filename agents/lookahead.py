@@ -43,6 +43,8 @@ from agents.decision import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER
 from agents.expert import HeadwayDriver, HeadwayDriverConfig, bumper_gap, check_highway_env
 from rhs_common.validation import build, check_int, check_range, check_types
 
+__all__ = ["LookaheadDriver", "LookaheadDriverConfig", "META_ACTIONS"]
+
 #: highway-env's meta-action names, in DiscreteMetaAction's order (LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER)
 META_ACTIONS = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
 

@@ -22,6 +22,8 @@ import ast
 import importlib
 from typing import Any
 
+__all__ = ["ALLOWED_NAMES", "MAX_CHARS", "MAX_DEPTH", "parse_policy_kwargs"]
+
 #: the longest expression read (the shipped ones are ~150 characters)
 MAX_CHARS = 10_000
 #: the deepest nesting of lists / dicts / calls accepted

@@ -30,6 +30,11 @@ import numpy as np
 
 from agents.expert import HeadwayDriver, bumper_gap
 
+__all__ = [
+    "GAP_SCALE_M", "LANE_FEATURES", "N_ACTIONS", "PRIVILEGED_DIM", "PRIVILEGED_KEY", "PrivilegedObservation",
+    "SPEED_SCALE_MPS", "privileged_features", "without_privileged",
+]
+
 #: the observation key the critic reads and the actor never sees
 PRIVILEGED_KEY = "privileged"
 #: speed scale V of the features, m/s (highway-env's top target speed)

@@ -28,6 +28,8 @@ from typing import Any
 
 from stable_baselines3.common.callbacks import BaseCallback
 
+__all__ = ["CHECKPOINT_DIR", "StopOnSignal", "latest_checkpoint", "load_checkpoint", "save_checkpoint"]
+
 CHECKPOINT_DIR = "checkpoints"
 _STEPS = re.compile(r"^(?P<algo>[a-z0-9]+)_(?P<steps>\d+)_steps\.zip$")
 

@@ -93,6 +93,13 @@ from agents.rllib_policy import (  # noqa: F401  (re-exported: the checkpoint si
     require_ray,
 )
 
+__all__ = [
+    "AnchoredPPOLearner", "CHECKPOINT_DIR", "CrashRateCallback", "LOCAL_START_ATTEMPTS", "PointSetPPOModule",
+    "RLlibPolicy", "SB3_EXTRACTORS", "build_config", "env_config", "export_module_actor", "init_ray",
+    "is_rllib_checkpoint", "make_env", "model_settings", "ppo_settings", "require_ray", "student_actor_state",
+    "train_rllib",
+]
+
 
 def env_config(env_kwargs: dict[str, Any], decision_interval: int = 1, decision_mode: str = "hold",
                privileged: bool = False, shield: dict[str, Any] | None = None,

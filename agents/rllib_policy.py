@@ -13,6 +13,8 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+__all__ = ["CHECKPOINT_DIR", "MODULE_SUBDIR", "RLlibPolicy", "is_rllib_checkpoint", "require_ray"]
+
 CHECKPOINT_DIR = "rllib_checkpoint"
 #: the RLModule inside an algorithm checkpoint (single-agent: the default module id)
 MODULE_SUBDIR = ("learner_group", "learner", "rl_module", "default_policy")

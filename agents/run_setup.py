@@ -18,6 +18,14 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
+__all__ = [
+    "ALGOS", "FORKSERVER_PRELOAD", "HP_NUMBERS", "HP_SCHEDULES", "HYPERPARAMS_DIR", "META_KEYS", "RunSettings",
+    "WARM_STEPS", "check_env_kwargs", "check_hyperparams", "check_train_args", "eval_policy_kwargs", "limit_threads",
+    "load_hyperparams", "make_vec_env", "metadata_path", "parse_env_kwargs", "policy_kwargs_by_name",
+    "resolve_policy_kwargs", "run_settings", "run_summary", "shield_setting", "tensorboard_available",
+    "update_threads_for", "warm_kernels", "worker_env_id", "write_summary",
+]
+
 ALGOS = ("ppo", "dqn", "dagger", "finetune")
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 #: keys of a hyperparameter entry that are not arguments of the algorithm class

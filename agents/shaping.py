@@ -39,6 +39,8 @@ import gymnasium as gym
 from agents.expert import bumper_gap
 from rhs_common.validation import build, check_range, check_types
 
+__all__ = ["RewardShaping", "ShapingConfig", "time_to_collision", "ttc_penalty"]
+
 
 @dataclass(frozen=True)
 class ShapingConfig:

@@ -85,6 +85,11 @@ import numpy as np
 from agents.decision import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER
 from rhs_common.validation import build, check_int, check_range, check_types
 
+__all__ = [
+    "RadarShield", "ShieldAction", "ShieldConfig", "ShieldedPolicy", "check_shield_env", "nearest_object", "objects",
+    "road_offsets", "shield_record",
+]
+
 
 @dataclass(frozen=True)
 class ShieldConfig:

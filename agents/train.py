@@ -58,6 +58,11 @@ from agents.run_setup import (  # noqa: F401  (re-exported: the names users of a
     write_summary,
 )
 
+__all__ = [
+    "ALGOS", "BACKENDS", "HYPERPARAMS_DIR", "configure", "load_hyperparams", "metadata_path", "policy_kwargs_by_name",
+    "run", "train", "train_rllib_backend", "update_threads_for", "worker_env_id",
+]
+
 
 def _train_dagger(algo: str, env_id: str, timesteps: int | None, out: str | Path, seed: int, n_envs: int | None,
                   hyperparams: str | Path | None, env_kwargs: dict | None, progress: bool, torch_threads: int | None,

@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+__all__ = ["apply_motion", "circular_mean", "compose", "points_in_frame", "relative_motion", "rotation", "wrap_angle"]
+
 
 def wrap_angle(a):
     """Angles (rad) wrapped to ``[-pi, pi)``: ``(a + pi) mod 2 pi - pi``; a scalar stays a numpy scalar."""

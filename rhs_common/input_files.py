@@ -25,6 +25,11 @@ import re
 from pathlib import Path
 from typing import Any
 
+__all__ = [
+    "InputError", "MAX_BYTES", "MAX_DEPTH", "MAX_INT_DIGITS", "check_number", "nesting_depth", "parse_json",
+    "read_json", "read_text", "read_yaml",
+]
+
 #: deepest nesting of lists / objects accepted in a document
 MAX_DEPTH = 64
 #: most digits of an integer literal (2**63 has 19)

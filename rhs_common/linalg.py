@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+__all__ = ["batched_lstsq"]
+
 
 def batched_lstsq(atoms: np.ndarray, iota: np.ndarray) -> np.ndarray:
     """Batched least squares ``argmin_s ||A s - y||^2`` by the normal equations.

@@ -34,15 +34,8 @@ from typing import Any
 import numpy as np
 
 __all__ = [
-    "MeanInterval",
-    "format_record",
-    "mean_half_record",
-    "mean_interval",
-    "paired_difference",
-    "ratio_bootstrap",
-    "rmse_interval",
-    "t_quantile",
-    "wilson_interval",
+    "MeanInterval", "format_record", "mean_half_record", "mean_interval", "normal_quantile", "paired_difference",
+    "ratio_bootstrap", "rmse_interval", "t_quantile", "wilson_interval",
 ]
 
 

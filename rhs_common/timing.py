@@ -14,6 +14,8 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+__all__ = ["StageTimer"]
+
 
 class StageTimer:
     """Accumulates ``time.perf_counter`` seconds per stage name in :attr:`times`."""

@@ -71,6 +71,11 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+__all__ = [
+    "apply_moved_fields", "build", "check_bool", "check_choice", "check_int", "check_output_path", "check_range",
+    "check_types", "config_json", "flat_dict", "unknown_fields_message",
+]
+
 T = TypeVar("T")
 
 

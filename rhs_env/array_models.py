@@ -35,6 +35,12 @@ import numpy as np
 
 from rhs_common.validation import check_int, check_range, check_types
 
+__all__ = [
+    "ANTENNA_KINDS", "ArrayAntenna", "CARRIER_RANGE_HZ", "MAX_SLOTS", "PHASED_ARRAY_COST_RATIO", "RHSConfig",
+    "SPEC_BAND_HZ", "SPEED_OF_LIGHT", "ScanConfig", "check_amplitudes", "hologram_pattern", "phased_array",
+    "rhs_antenna", "steering",
+]
+
 SPEED_OF_LIGHT = 299_792_458.0  # m/s
 #: carriers accepted, Hz: the microwave and millimetre-wave radar bands (1 Hz would be a 300 000 km wavelength)
 CARRIER_RANGE_HZ = (1e9, 3e11)

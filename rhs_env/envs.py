@@ -444,4 +444,7 @@ class RHSPaperEnv(RHSHighwayEnv):
             self.road.vehicles.append(v)
 
 
-__all__ = ["PAPER_OBSTACLES", "PAPER_START", "RHSHighwayEnv", "RHSPaperEnv", "check_action", "check_config_types"]
+__all__ = [
+    "PAPER_OBSTACLES", "PAPER_START", "RHSDenseEnv", "RHSHighwayEnv", "RHSPaperEnv", "check_action",
+    "check_config_types",
+]

@@ -27,6 +27,11 @@ import numpy as np
 
 from rhs_common.validation import check_choice, check_int, check_range
 
+__all__ = [
+    "ACTION_TYPES", "CHECKS", "KINEMATICS_FEATURES", "MAX_OBSERVED_VEHICLES", "MAX_SPEED_MPS", "OBSERVATION_TYPES",
+    "SIMS", "check_highway_config", "check_numbers", "merge_config", "plain", "same_value",
+]
+
 #: highway-env's action and observation types (``action_factory`` / ``observation_factory``)
 ACTION_TYPES = ("ContinuousAction", "DiscreteAction", "DiscreteMetaAction", "MultiAgentAction")
 OBSERVATION_TYPES = ("TimeToCollision", "Kinematics", "OccupancyGrid", "KinematicsGoal", "GrayscaleObservation",

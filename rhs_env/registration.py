@@ -39,6 +39,12 @@ from typing import Any
 
 import gymnasium as gym
 
+__all__ = [
+    "DENSE_ID", "ENV_SPECS", "HIGHWAY_ID", "HIGHWAY_RADAR_ID", "HIGHWAY_SLAM_ID", "NULL_OBSERVATION", "PAPER_ID",
+    "SLAM_ENV_SPECS", "check_env_id", "make_highway_radar", "register_envs", "route_kwargs",
+    "with_cheap_base_observation",
+]
+
 HIGHWAY_ID = "rhs-highway-v0"
 HIGHWAY_RADAR_ID = "rhs-highway-radar-v0"
 HIGHWAY_SLAM_ID = "rhs-highway-slam-v0"

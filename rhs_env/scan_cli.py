@@ -29,6 +29,8 @@ from rhs_common.input_files import InputError, read_json
 from rhs_common.validation import check_output_path
 from rhs_env.array_models import ANTENNA_KINDS
 
+__all__ = ["MAX_COORD_M", "MAX_RCS_M2", "MAX_SPEED_MPS", "MAX_TARGETS", "SceneError", "configure", "parse_scene", "run"]
+
 #: bounds that keep one scan's work and arithmetic finite: an RCS of 1e300 m^2 overflows the
 #: echo power (and its sidelobes wipe out every other target); 10 000 targets is ~100x a highway scene
 MAX_RCS_M2 = 1e4

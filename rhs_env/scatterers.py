@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+__all__ = ["LOS_EPS", "Occluders", "Scatterers", "visible_mask"]
+
 # Relative tolerance on the ray parameter u: a point lying on an occluder
 # (u -> 1) is not hidden by it.
 LOS_EPS = 1e-9

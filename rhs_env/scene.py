@@ -47,6 +47,13 @@ from rhs_common.validation import (
 )
 from rhs_env.scatterers import Occluders, Scatterers
 
+__all__ = [
+    "DENSE_LANDMARKS", "LANDMARK_SIDES", "LandmarkConfig", "Landmarks", "MAX_SCATTER_RANGE_M", "OBJECT_ID_OFFSET",
+    "ScatterConfig", "VEHICLE_ID_OFFSET", "draw_disks", "ego_motion", "get_landmarks", "he_to_world_xy",
+    "place_roadside_landmarks", "scatterers_to_dict", "scene_scatterers", "vehicle_to_he_xy", "world_pose",
+    "world_surface_pixels", "world_to_he_xy",
+]
+
 #: object ids: landmarks are ``0 .. L-1``; other vehicles ``VEHICLE_ID_OFFSET + i``
 #: (``i`` = index in ``road.vehicles``); solid road objects ``OBJECT_ID_OFFSET + j``
 #: (``j`` = index in ``road.objects``). Ids are stable within an episode.

@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import get_window
 
+__all__ = ["WINDOWS", "make_window"]
+
 WINDOWS = ("hann", "hamming", "blackman", "boxcar", "taylor")
 
 

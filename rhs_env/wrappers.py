@@ -58,6 +58,8 @@ if TYPE_CHECKING:  # pragma: no cover - annotations only (the radar is imported 
     from rhs_env.radar import RadarSystem
     from rhs_env.scatterers import Scatterers
 
+__all__ = ["AMPLITUDE_MAX", "POINT_COLOR", "POINT_FEATURES", "RANGE_STD_MAX", "RadarObservation", "make_radar_config"]
+
 POINT_FEATURES = POINT_COLUMNS  # x, y, radial_velocity, amplitude, range_std, angle_std, radar
 RANGE_STD_MAX = 1e3  # m; a point without a usable SNR is clipped to this
 POINT_COLOR = (255, 40, 40)

@@ -45,6 +45,13 @@ from rhs_common.cache_dir import cache_subdir
 from rhs_common.validation import check_choice, config_json
 from rhs_env.array_models import RHSConfig, ScanConfig, check_amplitudes
 
+__all__ = [
+    "BUILD_ENV", "CACHE_ENV", "CHECKSUMS", "DATA_DIR", "FORMAT_VERSION", "LibraryRebuildWarning",
+    "MAX_IMPLICIT_BUILD_S", "METHODS", "PatternLibrary", "build_library", "cache_dir", "cache_path", "estimate_build_s",
+    "fields_hash", "file_sha256", "find_shipped", "get_library", "library_fields", "load", "method_settings",
+    "rebuild_command", "write_checksums",
+]
+
 METHODS = ("fast", "sdr")
 DATA_DIR = Path(__file__).resolve().parent / "data"
 #: the sha256 of every shipped file, by name, with the hash of its config (written by :func:`write_checksums`)

@@ -22,6 +22,11 @@ import numpy as np
 
 from rhs_env.array_models import RHSConfig, rhs_antenna
 
+__all__ = [
+    "FINE_GRID_POINTS", "GridReport", "delta_p1", "mainlobe_checks", "pattern_report", "pointing_error_deg",
+    "side_matrix", "sidelobe_directions", "two_way_power",
+]
+
 FINE_GRID_POINTS = 8001  # points in sin(theta) over [-1, 1] for PSLR / pointing
 
 

@@ -41,6 +41,8 @@ from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.parallel import parallel_map
 from rhs_env.patterns.metrics import side_matrix, sidelobe_directions
 
+__all__ = ["SDRSettings", "SDR_SOLVERS", "build_sdr", "optimize_grid_sdr"]
+
 SDR_SOLVERS = ("CLARABEL", "SCS")
 
 

@@ -2,3 +2,5 @@
 
 It runs on any point cloud and imports neither gymnasium nor ``rhs_env`` (tested).
 """
+
+__all__: list[str] = []

@@ -36,6 +36,11 @@ import numpy as np
 from rhs_common.geometry import compose, points_in_frame
 from rhs_common.validation import check_int, check_range, check_types
 
+__all__ = [
+    "CNNRegistration", "CNNTrainConfig", "DEFAULT_WEIGHTS", "GridMapConfig", "TRAIN_COMMAND", "build_network",
+    "grid_map", "load_weights", "pair_input", "train_cnn", "weights_record",
+]
+
 DEFAULT_WEIGHTS = Path(__file__).parent.parent / "data" / "registration_cnn.pt"
 #: how the weights are made (``rhs_studies.train_registration``)
 TRAIN_COMMAND = "python scripts/train_registration.py"

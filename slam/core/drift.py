@@ -32,6 +32,8 @@ import math
 
 import numpy as np
 
+__all__ = ["DriftCovariance", "drift_step"]
+
 
 def drift_step(cov: np.ndarray, heading: float, motion: np.ndarray, densities: tuple[float, float, float]) -> np.ndarray:
     """``P'`` after the motion ``motion`` (3,) from the heading ``heading`` (rad) (module docstring);

@@ -39,6 +39,8 @@ from dataclasses import dataclass
 
 from rhs_common.validation import check_int, check_range, check_types
 
+__all__ = ["HealthConfig", "TrackHealth"]
+
 
 @dataclass(frozen=True)
 class HealthConfig:

@@ -48,6 +48,15 @@ from slam.core.health import HealthConfig, TrackHealth
 from slam.core.rbpf import RBPFSlam, SlamConfig, SlamEstimate
 from slam.core.registration import ICPRegistration, OdometryRegistration, Registration
 
+__all__ = [
+    "CycleResult", "DOPPLER_GATE_CROSS_M", "DRIFT_ALONG_M2PM", "DRIFT_CROSS_M2PM", "DRIFT_HEADING_RAD2PM",
+    "LATERAL_ACCEL_MAX", "PipelineConfig", "RECHECK_BELOW", "RECHECK_GAIN", "RELOC_CELL_M", "RELOC_GATE_M",
+    "RELOC_GRID", "RELOC_MAX_SIGMAS", "RELOC_MIN_FRACTION", "RELOC_MIN_POINTS", "RELOC_REACH_M", "RELOC_YAW_RAD",
+    "RELOC_YAW_STEPS", "SLIP_FREE", "SLIP_REGISTRATION_CHECK", "SLIP_TURN_END", "SlamPipeline", "TURN_GAIN",
+    "TURN_RATE_MIN", "WIDE_YAW_STARTS", "doppler_displacement", "doppler_ego_motion", "forward_speed_fit",
+    "static_mask", "within_doppler_gate",
+]
+
 #: the drift densities of :mod:`slam.core.drift` (along, cross: m^2 per m driven; heading: rad^2 per m): 1 cm,
 #: 5.5 cm and 1.2 mrad after 1 km (the heading's share of the cross-track std: 0.68 m). Measured on the
 #: tuning drives (seeds 1000-1009: IDM and the shipped policy on rhs-highway-slam-v0, IDM on rhs-dense-v0;

@@ -108,7 +108,10 @@ from slam.core.association import (
     to_map_frame,
 )
 
-__all__ = ["SlamConfig", "SlamEstimate", "RBPFSlam", "StageTimer", "wrap_angle", "circular_mean"]
+__all__ = [
+    "Observations", "RBPFSlam", "SlamConfig", "SlamEstimate", "StageTimer", "circular_mean", "log_sum_exp",
+    "rotate_sym2", "wrap_angle",
+]
 
 _LOG2PI = math.log(2.0 * math.pi)
 VARIANTS = ("fastslam2", "fastslam1")

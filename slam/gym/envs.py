@@ -14,6 +14,8 @@ import gymnasium as gym
 
 from slam.gym import precompile
 
+__all__ = ["make_dense_slam", "make_highway_slam", "make_paper_slam", "make_slam_env"]
+
 
 def make_slam_env(env_cls: type[gym.Env] | str, kwargs: dict[str, Any]) -> gym.Env:
     """``env_cls`` (a highway-env scene, or its class name in :mod:`rhs_env.envs`) under the radar, SLAM and

@@ -37,6 +37,8 @@ from rhs_common.validation import check_bool, check_range
 from rhs_env.scene import get_landmarks, world_pose
 from slam.core.metrics import map_metrics
 
+__all__ = ["SlamMetricsInfo"]
+
 
 class SlamMetricsInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Adds the SLAM's ground truth and errors to ``info`` (see the module docstring).

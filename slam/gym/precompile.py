@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["start", "synthetic_cloud", "workload"]
+__all__ = ["main", "start", "synthetic_cloud", "workload"]
 
 _ENV_SWITCH = "RHS_SLAM_BACKGROUND_COMPILE"
 

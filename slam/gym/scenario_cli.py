@@ -31,6 +31,11 @@ import numpy as np
 from rhs_common.input_files import read_json
 from rhs_common.validation import check_choice, check_int, check_output_path
 
+__all__ = [
+    "ANTENNAS", "MAX_COORD_M", "MAX_CYCLES", "MAX_DT_S", "MAX_HEADING_RAD", "MAX_LANDMARKS", "MAX_RCS_M2",
+    "MAX_SPEED_MPS", "OPTIONAL", "REGISTRATIONS", "configure", "parse_scenario", "run", "run_scripted",
+]
+
 OPTIONAL = {"antenna", "seed", "dt", "registration", "rcs_m2", "grid_deg", "particles"}
 
 #: bounds that keep a run finite and physical: cycles and landmarks (work), coordinates,
