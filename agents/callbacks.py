@@ -7,6 +7,8 @@ import time
 import torch
 from stable_baselines3.common.callbacks import BaseCallback
 
+__all__ = ["CrashRateCallback", "PhaseTimer", "TqdmCallback", "UpdateThreads"]
+
 
 class TqdmCallback(BaseCallback):
     """Progress bar over environment steps (SB3's own needs the rich package)."""
