@@ -10,7 +10,9 @@ per-step progress bar, prints the return, collision, mean speed and SLAM errors
 cloud and the estimated map around the car, and the position error over time
 against the filter's own 2-sigma band), ``OUT/demo.json`` and, with
 ``--animation``, ``OUT/episode.gif`` of the rendered episode (radar points, true
-and estimated trajectory and map drawn over the road, a legend strip below).
+and estimated trajectory and map drawn over the road, a legend strip below);
+``--video PATH`` (``.gif``, or ``.mp4`` with the ``video`` extra) writes it through
+:class:`rhs_env.video.RecordEpisodeVideo`, with the SLAM health and position error in a status strip.
 """
 
 from __future__ import annotations
@@ -60,6 +62,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="rhs_slam_demo", help="output directory (default: ./rhs_slam_demo)")
     parser.add_argument("--animation", action="store_true", help="also write episode.gif of the rendered frames")
     parser.add_argument("--fps", type=float, default=5.0, help="GIF frame rate (default 5 = real time)")
+    parser.add_argument("--video", default=None, metavar="PATH",
+                        help="also write the episode as a .gif or .mp4 (radar points, SLAM estimate and health)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -67,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
 
     import rhs_env  # noqa: F401
     from rhs_common.validation import check_output_path
+    from rhs_env.video import RecordEpisodeVideo, check_video_path
 
     env = None
     try:
@@ -76,9 +81,13 @@ def run(args: argparse.Namespace) -> int:
         if not 0.1 <= args.fps <= 100:
             raise ValueError(f"--fps must be in [0.1, 100], got {args.fps}")
         env_id, env_kwargs = resolve_env(args.policy, args.env, parse_env_kwargs(args.env_kwargs))
-        if args.animation:
+        if args.video is not None:
+            check_video_path("--video", args.video)
+        if args.animation or args.video is not None:
             env_kwargs.setdefault("render_mode", "rgb_array")
         env = make_env(env_id, env_kwargs)
+        if args.video is not None:
+            env = RecordEpisodeVideo(env, args.video, fps=args.fps)
         policy = load_policy(args.policy, env, args.seed)
     except (ValueError, TypeError, FileNotFoundError, json.JSONDecodeError) as exc:
         print(f"rhs-slam demo: error: {exc}", file=sys.stderr)
@@ -123,6 +132,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         plot_summary({"env_id": env_id, "runs": [result]}, figure)
     summary["figure"] = str(figure)
+    if args.video is not None:  # written by RecordEpisodeVideo when the episode ended
+        summary["video"] = str(args.video)
     if frames:
         from PIL import Image  # pillow comes with matplotlib
 
