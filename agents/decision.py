@@ -70,7 +70,7 @@ def check_decision_interval(value: Any) -> int:
     """``value`` as an int in ``[1, MAX_DECISION_INTERVAL]``: ``TypeError`` if not an int, ``ValueError`` if out of
     range, both naming ``decision_interval``.
 
-    Example:
+    Examples:
         >>> check_decision_interval(5)
         5
         >>> check_decision_interval(0)
@@ -94,7 +94,7 @@ class HoldAction(gym.Wrapper):
     steps actually taken. Spaces are the env's. Wrap it outside a ``Monitor``
     so episode returns and lengths stay counted per env step.
 
-    Example:
+    Examples:
         >>> import gymnasium as gym
         >>> env = HoldAction(gym.make("CartPole-v1"), 5)
         >>> obs, info = env.reset(seed=0)
@@ -130,7 +130,7 @@ class HeldPolicy:
     Call :meth:`reset` at the start of each episode (``run_episode`` does), so
     the first step of every episode is a fresh decision.
 
-    Example:
+    Examples:
         >>> class Count:
         ...     calls = 0
         ...     def predict(self, obs, deterministic=True):

@@ -34,7 +34,7 @@ policy (``rhs-slam evaluate --policy headway``) it is a scripted reference; as
 the expert of :mod:`agents.imitation` it labels the states a learning policy
 visits. On the 50 policy seeds of ``rhs-highway-v0`` see ``results/policies.md``.
 
-Example:
+Examples:
     >>> import gymnasium as gym, rhs_env
     >>> env = gym.make("rhs-highway-v0", vehicles_count=5)
     >>> _ = env.reset(seed=0)
@@ -103,7 +103,7 @@ class HeadwayDriver:
         config: a :class:`HeadwayDriverConfig` or a dict of its fields.
     """
 
-    def __init__(self, env, config: Any = None):
+    def __init__(self, env: Any, config: Any = None):
         check_highway_env(env, "the headway driver")
         self.env = env
         self.config = build(HeadwayDriverConfig, config, "expert")

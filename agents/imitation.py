@@ -159,7 +159,7 @@ class ExpertActionInfo(gym.Wrapper):
     the ``(observation, expert action)`` of the steps since the previous one: the states between two
     decisions, labelled with what the expert would decide there (``DaggerConfig.label_between``).
 
-    Example:
+    Examples:
         >>> import gymnasium as gym, rhs_env
         >>> env = ExpertActionInfo(gym.make("rhs-highway-v0", vehicles_count=5))
         >>> _, info = env.reset(seed=0)

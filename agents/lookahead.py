@@ -23,7 +23,7 @@ traffic (150 frames with the defaults, about 0.12 s per decision on one core, ``
 triple it). It reads ``env.unwrapped.road`` and ``.vehicle`` and ignores the
 observation, like :class:`agents.expert.HeadwayDriver`.
 
-Example:
+Examples:
     >>> import gymnasium as gym, rhs_env
     >>> env = gym.make("rhs-highway-v0", vehicles_count=5)
     >>> _ = env.reset(seed=0)
@@ -109,7 +109,7 @@ class LookaheadDriver:
         config: a :class:`LookaheadDriverConfig` or a dict of its fields.
     """
 
-    def __init__(self, env, config: Any = None):
+    def __init__(self, env: Any, config: Any = None):
         check_highway_env(env, "the lookahead driver")
         self.env = env
         self.config = build(LookaheadDriverConfig, config, "lookahead")

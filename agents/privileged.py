@@ -78,7 +78,7 @@ def _side_lanes(road, lane_index) -> tuple[Any, Any]:
 def privileged_features(env: gym.Env, expert: HeadwayDriver | None = None) -> np.ndarray:
     """The critic's ground-truth vector of the module docstring (float32, length :data:`PRIVILEGED_DIM`).
 
-    Example:
+    Examples:
         >>> import gymnasium as gym, rhs_env
         >>> env = gym.make("rhs-highway-v0")
         >>> _ = env.reset(seed=0)
@@ -115,7 +115,7 @@ def without_privileged(space: gym.spaces.Dict) -> gym.spaces.Dict:
 class PrivilegedObservation(gym.ObservationWrapper):
     """Add :func:`privileged_features` to a Dict observation under :data:`PRIVILEGED_KEY` (for a critic).
 
-    Example:
+    Examples:
         >>> import gymnasium as gym, rhs_env
         >>> env = PrivilegedObservation(gym.make("rhs-highway-radar-v0", radar={"scan": {"grid_deg": 5}}))
         >>> obs, _ = env.reset(seed=0)

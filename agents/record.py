@@ -37,7 +37,7 @@ import re
 import sys
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -53,6 +53,9 @@ from agents.evaluate import (
     run_episode,
 )
 from agents.expert import HeadwayDriver
+
+if TYPE_CHECKING:
+    from minari.data_collector import EpisodeBuffer
 
 __all__ = [
     "DATASET_ID", "KINEMATICS_FEATURES", "KINEMATICS_VEHICLES", "MINARI_HINT", "NAMESPACE", "SCHEMA_VERSION",
@@ -126,7 +129,7 @@ class StepRecorder:
         env: the env being driven (any of the project's ids whose ego is a highway-env vehicle).
     """
 
-    def __init__(self, env) -> None:
+    def __init__(self, env: Any) -> None:
         from highway_env.envs.common.observation import KinematicObservation
 
         self.env = env
@@ -180,7 +183,7 @@ def _stack(items: list[Any]) -> Any:
     return np.stack([np.asarray(it) for it in items])
 
 
-def record_episode(env, policy, seed: int, recorder: StepRecorder, episode_id: int):
+def record_episode(env: Any, policy: Any, seed: int, recorder: StepRecorder, episode_id: int) -> EpisodeBuffer:
     """One episode as a :class:`minari.data_collector.EpisodeBuffer` (observations and infos: T + 1 entries).
 
     Args:

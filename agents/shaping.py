@@ -84,7 +84,7 @@ class RewardShaping(gym.Wrapper):
     """Subtract :func:`ttc_penalty` of the state reached and, for a step the shield replaced, ``shield_cost`` from
     each step's reward (see the module docstring); ``info["shaping"]`` is the sum subtracted (<= 0).
 
-    Example:
+    Examples:
         >>> import gymnasium as gym, rhs_env
         >>> env = RewardShaping(gym.make("rhs-highway-v0", vehicles_count=5), {"ttc_s": 3.0})
         >>> _ = env.reset(seed=0)

@@ -57,7 +57,7 @@ the ego sits ``o = p_y - w round(p_y / w)`` left of its lane's centre, so a poin
 left of that centre and in the left (right) lane when ``w/2 < Y + o < w/2 + band``
 (``-w/2 - band < Y + o < -w/2``), ``band = lane_band_m``; the roadside posts stand beyond it.
 
-Example:
+Examples:
     >>> import numpy as np
     >>> shield = RadarShield()
     >>> car = np.array([[12.0, 0.3, -8.0, 1.0], [12.5, -0.4, -8.0, 1.0]])  # two points, closing at 8 m/s
@@ -239,7 +239,7 @@ class ShieldedPolicy:
     Wrap it outside :class:`agents.decision.HeldPolicy`, so the steps between decisions are shielded
     too. :func:`agents.evaluate.run_episode` calls :meth:`reset` at each episode start.
 
-    Example:
+    Examples:
         >>> import numpy as np
         >>> class Faster:
         ...     def predict(self, obs, deterministic=True):
@@ -272,7 +272,7 @@ class ShieldAction(gym.Wrapper):
     """The shield inside an env (for training under it): each step's action is filtered on the last observation;
     ``info["shield"]`` is the reason of a replacement or None. Wrap it inside :class:`agents.decision.HoldAction`.
 
-    Example:
+    Examples:
         >>> import gymnasium as gym, rhs_env
         >>> env = ShieldAction(gym.make("rhs-highway-radar-v0", vehicles_count=5))
         >>> _ = env.reset(seed=0)

@@ -370,7 +370,7 @@ def python_body(kernel: Any, *python_callees: str) -> Callable:
     selects and loops, so it computes the same bits as the compiled kernel (tested for the OMP). A plain
     function (``NUMBA_DISABLE_JIT=1``) is returned as it is.
 
-    Example:
+    Examples:
         >>> import numpy as np
         >>> from rhs_common.jit import njit, python_body
         >>> double = njit(lambda v: 2.0 * v, cache=False)

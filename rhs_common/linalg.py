@@ -14,7 +14,7 @@ def batched_lstsq(atoms: np.ndarray, iota: np.ndarray) -> np.ndarray:
     ``s = (A^H A + 1e-12 I)^-1 A^H y`` per batch entry; the tiny ridge keeps a
     Gram matrix of coincident atoms solvable.
 
-    Example:
+    Examples:
         >>> a = np.eye(3)[None, :, :2]  # two orthonormal atoms in C^3
         >>> batched_lstsq(a, np.array([[[2.0], [3.0], [5.0]]]))[0, :, 0].round(6).tolist()
         [2.0, 3.0]

@@ -16,7 +16,7 @@
 All take ``level`` (default 0.95). scipy is imported inside the functions, so
 importing this module costs no more than numpy.
 
-Example:
+Examples:
     >>> iv = mean_interval([1.0, 2.0, 3.0, 4.0])
     >>> round(iv.mean, 3), round(iv.half_width, 3), iv.n
     (2.5, 2.054, 4)

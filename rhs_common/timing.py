@@ -1,6 +1,6 @@
 """Wall-time per named stage, for the benchmark's stage tables.
 
-Example:
+Examples:
     >>> timer = StageTimer()
     >>> with timer("predict"):
     ...     _ = sum(range(10))

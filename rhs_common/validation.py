@@ -23,7 +23,7 @@ subprocess vector envs, and ~100 lines here cost less than a dependency whose
 error format (pydantic's multi-line reports, cattrs' exception groups) we would
 have to translate back into one line that names the field.
 
-Example:
+Examples:
     >>> from dataclasses import dataclass
     >>> @dataclass(frozen=True)
     ... class Inner:

@@ -80,7 +80,7 @@ import numpy as np
 from scipy import special, stats
 
 from rhs_env.point_cloud import AngleDictionary, cfar_alpha
-from rhs_env.radar_config import DETECTORS
+from rhs_env.radar_config import DETECTORS, RadarConfig
 
 __all__ = ["DETECTORS", "FootprintDetector", "beam_footprints", "os_alpha_fast", "training_step", "union_false_alarm"]
 
@@ -253,7 +253,7 @@ class FootprintDetector:
         window: the range window w (N,).
     """
 
-    def __init__(self, dic: AngleDictionary, config, noise_cell_var: float, leak: np.ndarray,
+    def __init__(self, dic: AngleDictionary, config: RadarConfig, noise_cell_var: float, leak: np.ndarray,
                  window: np.ndarray) -> None:
         cfg = config
         self.footprints, self.centres = beam_footprints(dic, cfg.scan.sector_deg)  # (I, J), (J,)

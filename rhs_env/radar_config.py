@@ -26,7 +26,7 @@ The flat field names of before the grouping (``cfar_pfa``, ``tx_power_dbm``,
 :func:`~rhs_common.validation.build` (``gym.make(..., radar={"cfar_pfa": 1e-5})``) they
 still work, with a ``DeprecationWarning`` naming the new path.
 
-Example:
+Examples:
     >>> cfg = RadarConfig(detection=DetectionConfig(pfa=1e-5), link=LinkBudgetConfig(tx_power_dbm=20.0))
     >>> cfg.detection.pfa, cfg.link.tx_power_dbm, cfg.waveform.samples
     (1e-05, 20.0, 400)

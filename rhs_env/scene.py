@@ -498,8 +498,8 @@ def _face_scatterers(objs: list, ids: np.ndarray, static: np.ndarray, ego_motion
 
 
 def scene_scatterers(
-    env,
-    ego=None,
+    env: Any,
+    ego: Any = None,
     config: ScatterConfig | Mapping[str, Any] | None = None,
     kernels: str = "numba",
 ) -> tuple[Scatterers, Occluders]:

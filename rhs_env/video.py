@@ -14,7 +14,7 @@ episode goes to ``NAME-1.gif``, the next to ``NAME-2.gif`` and so on (``written`
 suffix chooses the format: ``.gif`` needs only pillow (installed with matplotlib); ``.mp4`` needs
 ``imageio-ffmpeg`` (the ``video`` extra, which ships an ffmpeg binary), checked when the wrapper is made.
 
-Example:
+Examples:
     >>> import gymnasium as gym, rhs_env, tempfile, pathlib
     >>> out = pathlib.Path(tempfile.mkdtemp()) / "episode.gif"
     >>> env = RecordEpisodeVideo(gym.make("rhs-highway-v0", render_mode="rgb_array", duration=1), out)

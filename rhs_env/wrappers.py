@@ -117,7 +117,7 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             work and the env's), restored after each call (:mod:`rhs_common.threads`);
             default 1, ``None`` leaves the user's thread pools alone (opt into threads).
 
-    Example:
+    Examples:
         >>> import gymnasium as gym
         >>> from rhs_env.envs import RHSPaperEnv
         >>> env = RadarObservation(RHSPaperEnv(), radar={"scan": {"grid_deg": 5}}, max_points=32)

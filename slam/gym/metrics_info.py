@@ -48,7 +48,7 @@ class SlamMetricsInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
         map_gate_m: gate of the Hungarian map metric (m), > 0.
         landmarks_in_info: also add the variable-length true and estimated landmark arrays.
 
-    Example:
+    Examples:
         >>> import gymnasium as gym, rhs_env
         >>> env = gym.make("rhs-highway-slam-v0", radar={"scan": {"grid_deg": 5}}, vehicles_count=3)
         >>> _, info = env.reset(seed=0)

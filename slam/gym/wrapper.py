@@ -79,7 +79,7 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         blas_threads: BLAS / OpenMP threads inside ``step`` / ``reset``, restored after
             each call (:mod:`rhs_common.threads`); default 1, ``None`` leaves them alone.
 
-    Example:
+    Examples:
         >>> import gymnasium as gym, rhs_env
         >>> env = gym.make("rhs-highway-slam-v0", radar={"scan": {"grid_deg": 5}}, vehicles_count=3)
         >>> obs, info = env.reset(seed=0)
