@@ -223,7 +223,7 @@ def record_episode(env: Any, policy: Any, seed: int, recorder: StepRecorder, epi
                          rewards=rewards, terminations=terminations, truncations=truncations, infos=_stack(infos))
 
 
-def reference_returns(env, seeds: list[int]) -> dict[str, float]:
+def reference_returns(env: Any, seeds: list[int]) -> dict[str, float]:
     """Mean returns of the random and the IDM + MOBIL policy on ``seeds`` (Minari's ref_min / ref_max score)."""
     out = {}
     for name in ("random", "idm"):

@@ -112,7 +112,7 @@ def annotate(frame: np.ndarray, info: dict[str, Any], t_s: float, total: float,
 
     image = Image.fromarray(np.asarray(frame, dtype=np.uint8))
     if scale != 1.0:
-        image = image.resize((max(2, round(image.width * scale)), max(2, round(image.height * scale))), Image.LANCZOS)
+        image = image.resize((max(2, round(image.width * scale)), max(2, round(image.height * scale))), Image.Resampling.LANCZOS)
     w, h = image.size
     row_h, per_row = 14, max(1, w // 130)
     legend_rows = -(-len(legend) // per_row)
