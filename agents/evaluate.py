@@ -51,6 +51,8 @@ from agents.lookahead import LookaheadDriver
 from agents.run_setup import parse_env_kwargs
 from agents.shield import ShieldedPolicy, check_shield_env, shield_record
 from rhs_env.registration import SLAM_ENV_SPECS
+from slam.core.trajectory_formats import FORMAT_CHOICES, formats_of
+from slam.gym.trajectory import sim_time
 
 __all__ = [
     "ConstantPolicy", "DAGGER_CONTINUED_POLICY", "DAGGER_CRUISE30_CLOSE_POLICY", "DAGGER_CRUISE30_GAP_POLICY",
@@ -448,7 +450,7 @@ def run_episode(
     if trace is not None:
         trace.append((obs, info))
     total, steps, speeds, pos_err, head_err2 = 0.0, 0, [], [], []
-    true_xy, est_xy = [], []
+    true_xy, est_xy, true_poses, est_poses, times = [], [], [], [], []
     crashed, done = False, False
     while not done:
         action, _ = policy.predict(obs, deterministic=deterministic)
@@ -462,6 +464,9 @@ def run_episode(
             head_err2.append(float(info.get("heading_error_rad", np.nan)) ** 2)
             true_xy.append(np.asarray(info["true_pose"][:2], dtype=float).tolist())
             est_xy.append(np.asarray(info["estimated_pose"][:2], dtype=float).tolist())
+            true_poses.append(np.asarray(info["true_pose"], dtype=float).reshape(3).tolist())
+            est_poses.append(np.asarray(info["estimated_pose"], dtype=float).reshape(3).tolist())
+            times.append(sim_time(env, steps))
         if frames is not None:
             frames.append(env.render())
         if trace is not None:
@@ -487,10 +492,45 @@ def run_episode(
         "position_error_m": pos_err,
         "true_xy": true_xy,
         "estimated_xy": est_xy,
+        "time_s": times,  # the env's simulated time of each pose (one policy period per step)
+        "true_poses": true_poses,
+        "estimated_poses": est_poses,
         "landmarks_true": np.asarray(info.get("true_landmarks", np.zeros((0, 2)))).reshape(-1, 2).tolist(),
         "landmarks_est": np.asarray(info.get("estimated_landmarks", np.zeros((0, 2)))).reshape(-1, 2).tolist(),
         "shield_overrides": None if shield is None else dict(shield.overrides),
     }
+
+
+def write_run_trajectories(run: dict[str, Any], directory: str | Path, formats: tuple[str, ...] = ("tum",)) -> list[Path]:
+    """Write an episode's estimated and true trajectories (:func:`run_episode`'s ``estimated_poses``, ``true_poses``
+    and ``time_s``) as ``seed_<seed>_est.tum`` / ``_gt.tum`` (and ``.kitti``) in ``directory``, for ``evo_ape``
+    (no alignment: its APE is the episode's ``position_rmse_m``); nothing for an episode without SLAM poses.
+
+    Args:
+        run: one episode's record.
+        directory: the output folder.
+        formats: some of ``("tum", "kitti")``.
+
+    Returns:
+        The paths written.
+    """
+    from slam.core.trajectory_formats import write_trajectory_pair
+
+    if not run.get("estimated_poses"):
+        return []
+    return write_trajectory_pair(directory, f"seed_{run['seed']}", np.asarray(run["time_s"]),
+                                 np.asarray(run["estimated_poses"]), np.asarray(run["true_poses"]), formats)
+
+
+def check_trajectories(args: argparse.Namespace) -> None:
+    """``ValueError`` before any episode unless ``--trajectories`` is a folder that can be written and the env
+    (``--env``, else the policy's) is a SLAM id, whose info has the estimated and true poses."""
+    from rhs_common.validation import check_output_path
+
+    check_output_path("--trajectories", args.trajectories, directory=True)
+    env_id, _ = resolve_env(args.policy, args.env, parse_env_kwargs(args.env_kwargs))
+    if env_id.split(":")[-1] not in SLAM_ENV_IDS:
+        raise ValueError(f"--trajectories: {env_id} has no SLAM estimate to export; use one of {', '.join(SLAM_ENV_IDS)}")
 
 
 def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
@@ -699,6 +739,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="drive a policy saved with the shield (the shipped one) without it")
     parser.add_argument("--out", required=True, help="output JSON file")
     parser.add_argument("--figure", default=None, help="output PNG (default: the --out path with .png)")
+    parser.add_argument("--trajectories", default=None, metavar="DIR",
+                        help="also write each episode's estimated and true trajectories here (seed_<seed>_est.tum, "
+                        "seed_<seed>_gt.tum) for evo_ape / evo_traj (the SLAM ids)")
+    parser.add_argument("--trajectory-format", default="tum", choices=FORMAT_CHOICES,
+                        help="format of --trajectories: tum (timestamped), kitti (3x4 matrices) or both (default: tum)")
     parser.add_argument("--no-progress", action="store_true")
     parser.add_argument("--yes", action="store_true",
                         help=f"run an evaluation estimated above {MAX_UNCONFIRMED_HOURS:g} h (refused otherwise)")
@@ -710,6 +755,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         check_output_path("--out", args.out)
         check_output_path("--figure", args.figure or Path(args.out).with_suffix(".png"))
+        if args.trajectories is not None:
+            check_trajectories(args)
         if args.episodes < 1 or args.episodes > 100_000:
             raise ValueError(f"--episodes must be in [1, 100000], got {args.episodes}")
         if not 0 <= args.seed < 2**63:
@@ -725,6 +772,9 @@ def run(args: argparse.Namespace) -> int:
             max_hours=None if args.yes else MAX_UNCONFIRMED_HOURS,
             shield=False if args.no_shield else None if args.shield is None else parse_shield(args.shield),
         )
+        if args.trajectories is not None:  # the finished episodes' (all of them unless interrupted)
+            summary["trajectory_files"] = [str(f) for r in summary["runs"] for f in write_run_trajectories(
+                r, args.trajectories, formats_of(args.trajectory_format))]
     except (ValueError, TypeError, FileNotFoundError, json.JSONDecodeError) as exc:
         print(f"rhs-slam evaluate: error: {exc}", file=sys.stderr)
         return 2

@@ -21,8 +21,16 @@ Per cycle, three scores in [0, 1] (1 = healthy):
   a cycle (0.4 rad, 2 m across the road per 5 m driven).
 * **spread**: the particles' position std ``s = hypot(s_x, s_y)`` (m):
   ``h_spread = clip((s_lost - s) / (s_lost - s_ok), 0, 1)``.
+* **anchor**: after ``unanchored_cycles_ok`` consecutive cycles in which no observation was associated
+  with a map landmark (the particles' mean matches is 0), the score falls by ``1 / unanchored_cycles_ok``
+  per further cycle: the pose then comes from the odometry alone, whatever the other scores say (a scene
+  with nothing static, where the registration may still pair the points of cars). With
+  :attr:`TrackHealth.static_scene` False (the owner knows the scene holds nothing static: the SLAM wrapper
+  on a road without landmarks or obstacles) no cycle counts as associated, a match being one with a moving
+  car. A new map keeps the count (an empty map matches nothing); a relocalisation, a match with the old map,
+  clears it. On the straight-road drives a cycle without a match is the first of a map only.
 
-``health = min(h_match, h_reg, h_blind, h_spread)``. A cycle whose health is below ``lost_below``
+``health = min(h_match, h_reg, h_blind, h_spread, h_anchor)``. A cycle whose health is below ``lost_below``
 starts a **loss**. ``lost_below`` = 0.7: on the tuning drives (highway and dense, IDM, the shipped policy
 and random actions, seeds 1000-1029) no cycle with an error below 0.5 m scored below 0.8, while a sharp
 lane change that matched a quarter of the observations (health 0.57) left a 0.015 rad heading error
@@ -50,7 +58,8 @@ class HealthConfig:
     registration fit fraction scored 1; ``blind_cycles_ok`` [1, 1000]: cycles without a registration
     fit scored 1; ``spread_ok_m`` < ``spread_lost_m``: position stds scored
     1 and 0; ``lost_below`` [0, 1]: a health below this starts a loss; ``min_landmarks`` [0, 10^6]:
-    map landmarks needed before the matched fraction counts.
+    map landmarks needed before the matched fraction counts; ``unanchored_cycles_ok`` [1, 1000]: consecutive
+    cycles without an observation associated with the map scored 1.
     """
 
     match_lost: float = 0.1
@@ -61,6 +70,7 @@ class HealthConfig:
     spread_lost_m: float = 6.0
     lost_below: float = 0.7
     min_landmarks: int = 5
+    unanchored_cycles_ok: int = 3
 
     def __post_init__(self) -> None:
         check_types(self)
@@ -72,6 +82,7 @@ class HealthConfig:
         check_range("spread_lost_m", self.spread_lost_m, self.spread_ok_m, 1e6, low_open=True)
         check_range("lost_below", self.lost_below, 0.0, 1.0)
         check_int("min_landmarks", self.min_landmarks, 0, 1_000_000)
+        check_int("unanchored_cycles_ok", self.unanchored_cycles_ok, 1, 1000)
 
 
 def _clip01(x: float) -> float:
@@ -83,6 +94,8 @@ class TrackHealth:
 
     def __init__(self, config: HealthConfig | None = None) -> None:
         self.config = config if config is not None else HealthConfig()
+        #: the scene holds static features the map can anchor to (the owner sets it; False: no match counts)
+        self.static_scene = True
         self.reset()
 
     def reset(self) -> None:
@@ -92,6 +105,8 @@ class TrackHealth:
         self.h_spread = 1.0
         self.h_blind = 1.0
         self.blind = 0  # consecutive cycles without a registration fit
+        self.h_anchor = 1.0
+        self.unanchored = 0  # consecutive cycles without an observation associated with the map
         self.health = 1.0
         self.lost = False
         self.losses = 0  # losses started since the reset
@@ -121,7 +136,10 @@ class TrackHealth:
         self.h_blind = _clip01(1.0 - (self.blind - c.blind_cycles_ok) / c.blind_cycles_ok)
         s = position_std_m if math.isfinite(position_std_m) else c.spread_lost_m
         self.h_spread = _clip01((c.spread_lost_m - s) / (c.spread_lost_m - c.spread_ok_m))
-        self.health = min(self.h_match, self.h_reg, self.h_blind, self.h_spread)
+        self.unanchored = 0 if self.static_scene and n_matched > 0 else self.unanchored + 1
+        k = c.unanchored_cycles_ok
+        self.h_anchor = _clip01(1.0 - (self.unanchored - k) / k)
+        self.health = min(self.h_match, self.h_reg, self.h_blind, self.h_spread, self.h_anchor)
         if self.lost:
             self.lost_cycles += 1
         elif self.health < c.lost_below:
@@ -135,11 +153,13 @@ class TrackHealth:
         """The filter found itself again in the map built before the loss."""
         self.lost = False
         self.lost_cycles = 0
-        self.h_match = self.h_reg = self.h_spread = self.h_blind = self.health = 1.0
-        self.blind = 0
+        self.h_match = self.h_reg = self.h_spread = self.h_blind = self.h_anchor = self.health = 1.0
+        self.blind = self.unanchored = 0
 
     def new_map(self) -> None:
-        """A new map started at the current estimate (a break in the map frame): not lost in it."""
-        losses = self.losses
+        """A new map started at the current estimate (a break in the map frame): not lost in it. The cycles
+        without an association carry on (an empty map anchors nothing), and so does their score."""
+        losses, unanchored, h_anchor = self.losses, self.unanchored, self.h_anchor
         self.reset()
-        self.losses = losses
+        self.losses, self.unanchored, self.h_anchor = losses, unanchored, h_anchor
+        self.health = h_anchor

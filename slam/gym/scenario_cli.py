@@ -13,7 +13,10 @@ Input JSON (``examples/scenario.json`` in the repository is one)::
 
 The radar synthesises and processes the echoes of the landmarks seen from each
 true pose; the SLAM runs through the same :class:`slam.core.pipeline.SlamPipeline`
-as the env. Output: ``estimated_poses`` and ``landmarks`` (map frame),
+as the env. With ``--trajectories DIR`` the estimated and true trajectories are also written as
+``DIR/<scenario stem>_est.tum`` and ``_gt.tum`` (``--trajectory-format kitti`` or ``both`` for KITTI's
+format; :mod:`slam.core.trajectory_formats`), times ``t * dt``, for ``evo_ape`` / ``evo_traj``; their APE
+(no alignment) is ``ate_rmse_m``. Output: ``estimated_poses`` and ``landmarks`` (map frame),
 ``ate_rmse_m``, ``map_rmse_m`` and the map match counts.
 """
 
@@ -30,6 +33,7 @@ import numpy as np
 
 from rhs_common.input_files import read_json
 from rhs_common.validation import check_choice, check_int, check_output_path
+from slam.core.trajectory_formats import FORMAT_CHOICES, formats_of
 
 __all__ = [
     "ANTENNAS", "MAX_COORD_M", "MAX_CYCLES", "MAX_DT_S", "MAX_HEADING_RAD", "MAX_LANDMARKS", "MAX_RCS_M2",
@@ -136,8 +140,27 @@ def parse_scenario(doc: Any) -> dict[str, Any]:
     return out
 
 
-def run_scripted(spec: dict[str, Any], progress: bool = False) -> dict[str, Any]:
-    """Run the radar + SLAM on a parsed scenario; returns the JSON-ready result."""
+def run_scripted(
+    spec: dict[str, Any],
+    progress: bool = False,
+    trajectories: str | Path | None = None,
+    formats: tuple[str, ...] = ("tum",),
+    stem: str = "scenario",
+) -> dict[str, Any]:
+    """Run the radar + SLAM on a parsed scenario; returns the JSON-ready result.
+
+    Args:
+        spec: a scenario from :func:`parse_scenario`.
+        progress: show a progress bar.
+        trajectories: also write the estimated and true trajectories into this folder
+            (:func:`slam.core.trajectory_formats.write_trajectory_pair`, unrounded, times ``t * dt``);
+            the result then lists them in ``trajectory_files``.
+        formats: their formats, some of ``("tum", "kitti")``.
+        stem: their file name stem.
+
+    Returns:
+        The JSON-ready result (poses and landmarks rounded to 0.1 mm).
+    """
     from rhs_env.array_models import ScanConfig
     from rhs_env.radar import RadarConfig, RadarSystem
     from slam.core.rbpf import SlamConfig
@@ -159,6 +182,13 @@ def run_scripted(spec: dict[str, Any], progress: bool = False) -> dict[str, Any]
         progress=progress,
     )
     nan_to_none = lambda v: None if v is None or not np.isfinite(v) else float(v)
+    files = {}
+    if trajectories is not None:
+        from slam.core.trajectory_formats import write_trajectory_pair
+
+        times = np.arange(len(res["true_poses"])) * spec["dt"]
+        paths = write_trajectory_pair(trajectories, stem, times, res["estimated_poses"], res["true_poses"], formats)
+        files = {"trajectory_files": [str(p) for p in paths]}
     return {
         "estimated_poses": np.round(res["estimated_poses"], 4).tolist(),
         "true_poses": np.round(res["true_poses"], 4).tolist(),
@@ -172,25 +202,34 @@ def run_scripted(spec: dict[str, Any], progress: bool = False) -> dict[str, Any]
         "antenna": spec["antenna"],
         "registration": spec["registration"],
         "seed": spec["seed"],
+        **files,
     }
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scenario", help="scenario JSON file (landmarks, poses, ...)")
     parser.add_argument("--out", required=True, help="result JSON file")
+    parser.add_argument("--trajectories", default=None, metavar="DIR",
+                        help="also write the estimated and true trajectories here (<scenario>_est.tum, <scenario>_gt.tum) "
+                        "for evo_ape / evo_traj")
+    parser.add_argument("--trajectory-format", default="tum", choices=FORMAT_CHOICES,
+                        help="format of --trajectories: tum (timestamped), kitti (3x4 matrices) or both (default: tum)")
     parser.add_argument("--no-progress", action="store_true")
 
 
 def run(args: argparse.Namespace) -> int:
     try:
         check_output_path("--out", args.out)
+        if args.trajectories is not None:
+            check_output_path("--trajectories", args.trajectories, directory=True)
         doc = read_json(args.scenario)
         try:
             spec = parse_scenario(doc)
         except (TypeError, ValueError) as exc:
             raise type(exc)(f"{args.scenario}: {exc}") from None
         try:
-            result = run_scripted(spec, progress=not args.no_progress)
+            result = run_scripted(spec, progress=not args.no_progress, trajectories=args.trajectories,
+                                  formats=formats_of(args.trajectory_format), stem=Path(args.scenario).stem)
         except FileNotFoundError as exc:  # e.g. the CNN registration weights are not there
             raise ValueError(str(exc)) from None
         try:
@@ -200,5 +239,6 @@ def run(args: argparse.Namespace) -> int:
     except (TypeError, ValueError) as exc:
         print(f"rhs-slam scenario: error: {exc}", file=sys.stderr)
         return 2
-    print(json.dumps({k: result[k] for k in ("ate_rmse_m", "map_rmse_m", "map_matched", "map_missed", "map_spurious")}))
+    keys = ("ate_rmse_m", "map_rmse_m", "map_matched", "map_missed", "map_spurious", "trajectory_files")
+    print(json.dumps({k: result[k] for k in keys if k in result}))
     return 0

@@ -41,6 +41,7 @@ on ``wrapper.stage_times``.
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import gymnasium as gym
@@ -50,7 +51,7 @@ from gymnasium import spaces
 from rhs_common.geometry import apply_motion, relative_motion
 from rhs_common.threads import blas_threads_limit, check_blas_threads
 from rhs_common.validation import build, check_bool, check_int
-from rhs_env.scene import draw_disks, he_to_world_xy, world_pose, world_surface_pixels
+from rhs_env.scene import draw_disks, get_landmarks, he_to_world_xy, world_pose, world_surface_pixels
 from slam.core.pipeline import PipelineConfig, SlamPipeline
 from slam.core.rbpf import SlamConfig, SlamEstimate
 from slam.core.registration import (
@@ -61,6 +62,22 @@ from slam.core.registration import (
 
 TRUE_COLOR = (30, 30, 30)
 EST_COLOR = (255, 140, 0)
+
+
+def static_features(env: gym.Env) -> int:
+    """Static features of an env's scene that the radar sees and the SLAM can map: its roadside landmarks
+    (:func:`rhs_env.scene.get_landmarks`; none on a plain highway-env env) plus the solid road objects
+    (highway-env's ``Obstacle``) when the radar scatters from them (``ScatterConfig.include_obstacles``)."""
+    base: Any = env.unwrapped
+    count = len(get_landmarks(base))
+    try:
+        obstacles = bool(getattr(env.get_wrapper_attr("scatter_config"), "include_obstacles", True))
+    except AttributeError:  # no radar wrapper says: the scene's scatterers include them by default
+        obstacles = True
+    road = getattr(base, "road", None)
+    if obstacles and road is not None:
+        count += sum(1 for o in road.objects if getattr(o, "solid", False) and getattr(o, "collidable", True))
+    return count
 
 
 class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
@@ -129,6 +146,7 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             reg, self.slam_config, np.random.default_rng(0), self.pipeline_config, sensor_xy=sensor_xy
         )
         self.max_landmarks = int(max_landmarks)
+        self._warned_no_static = False  # the no-static-scene warning is given once per wrapper
         self.stage_times_in_info = bool(stage_times_in_info)
         self.stage_times: dict[str, float] = {}
         big = np.float32(1e5)
@@ -175,8 +193,29 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         if self.registration_kind == "odometry":
             self.pipeline.registration = make_registration("odometry", rng, truth=self.true_motion)
         self.pipeline.reset(rng)
+        self._check_static_scene()
         self.origin = world_pose(self._base.vehicle)
         return self._observe(obs), self._with_info(info)
+
+    def _check_static_scene(self) -> None:
+        """Tell the health signal whether the scene holds anything static (:func:`static_features`), and warn
+        once when it holds fewer features than the health's ``min_landmarks``: the pose is then the odometry's."""
+        count = static_features(self.env)
+        self.pipeline.health.static_scene = count > 0
+        cfg = self.pipeline.health.config
+        if count < max(cfg.min_landmarks, 1) and not self._warned_no_static:
+            self._warned_no_static = True
+            name = getattr(self._base.spec, "id", None) or type(self._base).__name__
+            what = "no static landmarks or obstacles" if count == 0 else f"only {count} static landmark(s) or obstacle(s)"
+            warnings.warn(
+                f"SlamObservation: the scene of {name} has {what}, so the SLAM has next to nothing static to "
+                "map: its pose is odometry-only (Doppler and point-cloud registration, drifting without bound); "
+                "info['slam_health'] drops and info['slam_lost'] is set within "
+                f"{cfg.unanchored_cycles_ok + 1} cycles without a landmark match. The rhs SLAM envs "
+                "(rhs_env.registration) place roadside landmarks for a mapped pose.",
+                UserWarning,
+                stacklevel=4,
+            )
 
     def step(self, action):
         with blas_threads_limit(self.blas_threads):
