@@ -49,7 +49,7 @@ A real change of the code's output moves many values by more than that, and stil
    is busy), ``python scripts/reproduce.py --fingerprints-only --only NAME --reason
    "..."`` records the new fingerprint in ``fingerprints.json`` only. The results file
    still carries the old hash, so it is *unverified*: :func:`verification` says so,
-   ``scripts/update_readme.py`` puts a visible warning (with the reason) in the
+   ``scripts/write_results_pages.py`` puts a visible warning (with the reason) in the
    block of that result on its documentation page (and in the README's headline table
    when it feeds it), and the test checks that the pages carry it.
 

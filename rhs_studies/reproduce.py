@@ -1,7 +1,7 @@
 """Regenerate every file in ``results/`` and the pages that show them, or only some of them.
 
 Each step runs one script (a subprocess, single-threaded BLAS) with the options that
-made the published numbers, then ``scripts/update_readme.py`` copies the tables into
+made the published numbers, then ``scripts/write_results_pages.py`` copies the tables into
 the documentation's results pages (``docs/results/``) and the README's headline table.
 The run-time estimate comes from the ``provenance.wall_s`` each results file recorded
 (``STEPS[*].guess_s`` where none is recorded yet); the progress bar advances in
@@ -222,7 +222,7 @@ def run_steps(steps: list[Step], progress: bool) -> int:
             if proc.returncode != 0:
                 failed.append(s.name)
                 tqdm.write(f"reproduce: {s.name} failed (exit {proc.returncode}) after {_hms(time.time() - t0)}")
-    subprocess.run([sys.executable, str(SCRIPTS / "update_readme.py")], cwd=ROOT, check=False)
+    subprocess.run([sys.executable, str(SCRIPTS / "write_results_pages.py")], cwd=ROOT, check=False)
     if failed:
         print(f"reproduce: failed steps: {', '.join(failed)}", file=sys.stderr)
         return 1
@@ -252,7 +252,7 @@ def refresh_fingerprints(steps: list[Step], reason: str | None) -> int:
               f"{' '.join(changed)}) or record the change with --reason", file=sys.stderr)
         return 1
     if changed:
-        subprocess.run([sys.executable, str(SCRIPTS / "update_readme.py")], cwd=ROOT, check=False)
+        subprocess.run([sys.executable, str(SCRIPTS / "write_results_pages.py")], cwd=ROOT, check=False)
     return 0
 
 

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from rhs_studies import provenance as prov
-from rhs_studies import reproduce, update_readme
+from rhs_studies import reproduce, write_results_pages
 
 SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
 
@@ -119,7 +119,7 @@ def test_every_results_file_has_a_step_and_provenance_or_is_flagged():
         if not step.no_fingerprint:
             assert p.get("fingerprint"), f"results/{f.name}: no fingerprint in its provenance"
     # files without provenance are legal only while the pages show them as unverified
-    for page in update_readme.pages():
+    for page in write_results_pages.pages():
         text = page.read_text()
         for name in flagged:
             stem = Path(name).stem
@@ -130,17 +130,17 @@ def test_every_results_file_has_a_step_and_provenance_or_is_flagged():
 
 def test_readme_is_up_to_date_with_results_and_their_verification():
     """README.md and every docs page show the results as they are, with a warning on each unverified one."""
-    for page in update_readme.pages():
+    for page in write_results_pages.pages():
         text = page.read_text()
-        assert update_readme.render(text, RESULTS, page) == text, (
+        assert write_results_pages.render(text, RESULTS, page) == text, (
             f"{page.relative_to(prov.ROOT)} is out of date with results/ (or an unverified result lacks its "
-            "warning): run python scripts/update_readme.py"
+            "warning): run python scripts/write_results_pages.py"
         )
 
 
 def test_every_results_table_is_on_a_docs_page():
     """Each results/NAME.md is shown on the documentation site, and the README has its headline table."""
-    shown = "".join(p.read_text() for p in update_readme.pages() if p.name != "README.md")
+    shown = "".join(p.read_text() for p in write_results_pages.pages() if p.name != "README.md")
     for f in sorted(RESULTS.glob("*.md")):
         assert f"<!-- results:{f.stem} -->" in shown, f"results/{f.name} is on no page under docs/"
     assert "<!-- results:headline -->" in (prov.ROOT / "README.md").read_text()
@@ -241,7 +241,7 @@ def test_verification_and_readme_warning(tmp_path):
     assert not ok and "SLAM changed" in why
     (tmp_path / "fingerprints.json").write_text(json.dumps(fps))
     (tmp_path / "fig5c.md").write_text("| table |\n")
-    out = update_readme.render("a\n<!-- results:fig5c -->\nold\n<!-- /results:fig5c -->\n", tmp_path)
+    out = write_results_pages.render("a\n<!-- results:fig5c -->\nold\n<!-- /results:fig5c -->\n", tmp_path)
     assert "| table |" in out and "**Unverified:**" in out and "SLAM changed" in out
     assert "reproduce.py --only fig5c" in out
 
@@ -249,38 +249,38 @@ def test_verification_and_readme_warning(tmp_path):
 def test_figure_links_follow_the_page():
     """A results table's figure link (from the repository root) points at the figure from a docs page too."""
     md = "![map](results/fig5c.png) and [json](results/fig5c.json)"
-    assert update_readme.figure_links(md, prov.ROOT / "README.md") == md
-    assert update_readme.figure_links(md, prov.ROOT / "docs" / "results" / "fig5c.md") == "![map](fig5c.png) and [json](fig5c.json)"
-    assert update_readme.figure_links(md, prov.ROOT / "docs" / "index.md") == md
-    assert update_readme.figure_links(md, prov.ROOT / "docs" / "usage" / "x.md") == md.replace("](results/", "](../results/")
+    assert write_results_pages.figure_links(md, prov.ROOT / "README.md") == md
+    assert write_results_pages.figure_links(md, prov.ROOT / "docs" / "results" / "fig5c.md") == "![map](fig5c.png) and [json](fig5c.json)"
+    assert write_results_pages.figure_links(md, prov.ROOT / "docs" / "index.md") == md
+    assert write_results_pages.figure_links(md, prov.ROOT / "docs" / "usage" / "x.md") == md.replace("](results/", "](../results/")
 
 
 def test_headline_table_comes_from_the_results_and_flags_unverified_ones(tmp_path):
     """Every headline number is read from a results JSON; an unverified source gets its warning."""
     import shutil
 
-    names = {name for name, _ in update_readme.HEADLINE}
+    names = {name for name, _ in write_results_pages.HEADLINE}
     for name in names:
         shutil.copy(RESULTS / f"{name}.json", tmp_path / f"{name}.json")
     fps = prov.load_fingerprints(RESULTS / "fingerprints.json")
     (tmp_path / "fingerprints.json").write_text(json.dumps(fps))
-    table = update_readme.headline(tmp_path, fps)
-    assert table is not None and table.count("\n| ") == len(update_readme.HEADLINE)  # a row per entry
+    table = write_results_pages.headline(tmp_path, fps)
+    assert table is not None and table.count("\n| ") == len(write_results_pages.HEADLINE)  # a row per entry
     data = json.loads((tmp_path / "registration.json").read_text())
     data["icp"]["translation_rmse_m"] = 0.4321
     data.pop("provenance", None)
     (tmp_path / "registration.json").write_text(json.dumps(data))
-    table = update_readme.headline(tmp_path, fps)
+    table = write_results_pages.headline(tmp_path, fps)
     assert "0.432 m" in table and "**Unverified:**" in table and "registration.json" in table
     (tmp_path / "fig5a.json").unlink()
-    assert update_readme.headline(tmp_path, fps) is None  # a missing source: the block is left as it is
+    assert write_results_pages.headline(tmp_path, fps) is None  # a missing source: the block is left as it is
 
 
 def test_readme_block_drops_the_results_files_own_heading():
     """The README section has its heading; the block must not repeat it (or add an H1 mid-README)."""
-    assert update_readme.block_text("# SLAM accuracy\n\n| a |\n") == "| a |"
-    assert update_readme.block_text("### Claim\n| a |\n\n## kept\n") == "| a |\n\n## kept"
-    assert update_readme.block_text("| a |\n# not first\n") == "| a |\n# not first"
+    assert write_results_pages.block_text("# SLAM accuracy\n\n| a |\n") == "| a |"
+    assert write_results_pages.block_text("### Claim\n| a |\n\n## kept\n") == "| a |\n\n## kept"
+    assert write_results_pages.block_text("| a |\n# not first\n") == "| a |\n# not first"
 
 
 def test_write_json_records_provenance_outside_results(tmp_path):

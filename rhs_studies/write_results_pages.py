@@ -14,8 +14,8 @@ When ``results/NAME.json`` is not verified against the code (written before prov
 existed, or the code's fingerprint changed since the run, see ``rhs_studies/provenance.py``),
 the block ends with a visible warning saying why and which step to rerun.
 
-    python scripts/update_readme.py            # rewrite README.md and docs/**/*.md in place
-    python scripts/update_readme.py --check    # exit 1 if any of them is out of date
+    python scripts/write_results_pages.py            # rewrite README.md and docs/**/*.md in place
+    python scripts/write_results_pages.py --check    # exit 1 if any of them is out of date
 """
 
 from __future__ import annotations
@@ -299,7 +299,7 @@ def main() -> int:
             page.write_text(new)
             print(f"updated {page.relative_to(ROOT)}")
     if args.check and stale:
-        print(f"{', '.join(map(str, stale))} out of date with results/: run python scripts/update_readme.py", file=sys.stderr)
+        print(f"{', '.join(map(str, stale))} out of date with results/: run python scripts/write_results_pages.py", file=sys.stderr)
         return 1
     return 0
 
