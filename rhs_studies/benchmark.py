@@ -35,6 +35,11 @@ every section and printed beside it. Sections (``--sections``, default all):
   both synthesis fidelities;
 * ``patterns``: time to build the dtheta = 1 deg default library with each
   method (scripts/benchmark_patterns.py; SDR on a subset, extrapolated);
+* ``traffic``: the traffic alone, steps per second of highway-env's ``highway-fast-v0``, ``rhs-highway-v0``
+  stepped by highway-env (``sim="highway-env"``, the default) and by the compiled core (``sim="compiled"``,
+  :mod:`rhs_env.traffic`), round-robin on the same seeds and actions, with their default (Kinematics)
+  observation and with none (the radar and SLAM envs replace it); and the compiled core's first-step seconds
+  in a fresh process with an empty kernel cache (compile) and with the cache (load);
 * ``training``: PPO training steps/s with 2 subprocess envs on
   ``rhs-highway-slam-v0`` against ``rhs-highway-v0`` at the steady rate (from the second rollout on),
   with each run's start-up seconds beside it; goal >= 0.7x.
@@ -62,7 +67,7 @@ from rhs_studies.provenance import command_line, write_json
 
 ROOT = Path(__file__).resolve().parent.parent
 
-SECTIONS = ("envs", "start", "floor", "load", "vec", "radar", "patterns", "training")
+SECTIONS = ("envs", "start", "floor", "load", "vec", "radar", "patterns", "traffic", "training")
 GOALS = {"radar_env_over_base": 0.75, "slam_env_over_base": 0.67, "loaded_over_quiet": 0.85,
          "two_workers_over_one": 1.8, "ppo_slam_over_base": 0.7}
 START_GOALS_S = {"cold_s": 30.0, "warm_s": 5.0}  # first step of a new user: empty kernel cache / warm cache
@@ -310,6 +315,99 @@ def bench_start(repeats: int = 1) -> dict:
                warm_runs_s=[round(v, 2) for v in warm], background_runs_s=[round(v, 2) for v in background])
     out["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
     return out
+
+
+#: the envs of the ``traffic`` section: (label, id, kwargs); "bare": no base observation (the radar / SLAM envs')
+TRAFFIC_RUNS: tuple[tuple[str, str, dict[str, Any]], ...] = (
+    ("highway-fast-v0", "highway-fast-v0", {}),
+    ("rhs-highway-v0 (highway-env)", "rhs-highway-v0", {}),
+    ("rhs-highway-v0 (compiled)", "rhs-highway-v0", {"sim": "compiled"}),
+    ("rhs-highway-v0 bare (highway-env)", "bare", {}),
+    ("rhs-highway-v0 bare (compiled)", "bare", {"sim": "compiled"}),
+)
+#: a new process: time make + reset + the first step of the compiled env (its kernels compile or load there), after
+#: the imports (wall and CPU seconds)
+TRAFFIC_START_CODE = """
+import time, rhs_env, gymnasium as gym
+t0, c0 = time.perf_counter(), time.process_time()
+env = gym.make("rhs-highway-v0", sim="compiled"); env.reset(seed=0); env.step(1)
+print(time.perf_counter() - t0, time.process_time() - c0)
+"""
+
+
+def _make_traffic_env(env_id: str, kwargs: dict[str, Any]):
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401  (registers the ids)
+
+    if env_id == "bare":
+        from rhs_env.envs import RHSHighwayEnv
+        from rhs_env.registration import NULL_OBSERVATION
+
+        return RHSHighwayEnv(config={"observation": dict(NULL_OBSERVATION), **kwargs})
+    if env_id == "highway-fast-v0":
+        import highway_env  # noqa: F401  (registers highway-fast-v0)
+    return gym.make(env_id, **kwargs)
+
+
+def bench_traffic(steps: int, seed: int, block: int = 5) -> dict:
+    """Steps/s of :data:`TRAFFIC_RUNS`, round-robin in blocks of ``block`` steps on the same actions and seeds;
+    the compiled core's ratios with their 95 % intervals (:func:`ratio_interval`); its compile / load seconds."""
+    import tempfile
+    import warnings
+
+    out: dict[str, Any] = {"load_average_start": [round(x, 2) for x in os.getloadavg()]}
+    actions = np.random.default_rng(seed).integers(0, 5, size=steps)
+    recs = {label: {"env": _make_traffic_env(i, kw), "n": 0, "blocks": [], "dt": 0.0, "slam": [], "radar": []}
+            for label, i, kw in TRAFFIC_RUNS}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for rec in recs.values():
+            rec["env"].reset(seed=seed)
+            _time_block(rec, actions[:block], seed)  # warm (the compiled core's kernels load or compile here)
+            rec.update(n=0, blocks=[], dt=0.0)
+            rec["env"].reset(seed=seed)
+        for start in range(0, steps, block):
+            for rec in recs.values():
+                _time_block(rec, actions[start:start + block], seed)
+    for label, rec in recs.items():
+        out[label] = {"steps_per_s": rec["n"] / rec["dt"], "ms_per_step": 1e3 * rec["dt"] / rec["n"]}
+        rec["env"].close()
+    blocks = {label: np.asarray(rec["blocks"]) for label, rec in recs.items()}
+    for name, env, base in (("compiled_over_highway_env", "rhs-highway-v0 (compiled)", "rhs-highway-v0 (highway-env)"),
+                            ("compiled_over_highway_fast", "rhs-highway-v0 (compiled)", "highway-fast-v0"),
+                            ("bare_compiled_over_highway_env", "rhs-highway-v0 bare (compiled)",
+                             "rhs-highway-v0 bare (highway-env)"),
+                            ("bare_compiled_over_highway_fast", "rhs-highway-v0 bare (compiled)", "highway-fast-v0")):
+        out[name] = out[env]["steps_per_s"] / out[base]["steps_per_s"]
+        out[f"{name}_ci"] = ratio_interval(blocks[base], blocks[env])
+    with tempfile.TemporaryDirectory() as cache:
+        env_vars = {**os.environ, "NUMBA_CACHE_DIR": cache, "OMP_NUM_THREADS": "1"}
+        for key in ("first_step_compile_s", "first_step_cached_s"):
+            res = subprocess.run([sys.executable, "-c", TRAFFIC_START_CODE], cwd=ROOT, env=env_vars,
+                                 capture_output=True, text=True, check=True)
+            wall, cpu = res.stdout.strip().splitlines()[-1].split()
+            out[key], out[key[:-2] + "_cpu_s"] = float(wall), float(cpu)
+    out["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
+    return out
+
+
+def _md_traffic(result: dict) -> list[str]:
+    t = result["traffic"]
+    lines = [f"| traffic alone (round-robin, load {t['load_average_start'][0]:.1f}) | steps/s | ms/step |",
+             "|---|---:|---:|"]
+    lines += [f"| {label} | {t[label]['steps_per_s']:.1f} | {t[label]['ms_per_step']:.2f} |"
+              for label, _, _ in TRAFFIC_RUNS if label in t]
+    ci = t["compiled_over_highway_env_ci"]
+    bare = t["bare_compiled_over_highway_env_ci"]
+    lines += ["", f"The compiled core (`sim=\"compiled\"`): {t['compiled_over_highway_env']:.1f} x highway-env's "
+              f"steps/s on `rhs-highway-v0` (95 % [{ci[0]:.1f}, {ci[1]:.1f}]), {t['compiled_over_highway_fast']:.1f} x "
+              f"`highway-fast-v0`; without the Kinematics observation {t['bare_compiled_over_highway_env']:.0f} x "
+              f"(95 % [{bare[0]:.0f}, {bare[1]:.0f}]). Its make + reset + first step in a new process: "
+              f"{t['first_step_compile_s']:.1f} s ({t.get('first_step_compile_cpu_s', float('nan')):.1f} s of CPU) "
+              "with an empty kernel cache (compile), "
+              f"{t['first_step_cached_s']:.2f} s with the cache.", ""]
+    return lines
 
 
 def _wait_for_background_compile(cache: Path, t0: float, timeout_s: float = 600.0) -> float:
@@ -676,6 +774,8 @@ def markdown(result: dict) -> str:
                   + (f" (the radar and SLAM envs skip its {budget['kinematics_observation_ms']:.1f} ms Kinematics "
                      "observation)" if budget.get("kinematics_observation_ms") else "") + ".", ""]
     lines += _md_ratios(result)
+    if "traffic" in result:
+        lines += _md_traffic(result)
     if "radar" in result:
         lines += ["| one 4-radar scan, typical scene | synthesis (ms) | range/CFAR (ms) | OMP (ms) | total (ms) |",
                   "|---|---:|---:|---:|---:|"]
@@ -744,6 +844,8 @@ def _run_section(sec: str, args: argparse.Namespace) -> dict:
         from rhs_studies.benchmark_patterns import benchmark_patterns
 
         return benchmark_patterns(grid_deg=1.0)
+    if sec == "traffic":
+        return bench_traffic(args.steps, args.seed, block=args.block)
     return bench_training(args.train_steps, args.seed, args.train_repeats)
 
 

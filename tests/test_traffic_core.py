@@ -108,3 +108,35 @@ def test_kernel_python_body_matches_compiled():
     python(*py_args, 3, 0, core.ACTION_CODES["FASTER"], s.ctrl, 1 / 15)
     np.testing.assert_allclose(py_args[0], args[0], rtol=0, atol=1e-9)
     np.testing.assert_array_equal(py_args[1], args[1])
+
+
+def test_benchmark_traffic_section_markdown():
+    """scripts/benchmark.py's ``traffic`` section: its table and the ratio line from a result."""
+    from rhs_studies import benchmark
+
+    t = {label: {"steps_per_s": 10.0 * (i + 1), "ms_per_step": 100.0 / (i + 1)}
+         for i, (label, _, _) in enumerate(benchmark.TRAFFIC_RUNS)}
+    t.update(load_average_start=[1.0], compiled_over_highway_env=1.5, compiled_over_highway_env_ci=[1.4, 1.6],
+             compiled_over_highway_fast=3.0, bare_compiled_over_highway_env=40.0,
+             bare_compiled_over_highway_env_ci=[30.0, 50.0], first_step_compile_s=9.5,
+             first_step_compile_cpu_s=6.0, first_step_cached_s=0.4)
+    text = "\n".join(benchmark._md_traffic({"traffic": t}))
+    assert "| rhs-highway-v0 bare (compiled) | 50.0 | 20.00 |" in text
+    assert "1.5 x highway-env's steps/s" in text and "9.5 s (6.0 s of CPU)" in text
+    assert "traffic" in benchmark.SECTIONS
+
+
+def test_radar_env_sees_the_same_traffic():
+    """``rhs-highway-radar-v0`` with ``sim="compiled"``: the same point clouds as on highway-env (the radar reads the
+    written-back vehicles)."""
+    from conftest import small_env_kwargs
+
+    envs = [gym.make("rhs-highway-radar-v0", sim=sim, vehicles_count=10, **small_env_kwargs(slam=False))
+            for sim in ("highway-env", "compiled")]
+    for env in envs:
+        env.reset(seed=3)
+    for t in range(6):
+        (a, *_), (b, *_) = (env.step(0 if t == 0 else 3) for env in envs)
+        np.testing.assert_allclose(a["points"], b["points"], rtol=0, atol=1e-6)
+        np.testing.assert_array_equal(a["points_mask"], b["points_mask"])
+    assert envs[1].unwrapped.config["sim"] == "compiled"

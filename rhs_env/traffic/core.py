@@ -455,7 +455,11 @@ def simulate(f: np.ndarray, k: np.ndarray, p: np.ndarray, lanes: np.ndarray, spe
     """``frames`` iterations of ``AbstractEnv._simulate``, in place.
 
     Args:
-        f, k, p, lanes, speeds: the state (module docstring).
+        f: vehicle floats (the module docstring has the columns of every state array).
+        k: vehicle integers.
+        p: vehicle constants.
+        lanes: lane geometry.
+        speeds: the controlled vehicle's target speeds.
         frames: simulation frames to run.
         action_frame: the frame (0-based) at which the controlled vehicle takes ``action_code``; -1 for none.
         action_code: a code of :data:`ACTION_CODES`; an ``IDMVehicle`` in control ignores it (but acts once more
