@@ -22,7 +22,7 @@ action between, so every policy is scored per env step on the same seeds. A reco
 it, ``--no-shield`` drives a shielded one without. The default policy is the shipped one,
 ``agents/data/rl/shield_flank_explore_lane_time.zip`` (with its ``.json`` record): a PPO fine-tune (privileged
 critic, 40k env steps, :mod:`agents.finetune`) of the DAgger student below, trained and driven behind the radar
-shield, whose lane-change rule (``lane_time_s`` 2.5) was chosen on validation seeds (:mod:`rhs_studies.rl_lane_test`).
+shield, whose lane-change rule (``lane_time_s`` 2.5) was chosen on validation seeds (:mod:`rhs_studies.rl_lane_rule_trial`).
 Its start, ``agents/data/rl/dagger_cruise30_close.zip``, is the DAgger student of
 :class:`agents.expert.HeadwayDriver` (:mod:`agents.imitation`), ``agents/data/dagger_rhs_highway_slam.zip``,
 continued with DAgger for 80k env steps (``rl/dagger_continue_80k.zip``), then 40k with the headway driver
@@ -79,7 +79,7 @@ DAGGER_CONTINUED_POLICY = DATA_DIR / "rl" / "dagger_continue_80k.zip"
 DAGGER_CRUISE30_GAP_POLICY = DATA_DIR / "rl" / "dagger_cruise30_gap.zip"
 DAGGER_CRUISE30_CLOSE_POLICY = DATA_DIR / "rl" / "dagger_cruise30_close.zip"
 #: the PPO fine-tune of DAGGER_CRUISE30_CLOSE_POLICY under the shield (rhs_studies/rl_finetune.py's
-#: ``shield_flank_explore`` arm) behind the lane rule rhs_studies/rl_lane_test.py chose and tested (``--ship``)
+#: ``shield_flank_explore`` arm) behind the lane rule rhs_studies/rl_lane_rule_trial.py chose and tested (``--ship``)
 RL_FINETUNE_POLICY = DATA_DIR / "rl" / "shield_flank_explore_lane_time.zip"
 #: the policy of ``rhs-slam demo`` / ``evaluate`` by default, and the ground-truth student of the same expert
 SHIPPED_POLICY, SHIPPED_TRUTH_POLICY = RL_FINETUNE_POLICY, DAGGER_TRUTH_POLICY

@@ -45,6 +45,9 @@ from rhs_studies.provenance import (
 from rhs_studies.subprocess_env import study_env
 
 SCRIPTS = ROOT / "scripts"
+#: studies whose module was renamed after results were recorded: ``scripts/<launcher>.py`` (the recorded command and
+#: the key in fingerprints.json) runs ``rhs_studies.<module>``
+RENAMED_STUDIES = {"rl_lane_test": "rl_lane_rule_trial"}
 
 
 @dataclass(frozen=True)
@@ -127,10 +130,6 @@ STEPS: tuple[Step, ...] = (
          "short PPO and DAgger ablations (ablate_policy.REPRODUCE)",
          no_fingerprint="a record of training runs (minutes each even when tiny); "
          "the policies they make are evaluated on the same seeds as the policies step"),
-    Step("traffic_alignment", "traffic_alignment.py", (), ("traffic_alignment.json",), 600,
-         "the compiled traffic core against highway-env, 50 seeds x 200 steps per scene",
-         no_fingerprint="an equivalence check of two implementations, not numbers of the code: its differences are "
-         "rounding-level and vary by CPU; a short version runs in tests/test_traffic_core.py on every test run"),
     Step("benchmark_radar", "benchmark_radar.py", (), ("benchmark_radar.json",), 60, "timings",
          no_fingerprint="timings"),
     Step("benchmark", "benchmark.py", ("--out", "results/benchmark.json"), ("benchmark.json",), 900, "timings",
@@ -151,7 +150,7 @@ def step_for_result(result_name: str) -> Step | None:
 def load_script(script: str):
     """The module of ``scripts/<script>``: :mod:`rhs_studies.<name>` for the studies the script launches, else the
     script file itself imported as a module (the scripts that are not yet in the kit)."""
-    name = Path(script).stem
+    name = RENAMED_STUDIES.get(Path(script).stem, Path(script).stem)
     if importlib.util.find_spec(f"rhs_studies.{name}") is not None:
         return importlib.import_module(f"rhs_studies.{name}")
     if name in sys.modules:

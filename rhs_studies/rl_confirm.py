@@ -237,7 +237,7 @@ def fingerprint() -> list[float]:
 
 
 def study_arguments(ap: argparse.ArgumentParser, test_seed: int) -> None:
-    """The options of a study on fresh seeds (this one, :mod:`rhs_studies.rl_lane_test`): its validation and test
+    """The options of a study on fresh seeds (this one, :mod:`rhs_studies.rl_lane_rule_trial`): its validation and test
     seeds, workers and folders."""
     ap.add_argument("--validation-seed", type=int, default=7000, help="first validation seed (the choice)")
     ap.add_argument("--validation-episodes", type=int, default=100)

@@ -19,7 +19,7 @@ MODULES = (
     "agents.shield",
     "rhs_studies.rl_finetune",
     "rhs_studies.rl_confirm",
-    "rhs_studies.rl_lane_test",
+    "rhs_studies.rl_lane_rule_trial",
 )
 
 

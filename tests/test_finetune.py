@@ -477,9 +477,9 @@ def test_the_lane_test_chooses_the_rule_on_validation_seeds_and_drives_the_fine_
     validation collisions is the one the test drives; the test drives the start, the DAgger control and IDM + MOBIL
     with their own shields; used seeds are refused."""
     from agents.evaluate import policy_metadata
-    from rhs_studies import rl_confirm, rl_lane_test
+    from rhs_studies import rl_confirm, rl_lane_rule_trial
 
-    saved = policy_metadata(rl_lane_test.SHIPPED_DIR / f"{rl_lane_test.FINETUNE}.zip")["shield"]
+    saved = policy_metadata(rl_lane_rule_trial.SHIPPED_DIR / f"{rl_lane_rule_trial.FINETUNE}.zip")["shield"]
     shields = []
 
     def fake_run(policy, env_id, kwargs, seeds, workers, deterministic=True, shield=None):
@@ -495,32 +495,32 @@ def test_the_lane_test_chooses_the_rule_on_validation_seeds_and_drives_the_fine_
                 for k in keys}
 
     monkeypatch.setattr(rl_confirm, "run_policy", fake_run)  # drive_arm's
-    monkeypatch.setattr(rl_lane_test, "evaluate_rows", fake_rows)
-    result = rl_lane_test.lane_test(list(range(7000, 7010)), list(range(8000, 8010)), 1)
+    monkeypatch.setattr(rl_lane_rule_trial, "evaluate_rows", fake_rows)
+    result = rl_lane_rule_trial.lane_test(list(range(7000, 7010)), list(range(8000, 8010)), 1)
     assert [s for s, _ in shields] == [7000, 7000, 8000]
-    for (_, shield), rule in zip(shields, rl_lane_test.LANE_RULES.values()):
+    for (_, shield), rule in zip(shields, rl_lane_rule_trial.LANE_RULES.values()):
         assert shield == {**saved, **rule} and shield != saved  # one field changed, the rest as saved
     assert result["validation"]["chosen"] == "lane_time" and shields[2][1] == {**saved, "lane_time_s": 2.5}
     t = result["test"]["targets"]
-    assert t["arm"] == rl_lane_test.FINETUNE and t["gain_over_student"]["mean"] == pytest.approx(10.0)
+    assert t["arm"] == rl_lane_rule_trial.FINETUNE and t["gain_over_student"]["mean"] == pytest.approx(10.0)
     assert t["met"]["gain_over_student"] and t["met"]["collisions"]
-    assert "Chosen: **lane_time_s 2.5**" in rl_lane_test.markdown(result)
+    assert "Chosen: **lane_time_s 2.5**" in rl_lane_rule_trial.markdown(result)
     with pytest.raises(SystemExit):  # a test set the project has judged on already
-        rl_lane_test.main(["--seed", "6050", "--out-dir", str(tmp_path)])
+        rl_lane_rule_trial.main(["--seed", "6050", "--out-dir", str(tmp_path)])
     # shipping: refused unless every target was met; else the same zip, the record's shield with the rule's field
     import shutil
 
     for suffix in (".zip", ".json"):
-        shutil.copyfile(rl_lane_test.SHIPPED_DIR / f"{rl_lane_test.FINETUNE}{suffix}",
-                        tmp_path / f"{rl_lane_test.FINETUNE}{suffix}")
+        shutil.copyfile(rl_lane_rule_trial.SHIPPED_DIR / f"{rl_lane_rule_trial.FINETUNE}{suffix}",
+                        tmp_path / f"{rl_lane_rule_trial.FINETUNE}{suffix}")
     result["test"]["targets"]["met"]["return_vs_idm"] = False
     with pytest.raises(ValueError, match="return_vs_idm"):
-        rl_lane_test.ship(result, tmp_path / "rl_lane_test.json", tmp_path)
+        rl_lane_rule_trial.ship(result, tmp_path / "rl_lane_test.json", tmp_path)
     result["test"]["targets"]["met"] = dict.fromkeys(result["test"]["targets"]["met"], True)
-    out = rl_lane_test.ship(result, tmp_path / "rl_lane_test.json", tmp_path)
-    assert out.name == f"{rl_lane_test.FINETUNE}_lane_time.zip"
-    assert out.read_bytes() == (tmp_path / f"{rl_lane_test.FINETUNE}.zip").read_bytes()
+    out = rl_lane_rule_trial.ship(result, tmp_path / "rl_lane_test.json", tmp_path)
+    assert out.name == f"{rl_lane_rule_trial.FINETUNE}_lane_time.zip"
+    assert out.read_bytes() == (tmp_path / f"{rl_lane_rule_trial.FINETUNE}.zip").read_bytes()
     record = policy_metadata(out)
     assert record["shield"] == {**saved, "lane_time_s": 2.5} and record["shipped_by"]["shield_rule"] == {"lane_time_s": 2.5}
     assert {k: v for k, v in record.items() if k not in ("shield", "model", "shipped_by")} == \
-        {k: v for k, v in policy_metadata(tmp_path / f"{rl_lane_test.FINETUNE}.zip").items() if k not in ("shield", "model")}
+        {k: v for k, v in policy_metadata(tmp_path / f"{rl_lane_rule_trial.FINETUNE}.zip").items() if k not in ("shield", "model")}
