@@ -130,6 +130,10 @@ STEPS: tuple[Step, ...] = (
          "short PPO and DAgger ablations (ablate_policy.REPRODUCE)",
          no_fingerprint="a record of training runs (minutes each even when tiny); "
          "the policies they make are evaluated on the same seeds as the policies step"),
+    Step("traffic_alignment", "traffic_alignment.py", (), ("traffic_alignment.json",), 600,
+         "the compiled traffic core against highway-env, 50 seeds x 200 steps per scene",
+         no_fingerprint="an equivalence check of two implementations, not numbers of the code: its differences are "
+         "rounding-level and vary by CPU; a short version runs in tests/test_traffic_core.py on every test run"),
     Step("benchmark_radar", "benchmark_radar.py", (), ("benchmark_radar.json",), 60, "timings",
          no_fingerprint="timings"),
     Step("benchmark", "benchmark.py", ("--out", "results/benchmark.json"), ("benchmark.json",), 900, "timings",
