@@ -38,7 +38,7 @@ def scene_summary(scene: str, seeds: int, steps: int) -> dict[str, Any]:
     episodes = [align_episode(scene, seed, steps) for seed in range(seeds)]
     wall = time.perf_counter() - t0
     agree = [e for e in episodes if e.agrees and e.terminated_at == e.terminated_at_compiled]
-    summary = {
+    summary: dict[str, Any] = {
         "scene": scene,
         "seeds": seeds,
         "steps": steps,
