@@ -108,6 +108,9 @@ STEPS: tuple[Step, ...] = (
          "trains the DAgger policies (PPO: --algo ppo)", no_fingerprint="a record of training runs (timesteps, wall time); "
          "what the policies do is fingerprinted by the policies step"),
     Step("policies", "evaluate_policies.py", (), ("policies.json",), 220),
+    Step("episode_video", "make_video.py", (), ("episode_video.json",), 60,
+         no_fingerprint="an animation (results/episode.gif, the front page's video): pixels that no tolerance compares; "
+         "the drive it shows is the shipped policy's, whose numbers the policies step guards"),
     Step("rl_finetune", "rl_finetune.py", ("--train",), ("rl_finetune.json",), 16000,
          "PPO fine-tune of the student with its controls and the lookahead teacher's student (trains the arms missing "
          "in runs/rl: ~10-20 min per 20k env steps, ~45 min per 80k arm, ~35 min for the lookahead's 48k), then 100 "

@@ -1,9 +1,9 @@
 """MkDocs hooks of the documentation site (``mkdocs.yml``: ``hooks``).
 
 * ``on_files``: the figures live in ``results/`` (written by the scripts, next to the
-  tables they illustrate), outside ``docs/``. Every ``results/*.png`` is added to the
-  site as ``results/NAME.png``, so a page in ``docs/results/`` shows one with
-  ``![...](NAME.png)`` and MkDocs checks the link like any other.
+  tables they illustrate), outside ``docs/``. Every ``results/*.png`` (and ``*.gif``: the
+  front page's video) is added to the site as ``results/NAME.png``, so a page in
+  ``docs/results/`` shows one with ``![...](NAME.png)`` and MkDocs checks the link like any other.
 * ``on_page_markdown``: a line ``<!-- api: PACKAGE -->`` in a page becomes one
   mkdocstrings ``::: MODULE`` directive per module of that package, found by walking its
   folder when the site is built, so the API reference follows the packages as they are.
@@ -21,7 +21,7 @@ API = re.compile(r"^<!-- api: (?P<package>[\w.]+) -->$", re.MULTILINE)
 
 
 def on_files(files: Files, config) -> Files:
-    for png in sorted((ROOT / "results").glob("*.png")):
+    for png in sorted([*(ROOT / "results").glob("*.png"), *(ROOT / "results").glob("*.gif")]):
         files.append(File(f"results/{png.name}", src_dir=str(ROOT), dest_dir=config["site_dir"],
                           use_directory_urls=config["use_directory_urls"]))
     return files
