@@ -48,7 +48,8 @@ class TrajectoryRecorder(gym.Wrapper, gym.utils.RecordConstructorArgs):
         env: an env whose ``info`` has ``true_pose`` and ``estimated_pose`` (3,) each step.
         directory: output folder (created).
         formats: some of ``("tum", "kitti")``.
-        prefix: file name prefix; the files are ``<prefix>_<episode:04d>_{est,gt}.<format>``.
+        prefix: file name prefix; the files are ``<prefix>_<episode:04d>_{est,gt}.<format>`` (the copies of a
+            vector env need a prefix or a directory each, or they write the same names).
 
     Attributes:
         paths: every file written so far.
