@@ -123,3 +123,16 @@ def test_demo_writes_the_video(tmp_path, capsys):
         assert im.n_frames == summary["steps"] + 1
     assert main(["demo", "--out", str(out), "--video", str(tmp_path / "v.webm")]) == 2
     assert "--video must end in .gif or .mp4" in capsys.readouterr().err
+
+
+def test_the_front_page_video_script(tmp_path):
+    from rhs_studies import make_video
+
+    assert make_video.main(["--policy", "constant:1", "--env", "rhs-highway-slam-v0", "--seconds", "1",
+                            "--out-dir", str(tmp_path)]) == 0
+    record = json.loads((tmp_path / "episode_video.json").read_text())
+    with Image.open(tmp_path / "episode.gif") as im:
+        assert im.n_frames == record["frames"] == record["steps"] + 1 == 6
+    assert record["bytes"] == (tmp_path / "episode.gif").stat().st_size < make_video.MAX_BYTES
+    assert record["provenance"]["command"][1] == "scripts/make_video.py"
+    assert make_video.main(["--seconds", "0.1", "--out-dir", str(tmp_path)]) == 2
