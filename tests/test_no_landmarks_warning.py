@@ -89,3 +89,12 @@ def test_a_slam_env_with_landmarks_does_not_warn():
         env.reset(seed=0)
     assert static_features(env) > 0 and env.get_wrapper_attr("pipeline").health.static_scene
     env.close()
+
+
+def test_a_lone_obstacle_counts_as_static_but_still_warns():
+    """merge-v0's one obstacle at the end of the ramp can be matched (the anchor score counts it), but it is no map."""
+    env = SlamObservation(RadarObservation(gym.make("merge-v0"), radar=FAST_RADAR), slam={"n_particles": 8})
+    with pytest.warns(UserWarning, match=r"only 1 static landmark\(s\) or obstacle\(s\)"):
+        env.reset(seed=0)
+    assert static_features(env) == 1 and env.pipeline.health.static_scene
+    env.close()
