@@ -13,6 +13,10 @@ against the filter's own 2-sigma band), ``OUT/demo.json`` and, with
 and estimated trajectory and map drawn over the road, a legend strip below);
 ``--video PATH`` (``.gif``, or ``.mp4`` with the ``video`` extra) writes it through
 :class:`rhs_env.video.RecordEpisodeVideo`, with the SLAM health and position error in a status strip.
+Each file is written atomically (:mod:`rhs_common.output_files`). Ctrl-C (SIGINT) during the
+episode or while the outputs are written ends it with one line on stderr and exit status 130:
+``OUT/demo.json`` then says what was done (the steps driven) with ``"partial": true`` and the
+files of a previous run are left as they were; before the episode starts nothing is written.
 """
 
 from __future__ import annotations
@@ -67,8 +71,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
-
     import rhs_env  # noqa: F401
     from rhs_common.validation import check_output_path
     from rhs_env.video import RecordEpisodeVideo, check_video_path
@@ -94,24 +96,54 @@ def run(args: argparse.Namespace) -> int:
         if env is not None:
             env.close()
         return 2
-    from tqdm.auto import tqdm
-
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     frames: list | None = [] if args.animation else None
     trace: list = []
     slam = _show_landmarks(env)
     print(f"rhs-slam demo: one episode of {env_id} (seed {args.seed}) with policy {args.policy}", file=sys.stderr)
+    summary: dict = {
+        "env_id": env_id,
+        "env_kwargs": {k: v for k, v in env_kwargs.items() if k != "render_mode"},
+        "policy": str(args.policy),
+        "seed": args.seed,
+    }
+    try:
+        return _episode_and_outputs(args, env, policy, out, summary, frames, trace, slam)
+    except KeyboardInterrupt:
+        return _interrupted(out, summary, trace, episode_steps(env))
+
+
+def _interrupted(out: Path, summary: dict, trace: list, total_steps: int | None) -> int:
+    """Ctrl-C: ``OUT/demo.json`` says what was done, marked ``"partial": true``; exit 130 (128 + SIGINT)."""
+    import signal
+
+    from rhs_common.output_files import write_text_atomic
+
+    done = "steps" in summary  # the episode had finished: the figure or the GIF was being written
+    if not done:
+        summary["steps"] = max(len(trace) - 1, 0)
+    summary.update(partial=True, interrupted="SIGINT")
+    write_text_atomic(out / "demo.json", json.dumps(summary, indent=2, default=json_default))
+    what = "while writing the outputs" if done else f"after {summary['steps']} of {total_steps or '?'} steps"
+    print(f"rhs-slam demo: interrupted (Ctrl-C) {what}; wrote {out / 'demo.json'} marked \"partial\": true",
+          file=sys.stderr)
+    return 128 + int(signal.SIGINT)
+
+
+def _episode_and_outputs(args, env, policy, out: Path, summary: dict, frames, trace: list, slam: bool) -> int:
+    """Drive the episode, then write the figure, the GIF and ``demo.json`` (each atomically), filling ``summary``."""
+    from tqdm.auto import tqdm
+
+    from rhs_common.output_files import atomic_output, write_text_atomic
+
+    env_id = summary["env_id"]
     try:
         with tqdm(total=episode_steps(env), desc="demo", unit="step") as bar:
             result = run_episode(env, policy, args.seed, frames=frames, trace=trace, bar=bar)
     finally:
         env.close()
-    summary = {
-        "env_id": env_id,
-        "env_kwargs": {k: v for k, v in env_kwargs.items() if k != "render_mode"},
-        "policy": str(args.policy),
-        "seed": args.seed,
+    summary.update({
         "return": result["return"],
         "steps": result["steps"],
         "crashed": result["crashed"],
@@ -124,13 +156,14 @@ def run(args: argparse.Namespace) -> int:
         "map_matched": result["map_matched"],
         "map_missed": result["map_missed"],
         "map_spurious": result["map_spurious"],
-    }
+    })
     figure = out / "trajectory_map.png"
     print(f"rhs-slam demo: writing {figure}", file=sys.stderr)
-    if slam:
-        plot_demo(trace, env_id, args.seed, figure, dt=1.0 / float(env.unwrapped.config["policy_frequency"]))
-    else:
-        plot_summary({"env_id": env_id, "runs": [result]}, figure)
+    with atomic_output(figure) as tmp:
+        if slam:
+            plot_demo(trace, env_id, args.seed, tmp, dt=1.0 / float(env.unwrapped.config["policy_frequency"]))
+        else:
+            plot_summary({"env_id": env_id, "runs": [result]}, tmp)
     summary["figure"] = str(figure)
     if args.video is not None:  # written by RecordEpisodeVideo when the episode ended
         summary["video"] = str(args.video)
@@ -143,9 +176,11 @@ def run(args: argparse.Namespace) -> int:
             print(f"rhs-slam demo: writing {gif} ({len(frames)} frames)", file=sys.stderr)
             images = [with_legend(Image.fromarray(np.asarray(f, dtype=np.uint8))) for f in frames]
             duration = max(20, round(1000.0 / max(args.fps, 0.1)))
-            images[0].save(gif, save_all=True, append_images=images[1:], duration=duration, loop=0)
+            with atomic_output(gif) as tmp:
+                images[0].save(tmp, save_all=True, append_images=images[1:], duration=duration, loop=0)
             summary["animation"] = str(gif)
-    (out / "demo.json").write_text(json.dumps(summary, indent=2, default=json_default))
+    summary["partial"] = False
+    write_text_atomic(out / "demo.json", json.dumps(summary, indent=2, default=json_default))
     print(json.dumps(summary, indent=2, default=json_default))
     return 0
 

@@ -32,13 +32,17 @@ at 30 m/s and a 2.0 s gap (``rl/dagger_cruise30_gap.zip``) and 40k more with it 
 
 An evaluation estimated above an hour (:func:`estimate_hours`, from the measured steps/s) needs
 ``--yes``. SIGTERM or Ctrl-C stop it at once: the finished episodes are written (``interrupted``
-names the signal) and the command exits 128 + the signal number, as ``rhs-slam train`` does.
+names the signal, ``partial`` is true) and the command exits 128 + the signal number, as ``rhs-slam train`` does.
+``--out`` and ``--figure`` are written atomically (:mod:`rhs_common.output_files`), and refused before any
+episode when one is the policy or its record, they are one path, or the figure's suffix is not a format
+matplotlib writes; so are ``--shield`` with ``--no-shield`` and ``--stochastic`` with a scripted driver.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -59,9 +63,10 @@ __all__ = [
     "DAGGER_POLICY", "DAGGER_TRUTH_POLICY", "DATA_DIR", "DEFAULT_ENV", "IDMMobilPolicy", "Interrupted",
     "MAX_UNCONFIRMED_HOURS", "PPO_POLICY", "PPO_TRUTH_POLICY", "PointColumnAdapter", "RADAR_STEPS_PER_S",
     "RL_FINETUNE_POLICY", "RandomPolicy", "SHIPPED_POLICY", "SHIPPED_TRUTH_POLICY", "SLAM_ENV_IDS", "STEPS_PER_S",
-    "check_spaces", "configure", "env_action", "episode_steps", "estimate_hours", "evaluate", "is_scripted",
-    "json_default", "load_policy", "make_env", "model_shield", "parse_env_kwargs", "parse_shield", "plot_summary",
-    "policy_metadata", "resolve_env", "run", "run_episode", "seed_sampling", "summarize",
+    "check_flags", "check_spaces", "configure", "env_action", "episode_steps", "estimate_hours", "evaluate",
+    "figure_suffixes", "is_scripted", "json_default", "load_policy", "make_env", "model_shield", "parse_env_kwargs",
+    "parse_shield", "plot_summary", "policy_files", "policy_metadata", "resolve_env", "run", "run_episode",
+    "seed_sampling", "summarize",
 ]
 
 DATA_DIR = Path(__file__).parent / "data"
@@ -749,12 +754,44 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help=f"run an evaluation estimated above {MAX_UNCONFIRMED_HOURS:g} h (refused otherwise)")
 
 
+def policy_files(policy: str | Path) -> list[tuple[str, Path]]:
+    """The files a policy is read from (the zip or checkpoint folder, and the JSON record beside it or beside the
+    file a symbolic link names) as ``(what, path)`` pairs; none for a scripted driver."""
+    if is_scripted(policy):
+        return []
+    records = {Path(policy).with_suffix(".json"), Path(os.path.realpath(policy)).with_suffix(".json")}
+    return [("--policy", Path(policy)), *(("the policy's record", r) for r in sorted(records))]
+
+
+def figure_suffixes() -> tuple[str, ...]:
+    """The suffixes matplotlib's Agg canvas saves (``.png``, ``.pdf``, ``.svg``, ...), with the dot."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    return tuple(sorted(f".{ext}" for ext in FigureCanvasAgg.get_supported_filetypes()))
+
+
+def check_flags(args: argparse.Namespace) -> None:
+    """``ValueError`` for flags that contradict each other, and for outputs that cannot be written as asked
+    (checked before any episode: an output onto an input, a figure format matplotlib does not write)."""
+    from rhs_common.output_files import check_output_file
+
+    if args.shield is not None and args.no_shield:
+        raise ValueError("--shield and --no-shield contradict each other: pass one of them")
+    if args.stochastic and is_scripted(args.policy):
+        raise ValueError(f"--stochastic: the scripted driver {args.policy!r} has no action distribution to sample "
+                         "(it is for a trained policy); drop --stochastic")
+    inputs = policy_files(args.policy)
+    check_output_file("--out", args.out, inputs=inputs)
+    figure = args.figure or Path(args.out).with_suffix(".png")
+    check_output_file("--figure" if args.figure else "--figure (default: --out with .png)", figure,
+                      inputs=[*inputs, ("--out", args.out)], suffixes=figure_suffixes())
+
+
 def run(args: argparse.Namespace) -> int:
-    from rhs_common.validation import check_output_path
+    from rhs_common.output_files import atomic_output, write_text_atomic
 
     try:
-        check_output_path("--out", args.out)
-        check_output_path("--figure", args.figure or Path(args.out).with_suffix(".png"))
+        check_flags(args)
         if args.trajectories is not None:
             check_trajectories(args)
         if args.episodes < 1 or args.episodes > 100_000:
@@ -779,26 +816,28 @@ def run(args: argparse.Namespace) -> int:
         print(f"rhs-slam evaluate: error: {exc}", file=sys.stderr)
         return 2
     out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
     figure = Path(args.figure) if args.figure else out.with_suffix(".png")
-    figure.parent.mkdir(parents=True, exist_ok=True)
     summary["figure"] = str(figure)
-    out.write_text(json.dumps(summary, indent=2, default=json_default))
-    plot_summary(summary, figure)
+    summary["partial"] = summary["interrupted"] is not None  # the episodes finished before the signal only
+    with atomic_output(figure) as tmp:  # the figure first: a JSON record is the sign the run was written out
+        plot_summary(summary, tmp)
+    write_text_atomic(out, json.dumps(summary, indent=2, default=json_default))
     brief = {k: v for k, v in summary.items() if k != "runs"}
     print(json.dumps(brief, indent=2, default=json_default))
     if summary["interrupted"]:
         import signal
 
         print(f"rhs-slam evaluate: interrupted ({summary['interrupted']}) after {summary['episodes']} of "
-              f"{args.episodes} episodes; wrote them to {out}", file=sys.stderr)
+              f"{args.episodes} episodes; wrote them to {out}, marked \"partial\": true", file=sys.stderr)
         return 128 + int(signal.Signals[summary["interrupted"]])
     return 0
 
 
 def parse_shield(text: str) -> dict[str, Any]:
     """``--shield``'s JSON object of :class:`agents.shield.ShieldConfig` fields, validated."""
-    value = json.loads(text)
+    from rhs_common.input_files import parse_json
+
+    value = parse_json(text, "--shield")
     if not isinstance(value, dict):
         raise TypeError(f"--shield must be a JSON object of ShieldConfig fields, got {text!r}")
     shield_record(value)  # a wrong field fails here, naming shield.<field>

@@ -10,8 +10,10 @@ Scene (vehicle frame, the ego at the origin heading +x; ``examples/scene.json`` 
 Output: ``{"points": [[x, y, radial_velocity, amplitude], ...], "radar": [...],
 "stage_times": {...}, "antenna": ..., "seed": ...}``. A malformed scene is
 refused with a one-line message on stderr naming the file and exit status 2: bytes that are
-not UTF-8, nesting, integers of many digits (:mod:`rhs_common.input_files`), strings or
-booleans where numbers go, values out of their bounds.
+not UTF-8, nesting, integers of many digits, keys given twice, a path that is not a regular
+file or over the size limit (:mod:`rhs_common.input_files`), strings or booleans where numbers go,
+values out of their bounds. ``--out`` may not be the scene itself nor a named pipe or device; it is
+written atomically (:mod:`rhs_common.output_files`): a failed run leaves the previous file whole.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from rhs_common.input_files import InputError, read_json
-from rhs_common.validation import check_output_path
+from rhs_common.output_files import check_output_file, write_text_atomic
 from rhs_env.array_models import ANTENNA_KINDS
 
 __all__ = ["MAX_COORD_M", "MAX_RCS_M2", "MAX_SPEED_MPS", "MAX_TARGETS", "SceneError", "configure", "parse_scene", "run"]
@@ -112,8 +114,8 @@ def run(args: argparse.Namespace) -> int:
     if args.seed is not None and not 0 <= args.seed < 2**63:
         return _fail(f"--seed must be an integer in [0, 2**63), got {args.seed}")
     try:
-        check_output_path("--out", args.out)
-    except ValueError as exc:
+        check_output_file("--out", args.out, inputs=[("the scene", args.scene)])
+    except (TypeError, ValueError) as exc:
         return _fail(str(exc))
     try:
         data = read_json(args.scene)
@@ -150,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
         "stage_times": {k2: float(v) for k2, v in cloud.stage_times.items()},
     }
     try:
-        Path(args.out).write_text(json.dumps(out) + "\n")
+        write_text_atomic(args.out, json.dumps(out) + "\n")
     except OSError as exc:
         return _fail(f"cannot write {args.out}: {exc.strerror or exc}")
     print(f"{len(cloud)} points from {k} targets ({antenna}, seed {seed}) -> {args.out}")

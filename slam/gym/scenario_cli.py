@@ -17,7 +17,8 @@ as the env. With ``--trajectories DIR`` the estimated and true trajectories are 
 ``DIR/<scenario stem>_est.tum`` and ``_gt.tum`` (``--trajectory-format kitti`` or ``both`` for KITTI's
 format; :mod:`slam.core.trajectory_formats`), times ``t * dt``, for ``evo_ape`` / ``evo_traj``; their APE
 (no alignment) is ``ate_rmse_m``. Output: ``estimated_poses`` and ``landmarks`` (map frame),
-``ate_rmse_m``, ``map_rmse_m`` and the map match counts.
+``ate_rmse_m``, ``map_rmse_m`` and the map match counts, written atomically
+(:mod:`rhs_common.output_files`); ``--out`` may not be the scenario file itself.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from rhs_common.input_files import read_json
+from rhs_common.output_files import check_output_file, write_text_atomic
 from rhs_common.validation import check_choice, check_int, check_output_path
 from slam.core.trajectory_formats import FORMAT_CHOICES, formats_of
 
@@ -219,7 +221,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        check_output_path("--out", args.out)
+        check_output_file("--out", args.out, inputs=[("the scenario", args.scenario)])
         if args.trajectories is not None:
             check_output_path("--trajectories", args.trajectories, directory=True)
         doc = read_json(args.scenario)
@@ -233,7 +235,7 @@ def run(args: argparse.Namespace) -> int:
         except FileNotFoundError as exc:  # e.g. the CNN registration weights are not there
             raise ValueError(str(exc)) from None
         try:
-            Path(args.out).write_text(json.dumps(result, indent=1))
+            write_text_atomic(args.out, json.dumps(result, indent=1))
         except OSError as exc:
             raise ValueError(f"cannot write {args.out}: {exc.strerror or exc}") from None
     except (TypeError, ValueError) as exc:
