@@ -63,6 +63,10 @@ __all__ = [
     "record_episode", "reference_returns", "run",
 ]
 
+__all__ = ["DATASET_ID", "KINEMATICS_FEATURES", "KINEMATICS_VEHICLES", "MINARI_HINT", "NAMESPACE", "SCHEMA_VERSION",
+           "SLAM_INFO_KEYS", "StepRecorder", "check_arguments", "configure", "datasets_root", "default_dataset_id",
+           "record_episode", "reference_returns", "run"]
+
 #: version of the layout below; bumped when a key changes meaning
 SCHEMA_VERSION = 1
 #: columns of the ground-truth Kinematics table (highway-env's KinematicObservation, unnormalised)

@@ -40,6 +40,9 @@ import numpy as np
 
 from rhs_common.validation import check_int, check_range
 
+__all__ = ["FORMATS", "LEGEND", "RADAR_LABELS", "SLAM_LABELS", "VIDEO_HINT", "RecordEpisodeVideo", "annotate",
+           "check_video_path", "legend_for", "status_line", "write_video"]
+
 #: what the frames show, colour -> label (rhs_env.wrappers.POINT_COLOR, rhs_env.envs.LANDMARK_COLOR,
 #: slam.gym.wrapper.TRUE_COLOR and EST_COLOR, highway-env's ego and IDM vehicles; tests/test_video.py checks them)
 LEGEND: tuple[tuple[tuple[int, int, int], str], ...] = (
