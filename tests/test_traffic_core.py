@@ -140,3 +140,21 @@ def test_radar_env_sees_the_same_traffic():
         np.testing.assert_allclose(a["points"], b["points"], rtol=0, atol=1e-6)
         np.testing.assert_array_equal(a["points_mask"], b["points_mask"])
     assert envs[1].unwrapped.config["sim"] == "compiled"
+
+
+def test_ground_truth_observation_and_info_match():
+    """``rhs-highway-v0``'s default Kinematics observation and its ``info`` (speed, crash, reward terms, world pose)
+    are the same on both sims."""
+    envs = [gym.make("rhs-highway-v0", sim=sim, vehicles_count=12) for sim in ("highway-env", "compiled")]
+    for env in envs:
+        env.reset(seed=11)
+    rng = np.random.default_rng(1)
+    for _ in range(30):
+        action = int(rng.integers(5))
+        (oa, ra, ta, ua, ia), (ob, rb, tb, ub, ib) = (env.step(action) for env in envs)
+        np.testing.assert_allclose(oa, ob, rtol=0, atol=1e-6)
+        assert (ta, ua, ia["crashed"]) == (tb, ub, ib["crashed"]) and abs(ra - rb) <= REWARD_TOL
+        assert ia["rewards"].keys() == ib["rewards"].keys()
+        for key, value in ia["rewards"].items():
+            assert abs(float(value) - ib["rewards"][key]) <= REWARD_TOL, key
+        np.testing.assert_allclose(ia["world_pose"], ib["world_pose"], rtol=0, atol=POSITION_TOL)
