@@ -158,3 +158,20 @@ def test_ground_truth_observation_and_info_match():
         for key, value in ia["rewards"].items():
             assert abs(float(value) - ib["rewards"][key]) <= REWARD_TOL, key
         np.testing.assert_allclose(ia["world_pose"], ib["world_pose"], rtol=0, atol=POSITION_TOL)
+
+
+def test_rendering_frame_by_frame_matches():
+    """With a viewer the core steps one frame at a time (highway-env renders the frames in between): the same
+    images and state as highway-env."""
+    envs = [gym.make("rhs-highway-v0", sim=sim, render_mode="rgb_array", vehicles_count=8)
+            for sim in ("highway-env", "compiled")]
+    for env in envs:
+        env.reset(seed=4)
+        env.render()
+    for _ in range(3):
+        for env in envs:
+            env.step(3)
+        a, b = (env.render() for env in envs)
+        np.testing.assert_array_equal(a, b)
+    xa, xb = (np.array([v.position for v in env.unwrapped.road.vehicles]) for env in envs)
+    np.testing.assert_allclose(xa, xb, rtol=0, atol=POSITION_TOL)
