@@ -24,7 +24,9 @@ datasets folder: load with ``MINARI_DATASETS_PATH=OUT`` and ``minari.load_datase
   seeds of the same env (``minari.get_normalized_score``), and the env spec to rebuild the env
   (``dataset.recover_environment()`` after ``import rhs_env``).
 
-The package ``minari`` (with ``h5py``) is the optional extra ``dataset``:
+Ctrl-C keeps the episodes that finished: they are written (without reference scores), the summary says
+``"interrupted": "SIGINT"`` and the command exits 130. The package ``minari`` (with ``h5py``) is the optional
+extra ``dataset``:
 ``pip install -c constraints/base.txt -e ".[dataset]"``.
 """
 
@@ -34,6 +36,7 @@ import argparse
 import json
 import os
 import re
+import signal
 import sys
 import warnings
 from pathlib import Path
@@ -65,7 +68,7 @@ __all__ = [
 
 __all__ = ["DATASET_ID", "KINEMATICS_FEATURES", "KINEMATICS_VEHICLES", "MINARI_HINT", "NAMESPACE", "SCHEMA_VERSION",
            "SLAM_INFO_KEYS", "StepRecorder", "check_arguments", "configure", "datasets_root", "default_dataset_id",
-           "record_episode", "reference_returns", "run"]
+           "record_episode", "reference_returns", "run", "write_dataset"]
 
 #: version of the layout below; bumped when a key changes meaning
 SCHEMA_VERSION = 1
@@ -249,7 +252,7 @@ def run(args: argparse.Namespace) -> int:
     from rhs_common.validation import check_output_path
 
     try:
-        import minari
+        import minari  # noqa: F401  (the optional extra: checked before any episode is driven)
     except ImportError:
         print(f"rhs-slam record: error: {MINARI_HINT}", file=sys.stderr)
         return 2
@@ -279,33 +282,67 @@ def run(args: argparse.Namespace) -> int:
     seeds = [args.seed + k for k in range(args.episodes)]
     print(f"rhs-slam record: {args.episodes} episode(s) of {env_id} with {args.policy} -> {root / dataset_id}",
           file=sys.stderr)
+    buffers: list = []
+    refs: dict[str, float] = {}
+    interrupted = False
     try:
         recorder = StepRecorder(env)
-        buffers = [record_episode(env, policy, s, recorder, k) for k, s in enumerate(tqdm(seeds, desc="record"))]
-        refs = reference_returns(env, seeds[: args.reference_episodes]) if args.reference_episodes else {}
-        os.environ["MINARI_DATASETS_PATH"] = str(root.resolve())
-        root.mkdir(parents=True, exist_ok=True)
-        scores = {"ref_min_score": refs["random"], "ref_max_score": refs["idm"],
-                  "num_episodes_average_score": args.reference_episodes} if refs else {}
-        with warnings.catch_warnings():  # Minari asks for an author, an e-mail and a code link: none to give
-            warnings.filterwarnings("ignore", message=r"`(author|author_email|code_permalink)` is set to None")
-            dataset = minari.create_dataset_from_buffers(
-                dataset_id, buffers, env=env, eval_env=env.spec, algorithm_name=str(args.policy),
-                description=_description(env_id, env_kwargs, args.policy, recorder),
-                data_format="hdf5", requirements=["rhs-slam"], **scores,
-            )
+        try:
+            for k, s in enumerate(tqdm(seeds, desc="record")):
+                buffers.append(record_episode(env, policy, s, recorder, k))
+            refs = reference_returns(env, seeds[: args.reference_episodes]) if args.reference_episodes else {}
+        except KeyboardInterrupt:  # the finished episodes are kept (without reference scores)
+            if not buffers:
+                raise
+            interrupted, refs = True, {}
+            print(f"rhs-slam record: interrupted (Ctrl-C) after {len(buffers)} of {args.episodes} episode(s); "
+                  "writing those", file=sys.stderr)
+        dataset = write_dataset(root, dataset_id, buffers, env, refs, len(seeds[: args.reference_episodes]),
+                                str(args.policy), _description(env_id, env_kwargs, args.policy, recorder))
     finally:
         env.close()
-    returns = [float(np.sum(b.rewards)) for b in buffers]
     summary = {
         "dataset_id": dataset_id, "path": str(root / dataset_id), "schema_version": SCHEMA_VERSION,
-        "env_id": env_id, "env_kwargs": env_kwargs, "policy": str(args.policy), "seeds": seeds,
+        "env_id": env_id, "env_kwargs": env_kwargs, "policy": str(args.policy), "seeds": seeds[: len(buffers)],
         "episodes": dataset.total_episodes, "steps": dataset.total_steps,
-        "mean_return": float(np.mean(returns)), "reference_returns": refs,
+        "mean_return": float(np.mean([float(np.sum(b.rewards)) for b in buffers])), "reference_returns": refs,
         "expert_agreement": _agreement(buffers),
     }
+    if interrupted:
+        summary["interrupted"] = "SIGINT"
     print(json.dumps(summary, indent=2, default=json_default))
-    return 0
+    return 128 + int(signal.SIGINT) if interrupted else 0
+
+
+def write_dataset(root: Path, dataset_id: str, buffers: list, env: Any, refs: dict[str, float], reference_episodes: int,
+                  algorithm: str, description: str) -> Any:
+    """Write ``buffers`` as the Minari dataset ``root/dataset_id`` (HDF5) with the reference scores ``refs``.
+
+    Args:
+        root: the Minari datasets folder (created).
+        dataset_id: the Minari id.
+        buffers: the episodes (:func:`record_episode`).
+        env: the env they were recorded on (its spec is the dataset's, for ``recover_environment``).
+        refs: ``{"random": return, "idm": return}`` or ``{}`` (no reference scores).
+        reference_episodes: the episodes each reference return is a mean over.
+        algorithm: the dataset's ``algorithm_name`` (the policy).
+        description: the dataset's description.
+
+    Returns:
+        The :class:`minari.MinariDataset`.
+    """
+    import minari
+
+    os.environ["MINARI_DATASETS_PATH"] = str(root.resolve())
+    root.mkdir(parents=True, exist_ok=True)
+    scores = {"ref_min_score": refs["random"], "ref_max_score": refs["idm"],
+              "num_episodes_average_score": reference_episodes} if refs else {}
+    with warnings.catch_warnings():  # Minari asks for an author, an e-mail and a code link: none to give
+        warnings.filterwarnings("ignore", message=r"`(author|author_email|code_permalink)` is set to None")
+        return minari.create_dataset_from_buffers(
+            dataset_id, buffers, env=env, eval_env=env.spec, algorithm_name=algorithm, description=description,
+            data_format="hdf5", requirements=["rhs-slam"], **scores,
+        )
 
 
 def _agreement(buffers) -> float | None:

@@ -123,3 +123,25 @@ def test_behaviour_cloning_from_the_dataset(recorded, tmp_path):
         assert int(policy.predict(o)[0]) in range(5)
     finally:
         env.close()
+
+
+def test_ctrl_c_keeps_the_finished_episodes(tmp_path, monkeypatch, capsys):
+    """Interrupted in the second episode, the first is written (without reference scores) and the exit is 130."""
+    calls = []
+    real = record.record_episode
+
+    def interrupted_second(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(record, "record_episode", interrupted_second)
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
+    code = main(["record", "--policy", "headway", "--episodes", "3", "--env-kwargs", json.dumps(SMALL),
+                 "--out", str(tmp_path)])
+    assert code == 130
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["interrupted"] == "SIGINT" and summary["episodes"] == 1 and summary["seeds"] == [0]
+    ds = minari.load_dataset(DATASET_ID)
+    assert ds.total_episodes == 1 and "ref_min_score" not in ds.storage.metadata
