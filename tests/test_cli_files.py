@@ -4,15 +4,20 @@
 ``python -m rhs_slam.cli ARGV`` in a scratch folder, in a child process with a time limit (a
 named pipe, ``/dev/zero`` or a YAML alias bomb hung or filled the memory before), and must
 end with exit status 2 and one line on stderr that holds every fragment, no traceback, before
-any work: the inputs are unchanged and no result file appears. :data:`WORKS` are the neighbours
-that must still work. Beside the tables: ``--version``, Ctrl-C in ``demo`` and ``evaluate`` (each
-in a child that sends itself SIGINT at a chosen moment), the atomic writer, and
-seeded cases of the reader rules (a key given twice is refused; aliases are followed up to a node budget).
+any work: the inputs are unchanged and no result file appears. Beside the table: the neighbours
+that must still work (an output through a symlink or over an old result, the shipped YAML files
+with their aliases, a merge key overridden), ``--version``, Ctrl-C in ``demo``, ``evaluate`` and
+``scenario`` (each in a child that sends itself SIGINT at a chosen moment), the atomic writer, and
+seeded cases of the reader rules (a key given twice is refused; aliases are followed up to a node
+budget).
 
-Measured before the changes (the 27 rows of FAULTS): 11 silently accepted (the scene / scenario
-overwritten by its own result, duplicate keys, contradictory flags), 6 hangs (named pipes, the
-alias bomb), 1 out of memory (``/dev/zero``), 5 tracebacks or a refusal only after the whole
-evaluation (``--figure``), 4 refused already (a directory, the limit variable's own rows are new).
+Run against the tree before these checks, 39 of the tests here failed: every row of FAULTS but
+the directory one (the named pipes and the alias bomb hung to the time limit; the scene, the
+scenario and the policy record were overwritten; keys given twice and contradictory flags were
+accepted; ``--figure x.txt`` failed with a traceback only after the evaluation), ``--version``, the
+five Ctrl-C cases of ``demo`` and ``evaluate`` (tracebacks, no ``partial``), the duplicate-key rule
+and the five alias cases past the budget (two of them still walking the document after 10 s).
+``/dev/zero`` as a scene read without end (still reading after 10 s under a 4 GB memory limit).
 """
 
 from __future__ import annotations
@@ -293,6 +298,15 @@ def test_evaluate_interrupted_while_writing_leaves_no_record(tmp_path):
     _interrupted(EVALUATE, tmp_path, "agents.evaluate:plot_summary:1")
     assert (tmp_path / "ev.json").read_text() == "an earlier run"
     assert not (tmp_path / "ev.png").exists() and _no_temporaries(tmp_path) == []
+
+
+def test_scenario_interrupted_keeps_the_earlier_result(tmp_path):
+    """Any other command: one line, exit 130, and the result file of an earlier run is left whole."""
+    _setup(tmp_path, {**SCEN, "out.json": "an earlier run"})
+    _, last = _interrupted(["scenario", "sc.json", "--out", "out.json", "--no-progress"], tmp_path,
+                           "slam.core.scenario:run_scenario:1")
+    assert last == "rhs-slam scenario: interrupted (Ctrl-C); stopped"
+    assert (tmp_path / "out.json").read_text() == "an earlier run" and _no_temporaries(tmp_path) == []
 
 
 # --------------------------------------------------------------------------- the writer, and the rules
