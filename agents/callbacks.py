@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
+from typing import Any
 
 import torch
 from stable_baselines3.common.callbacks import BaseCallback
 
-__all__ = ["CrashRateCallback", "PhaseTimer", "TqdmCallback", "UpdateThreads"]
+__all__ = ["AtomicCheckpoint", "CrashRateCallback", "PhaseTimer", "TqdmCallback", "UpdateThreads", "best_eval_return"]
 
 
 class TqdmCallback(BaseCallback):
@@ -123,3 +125,38 @@ class UpdateThreads(BaseCallback):
 
     def _on_training_end(self) -> None:
         torch.set_num_threads(self.collect)
+
+
+class AtomicCheckpoint(BaseCallback):
+    """Every ``save_freq`` calls (decisions per env), ``out/checkpoints/<algo>_<steps>_steps.zip`` as
+    stable-baselines3's ``CheckpointCallback`` names it, but written atomically with ``record`` inside
+    (:func:`agents.resume.save_checkpoint`; no replay buffer, as ``CheckpointCallback`` by default): a signal,
+    a crash or a full disk mid-write leaves the earlier checkpoints whole."""
+
+    def __init__(self, save_freq: int, out: str | Path, algo: str, record: dict[str, Any] | None = None) -> None:
+        super().__init__()
+        self.save_freq, self.out, self.algo, self.record = int(save_freq), Path(out), algo, record
+
+    def _on_step(self) -> bool:
+        from agents.resume import save_checkpoint
+
+        if self.n_calls % self.save_freq == 0:
+            save_checkpoint(self.model, self.out, self.algo, self.record, replay_buffer=False)
+        return True
+
+
+def best_eval_return(folder: str | Path) -> float:
+    """The best mean return of the evaluations logged in ``folder`` (``evaluations*.npz``; -inf: none), so a
+    resumed run's ``EvalCallback`` replaces ``best_model.zip`` only with a better one."""
+    import numpy as np
+
+    best = -np.inf
+    for path in sorted(Path(folder).glob("evaluations*.npz")):
+        try:
+            with np.load(path) as z:
+                results = np.asarray(z["results"], dtype=float)
+        except (OSError, ValueError, KeyError):
+            continue
+        if results.size:
+            best = max(best, float(np.max(results.reshape(len(results), -1).mean(axis=1))))
+    return float(best)

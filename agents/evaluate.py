@@ -66,7 +66,7 @@ __all__ = [
     "check_flags", "check_spaces", "configure", "env_action", "episode_steps", "estimate_hours", "evaluate",
     "figure_suffixes", "is_scripted", "json_default", "load_policy", "make_env", "model_shield", "parse_env_kwargs",
     "parse_shield", "plot_summary", "policy_files", "policy_metadata", "resolve_env", "run", "run_episode",
-    "seed_sampling", "summarize",
+    "seed_sampling", "summarize", "write_run_trajectories",
 ]
 
 DATA_DIR = Path(__file__).parent / "data"
@@ -178,18 +178,15 @@ class RandomPolicy:
         return self.space.sample(), None
 
 
-def policy_metadata(policy: str | Path) -> dict[str, Any]:
-    """The JSON beside a policy zip (env id, env kwargs, training settings), or ``{}``."""
+def policy_metadata(policy: str | Path, required: bool = False) -> dict[str, Any]:
+    """A policy's record (env id, env kwargs, training settings): the JSON beside the zip (or beside the file a
+    symbolic link names), else the one inside the zip (:func:`agents.policy_record.read_record`); ``{}`` for a
+    scripted driver. Without any record: ``{}``, or (``required``) a ``ValueError`` naming the missing JSON."""
+    from agents.policy_record import read_record
+
     if is_scripted(policy):
         return {}
-    path = Path(policy).with_suffix(".json")
-    if not path.exists():
-        return {}
-    try:
-        meta = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not valid JSON ({exc})") from None
-    return meta if isinstance(meta, dict) else {}
+    return read_record(policy, required=required)
 
 
 #: ids whose info carries the SLAM metrics (slam.gym.metrics_info.SlamMetricsInfo)
@@ -209,7 +206,7 @@ def resolve_env(
 
     if env_id is not None:
         check_env_id(env_id)
-    meta = policy_metadata(policy)
+    meta = policy_metadata(policy, required=True)
     meta_env = meta.get("env_id")
     env_id = env_id or meta_env or DEFAULT_ENV
     base = dict(meta.get("env_kwargs") or {}) if env_id == meta_env else {}
@@ -284,7 +281,7 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
     if env is not None:
         check_spaces(model, env, path)
         model = PointColumnAdapter.wrap(model, env)
-    meta = policy_metadata(path)
+    meta = policy_metadata(path, required=True)
     return _with_saved_shield(held(model, meta.get("decision_interval", 1), meta.get("decision_mode", "hold")),
                               meta, env)
 
@@ -324,7 +321,7 @@ def _load_rllib(path: Path, env=None):
     model = RLlibPolicy(path)
     if env is not None:
         check_spaces(model, env, path)
-    meta = policy_metadata(path)
+    meta = policy_metadata(path, required=True)
     return _with_saved_shield(held(model, meta.get("decision_interval", 1), meta.get("decision_mode", "hold")),
                               meta, env)
 
@@ -777,6 +774,9 @@ def check_flags(args: argparse.Namespace) -> None:
 
     if args.shield is not None and args.no_shield:
         raise ValueError("--shield and --no-shield contradict each other: pass one of them")
+    if args.shield is not None and str(args.policy).split(":", 1)[0] == "idm":
+        raise ValueError(f"--shield: the {args.policy!r} driver is highway-env's IDMVehicle, which ignores every "
+                         "action, so a shield could not act on it; drop --shield (or drive 'headway' behind it)")
     if args.stochastic and is_scripted(args.policy):
         raise ValueError(f"--stochastic: the scripted driver {args.policy!r} has no action distribution to sample "
                          "(it is for a trained policy); drop --stochastic")

@@ -19,11 +19,12 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
-    "ALGOS", "FORKSERVER_PRELOAD", "HP_NUMBERS", "HP_SCHEDULES", "HYPERPARAMS_DIR", "META_KEYS", "RunSettings",
-    "WARM_STEPS", "check_env_kwargs", "check_hyperparams", "check_train_args", "eval_policy_kwargs", "limit_threads",
-    "load_hyperparams", "make_vec_env", "metadata_path", "parse_env_kwargs", "policy_kwargs_by_name",
-    "resolve_policy_kwargs", "run_settings", "run_summary", "shield_setting", "tensorboard_available",
-    "update_threads_for", "warm_kernels", "worker_env_id", "write_summary",
+    "ALGOS", "EnvFactory", "FORKSERVER_PRELOAD", "HP_NUMBERS", "HP_SCHEDULES", "HYPERPARAMS_DIR", "META_KEYS",
+    "RunSettings", "WARM_STEPS", "check_env_kwargs", "check_hyperparams", "check_train_args", "eval_policy_kwargs",
+    "limit_threads", "load_hyperparams", "make_vec_env", "metadata_path", "parse_env_kwargs", "policy_kwargs_by_name",
+    "resolve_policy_kwargs", "run_record", "run_settings", "run_summary", "shield_setting",
+    "start_forkserver_ignoring_sigint", "tensorboard_available", "update_threads_for", "warm_kernels", "worker_env_id",
+    "write_summary",
 ]
 
 ALGOS = ("ppo", "dqn", "dagger", "finetune")
@@ -253,6 +254,7 @@ def make_vec_env(
     decision_interval: int = 1,
     wrapper: Callable[[Any], Any] | None = None,
     decision_mode: str = "hold",
+    monitor_suffix: str = "",
 ):
     """``n_envs`` copies of ``env_id`` (``Monitor`` logging ``crashed``), in subprocesses when n_envs > 1.
 
@@ -260,9 +262,12 @@ def make_vec_env(
     (the monitor still counts env steps and per-step rewards), which repeats the action
     or, with ``decision_mode="pulse"``, fills the steps after it with IDLE. ``wrapper`` (a picklable
     callable, env -> env) wraps each ``Monitor`` first, e.g.
-    :class:`agents.imitation.ExpertActionInfo`.
+    :class:`agents.imitation.ExpertActionInfo`. The monitor of env ``i`` writes
+    ``monitor_dir/<i><monitor_suffix>.monitor.csv`` (a resumed run: a new file beside the earlier ones).
+    The subprocess workers ignore SIGINT (:class:`EnvFactory`, :func:`start_forkserver_ignoring_sigint`): a
+    Ctrl-C in a terminal signals the whole process group, and the run's own handler stops them cleanly.
+    The envs are built as stable-baselines3's ``make_vec_env`` builds them (same seeds).
     """
-    from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     from agents.decision import HoldAction, check_decision_interval, fill_action
@@ -270,20 +275,75 @@ def make_vec_env(
     if n_envs < 1:
         raise ValueError(f"n_envs must be >= 1, got {n_envs}")
     k = check_decision_interval(decision_interval)
-    vec_cls = SubprocVecEnv if (subprocess and n_envs > 1) else DummyVecEnv
-    if vec_cls is SubprocVecEnv:
+    in_workers = subprocess and n_envs > 1
+    if in_workers:
         _preload_forkserver()
         warm_kernels(env_id, env_kwargs or {})
-    return sb3_make_vec_env(
-        worker_env_id(env_id),
-        n_envs=n_envs,
-        seed=seed,
-        env_kwargs=env_kwargs or {},
-        vec_env_cls=vec_cls,
-        monitor_dir=str(monitor_dir) if monitor_dir else None,
-        monitor_kwargs={"info_keywords": ("crashed",)},
-        wrapper_class=_compose(wrapper, partial(HoldAction, k=k, fill=fill_action(decision_mode)) if k > 1 else None),
-    )
+        start_forkserver_ignoring_sigint()
+    wrap = _compose(wrapper, partial(HoldAction, k=k, fill=fill_action(decision_mode)) if k > 1 else None)
+    factories = [EnvFactory(worker_env_id(env_id), rank, seed, dict(env_kwargs or {}),
+                            os.path.join(monitor_dir, f"{rank}{monitor_suffix}") if monitor_dir else None,
+                            wrap, ignore_sigint=in_workers) for rank in range(n_envs)]
+    venv = SubprocVecEnv(factories) if in_workers else DummyVecEnv(factories)  # type: ignore[arg-type]
+    venv.seed(seed)  # the seeds of the first reset, as stable-baselines3's make_vec_env sets them
+    return venv
+
+
+@dataclass(frozen=True)
+class EnvFactory:
+    """Builds env ``rank`` of a vector env in its worker, as stable-baselines3's ``make_vec_env`` does
+    (``render_mode="rgb_array"`` where the env takes it, the action space seeded ``seed + rank``, a ``Monitor``
+    logging ``crashed`` into ``monitor_file``, then ``wrapper``); ``ignore_sigint``: first set SIGINT to be
+    ignored in this (worker) process."""
+
+    env_id: str
+    rank: int
+    seed: int
+    env_kwargs: dict[str, Any]
+    monitor_file: str | None = None
+    wrapper: Callable[[Any], Any] | None = None
+    ignore_sigint: bool = False
+
+    def __call__(self) -> Any:
+        import gymnasium as gym
+        from stable_baselines3.common.monitor import Monitor
+
+        if self.ignore_sigint:
+            import signal
+
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            env = gym.make(self.env_id, **{"render_mode": "rgb_array", **self.env_kwargs})
+        except TypeError:
+            env = gym.make(self.env_id, **self.env_kwargs)
+        env.action_space.seed(self.seed + self.rank)
+        if self.monitor_file is not None:
+            os.makedirs(os.path.dirname(self.monitor_file), exist_ok=True)
+        env = Monitor(env, filename=self.monitor_file, info_keywords=("crashed",))
+        return self.wrapper(env) if self.wrapper is not None else env
+
+
+def start_forkserver_ignoring_sigint() -> None:
+    """Start multiprocessing's forkserver (where it is used and not running yet) with SIGINT ignored.
+
+    The forkserver hands its own SIGINT setting to every worker it forks, so the workers ignore a Ctrl-C from
+    their first instruction on (:class:`EnvFactory` sets it too, for a forkserver started elsewhere).
+    """
+    import multiprocessing
+    import signal
+    import threading
+
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return
+    if threading.current_thread() is not threading.main_thread():
+        return
+    from multiprocessing import forkserver
+
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # inherited by the server process it spawns
+    try:
+        forkserver.ensure_running()
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 #: env steps of :func:`warm_kernels`' workload: past the first scans, until the SLAM matches landmarks
@@ -469,10 +529,23 @@ def run_summary(algo: str, env_id: str, run: RunSettings, seed: int, decisions: 
     }
 
 
+def run_record(algo: str, env_id: str, run: RunSettings, seed: int) -> dict[str, Any]:
+    """What a checkpoint of a run carries inside its zip: the env and settings to drive and to resume it with."""
+    return {"algo": algo, "env_id": env_id.split(":", 1)[-1], "env_kwargs": run.env_kwargs, "policy": run.policy,
+            "decision_interval": run.decision_interval, "decision_mode": run.decision_mode, "n_envs": run.n_envs,
+            "seed": seed, "planned_timesteps": run.timesteps, "hyperparams": run.hp_record}
+
+
 def write_summary(out: Path, summary: dict[str, Any]) -> None:
-    """``out/train.json`` and the metadata JSON beside ``model.zip`` (and ``best_model.zip``)."""
+    """``out/train.json`` and the record of ``model.zip`` (and ``best_model.zip``): the JSON beside each zip and
+    a copy inside it (:mod:`agents.policy_record`), all written atomically."""
+    from agents.policy_record import embed_record, write_bytes_atomic
+
     text = json.dumps(summary, indent=2)
-    (out / "train.json").write_text(text)
-    metadata_path(out / "model.zip").write_text(text)
-    if (out / "best_model.zip").exists():
-        metadata_path(out / "best_model.zip").write_text(json.dumps({**summary, "model": str(out / "best_model.zip")}, indent=2))
+    write_bytes_atomic(out / "train.json", text.encode())
+    for name in ("model.zip", "best_model.zip"):
+        if name == "model.zip" or (out / name).exists():
+            record = summary if name == "model.zip" else {**summary, "model": str(out / name)}
+            if (out / name).exists():
+                embed_record(out / name, record)
+            write_bytes_atomic(metadata_path(out / name), json.dumps(record, indent=2).encode())

@@ -28,6 +28,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
+import shutil
+import signal
 import sys
 import time
 import warnings
@@ -59,8 +62,8 @@ from agents.run_setup import (  # noqa: F401  (re-exported: the names users of a
 )
 
 __all__ = [
-    "ALGOS", "BACKENDS", "HYPERPARAMS_DIR", "configure", "load_hyperparams", "metadata_path", "policy_kwargs_by_name",
-    "run", "train", "train_rllib_backend", "update_threads_for", "worker_env_id",
+    "ALGOS", "BACKENDS", "HYPERPARAMS_DIR", "RUN_DIRS", "RUN_FILES", "configure", "load_hyperparams", "metadata_path",
+    "policy_kwargs_by_name", "run", "train", "train_rllib_backend", "update_threads_for", "worker_env_id",
 ]
 
 
@@ -107,6 +110,8 @@ def train(
     resume: bool = False,
     init_policy: str | Path | None = None,
     update_threads: int | str | None = None,
+    force: bool | None = None,
+    command: list[str] | None = None,
 ) -> dict[str, Any]:
     """Train ``algo`` on ``env_id`` for ``timesteps`` steps; returns the summary written to ``out/train.json``.
 
@@ -124,40 +129,70 @@ def train(
     :func:`agents.run_setup.update_threads_for`, and why it is not the default). ``summary["timing"]`` splits the
     wall time: ``setup_s`` (vector env, kernel warm-up, model), ``learn_s``, the first rollout and the steady rate
     from the second rollout on (:class:`agents.callbacks.PhaseTimer`).
+
+    PPO / DQN: SIGINT / SIGTERM are caught for the whole run (:class:`agents.resume.InterruptGuard`): the first
+    stops at the next rollout boundary with a checkpoint (the subprocess workers ignore SIGINT, so a Ctrl-C in a
+    terminal stops them cleanly too), a second exits at once with 128 + its number, leaving the checkpoints saved
+    so far. ``force``: without ``resume``, a run already in ``out`` is refused (False, the CLI's default) or
+    deleted first (True); None, the library's default, writes over it as before. With ``resume``, a checkpoint
+    trained on another env id, env kwargs or decision interval, or one with more env steps than ``timesteps``,
+    is refused unless ``force`` is True. ``command``: the command line the interrupt message tells to rerun with
+    ``--resume``. Resumed runs write new monitor and evaluation files beside the earlier ones
+    (``monitor/<i>.resume<n>.monitor.csv``, ``eval/evaluations.resume<n>.npz``) and TensorBoard events into the
+    same run folder: nothing written before is replaced.
     """
+    if force and (algo in ("dagger", "finetune") or init_policy is not None):
+        raise ValueError("--force is for --algo ppo / dqn (dagger and finetune start over in OUT as before)")
     if algo == "finetune":
         return _train_finetune(env_id, timesteps, out, seed, n_envs, hyperparams, env_kwargs, progress, torch_threads,
                                resume, init_policy, checkpoint_freq)
     if algo == "dagger" or init_policy is not None:
         return _train_dagger(algo, env_id, timesteps, out, seed, n_envs, hyperparams, env_kwargs, progress,
                              torch_threads, resume, init_policy)
+    from agents.resume import InterruptGuard
+
+    with InterruptGuard() as guard:
+        return _train_sb3(algo, env_id, timesteps, Path(out), seed, n_envs, hyperparams, env_kwargs, eval_freq,
+                          eval_episodes, checkpoint_freq, progress, torch_threads, resume, update_threads, force,
+                          command, guard)
+
+
+def _train_sb3(algo: str, env_id: str, timesteps: int | None, out: Path, seed: int, n_envs: int | None,
+               hyperparams: str | Path | None, env_kwargs: dict | None, eval_freq: int, eval_episodes: int,
+               checkpoint_freq: int, progress: bool, torch_threads: int | None, resume: bool,
+               update_threads: int | str | None, force: bool | None, command: list[str] | None,
+               guard: Any) -> dict[str, Any]:
+    """:func:`train` for PPO / DQN, under the run's :class:`agents.resume.InterruptGuard` ``guard``."""
     import torch
 
     from agents.callbacks import UpdateThreads
+    from agents.run_setup import run_record
 
     t_setup = time.perf_counter()
     run = run_settings(algo, env_id, timesteps, n_envs, hyperparams, env_kwargs)
     check_train_args(run.timesteps, run.n_envs, seed, eval_freq, eval_episodes, checkpoint_freq)
-    out = Path(out)
-    _check_start(algo, run, out, resume)
+    found = _check_start(algo, env_id, run, out, resume, force)
     out.mkdir(parents=True, exist_ok=True)
     limit_threads(torch_threads)
     updating = update_threads_for(torch_threads, run.n_envs, update_threads) if algo == "ppo" else None
     if run.n_envs > 1:
         check_env_kwargs(env_id, run.env_kwargs)
     k = run.decision_interval
+    suffix = _resume_suffix(out) if found is not None else ""
+    record = run_record(algo, env_id, run, seed)
     venv = make_vec_env(env_id, run.n_envs, seed, run.env_kwargs, monitor_dir=out / "monitor", decision_interval=k,
-                        decision_mode=run.decision_mode)
+                        decision_mode=run.decision_mode, monitor_suffix=suffix)
     decisions = -(-run.timesteps // k)
     eval_env = None
     try:
-        model = _new_or_resumed_model(algo, run, venv, seed, out, resume)
+        model = _new_or_resumed_model(algo, run, venv, seed, out, found is not None)
         done = int(model.num_timesteps)
         callbacks, eval_cb, eval_env = _callbacks(algo, env_id, run, seed, out, eval_freq, eval_episodes,
-                                                  checkpoint_freq, max(0, decisions - done) if progress else None)
+                                                  checkpoint_freq, max(0, decisions - done) if progress else None,
+                                                  record, suffix)
         if updating is not None:
             callbacks.append(UpdateThreads(torch.get_num_threads(), updating))
-        t0, wall, stopper, timer = _learn(algo, model, callbacks, decisions - done, done == 0, out)
+        t0, wall, stopper, timer = _learn(algo, model, callbacks, decisions - done, done == 0, out, guard, record)
     finally:
         venv.close()
         if eval_env is not None:
@@ -166,81 +201,175 @@ def train(
     summary["timing"] = {"update_threads": updating, "setup_s": round(t0 - t_setup, 3), "learn_s": round(wall, 3),
                          "learn_start_s": round(timer.started - t0, 3) if timer.rollouts else None,
                          **timer.phases(run.decision_interval)}
-    if not stopper.stopped:
+    if stopper.stopped:
+        summary["signal"] = signal.Signals(guard.requested or signal.SIGTERM).name
+        summary["checkpoint"] = str(stopper.checkpoint)
+        print(f"rhs-slam train: interrupted at {model.num_timesteps} steps, saved {summary['checkpoint']}; "
+              f"resume with: {_resume_hint(command)}", file=sys.stderr)
+    else:
         write_summary(out, summary)
     return summary
 
 
-def _learn(algo: str, model: Any, callbacks: list, remaining: int, fresh: bool, out: Path) -> tuple[float, float, Any, Any]:
-    """``model.learn`` over the ``remaining`` decisions with ``callbacks``, a stop on SIGTERM / SIGINT and a
-    :class:`agents.callbacks.PhaseTimer`; saves ``out/model.zip`` (or, stopped, a checkpoint).
-    Returns the start (perf_counter), the wall seconds, the stopper and the timer."""
+def _resume_hint(command: list[str] | None) -> str:
+    """``command`` with ``--resume`` (and without ``--force``), or a sentence saying to rerun it so."""
+    if not command:
+        return "the same command with --resume"
+    args = [a for a in command if a != "--force"]
+    return shlex.join(args if "--resume" in args else [*args, "--resume"])
+
+
+def _resume_suffix(out: Path) -> str:
+    """``.resume<n>``, the first ``n`` no monitor or evaluation file of ``out`` uses yet."""
+    n = 1
+    while list((out / "monitor").glob(f"*.resume{n}.monitor.csv")) or (out / "eval" / f"evaluations.resume{n}.npz").exists():
+        n += 1
+    return f".resume{n}"
+
+
+def _learn(algo: str, model: Any, callbacks: list, remaining: int, fresh: bool, out: Path, guard: Any,
+           record: dict[str, Any]) -> tuple[float, float, Any, Any]:
+    """``model.learn`` over the ``remaining`` decisions with ``callbacks``, a stop once ``guard`` has a signal and a
+    :class:`agents.callbacks.PhaseTimer`; saves ``out/model.zip`` (or, stopped, a checkpoint carrying ``record``,
+    its path in ``stopper.checkpoint``). Returns the start (perf_counter), the wall seconds, the stopper and the
+    timer."""
     from stable_baselines3.common.callbacks import CallbackList
 
     from agents.callbacks import PhaseTimer
+    from agents.policy_record import embed_record, save_model
     from agents.resume import StopOnSignal, save_checkpoint
 
-    stopper, timer = StopOnSignal(), PhaseTimer()
+    stopper, timer = StopOnSignal(guard), PhaseTimer()
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         # the eval env is a DummyVecEnv, the training env a SubprocVecEnv: same envs, on purpose
         warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
-        if remaining > 0:
+        if guard.requested is not None:  # a signal during the setup: nothing to learn, save where it stands
+            stopper.stopped = True
+        elif remaining > 0:
             model.learn(total_timesteps=remaining, callback=CallbackList([*callbacks, stopper, timer]),
                         tb_log_name=algo, reset_num_timesteps=fresh)
     wall = max(time.perf_counter() - t0, 1e-9)
     if stopper.stopped:
-        path = save_checkpoint(model, out, algo)
-        print(f"rhs-slam train: interrupted at {model.num_timesteps} steps, saved {path}; "
-              "run the same command with --resume to continue", file=sys.stderr)
+        stopper.checkpoint = save_checkpoint(model, out, algo, record)
+        if (out / "best_model.zip").exists():
+            embed_record(out / "best_model.zip", {**record, "model": str(out / "best_model.zip")})
     else:
-        model.save(out / "model.zip")
+        save_model(model, out / "model.zip")
     return t0, wall, stopper, timer
 
 
-def _check_start(algo: str, run: RunSettings, out: Path, resume: bool) -> None:
-    """Before any work: ``resume`` needs a checkpoint in ``out`` (``ValueError`` naming ``--resume`` otherwise);
-    say so when PPO will train more steps than asked (it collects whole rollouts of ``n_steps * n_envs``)."""
+#: what a run leaves in its ``--out`` (:func:`train` refuses to start over onto them without ``force``)
+RUN_FILES = ("model.zip", "model.json", "best_model.zip", "best_model.json", "train.json")
+RUN_DIRS = ("checkpoints", "monitor", "eval", "tb")
+
+
+def _check_start(algo: str, env_id: str, run: RunSettings, out: Path, resume: bool,
+                 force: bool | None) -> tuple[Path, int] | None:
+    """Before any work: the checkpoint to resume from (``ValueError`` naming ``--resume`` without one, or for one
+    another run made, see :func:`_check_resumable`), or, for a new run, ``out`` free of an earlier run
+    (:func:`_check_fresh_out`); say so when PPO will train more steps than asked (it collects whole rollouts of
+    ``n_steps * n_envs``)."""
+    from agents.resume import checkpoints, usable_checkpoint
+
+    found = None
+    if resume:
+        found = usable_checkpoint(out, algo)
+        if found is None:
+            damaged = [str(p) for p, _ in checkpoints(out, algo)]
+            raise ValueError(f"--resume: no {'whole ' if damaged else ''}checkpoint {algo}_<steps>_steps.zip in "
+                             f"{out / 'checkpoints'} to continue from; run without --resume to start a new run"
+                             + (" (with --force to replace this one)" if damaged else ""))
+        _check_resumable(found, env_id, run, force)
+    else:
+        _check_fresh_out(algo, out, force)
+    if algo == "ppo":
+        rollout = int(run.hp.get("n_steps", 2048)) * run.n_envs  # stable-baselines3's default n_steps: 2048
+        decisions = -(-run.timesteps // run.decision_interval)
+        rounded = -(-decisions // rollout) * rollout * run.decision_interval
+        if rounded != run.timesteps:
+            print(f"rhs-slam train: PPO collects whole rollouts of n_steps x n_envs = {rollout} decisions: "
+                  f"--timesteps {run.timesteps} is rounded up to {rounded} env steps", file=sys.stderr)
+    return found
+
+
+def _check_resumable(found: tuple[Path, int], env_id: str, run: RunSettings, force: bool | None) -> None:
+    """``ValueError`` unless ``force``: the checkpoint ``found`` was trained on another env id, env kwargs or
+    decision interval / mode than ``run`` (its record inside the zip says), or has more env steps than ``run``'s
+    budget."""
+    from agents.policy_record import embedded_record
+
+    path, decisions = found
+    saved = embedded_record(path) or {}
+    steps = decisions * int(saved.get("decision_interval", run.decision_interval))
+    now = {"env_id": env_id.split(":", 1)[-1], "env_kwargs": run.env_kwargs,
+           "decision_interval": run.decision_interval, "decision_mode": run.decision_mode}
+    changed = [f"{key} {saved[key]!r} -> {value!r}" for key, value in now.items()
+               if key in saved and saved[key] != value]
+    if force:
+        for problem in changed:
+            print(f"rhs-slam train: warning: --force: resuming {path} with {problem}", file=sys.stderr)
+        return
+    hint = "or pass --force to resume anyway"
+    if changed:
+        raise ValueError(f"--resume: {path} was trained with other settings ({'; '.join(changed)}): run the same "
+                         f"--env, --env-kwargs and --hyperparams as the interrupted run, {hint}")
+    if steps > run.timesteps:
+        raise ValueError(f"--resume: {path} has trained {steps} env steps already, more than --timesteps "
+                         f"{run.timesteps}: give --timesteps of at least {steps}, {hint} (the checkpoint becomes "
+                         "the final model)")
+
+
+def _check_fresh_out(algo: str, out: Path, force: bool | None) -> None:
+    """``out`` holds an earlier run (:data:`RUN_FILES`, :data:`RUN_DIRS`): ``ValueError`` naming ``--out``
+    (``force`` False), its files deleted (True), or left to be written over (None)."""
     from agents.resume import latest_checkpoint
 
-    if resume and latest_checkpoint(out, algo) is None:
-        raise ValueError(f"--resume: no checkpoint {algo}_<steps>_steps.zip in {out / 'checkpoints'} to continue "
-                         "from; run without --resume to start a new run")
-    if algo != "ppo":
+    found = [out / n for n in RUN_FILES if (out / n).is_file()]
+    found += [out / n for n in RUN_DIRS if (out / n).is_dir() and any((out / n).iterdir())]
+    if not found or force is None:
         return
-    rollout = int(run.hp.get("n_steps", 2048)) * run.n_envs  # stable-baselines3's default n_steps: 2048
-    decisions = -(-run.timesteps // run.decision_interval)
-    rounded = -(-decisions // rollout) * rollout * run.decision_interval
-    if rounded != run.timesteps:
-        print(f"rhs-slam train: PPO collects whole rollouts of n_steps x n_envs = {rollout} decisions: "
-              f"--timesteps {run.timesteps} is rounded up to {rounded} env steps", file=sys.stderr)
+    if force:
+        for path in found:
+            shutil.rmtree(path) if path.is_dir() else path.unlink()
+        print(f"rhs-slam train: --force: deleted the earlier run in {out} ({', '.join(p.name for p in found)})",
+              file=sys.stderr)
+        return
+    last = latest_checkpoint(out, algo)
+    what = ("a finished run (model.zip)" if (out / "model.zip").exists()
+            else f"an interrupted run (checkpoint at {last[1]} steps)" if last else "the files of an earlier run")
+    raise ValueError(f"--out {out} already holds {what}: continue it with --resume, choose another --out, or pass "
+                     "--force to delete it and start over")
 
 
 def _new_or_resumed_model(algo: str, run: RunSettings, venv: Any, seed: int, out: Path, resume: bool) -> Any:
-    """A fresh ``algo`` model on ``venv``, or (``resume``) the checkpoint with the most steps in ``out/checkpoints``."""
+    """A fresh ``algo`` model on ``venv``, or (``resume``) the newest whole checkpoint in ``out/checkpoints``
+    (:func:`agents.resume.load_latest`: a damaged one is passed over with a warning)."""
     from stable_baselines3 import DQN, PPO
 
-    from agents.resume import latest_checkpoint, load_checkpoint
+    from agents.resume import load_latest
 
     cls = {"ppo": PPO, "dqn": DQN}[algo]
     tb = str(out / "tb") if tensorboard_available() else None
     if tb is None:
         print("rhs-slam train: tensorboard is not installed; no TensorBoard logs", file=sys.stderr)
-    found = latest_checkpoint(out, algo) if resume else None
-    if found is None:
+    if not resume:
         return cls(run.policy, venv, seed=seed, verbose=0, tensorboard_log=tb, device="cpu", **run.hp)
     schedules = {k: v for k, v in run.hp.items() if k in ("learning_rate", "clip_range")}
-    model = load_checkpoint(cls, found[0], venv, custom_objects=schedules, tensorboard_log=tb)
-    print(f"rhs-slam train: resuming from {found[0]} ({model.num_timesteps} steps)", file=sys.stderr)
+    model, path = load_latest(cls, out, algo, venv, custom_objects=schedules, tensorboard_log=tb)
+    print(f"rhs-slam train: resuming from {path} ({model.num_timesteps} steps)", file=sys.stderr)
     return model
 
 
 def _callbacks(algo: str, env_id: str, run: RunSettings, seed: int, out: Path, eval_freq: int,
-               eval_episodes: int, checkpoint_freq: int, progress_total: int | None):
-    """Crash-rate logging, evaluation (its env returned to be closed), checkpoints, progress bar."""
-    from stable_baselines3.common.callbacks import CheckpointCallback, EvalCallback
+               eval_episodes: int, checkpoint_freq: int, progress_total: int | None, record: dict[str, Any],
+               suffix: str = ""):
+    """Crash-rate logging, evaluation (its env returned to be closed; a resumed run, ``suffix``, logs into a new
+    ``eval/evaluations<suffix>.npz`` and keeps the best mean return so far), checkpoints carrying ``record``,
+    progress bar."""
+    from stable_baselines3.common.callbacks import EvalCallback
 
-    from agents.callbacks import CrashRateCallback, TqdmCallback
+    from agents.callbacks import AtomicCheckpoint, CrashRateCallback, TqdmCallback, best_eval_return
 
     callbacks: list = [CrashRateCallback()]
     eval_cb = eval_env = None
@@ -251,10 +380,13 @@ def _callbacks(algo: str, env_id: str, run: RunSettings, seed: int, out: Path, e
         eval_cb = EvalCallback(eval_env, n_eval_episodes=eval_episodes,
                                eval_freq=max(1, eval_freq // (run.n_envs * k)),
                                best_model_save_path=str(out), log_path=str(out / "eval"), deterministic=True, verbose=0)
+        if suffix:
+            eval_cb.log_path = str(out / "eval" / f"evaluations{suffix}")
+            eval_cb.best_mean_reward = best_eval_return(out / "eval")
         callbacks.append(eval_cb)
     if checkpoint_freq and checkpoint_freq > 0:
-        callbacks.append(CheckpointCallback(save_freq=max(1, checkpoint_freq // (run.n_envs * run.decision_interval)),
-                                            save_path=str(out / "checkpoints"), name_prefix=algo))
+        callbacks.append(AtomicCheckpoint(max(1, checkpoint_freq // (run.n_envs * run.decision_interval)), out, algo,
+                                          record))
     if progress_total is not None:
         callbacks.append(TqdmCallback(progress_total))
     return callbacks, eval_cb, eval_env
@@ -376,6 +508,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resume", action="store_true",
                         help="continue from the latest checkpoint in OUT/checkpoints (after SIGTERM / SIGINT / a crash); "
                         "dagger: from the state the last finished round left in OUT")
+    parser.add_argument("--force", action="store_true",
+                        help="ppo / dqn: without --resume, delete a run already in OUT and start over; with --resume, "
+                        "continue a checkpoint on other env kwargs or with fewer --timesteps than it has")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -389,8 +524,9 @@ def run(args: argparse.Namespace) -> int:
                 raise ValueError(f"the rllib backend trains ppo or finetune, got --algo {args.algo}")
             if args.n_envs is not None:
                 raise ValueError("--n-envs is for the sb3 backend; the rllib backend takes --num-env-runners")
-            if args.resume:
-                raise ValueError("--resume is for the sb3 backend (the rllib backend saves OUT/checkpoints/step_N)")
+            if args.resume or args.force:
+                raise ValueError("--resume / --force are for the sb3 backend (the rllib backend saves "
+                                 "OUT/checkpoints/step_N)")
             summary = train_rllib_backend(
                 args.env, args.timesteps, args.out, seed=args.seed, hyperparams=args.hyperparams,
                 env_kwargs=env_kwargs, num_env_runners=args.num_env_runners, address=args.address,
@@ -416,9 +552,13 @@ def run(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
             resume=args.resume,
             init_policy=args.init_policy,
+            force=bool(args.force),
+            command=["rhs-slam", *sys.argv[1:]] if sys.argv[1:2] == ["train"] else None,
         )
     except (ValueError, TypeError, FileNotFoundError, json.JSONDecodeError) as exc:
         print(f"rhs-slam train: error: {exc}", file=sys.stderr)
         return 2
     print(json.dumps(summary, indent=2))
-    return 143 if summary.get("interrupted") else 0  # 128 + SIGTERM: the run is not finished
+    if summary.get("interrupted"):  # 128 + the signal: the run is not finished
+        return 128 + int(signal.Signals[summary.get("signal", "SIGTERM")])
+    return 0
