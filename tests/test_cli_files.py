@@ -129,6 +129,8 @@ FAULTS = [
     # ---- contradictory flags
     Fault("evaluate --shield with --no-shield", ["evaluate", "--shield", "--no-shield", "--out", "out.json"], {},
           ("--shield", "--no-shield")),
+    Fault("evaluate --shield with idm (which ignores actions)", ["evaluate", "--policy", "idm:25", "--shield",
+                                                                  "--out", "out.json"], {}, ("--shield", "'idm:25'")),
     Fault("evaluate --stochastic with idm", ["evaluate", "--policy", "idm", "--stochastic", "--out", "out.json"], {},
           ("--stochastic", "'idm'")),
     Fault("evaluate --stochastic with headway:5", ["evaluate", "--policy", "headway:5", "--stochastic", "--out",
