@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterator
 
+import numpy as np
 from threadpoolctl import ThreadpoolController
 
 __all__ = ["blas_threads_limit", "check_blas_threads"]
@@ -30,12 +31,13 @@ def _controller() -> ThreadpoolController:
 
 
 def check_blas_threads(value: int | None) -> int | None:
-    """``None`` (leave the thread pools alone) or an int in [1, 1024]; ValueError naming ``blas_threads`` otherwise."""
+    """``None`` (leave the thread pools alone) or an integer in [1, 1024] (a numpy integer too, returned as an int);
+    ValueError naming ``blas_threads`` otherwise."""
     if value is None:
         return None
-    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 1024:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or not 1 <= value <= 1024:
         raise ValueError(f"blas_threads must be None or an int in [1, 1024], got {value!r}")
-    return value
+    return int(value)
 
 
 @contextlib.contextmanager

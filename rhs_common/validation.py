@@ -72,8 +72,9 @@ from typing import Any, TypeVar
 import numpy as np
 
 __all__ = [
-    "apply_moved_fields", "build", "check_bool", "check_choice", "check_int", "check_output_path", "check_range",
-    "check_types", "config_json", "flat_dict", "unknown_fields_message",
+    "DEFAULT_MEMORY_LIMIT_BYTES", "MEMORY_LIMIT_ENV", "apply_moved_fields", "build", "check_bool", "check_choice",
+    "check_int", "check_memory", "check_output_path", "check_range", "check_types", "config_json", "flat_dict",
+    "format_bytes", "memory_limit_bytes", "unknown_fields_message",
 ]
 
 T = TypeVar("T")
@@ -86,6 +87,13 @@ def _is_real(value: Any) -> bool:
 
 def _is_int(value: Any) -> bool:
     return isinstance(value, (numbers.Integral, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def _shown(value: Any) -> str:
+    """``repr(value)``, an integer of more than 30 digits by its size (Python refuses to write one past 4300 digits)."""
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 100:
+        return f"an integer of about {int(value.bit_length() * math.log10(2)) + 1} digits"
+    return repr(value)
 
 
 def check_range(
@@ -103,14 +111,17 @@ def check_range(
     allowed = f"{lo_br}{'-inf' if low is None else low}, {'inf' if high is None else high}{hi_br}"
     if not _is_real(value):
         raise TypeError(f"{field} must be a number in {allowed}, got {value!r} ({type(value).__name__})")
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:  # an int past 1.8e308 (10**400)
+        v = math.inf
     if not math.isfinite(v):  # NaN and +-inf: every bound keeps the work finite
-        raise ValueError(f"{field} must be a finite number in {allowed}, got {value!r}")
+        raise ValueError(f"{field} must be a finite number in {allowed}, got {_shown(value)}")
     bad = (low is not None and (v <= low if low_open else v < low)) or (
         high is not None and (v >= high if high_open else v > high)
     )
     if bad:
-        raise ValueError(f"{field} must be in {allowed}, got {value!r}")
+        raise ValueError(f"{field} must be in {allowed}, got {_shown(value)}")
 
 
 def check_int(field: str, value: Any, low: int | None = None, high: int | None = None) -> None:
@@ -132,6 +143,65 @@ def check_choice(field: str, value: Any, choices: tuple[str, ...]) -> None:
         raise TypeError(f"{field} must be one of {', '.join(map(repr, choices))}, got {value!r} ({type(value).__name__})")
     if value not in choices:
         raise ValueError(f"{field} must be one of {', '.join(map(repr, choices))}, got {value!r}")
+
+
+# --------------------------------------------------------------------------- memory
+#: environment variable that overrides :data:`DEFAULT_MEMORY_LIMIT_BYTES` (bytes, or with a K / M / G / T suffix)
+MEMORY_LIMIT_ENV = "RHS_SLAM_MEMORY_LIMIT"
+#: the largest allocation a config may ask for before it is refused (8 GiB; the defaults need a few MB)
+DEFAULT_MEMORY_LIMIT_BYTES = 8 * 2**30
+_SUFFIXES = {"": 1, "K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
+
+
+def format_bytes(nbytes: float) -> str:
+    """``nbytes`` in the largest binary unit that keeps it >= 1: ``format_bytes(3 * 2**30) == '3.00 GiB'``."""
+    for unit, size in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
+        if nbytes >= size:
+            return f"{nbytes / size:.2f} {unit}"
+    return f"{nbytes:.0f} B"
+
+
+def memory_limit_bytes() -> int:
+    """The allocation limit of :func:`check_memory`: ``$RHS_SLAM_MEMORY_LIMIT`` if set, else 8 GiB.
+
+    The variable holds a number of bytes, optionally with a binary suffix (``32G``, ``512M``,
+    ``1.5T``; a trailing ``B`` / ``iB`` is allowed). Anything else is a ``ValueError`` naming it.
+    """
+    import os
+
+    text = os.environ.get(MEMORY_LIMIT_ENV, "").strip()
+    if not text:
+        return DEFAULT_MEMORY_LIMIT_BYTES
+    t = text.upper().removesuffix("IB").removesuffix("B")
+    unit = t[-1:] if t[-1:] in _SUFFIXES else ""
+    try:
+        value = float(t[: len(t) - len(unit)])
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or value <= 0:
+        raise ValueError(f"{MEMORY_LIMIT_ENV} must be a positive number of bytes (e.g. 17179869184 or 16G), "
+                         f"got {text!r}")
+    return int(value * _SUFFIXES[unit])
+
+
+def check_memory(what: str, nbytes: float, limit: int | None = None) -> None:
+    """``ValueError`` when an allocation of ``nbytes`` (``what``: the fields and their product) exceeds the limit.
+
+    Called by the configs at construction, so a setting that would exhaust memory is refused
+    before any array is made, naming the fields and the bytes; ``limit`` defaults to
+    :func:`memory_limit_bytes` (``$RHS_SLAM_MEMORY_LIMIT``, 8 GiB).
+
+    >>> check_memory("n_particles x max_landmarks = 100 x 256 slots", 1.7e6)
+    >>> check_memory("n_particles x max_landmarks = 100000 x 5000 slots", 3.25e10, limit=2**33)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    ValueError: n_particles x max_landmarks = 100000 x 5000 slots needs 30.27 GiB (3.25e+10 bytes), above ... 8.00 GiB; ...
+    """
+    cap = memory_limit_bytes() if limit is None else limit
+    if nbytes > cap:
+        raise ValueError(f"{what} needs {format_bytes(nbytes)} ({nbytes:.3g} bytes), above the memory limit of "
+                         f"{format_bytes(cap)}; lower them, or raise the limit with the environment variable "
+                         f"{MEMORY_LIMIT_ENV} (bytes, e.g. 64G)")
 
 
 # --------------------------------------------------------------------------- type hints
@@ -201,7 +271,10 @@ def check_types(config: Any) -> None:
         if reason:
             raise TypeError(f"{reason}, got {value!r} ({type(value).__name__})")
         if hint is float and not isinstance(value, float):  # an int or a numpy scalar: the Python float
-            object.__setattr__(config, f.name, float(value))
+            try:
+                object.__setattr__(config, f.name, float(value))
+            except OverflowError:  # an int past 1.8e308
+                raise ValueError(f"{f.name} must be a finite number, got {_shown(value)}") from None
         elif hint is int and isinstance(value, np.integer):
             object.__setattr__(config, f.name, int(value))
 
@@ -217,6 +290,11 @@ def _nested_class(hint: Any) -> type | None:
         if dataclasses.is_dataclass(h) and isinstance(h, type):
             return h
     return None
+
+
+def _optional(hint: Any) -> bool:
+    """The hint admits None (``X | None``)."""
+    return type(None) in (_union_args(hint) or ())
 
 
 def _value(hint: Any, value: Any, path: str) -> Any:
@@ -342,7 +420,8 @@ def flat_dict(config: Any) -> dict[str, Any]:
 def build(cls: type[T], value: Any = None, path: str = "") -> T:
     """A ``cls`` from None (defaults), an instance (kept) or a mapping of its fields (recursive).
 
-    Nested config fields accept mappings too. Errors name the field path:
+    Nested config fields accept mappings too, and None for "the group's default" (unless the
+    field itself may be None). Errors name the field path:
     unknown keys and out-of-range values raise ``ValueError``, wrong types
     ``TypeError``. Old flat names listed in ``cls.MOVED_FIELDS`` (a class
     attribute, old name -> new dotted path) are moved to their new place with a
@@ -362,7 +441,9 @@ def build(cls: type[T], value: Any = None, path: str = "") -> T:
     if unknown:
         raise ValueError(unknown_fields_message(cls, unknown, path))
     hints = _hints(cls)
-    kwargs = {k: _value(hints.get(k, Any), v, _join(path, k)) for k, v in value.items()}
+    # None for a nested group that cannot be None means "the default" (``radar={"waveform": None}``)
+    kwargs = {k: _value(hints.get(k, Any), v, _join(path, k)) for k, v in value.items()
+              if not (v is None and _nested_class(hints.get(k, Any)) is not None and not _optional(hints.get(k, Any)))}
     try:
         return cls(**kwargs)
     except (TypeError, ValueError) as err:

@@ -42,7 +42,7 @@ from highway_env.envs.highway_env import HighwayEnv
 from highway_env.road.lane import LineType, StraightLane
 from highway_env.road.road import Road, RoadNetwork
 
-from rhs_common.validation import check_bool, check_choice, check_int, check_range
+from rhs_common.validation import check_bool, check_choice, check_int, check_memory, check_range
 from rhs_env.highway_config import check_highway_config, check_numbers, merge_config, plain
 from rhs_env.scene import (
     DENSE_LANDMARKS,
@@ -60,6 +60,57 @@ PAPER_START = (0.0, 37.5)
 MAX_WORLD_M = 1e5
 
 LANDMARK_COLOR = (60, 220, 60)
+#: most obstacles of the paper scene: each is a scatterer of every sweep (10 000 made a step last minutes)
+MAX_OBSTACLES = 1000
+#: half the ego's box (highway-env's Vehicle: 5 m x 2 m): an obstacle inside it at the start is refused
+EGO_HALF_LENGTH_M, EGO_HALF_WIDTH_M = 2.5, 1.0
+#: smallest ``scaling`` (pixels per metre): a 600 px view of 60 km; highway-env draws a lane's stripes over the
+#: whole view, ``2 (W + H) / (STRIPE_SPACING scaling)`` of them, so 1e-9 asked for 2.7 TiB
+MIN_SCALING = 0.01
+#: the keys ``reset(options=...)`` takes (highway-env's: a config update before the reset)
+RESET_OPTIONS = ("config",)
+
+
+class EnvClosedError(gym.error.ClosedEnvironmentError, RuntimeError):
+    """``step`` or ``render`` after ``close``."""
+
+
+def check_reset_options(options: Any) -> None:
+    """``TypeError`` unless ``options`` is None or a dict, ``ValueError`` for keys other than :data:`RESET_OPTIONS`."""
+    if options is None:
+        return
+    if not isinstance(options, Mapping):
+        raise TypeError(f"reset options must be None or a dict such as {{'config': {{...}}}}, got {options!r} "
+                        f"({type(options).__name__})")
+    unknown = sorted(str(k) for k in options if k not in RESET_OPTIONS)
+    if unknown:
+        raise ValueError(f"reset options has unknown key(s) {', '.join(map(repr, unknown))}; allowed: "
+                         f"{', '.join(RESET_OPTIONS)}")
+
+
+def check_manual_control(render_mode: str | None) -> None:
+    """``ValueError`` unless ``manual_control=True`` can work: the keyboard of a ``render_mode="human"`` window.
+
+    Without that window highway-env drops the agent's actions and reads no keys: the ego would drive uncontrolled.
+    """
+    import os
+
+    if render_mode != "human":
+        raise ValueError(f"manual_control=True steers the ego from the keyboard of the render window: it needs "
+                         f"render_mode='human', got render_mode={render_mode!r}")
+    if os.environ.get("SDL_VIDEODRIVER") == "dummy" or not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise ValueError("manual_control=True needs a display for its window (DISPLAY / WAYLAND_DISPLAY unset or "
+                         "SDL_VIDEODRIVER=dummy); set manual_control=False")
+
+
+def check_render_memory(config: Mapping[str, Any]) -> None:
+    """``ValueError`` (:func:`rhs_common.validation.check_memory`) when a frame's lane stripes would exhaust memory."""
+    from highway_env.road.graphics import LaneGraphics
+
+    w, h, scaling = int(config["screen_width"]), int(config["screen_height"]), float(config["scaling"])
+    stripes = 2 * (w + h) / (LaneGraphics.STRIPE_SPACING * scaling)
+    check_memory(f"screen_width + screen_height = {w} + {h} px at scaling={scaling:g} px/m: {stripes:.3g} lane "
+                 "stripes per frame", stripes * 8 * 4)
 
 
 def check_config_types(config: Mapping[str, Any], defaults: Mapping[str, Any]) -> None:
@@ -99,6 +150,9 @@ def check_action(space: gym.spaces.Space, action: Any) -> Any:
         return int(a)
     if isinstance(space, gym.spaces.Box):
         try:
+            kind = np.asarray(action).dtype.kind
+            if kind not in "iuf":  # strings ("1.0" would convert), booleans, objects: not numbers
+                raise TypeError(kind)
             a = np.asarray(action, dtype=float)
         except (TypeError, ValueError):
             raise TypeError(f"action must be an array of shape {space.shape} (action space {space}), "
@@ -144,22 +198,43 @@ class RHSHighwayEnv(HighwayEnv):
             check_choice("render_mode", render_mode, tuple(self.metadata["render_modes"]))
         if config is not None and not isinstance(config, Mapping):
             raise TypeError(f"config must be a dict of config keys, got {config!r} ({type(config).__name__})")
-        self._ended = self._warned_after_end = False
+        self._ended = self._warned_after_end = self._closed = False
         super().__init__(merge_config(config, kwargs), render_mode)
+        if self.config["manual_control"]:
+            check_manual_control(render_mode)
+
+    def close(self) -> None:
+        """highway-env's close; ``step`` and ``render`` then raise :class:`EnvClosedError` until ``reset``."""
+        self._closed = True
+        super().close()
+
+    def _check_open(self, call: str, scene: bool = True) -> None:
+        """:class:`EnvClosedError` after ``close()``; with ``scene``, ``ResetNeeded`` after a refused ``reset()``."""
+        if getattr(self, "_closed", False):
+            raise EnvClosedError(f"{call}() called after close(); call reset() to start a new episode, "
+                                 "or make a new env")
+        if scene and getattr(self, "_reset_refused", False):  # the last reset raised: no episode to go on with
+            raise gym.error.ResetNeeded(f"{call}() after a reset() that raised an error: call reset() again "
+                                        "with valid arguments")
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         """highway-env's reset. ``seed``: None or an integer >= 0; a numpy integer (``np.int64(5)``, as
         stable-baselines3 and ``np.random`` hand them out) is taken as the Python int of the same
         value (gymnasium itself accepts only ``int``). Other types raise ``TypeError``, negative
         seeds ``ValueError``, both naming ``seed``."""
-        if seed is not None:
-            if not isinstance(seed, (int, np.integer)) or isinstance(seed, (bool, np.bool_)):
-                raise TypeError(f"seed must be None or an integer >= 0, got {seed!r} ({type(seed).__name__})")
-            if seed < 0:
-                raise ValueError(f"seed must be None or an integer >= 0, got {seed!r}")
-            seed = int(seed)
-        self._ended = self._warned_after_end = False
-        return super().reset(seed=seed, options=options)
+        try:
+            if seed is not None:
+                if not isinstance(seed, (int, np.integer)) or isinstance(seed, (bool, np.bool_)):
+                    raise TypeError(f"seed must be None or an integer >= 0, got {seed!r} ({type(seed).__name__})")
+                if seed < 0:
+                    raise ValueError(f"seed must be None or an integer >= 0, got {seed!r}")
+                seed = int(seed)
+            check_reset_options(options)
+            self._ended = self._warned_after_end = self._closed = self._reset_refused = False
+            return super().reset(seed=seed, options=options)
+        except Exception:
+            self._reset_refused = True  # no episode to go on with: a step raises ResetNeeded until a reset works
+            raise
 
     def step(self, action: Any):
         """highway-env's step after :func:`check_action` (a clear error naming the action space).
@@ -168,6 +243,7 @@ class RHSHighwayEnv(HighwayEnv):
         since) warns once per episode, as gymnasium's order checks do, and is then carried out
         (highway-env keeps simulating).
         """
+        self._check_open("step")
         action = check_action(self.action_space, action)
         if self._ended and not self._warned_after_end:
             self._warned_after_end = True
@@ -234,7 +310,8 @@ class RHSHighwayEnv(HighwayEnv):
         check_config_types(c, self.default_config())
         check_range("screen_width", c["screen_width"], 1, 4096)
         check_range("screen_height", c["screen_height"], 1, 4096)
-        check_range("scaling", c["scaling"], 0.0, 1000.0, low_open=True)
+        check_range("scaling", c["scaling"], MIN_SCALING, 1000.0)
+        check_render_memory(c)
         check_int("lanes_count", c["lanes_count"], 1, 20)
         check_int("vehicles_count", c["vehicles_count"], 0, 500)
         check_int("controlled_vehicles", c["controlled_vehicles"], 1, 10)
@@ -242,7 +319,7 @@ class RHSHighwayEnv(HighwayEnv):
         check_range("simulation_frequency", c["simulation_frequency"], 1.0, 1000.0)
         check_range("policy_frequency", c["policy_frequency"], 0.0, c["simulation_frequency"], low_open=True)
         check_range("vehicles_density", c["vehicles_density"], 0.0, 100.0, low_open=True)
-        check_range("ego_spacing", c["ego_spacing"], 0.0, 100.0, low_open=True)
+        check_range("ego_spacing", c["ego_spacing"], 0.0, 100.0)  # 0: as highway-env, the ego at the lane start
         check_highway_config(c)
         self.landmark_config = LandmarkConfig.make(c["landmarks"])
         c["landmarks"] = self.landmark_config.to_dict()
@@ -269,8 +346,10 @@ class RHSHighwayEnv(HighwayEnv):
     # ---- rendering
     def render(self) -> np.ndarray | None:
         """highway-env's render with the landmarks drawn over the road (headless with rgb_array)."""
-        if self.render_mode is None:
+        if self.render_mode is None:  # highway-env's warning; after close() the error
+            self._check_open("render", scene=False)
             return super().render()
+        self._check_open("render")
         from highway_env.envs.common.graphics import EnvViewer
 
         viewer: Any = self.viewer  # type: ignore[has-type]  # highway-env's EnvViewer, made on the first render
@@ -393,9 +472,16 @@ class RHSPaperEnv(RHSHighwayEnv):
         if any(not isinstance(p, (list, tuple, np.ndarray)) for p in obstacles):
             raise TypeError(f"obstacles must be a list of [x, y] pairs in metres (e.g. [[10, 65], [25, 10]]), "
                             f"not a flat list of numbers; got {c['obstacles']!r}")
+        if len(obstacles) > MAX_OBSTACLES:
+            raise ValueError(f"obstacles must hold at most {MAX_OBSTACLES} [x, y] pairs (each is a scatterer every "
+                             f"radar sweep synthesises), got {len(obstacles)}")
         reach = MAX_SCATTER_RANGE_M
         for i, p in enumerate(obstacles):
             x, y = check_numbers(f"obstacles[{i}]", p, 2)
+            if abs(x - start[0]) <= EGO_HALF_LENGTH_M and abs(y - start[1]) <= EGO_HALF_WIDTH_M:
+                raise ValueError(f"obstacles[{i}] = [{x:g}, {y:g}] lies on the ego at its start = [{start[0]:g}, "
+                                 f"{start[1]:g}] (within +-{EGO_HALF_LENGTH_M:g} m along x, +-{EGO_HALF_WIDTH_M:g} m "
+                                 "across): move it or the start")
             if not (x0 - reach <= x <= x0 + length + reach and abs(y - start[1]) <= reach):
                 raise ValueError(
                     f"obstacles[{i}] = [{x:g}, {y:g}] is beyond what the radar can see from the road: x must be in "
@@ -445,6 +531,6 @@ class RHSPaperEnv(RHSHighwayEnv):
 
 
 __all__ = [
-    "PAPER_OBSTACLES", "PAPER_START", "RHSDenseEnv", "RHSHighwayEnv", "RHSPaperEnv", "check_action",
-    "check_config_types",
+    "EnvClosedError", "MAX_OBSTACLES", "PAPER_OBSTACLES", "PAPER_START", "RHSDenseEnv", "RHSHighwayEnv", "RHSPaperEnv",
+    "check_action", "check_config_types", "check_manual_control", "check_render_memory", "check_reset_options",
 ]

@@ -32,11 +32,13 @@ __all__ = [
     "SIMS", "check_highway_config", "check_numbers", "merge_config", "plain", "same_value",
 ]
 
-#: highway-env's action and observation types (``action_factory`` / ``observation_factory``)
-ACTION_TYPES = ("ContinuousAction", "DiscreteAction", "DiscreteMetaAction", "MultiAgentAction")
-OBSERVATION_TYPES = ("TimeToCollision", "Kinematics", "OccupancyGrid", "KinematicsGoal", "GrayscaleObservation",
-                     "AttributesObservation", "MultiAgentObservation", "TupleObservation", "LidarObservation",
-                     "ExitObservation")
+#: highway-env's action and observation types (``action_factory`` / ``observation_factory``) that these
+#: single-ego highway scenes support: ``MultiAgentAction`` (one action per controlled vehicle; the radar and the
+#: SLAM follow one ego), ``KinematicsGoal`` (needs the parking env's goal) and ``ExitObservation`` (the exit
+#: env's lanes) are refused with this list
+ACTION_TYPES = ("ContinuousAction", "DiscreteAction", "DiscreteMetaAction")
+OBSERVATION_TYPES = ("TimeToCollision", "Kinematics", "OccupancyGrid", "GrayscaleObservation",
+                     "AttributesObservation", "MultiAgentObservation", "TupleObservation", "LidarObservation")
 #: the columns a Kinematics observation can hold (``highway_env.vehicle.kinematics.Vehicle.to_dict``)
 KINEMATICS_FEATURES = ("presence", "x", "y", "vx", "vy", "heading", "cos_h", "sin_h", "cos_d", "sin_d", "long_off",
                        "lat_off", "ang_off")
@@ -111,7 +113,7 @@ def _check_action(c: MutableMapping[str, Any]) -> None:
 def _check_observation(c: MutableMapping[str, Any]) -> None:
     o = _check_mapping("observation", c["observation"])
     check_choice("observation.type", o.get("type"), OBSERVATION_TYPES)
-    if o["type"] in ("Kinematics", "KinematicsGoal"):
+    if o["type"] == "Kinematics":
         if "vehicles_count" in o:
             check_int("observation.vehicles_count", o["vehicles_count"], 1, MAX_OBSERVED_VEHICLES)
         if "features" in o:

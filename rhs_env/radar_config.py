@@ -45,6 +45,7 @@ from rhs_common.validation import (
     check_bool,
     check_choice,
     check_int,
+    check_memory,
     check_range,
     check_types,
     flat_dict,
@@ -407,6 +408,11 @@ class RadarConfig:
         check_choice("kernels", self.kernels, KERNELS)
         check_range("max_range_m", self.max_range_m, 1.0, 0.95 * self.waveform.unambiguous_range_m)
         check_range("min_range_m", self.min_range_m, 0.0, self.max_range_m, high_open=True)
+        wf, slots = self.waveform, self.scan.slots
+        # one sweep holds, per radar, slot and chirp, the N samples and their Z N-point range FFT (complex64)
+        check_memory(f"waveform.sample_rate_hz x waveform.chirp_s = {wf.samples} samples per chirp x "
+                     f"{wf.chirps_per_slot} chirps x {slots} slots (scan.grid_deg) x (1 + waveform.zero_pad = "
+                     f"{1 + wf.zero_pad}) x 4 radars", 4 * slots * wf.chirps_per_slot * wf.samples * (1 + wf.zero_pad) * 8)
 
     # -- derived quantities that span groups ------------------------------------
     @property

@@ -35,9 +35,12 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import sys
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
 __all__ = [
     "DENSE_ID", "ENV_SPECS", "HIGHWAY_ID", "HIGHWAY_RADAR_ID", "HIGHWAY_SLAM_ID", "NULL_OBSERVATION", "PAPER_ID",
@@ -72,6 +75,7 @@ def make_highway_radar(**kwargs: Any) -> gym.Env:
     from rhs_env.envs import RHSHighwayEnv
     from rhs_env.wrappers import RadarObservation
 
+    check_vector_info_flags(kwargs)
     (wrapper_kwargs,), env_kwargs = route_kwargs(kwargs, RadarObservation)
     return RadarObservation(RHSHighwayEnv(**with_cheap_base_observation(env_kwargs)), **wrapper_kwargs)
 
@@ -79,12 +83,29 @@ def make_highway_radar(**kwargs: Any) -> gym.Env:
 #: highway-env observation that costs nothing: the radar wrapper replaces the
 #: base observation anyway, and the Kinematics table costs ~4 ms per step (pandas).
 NULL_OBSERVATION = {"type": "AttributesObservation", "attributes": []}
+#: highway-env observation types named in the refusal of an ``observation`` on a radar id (rhs-highway-v0 takes them)
+SUPPORTED_BASE_OBSERVATIONS = ("Kinematics", "OccupancyGrid", "TimeToCollision", "GrayscaleObservation")
 
 
 def with_cheap_base_observation(env_kwargs: dict[str, Any]) -> dict[str, Any]:
-    """``env_kwargs`` with the base observation set to :data:`NULL_OBSERVATION` unless the caller chose one."""
-    chosen = "observation" in env_kwargs or "observation" in (env_kwargs.get("config") or {})
-    return env_kwargs if chosen else {**env_kwargs, "observation": dict(NULL_OBSERVATION)}
+    """``env_kwargs`` with the base observation set to :data:`NULL_OBSERVATION`.
+
+    The radar wrapper replaces highway-env's observation by the point cloud, so an ``observation``
+    given by the caller (``{"type": "Kinematics"}``) could only be ignored: it is a ``ValueError``
+    naming it and the ids that take it; :data:`NULL_OBSERVATION` itself is accepted.
+    """
+    from rhs_env.highway_config import same_value
+
+    config = env_kwargs.get("config")
+    given = [v for v in (env_kwargs.get("observation"), config.get("observation") if isinstance(config, Mapping)
+                         else None) if v is not None]
+    for value in given:
+        if not same_value(value, NULL_OBSERVATION):
+            raise ValueError(f"observation={value!r} is highway-env's observation, which the radar replaces by its "
+                             "point cloud (points, points_mask; the SLAM adds pose, landmarks): it would be ignored. "
+                             f"Drop it; for highway-env's observations ({', '.join(SUPPORTED_BASE_OBSERVATIONS)}) "
+                             f"use {HIGHWAY_ID}")
+    return env_kwargs if given else {**env_kwargs, "observation": dict(NULL_OBSERVATION)}
 
 
 #: (id, entry point) of the envs registered here
@@ -117,6 +138,37 @@ def check_env_id(env_id: str) -> None:
         gym.spec(name)
     except (gym.error.Error, ImportError) as exc:
         raise ValueError(f"unknown env id {env_id!r} ({exc}); this package registers {ours}") from None
+
+
+#: flags whose info entries vary in length between envs and steps: gymnasium's vector envs cannot stack them
+UNSTACKABLE_INFO_FLAGS = ("landmarks_in_info", "scatterers_in_info")
+
+
+def _inside_gym_make_vec() -> bool:
+    """The caller runs inside ``gymnasium.make_vec``'s env constructor (a sync or async vector env's env)."""
+    frame = sys._getframe(1)
+    while frame is not None:
+        code = frame.f_code
+        if code.co_name == "create_single_env" and "gymnasium" in code.co_filename:
+            return True
+        frame = frame.f_back  # type: ignore[assignment]
+    return False
+
+
+def check_vector_info_flags(kwargs: Mapping[str, Any], force: bool = False) -> None:
+    """``ValueError`` naming the flag when :data:`UNSTACKABLE_INFO_FLAGS` are on in a gymnasium vector env.
+
+    Called by the entry points with their kwargs: it acts only inside ``gym.make_vec`` (or with
+    ``force=True``, as :func:`rhs_env.vector.make_vec` calls it). A single env, and stable-baselines3's vector envs
+    (which keep one info dict per env), take the flags.
+    """
+    on = [k for k in UNSTACKABLE_INFO_FLAGS if kwargs.get(k) is True or isinstance(kwargs.get(k), np.bool_)
+          and bool(kwargs.get(k))]
+    if on and (force or _inside_gym_make_vec()):
+        raise ValueError(
+            f"{', '.join(f'{k}=True' for k in on)} puts arrays of a length that varies between envs into info, "
+            "which a gymnasium vector env cannot stack; leave it off in vector envs, use a single env, or "
+            "stable-baselines3's vector envs (one info dict per env: rhs_env.vector.make_subproc_vec_env)")
 
 
 def register_envs() -> None:

@@ -131,7 +131,7 @@ class LandmarkConfig:
         check_range("spacing_m", self.spacing_m, 1.0, 1000.0)
         check_range("lateral_offset_m", self.lateral_offset_m, 0.0, 100.0)
         check_range("rcs_m2", self.rcs_m2, 0.0, 1e4, low_open=True)
-        check_range("jitter_m", self.jitter_m, 0.0, None)
+        check_range("jitter_m", self.jitter_m, 0.0, 500.0)
         if self.jitter_m >= self.spacing_m / 2:  # a bound set by another field: name both
             raise ValueError(f"jitter_m must be below spacing_m / 2 = {self.spacing_m / 2:g} "
                              f"(spacing_m={self.spacing_m:g}), got {self.jitter_m!r}")

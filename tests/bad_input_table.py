@@ -180,6 +180,62 @@ CASES: list[Case] = [
          fragments=("radar.rhs.elements", "rhs-slam patterns")),
     Case("4096 elements, hologram", "make", (RADAR, {**SMALL, "radar": {"antenna": "hologram", "rhs": {"elements": 4096},
                                                                       "scan": {"grid_deg": 30.0}}}), "accept"),
+    # ---- settings that overflowed or exhausted memory: bounded, estimated up front
+    Case("slam measurement_floor_m 1e200", "make", (SLAM, {**SLAM_KW, "slam": {"measurement_floor_m": 1e200}}),
+         fragments=("slam.measurement_floor_m",)),
+    Case("slam accel_std_mps2 1e300", "make", (SLAM, {**SLAM_KW, "slam": {"accel_std_mps2": 1e300}}),
+         fragments=("slam.accel_std_mps2",)),
+    Case("slam gate_mahalanobis 1e308", "make", (SLAM, {**SLAM_KW, "slam": {"gate_mahalanobis": 1e308}}),
+         fragments=("slam.gate_mahalanobis",)),
+    Case("slam trans_std_m 1e300", "make", (SLAM, {**SLAM_KW, "slam": {"trans_std_m": 1e300}}),
+         fragments=("slam.trans_std_m",)),
+    Case("slam range_std_m 1e300", "make", (SLAM, {**SLAM_KW, "slam": {"range_std_m": 1e300}}),
+         fragments=("slam.range_std_m",)),
+    Case("slam 100000 particles x 5000 slots", "make",
+         (SLAM, {**SLAM_KW, "slam": {"n_particles": 100_000, "max_landmarks": 5000}}),
+         fragments=("n_particles x max_landmarks", "GiB", "RHS_SLAM_MEMORY_LIMIT")),
+    Case("waveform f_s 1e10 x chirp 1e-2", "make",
+         (RADAR, {**SMALL, "radar": {**CHEAP_RADAR, "waveform": {"sample_rate_hz": 1e10, "chirp_s": 1e-2}}}),
+         fragments=("radar.waveform.sample_rate_hz x waveform.chirp_s", "GiB", "RHS_SLAM_MEMORY_LIMIT")),
+    Case("scaling 1e-9 with rgb_array", "make", (HW, {**SMALL, "scaling": 1e-9, "render_mode": "rgb_array"}),
+         fragments=("scaling",)),
+    # ---- settings that cannot apply or contradict each other
+    Case("icp settings with odometry", "make", (SLAM, {**SLAM_KW, "registration": "odometry",
+                                                       "icp": {"max_iterations": 5}}),
+         fragments=("icp", "registration='odometry'")),
+    Case("slam min_range_m 1e9", "make", (SLAM, {**SLAM_KW, "slam": {"min_range_m": 1e9}}),
+         fragments=("slam.min_range_m",)),
+    Case("slam min_range_m beyond the radar's max range", "make", (SLAM, {**SLAM_KW, "slam": {"min_range_m": 150.0}}),
+         fragments=("slam.min_range_m", "radar.max_range_m")),
+    Case("rhs carrier 1 Hz", "make", (RADAR, {**SMALL, "radar": {**CHEAP_RADAR, "rhs": {"elements": 24,
+                                                                                       "carrier_hz": 1.0}}}),
+         fragments=("radar.rhs.carrier_hz",)),
+    Case("action MultiAgentAction", "make", (HW, {**SMALL, "action": {"type": "MultiAgentAction"}}),
+         fragments=("action.type", "DiscreteMetaAction")),
+    Case("observation Kinematics on a SLAM env", "make", (SLAM, {**SLAM_KW, "observation": {"type": "Kinematics"}}),
+         fragments=("observation", HW)),
+    Case("paper obstacle on the ego's start", "make", (PAPER, {**PAPER_KW, "obstacles": [[0.0, 37.5]]}),
+         fragments=("obstacles[0]", "start")),
+    Case("10000 paper obstacles", "make", (PAPER, {**PAPER_KW, "obstacles": [[float(i % 300), 10.0 + i % 7]
+                                                                               for i in range(10_000)]}),
+         fragments=("obstacles", "1000")),
+    Case("Box action of strings", "call", lambda: _continuous_step(np.array(["0.1", "0.2"])),
+         fragments=("action", "Box")),
+    Case("Box action float32", "call", lambda: _continuous_step(np.array([0.1, 0.2], np.float32)), "accept"),
+    Case("step after close", "call", lambda: _after_close("step"), fragments=("step()", "close()")),
+    Case("render after close", "call", lambda: _after_close("render"), fragments=("render()", "close()")),
+    Case("reset options [1, 2]", "call", lambda: _reset_with([1, 2]), fragments=("options",)),
+    Case("reset options 'x'", "call", lambda: _reset_with("x"), fragments=("options",)),
+    Case("reset options unknown key", "call", lambda: _reset_with({"lanes": 2}), fragments=("options", "config")),
+    Case("reset options config", "call", lambda: _reset_with({"config": {"lanes_count": 2}}), "accept"),
+    Case("render_mode rgb_array_list (gymnasium's frame list)", "make",
+         (HW, {**SMALL, "render_mode": "rgb_array_list"}), "accept"),
+    Case("manual_control without a display", "make", (HW, {**SMALL, "manual_control": True}),
+         fragments=("manual_control",)),
+    # ---- what the configs must accept
+    Case("blas_threads numpy int", "make", (SLAM, {**SLAM_KW, "blas_threads": np.int64(2)}), "accept"),
+    Case("radar waveform None", "make", (RADAR, {**SMALL, "radar": {**CHEAP_RADAR, "waveform": None}}), "accept"),
+    Case("ego_spacing 0", "make", (HW, {**SMALL, "ego_spacing": 0}), "accept"),
     # ---- the episode is over
     Case("step after truncated", "after_end", (HW, SMALL, "truncated"), "note", ("reset()", "[1 warnings]")),
     Case("step after terminated", "after_end", (HW, SMALL, "terminated"), "note", ("reset()", "[1 warnings]")),
@@ -342,6 +398,45 @@ def _step_with(action: Any) -> Outcome:
         env.close()
 
 
+def _continuous_step(action: Any) -> Any:
+    """A step of ``rhs-highway-v0`` with the continuous action space (a Box of two numbers)."""
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+
+    env = gym.make(HW, **SMALL, action={"type": "ContinuousAction"})
+    try:
+        env.reset(seed=0)
+        return env.step(action)[0]
+    finally:
+        env.close()
+
+
+def _after_close(call: str) -> Any:
+    """``step`` or ``render`` of an ``rgb_array`` env after its ``close``."""
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+
+    env = gym.make(HW, **SMALL, render_mode="rgb_array")
+    env.reset(seed=0)
+    env.close()
+    return env.step(1)[0] if call == "step" else env.render()
+
+
+def _reset_with(options: Any) -> Any:
+    """``reset(seed=0, options=options)`` of ``rhs-highway-v0``."""
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+
+    env = gym.make(HW, **SMALL)
+    try:
+        return env.reset(seed=0, options=options)[0]
+    finally:
+        env.close()
+
+
 def table_rows() -> list[Case]:
     """The rows of ``tests/test_bad_inputs.py`` (every one a refusal naming its fragment) as cases."""
     from test_bad_inputs import CASES as ROWS
@@ -406,6 +501,10 @@ def run_case(case: Case, folder: Path) -> Outcome:
             fn: Callable[[], Any] = case.given
             return Outcome(True, finite=_finite(fn()))
     except (ValueError, TypeError) as exc:
+        return Outcome(False, message=f"{type(exc).__name__}: {exc}", clean=True)
+    except RuntimeError as exc:  # gymnasium's lifecycle errors (rhs_env.envs.EnvClosedError) are refusals too
+        if type(exc).__name__ != "EnvClosedError":
+            raise
         return Outcome(False, message=f"{type(exc).__name__}: {exc}", clean=True)
     raise ValueError(f"unknown case kind {case.kind!r}")
 

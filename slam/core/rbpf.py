@@ -94,7 +94,7 @@ import numpy as np
 from rhs_common.geometry import circular_mean, wrap_angle
 from rhs_common.jit import KERNELS
 from rhs_common.timing import StageTimer
-from rhs_common.validation import check_bool, check_choice, check_int, check_range, check_types
+from rhs_common.validation import check_bool, check_choice, check_int, check_memory, check_range, check_types
 from slam.core.association import (
     DROPPED,
     NEW,
@@ -155,6 +155,17 @@ def rotate_sym2(c, s, b00, b01, b11):
     )
 
 
+#: upper bounds of the noise settings: orders of magnitude past any physical use, low enough that their squares
+#: and the Gaussians built from them stay finite in float64 (1e300 overflowed)
+MAX_MAHALANOBIS = 1e3  # gates and the new-landmark distance (a 3-sigma gate is 3)
+MAX_STD_M = 1e3  # range / translation / floor std, m
+MAX_DISTANCE_M = 1e4  # gates, cluster radius and the nearest range, m (the radars see 100 m)
+MAX_CYCLES = 10**9  # cycle counts (pruning, hits): 6 years at 5 Hz
+#: bytes of filter state per particle and landmark slot: mean (2 float64), covariance (4), active flag,
+#: last-seen cycle and hit count (int64): :meth:`RBPFSlam.reset`
+STATE_BYTES_PER_SLOT = 2 * 8 + 4 * 8 + 1 + 8 + 8
+
+
 @dataclass(frozen=True)
 class SlamConfig:
     """RBPF SLAM settings (SI units). Validated at construction.
@@ -187,6 +198,10 @@ class SlamConfig:
     archive a pruned landmark. kernels: "numba" (default: the Mahalanobis association, the
     FastSLAM 2.0 proposal sums and the ICP fit compiled, :mod:`slam.core.kernels`) | "numpy" (the
     reference; the same results to round-off).
+
+    Bounds: Mahalanobis gates and distances at most 1e3, std values 1e3 m (accelerations 1e3), distances
+    1e4 m, cycle counts 1e9; ``n_particles x max_landmarks`` state within the memory limit
+    (:func:`rhs_common.validation.check_memory`, 8 GiB unless ``$RHS_SLAM_MEMORY_LIMIT``).
     """
 
     n_particles: int = 100
@@ -229,37 +244,40 @@ class SlamConfig:
         check_int("max_landmarks", self.max_landmarks, 1, 100_000)
         check_choice("variant", self.variant, VARIANTS)
         check_choice("association", self.association, ASSOCIATIONS)
-        check_range("gate_mahalanobis", self.gate_mahalanobis, 0.0, None, low_open=True)
-        check_range("new_gate_mahalanobis", self.new_gate_mahalanobis, self.gate_mahalanobis, None)
+        check_range("gate_mahalanobis", self.gate_mahalanobis, 0.0, MAX_MAHALANOBIS, low_open=True)
+        check_range("new_gate_mahalanobis", self.new_gate_mahalanobis, self.gate_mahalanobis, MAX_MAHALANOBIS)
         check_int("association_rounds", self.association_rounds, 1, 100)
         check_bool("joint_compatibility", self.joint_compatibility)
-        check_range("recovery_std_factor", self.recovery_std_factor, 1.0, None)
+        check_range("recovery_std_factor", self.recovery_std_factor, 1.0, 1e3)
         check_range("recovery_match_fraction", self.recovery_match_fraction, 0.0, 1.0)
         check_choice("measurement_noise", self.measurement_noise, NOISE_MODELS)
-        check_range("measurement_floor_m", self.measurement_floor_m, 0.0, None)
-        check_range("delta_m", self.delta_m, 0.0, None, low_open=True)
-        check_range("cluster_radius_m", self.cluster_radius_m, 0.0, None)
-        check_range("range_std_m", self.range_std_m, 0.0, None, low_open=True)
+        check_range("measurement_floor_m", self.measurement_floor_m, 0.0, MAX_STD_M)
+        check_range("delta_m", self.delta_m, 0.0, MAX_DISTANCE_M, low_open=True)
+        check_range("cluster_radius_m", self.cluster_radius_m, 0.0, MAX_DISTANCE_M)
+        check_range("range_std_m", self.range_std_m, 0.0, MAX_STD_M, low_open=True)
         check_range("bearing_std_rad", self.bearing_std_rad, 0.0, math.pi, low_open=True)
-        check_range("trans_std_m", self.trans_std_m, 0.0, None)
+        check_range("trans_std_m", self.trans_std_m, 0.0, MAX_STD_M)
         check_range("trans_frac", self.trans_frac, 0.0, 1.0)
         check_range("rot_std_rad", self.rot_std_rad, 0.0, math.pi)
-        check_range("accel_std_mps2", self.accel_std_mps2, 0.0, None)
-        check_range("yaw_accel_std_radps2", self.yaw_accel_std_radps2, 0.0, None)
+        check_range("accel_std_mps2", self.accel_std_mps2, 0.0, 1e3)
+        check_range("yaw_accel_std_radps2", self.yaw_accel_std_radps2, 0.0, 1e3)
         check_range("resample_threshold", self.resample_threshold, 0.0, 1.0)
         check_choice("weighting", self.weighting, ("likelihood", "amplitude"))
         check_choice("kernels", self.kernels, KERNELS)
         if self.weighting == "amplitude" and self.variant != "fastslam1":
             raise ValueError("weighting='amplitude' needs variant='fastslam1' (per-observation likelihoods)")
-        check_range("new_landmark_mahalanobis", self.new_landmark_mahalanobis, 0.0, None, low_open=True)
-        check_int("prune_after_cycles", self.prune_after_cycles, 1, None)
-        check_int("tentative_prune_after_cycles", self.tentative_prune_after_cycles, 1, None)
-        check_int("min_hits", self.min_hits, 1, None)
+        check_range("new_landmark_mahalanobis", self.new_landmark_mahalanobis, 0.0, MAX_MAHALANOBIS, low_open=True)
+        check_int("prune_after_cycles", self.prune_after_cycles, 1, MAX_CYCLES)
+        check_int("tentative_prune_after_cycles", self.tentative_prune_after_cycles, 1, MAX_CYCLES)
+        check_int("min_hits", self.min_hits, 1, MAX_CYCLES)
         check_range("min_existence", self.min_existence, 0.0, 1.0)
-        check_range("dynamic_threshold_mps", self.dynamic_threshold_mps, 0.0, None)
-        check_range("min_range_m", self.min_range_m, 0.0, None, low_open=True)
-        check_int("max_retired", self.max_retired, 0, None)
-        check_int("retire_min_hits", self.retire_min_hits, 1, None)
+        check_range("dynamic_threshold_mps", self.dynamic_threshold_mps, 0.0, 1e4)
+        check_range("min_range_m", self.min_range_m, 0.0, MAX_DISTANCE_M, low_open=True)
+        check_int("max_retired", self.max_retired, 0, 10_000_000)
+        check_int("retire_min_hits", self.retire_min_hits, 1, MAX_CYCLES)
+        P, L = self.n_particles, self.max_landmarks
+        check_memory(f"n_particles x max_landmarks = {P} x {L} landmark slots ({STATE_BYTES_PER_SLOT} bytes each)",
+                     P * L * STATE_BYTES_PER_SLOT)
 
 
 @dataclass

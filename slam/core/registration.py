@@ -296,7 +296,7 @@ class OdometryRegistration:
         trans_frac: float = 0.0,
         truth: Callable[[], np.ndarray] | None = None,
     ) -> None:
-        check_range("trans_std_m", trans_std_m, 0.0, None)
+        check_range("trans_std_m", trans_std_m, 0.0, 1e3)
         check_range("rot_std_rad", rot_std_rad, 0.0, math.pi)
         check_range("trans_frac", trans_frac, 0.0, 1.0)
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)

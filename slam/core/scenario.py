@@ -66,13 +66,13 @@ class SyntheticCloud:
         movers: np.ndarray | None = None,
         report_std: bool = False,
     ) -> None:
-        check_range("max_range_m", max_range_m, 0.0, None, low_open=True)
-        check_range("range_std_m", range_std_m, 0.0, None)
+        check_range("max_range_m", max_range_m, 0.0, 1e5, low_open=True)
+        check_range("range_std_m", range_std_m, 0.0, 1e3)
         check_range("bearing_std_rad", bearing_std_rad, 0.0, math.pi)
         check_range("p_miss", p_miss, 0.0, 1.0)
-        check_range("false_rate", false_rate, 0.0, None)
-        check_range("doppler_std", doppler_std, 0.0, None)
-        check_range("dt", dt, 0.0, None, low_open=True)
+        check_range("false_rate", false_rate, 0.0, 1e4)  # Poisson mean per scan: points drawn
+        check_range("doppler_std", doppler_std, 0.0, 1e3)
+        check_range("dt", dt, 0.0, 1e3, low_open=True)
         self.landmarks = np.asarray(landmarks, dtype=float).reshape(-1, 2)
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         self.max_range_m = float(max_range_m)

@@ -25,11 +25,12 @@ def make_slam_env(env_cls: type[gym.Env] | str, kwargs: dict[str, Any]) -> gym.E
     the scene and the wrappers (~2 s), so the background's own imports run beside them."""
     precompile.start()
     from rhs_env import envs
-    from rhs_env.registration import route_kwargs, with_cheap_base_observation
+    from rhs_env.registration import check_vector_info_flags, route_kwargs, with_cheap_base_observation
     from rhs_env.wrappers import RadarObservation
     from slam.gym.metrics_info import SlamMetricsInfo
     from slam.gym.wrapper import SlamObservation
 
+    check_vector_info_flags(kwargs)
     scene = getattr(envs, env_cls) if isinstance(env_cls, str) else env_cls
     (radar_kw, slam_kw, metrics_kw), env_kw = route_kwargs(kwargs, RadarObservation, SlamObservation, SlamMetricsInfo)
     base = scene(**with_cheap_base_observation(env_kw))

@@ -59,7 +59,7 @@ class SlamMetricsInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def __init__(self, env: gym.Env, map_gate_m: float = 2.0, landmarks_in_info: bool = False) -> None:
         gym.utils.RecordConstructorArgs.__init__(self, map_gate_m=map_gate_m, landmarks_in_info=landmarks_in_info)
         gym.Wrapper.__init__(self, env)
-        check_range("map_gate_m", map_gate_m, 0.0, None, low_open=True)
+        check_range("map_gate_m", map_gate_m, 0.0, 1e4, low_open=True)
         check_bool("landmarks_in_info", landmarks_in_info)
         self.map_gate_m = float(map_gate_m)
         self.landmarks_in_info = bool(landmarks_in_info)

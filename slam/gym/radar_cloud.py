@@ -34,8 +34,8 @@ class RadarCloud:
     """
 
     def __init__(self, landmarks: np.ndarray, poses: np.ndarray, dt: float, radar, rcs_m2: float = 5.0) -> None:
-        check_range("dt", dt, 0.0, None, low_open=True)
-        check_range("rcs_m2", rcs_m2, 0.0, None)
+        check_range("dt", dt, 0.0, 1e3, low_open=True)
+        check_range("rcs_m2", rcs_m2, 0.0, 1e4)
         self.landmarks = np.asarray(landmarks, dtype=float).reshape(-1, 2)
         self.poses = np.asarray(poses, dtype=float).reshape(-1, 3)
         self.dt = float(dt)

@@ -140,7 +140,14 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         self.pipeline_config = build(PipelineConfig, pipeline, "pipeline")
         self.registration_kind = registration
         reg = make_registration(registration, truth=self.true_motion, icp=self.icp_config)
+        if icp is not None and registration != "icp":  # settings that cannot apply: refused, not ignored
+            raise ValueError(f"icp={icp!r} sets the ICP registration, but registration={registration!r} does not "
+                             "use it; drop icp or use registration='icp'")
         radar_cfg = getattr(env, "radar_config", None)  # the radars' mounts place each point's line of sight
+        max_range = getattr(radar_cfg, "max_range_m", None)
+        if max_range is not None and self.slam_config.min_range_m >= max_range:
+            raise ValueError(f"slam.min_range_m={self.slam_config.min_range_m:g} m ignores every point: the radars "
+                             f"report ranges up to radar.max_range_m={max_range:g} m; lower slam.min_range_m below it")
         sensor_xy = radar_cfg.mounting.mounts()[0] if radar_cfg is not None else None
         self.pipeline = SlamPipeline(
             reg, self.slam_config, np.random.default_rng(0), self.pipeline_config, sensor_xy=sensor_xy
