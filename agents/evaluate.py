@@ -777,9 +777,6 @@ def check_flags(args: argparse.Namespace) -> None:
     if args.shield is not None and str(args.policy).split(":", 1)[0] == "idm":
         raise ValueError(f"--shield: the {args.policy!r} driver is highway-env's IDMVehicle, which ignores every "
                          "action, so a shield could not act on it; drop --shield (or drive 'headway' behind it)")
-    if args.shield is not None and str(args.policy).split(":", 1)[0] == "idm":
-        raise ValueError(f"--shield: the {args.policy!r} driver is highway-env's IDMVehicle, which ignores every "
-                         "action, so a shield could not act on it; drop --shield (or drive 'headway' behind it)")
     if args.stochastic and is_scripted(args.policy):
         raise ValueError(f"--stochastic: the scripted driver {args.policy!r} has no action distribution to sample "
                          "(it is for a trained policy); drop --stochastic")
