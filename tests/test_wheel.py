@@ -8,7 +8,8 @@ dependencies from this one's site-packages as plain paths (a ``.pth`` file), so 
 environment runs there, the checkout's editable install included. From a temporary working folder the
 installed ``rhs-slam demo`` drives a short episode (2 s, 10 steps) with the shipped policy and every registered
 ``rhs-*`` id is made, reset and stepped once, each module imported from the new environment's site-packages.
-About a minute, most of it the cold compile of the kernels in the new location.
+About a minute on a quiet 2-core machine, most of it the cold compile of the kernels in the new location (in the
+foreground: ``RHS_SLAM_BACKGROUND_COMPILE=0``, so no process outlives the test).
 """
 
 from __future__ import annotations
@@ -97,7 +98,9 @@ def _venv(path: Path, wheel: Path) -> tuple[Path, Path]:
 
 def _run(cmd: list[str], cwd: Path, timeout: float = 400) -> str:
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
-    env.update(MPLBACKEND="Agg", SDL_VIDEODRIVER="dummy", OMP_NUM_THREADS="1", PYTHONNOUSERSITE="1")
+    # no background compile (slam.gym.precompile): it would outlive the test in a detached process
+    env.update(MPLBACKEND="Agg", SDL_VIDEODRIVER="dummy", OMP_NUM_THREADS="1", PYTHONNOUSERSITE="1",
+               RHS_SLAM_BACKGROUND_COMPILE="0")
     proc = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
     assert proc.returncode == 0, f"{' '.join(cmd)} failed ({proc.returncode}):\n{proc.stdout[-4000:]}\n{proc.stderr[-4000:]}"
     return proc.stdout
