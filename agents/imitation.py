@@ -419,9 +419,7 @@ def load_round_state(out: Path, model, optimizer, rng: np.random.Generator,
     meta_path = out / STATE_META
     if not meta_path.exists():
         return None
-    from rhs_common.input_files import read_json
-
-    meta = read_json(meta_path)
+    meta = json.loads(meta_path.read_text())  # the run's own state (the generator's 128-bit integers), not input
     if meta["decisions"] != decisions:
         raise ValueError(f"resume: {out} holds a run of {meta['decisions']} decisions, this one plans {decisions} "
                          "(the same timesteps and decision_interval are needed)")
