@@ -403,7 +403,8 @@ def _md_traffic(result: dict) -> list[str]:
     lines += ["", f"The compiled core (`sim=\"compiled\"`): {t['compiled_over_highway_env']:.1f} x highway-env's "
               f"steps/s on `rhs-highway-v0` (95 % [{ci[0]:.1f}, {ci[1]:.1f}]), {t['compiled_over_highway_fast']:.1f} x "
               f"`highway-fast-v0`; without the Kinematics observation {t['bare_compiled_over_highway_env']:.0f} x "
-              f"(95 % [{bare[0]:.0f}, {bare[1]:.0f}]). Its make + reset + first step in a new process: "
+              f"(95 % [{bare[0]:.0f}, {bare[1]:.0f}]) and {t['bare_compiled_over_highway_fast']:.0f} x "
+              "`highway-fast-v0`. Its make + reset + first step in a new process: "
               f"{t['first_step_compile_s']:.1f} s ({t.get('first_step_compile_cpu_s', float('nan')):.1f} s of CPU) "
               "with an empty kernel cache (compile), "
               f"{t['first_step_cached_s']:.2f} s with the cache.", ""]

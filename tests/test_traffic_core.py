@@ -118,7 +118,7 @@ def test_benchmark_traffic_section_markdown():
          for i, (label, _, _) in enumerate(benchmark.TRAFFIC_RUNS)}
     t.update(load_average_start=[1.0], compiled_over_highway_env=1.5, compiled_over_highway_env_ci=[1.4, 1.6],
              compiled_over_highway_fast=3.0, bare_compiled_over_highway_env=40.0,
-             bare_compiled_over_highway_env_ci=[30.0, 50.0], first_step_compile_s=9.5,
+             bare_compiled_over_highway_env_ci=[30.0, 50.0], bare_compiled_over_highway_fast=60.0, first_step_compile_s=9.5,
              first_step_compile_cpu_s=6.0, first_step_cached_s=0.4)
     text = "\n".join(benchmark._md_traffic({"traffic": t}))
     assert "| rhs-highway-v0 bare (compiled) | 50.0 | 20.00 |" in text
