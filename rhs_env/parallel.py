@@ -35,7 +35,9 @@ def parallel_map(
     """``[func(*a) for a in arg_list]`` over ``workers`` processes (in order); ``progress``: a tqdm bar or None.
 
     Worker processes run single-threaded (:func:`single_threaded_worker`), so ``workers``
-    is the number of cores used.
+    is the number of cores used. A Ctrl-C (or a task's error) stops the map at once: the queued tasks are
+    cancelled and the workers ended before it propagates (measured: a 0.25-degree pattern build exits within
+    a second of one SIGINT, where the pool's own shutdown ran the remaining grids first).
     """
     check_int("workers", workers, 1, 256)
     out: list[Any] = [None] * len(arg_list)
@@ -45,13 +47,29 @@ def parallel_map(
             if progress is not None:
                 progress.update(1)
         return out
-    with ProcessPoolExecutor(max_workers=workers, initializer=single_threaded_worker) as pool:
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=single_threaded_worker)
+    try:
         futures = {pool.submit(_grid_task, (func, a)): k for k, a in enumerate(arg_list)}
         for fut in as_completed(futures):
             out[futures[fut]] = fut.result()
             if progress is not None:
                 progress.update(1)
+    except BaseException:  # Ctrl-C or a failed task: stop now (a plain shutdown would run every queued task first)
+        _stop(pool)
+        raise
+    pool.shutdown()
     return out
+
+
+def _stop(pool: ProcessPoolExecutor) -> None:
+    """Cancel the queued tasks of ``pool`` and end its workers (the running tasks are lost, nothing waits)."""
+    workers = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in workers:
+        if proc.is_alive():
+            proc.terminate()
+    for proc in workers:
+        proc.join(timeout=5.0)
 
 
 __all__ = ["parallel_map", "single_threaded_worker"]

@@ -3,6 +3,11 @@
 Example::
 
     rhs-slam patterns --elements 60 --grid-deg 1 --method fast --out lib.npz --json report.json
+
+Refused before any work, with one line naming the option: a radar without sidelobes (too few elements for the
+grid), the same element as Tx and Rx feed, an SDR build larger than the machine's memory. Ctrl-C stops a build at
+once (its worker processes too) with one line; a library is written only once every grid is built, so nothing
+partial is left behind.
 """
 
 from __future__ import annotations
@@ -10,6 +15,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
+import signal
 import sys
 from pathlib import Path
 from typing import Any
@@ -46,6 +53,29 @@ def _table(rows: list[dict[str, float]]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Build or load the library ``args`` describe and print its report (exit status: 0, 2 on an error, 130 on
+    Ctrl-C)."""
+    try:
+        return _run(args)
+    except KeyboardInterrupt:
+        print("rhs-slam patterns: interrupted (Ctrl-C); nothing was written (a library is saved only once every "
+              "grid is built)", file=sys.stderr)
+        return 128 + int(signal.SIGINT)
+
+
+def _write_text(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically (temp file then rename: an interrupt leaves the old file or none)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(text)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _run(args: argparse.Namespace) -> int:
     from rhs_common.validation import check_output_path
     from rhs_env.array_models import RHSConfig, ScanConfig
     from rhs_env.patterns.library import build_library, estimate_build_s, get_library, load
@@ -100,8 +130,7 @@ def run(args: argparse.Namespace) -> int:
         out: dict[str, Any] = {"config": lib.config, "hash": lib.hash, "summary": summary, "grids": rep.rows(),
                                "library": str(lib.path) if lib.path else None}
         try:
-            args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps(out, indent=2))
+            _write_text(args.json, json.dumps(out, indent=2))
         except OSError as exc:
             print(f"rhs-slam patterns: error: cannot write {args.json}: {exc}", file=sys.stderr)
             return 2

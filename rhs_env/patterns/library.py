@@ -47,9 +47,9 @@ from rhs_env.array_models import RHSConfig, ScanConfig, check_amplitudes
 
 __all__ = [
     "BUILD_ENV", "CACHE_ENV", "CHECKSUMS", "DATA_DIR", "FORMAT_VERSION", "LibraryRebuildWarning",
-    "MAX_IMPLICIT_BUILD_S", "METHODS", "PatternLibrary", "build_library", "cache_dir", "cache_path", "estimate_build_s",
-    "fields_hash", "file_sha256", "find_shipped", "get_library", "library_fields", "load", "method_settings",
-    "rebuild_command", "write_checksums",
+    "MAX_IMPLICIT_BUILD_S", "METHODS", "PatternLibrary", "build_library", "cache_dir", "cache_path", "check_buildable",
+    "estimate_build_s", "fields_hash", "file_sha256", "find_shipped", "get_library", "library_fields", "load",
+    "method_settings", "rebuild_command", "write_checksums",
 ]
 
 METHODS = ("fast", "sdr")
@@ -145,8 +145,12 @@ class PatternLibrary:
         path.parent.mkdir(parents=True, exist_ok=True)
         blob = json.dumps({"fields": self.config, "sha256": self.hash}, sort_keys=True)
         tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
-        np.savez(tmp, angles_deg=self.angles_deg, tx=self.tx, rx=self.rx, config=np.array(blob))
-        os.replace(tmp, path)
+        try:
+            np.savez(tmp, angles_deg=self.angles_deg, tx=self.tx, rx=self.rx, config=np.array(blob))
+            os.replace(tmp, path)
+        except BaseException:  # (Ctrl-C, a full disk: no partial file is left behind)
+            tmp.unlink(missing_ok=True)
+            raise
         self.path = path
         return path
 
@@ -195,7 +199,7 @@ def _read_fields(path: Path) -> dict[str, Any]:
     if not path.is_file():
         raise _refuse(path, "no such file" if not path.exists() else "not a regular file")
     try:
-        with np.load(path, allow_pickle=False) as z:
+        with open(path, "rb") as f, np.load(f, allow_pickle=False) as z:  # (our handle: closed on a bad zip too)
             blob = json.loads(str(z["config"]))
     except Exception as exc:  # (BadZipFile, EOFError, pickle or JSON errors: any is a bad file)
         raise _refuse(path, f"not a readable pattern library .npz ({type(exc).__name__}: {exc})") from None
@@ -232,7 +236,7 @@ def load(path: str | os.PathLike[str], expected_config: dict[str, Any] | None = 
         raise ValueError(f"pattern library {path}: config differs from the expected one in {diff}")
     config, scan = _configs(path, fields)
     try:
-        with np.load(path, allow_pickle=False) as z:
+        with open(path, "rb") as f, np.load(f, allow_pickle=False) as z:
             arrays = {k: np.asarray(z[k]) for k in ("angles_deg", "tx", "rx")}
     except Exception as exc:  # (a damaged member: BadZipFile, zlib.error, a bad CRC)
         raise _refuse(path, f"unreadable arrays ({type(exc).__name__}: {exc})") from None
@@ -244,7 +248,8 @@ def load(path: str | os.PathLike[str], expected_config: dict[str, Any] | None = 
     except (TypeError, ValueError) as exc:
         raise _refuse(path, str(exc)) from None
     if lib.tx.shape != (scan.slots, config.elements):
-        raise _refuse(path, f"arrays do not match its config (M={config.elements}, {scan.slots} grids)")
+        raise _refuse(path, f"tx / rx shape {lib.tx.shape} does not match its config: ({scan.slots} grids, "
+                            f"M={config.elements})")
     return lib
 
 
@@ -329,6 +334,35 @@ def find_shipped(fields: dict[str, Any]) -> Path | None:
     return None
 
 
+def _grids_without_sidelobes(config: RHSConfig, scan: ScanConfig, oversample: float) -> list[float]:
+    """The grid centres (deg) whose main lobe covers every visible direction (an empty sidelobe set D)."""
+    from rhs_env.patterns.metrics import sidelobe_directions
+
+    return [float(a) for a in scan.angles_deg if sidelobe_directions(config, float(a), oversample).size == 0]
+
+
+def check_buildable(config: RHSConfig, scan: ScanConfig, oversample: float = 4.0) -> None:
+    """Refuse a radar too small to have sidelobes: every grid needs directions outside its main lobe.
+
+    The main lobe of an M-element line spans ``|s - s_i| <= 1 / (M d)`` in ``s = sin(theta)``; with few elements it
+    covers the whole visible region ``[-1, 1]`` and there is nothing to optimise (the P1 objective has no sidelobe
+    set). Raises ``ValueError`` naming ``elements`` and the smallest count that has a sidelobe set on every grid.
+    """
+    empty = _grids_without_sidelobes(config, scan, oversample)
+    if not empty:
+        return
+    smallest = config.elements + 1
+    while smallest < 4096 and _grids_without_sidelobes(
+            RHSConfig(elements=smallest, spacing_wl=config.spacing_wl, refractive_index=config.refractive_index),
+            scan, oversample):
+        smallest += 1
+    raise ValueError(
+        f"elements={config.elements} with spacing_wl={config.spacing_wl:g}: the main lobe (half-width 1/(M d) = "
+        f"{config.mainlobe_halfwidth:.3g} in sin(theta)) covers every direction of the grid at {empty[0]:g} deg, "
+        f"so there are no sidelobes to suppress and no pattern to optimise; a library of {scan.grid_deg:g}-degree "
+        f"grids needs elements in [{smallest}, 4096]")
+
+
 def build_library(
     config: RHSConfig,
     scan: ScanConfig,
@@ -342,6 +376,11 @@ def build_library(
 
     fields = library_fields(config, scan, method, **settings)
     s = method_settings(method, **settings)
+    check_buildable(config, scan, s.oversample)
+    if method == "sdr":
+        from rhs_env.patterns.sdr import check_memory
+
+        check_memory(config, scan, s, workers)
     with tqdm(total=scan.slots, desc=f"patterns ({method}, M={config.elements}, {scan.grid_deg:g} deg)",
               disable=not progress, unit="grid") as bar:
         if method == "fast":

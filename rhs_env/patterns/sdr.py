@@ -30,6 +30,7 @@ Units: delta in the normalised two-way power units of :mod:`rhs_env.patterns.met
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -41,7 +42,10 @@ from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.parallel import parallel_map
 from rhs_env.patterns.metrics import side_matrix, sidelobe_directions
 
-__all__ = ["SDRSettings", "SDR_SOLVERS", "build_sdr", "optimize_grid_sdr"]
+__all__ = [
+    "SDRSettings", "SDR_BASE_BYTES", "SDR_BYTES_PER_ENTRY", "SDR_MEMORY_SHARE", "SDR_SOLVERS", "build_sdr",
+    "check_memory", "estimate_memory_bytes", "optimize_grid_sdr",
+]
 
 SDR_SOLVERS = ("CLARABEL", "SCS")
 
@@ -211,6 +215,52 @@ def optimize_grid_sdr(
     return tx, rx, {"delta": cur, "iterations": it, "history": history, "relaxation_delta": bounds}
 
 
+#: memory one SDR grid holds per entry of its lifted constraints ((1 + L) M^2 of them), bytes: the quadratic forms, the
+#: parameter and cvxpy's compiled problem (measured 275 B at M = 24 -> 48 on top of ~100 MiB for cvxpy itself)
+SDR_BYTES_PER_ENTRY = 256
+SDR_BASE_BYTES = 100 * 2**20
+#: share of the machine's memory the SDR workers of a build may hold together
+SDR_MEMORY_SHARE = 0.5
+
+
+def estimate_memory_bytes(config: RHSConfig, scan: ScanConfig, settings: SDRSettings | None = None) -> int:
+    """Memory (bytes) one SDR worker holds for the largest grid of ``scan``: ``SDR_BASE_BYTES`` plus
+    ``SDR_BYTES_PER_ENTRY`` per entry of the ``(1 + L, M^2)`` lifted constraints (L sidelobe directions)."""
+    settings = settings or SDRSettings()
+    l_max = max(sidelobe_directions(config, float(a), settings.oversample).size for a in scan.angles_deg)
+    return SDR_BASE_BYTES + SDR_BYTES_PER_ENTRY * (1 + l_max) * config.elements**2
+
+
+def _physical_memory() -> int | None:
+    try:
+        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, OSError, ValueError):  # (not on every platform)
+        return None
+
+
+def _size(n: float) -> str:
+    for unit, scale in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20)):
+        if n >= scale:
+            return f"{n / scale:.1f} {unit}"
+    return f"{n / 2**20:.2f} MiB"
+
+
+def check_memory(config: RHSConfig, scan: ScanConfig, settings: SDRSettings | None = None, workers: int = 2) -> None:
+    """Refuse, before anything is allocated, an SDR build whose workers would need more than ``SDR_MEMORY_SHARE``
+    of this machine's memory (``ValueError`` naming the elements, the estimate and the limit)."""
+    total = _physical_memory()
+    if total is None:
+        return
+    need = estimate_memory_bytes(config, scan, settings)
+    limit = SDR_MEMORY_SHARE * total
+    if need * workers > limit:
+        raise ValueError(
+            f"method sdr with elements={config.elements}: each of the {workers} workers needs about {_size(need)} "
+            f"(the lifted (M+1)^2 semidefinite problem of one grid), {_size(need * workers)} in all, above the limit "
+            f"of {_size(limit)} ({SDR_MEMORY_SHARE:.0%} of this machine's {_size(total)}); use the fast method, fewer "
+            f"elements or fewer workers")
+
+
 def build_sdr(
     config: RHSConfig,
     scan: ScanConfig,
@@ -225,6 +275,7 @@ def build_sdr(
     reproduces the same grids of a full build.
     """
     settings = settings or SDRSettings()
+    check_memory(config, scan, settings, workers)
     full = scan.angles_deg
     angles = full if angles_deg is None else np.asarray(list(angles_deg), dtype=float)
     idx = [int(np.argmin(np.abs(full - a))) for a in angles]
