@@ -118,16 +118,20 @@ def _configure_cache() -> None:
     from rhs_common.cache_dir import cache_subdir, fallback_root, unusable_reason
 
     user = os.environ.get("NUMBA_CACHE_DIR")
-    if user:
-        reason = unusable_reason(Path(user))
-        if reason is None:
+    try:
+        if user:
+            reason = unusable_reason(Path(user))
+            if reason is None:
+                return
+            path = fallback_root(f"NUMBA_CACHE_DIR={user}", reason, "NUMBA_CACHE_DIR") / "numba"
+            path.mkdir(parents=True, exist_ok=True)
+        elif _writable(_PACKAGE_ROOT / "rhs_env"):
             return
-        path = fallback_root(f"NUMBA_CACHE_DIR={user}", reason, "NUMBA_CACHE_DIR") / "numba"
-        path.mkdir(parents=True, exist_ok=True)
-    elif _writable(_PACKAGE_ROOT / "rhs_env"):
+        else:
+            path = cache_subdir("numba")
+    except OSError as exc:  # no folder at all can be written: the kernels compile in memory (_jit)
+        _warn_cache_once(f"rhs-slam: {exc}; the kernels are compiled on every run", stacklevel=3)
         return
-    else:
-        path = cache_subdir("numba")
     os.environ["NUMBA_CACHE_DIR"] = str(path)
     if "numba" in sys.modules:  # imported before us: its config is read, tell it too
         from numba.core import config
@@ -171,14 +175,14 @@ class KernelCacheWarning(UserWarning):
 _CACHE_WARNED = False
 
 
-def _warn_cache_once(message: str) -> None:
+def _warn_cache_once(message: str, stacklevel: int = 4) -> None:
     """One :class:`KernelCacheWarning` per process (a cache with every entry bad says it once)."""
     global _CACHE_WARNED
     if not _CACHE_WARNED:
         _CACHE_WARNED = True
         import warnings
 
-        warnings.warn(message, KernelCacheWarning, stacklevel=4)
+        warnings.warn(message, KernelCacheWarning, stacklevel=stacklevel)
 
 
 def discard_cache_entry(cache: Any) -> list[Path]:
@@ -250,7 +254,11 @@ def _jit(func: Callable, options: dict[str, Any]) -> Any:
     cache = options.pop("cache")
     dispatcher = _numba().njit(cache=False, **options)(func)
     if cache and hasattr(dispatcher, "enable_caching"):  # (NUMBA_DISABLE_JIT=1 returns the function itself)
-        dispatcher._cache = _checked_cache()(dispatcher.py_func)
+        try:
+            dispatcher._cache = _checked_cache()(dispatcher.py_func)
+        except RuntimeError as exc:  # numba found no folder to cache in: compile in memory
+            _warn_cache_once(f"rhs-slam: no writable numba cache folder ({exc}); the kernels are compiled on every "
+                             f"run; set NUMBA_CACHE_DIR to a writable folder", stacklevel=4)
     return dispatcher
 
 

@@ -435,8 +435,13 @@ def get_library(
     shipped = find_shipped(fields)
     if shipped is not None:
         return load(shipped, fields)
-    path = cache_path(fields)
-    if path.exists() or path.is_symlink():
+    try:
+        path: Path | None = cache_path(fields)
+    except OSError as exc:  # no folder can be written, not even a temporary one: build, keep it in memory
+        path = None
+        warnings.warn(f"rhs-slam: {exc}; the pattern library is built for this run only", LibraryRebuildWarning,
+                      stacklevel=2)
+    if path is not None and (path.exists() or path.is_symlink()):
         try:
             return load(path, fields)
         except ValueError as exc:
@@ -452,5 +457,6 @@ def get_library(
             f"{config.elements} --grid-deg {scan.grid_deg:g}` (cached for every later run), or set {BUILD_ENV}=1 to "
             f"build it here, or choose fewer elements / a coarser grid")
     lib = build_library(config, scan, method, workers=workers, progress=progress, **settings)
-    lib.save(path)
+    if path is not None:
+        lib.save(path)
     return lib
