@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from rhs_env.array_models import RHSConfig, ScanConfig
-from rhs_env.patterns.library import DATA_DIR, build_library
+from rhs_env.patterns.library import DATA_DIR, build_library, write_checksums
 from rhs_env.patterns.metrics import pattern_report
 from rhs_studies.provenance import write_json
 
@@ -65,6 +65,7 @@ def main(argv: list[str] | None = None) -> int:
             f"{rep['median_pslr_db']:.2f} dB, worst pointing {rep['worst_pointing_error_deg']:.3f} deg",
             flush=True,
         )
+    write_checksums(a.out_dir)  # the sha256 every shipped file is checked against when loaded
     if a.json is not None:
         a.json.parent.mkdir(parents=True, exist_ok=True)
         write_json(a.json, {"libraries": summary, "method": a.method, "rhs": config.to_dict()}, __file__, a, started,
