@@ -67,6 +67,9 @@ EGO_HALF_LENGTH_M, EGO_HALF_WIDTH_M = 2.5, 1.0
 #: smallest ``scaling`` (pixels per metre): a 600 px view of 60 km; highway-env draws a lane's stripes over the
 #: whole view, ``2 (W + H) / (STRIPE_SPACING scaling)`` of them, so 1e-9 asked for 2.7 TiB
 MIN_SCALING = 0.01
+#: highway-env's reward weights and their bound (a sum of 1e308s overflows to inf)
+REWARD_KEYS = ("collision_reward", "right_lane_reward", "high_speed_reward", "lane_change_reward")
+MAX_REWARD = 1e6
 #: the keys ``reset(options=...)`` takes (highway-env's: a config update before the reset)
 RESET_OPTIONS = ("config",)
 
@@ -320,6 +323,13 @@ class RHSHighwayEnv(HighwayEnv):
         check_range("policy_frequency", c["policy_frequency"], 0.0, c["simulation_frequency"], low_open=True)
         check_range("vehicles_density", c["vehicles_density"], 0.0, 100.0, low_open=True)
         check_range("ego_spacing", c["ego_spacing"], 0.0, 100.0)  # 0: as highway-env, the ego at the lane start
+        for key in REWARD_KEYS:
+            check_range(key, c[key], -MAX_REWARD, MAX_REWARD)
+        if c["normalize_reward"] and not c["collision_reward"] < c["high_speed_reward"] + c["right_lane_reward"]:
+            raise ValueError(
+                "normalize_reward maps [collision_reward, high_speed_reward + right_lane_reward] onto [0, 1]: it needs "
+                f"collision_reward < high_speed_reward + right_lane_reward, got {c['collision_reward']!r} and "
+                f"{c['high_speed_reward']!r} + {c['right_lane_reward']!r}; or set normalize_reward=False")
         check_highway_config(c)
         self.landmark_config = LandmarkConfig.make(c["landmarks"])
         c["landmarks"] = self.landmark_config.to_dict()

@@ -9,6 +9,9 @@ with a time limit, so a hang is counted as one instead of stopping the count)::
 Measured (timeout 240 s, 2-core machine; the 101 rows here plus the 62 of tests/test_bad_inputs.py):
 at 493cbf2, 163 / 70 / 21 / 19 / 21 / 27 / 3 / 2; after the input checks, 163 / 134 / 29 / 0 / 0 / 0 / 0 / 0.
 (The starting tree is run as ``PYTHONPATH=<its checkout> python tests/bad_input_table.py``.)
+The 50 rows added for the bounds, memory estimates, contradictions and env lifecycle (29 here, 21 in
+tests/test_bad_inputs.py; timeout 60 s): at 8eb0ff3, 50 / 0 / 3 / 5 / 9 / 26 / 4 / 3; after, 50 / 44 / 6 / 0 / 0 / 0 /
+0 / 0 (two reward rows added since: 52 / 46 / 6).
 
 A row is ``Case(name, kind, given, expect, fragments)``:
 

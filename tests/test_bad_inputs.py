@@ -86,7 +86,10 @@ CASES = [
      ValueError, "RHS_SLAM_MEMORY_LIMIT"),
     ("scaling 1e-9 px/m", "make", (HW, {"scaling": 1e-9, "render_mode": "rgb_array"}), ValueError,
      "scaling must be in [0.01, 1000.0]"),
+    ("reward 1e308", "make", (HW, {"high_speed_reward": 1e308}), ValueError, "high_speed_reward must be in"),
     # ---- settings that contradict each other or cannot apply
+    ("normalised reward of an empty range", "make", (HW, {"collision_reward": 0.5}), ValueError,
+     "collision_reward < high_speed_reward + right_lane_reward"),
     ("icp with odometry", "make", (SLAM, {"registration": "odometry", "icp": {"max_iterations": 5}}), ValueError,
      "registration='odometry' does not use it"),
     ("slam min range past the radar's", "make", (SLAM, {"slam": {"min_range_m": 500.0}}), ValueError,
