@@ -41,7 +41,7 @@ from typing import Any
 
 import yaml
 
-from rhs_studies.provenance import STATE_AT_START, write_json
+from rhs_studies.kit.provenance import STATE_AT_START, write_json
 from rhs_studies.train_policy import FINE_SPEEDS  # target speeds down to 10 m/s (highway-env's default: 20, 25, 30)
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -63,7 +63,7 @@ from typing import Any
 
 import numpy as np
 
-from rhs_studies.provenance import command_line, write_json
+from rhs_studies.kit.provenance import command_line, write_json
 
 ROOT = Path(__file__).resolve().parent.parent
 

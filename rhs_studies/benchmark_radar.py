@@ -22,8 +22,8 @@ import numpy as np
 
 from rhs_env.array_models import ScanConfig
 from rhs_env.radar import RadarConfig, RadarSystem
-from rhs_studies.provenance import write_json
-from rhs_studies.scenes import typical_scene
+from rhs_studies.kit.episodes import typical_scene
+from rhs_studies.kit.provenance import write_json
 
 
 def benchmark_radar(antenna: str = "rhs", grid_deg: float = 1.0, repeats: int = 20, seed: int = 0,

@@ -29,7 +29,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from rhs_studies.provenance import write_json
+from rhs_studies.kit.provenance import write_json
 
 DEFAULT_ENV_KWARGS = {"radar": {"scan": {"grid_deg": 5}}}
 

@@ -21,7 +21,7 @@ from pathlib import Path
 from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.patterns.library import DATA_DIR, build_library, write_checksums
 from rhs_env.patterns.metrics import pattern_report
-from rhs_studies.provenance import write_json
+from rhs_studies.kit.provenance import write_json
 
 CAP_TOL_DB = 0.01  # a grid counts as over the sidelobe cap when its fine-grid PSLR exceeds it by more
 

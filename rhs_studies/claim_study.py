@@ -78,7 +78,7 @@ from rhs_env.array_models import ANTENNA_KINDS, ArrayAntenna
 from rhs_env.point_cloud import angle_crb, pointcloud_metrics
 from rhs_env.radar import RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers
-from rhs_studies.provenance import write_json
+from rhs_studies.kit.provenance import write_json
 
 ROOT = Path(__file__).resolve().parent.parent
 

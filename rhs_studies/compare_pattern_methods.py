@@ -31,7 +31,7 @@ from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.patterns.fast import FastSettings, build_fast, optimize_grid_fast
 from rhs_env.patterns.metrics import pattern_report
 from rhs_env.patterns.sdr import SDRSettings, build_sdr
-from rhs_studies.provenance import write_json
+from rhs_studies.kit.provenance import write_json
 
 ROOT = Path(__file__).resolve().parents[1]
 

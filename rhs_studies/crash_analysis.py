@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -47,7 +46,8 @@ from typing import Any
 
 import numpy as np
 
-from rhs_studies.provenance import write_json
+from rhs_studies.kit.pool import map_seeds
+from rhs_studies.kit.provenance import write_json
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -178,9 +178,9 @@ def category(rec: dict[str, Any]) -> str:
     return "seen, student disagreed" if (rec.get("hazard_points") or 0) > 0 else "not seen"
 
 
-def _chunk(policy: str, seeds: list[int], margin: float, window: int, env_kwargs: dict | None = None,
-           expert: dict | None = None) -> list[dict]:
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
+def drive_chunk(seeds: list[int], policy: str, margin: float, window: int, env_kwargs: dict | None = None,
+                expert: dict | None = None) -> list[dict]:
+    """Labelled episodes of ``policy`` on ``seeds`` in this process (one chunk of :func:`run_seeds`)."""
     import rhs_env  # noqa: F401
     from agents.decision import HeldPolicy
     from agents.evaluate import load_policy, make_env, resolve_env
@@ -199,13 +199,8 @@ def _chunk(policy: str, seeds: list[int], margin: float, window: int, env_kwargs
 
 def run_seeds(policy: str, seeds: list[int], margin: float, window: int, workers: int,
               expert: dict | None = None) -> list[dict]:
-    """Episodes on ``seeds``, in ``workers`` contiguous chunks (:func:`rhs_env.parallel.parallel_map`)."""
-    from rhs_env.parallel import parallel_map
-
-    k = -(-len(seeds) // workers)
-    parts = [seeds[i : i + k] for i in range(0, len(seeds), k)]
-    done = parallel_map(_chunk, [(policy, part, margin, window, None, expert) for part in parts], workers)
-    return [r for part in done for r in part]
+    """Episodes on ``seeds``, in ``workers`` contiguous chunks (:func:`rhs_studies.kit.pool.map_seeds`)."""
+    return map_seeds(drive_chunk, seeds, workers, policy, margin, window, None, expert)
 
 
 def summarize(runs: list[dict]) -> dict[str, Any]:
@@ -289,7 +284,7 @@ def fingerprint() -> list[float]:
     policy = str(ROOT / DEFAULT_POLICY)
     if not Path(policy).exists():
         return []
-    run = _chunk(policy, [1000], 1.0, 3, {"duration": 2})[0]
+    run = drive_chunk([1000], policy, 1.0, 3, {"duration": 2})[0]
     return [run["return"], run["steps"], run["decisions"], run["agreement"], float(run["crashed"])]
 
 

@@ -42,7 +42,7 @@ from scipy import stats
 from rhs_env.point_cloud import os_cfar_threshold
 from rhs_env.radar import DetectionConfig, RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers
-from rhs_studies.provenance import write_json
+from rhs_studies.kit.provenance import write_json
 
 DETECTORS = ("summed", "footprint")
 ANTENNAS = ("rhs", "phased")
@@ -136,7 +136,7 @@ def measure_pfa(radars: dict[str, RadarSystem], scans: int) -> dict[str, dict]:
 
 def time_detectors(antenna: str, repeats: int, seed: int = 0) -> dict:
     """Median time (ms) of the detection stage (``RadarSystem._detect``) and of a full scan, both detectors."""
-    from rhs_studies.scenes import typical_scene
+    from rhs_studies.kit.episodes import typical_scene
 
     scene, occ = typical_scene(np.random.default_rng(seed + 1))
     radars = {d: RadarSystem(RadarConfig(antenna=antenna, detection=DetectionConfig(statistic=d)), np.random.default_rng(seed))

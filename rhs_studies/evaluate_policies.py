@@ -53,13 +53,14 @@ import json
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
 from agents.decision import SLOWER
 from rhs_common.stats import mean_interval, paired_difference, wilson_interval
-from rhs_studies.provenance import write_json
+from rhs_studies.kit.driving import drive_seeds, run_policy
+from rhs_studies.kit.provenance import write_json
+from rhs_studies.kit.tables import paired
 from rhs_studies.train_policy import ANTENNA_STUDY, TARGETS, target_path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -67,34 +68,6 @@ ROOT = Path(__file__).resolve().parent.parent
 REWARD_AIM, COLLISION_AIM = 0.8, 1.5
 #: the driving targets: return vs always-SLOWER, collision rate, return vs the ground-truth policy
 GOAL_VS_SLOWER, GOAL_COLLISIONS, GOAL_VS_TRUTH = 1.1, 0.04, 0.9
-
-
-def _chunk(policy: str, env_id: str, env_kwargs: dict, seeds: list[int], deterministic: bool = True,
-           shield: dict | None = None) -> list[dict]:
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    from agents.evaluate import evaluate
-
-    s = evaluate(policy, env_id, len(seeds), seeds[0], env_kwargs, progress=False, deterministic=deterministic,
-                 shield=shield)
-    return s["runs"]
-
-
-def run_policy(policy: str, env_id: str, env_kwargs: dict, seeds: list[int], workers: int,
-               deterministic: bool = True, shield: dict | None = None) -> list[dict]:
-    """Episodes on ``seeds`` (contiguous), split over ``workers`` processes; greedy actions, or (``deterministic``
-    False) sampled, seeded by each episode's seed; ``shield`` (a :class:`agents.shield.ShieldConfig` as a dict) in
-    place of the shield saved beside the policy (None: as its record says)."""
-    if workers <= 1:
-        return _chunk(policy, env_id, env_kwargs, seeds, deterministic, shield)
-    k = -(-len(seeds) // workers)
-    parts = [seeds[i : i + k] for i in range(0, len(seeds), k)]
-    from rhs_env.parallel import single_threaded_worker
-
-    n = len(parts)
-    with ProcessPoolExecutor(max_workers=n, initializer=single_threaded_worker) as pool:
-        results = list(pool.map(_chunk, [policy] * n, [env_id] * n, [env_kwargs] * n, parts, [deterministic] * n,
-                                [shield] * n))
-    return [run for part in results for run in part]
 
 
 def _same_policy(a: str, b: str) -> bool:
@@ -153,7 +126,7 @@ def fingerprint() -> list[float]:
     others = [p for p in (target_path("dagger", "truth_all_around"), PPO_POLICY, PPO_TRUTH_POLICY) if p.exists()]
     for policy in dict.fromkeys((SHIPPED_POLICY, DAGGER_POLICY, SHIPPED_TRUTH_POLICY, *others)):
         env_id, kwargs = resolve_env(str(policy))
-        run = _chunk(str(policy), env_id, {**kwargs, "duration": 2}, [1000])[0]
+        run = drive_seeds([1000], str(policy), env_id, {**kwargs, "duration": 2})[0]
         out += [run[k] for k in sorted(run) if isinstance(run[k], (int, float)) and not k.endswith("_s")]
     return out
 
@@ -332,14 +305,6 @@ def _collisions(summary: dict) -> str:
     k, n = summary["collisions"], summary["episodes"]
     low, high = wilson_interval(k, n)
     return f"{summary['collision_rate']:.2f} ({k}/{n}) [{100 * low:.0f}-{100 * high:.0f} %]"
-
-
-def paired(a: list[dict[str, Any]], b: list[dict[str, Any]]) -> dict[str, float]:
-    """Paired return difference a - b of two policies' episodes over their common seeds (t interval)."""
-    by_b = {r["seed"]: r["return"] for r in b}
-    common = [r for r in a if r["seed"] in by_b]
-    d = paired_difference([r["return"] for r in common], [by_b[r["seed"]] for r in common])
-    return {"mean": d.mean, "low": d.low, "high": d.high, "n": len(common)}
 
 
 def _vs_reference(row: dict, rows: list[dict], reference: str = "idm") -> str:

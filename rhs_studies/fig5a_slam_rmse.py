@@ -50,8 +50,9 @@ from pathlib import Path
 import numpy as np
 
 from rhs_common.stats import format_record, mean_interval
-from rhs_studies.episodes import ANTENNAS, add_episode_args, paper_slam_episode, start_study
-from rhs_studies.provenance import jsonable, write_json
+from rhs_studies.kit.episodes import ANTENNAS, add_episode_args, paper_slam_episode, start_study
+from rhs_studies.kit.pool import map_jobs
+from rhs_studies.kit.provenance import jsonable, write_json
 
 PAPER_RATIO = 1.0 / 3.0  # "RHS about a third of the phased array's error"
 PAPER_CLAIM = "RHS about a third of the phased array's error (ratio ~0.33)"
@@ -282,29 +283,17 @@ def episode_settings(a: argparse.Namespace) -> dict:
 
 def run_jobs(jobs: list[tuple], a: argparse.Namespace, partial: Path, done: list[dict]) -> list[dict]:
     """Run the (antenna, power, seed) ``jobs`` (in ``a.workers`` processes), saving each episode to ``partial``."""
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
     from tqdm import tqdm
 
-    from rhs_env.parallel import single_threaded_worker
-
     episodes = list(done)
+    bar = tqdm(total=len(jobs), desc="fig5a episodes", unit="ep", disable=a.no_progress)
 
     def save(ep: dict) -> None:
         episodes.append(ep)
         partial.write_text(json.dumps({"settings": episode_settings(a), "episodes": episodes}, default=jsonable))
+        bar.update(1)
 
-    bar = tqdm(total=len(jobs), desc="fig5a episodes", unit="ep", disable=a.no_progress)
-    if a.workers <= 1:
-        for ant, p, s in jobs:
-            save(paper_slam_episode(ant, s, p, a))
-            bar.update(1)
-    else:
-        with ProcessPoolExecutor(a.workers, initializer=single_threaded_worker) as pool:
-            futs = [pool.submit(paper_slam_episode, ant, s, p, a) for ant, p, s in jobs]
-            for f in as_completed(futs):
-                save(f.result())
-                bar.update(1)
+    map_jobs(paper_slam_episode, [(ant, s, p, a) for ant, p, s in jobs], a.workers, on_result=save)
     bar.close()
     return episodes
 

@@ -30,8 +30,8 @@ import numpy as np
 
 from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.radar import RadarConfig, RadarSystem
-from rhs_studies.provenance import write_json
-from rhs_studies.scenes import landmark_scene
+from rhs_studies.kit.episodes import landmark_scene
+from rhs_studies.kit.provenance import write_json
 
 
 def evaluate(cfg: RadarConfig, cycles: int, seed: int) -> dict:

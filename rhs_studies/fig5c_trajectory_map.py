@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from rhs_common.geometry import wrap_angle
-from rhs_studies.episodes import ANTENNAS, add_episode_args, drive, make_paper_env, start_study
-from rhs_studies.provenance import write_json
+from rhs_studies.kit.episodes import ANTENNAS, add_episode_args, drive, make_paper_env, start_study
+from rhs_studies.kit.provenance import write_json
 
 
 def run(args: argparse.Namespace) -> dict:

@@ -59,8 +59,8 @@ from typing import Any
 
 import numpy as np
 
-from rhs_studies.provenance import FINGERPRINTS, ROOT, ROUNDING_RTOL, STATE_AT_START, load_fingerprints, script_name
-from rhs_studies.subprocess_env import study_env
+from rhs_studies.kit.episodes import study_env
+from rhs_studies.kit.provenance import FINGERPRINTS, ROOT, ROUNDING_RTOL, STATE_AT_START, load_fingerprints, script_name
 
 SAFETY = 4.0  # tolerance = SAFETY x the largest measured round-off spread
 FLIP_REL = 0.02  # a value that moved by more than 2 % under a machine-only change flipped a discrete decision
@@ -88,7 +88,7 @@ def _steps(only: list[str] | None):
 def worker(names: list[str]) -> None:
     """Print ``{step: values}`` as JSON on the last line (run in a subprocess under one setting)."""
     from rhs_studies import reproduce
-    from rhs_studies.provenance import compute_fingerprint, package_versions
+    from rhs_studies.kit.provenance import compute_fingerprint, package_versions
 
     if os.environ.get("RHS_TORCH_THREADS"):
         import torch

@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rhs_studies.episodes import POLICY_HZ, drive
-from rhs_studies.provenance import write_json
+from rhs_studies.kit.episodes import POLICY_HZ, drive
+from rhs_studies.kit.provenance import write_json
 
 ANTENNAS = ("rhs", "phased")
 DETECTORS = ("summed", "footprint")

@@ -34,7 +34,7 @@ import numpy as np
 from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.patterns.fast import FastSettings, build_fast
 from rhs_env.patterns.metrics import pattern_report
-from rhs_studies.provenance import write_json
+from rhs_studies.kit.provenance import write_json
 
 ROOT = Path(__file__).resolve().parents[1]
 

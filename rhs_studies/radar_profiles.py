@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rhs_studies.provenance import numbers, write_json
+from rhs_studies.kit.provenance import numbers, write_json
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -65,7 +65,7 @@ def radar_config(profile: dict, grid_deg: float):
 def time_profiles(names: list[str], grid_deg: float, repeats: int, seed: int) -> dict[str, dict]:
     """Median ms per stage (and total) of one scan per profile; the profiles scan in turn, round by round."""
     from rhs_env.radar import RadarSystem
-    from rhs_studies.scenes import typical_scene
+    from rhs_studies.kit.episodes import typical_scene
 
     radars = {n: RadarSystem(radar_config(PROFILES[n], grid_deg), np.random.default_rng(seed)) for n in names}
     scene, occ = typical_scene(np.random.default_rng(seed + 1))

@@ -29,7 +29,7 @@ import numpy as np
 from rhs_common.stats import mean_half_record, rmse_interval
 from rhs_env.array_models import ScanConfig
 from rhs_env.radar import RadarConfig, RadarSystem
-from rhs_studies.provenance import command_line, numbers, write_json
+from rhs_studies.kit.provenance import command_line, numbers, write_json
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -49,7 +49,7 @@ def evaluate(cfg: RadarConfig, scenes: int, seed: int, noise_draws: int = 1, sce
     intervals are somewhat narrow for the scene-level means; two configs compared on
     the same scenes and seeds see the same scene effects.
     """
-    from rhs_studies.scenes import landmark_scene
+    from rhs_studies.kit.episodes import landmark_scene
 
     make_scene = landmark_scene if scene is None else scene
     det, false_pts = [], []

@@ -27,8 +27,8 @@ import math
 import sys
 
 from rhs_common.stats import format_record, mean_interval
-from rhs_studies.episodes import ANTENNAS, add_episode_args, paper_slam_episode, start_study
-from rhs_studies.provenance import write_json
+from rhs_studies.kit.episodes import ANTENNAS, add_episode_args, paper_slam_episode, start_study
+from rhs_studies.kit.provenance import write_json
 from slam.core.registration import REGISTRATIONS
 
 METRICS = ("vehicle_rmse_m", "final_position_error_m", "heading_rmse_rad", "obstacle_rmse_m")

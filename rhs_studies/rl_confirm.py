@@ -33,32 +33,29 @@ seeds; the result names the commit it was driven at).
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from agents.evaluate import resolve_env
-from rhs_studies.evaluate_policies import paired, run_policy
-from rhs_studies.provenance import write_json
-from rhs_studies.rl_finetune import (
+from rhs_studies.kit.driving import (
     LABELS,
     SHIELD_CONTROL,
     SHIPPED_DIR,
-    STARTS,
+    FreshSeeds,
+    arm_policies,
+    check_zips,
+    drive_arm,
     evaluate_rows,
-    paired_text,
-    row_summary,
-    table_row,
+    rl_fingerprint,
+    run_policy,
     targets,
 )
-from rhs_studies.rl_finetune import fingerprint as study_fingerprint
+from rhs_studies.kit.runner import Study, option, run_study
+from rhs_studies.kit.tables import mean_return, paired, paired_text, row_summary, slim_runs, table_row, targets_line
 
-ROOT = Path(__file__).resolve().parent.parent
 #: the exploring fine-tunes the choice is between (the RL study's two best shield arms on its seeds)
 CANDIDATES = ("shield_explore", "shield_flank_explore")
 #: the rows besides the candidates: their start, on both seed sets
@@ -67,7 +64,6 @@ START = "shipped"
 SCRATCH_CANDIDATES = ("shield_scratch", "shield_scratch_explore", "shield_scratch_cost")
 #: PPO from scratch's targets: return vs IDM + MOBIL, collisions per episode
 SCRATCH_VS_IDM, SCRATCH_COLLISIONS = 1.0, 0.04
-SLIM = ("seed", "return", "crashed", "mean_speed")
 PARTS = ("finetune", "scratch")
 
 
@@ -83,11 +79,6 @@ def choose(runs: dict[str, list[dict]], candidates: tuple[str, ...] = CANDIDATES
     return max(candidates, key=lambda arm: gains[arm]["mean"]), gains
 
 
-def arm_policies(rows: tuple[str, ...], ship_dir: Path) -> dict[str, Path]:
-    """The policy file of each row: a start's, else the arm's zip in ``ship_dir``."""
-    return {row: STARTS[row] if row in STARTS else ship_dir / f"{row}.zip" for row in rows}
-
-
 def markdown(result: dict[str, Any]) -> str:
     """The choice and the test, one paragraph and one table."""
     v, t = result["validation"], result["test"]
@@ -98,7 +89,7 @@ def markdown(result: dict[str, Any]) -> str:
              f"Test on seeds {t['seeds'][0]}-{t['seeds'][-1]} ({len(t['seeds'])} episodes, driven once):", "",
              "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs the shield student (paired, 95 % CI) |",
              "|---|---|---|---|---|"]
-    lines += [table_row(key, s, t["vs_start"].get(key)) for key, s in t["rows"].items()]
+    lines += [table_row(LABELS.get(key, key), s, t["vs_start"].get(key)) for key, s in t["rows"].items()]
     lines += ["", targets_line(t["targets"], "the chosen arm")]
     if "scratch" in result:
         lines += ["", *scratch_markdown(result["scratch"])]
@@ -108,15 +99,6 @@ def markdown(result: dict[str, Any]) -> str:
                   + ", ".join(f"{part} ({commit[:7] if commit else 'unknown commit'})" for part, commit in kept.items())
                   + "."]
     return "\n".join(lines) + "\n"
-
-
-def targets_line(tg: dict[str, Any], judged: str) -> str:
-    """The fine-tune's targets (:func:`rhs_studies.rl_finetune.targets`) on the test seeds, judged on ``judged``."""
-    met = ", ".join(f"{k} {'met' if ok else 'not met'}" for k, ok in tg["met"].items())
-    return (f"Targets judged on {judged}: {tg['return_vs_idm']:.3f}x IDM + MOBIL, "
-            f"{100 * tg['collision_rate']:.0f} % collisions, {tg['mean_speed_mps']:.1f} m/s, "
-            f"{paired_text(tg['gain_over_student'])} over the shield student, "
-            f"{paired_text(tg['gain_over_dagger_continue'])} over the DAgger control; targets: {met}.")
 
 
 def scratch_markdown(part: dict[str, Any]) -> list[str]:
@@ -131,7 +113,7 @@ def scratch_markdown(part: dict[str, Any]) -> list[str]:
              "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs IDM + MOBIL (paired, 95 % CI) |",
              "|---|---|---|---|---|"]
     label = {"sampled": f"{name}, actions sampled", "greedy": f"{name}, greedy actions", "idm": LABELS["idm"]}
-    lines += [table_row(key, s, t["vs_idm"].get(key), label[key]) for key, s in t["rows"].items()]
+    lines += [table_row(label[key], s, t["vs_idm"].get(key)) for key, s in t["rows"].items()]
     tg = t["targets"]
     met = ", ".join(f"{k} {'met' if ok else 'not met'}" for k, ok in tg["met"].items())
     lines += ["", f"Targets judged on the chosen arm, actions sampled: {tg['return_vs_idm']:.3f}x IDM + MOBIL "
@@ -163,26 +145,12 @@ def confirm(validation_seeds: list[int], test_seeds: list[int], workers: int, sh
     }
 
 
-def slim_runs(runs: dict[str, list[dict]]) -> dict[str, list[dict]]:
-    """Each row's episodes with only the fields the results keep (:data:`SLIM`)."""
-    return {k: [{f: e.get(f) for f in SLIM} for e in r] for k, r in runs.items()}
-
-
-def drive_arm(arm: str, seeds: list[int], workers: int, ship_dir: Path = SHIPPED_DIR, deterministic: bool = True,
-              shield: dict[str, Any] | None = None) -> list[dict]:
-    """The arm's zip in ``ship_dir`` on ``seeds``, on its saved env; greedy or sampled actions, behind ``shield``
-    (None: the shield its record keeps; :func:`rhs_studies.evaluate_policies.run_policy`)."""
-    path = str(ship_dir / f"{arm}.zip")
-    env_id, kwargs = resolve_env(path)
-    return run_policy(path, env_id, kwargs, seeds, workers, deterministic, shield)
-
-
 def confirm_scratch(validation_seeds: list[int], test_seeds: list[int], workers: int, ship_dir: Path = SHIPPED_DIR,
                     idm: list[dict] | None = None, candidates: tuple[str, ...] = SCRATCH_CANDIDATES) -> dict[str, Any]:
     """Steps 3 and 4 of the protocol (the module's docstring); ``idm``: IDM + MOBIL's test episodes when driven
     already (the first part's), else driven here."""
     val = {arm: drive_arm(arm, validation_seeds, workers, ship_dir, False) for arm in candidates}
-    chosen = max(candidates, key=lambda arm: float(np.mean([e["return"] for e in val[arm]])))
+    chosen = max(candidates, key=lambda arm: mean_return(val[arm]))
     print(f"rl_confirm: chose {chosen} from scratch", file=sys.stderr)
     test = {"sampled": drive_arm(chosen, test_seeds, workers, ship_dir, False),
             "greedy": drive_arm(chosen, test_seeds, workers, ship_dir, True),
@@ -233,61 +201,48 @@ def _idm_runs(result: dict[str, Any], test: list[int]) -> list[dict] | None:
 
 def fingerprint() -> list[float]:
     """The RL study's: the same starts and shipped zips on one short episode (this study drives nothing else)."""
-    return study_fingerprint()
+    return rl_fingerprint()
 
 
-def study_arguments(ap: argparse.ArgumentParser, test_seed: int) -> None:
-    """The options of a study on fresh seeds (this one, :mod:`rhs_studies.rl_lane_rule_trial`): its validation and test
-    seeds, workers and folders."""
-    ap.add_argument("--validation-seed", type=int, default=7000, help="first validation seed (the choice)")
-    ap.add_argument("--validation-episodes", type=int, default=100)
-    ap.add_argument("--seed", type=int, default=test_seed, help="first test seed")
-    ap.add_argument("--episodes", type=int, default=100, help="test episodes")
-    ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--ship-dir", type=Path, default=SHIPPED_DIR, help="the RL study's shipped arms")
-    ap.add_argument("--out-dir", type=Path, default=ROOT / "results")
+@dataclass(frozen=True)
+class Options(FreshSeeds):
+    """This study's options: :class:`FreshSeeds` (test seeds from 6000) and the parts driven."""
+
+    parts: tuple[str, ...] = option(PARTS, "the parts driven (the others kept from the existing rl_confirm.json, "
+                                    "same seeds)", choices=PARTS)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not self.parts or any(p not in PARTS for p in self.parts):
+            raise ValueError(f"--parts must be some of {list(PARTS)}")
 
 
-def seed_sets(ap: argparse.ArgumentParser, args: argparse.Namespace, arms: list[str]) -> tuple[list[int], list[int]]:
-    """The validation and test seeds of :func:`study_arguments`' options; ``ap.error`` when a set has fewer than two
-    episodes, the sets overlap, or an arm of ``arms`` has no zip in ``--ship-dir``."""
-    if args.episodes < 2 or args.validation_episodes < 2:
-        ap.error("--episodes and --validation-episodes must be >= 2 (intervals need two episodes)")
-    val = list(range(args.validation_seed, args.validation_seed + args.validation_episodes))
-    test = list(range(args.seed, args.seed + args.episodes))
-    if set(val) & set(test):
-        ap.error(f"the validation seeds {val[0]}-{val[-1]} overlap the test seeds {test[0]}-{test[-1]}")
-    missing = [a for a in arms if not (Path(args.ship_dir) / f"{a}.zip").exists()]
-    if missing:
-        ap.error(f"no shipped zip for {missing} in {args.ship_dir}: run scripts/rl_finetune.py first")
-    return val, test
+def check(opts: Options) -> None:
+    """The zips of the parts driven are present and the parts kept are on the same seeds (:func:`kept_parts`)."""
+    arms = [*CANDIDATES, SHIELD_CONTROL] * ("finetune" in opts.parts) + [*SCRATCH_CANDIDATES] * ("scratch" in opts.parts)
+    check_zips(opts.ship_dir, arms)
+    kept_parts(Path(opts.out_dir) / "rl_confirm.json", [p for p in PARTS if p not in opts.parts], *opts.seed_sets())
+
+
+def run(opts: Options) -> dict[str, Any]:
+    """The parts of ``opts`` driven, the others kept (:func:`kept_parts`); the result without provenance."""
+    val, test = opts.seed_sets()
+    result, kept = kept_parts(Path(opts.out_dir) / "rl_confirm.json", [p for p in PARTS if p not in opts.parts],
+                              val, test)
+    if "finetune" in opts.parts:
+        result.update(confirm(val, test, opts.workers, Path(opts.ship_dir)))
+    if "scratch" in opts.parts:
+        result["scratch"] = confirm_scratch(val, test, opts.workers, Path(opts.ship_dir), idm=_idm_runs(result, test))
+    if kept:
+        result["kept_parts"] = kept
+    return result
+
+
+STUDY = Study("rl_confirm", "scripts/rl_confirm.py", Options, run, markdown, fingerprint, __doc__, check)
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    study_arguments(ap, test_seed=6000)
-    ap.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS),
-                    help="the parts driven (the others kept from the existing rl_confirm.json, same seeds)")
-    args = ap.parse_args(argv)
-    arms = [*CANDIDATES, SHIELD_CONTROL] * ("finetune" in args.parts) + [*SCRATCH_CANDIDATES] * ("scratch" in args.parts)
-    val, test = seed_sets(ap, args, arms)
-    out = Path(args.out_dir)
-    try:
-        result, kept = kept_parts(out / "rl_confirm.json", [p for p in PARTS if p not in args.parts], val, test)
-    except ValueError as err:
-        ap.error(str(err))
-    started = time.time()
-    if "finetune" in args.parts:
-        result.update(confirm(val, test, args.workers, Path(args.ship_dir)))
-    if "scratch" in args.parts:
-        result["scratch"] = confirm_scratch(val, test, args.workers, Path(args.ship_dir), idm=_idm_runs(result, test))
-    if kept:
-        result["kept_parts"] = kept
-    write_json(out / "rl_confirm.json", result, __file__, args, started, fingerprint, argv)
-    text = markdown(result)
-    (out / "rl_confirm.md").write_text(text)
-    print(text)
-    return 0
+    return run_study(STUDY, argv)
 
 
 if __name__ == "__main__":

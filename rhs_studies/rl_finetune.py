@@ -77,100 +77,34 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
-from agents.decision import SLOWER
-from agents.evaluate import DAGGER_CRUISE30_CLOSE_POLICY, resolve_env
-from rhs_common.stats import mean_interval, wilson_interval
-from rhs_studies.evaluate_policies import paired, run_policy
-from rhs_studies.provenance import git_state, write_json
+from agents.evaluate import resolve_env
+from rhs_studies.kit.driving import (
+    ARMS,
+    ENV_ID,
+    HYPERPARAMS,
+    LABELS,
+    ROOT,
+    SHIELD_ARMS,
+    SHIELD_CONTROL,
+    SHIPPED_DIR,
+    SHIPPED_START,
+    SLIM_KEYS,
+    STARTS,
+    STUDENT,
+    Arm,
+    evaluate_rows,
+    rl_fingerprint,
+    start_of,
+    targets,
+)
+from rhs_studies.kit.provenance import git_state, write_json
+from rhs_studies.kit.tables import paired, paired_text, row_summary
+from rhs_studies.kit.tables import table_row as _table_row
 
-ROOT = Path(__file__).resolve().parent.parent
-ENV_ID = "rhs-highway-slam-v0"
-STUDENT = ROOT / "agents" / "data" / "dagger_rhs_highway_slam.zip"
-#: the shield student (the 30 m/s DAgger student behind the radar shield, shipped until the RL fine-tune of it
-#: replaced it): the start of the shield arms
-SHIPPED_START = DAGGER_CRUISE30_CLOSE_POLICY
-#: the rows the arms start from
-STARTS = {"student": STUDENT, "shipped": SHIPPED_START}
-#: where the trained arms are kept (the actor zips and their training records)
-SHIPPED_DIR = ROOT / "agents" / "data" / "rl"
-HYPERPARAMS = ROOT / "agents" / "hyperparams"
-
-
-class Arm(NamedTuple):
-    """One training run of the study: ``rhs-slam train --algo ALGO`` with the hyperparameters ``spec``."""
-
-    algo: str
-    #: ``NAME.yml`` of agents/hyperparams, or ``NAME.yml:key=value;...`` (see :func:`hyperparams_file`)
-    spec: str
-    #: starts from the shipped DAgger student (``--init-policy``)
-    from_student: bool
-    #: env steps; None: the study's ``--timesteps``
-    timesteps: int | None = None
-    #: the row it starts from (a key of :data:`STARTS`), whose env kwargs it trains on; its paired differences are
-    #: against that row
-    start: str = "student"
-
-
-HORIZON = "finetune.yml:gamma=0.95;reward_shaping={ttc_s: 3.0, weight: 0.5}"
-#: a longer budget for the best fine-tune setting and its DAgger control (same env steps each)
-LONG_STEPS = 80000
-#: the exploring fine-tune under the shield: the warm-up recipe without the anchor, entropy 0.02, learning rate 3e-4
-SHIELD_EXPLORE = "finetune_warmup.yml:anchor_coef=0;ent_coef=0.02;learning_rate=3.0e-4"
-#: PPO from scratch under the shield with PPO's usual settings (the first study's ``scratch`` arm)
-SCRATCH_EXPLORE = "finetune_shielded.yml:learning_rate=5.0e-4;clip_range=0.2;ent_coef=0.01"
-ARMS: dict[str, Arm] = {
-    "finetune": Arm("finetune", "finetune.yml", True),
-    "finetune_no_anchor": Arm("finetune", "finetune.yml:anchor_coef=0", True),
-    "finetune_horizon": Arm("finetune", HORIZON, True),
-    "dagger_continue": Arm("dagger", "dagger_continue.yml", True),
-    "scratch": Arm("finetune", "finetune.yml:learning_rate=5.0e-4;clip_range=0.2;ent_coef=0.01;"
-                               "reward_shaping={ttc_s: 3.0, weight: 0.5}", False),
-    "finetune_horizon_80k": Arm("finetune", HORIZON, True, LONG_STEPS),
-    "dagger_continue_80k": Arm("dagger", "dagger_continue.yml", True, LONG_STEPS),
-    "dagger_lookahead": Arm("dagger", "dagger_lookahead.yml", True, 48000),
-    "shield_finetune": Arm("finetune", "finetune_shielded.yml", True, 20000, "shipped"),
-    "shield_warmup": Arm("finetune", "finetune_warmup.yml", True, 60000, "shipped"),
-    "shield_explore": Arm("finetune", SHIELD_EXPLORE, True, 40000, "shipped"),
-    "shield_flank_explore": Arm("finetune", SHIELD_EXPLORE, True, 40000, "shipped"),
-    "shield_dagger": Arm("dagger", "dagger_shielded.yml", True, 40000, "shipped"),
-    "shield_scratch": Arm("finetune", "finetune_shielded.yml", False, 60000, "shipped"),
-    "shield_scratch_explore": Arm("finetune", SCRATCH_EXPLORE, False, 60000, "shipped"),
-    "shield_scratch_cost": Arm("finetune", SCRATCH_EXPLORE + ";reward_shaping={ttc_s: 3.0, weight: 0.5, shield_cost: 0.5}",
-                               False, 60000, "shipped"),
-}
-LABELS = {
-    "student": "DAgger student (start of the arms above the shield's)",
-    "finetune": "PPO fine-tune, privileged critic, decaying anchor",
-    "finetune_no_anchor": "PPO fine-tune without the anchor (control)",
-    "finetune_horizon": "PPO fine-tune, gamma 0.95 and time-to-collision shaping",
-    "finetune_horizon_80k": f"PPO fine-tune, gamma 0.95 and time-to-collision shaping, {LONG_STEPS // 1000}k env steps",
-    "dagger_continue": "DAgger continuation (control)",
-    "dagger_continue_80k": f"DAgger continuation, {LONG_STEPS // 1000}k env steps (control; shipped before the shield student)",
-    "scratch": "PPO from scratch, privileged critic",
-    "dagger_lookahead": "DAgger from the lookahead teacher, 48k env steps",
-    "slower": "always SLOWER (scripted)",
-    "idm": "IDM + MOBIL (highway-env, scripted)",
-    "headway": "HeadwayDriver at 1 Hz, IDLE between (the expert)",
-    "lookahead": "LookaheadDriver at 1 Hz, IDLE between (the rollout teacher)",
-    "shipped": "Shield student: 30 m/s DAgger student behind the radar shield (start of the shield arms; shipped before "
-               "the RL fine-tune)",
-    "shield_finetune": "PPO fine-tune under the shield, gamma 0.95 and time-to-collision shaping, 20k env steps",
-    "shield_warmup": "PPO fine-tune under the shield with a critic warm-up, 60k env steps",
-    "shield_explore": "PPO fine-tune under the shield, critic warm-up, no anchor, entropy 0.02, 40k env steps",
-    "shield_flank_explore": "PPO fine-tune trained under the shield with its flank rule, warm-up, no anchor, entropy 0.02, "
-                            "40k env steps",
-    "shield_dagger": "DAgger continuation under the shield, 40k env steps (control of the shield fine-tunes)",
-    "shield_scratch": "PPO from scratch under the shield, 60k env steps",
-    "shield_scratch_explore": "PPO from scratch under the shield, learning rate 5e-4, clip 0.2, entropy 0.01, 60k env steps",
-    "shield_scratch_cost": "PPO from scratch under the shield, as above, each shield intervention costing 0.5, 60k env "
-                           "steps",
-}
-#: the fine-tune's targets: return vs IDM + MOBIL, collisions per episode, mean speed, paired gain over the student
-TARGET_VS_IDM, TARGET_COLLISIONS, TARGET_SPEED_MPS, TARGET_GAIN = 1.08, 0.02, 24.0, 3.0
 #: training episodes per point of a learning curve (a rolling window)
 CURVE_WINDOW = 20
 
@@ -284,18 +218,6 @@ def learning_curve(monitor_dir: Path, window: int = CURVE_WINDOW) -> dict[str, l
             "collision_rate": rolling(np.array([r[3] for r in rows]))}
 
 
-def row_summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
-    """Mean return (t interval), collisions (Wilson interval), mean speed of one policy's episodes."""
-    returns = [r["return"] for r in runs]
-    crashes = sum(bool(r["crashed"]) for r in runs)
-    ret = mean_interval(returns)
-    low, high = wilson_interval(crashes, len(runs))
-    speed = mean_interval([r["mean_speed"] for r in runs])
-    return {"episodes": len(runs), "return": {"mean": ret.mean, "half": ret.half_width, "min": float(np.min(returns))},
-            "collisions": crashes, "collision_rate": crashes / len(runs), "collision_interval": [low, high],
-            "mean_speed_mps": {"mean": speed.mean, "half": speed.half_width}}
-
-
 #: (fine-tune arm, its DAgger control of the same budget), the first pair present is the one the targets judge
 HEADLINE_PAIRS = (("finetune_horizon_80k", "dagger_continue_80k"), ("finetune", "dagger_continue"))
 
@@ -305,50 +227,12 @@ HEADLINE_PAIRS = (("finetune_horizon_80k", "dagger_continue_80k"), ("finetune", 
 TEACHER_PAIR = ("dagger_lookahead", "dagger_continue_80k")
 
 
-#: the shield arms the targets judge, in order of preference (the first evaluated; chosen on the validation seeds
-#: 4000-4049, where shield_explore led: +3.2 +- 2.5 paired against the shield student, 0 / 50 collisions, before and
-#: after the flank rule; shield_flank_explore +1.7 +- 2.6 with 1 / 50) and their DAgger control
-SHIELD_ARMS = ("shield_explore", "shield_warmup", "shield_finetune")
-SHIELD_CONTROL = "shield_dagger"
-
-
-def start_of(row: str) -> str:
-    """The row ``row`` is compared with: its arm's start, else the DAgger student."""
-    return ARMS[row].start if row in ARMS else "student"
-
-
 def headline_arm(runs: dict[str, list[dict]]) -> tuple[str, str]:
     """The fine-tune the targets judge and its DAgger control: the longest budget evaluated."""
     for arm, control in HEADLINE_PAIRS:
         if arm in runs:
             return arm, control
     return HEADLINE_PAIRS[-1]
-
-
-def targets(rows: dict[str, dict[str, Any]], runs: dict[str, list[dict]], arm: str = "finetune",
-            control: str | None = "dagger_continue") -> dict[str, Any]:
-    """The fine-tune's targets against IDM + MOBIL, its start and the DAgger continuation ``control`` (None: none)."""
-    if arm not in rows:
-        return {}
-    s = rows[arm]
-    gain = paired(runs[arm], runs[start_of(arm)])
-    out: dict[str, Any] = {
-        "arm": arm, "control": control,
-        "return_vs_idm": s["return"]["mean"] / rows["idm"]["return"]["mean"],
-        "collision_rate": s["collision_rate"],
-        "mean_speed_mps": s["mean_speed_mps"]["mean"],
-        "gain_over_student": gain,
-    }
-    if control in runs:
-        out["gain_over_dagger_continue"] = paired(runs[arm], runs[control])
-    out["met"] = {
-        "return_vs_idm": out["return_vs_idm"] >= TARGET_VS_IDM,
-        "collisions": s["collision_rate"] <= TARGET_COLLISIONS,
-        "mean_speed": out["mean_speed_mps"] >= TARGET_SPEED_MPS,
-        "gain_over_student": gain["mean"] >= TARGET_GAIN and gain["low"] > 0,
-        "beats_dagger_continue": ("gain_over_dagger_continue" in out and out["gain_over_dagger_continue"]["low"] > 0),
-    }
-    return out
 
 
 def plot(curves: dict[str, dict[str, list[float]]], path: Path) -> None:
@@ -376,23 +260,9 @@ def plot(curves: dict[str, dict[str, list[float]]], path: Path) -> None:
     plt.close(fig)
 
 
-def paired_text(d: dict[str, float]) -> str:
-    """A paired difference (:func:`rhs_studies.evaluate_policies.paired`) as mean [low, high].
-
-    >>> paired_text({"mean": 3.14, "low": 1.5, "high": 4.72})
-    '+3.1 [+1.5, +4.7]'
-    """
-    return f"{d['mean']:+.1f} [{d['low']:+.1f}, {d['high']:+.1f}]"
-
-
 def table_row(key: str, s: dict[str, Any], gain: dict[str, float] | None, label: str | None = None) -> str:
-    """One row of a results table: the policy (``label``, else its :data:`LABELS` entry), its :func:`row_summary`
-    ``s`` and its paired difference ``gain`` (None: blank)."""
-    lo, hi = s["collision_interval"]
-    diff = "" if gain is None else paired_text(gain)
-    return (f"| {label or LABELS.get(key, key)} | {s['return']['mean']:.1f} +- {s['return']['half']:.1f} | "
-            f"{s['collisions']}/{s['episodes']} [{100 * lo:.0f}-{100 * hi:.0f} %] | "
-            f"{s['mean_speed_mps']['mean']:.1f} | {diff} |")
+    """One row of the table: :func:`rhs_studies.kit.tables.table_row` labelled ``label``, else by :data:`LABELS`."""
+    return _table_row(label or LABELS.get(key, key), s, gain)
 
 
 def markdown(result: dict[str, Any]) -> str:
@@ -421,31 +291,6 @@ def markdown(result: dict[str, Any]) -> str:
         lines += ["", f"Targets judged on {name}: {t['return_vs_idm']:.3f}x IDM + MOBIL, {100 * t['collision_rate']:.0f} % collisions, "
                   f"{t['mean_speed_mps']:.1f} m/s{vs}; targets: {met}."]
     return "\n".join(lines) + "\n"
-
-
-def evaluate_rows(policies: dict[str, Path], seeds: list[int], workers: int,
-                  skip: tuple[str, ...] = ()) -> dict[str, list[dict]]:
-    """Every learned policy on the SLAM env and the scripted references on the ground-truth env, same seeds
-    (the rows named in ``skip`` left out)."""
-    _, student_kwargs = resolve_env(str(STUDENT))
-    # always SLOWER and IDM with highway-env's own action set, as the driving targets were set; the teachers with the
-    # students' target speeds, as they taught them
-    teach = {"action": student_kwargs.get("action")} if "action" in student_kwargs else {}
-    scripted = {"slower": (f"constant:{SLOWER}", {}), "idm": ("idm", {}), "headway": ("headway:5", teach),
-                "lookahead": ("lookahead:5", teach)}
-    scripted = {k: v for k, v in scripted.items() if k not in skip}
-    runs: dict[str, list[dict]] = {}
-    for key, path in {k: v for k, v in policies.items() if k not in skip}.items():
-        env_id, kwargs = resolve_env(str(path))
-        t0 = time.perf_counter()
-        runs[key] = run_policy(str(path), env_id, kwargs, seeds, workers)
-        print(f"rl_finetune: {key}: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
-    for key, (policy, kwargs) in scripted.items():
-        runs[key] = run_policy(policy, "rhs-highway-v0", kwargs, seeds, workers)
-    return runs
-
-
-SLIM_KEYS = ("seed", "return", "steps", "crashed", "mean_speed", "position_rmse_m")
 
 
 def table_order(runs: dict[str, Any]) -> dict[str, Any]:
@@ -478,13 +323,8 @@ def keep_rows(path: Path, rows: list[str], seeds: list[int]) -> dict[str, Any]:
 
 def fingerprint() -> list[float]:
     """The starts and each shipped arm, one 2-second episode (10 steps) on seed 3000 (the other zips beside the
-    arms are not this study's)."""
-    out: list[float] = []
-    for path in [*STARTS.values(), *sorted(p for p in SHIPPED_DIR.glob("*.zip") if p.stem in ARMS)]:
-        env_id, kwargs = resolve_env(str(path))
-        run = run_policy(str(path), env_id, {**kwargs, "duration": 2}, [3000], 1)[0]
-        out += [float(run[k]) for k in SLIM_KEYS[1:] if isinstance(run.get(k), (int, float))]
-    return out
+    arms are not this study's): :func:`rhs_studies.kit.driving.rl_fingerprint`."""
+    return rl_fingerprint()
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -582,3 +422,9 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+__all__ = ["ARMS", "HYPERPARAMS", "LABELS", "SHIELD_ARMS", "SHIELD_CONTROL", "SHIPPED_DIR", "SHIPPED_START", "STARTS",
+           "STUDENT", "Arm", "evaluate_rows", "fingerprint", "headline_arm", "hyperparams_file", "keep_rows",
+           "learning_curve", "main", "markdown", "paired", "paired_text", "plot", "row_summary", "ship_arm",
+           "start_of", "table_order", "table_row", "targets", "train_command"]

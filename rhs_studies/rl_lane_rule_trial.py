@@ -21,7 +21,8 @@ whether a stricter rule closes the gap, with a protocol fixed before any of its 
 target was met: its zip copied to ``agents/data/rl/<fine-tune>_<rule>.zip`` with its record, the shield changed to the
 rule's and the study that chose it named (:func:`ship`); :data:`agents.evaluate.SHIPPED_POLICY` points there.
 
-Test seeds that overlap a set the project's policies were chosen, tuned or judged on (:data:`USED_SEEDS`) are refused.
+Test seeds that overlap a set the project's policies were chosen, tuned or judged on (the seed ledger,
+:mod:`rhs_studies.kit.seeds`) are refused.
 
     OMP_NUM_THREADS=1 python scripts/rl_lane_test.py                 # 2 x 100 + 4 x 100 episodes, ~45 min
     OMP_NUM_THREADS=1 python scripts/rl_lane_test.py --episodes 4 --validation-episodes 4 --out-dir /tmp/l
@@ -29,24 +30,32 @@ Test seeds that overlap a set the project's policies were chosen, tuned or judge
 
 from __future__ import annotations
 
-import argparse
 import json
 import shutil
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from agents.evaluate import policy_metadata
-from rhs_studies.evaluate_policies import paired
-from rhs_studies.provenance import write_json
-from rhs_studies.rl_confirm import START, arm_policies, drive_arm, seed_sets, slim_runs, study_arguments, targets_line
-from rhs_studies.rl_finetune import LABELS, SHIELD_CONTROL, SHIPPED_DIR, evaluate_rows, row_summary, table_row, targets
-from rhs_studies.rl_finetune import fingerprint as study_fingerprint
+from rhs_studies.kit.driving import (
+    LABELS,
+    ROOT,
+    SHIELD_CONTROL,
+    SHIPPED_DIR,
+    FreshSeeds,
+    arm_policies,
+    check_zips,
+    drive_arm,
+    evaluate_rows,
+    rl_fingerprint,
+    targets,
+)
+from rhs_studies.kit.runner import Study, option, parse_options, parser_for, run_study
+from rhs_studies.kit.seeds import USED_SEEDS, check_fresh
+from rhs_studies.kit.tables import collisions, mean_return, paired, row_summary, slim_runs, table_row, targets_line
 
-ROOT = Path(__file__).resolve().parent.parent
 #: the launcher of this study: the command its results record and its key in results/fingerprints.json (the module
 #: was called rl_lane_test like it; renamed so that no module of the kit matches pytest's test-file pattern)
 LAUNCHER = "scripts/rl_lane_test.py"
@@ -55,10 +64,8 @@ FINETUNE = "shield_flank_explore"
 #: the candidate lane rules, each one field of the shield (defaults: lane_gap_m 4.0, lane_time_s 1.5); measured on
 #: the analysis seeds 5000-5059 before this study: each removed one lane-change crash of two, -0.2 and -0.7 in return
 LANE_RULES: dict[str, dict[str, float]] = {"lane_time": {"lane_time_s": 2.5}, "lane_gap": {"lane_gap_m": 6.0}}
-#: seed sets the project's policies were trained near, chosen, tuned or judged on before this study (first, last),
-#: which its test refuses (its own test seeds, 8000-8099, are not among them: the study reruns on them)
-USED_SEEDS = ((0, 999), (1000, 1099), (3000, 3099), (4000, 4099), (5000, 5059), (6000, 6099), (7000, 7099),
-              (10000, 10999))
+#: the rows besides the fine-tune on the test seeds: its start (the shield student, shipped then)
+START = "shipped"
 
 
 def choose(runs: dict[str, list[dict]]) -> str:
@@ -69,8 +76,7 @@ def choose(runs: dict[str, list[dict]]) -> str:
     >>> choose({"a": ep([1, 0], 9.0), "b": ep([0, 0], 1.0), "c": ep([0, 0], 2.0)})
     'c'
     """
-    return min(runs, key=lambda k: (sum(bool(e["crashed"]) for e in runs[k]),
-                                    -float(np.mean([e["return"] for e in runs[k]]))))
+    return min(runs, key=lambda k: (collisions(runs[k]), -mean_return(runs[k])))
 
 
 def drive_with_rule(rule: dict[str, float], seeds: list[int], workers: int, ship_dir: Path = SHIPPED_DIR,
@@ -81,7 +87,8 @@ def drive_with_rule(rule: dict[str, float], seeds: list[int], workers: int, ship
 
 
 def overlap(seeds: list[int]) -> list[tuple[int, int]]:
-    """The sets of :data:`USED_SEEDS` that ``seeds`` touch.
+    """The sets of :data:`rhs_studies.kit.seeds.USED_SEEDS` that ``seeds`` touch (this study's own test set,
+    ``lane_rule_test`` of the ledger, is not among them: the study reruns on it).
 
     >>> overlap(list(range(8000, 8100))), overlap([6099, 6100])
     ([], [(6000, 6099)])
@@ -139,7 +146,7 @@ def markdown(result: dict[str, Any]) -> str:
              "| policy | return (95 % CI) | collisions [Wilson 95 %] | speed m/s | vs the shield student (paired, 95 % CI) |",
              "|---|---|---|---|---|"]
     label = {result["finetune"]: f"{name}, shield with {rule_text(v['rule'])}"}
-    lines += [table_row(key, s, t["vs_start"].get(key), label.get(key)) for key, s in t["rows"].items()]
+    lines += [table_row(label.get(key) or LABELS.get(key, key), s, t["vs_start"].get(key)) for key, s in t["rows"].items()]
     lines += ["", targets_line(t["targets"], "the fine-tune behind the chosen rule")]
     return "\n".join(lines) + "\n"
 
@@ -174,36 +181,46 @@ def ship(result: dict[str, Any], results_file: Path, ship_dir: Path = SHIPPED_DI
 
 def fingerprint() -> list[float]:
     """The RL study's: the same starts and shipped zips on one short episode."""
-    return study_fingerprint()
+    return rl_fingerprint()
+
+
+@dataclass(frozen=True)
+class Options(FreshSeeds):
+    """This study's options: :class:`rhs_studies.kit.driving.FreshSeeds` with test seeds from 8000, and ``--ship``."""
+
+    seed: int = option(8000, "first test seed")
+    ship: bool = option(False, "drive nothing: ship the fine-tune behind the rule chosen in --out-dir's "
+                        "rl_lane_test.json, if it met every target")
+
+
+def check(opts: Options) -> None:
+    """The zips are present and the test seeds fresh: no set of the seed ledger but this study's own."""
+    check_zips(opts.ship_dir, [FINETUNE, SHIELD_CONTROL])
+    check_fresh(opts.seed_sets()[1], "the test seeds", allow=("lane_rule_test",))
+
+
+def run(opts: Options) -> dict[str, Any]:
+    """The protocol on the options' seeds (:func:`lane_test`)."""
+    val, test = opts.seed_sets()
+    return lane_test(val, test, opts.workers, Path(opts.ship_dir),
+                     baseline=confirmed_baseline(ROOT / "results" / "rl_confirm.json", val))
+
+
+STUDY = Study("rl_lane_test", LAUNCHER, Options, run, markdown, fingerprint, __doc__, check)
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    study_arguments(ap, test_seed=8000)
-    ap.add_argument("--ship", action="store_true",
-                    help="drive nothing: ship the fine-tune behind the rule chosen in --out-dir's rl_lane_test.json, "
-                    "if it met every target")
-    args = ap.parse_args(argv)
-    if args.ship:
-        path = Path(args.out_dir) / "rl_lane_test.json"
-        if not path.exists():
-            ap.error(f"--ship: {path} does not exist (run the study first)")
-        try:
-            print(f"rl_lane_test: shipped {ship(json.loads(path.read_text()), path, Path(args.ship_dir))}")
-        except ValueError as err:
-            ap.error(str(err))
-        return 0
-    val, test = seed_sets(ap, args, [FINETUNE, SHIELD_CONTROL])
-    if overlap(test):
-        ap.error(f"the test seeds {test[0]}-{test[-1]} overlap seeds already used {overlap(test)}: choose fresh ones")
-    out = Path(args.out_dir)
-    started = time.time()
-    result = lane_test(val, test, args.workers, Path(args.ship_dir),
-                       baseline=confirmed_baseline(ROOT / "results" / "rl_confirm.json", val))
-    write_json(out / "rl_lane_test.json", result, LAUNCHER, args, started, fingerprint, argv)
-    text = markdown(result)
-    (out / "rl_lane_test.md").write_text(text)
-    print(text)
+    ap = parser_for(Options, __doc__)
+    opts = parse_options(Options, argv, parser=ap)
+    if not opts.ship:
+        return run_study(STUDY, argv)
+    path = Path(opts.out_dir) / "rl_lane_test.json"
+    if not path.exists():
+        ap.error(f"--ship: {path} does not exist (run the study first)")
+    try:
+        print(f"rl_lane_test: shipped {ship(json.loads(path.read_text()), path, Path(opts.ship_dir))}")
+    except ValueError as err:
+        ap.error(str(err))
     return 0
 
 

@@ -33,17 +33,16 @@ horizon, about 0.03 per step): near ties, which a student that sees the scene th
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from rhs_studies.provenance import write_json
-from rhs_studies.rl_finetune import paired, row_summary
+from rhs_studies.kit.pool import map_seeds
+from rhs_studies.kit.provenance import write_json
+from rhs_studies.kit.tables import paired, row_summary
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV_ID = "rhs-highway-v0"
@@ -125,26 +124,19 @@ def drive(variant: str, seed: int, duration: float | None = None) -> dict[str, A
             "decisions": decisions, "s_per_decision": decide_s / decisions, "differs": differs, "gaps": gaps}
 
 
-def _chunk(variant: str, seeds: list[int], duration: float | None = None) -> list[dict[str, Any]]:
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
+def drive_chunk(seeds: list[int], variant: str, duration: float | None = None) -> list[dict[str, Any]]:
+    """Episodes of ``variant`` on ``seeds`` in this process (one chunk of :func:`run_variant`)."""
     return [drive(variant, s, duration) for s in seeds]
 
 
 def run_variant(variant: str, seeds: list[int], workers: int, duration: float | None = None) -> list[dict[str, Any]]:
-    """Episodes of ``variant`` on ``seeds`` (``duration`` s, None: the env's 40 s), split over ``workers`` processes."""
-    if workers <= 1:
-        return _chunk(variant, seeds, duration)
-    from rhs_env.parallel import single_threaded_worker
-
-    k = -(-len(seeds) // workers)
-    parts = [seeds[i : i + k] for i in range(0, len(seeds), k)]
-    with ProcessPoolExecutor(max_workers=len(parts), initializer=single_threaded_worker) as pool:
-        chunks = pool.map(_chunk, [variant] * len(parts), parts, [duration] * len(parts))
-        return [run for part in chunks for run in part]
+    """Episodes of ``variant`` on ``seeds`` (``duration`` s, None: the env's 40 s), split over ``workers`` processes
+    (:func:`rhs_studies.kit.pool.map_seeds`)."""
+    return map_seeds(drive_chunk, seeds, workers, variant, duration)
 
 
 def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
-    """:func:`rhs_studies.rl_finetune.row_summary` (return, collisions, speed), the seconds per decision and the
+    """:func:`rhs_studies.kit.tables.row_summary` (return, collisions, speed), the seconds per decision and the
     decision statistics of a lookahead."""
     out = row_summary(runs)
     out["s_per_decision"] = float(np.mean([r["s_per_decision"] for r in runs]))

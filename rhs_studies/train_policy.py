@@ -68,7 +68,7 @@ import sys
 import time
 from pathlib import Path
 
-from rhs_studies.provenance import provenance, write_json
+from rhs_studies.kit.provenance import provenance, write_json
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from rhs_common.geometry import wrap_angle
-from rhs_studies.provenance import write_json
+from rhs_studies.kit.provenance import write_json
 
 if TYPE_CHECKING:
     from rhs_env.wrappers import RadarObservation

@@ -28,7 +28,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from rhs_studies.provenance import load_fingerprints, verification
+from rhs_studies.kit.provenance import load_fingerprints, verification
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -148,7 +148,8 @@ def _policies(d: dict) -> tuple[str, str]:
 
 
 def _rl_confirm(d: dict) -> tuple[str, str]:
-    from rhs_studies.rl_finetune import ARMS, paired_text
+    from rhs_studies.kit.driving import ARMS
+    from rhs_studies.kit.tables import paired_text
 
     v, t = d["validation"], d["test"]
     arm, tg = v["chosen"], t["targets"]
@@ -163,7 +164,7 @@ def _rl_confirm(d: dict) -> tuple[str, str]:
 
 
 def _rl_lane_test(d: dict) -> tuple[str, str]:
-    from rhs_studies.rl_finetune import paired_text
+    from rhs_studies.kit.tables import paired_text
 
     v, t = d["validation"], d["test"]
     tg = t["targets"]

@@ -477,7 +477,8 @@ def test_the_lane_test_chooses_the_rule_on_validation_seeds_and_drives_the_fine_
     validation collisions is the one the test drives; the test drives the start, the DAgger control and IDM + MOBIL
     with their own shields; used seeds are refused."""
     from agents.evaluate import policy_metadata
-    from rhs_studies import rl_confirm, rl_lane_rule_trial
+    from rhs_studies import rl_lane_rule_trial
+    from rhs_studies.kit import driving
 
     saved = policy_metadata(rl_lane_rule_trial.SHIPPED_DIR / f"{rl_lane_rule_trial.FINETUNE}.zip")["shield"]
     shields = []
@@ -494,7 +495,7 @@ def test_the_lane_test_chooses_the_rule_on_validation_seeds_and_drives_the_fine_
         return {k: [{"seed": s, "return": 160.0 + s % 3, "crashed": False, "mean_speed": 23.0} for s in seeds]
                 for k in keys}
 
-    monkeypatch.setattr(rl_confirm, "run_policy", fake_run)  # drive_arm's
+    monkeypatch.setattr(driving, "run_policy", fake_run)  # drive_arm's
     monkeypatch.setattr(rl_lane_rule_trial, "evaluate_rows", fake_rows)
     result = rl_lane_rule_trial.lane_test(list(range(7000, 7010)), list(range(8000, 8010)), 1)
     assert [s for s, _ in shields] == [7000, 7000, 8000]

@@ -1,0 +1,109 @@
+"""The seed ledger: every set of episode seeds a driving study has trained near, chosen, tuned or judged on.
+
+A comparison judged on seeds that chose its arm, or tuned its shield, is not a fresh test. Each set is named here
+once, with the study that drove it and what for; :func:`overlap` says which sets a list of seeds touches, so that a
+study refuses to call a driven set fresh (:func:`check_fresh`). A new study that drives a new set adds it here.
+
+>>> [s.name for s in overlap(range(6099, 6101))]
+['rl_confirm_test']
+>>> overlap(range(9000, 9100))
+[]
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+from rhs_common.validation import check_int
+
+
+@dataclass(frozen=True)
+class SeedSet:
+    """One named set of consecutive seeds ``first``..``last`` (both included) and who drove it for what."""
+
+    name: str
+    first: int
+    last: int
+    #: the study (or training) that drove these seeds and what it read from them
+    use: str
+
+    def __post_init__(self) -> None:
+        check_int(f"seed set {self.name}.first", self.first, 0, 2**31 - 1)
+        check_int(f"seed set {self.name}.last", self.last, self.first, 2**31 - 1)
+
+    @property
+    def seeds(self) -> list[int]:
+        """The seeds of the set, in order."""
+        return list(range(self.first, self.last + 1))
+
+    def __contains__(self, seed: object) -> bool:
+        return isinstance(seed, int) and self.first <= seed <= self.last
+
+
+#: every seed set driven so far, in the order the studies drove them
+LEDGER: tuple[SeedSet, ...] = (
+    SeedSet("training", 0, 999, "the training envs of every policy (seeds 0..; the studies' scene seeds too)"),
+    SeedSet("policies_table", 1000, 1099, "evaluate_policies (the policies table) and crash_analysis (1000-1049)"),
+    SeedSet("heldout_2000", 2000, 2049, "the held-out evaluations of the students' budget ablation (crash_analysis)"),
+    SeedSet("rl_finetune_heldout", 3000, 3099, "rl_finetune: the RL arms judged (looked at more than once)"),
+    SeedSet("shield_validation", 4000, 4099, "teachers and shield_sensing: the shield tuned, the shield arms chosen"),
+    SeedSet("lane_analysis", 5000, 5059, "the lane-change crashes analysed, the lane rules measured"),
+    SeedSet("rl_confirm_test", 6000, 6099, "rl_confirm: the chosen fine-tune tested once"),
+    SeedSet("rl_confirm_validation", 7000, 7099, "rl_confirm: the fine-tune and PPO from scratch chosen"),
+    SeedSet("lane_rule_test", 8000, 8099, "rl_lane_rule_trial: the fine-tune behind the chosen lane rule tested"),
+    SeedSet("training_eval", 10000, 10999, "the training runs' evaluation envs"),
+)
+BY_NAME = {s.name: s for s in LEDGER}
+
+#: the sets the project's policies were trained near, chosen, tuned or judged on before the lane rule trial, as
+#: (first, last): what that trial's ``overlap`` names (its own test set, ``lane_rule_test``, it reruns on; its check
+#: now refuses every set of the ledger but its own, ``heldout_2000`` too)
+USED_SEEDS = tuple((s.first, s.last) for s in LEDGER if s.name not in ("lane_rule_test", "heldout_2000"))
+
+
+def seed_set(name: str) -> SeedSet:
+    """The ledger's set ``name``; ``ValueError`` naming the known sets otherwise."""
+    if name not in BY_NAME:
+        raise ValueError(f"seed set {name!r} is not in the ledger (rhs_studies/kit/seeds.py): known {sorted(BY_NAME)}")
+    return BY_NAME[name]
+
+
+def overlap(seeds: Iterable[int], ledger: Iterable[SeedSet] = LEDGER, allow: Iterable[str] = ()) -> list[SeedSet]:
+    """The sets of ``ledger`` that ``seeds`` touch, except those named in ``allow`` (a study rerunning its own set).
+
+    Args:
+        seeds: the episode seeds a study means to drive.
+        ledger: the sets to check against (default: every driven set).
+        allow: names of sets the caller may drive again (its own).
+
+    Returns:
+        The sets touched, in ledger order (empty: the seeds are fresh).
+    """
+    wanted = sorted(set(seeds))
+    allowed = set(allow)
+    return [s for s in ledger if s.name not in allowed and any(s.first <= x <= s.last for x in wanted)]
+
+
+def check_fresh(seeds: list[int], what: str, allow: Iterable[str] = ()) -> None:
+    """``ValueError`` when ``seeds`` (named ``what`` in the message) touch a set already driven (:func:`overlap`).
+
+    Args:
+        seeds: the episode seeds, at least one.
+        what: how the message names them (a flag, a spec field).
+        allow: names of sets the caller may drive again.
+    """
+    touched = overlap(seeds, allow=allow)
+    if touched:
+        sets = ", ".join(f"{s.name} ({s.first}-{s.last})" for s in touched)
+        raise ValueError(f"{what} {min(seeds)}-{max(seeds)} overlap seeds already used: {sets}; choose fresh ones")
+
+
+def consecutive(first: int, count: int) -> list[int]:
+    """``count`` seeds from ``first``, checked (``count`` >= 1)."""
+    check_int("seed", first, 0, 2**31 - 1)
+    check_int("episodes", count, 1, 10**6)
+    return list(range(first, first + count))
+
+
+__all__ = ["BY_NAME", "LEDGER", "USED_SEEDS", "SeedSet", "check_fresh", "consecutive", "overlap", "seed_set"]
