@@ -22,6 +22,12 @@ id                         entry point                                     obser
 ``rhs-dense-v0``           ``slam.gym.envs:make_dense_slam``               cloud + SLAM
 =========================  ==============================================  =====================
 
+highway-env's other roads (:data:`ROAD_NAMES`: merge, roundabout, intersection, exit, racetrack), each with its
+roadside landmarks, highway-env's traffic, rewards and default action (:mod:`rhs_env.road_envs`), get the same
+three ids: ``rhs-<road>-v0`` (``rhs_env.road_envs:RHS<Road>Env``, highway-env's own observation),
+``rhs-<road>-radar-v0`` (``rhs_env.road_envs:make_<road>_radar``) and ``rhs-<road>-slam-v0``
+(``slam.gym.road_envs:make_<road>_slam``).
+
 Keyword arguments of ``gym.make`` go to the entry point: env config keys
 (``lanes_count=3``, ``landmarks={"spacing_m": 10}``, ``config={...}``,
 ``render_mode="rgb_array"``) and the wrappers' own arguments, routed by their
@@ -47,7 +53,7 @@ import numpy as np
 
 __all__ = [
     "DENSE_ID", "ENV_SPECS", "HIGHWAY_ID", "HIGHWAY_RADAR_ID", "HIGHWAY_SLAM_ID", "NULL_OBSERVATION", "PAPER_ID",
-    "SLAM_ENV_SPECS", "check_env_id", "make_highway_radar", "register_envs", "route_kwargs",
+    "ROAD_NAMES", "SLAM_ENV_SPECS", "check_env_id", "make_highway_radar", "register_envs", "route_kwargs",
     "with_cheap_base_observation",
 ]
 
@@ -56,6 +62,8 @@ HIGHWAY_RADAR_ID = "rhs-highway-radar-v0"
 HIGHWAY_SLAM_ID = "rhs-highway-slam-v0"
 PAPER_ID = "rhs-paper-v0"
 DENSE_ID = "rhs-dense-v0"  # the highway with DENSE_LANDMARKS (guard-rail posts, paired poles, gantries)
+#: highway-env's other roads (rhs_env.road_envs.ROAD_ENVS): ids rhs-<road>-v0, rhs-<road>-radar-v0, rhs-<road>-slam-v0
+ROAD_NAMES = ("merge", "roundabout", "intersection", "exit", "racetrack")
 
 def route_kwargs(kwargs: dict[str, Any], *wrappers: type) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Split ``gym.make`` kwargs among wrapper classes by their ``__init__`` signatures.
@@ -115,6 +123,8 @@ def with_cheap_base_observation(env_kwargs: dict[str, Any]) -> dict[str, Any]:
 ENV_SPECS: tuple[tuple[str, str], ...] = (
     (HIGHWAY_ID, "rhs_env.envs:RHSHighwayEnv"),
     (HIGHWAY_RADAR_ID, "rhs_env.registration:make_highway_radar"),
+    *((f"rhs-{road}-v0", f"rhs_env.road_envs:RHS{road.capitalize()}Env") for road in ROAD_NAMES),
+    *((f"rhs-{road}-radar-v0", f"rhs_env.road_envs:make_{road}_radar") for road in ROAD_NAMES),
 )
 
 #: the SLAM ids: scene -> RadarObservation -> SlamObservation -> SlamMetricsInfo. They live one
@@ -123,6 +133,7 @@ SLAM_ENV_SPECS: tuple[tuple[str, str], ...] = (
     (HIGHWAY_SLAM_ID, "slam.gym.envs:make_highway_slam"),
     (PAPER_ID, "slam.gym.envs:make_paper_slam"),
     (DENSE_ID, "slam.gym.envs:make_dense_slam"),
+    *((f"rhs-{road}-slam-v0", f"slam.gym.road_envs:make_{road}_slam") for road in ROAD_NAMES),
 )
 
 

@@ -50,7 +50,7 @@ from rhs_env.scatterers import Occluders, Scatterers
 __all__ = [
     "DENSE_LANDMARKS", "LANDMARK_SIDES", "LandmarkConfig", "Landmarks", "MAX_SCATTER_RANGE_M", "OBJECT_ID_OFFSET",
     "ScatterConfig", "VEHICLE_ID_OFFSET", "draw_disks", "ego_motion", "get_landmarks", "he_to_world_xy",
-    "place_roadside_landmarks", "scatterers_to_dict", "scene_scatterers", "vehicle_to_he_xy", "world_pose",
+    "lane_coordinates", "off_lanes", "place_roadside_landmarks", "scatterers_to_dict", "scene_scatterers", "vehicle_to_he_xy", "world_pose",
     "world_surface_pixels", "world_to_he_xy",
 ]
 
@@ -339,10 +339,20 @@ def place_roadside_landmarks(network, config: LandmarkConfig, rng: np.random.Gen
     each gets a twin ``pair_gap_m`` further along the road. Then (after all poles, so
     the poles' draws do not depend on them) the guard-rail posts and the sign gantries
     of :class:`LandmarkConfig`. All draws come from ``rng``.
+
+    Any lane geometry works (``StraightLane``, ``SineLane``, ``CircularLane``, ...): the
+    points are ``lane.position(s, lateral)``. The spacing runs on across connected edges
+    (a ring of short arcs, a road cut into segments: the next edge starts where the
+    previous one's spacing left off, along the lane centre), so short segments get
+    their share. Landmarks that fall strictly inside a lane of the network (the inner
+    side of a ramp beside the main road, a median between opposite lanes, the inside
+    of a junction) are dropped (:func:`off_lanes`). A single straight segment (the
+    highway scenes) is placed exactly as before either rule.
     """
     if not config.enabled:
         return Landmarks.empty()
-    edges = [lanes for tos in network.graph.values() for lanes in tos.values() if lanes]
+    keys = [(a, b) for a, tos in network.graph.items() for b, lanes in tos.items() if lanes]
+    edges = [network.graph[a][b] for a, b in keys]
     sides = [side for side in ("left", "right") if config.sides in ("both", side)]
     xy, rcs = [], []
 
@@ -350,12 +360,19 @@ def place_roadside_landmarks(network, config: LandmarkConfig, rng: np.random.Gen
         xy.append(_lane_points(lane, s, -out if side == "left" else out))
         rcs.append(np.full(len(s), float(value)))
 
-    for lanes in edges:
+    carry: dict[tuple[Any, Any, str], float] = {}  # (from, to, side) -> start of the spacing on that edge
+    done: set[tuple[Any, Any]] = set()
+    for (a, b), lanes in zip(keys, edges):
+        done.add((a, b))
         for side in sides:
             lane = lanes[0] if side == "left" else lanes[-1]
             length = float(lane.length)
-            start = 0.5 * config.spacing_m if side == "left" else config.spacing_m
+            start = carry.pop((a, b, side), 0.5 * config.spacing_m if side == "left" else config.spacing_m)
             s = np.arange(start, length, config.spacing_m)
+            left_over = (float(s[-1]) + config.spacing_m if s.size else start) - length
+            for c in network.graph.get(b, {}):
+                if (b, c) not in done:
+                    carry.setdefault((b, c, side), max(left_over, 0.0))
             if s.size == 0:
                 continue
             s = np.clip(s + rng.uniform(-config.jitter_m, config.jitter_m, s.size), 0.0, length)
@@ -376,7 +393,55 @@ def place_roadside_landmarks(network, config: LandmarkConfig, rng: np.random.Gen
                 add(lane, s, np.full(s.size, _half_width(lane) + config.lateral_offset_m), side, config.gantry_rcs_m2)
     if not xy:
         return Landmarks.empty()
-    return Landmarks(np.concatenate(xy), np.concatenate(rcs))
+    points, values = np.concatenate(xy), np.concatenate(rcs)
+    keep = off_lanes(network, points) if len(keys) > 1 else np.ones(len(points), dtype=bool)
+    return Landmarks(points[keep], values[keep])
+
+
+def lane_coordinates(lane, xy_he: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``lane.local_coordinates`` of many points (N, 2) at once: (longitudinal, lateral) arrays.
+
+    Vectorized for ``StraightLane``, ``SineLane`` and ``CircularLane`` (highway-env's formulas), a loop otherwise.
+    """
+    from highway_env.road.lane import CircularLane, SineLane, StraightLane
+
+    p = np.asarray(xy_he, dtype=float).reshape(-1, 2)
+    if isinstance(lane, StraightLane):
+        d = p - lane.start
+        s, lat = d @ lane.direction, d @ lane.direction_lateral
+        if isinstance(lane, SineLane):
+            lat = lat - lane.amplitude * np.sin(lane.pulsation * s + lane.phase)
+        return s, lat
+    if isinstance(lane, CircularLane):
+        d = p - lane.center
+        phi = np.arctan2(d[:, 1], d[:, 0])
+        phi = lane.start_phase + (phi - lane.start_phase + np.pi) % (2 * np.pi) - np.pi
+        return lane.direction * (phi - lane.start_phase) * lane.radius, lane.direction * (lane.radius - np.hypot(*d.T))
+    coords = np.array([lane.local_coordinates(q) for q in p], dtype=float).reshape(-1, 2)
+    return coords[:, 0], coords[:, 1]
+
+
+def off_lanes(network, xy_he: np.ndarray) -> np.ndarray:
+    """(N,) bool: the points (highway-env frame) lying strictly inside no lane of ``network``.
+
+    Inside a lane means ``0 <= s <= length`` and ``|lateral| < width / 2`` in its
+    coordinates (:func:`lane_coordinates`): a point on a lane's edge line is off it.
+
+    Args:
+        network: a highway-env ``RoadNetwork``.
+        xy_he: (N, 2) points in highway-env coordinates.
+
+    Returns:
+        The mask of the points off every lane.
+    """
+    p = np.asarray(xy_he, dtype=float).reshape(-1, 2)
+    keep = np.ones(len(p), dtype=bool)
+    for tos in network.graph.values():
+        for lanes in tos.values():
+            for lane in lanes:
+                s, lat = lane_coordinates(lane, p)
+                keep &= ~((s >= 0) & (s <= float(lane.length)) & (np.abs(lat) < _half_width(lane)))
+    return keep
 
 
 def _half_width(lane) -> float:

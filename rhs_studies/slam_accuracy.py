@@ -375,14 +375,15 @@ def pose_nees(err_xy: np.ndarray, err_heading: float, std: np.ndarray, cov: np.n
     return float(e @ np.linalg.solve(P, e))
 
 
-def driver_episode(env, policy, seed: int) -> dict[str, Any]:
+def driver_episode(env, policy, seed: int, trace: list | None = None) -> dict[str, Any]:
     """One episode under ``policy`` until it ends; per-cycle errors, health, NEES and the loss events.
 
     A *loss* is a cycle where the health signal's ``slam_losses`` count rises; it is *recovered* when
     within ``RECOVER_CYCLES`` cycles the flag clears (relocalised or a new map) and the error in the
     current map is below ``RECOVERED_M``. Errors are in the current map (after a map break the truth
     is re-anchored at the break, :class:`slam.gym.metrics_info.SlamMetricsInfo`); ``episode_rmse_m`` is
-    against the episode's start.
+    against the episode's start. ``trace``: a list that gets ``(estimated_pose, true_pose)`` (the current map's
+    frame) of every cycle.
     """
     from rhs_common.geometry import wrap_angle
 
@@ -399,6 +400,8 @@ def driver_episode(env, policy, seed: int) -> dict[str, Any]:
         done = term or trunc
         crashed = crashed or bool(info.get("crashed", False))
         e = np.asarray(info["estimated_pose"], dtype=float) - np.asarray(info["true_pose"], dtype=float)
+        if trace is not None:
+            trace.append((np.asarray(info["estimated_pose"], dtype=float), np.asarray(info["true_pose"], dtype=float)))
         err.append(float(info["position_error_m"]))
         err_ep.append(float(info["position_error_episode_m"]))
         lost.append(bool(info["slam_lost"]))
@@ -567,6 +570,222 @@ def run_drivers(args, slam: dict) -> dict[str, Any]:
             "nees_interval": nees_interval(), "recover_cycles": RECOVER_CYCLES, "recovered_m": RECOVERED_M}
 
 
+#: the roads part: highway-env's other roads (rhs_env.road_envs), ids rhs-<road>-slam-v0
+ROADS = ("merge", "roundabout", "intersection", "exit", "racetrack")
+#: the roads part's drivers: highway-env's IDM + MOBIL in the ego's seat (agents.evaluate.IDMMobilPolicy, at the
+#: road's top target speed; on the racetrack, whose continuous action has none, at its 10 m/s speed limit) and
+#: uniformly random actions. No policy was trained on these roads.
+ROAD_DRIVERS = ("idm", "random")
+ROAD_IDM = {"racetrack": "idm:10"}
+#: the roads part's radar: a 5-degree scan grid (the default is 1 degree), the cheap configuration
+ROAD_RADAR = {"scan": {"grid_deg": 5}}
+#: the roads part's episode bound, cycles: every road ends before it (merge ~60, roundabout 55, intersection 65,
+#: exit 90 cycles) except the racetrack (300 s = 1500 cycles): 300 cycles = 60 s, about 600 m
+ROAD_CYCLES = 300
+#: KITTI's segment lengths (m); where an episode is shorter, :data:`SHORT_DRIFT_LENGTHS_M`
+DRIFT_LENGTHS_M = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)
+SHORT_DRIFT_LENGTHS_M = (25.0, 50.0)
+#: real-data radar odometry drift (%, KITTI's metric): DRO (Boreas), CFEAR (Oxford / MulRan / Boreas range)
+DRO_DRIFT_PCT = 0.18
+CFEAR_DRIFT_PCT = (0.61, 1.76)
+
+
+def segment_drift(est: np.ndarray, true: np.ndarray, lengths: tuple[float, ...]) -> dict[str, list[float]]:
+    """KITTI's odometry error over path segments: per length ``L``, every start cycle ``i`` whose path (true
+    positions) reaches ``L`` at a cycle ``j``; the error of the relative motion ``(T_i^-1 T_j)`` of ``est``
+    against ``true``: its translation over ``L`` and its rotation over ``L``.
+
+    Args:
+        est: (T, 3) estimated poses (x, y, heading), m and rad.
+        true: (T, 3) true poses.
+        lengths: segment lengths, m.
+
+    Returns:
+        ``{str(L): [sum of translation errors / L, sum of rotation errors / L (rad/m), segments]}``: sums, so
+        that episodes pool by adding them (KITTI averages over every segment).
+    """
+    from rhs_common.geometry import rotation, wrap_angle
+
+    est, true = np.asarray(est, dtype=float).reshape(-1, 3), np.asarray(true, dtype=float).reshape(-1, 3)
+    dist = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(true[:, :2], axis=0).T))])
+    out: dict[str, list[float]] = {}
+    for length in lengths:
+        t_sum = r_sum = 0.0
+        n = 0
+        for i in range(len(true)):
+            j = int(np.searchsorted(dist, dist[i] + length))
+            if j >= len(true):
+                break
+            rel = []
+            for p in (true, est):
+                rel.append(np.array([*(rotation(-p[i, 2]) @ (p[j, :2] - p[i, :2])), wrap_angle(p[j, 2] - p[i, 2])]))
+            d_t = rotation(-rel[0][2]) @ (rel[1][:2] - rel[0][:2])
+            t_sum += float(np.hypot(*d_t)) / length
+            r_sum += abs(float(wrap_angle(rel[1][2] - rel[0][2]))) / length
+            n += 1
+        out[f"{length:g}"] = [t_sum, r_sum, n]
+    return out
+
+
+def pooled_drift(runs: list[dict[str, Any]], lengths: tuple[float, ...]) -> dict[str, Any]:
+    """Translational drift (%) and rotational drift (deg / 100 m) pooled over every segment of ``lengths`` in
+    ``runs`` (their ``drift`` sums, :func:`segment_drift`), with the segment count and the lengths that had one."""
+    keys = [f"{length:g}" for length in lengths]
+    t = sum(r["drift"][k][0] for r in runs for k in keys if k in r["drift"])
+    rot = sum(r["drift"][k][1] for r in runs for k in keys if k in r["drift"])
+    n = sum(int(r["drift"][k][2]) for r in runs for k in keys if k in r["drift"])
+    have = [k for k in keys if any(int(r["drift"].get(k, [0, 0, 0])[2]) for r in runs)]
+    return {"translation_pct": 100 * t / n if n else None, "rotation_deg_per_100m": float(np.degrees(rot / n)) * 100
+            if n else None, "segments": n, "lengths_m": have}
+
+
+class ZeroActionDriver:
+    """IDM + MOBIL in the ego's seat (:class:`agents.evaluate.IDMMobilPolicy`, which ignores its actions) on an env
+    with a ``Box`` action space (the racetrack's steering): it passes the zero action the env's step asks for, and
+    gives highway-env's plain ``Vehicle`` ego (``ContinuousAction``'s) the lane and route an ``IDMVehicle`` is made
+    from (its current lane, no route: the lanes' successors)."""
+
+    def __init__(self, driver: Any, env: Any):
+        self.driver, self.env = driver, env
+        self.zero = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
+
+    def reset(self) -> None:
+        if callable(getattr(self.driver, "reset", None)):
+            self.driver.reset()
+
+    def predict(self, obs: Any, deterministic: bool = True) -> tuple[np.ndarray, None]:
+        ego = self.env.unwrapped.vehicle
+        if not hasattr(ego, "target_lane_index"):
+            ego.target_lane_index, ego.route = ego.lane_index, None
+            ego.target_speed = self.driver.target_speed
+        self.driver.predict(obs, deterministic)
+        return self.zero, None
+
+
+def _road_task(task: tuple) -> dict[str, Any]:
+    """One roads-part episode ``(road, driver, env kwargs, seed)`` in this process (its env kept per road)."""
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+    from agents.evaluate import load_policy
+    from rhs_common.geometry import wrap_angle
+
+    road, driver, kw, seed = task
+    env_id = f"rhs-{road}-slam-v0"
+    key = json.dumps([env_id, kw], sort_keys=True)
+    if key not in _WORKER_ENVS:
+        _close_worker_envs()
+        _WORKER_ENVS[key] = gym.make(env_id, **kw)
+    env = _WORKER_ENVS[key]
+    name = ROAD_IDM.get(road, "idm") if driver == "idm" else driver
+    policy = load_policy(name, env, seed=seed)
+    if driver == "idm" and isinstance(env.action_space, gym.spaces.Box):
+        policy = ZeroActionDriver(policy, env)
+    trace: list = []
+    t0 = time.perf_counter()
+    row = driver_episode(env, policy, seed, trace)
+    est, true = (np.array([p[k] for p in trace]) for k in (0, 1))
+    path = float(np.hypot(*np.diff(true[:, :2], axis=0).T).sum()) if len(true) > 1 else 0.0
+    heading = np.degrees(wrap_angle(est[:, 2] - true[:, 2]))
+    return {**row, "wall_s": time.perf_counter() - t0, "path_m": path,
+            "heading_rmse_deg": float(np.sqrt(np.mean(heading**2))), "max_heading_error_deg": float(np.abs(heading).max()),
+            "drift": segment_drift(est, true, SHORT_DRIFT_LENGTHS_M + DRIFT_LENGTHS_M)}
+
+
+def road_targets(driver: str, summary: dict[str, Any], runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """The per-road targets: worst-episode position RMSE <= 1 m (the scripted driver only), no cycle above
+    :data:`LOST_M` without the loss flag, NEES inside its 95 % band on >= 90 % of the cycles."""
+    silent = sum(int(r["cycles_above_lost"]) - int(r["cycles_above_lost_flagged"]) for r in runs)
+    cov = summary["nees_coverage"]
+    return {"worst_rmse_le_1m": bool(summary["worst_rmse_m"] <= 1.0) if driver == "idm" else None,
+            "silent_lost_cycles": silent, "no_silent_loss": silent == 0,
+            "nees_ge_90pct": None if cov is None else bool(cov >= 0.9)}
+
+
+def run_roads(args, slam: dict) -> dict[str, Any]:
+    """Every driver of ``--road-drivers`` on every road of ``--roads`` over ``--road-seeds`` (each episode until it
+    ends, at most ``--road-cycles``), on the cheap radar :data:`ROAD_RADAR` (``--radar`` merged over it)."""
+    tasks, combos = [], []
+    for road in args.roads:
+        kw: dict[str, Any] = {"radar": _nested_update(ROAD_RADAR, args.radar), **_duration_kw(road, args.road_cycles)}
+        if slam:
+            kw["slam"] = slam
+        for driver in args.road_drivers:
+            combos.append((road, driver, kw))
+            tasks += [(road, driver, kw, int(seed)) for seed in args.road_seeds]
+    started = time.perf_counter()
+    results: list[dict[str, Any]] = []
+    for task in tasks:
+        row = _road_task(task)
+        results.append(row)
+        if not args.no_progress:
+            done, elapsed = len(results), time.perf_counter() - started
+            print(f"[roads {done}/{len(tasks)} {elapsed:.0f} s, ~{elapsed / done * (len(tasks) - done):.0f} s left] "
+                  f"{task[0]} {task[1]} seed {row['seed']}: {row['cycles']} cycles, {row['path_m']:.0f} m, RMSE "
+                  f"{row['position_rmse_m']:.3f} m, max {row['max_error_m']:.2f} m, heading "
+                  f"{row['heading_rmse_deg']:.2f} deg", file=sys.stderr, flush=True)
+    _close_worker_envs()
+    out: dict[str, Any] = {}
+    n = len(args.road_seeds)
+    for i, (road, driver, kw) in enumerate(combos):
+        runs = results[i * n:(i + 1) * n]
+        summary = {**summarize_driver(runs), "heading_rmse_deg": ci95([r["heading_rmse_deg"] for r in runs]),
+                   "path_m": ci95([r["path_m"] for r in runs]),
+                   "drift_kitti": pooled_drift(runs, DRIFT_LENGTHS_M), "drift_short": pooled_drift(runs, SHORT_DRIFT_LENGTHS_M)}
+        out[f"{road}/{driver}"] = {"road": road, "env": f"rhs-{road}-slam-v0", "driver": driver,
+                                   "policy": ROAD_IDM.get(road, "idm") if driver == "idm" else driver,
+                                   "env_kwargs": kw, "max_cycles": args.road_cycles, "runs": runs, "summary": summary,
+                                   "targets": road_targets(driver, summary, runs)}
+    return {"combos": out, "seeds": list(args.road_seeds), "lost_m": LOST_M, "good_m": GOOD_M,
+            "nees_interval": nees_interval(), "radar": _nested_update(ROAD_RADAR, args.radar),
+            "dro_drift_pct": DRO_DRIFT_PCT, "cfear_drift_pct": list(CFEAR_DRIFT_PCT)}
+
+
+def _duration_kw(road: str, cycles: int) -> dict[str, Any]:
+    """The ``duration`` that bounds an episode of ``road`` at ``cycles`` cycles, where the road has a time limit
+    longer than that (the merge has none: it ends past x = 370 m)."""
+    from rhs_env.road_envs import ROAD_ENVS
+
+    default = ROAD_ENVS[road].default_config().get("duration")
+    return {"duration": cycles / POLICY_HZ} if default is not None and default * POLICY_HZ > cycles else {}
+
+
+def roads_markdown(res: dict[str, Any]) -> list[str]:
+    """The per-road table: targets, heading RMSE, drift over KITTI's lengths beside the real-data anchors."""
+    lo, hi = res["nees_interval"]
+    seeds = res["seeds"]
+    grid = res["radar"].get("scan", {}).get("grid_deg")
+    lines = [f"\n## Roads (seeds {seeds[0]}..{seeds[-1]}, {len(seeds)} per road and driver, each episode until it "
+             "ends)\n",
+             f"Simulated: highway-env's roads, traffic and rewards with roadside landmarks (`rhs-<road>-slam-v0`), the "
+             f"exact radar on a cheap {grid:g}-degree scan grid (the default is 1 degree), the default SLAM. "
+             "Drivers: `idm` = highway-env's IDM + MOBIL in the ego's seat (following the road's route; on the "
+             "racetrack at its 10 m/s speed limit, steering by the lane controller), `random` = uniformly random "
+             "actions. No policy has been trained on these roads. Worst RMSE target (<= 1 m) for the scripted "
+             f"driver. Silent: cycles with an error above {res['lost_m']:g} m where `slam_lost` is not set (target "
+             f"0). NEES: 3-dof against `slam_pose_cov`, inside [{lo:.3f}, {hi:.2f}] (target >= 90 % of cycles). "
+             "Drift: KITTI's translational error over 100-800 m segments where an episode is that long, else (in "
+             "brackets) over 25-50 m segments.\n",
+             "| road | driver | cycles | path (m) | RMSE mean (m) | worst (m) | target | crashed | silent | "
+             "NEES inside | heading RMSE (deg) | drift (%) | drift (deg/100 m) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for combo in res["combos"].values():
+        sm, tg = combo["summary"], combo["targets"]
+        dk = sm["drift_kitti"] if sm["drift_kitti"]["segments"] else sm["drift_short"]
+        br = (lambda x: x) if sm["drift_kitti"]["segments"] else (lambda x: f"({x})")
+        drift_t = "n/a" if dk["translation_pct"] is None else br(f"{dk['translation_pct']:.2f}")
+        drift_r = "n/a" if dk["rotation_deg_per_100m"] is None else br(f"{dk['rotation_deg_per_100m']:.2f}")
+        met = {True: "met", False: "**not met**", None: "-"}[tg["worst_rmse_le_1m"]]
+        lines.append(f"| {combo['road']} | {combo['driver']} | {sm['cycles']} | {_fmt(sm['path_m'])} | "
+                     f"{_fmt(sm['position_rmse_m'])} | {sm['worst_rmse_m']:.3f} (seed {sm['worst_seed']}) | {met} | "
+                     f"{_pct(sm['crashed_fraction'])} | {tg['silent_lost_cycles']} | {_pct(sm['nees_coverage'])} | "
+                     f"{_fmt(sm['heading_rmse_deg'])} | {drift_t} | {drift_r} |")
+    lines.append(f"\nReal-data radar odometry for scale (not the same test: real sensors, real roads, km-long "
+                 f"drives): DRO {res['dro_drift_pct']:g} % (Boreas), CFEAR {res['cfear_drift_pct'][0]:g}-"
+                 f"{res['cfear_drift_pct'][1]:g} % translational drift. The figures above are simulated.")
+    return lines
+
+
 def _log(args, part: str, row: dict) -> None:
     if not args.no_progress:
         short = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in row.items()
@@ -621,7 +840,7 @@ def markdown(doc: dict) -> str:
              f"Seeds: {doc['seeds']} (evaluation seeds; the filter was tuned on 0..4). Mean +- 95 % CI over seeds.\n",
              "| scene | metric | value | target | met |", "|---|---|---|---|---|"]
     for part, res in doc["parts"].items():
-        if part == "drivers":
+        if part in ("drivers", "roads"):
             continue
         for key, (op, val) in TARGETS[part].items():
             s = res["summary"][key]
@@ -630,8 +849,12 @@ def markdown(doc: dict) -> str:
         for key in EXTRA.get(part, ()):
             if key in res["summary"]:
                 lines.append(f"| {part} | {key} | {_fmt(res['summary'][key])} | - | - |")
-    drivers = doc["parts"].get("drivers")
-    return "\n".join(lines + _notes(doc) + (drivers_markdown(drivers) if drivers else [])) + "\n"
+    drivers, roads = doc["parts"].get("drivers"), doc["parts"].get("roads")
+    if roads and set(doc["parts"]) == {"roads"}:  # the per-road page alone
+        return "\n".join([f"# SLAM accuracy on highway-env's roads\n\nCommand: `{doc['command']}`  \nCommit: "
+                          f"`{doc['commit']}`\n", *roads_markdown(roads)[1:]]) + "\n"
+    return "\n".join(lines + _notes(doc) + (drivers_markdown(drivers) if drivers else [])
+                     + (roads_markdown(roads) if roads else [])) + "\n"
 
 
 def _notes(doc: dict) -> list[str]:
@@ -666,7 +889,7 @@ def _notes(doc: dict) -> list[str]:
 def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, dict]:
     """The options and the SlamConfig overrides (``--quick`` applied)."""
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--parts", nargs="+", choices=("highway", "paper", "dense", "drivers"),
+    p.add_argument("--parts", nargs="+", choices=("highway", "paper", "dense", "drivers", "roads"),
                    default=["highway", "paper", "dense"])
     p.add_argument("--drivers", nargs="+", choices=DRIVERS, default=list(DRIVERS),
                    help="drivers part: highway-env's IDM + MOBIL, the DAgger student continued 80k (dense road: its DAgger student), "
@@ -678,6 +901,14 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, dict]:
                         "1100..1199 to 1400..1499 were held out once and then diagnosed; 1500..1599 measured a "
                         "radar setting that was not adopted)")
     p.add_argument("--driver-cycles", type=int, default=200, help="drivers part: episode length bound (cycles)")
+    p.add_argument("--roads", nargs="+", choices=ROADS, default=list(ROADS),
+                   help="roads part (--parts roads): highway-env's roads, ids rhs-<road>-slam-v0 (default all five)")
+    p.add_argument("--road-drivers", nargs="+", choices=ROAD_DRIVERS, default=list(ROAD_DRIVERS),
+                   help="roads part: highway-env's IDM + MOBIL in the ego's seat, uniformly random actions")
+    p.add_argument("--road-seeds", type=int, nargs="+", default=list(range(3000, 3020)),
+                   help="roads part: held-out seeds (default 3000..3019, 20 per road and driver; no tuning used them)")
+    p.add_argument("--road-cycles", type=int, default=ROAD_CYCLES,
+                   help=f"roads part: episode length bound (cycles, default {ROAD_CYCLES}: only the racetrack's is longer)")
     p.add_argument("--workers", type=int, default=1,
                    help="drivers part: processes the episodes spread over (the same runs as 1; default 1)")
     p.add_argument("--seeds", type=int, nargs="+", default=[100, 101, 102, 103, 104])
@@ -704,6 +935,7 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, dict]:
     if args.quick:
         args.seeds, args.cycles, args.paper_cycles, args.dense_cycles = args.seeds[:1], 10, 6, 8
         args.driver_seeds, args.driver_cycles = args.driver_seeds[:1], 10
+        args.road_seeds, args.road_cycles = args.road_seeds[:1], 10
         slam = {"n_particles": 10, **slam}
     return args, slam
 
@@ -723,7 +955,8 @@ def fingerprint() -> list[float | None]:
 def main(argv: list[str] | None = None) -> int:
     started = time.time()
     args, slam = parse_args(argv)
-    runners = {"highway": run_highway, "paper": run_paper, "dense": run_dense, "drivers": run_drivers}
+    runners = {"highway": run_highway, "paper": run_paper, "dense": run_dense, "drivers": run_drivers,
+               "roads": run_roads}
     doc = {"command": " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])]),
            "commit": _commit(), "seeds": args.seeds, "slam_overrides": slam, "radar_overrides": args.radar, "parts": {}}
     for part in args.parts:
