@@ -11,12 +11,14 @@ import numpy as np
 import pytest
 
 import rhs_env  # noqa: F401  (registers the ids)
-from rhs_env.traffic import core
+from rhs_env.traffic import core, npmath
 from rhs_env.traffic.alignment import align_episode, make_scene
 from rhs_env.traffic.engine import UnsupportedScene
 
 #: tolerances of the alignment (positions m, speeds m/s, rewards)
 POSITION_TOL, SPEED_TOL, REWARD_TOL = 1e-6, 1e-6, 1e-9
+#: whether the kernels compute numpy's numbers to the bit here (rhs_env.traffic.npmath): then the alignment is exact
+BIT_EXACT = npmath.USE_SVML and npmath.numpy_dot_is_fma()
 
 
 @pytest.mark.parametrize(("scene", "seeds"), [("highway", (0, 1, 2)), ("dense", (3,)), ("paper", (4,))])
@@ -29,6 +31,30 @@ def test_alignment_with_highway_env(scene, seeds):
         assert r.max_position_diff_m <= POSITION_TOL and r.max_speed_diff_mps <= SPEED_TOL, r
         assert r.max_reward_diff <= REWARD_TOL, r
         assert r.lane_changes > 0  # the episode exercised MOBIL / the ego's lane changes
+        if BIT_EXACT:
+            assert r.max_position_diff_m == r.max_speed_diff_mps == r.max_reward_diff == 0.0, r
+
+
+def test_npmath_computes_numpys_numbers():
+    """arcsin, arctan, tan and power as numpy's scalar ufuncs give them (SVML where numpy uses it), the 2-vector dot
+    as numpy's BLAS; sin, cos and sqrt, which the kernels take from numba, too."""
+    from rhs_common.jit import njit
+
+    rng = np.random.default_rng(3)
+    x = np.concatenate([rng.uniform(-1.6, 1.6, 4000), rng.normal(0.0, 1e-3, 1000), [0.0, -0.0, 1.0, -1.0, 0.5]])
+    unit = np.clip(x, -1.0, 1.0)
+    pairs = [(npmath.arcsin, np.arcsin, unit), (npmath.arctan, np.arctan, x), (npmath.tan, np.tan, x),
+             (njit(lambda v: np.sin(v), cache=False), np.sin, x), (njit(lambda v: np.cos(v), cache=False), np.cos, x),
+             (njit(lambda v: np.sqrt(v), cache=False), np.sqrt, np.abs(x))]
+    for mine, theirs, values in pairs:
+        differ = [v for v in values.tolist() if mine(v) != theirs(v)]
+        assert not differ, (theirs.__name__, differ[:3])
+    base, exponent = np.abs(x[:2000]) * 1.5, rng.uniform(3.5, 4.5, 2000)
+    assert all(npmath.power(a, b) == np.power(a, b) for a, b in zip(base.tolist(), exponent.tolist(), strict=True))
+    if npmath.numpy_dot_is_fma():
+        a, b = rng.normal(0, 1e3, (2000, 2)), rng.normal(0, 1, (2000, 2))
+        assert all(npmath.dot2(u[0], u[1], w[0], w[1]) == np.dot(u, w) for u, w in zip(a, b, strict=True))
+        assert all(np.sqrt(npmath.dot2(u[0], u[1], u[0], u[1])) == np.linalg.norm(u) for u in a)
 
 
 def test_crashes_align():

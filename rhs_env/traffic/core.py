@@ -26,6 +26,10 @@ State layout (one row per vehicle of ``road.vehicles``, in its order):
 * ``lanes`` float64 ``(m, NL)``: the straight lanes of the edge (``StraightLane`` fields);
 * ``speeds``: the controlled vehicle's ``target_speeds``.
 
+``arcsin``, ``arctan``, ``tan``, ``power`` and the 2-vector dot products come from :mod:`rhs_env.traffic.npmath`
+(numpy's own SVML functions where numpy uses them, BLAS's fused dot), so that the kernels' numbers are numpy's to
+the bit.
+
 Supported: straight lanes on one road edge (``StraightLane``), no road objects, ``IDMVehicle`` and
 ``MDPVehicle`` instances (exact classes, checked by :mod:`rhs_env.traffic.state`), no route.
 """
@@ -37,6 +41,7 @@ import math
 import numpy as np
 
 from rhs_common.jit import njit
+from rhs_env.traffic import npmath
 
 __all__ = [
     "ACTION_CODES", "K_IDM", "K_MDP", "NF", "NK", "NL", "NP", "reward_terms", "simulate",
@@ -91,13 +96,13 @@ def clip(x: float, lo: float, hi: float) -> float:
 @njit
 def local_long(lanes: np.ndarray, ln: int, x: float, y: float) -> float:
     """``StraightLane.local_coordinates(position)[0]``."""
-    return (x - lanes[ln, L_SX]) * lanes[ln, L_DX] + (y - lanes[ln, L_SY]) * lanes[ln, L_DY]
+    return npmath.dot2(x - lanes[ln, L_SX], y - lanes[ln, L_SY], lanes[ln, L_DX], lanes[ln, L_DY])
 
 
 @njit
 def local_lat(lanes: np.ndarray, ln: int, x: float, y: float) -> float:
     """``StraightLane.local_coordinates(position)[1]``."""
-    return (x - lanes[ln, L_SX]) * lanes[ln, L_LX] + (y - lanes[ln, L_SY]) * lanes[ln, L_LY]
+    return npmath.dot2(x - lanes[ln, L_SX], y - lanes[ln, L_SY], lanes[ln, L_LX], lanes[ln, L_LY])
 
 
 @njit
@@ -174,7 +179,7 @@ def desired_gap(f: np.ndarray, p: np.ndarray, me: int, e: int, fr: int) -> float
     se = math.sin(f[e, H])
     cf = math.cos(f[fr, H])
     sf = math.sin(f[fr, H])
-    dv = (f[e, V] * ce - f[fr, V] * cf) * ce + (f[e, V] * se - f[fr, V] * sf) * se
+    dv = npmath.dot2(f[e, V] * ce - f[fr, V] * cf, f[e, V] * se - f[fr, V] * sf, ce, se)
     return d0 + f[e, V] * tau + f[e, V] * dv / (2 * np.sqrt(ab))
 
 
@@ -190,7 +195,7 @@ def idm_acceleration(f: np.ndarray, k: np.ndarray, p: np.ndarray, lanes: np.ndar
         ets = clip(ets, 0.0, limit)
     speed = f[e, V]
     base = (speed if not 0 > speed else 0.0) / abs(not_zero(ets))
-    acc = p[me, P_COMFORT_ACC_MAX] * (1 - np.power(base, p[me, P_DELTA]))
+    acc = p[me, P_COMFORT_ACC_MAX] * (1 - npmath.power(base, p[me, P_DELTA]))
     if fr >= 0:
         d = lane_distance(f, k, lanes, e, fr)
         acc -= p[me, P_COMFORT_ACC_MAX] * np.power(desired_gap(f, p, me, e, fr) / not_zero(d), 2)
@@ -203,11 +208,11 @@ def steering_control(f: np.ndarray, p: np.ndarray, lanes: np.ndarray, i: int, ln
     lat = local_lat(lanes, ln, f[i, X], f[i, Y])
     lane_future_heading = lanes[ln, L_HEADING]
     lateral_speed_command = -p[i, P_KP_LATERAL] * lat
-    heading_command = np.arcsin(clip(lateral_speed_command / not_zero(f[i, V]), -1.0, 1.0))
+    heading_command = npmath.arcsin(clip(lateral_speed_command / not_zero(f[i, V]), -1.0, 1.0))
     heading_ref = lane_future_heading + clip(heading_command, -np.pi / 4, np.pi / 4)
     heading_rate_command = p[i, P_KP_HEADING] * wrap_to_pi(heading_ref - f[i, H])
-    slip_angle = np.arcsin(clip(p[i, P_LENGTH] / 2 / not_zero(f[i, V]) * heading_rate_command, -1.0, 1.0))
-    steering_angle = np.arctan(2 * np.tan(slip_angle))
+    slip_angle = npmath.arcsin(clip(p[i, P_LENGTH] / 2 / not_zero(f[i, V]) * heading_rate_command, -1.0, 1.0))
+    steering_angle = npmath.arctan(2 * npmath.tan(slip_angle))
     return clip(steering_angle, -p[i, P_MAX_STEERING], p[i, P_MAX_STEERING])
 
 
@@ -323,7 +328,7 @@ def vehicle_step(f: np.ndarray, k: np.ndarray, p: np.ndarray, lanes: np.ndarray,
         f[i, ACC] = min(f[i, ACC], 1.0 * (p[i, P_MAX_SPEED] - f[i, V]))
     elif f[i, V] < p[i, P_MIN_SPEED]:
         f[i, ACC] = max(f[i, ACC], 1.0 * (p[i, P_MIN_SPEED] - f[i, V]))
-    beta = np.arctan(1 / 2 * np.tan(f[i, STEER]))
+    beta = npmath.arctan(1 / 2 * npmath.tan(f[i, STEER]))
     vx = f[i, V] * np.cos(f[i, H] + beta)
     vy = f[i, V] * np.sin(f[i, H] + beta)
     f[i, X] += vx * dt
@@ -360,7 +365,7 @@ def project(poly: np.ndarray, nx: float, ny: float) -> tuple[float, float]:
     lo = np.inf
     hi = -np.inf
     for q in range(poly.shape[0]):
-        v = poly[q, 0] * nx + poly[q, 1] * ny
+        v = npmath.dot2(poly[q, 0], poly[q, 1], nx, ny)
         if v < lo:
             lo = v
         if v > hi:
@@ -388,14 +393,14 @@ def polygons_intersecting(a: np.ndarray, b: np.ndarray, dax: float, day: float, 
         for q in range(poly.shape[0] - 1):
             nx = -poly[q + 1, 1] + poly[q, 1]
             ny = poly[q + 1, 0] - poly[q, 0]
-            norm = np.sqrt(nx * nx + ny * ny)
+            norm = np.sqrt(npmath.dot2(nx, ny, nx, ny))
             nx /= norm
             ny /= norm
             min_a, max_a = project(a, nx, ny)
             min_b, max_b = project(b, nx, ny)
             if interval_distance(min_a, max_a, min_b, max_b) > 0:
                 intersecting = False
-            velocity_projection = nx * (dax - dbx) + ny * (day - dby)
+            velocity_projection = npmath.dot2(nx, ny, dax - dbx, day - dby)
             if velocity_projection < 0:
                 min_a += velocity_projection
             else:
@@ -411,7 +416,7 @@ def polygons_intersecting(a: np.ndarray, b: np.ndarray, dax: float, day: float, 
                 cay = (((a[0, 1] + a[1, 1]) + a[2, 1]) + a[3, 1]) / 4
                 cbx = (((b[0, 0] + b[1, 0]) + b[2, 0]) + b[3, 0]) / 4
                 cby = (((b[0, 1] + b[1, 1]) + b[2, 1]) + b[3, 1]) / 4
-                if (cax - cbx) * nx + (cay - cby) * ny > 0:
+                if npmath.dot2(cax - cbx, cay - cby, nx, ny) > 0:
                     axis_x, axis_y = nx, ny
                 else:
                     axis_x, axis_y = -nx, -ny
@@ -428,7 +433,7 @@ def handle_collisions(f: np.ndarray, k: np.ndarray, p: np.ndarray, i: int, j: in
         return
     dx = f[j, X] - f[i, X]
     dy = f[j, Y] - f[i, Y]
-    if np.sqrt(dx * dx + dy * dy) > (p[i, P_DIAGONAL] + p[j, P_DIAGONAL]) / 2 + f[i, V] * dt:
+    if np.sqrt(npmath.dot2(dx, dy, dx, dy)) > (p[i, P_DIAGONAL] + p[j, P_DIAGONAL]) / 2 + f[i, V] * dt:
         return
     polygon(f, p, i, pa)
     polygon(f, p, j, pb)
