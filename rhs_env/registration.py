@@ -28,6 +28,13 @@ three ids: ``rhs-<road>-v0`` (``rhs_env.road_envs:RHS<Road>Env``, highway-env's 
 ``rhs-<road>-radar-v0`` (``rhs_env.road_envs:make_<road>_radar``) and ``rhs-<road>-slam-v0``
 (``slam.gym.road_envs:make_<road>_slam``).
 
+The fast variants (labelled, as highway-env's ``highway-fast-v0``): ``rhs-highway-radar-fast-v0``
+(``rhs_env.registration:make_highway_radar_fast``) and ``rhs-highway-slam-fast-v0``
+(``slam.gym.envs:make_highway_slam_fast``) draw the point cloud from the exact radar's measured detector
+(``radar_model="fast"``, :mod:`rhs_env.fast_radar`) and step the compiled traffic (``sim="compiled"``, aligned
+with highway-env on this scene; ``sim="highway-env"`` selects the original). Policies trained on them are to be
+evaluated on the exact ids.
+
 Keyword arguments of ``gym.make`` go to the entry point: env config keys
 (``lanes_count=3``, ``landmarks={"spacing_m": 10}``, ``config={...}``,
 ``render_mode="rgb_array"``) and the wrappers' own arguments, routed by their
@@ -52,8 +59,9 @@ import gymnasium as gym
 import numpy as np
 
 __all__ = [
-    "DENSE_ID", "ENV_SPECS", "HIGHWAY_ID", "HIGHWAY_RADAR_ID", "HIGHWAY_SLAM_ID", "NULL_OBSERVATION", "PAPER_ID",
-    "ROAD_NAMES", "SLAM_ENV_SPECS", "check_env_id", "make_highway_radar", "register_envs", "route_kwargs",
+    "DENSE_ID", "ENV_SPECS", "HIGHWAY_ID", "HIGHWAY_RADAR_FAST_ID", "HIGHWAY_RADAR_ID", "HIGHWAY_SLAM_FAST_ID",
+    "HIGHWAY_SLAM_ID", "NULL_OBSERVATION", "PAPER_ID", "ROAD_NAMES", "SLAM_ENV_SPECS", "check_env_id", "fast_variant_kwargs",
+    "make_highway_radar", "make_highway_radar_fast", "register_envs", "route_kwargs",
     "with_cheap_base_observation",
 ]
 
@@ -61,6 +69,8 @@ HIGHWAY_ID = "rhs-highway-v0"
 HIGHWAY_RADAR_ID = "rhs-highway-radar-v0"
 HIGHWAY_SLAM_ID = "rhs-highway-slam-v0"
 PAPER_ID = "rhs-paper-v0"
+HIGHWAY_RADAR_FAST_ID = "rhs-highway-radar-fast-v0"
+HIGHWAY_SLAM_FAST_ID = "rhs-highway-slam-fast-v0"
 DENSE_ID = "rhs-dense-v0"  # the highway with DENSE_LANDMARKS (guard-rail posts, paired poles, gantries)
 #: highway-env's other roads (rhs_env.road_envs.ROAD_ENVS): ids rhs-<road>-v0, rhs-<road>-radar-v0, rhs-<road>-slam-v0
 ROAD_NAMES = ("merge", "roundabout", "intersection", "exit", "racetrack")
@@ -89,6 +99,31 @@ def make_highway_radar(**kwargs: Any) -> gym.Env:
     check_vector_info_flags(kwargs)
     (wrapper_kwargs,), env_kwargs = route_kwargs(kwargs, RadarObservation)
     return RadarObservation(RHSHighwayEnv(**with_cheap_base_observation(env_kwargs)), **wrapper_kwargs)
+
+
+def fast_variant_kwargs(kwargs: dict[str, Any], env_id: str) -> dict[str, Any]:
+    """``kwargs`` of a ``-fast-`` id: ``radar_model="fast"`` and, unless given, ``sim="compiled"``.
+
+    Args:
+        kwargs: the ``gym.make`` kwargs.
+        env_id: the id, for the error message.
+
+    Returns:
+        The kwargs with the fast variant's defaults; ``radar_model="exact"`` is a ``ValueError`` naming the exact id.
+    """
+    model = kwargs.get("radar_model", "fast")
+    if model not in ("fast", "fast-calibrate"):
+        raise ValueError(f"{env_id} is the fast radar variant; radar_model={model!r} is not one of 'fast', "
+                         f"'fast-calibrate'. For the exact radar use {env_id.replace('-fast', '')}")
+    config = kwargs.get("config")
+    given_sim = "sim" in kwargs or (isinstance(config, Mapping) and "sim" in config)
+    return {**kwargs, "radar_model": model, **({} if given_sim else {"sim": "compiled"})}
+
+
+def make_highway_radar_fast(**kwargs: Any) -> gym.Env:
+    """``rhs-highway-radar-fast-v0``: :func:`make_highway_radar` with the fast radar and the compiled traffic
+    (:func:`fast_variant_kwargs`)."""
+    return make_highway_radar(**fast_variant_kwargs(kwargs, HIGHWAY_RADAR_FAST_ID))
 
 
 #: highway-env observation that costs nothing: the radar wrapper replaces the
@@ -123,6 +158,7 @@ def with_cheap_base_observation(env_kwargs: dict[str, Any]) -> dict[str, Any]:
 ENV_SPECS: tuple[tuple[str, str], ...] = (
     (HIGHWAY_ID, "rhs_env.envs:RHSHighwayEnv"),
     (HIGHWAY_RADAR_ID, "rhs_env.registration:make_highway_radar"),
+    (HIGHWAY_RADAR_FAST_ID, "rhs_env.registration:make_highway_radar_fast"),
     *((f"rhs-{road}-v0", f"rhs_env.road_envs:RHS{road.capitalize()}Env") for road in ROAD_NAMES),
     *((f"rhs-{road}-radar-v0", f"rhs_env.road_envs:make_{road}_radar") for road in ROAD_NAMES),
 )
@@ -133,6 +169,7 @@ SLAM_ENV_SPECS: tuple[tuple[str, str], ...] = (
     (HIGHWAY_SLAM_ID, "slam.gym.envs:make_highway_slam"),
     (PAPER_ID, "slam.gym.envs:make_paper_slam"),
     (DENSE_ID, "slam.gym.envs:make_dense_slam"),
+    (HIGHWAY_SLAM_FAST_ID, "slam.gym.envs:make_highway_slam_fast"),
     *((f"rhs-{road}-slam-v0", f"slam.gym.road_envs:make_{road}_slam") for road in ROAD_NAMES),
 )
 

@@ -116,6 +116,10 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         blas_threads: BLAS / OpenMP threads inside ``step`` / ``reset`` (the radar's
             work and the env's), restored after each call (:mod:`rhs_common.threads`);
             default 1, ``None`` leaves the user's thread pools alone (opt into threads).
+        radar_model: "exact" (the default: :class:`rhs_env.radar.RadarSystem` synthesises the range spectrum),
+            "fast" (:class:`rhs_env.fast_radar.FastRadarSystem`: points drawn from the exact radar's measured
+            detector, the ``-fast-`` ids; a labelled variant) or "fast-calibrate" (the same, calibrating radar
+            settings without a table at first use).
 
     Examples:
         >>> import gymnasium as gym
@@ -136,6 +140,7 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         stage_times_in_info: bool = False,
         scatterers_in_info: bool = False,
         blas_threads: int | None = 1,
+        radar_model: str = "exact",
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self,
@@ -146,8 +151,13 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             stage_times_in_info=stage_times_in_info,
             scatterers_in_info=scatterers_in_info,
             blas_threads=blas_threads,
+            radar_model=radar_model,
         )
         gym.ObservationWrapper.__init__(self, env)
+        from rhs_env.fast_radar import RADAR_MODELS
+
+        check_choice("radar_model", radar_model, RADAR_MODELS)
+        self.radar_model = radar_model
         check_int("max_points", max_points, 1, 65536)
         check_bool("stage_times_in_info", stage_times_in_info)
         check_bool("scatterers_in_info", scatterers_in_info)
@@ -252,7 +262,13 @@ class RadarObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         from rhs_env.radar import RadarSystem
 
         if self.radar is None or self.radar_config.antenna == "random":
-            self.radar = RadarSystem(self.radar_config, rng)
+            if self.radar_model == "exact":
+                self.radar = RadarSystem(self.radar_config, rng)
+            else:
+                from rhs_env.fast_radar import FastRadarSystem
+
+                self.radar = FastRadarSystem(self.radar_config, rng,
+                                             calibrate_missing=self.radar_model == "fast-calibrate")
         else:
             self.radar.rng = rng
 

@@ -14,7 +14,7 @@ import gymnasium as gym
 
 from slam.gym import precompile
 
-__all__ = ["make_dense_slam", "make_highway_slam", "make_paper_slam", "make_slam_env"]
+__all__ = ["make_dense_slam", "make_highway_slam", "make_highway_slam_fast", "make_paper_slam", "make_slam_env"]
 
 
 def make_slam_env(env_cls: type[gym.Env] | str, kwargs: dict[str, Any]) -> gym.Env:
@@ -40,6 +40,15 @@ def make_slam_env(env_cls: type[gym.Env] | str, kwargs: dict[str, Any]) -> gym.E
 def make_highway_slam(**kwargs: Any) -> gym.Env:
     """``rhs-highway-slam-v0``: the highway scene with traffic and roadside landmarks."""
     return make_slam_env("RHSHighwayEnv", kwargs)
+
+
+def make_highway_slam_fast(**kwargs: Any) -> gym.Env:
+    """``rhs-highway-slam-fast-v0``: the highway SLAM env with the fast radar (``radar_model="fast"``,
+    :mod:`rhs_env.fast_radar`) and the compiled traffic unless ``sim`` is given
+    (:func:`rhs_env.registration.fast_variant_kwargs`)."""
+    from rhs_env.registration import HIGHWAY_SLAM_FAST_ID, fast_variant_kwargs
+
+    return make_slam_env("RHSHighwayEnv", fast_variant_kwargs(kwargs, HIGHWAY_SLAM_FAST_ID))
 
 
 def make_dense_slam(**kwargs: Any) -> gym.Env:
