@@ -277,11 +277,11 @@ class RHSHighwayEnv(HighwayEnv):
 
     def _rewards(self, action: Any) -> dict[str, float]:
         traffic = self._compiled_traffic()
-        return super()._rewards(action) if traffic is None else traffic.rewards(self)
+        return HighwayEnv._rewards(self, action) if traffic is None else traffic.rewards(self)
 
     def _reward(self, action: Any) -> float:
         traffic = self._compiled_traffic()
-        return super()._reward(action) if traffic is None else traffic.reward(self)
+        return HighwayEnv._reward(self, action) if traffic is None else traffic.reward(self)
 
     # ---- configuration
     def configure(self, config: dict | None) -> None:
