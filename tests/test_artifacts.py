@@ -365,8 +365,10 @@ def test_patterns_builds_the_smallest_radar_with_sidelobes(tmp_path: Path) -> No
     assert res.returncode == 0 and "9 grids" in res.stdout, res.stderr[-2000:]
 
 
-def test_patterns_build_stops_on_the_first_sigint(tmp_path: Path) -> None:
-    """A 0.25-degree build (minutes) exits on one Ctrl-C with one line, workers stopped, no file written."""
+@pytest.mark.parametrize("target", ["parent", "group"], ids=["kill -INT", "Ctrl-C in a terminal"])
+def test_patterns_build_stops_on_the_first_sigint(tmp_path: Path, target: str) -> None:
+    """A 0.25-degree build (minutes) exits on one SIGINT -- to the command alone or, as a terminal's Ctrl-C, to its
+    workers too -- with one line, workers stopped, no file written."""
     out = tmp_path / "lib.npz"
     env = {**os.environ, "RHS_SLAM_CACHE": str(tmp_path / "cache"), "OMP_NUM_THREADS": "1"}
     proc = subprocess.Popen(
@@ -377,7 +379,10 @@ def test_patterns_build_stops_on_the_first_sigint(tmp_path: Path) -> None:
     try:
         time.sleep(10.0)  # imports, then the worker pool runs its first grids
         assert proc.poll() is None, proc.communicate()
-        proc.send_signal(signal.SIGINT)  # to the parent only, as `kill -INT` does
+        if target == "parent":
+            proc.send_signal(signal.SIGINT)  # to the parent only, as `kill -INT` does
+        else:
+            os.killpg(proc.pid, signal.SIGINT)  # to the whole process group, as a terminal does
         t0 = time.monotonic()
         _, err = proc.communicate(timeout=30)
         waited = time.monotonic() - t0
