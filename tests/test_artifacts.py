@@ -19,8 +19,11 @@ import textwrap
 import time
 from pathlib import Path
 
+import fuzz_settings  # noqa: F401  (loads the hypothesis profile)
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.patterns import library as L
@@ -394,3 +397,45 @@ def test_patterns_build_stops_on_the_first_sigint(tmp_path: Path, target: str) -
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert len(lines) == 1 and "interrupted" in lines[0] and "nothing was written" in lines[0], lines
     assert not out.exists() and not list(tmp_path.glob(".lib.npz*"))
+
+
+# ---- the rule behind the table: any damage to a library file is refused or harmless ---------------------------
+
+def _damage(original: bytes, cut: int | None, flips: list[tuple[int, int]]) -> bytes:
+    data = bytearray(original if cut is None else original[: cut % max(1, len(original))])
+    for pos, value in flips:
+        if data:
+            data[pos % len(data)] ^= value
+    return bytes(data)
+
+
+def test_any_damage_to_a_library_file_is_refused_naming_it_or_leaves_its_arrays(tmp_path: Path) -> None:
+    """Truncated at any byte or with bytes flipped anywhere, a library either loads to its own arrays (a flip in a
+    byte nothing reads) or is a ValueError naming the file; a shipped copy is refused by its sha256 either way."""
+    source = L.DATA_DIR / "rhs_m60_grid5deg_fast.npz"
+    original = source.read_bytes()
+    fields = L.library_fields(RHSConfig(), ScanConfig(grid_deg=5.0))
+    good = L.load(source, fields)
+    data = _data_copy(tmp_path)
+    target = data / source.name
+
+    @given(cut=st.none() | st.integers(0, len(original) - 1),
+           flips=st.lists(st.tuples(st.integers(0, len(original) - 1), st.integers(1, 255)), max_size=3))
+    def check(cut: int | None, flips: list[tuple[int, int]]) -> None:
+        damaged = _damage(original, cut, flips)
+        if damaged == original:
+            return
+        target.write_bytes(damaged)
+        try:
+            lib = L.load(target, fields)
+        except ValueError as exc:
+            assert str(target) in str(exc)
+        else:
+            np.testing.assert_array_equal(lib.tx, good.tx)
+            np.testing.assert_array_equal(lib.rx, good.rx)
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(L, "DATA_DIR", data)
+            with pytest.raises(ValueError, match="shipped pattern library .* is damaged"):
+                L.find_shipped(fields)
+
+    check()
