@@ -63,9 +63,12 @@ def _default_root() -> tuple[Path | None, str]:
     import platformdirs
 
     try:
-        return Path(platformdirs.user_cache_dir("rhs-slam")), "XDG_CACHE_HOME / HOME"
+        path = Path(platformdirs.user_cache_dir("rhs-slam"))
     except (KeyError, OSError, RuntimeError) as exc:  # no HOME and no passwd entry
         return None, f"XDG_CACHE_HOME / HOME ({exc})"
+    if not path.is_absolute() or path.parts[0].startswith("~"):  # no HOME and no passwd entry: "~" left as is
+        return None, "XDG_CACHE_HOME / HOME"
+    return path, "XDG_CACHE_HOME / HOME"
 
 
 def _private_temp() -> Path:

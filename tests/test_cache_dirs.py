@@ -147,3 +147,24 @@ def test_no_fallback_without_need(tmp_path: Path, monkeypatch, recwarn) -> None:
     monkeypatch.setenv("RHS_SLAM_CACHE", str(tmp_path / "c"))
     assert cache_dir.cache_subdir("patterns") == tmp_path / "c" / "patterns"
     assert not [w for w in recwarn if issubclass(w.category, cache_dir.CacheFallbackWarning)]
+
+
+def test_no_home_and_no_passwd_entry_falls_back(tmp_path: Path, monkeypatch) -> None:
+    """A container user with no HOME and no passwd entry: ``~`` stays unexpanded, and the cache must not become a
+    folder named ``~`` in the working directory."""
+    import pwd
+
+    from rhs_common import cache_dir
+
+    for var in ("RHS_SLAM_CACHE", "HOME", "XDG_CACHE_HOME"):
+        monkeypatch.setenv(var, "x")  # (recorded, so the fallback's export is undone after the test)
+        monkeypatch.delenv(var)
+    monkeypatch.setattr(pwd, "getpwuid", lambda uid: (_ for _ in ()).throw(KeyError(uid)))
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    monkeypatch.setattr(cache_dir, "_WARNED", set())
+    monkeypatch.chdir(tmp_path)
+    with pytest.warns(cache_dir.CacheFallbackWarning, match="no home folder.*set RHS_SLAM_CACHE"):
+        root = cache_dir.cache_root()
+    assert root.parent == tmp_path and root.name.startswith("rhs-slam-cache-")
+    assert not (tmp_path / "~").exists()
+    assert os.environ["RHS_SLAM_CACHE"] == str(root)
