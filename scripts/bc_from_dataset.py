@@ -1,6 +1,7 @@
 """Behaviour cloning from a Minari dataset of ``rhs-slam record``.
 
-Runs :mod:`rhs_studies.bc_from_dataset` (its docstring has the options), as ``python -m rhs_studies.bc_from_dataset`` does.
+Runs :mod:`rhs_studies.bc_from_dataset` (its docstring has the options),
+as ``python -m rhs_studies.bc_from_dataset`` does.
 """
 
 import sys

@@ -1,11 +1,12 @@
 """Ray RLlib sampling throughput: PPO steps/s with 1 and 2 env runners, in one run.
 
-Runs :mod:`rhs_studies.benchmark_rllib` (its docstring has the options), as ``python -m rhs_studies.benchmark_rllib`` does.
+Runs :mod:`rhs_studies.bench.benchmark_rllib` (its docstring has the options),
+as ``python -m rhs_studies.bench.benchmark_rllib`` does.
 """
 
 import sys
 
-from rhs_studies.benchmark_rllib import main
+from rhs_studies.bench.benchmark_rllib import main
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -193,6 +193,86 @@ def test_the_studies_are_the_top_layer_and_edit_no_import_path():
     assert edits == []
 
 
+#: the imports a study may make of another module of its own room (importer, imported: why); none across rooms
+ROOM_PARTS = {
+    ("slam.claim_study", "slam.claim_study_report"): "the claim study's report: a part of that study (no main)",
+    ("bench.benchmark", "bench.benchmark_radar"): "the benchmark suite runs the radar benchmark as its radar section",
+    ("bench.benchmark", "bench.benchmark_patterns"): "the benchmark suite runs the pattern benchmark as its section",
+    ("radar.radar_profiles", "radar.radar_quality"): "the radar profiles are scored with the radar quality metric",
+}
+#: what the upkeep tools read besides the kit: the steps of the reproduction (the study registry)
+UPKEEP_READS = ("rhs_studies.reproduce",)
+#: what the kit itself may import of rhs_studies besides itself: the records, episodes and scenes it re-exports
+KIT_READS = ("rhs_studies.provenance", "rhs_studies.episodes", "rhs_studies.scenes", "rhs_studies.subprocess_env")
+
+
+def _studies_imported(path: Path) -> list[str]:
+    """The rhs_studies modules ``path`` imports (``from rhs_studies import x`` -> rhs_studies.x), old study names
+    resolved to their rooms (rhs_studies.MOVED)."""
+    from rhs_studies import MOVED
+
+    out = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module == STUDIES:
+            names = [f"{STUDIES}.{a.name}" for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            names = [node.module or ""] if not node.level else [f"{STUDIES}.(relative import)"]
+        else:
+            continue
+        for n in names:
+            if n.split(".")[0] == STUDIES:
+                parts = n.split(".")
+                out.append(MOVED.get(parts[1], n) if len(parts) > 1 else n)
+    return out
+
+
+def _study_violations(path: Path, room: str) -> list[str]:
+    """The imports of the study module ``path`` (in ``room``) of anything in rhs_studies but the kit."""
+    me = f"{room}.{path.stem}"
+    bad = []
+    for target in _studies_imported(path):
+        rest = target.removeprefix(f"{STUDIES}.")
+        if target == f"{STUDIES}.kit" or target.startswith(f"{STUDIES}.kit."):
+            continue
+        if room == "upkeep" and target in UPKEEP_READS:
+            continue
+        if rest.split(".")[0] == room and (me, rest) in ROOM_PARTS:
+            continue
+        bad.append(f"{STUDIES}/{room}/{path.name}: {target}")
+    return bad
+
+
+def test_a_study_imports_the_kit_and_the_packages_never_another_study():
+    """The studies live in topic rooms (rhs_studies.ROOMS); a study imports rhs_studies.kit and the packages, never
+    another study: no import between rooms, and inside a room only the parts of ROOM_PARTS. The kit imports no
+    study."""
+    from rhs_studies import ROOMS
+
+    bad = [v for room in ROOMS for path in sorted((ROOT / STUDIES / room).glob("*.py")) if path.name != "__init__.py"
+           for v in _study_violations(path, room)]
+    assert bad == [], "move what studies share into rhs_studies/kit/: " + "; ".join(bad)
+    kit = [f"{path.name}: {t}" for path in sorted((ROOT / STUDIES / "kit").glob("*.py")) for t in _studies_imported(path)
+           if not (t == f"{STUDIES}.kit" or t.startswith(f"{STUDIES}.kit.") or t in KIT_READS)]
+    assert kit == []
+    rooms = {p.parent.name for p in (ROOT / STUDIES).glob("*/__init__.py")} - {"kit"}
+    assert rooms == set(ROOMS), "every room folder is listed in rhs_studies.ROOMS"
+    for room, names in ROOMS.items():
+        assert {p.stem for p in (ROOT / STUDIES / room).glob("*.py")} - {"__init__"} == set(names), room
+
+
+def test_the_study_rule_sees_an_import_of_another_study(tmp_path):
+    study = tmp_path / "new_study.py"
+    study.write_text("from rhs_studies.kit.tables import paired\nfrom rhs_studies.rl_finetune import ARMS\n"
+                     "def f():\n    from rhs_studies.radar import radar_quality\n    from rhs_studies import reproduce\n")
+    assert _study_violations(study, "driving") == [
+        "rhs_studies/driving/new_study.py: rhs_studies.driving.rl_finetune",
+        "rhs_studies/driving/new_study.py: rhs_studies.radar",
+        "rhs_studies/driving/new_study.py: rhs_studies.reproduce"]
+    assert _study_violations(study, "upkeep")[-1:] == ["rhs_studies/upkeep/new_study.py: rhs_studies.radar"]
+
+
 def _imported_names(path: Path) -> list[str]:
     out = []
     for node in ast.walk(ast.parse(path.read_text())):

@@ -17,9 +17,11 @@ MODULES = (
     "slam.gym.metrics_info",
     "agents.decision",
     "agents.shield",
-    "rhs_studies.rl_finetune",
-    "rhs_studies.rl_confirm",
-    "rhs_studies.rl_lane_rule_trial",
+    "rhs_studies.driving.rl_finetune",
+    "rhs_studies.driving.rl_lane_rule_trial",
+    "rhs_studies.kit.seeds",
+    "rhs_studies.kit.pool",
+    "rhs_studies.kit.tables",
 )
 
 

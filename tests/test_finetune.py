@@ -417,20 +417,18 @@ def test_the_confirmation_chooses_on_validation_seeds_and_judges_the_choice_once
     base = {"shipped": 160.0, "shield_explore": 161.0, "shield_flank_explore": 163.0, "shield_dagger": 160.5,
             "idm": 150.0}
 
-    def fake_rows(policies, seeds, workers, skip=()):
-        keys = [*policies, *(k for k in ("slower", "idm", "headway", "lookahead") if k not in skip)]
-        calls.append((keys, list(seeds)))
+    def fake_drive(row, seeds):  # one row of the protocol on seeds
+        calls.append((row.name, seeds[0]))
         # on the test seeds the other candidate would win: the test must not choose again
         shift = {"shield_explore": 5.0} if seeds[0] < 7000 else {}
-        return {k: [{"seed": s, "return": base[k] + shift.get(k, 0.0) + s % 3, "crashed": s == seeds[0] and k == "idm",
-                     "mean_speed": 24.5} for s in seeds] for k in keys}
+        return [{"seed": s, "return": base[row.name] + shift.get(row.name, 0.0) + s % 3,
+                 "crashed": s == seeds[0] and row.name == "idm", "mean_speed": 24.5} for s in seeds]
 
-    monkeypatch.setattr(rl_confirm, "evaluate_rows", fake_rows)
-    result = rl_confirm.confirm(list(range(7000, 7010)), list(range(6000, 6010)), 1)
-    (val_keys, val_seeds), (test_keys, test_seeds) = calls
-    assert val_keys == ["shipped", "shield_explore", "shield_flank_explore"] and val_seeds[0] == 7000
+    result = rl_confirm.confirm(list(range(7000, 7010)), list(range(6000, 6010)), 1, drive=fake_drive)
+    assert [k for k, s in calls if s == 7000] == ["shipped", "shield_explore", "shield_flank_explore"]
     assert result["validation"]["chosen"] == "shield_flank_explore"
-    assert test_keys == ["shipped", "shield_flank_explore", "shield_dagger", "idm"] and test_seeds[0] == 6000
+    assert [k for k, s in calls if s == 6000] == ["shipped", "shield_flank_explore", "shield_dagger", "idm"]
+    assert list(result["test"]["vs_start"]) == ["shield_flank_explore", "shield_dagger"]
     t = result["test"]["targets"]
     assert t["arm"] == "shield_flank_explore" and t["gain_over_student"]["mean"] == pytest.approx(3.0)
     assert t["gain_over_dagger_continue"]["mean"] == pytest.approx(2.5) and t["met"]["gain_over_student"]
@@ -442,15 +440,14 @@ def test_the_confirmation_chooses_on_validation_seeds_and_judges_the_choice_once
     # the fine-tune part's IDM + MOBIL episodes
     driven = []
 
-    def fake_drive(arm, seeds, workers, ship_dir, deterministic):
-        driven.append((arm, seeds[0], deterministic))
-        mean = {"shield_scratch": 150.0, "shield_scratch_explore": 155.0, "shield_scratch_cost": 152.0}[arm]
-        mean -= 8.0 * deterministic  # greedy: the reflex
+    def fake_scratch(row, seeds):
+        driven.append((row.policy, seeds[0], row.deterministic))
+        mean = {"shield_scratch": 150.0, "shield_scratch_explore": 155.0, "shield_scratch_cost": 152.0}[row.policy]
+        mean -= 8.0 * row.deterministic  # greedy: the reflex
         return [{"seed": s, "return": mean + s % 3, "crashed": False, "mean_speed": 20.0} for s in seeds]
 
-    monkeypatch.setattr(rl_confirm, "drive_arm", fake_drive)
     idm = result["test"]["runs"]["idm"]
-    part = rl_confirm.confirm_scratch(list(range(7000, 7010)), list(range(6000, 6010)), 1, idm=idm)
+    part = rl_confirm.confirm_scratch(list(range(7000, 7010)), list(range(6000, 6010)), 1, idm=idm, drive=fake_scratch)
     assert [d for d in driven if d[1] == 7000] == [(a, 7000, False) for a in rl_confirm.SCRATCH_CANDIDATES]
     assert part["validation"]["chosen"] == "shield_scratch_explore"
     assert [d for d in driven if d[1] == 6000] == [("shield_scratch_explore", 6000, False),
@@ -482,6 +479,7 @@ def test_the_lane_test_chooses_the_rule_on_validation_seeds_and_drives_the_fine_
 
     saved = policy_metadata(rl_lane_rule_trial.SHIPPED_DIR / f"{rl_lane_rule_trial.FINETUNE}.zip")["shield"]
     shields = []
+    real = driving.drive_row
 
     def fake_run(policy, env_id, kwargs, seeds, workers, deterministic=True, shield=None):
         shields.append((seeds[0], shield))
@@ -489,15 +487,15 @@ def test_the_lane_test_chooses_the_rule_on_validation_seeds_and_drives_the_fine_
         return [{"seed": s, "return": 170.0 + s % 3, "crashed": bad and s == seeds[0], "mean_speed": 25.0}
                 for s in seeds]
 
-    def fake_rows(policies, seeds, workers, skip=()):
-        keys = [*policies, *(k for k in ("slower", "idm", "headway", "lookahead") if k not in skip)]
-        assert seeds[0] == 8000 and keys == ["shipped", "shield_dagger", "idm"]
-        return {k: [{"seed": s, "return": 160.0 + s % 3, "crashed": False, "mean_speed": 23.0} for s in seeds]
-                for k in keys}
+    def fake_drive(row, seeds):  # the fine-tune through the real row driver (its shield), the other rows faked
+        if row.policy == rl_lane_rule_trial.FINETUNE:
+            return real(row.policy, seeds, 1, rl_lane_rule_trial.SHIPPED_DIR, row.deterministic, row.shield)
+        assert seeds[0] == 8000 and row.name in ("shipped", "shield_dagger", "idm")
+        return [{"seed": s, "return": 160.0 + s % 3, "crashed": False, "mean_speed": 23.0} for s in seeds]
 
-    monkeypatch.setattr(driving, "run_policy", fake_run)  # drive_arm's
-    monkeypatch.setattr(rl_lane_rule_trial, "evaluate_rows", fake_rows)
-    result = rl_lane_rule_trial.lane_test(list(range(7000, 7010)), list(range(8000, 8010)), 1)
+    monkeypatch.setattr(driving, "run_policy", fake_run)  # drive_row's
+    result = rl_lane_rule_trial.lane_test(list(range(7000, 7010)), list(range(8000, 8010)), 1, drive=fake_drive)
+    assert list(result["test"]["rows"]) == [rl_lane_rule_trial.FINETUNE, "shipped", "shield_dagger", "idm"]
     assert [s for s, _ in shields] == [7000, 7000, 8000]
     for (_, shield), rule in zip(shields, rl_lane_rule_trial.LANE_RULES.values()):
         assert shield == {**saved, **rule} and shield != saved  # one field changed, the rest as saved

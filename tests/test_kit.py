@@ -88,3 +88,86 @@ def test_the_runner_parses_the_options_dataclass_runs_and_writes_json_and_page(t
     assert result["seed"] == 9002 and result["provenance"]["config"]["names"] == ["a", "b"]
     assert result["provenance"]["command"][:2] == ["python", "scripts/toy.py"]
     assert (tmp_path / "toy.md").read_text() == "seed 9002\n" and "seed 9002" in capsys.readouterr().out
+
+
+SMOKE = """\
+name: smoke_scripted
+title: always SLOWER or the headway expert, against IDM + MOBIL
+validation_seeds: {first: 12000, episodes: 2}
+test_seeds: {first: 12100, episodes: 2}
+candidates:
+  - {policy: slower}
+  - {policy: headway}
+choice: {rule: mean_return}
+test:
+  - {policy: $chosen}
+  - {policy: idm}
+paired: {against: idm, key: vs_idm}
+targets: {kind: vs_idm, return_vs_idm: 0.5, collision_rate: 0.5}
+"""
+
+
+def test_a_new_comparison_is_a_yaml_file_alone(tmp_path, capsys):
+    """A spec file, no module: chosen on fresh validation seeds, tested once, JSON + page written (2 short episodes
+    per row on rhs-highway-v0)."""
+    from rhs_studies.driving import comparisons
+
+    spec = tmp_path / "smoke.yml"
+    spec.write_text(SMOKE)
+    assert comparisons.main(["--spec", str(spec), "--episode-s", "2", "--workers", "1", "--out-dir", str(tmp_path)]) == 0
+    result = json.loads((tmp_path / "smoke_scripted.json").read_text())
+    v, t = result["validation"], result["test"]
+    assert v["seeds"] == [12000, 12001] and t["seeds"] == [12100, 12101]
+    assert v["chosen"] in ("slower", "headway") and list(t["rows"]) == [v["chosen"], "idm"]
+    assert list(t["vs_idm"]) == [v["chosen"]] and set(t["targets"]["met"]) == {"return_vs_idm", "collisions"}
+    assert [e["seed"] for e in t["runs"]["idm"]] == [12100, 12101]
+    assert result["provenance"]["command"][1] == "scripts/compare_policies.py"
+    assert "Chosen: **" in (tmp_path / "smoke_scripted.md").read_text()
+    # a test set already driven is refused, naming the file and the set
+    spec.write_text(SMOKE.replace("first: 12100", "first: 6050"))
+    with pytest.raises(SystemExit):
+        comparisons.main(["--spec", str(spec), "--out-dir", str(tmp_path)])
+    assert "rl_confirm_test (6000-6099)" in capsys.readouterr().err
+
+
+def test_the_specs_are_validated_with_the_field_path_and_the_file(tmp_path):
+    from rhs_studies.kit.protocol import load_spec
+
+    for path in sorted((ROOT / "rhs_studies" / "driving" / "specs").glob("*.yml")):
+        assert load_spec(path).name == path.stem  # every shipped spec loads
+    bad = tmp_path / "bad.yml"
+    cases = [("policy: slower}", "policy: nope}", r"bad.yml: candidates\[0\]\.policy"),
+             ("rule: mean_return", "rule: best", r"bad.yml: choice\.rule"),
+             ("first: 12100, episodes: 2", "first: 12001, episodes: 2", "overlap the validation seeds"),
+             ("  - {policy: $chosen}\n", "", r"\$chosen"),
+             ("title:", "colour: red\ntitle:", r"bad.yml: unknown fields \['colour'\]")]
+    for old, new, message in cases:
+        bad.write_text(SMOKE.replace(old, new))
+        with pytest.raises(ValueError, match=message):
+            load_spec(bad)
+
+
+def test_the_protocol_replaces_the_three_copies_with_the_same_blocks():
+    """rl_confirm's two parts and the lane rule trial are their spec files run by the one protocol: the blocks
+    their pages render (keys in order), the choice rule of each, the rows driven."""
+    from rhs_studies.driving import rl_confirm, rl_lane_rule_trial
+
+    def drive(row, seeds):
+        ret = {"shield_explore": 1.0, "shield_flank_explore": 2.0, "lane_time": 0.0}.get(row.name, 0.5)
+        return [{"seed": s, "return": ret + (s % 2), "crashed": row.name == "lane_gap", "mean_speed": 24.0} for s in seeds]
+
+    val, test = list(range(7000, 7004)), list(range(6000, 6004))
+    fine = rl_confirm.confirm(val, test, 1, drive=drive)
+    saved = json.loads((ROOT / "results" / "rl_confirm.json").read_text())
+    assert list(fine) == ["candidates", "validation", "test"] == [k for k in saved if k in fine]
+    assert list(fine["validation"]) == list(saved["validation"]) and list(fine["test"]) == list(saved["test"])
+    assert list(fine["test"]["targets"]) == list(saved["test"]["targets"])
+    scratch = rl_confirm.confirm_scratch(val, test, 1, drive=drive)
+    assert list(scratch["validation"]) == list(saved["scratch"]["validation"])
+    assert list(scratch["test"]) == list(saved["scratch"]["test"]) and list(scratch["test"]["rows"]) == ["sampled", "greedy", "idm"]
+    assert list(scratch["test"]["targets"]) == list(saved["scratch"]["test"]["targets"])
+    lane = rl_lane_rule_trial.lane_test(val, list(range(8000, 8004)), 1, drive=drive)
+    saved = json.loads((ROOT / "results" / "rl_lane_test.json").read_text())
+    assert [k for k in saved if k != "provenance"] == list(lane) and lane["validation"]["chosen"] == "lane_time"
+    assert list(lane["validation"]) == list(saved["validation"]) and list(lane["test"]) == list(saved["test"])
+    assert list(lane["test"]["rows"]) == list(saved["test"]["rows"]) and lane["lane_rules"] == saved["lane_rules"]

@@ -30,9 +30,9 @@ def _launched_module(script: str) -> str:
 
 
 @pytest.mark.parametrize(("script", "module"), [
-    ("update_readme.py", "rhs_studies.write_results_pages"),
-    ("write_results_pages.py", "rhs_studies.write_results_pages"),
-    ("rl_lane_test.py", "rhs_studies.rl_lane_rule_trial"),
+    ("update_readme.py", "rhs_studies.upkeep.write_results_pages"),
+    ("write_results_pages.py", "rhs_studies.upkeep.write_results_pages"),
+    ("rl_lane_test.py", "rhs_studies.driving.rl_lane_rule_trial"),
 ])
 def test_old_and_new_launchers_run_the_renamed_module(script, module):
     assert _launched_module(script) == module

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -38,6 +39,41 @@ STARTS = {"student": STUDENT, "shipped": SHIPPED_START}
 #: where the trained arms are kept (the actor zips and their training records)
 SHIPPED_DIR = ROOT / "agents" / "data" / "rl"
 HYPERPARAMS = ROOT / "agents" / "hyperparams"
+
+#: the DAgger / PPO students of the policies table (rhs_studies.driving.train_policy trains them)
+DATA = ROOT / "agents" / "data"
+SLAM_ID, TRUTH_ID, DENSE_ID = "rhs-highway-slam-v0", "rhs-highway-v0", "rhs-dense-v0"
+ALGOS = ("dagger", "ppo")
+#: highway-env's Kinematics observation with the followers in view: 8 vehicles, behind as well as ahead (the
+#: default sees the 4 nearest vehicles ahead only, not the followers the expert checks before a lane change)
+KINEMATICS_ALL_AROUND = {"observation": {"type": "Kinematics", "vehicles_count": 8, "see_behind": True}}
+#: name -> (env id, radar kwargs merged over --slam-env-kwargs; None: a ground-truth env, no radar[, env kwargs])
+TARGETS: dict[str, tuple] = {
+    "slam": (SLAM_ID, {}),
+    "truth": (TRUTH_ID, None),
+    "truth_all_around": (TRUTH_ID, None, KINEMATICS_ALL_AROUND),
+    # the antenna study, does the antenna matter for driving: the same student on the RHS and on a phased array,
+    # and both on the dense roadside
+    "slam_rhs": (SLAM_ID, {"antenna": "rhs"}),
+    "slam_phased": (SLAM_ID, {"antenna": "phased"}),
+    "dense": (DENSE_ID, {}),
+    "dense_phased": (DENSE_ID, {"antenna": "phased"}),
+}
+SHIPPED = ("slam", "truth")
+#: the radar / SLAM envs train on a 5-degree beam grid (18 beams per sweep, ~2x faster than the 1-degree default)
+SLAM_ENV_KWARGS = {"radar": {"scan": {"grid_deg": 5}}}
+#: every policy's env (``--env-kwargs``): highway-env's DiscreteMetaAction with target speeds down to 10 m/s
+#: instead of [20, 25, 30]. With them the expert can slow behind a slower leader instead of crashing into it
+#: (results/ablations.json, 200 seeds: 2 collisions against 5) and its students learn that.
+FINE_SPEEDS = {"action": {"type": "DiscreteMetaAction", "target_speeds": [10, 15, 20, 25, 30]}}
+ANTENNA_STUDY = ("slam_rhs", "slam_phased", "dense", "dense_phased")
+
+
+def target_path(algo: str, name: str, data_dir: Path = DATA) -> Path:
+    """Where the ``name`` policy trained by ``algo`` goes: ``<algo>_rhs_highway_<name>.zip``, the antenna
+    study's other policies in ``antenna/``."""
+    sub = "" if name in SHIPPED else ("truth/" if name.startswith("truth") else "antenna/")
+    return Path(data_dir) / f"{sub}{algo}_rhs_highway_{name}.zip"
 
 
 class Arm(NamedTuple):
@@ -185,17 +221,26 @@ def targets(rows: dict[str, dict[str, Any]], runs: dict[str, list[dict]], arm: s
     return out
 
 
+#: the scripted references: name -> (policy, whether it drives with the students' action set). Always SLOWER and
+#: IDM with highway-env's own action set, as the driving targets were set; the teachers with the students' target
+#: speeds, as they taught them
+SCRIPTED: dict[str, tuple[str, bool]] = {"slower": (f"constant:{SLOWER}", False), "idm": ("idm", False),
+                                         "headway": ("headway:5", True), "lookahead": ("lookahead:5", True)}
+
+
+def scripted_kwargs(name: str) -> dict[str, Any]:
+    """The env kwargs of the scripted reference ``name`` on ``rhs-highway-v0`` (:data:`SCRIPTED`)."""
+    if not SCRIPTED[name][1]:
+        return {}
+    _, student_kwargs = resolve_env(str(STUDENT))
+    return {"action": student_kwargs.get("action")} if "action" in student_kwargs else {}
+
+
 def evaluate_rows(policies: dict[str, Path], seeds: list[int], workers: int,
                   skip: tuple[str, ...] = ()) -> dict[str, list[dict]]:
     """Every learned policy on the SLAM env and the scripted references on the ground-truth env, same seeds
     (the rows named in ``skip`` left out)."""
-    _, student_kwargs = resolve_env(str(STUDENT))
-    # always SLOWER and IDM with highway-env's own action set, as the driving targets were set; the teachers with the
-    # students' target speeds, as they taught them
-    teach = {"action": student_kwargs.get("action")} if "action" in student_kwargs else {}
-    scripted = {"slower": (f"constant:{SLOWER}", {}), "idm": ("idm", {}), "headway": ("headway:5", teach),
-                "lookahead": ("lookahead:5", teach)}
-    scripted = {k: v for k, v in scripted.items() if k not in skip}
+    scripted = {k: (SCRIPTED[k][0], scripted_kwargs(k)) for k in SCRIPTED if k not in skip}
     runs: dict[str, list[dict]] = {}
     for key, path in {k: v for k, v in policies.items() if k not in skip}.items():
         env_id, kwargs = resolve_env(str(path))
@@ -205,6 +250,37 @@ def evaluate_rows(policies: dict[str, Path], seeds: list[int], workers: int,
     for key, (policy, kwargs) in scripted.items():
         runs[key] = run_policy(policy, "rhs-highway-v0", kwargs, seeds, workers)
     return runs
+
+
+def drive_row(name: str, seeds: list[int], workers: int, ship_dir: Path = SHIPPED_DIR, deterministic: bool = True,
+              shield_changes: Mapping[str, Any] | None = None, episode_s: float | None = None) -> list[dict]:
+    """One row of a comparison on ``seeds``: a scripted reference (:data:`SCRIPTED`) on ``rhs-highway-v0``, else a
+    start or a shipped arm (:func:`arm_policies`) on its saved env, greedy or sampled, behind the shield its record
+    keeps with ``shield_changes`` (None: as saved); ``episode_s``: the episode's duration (None: the env's).
+
+    Args:
+        name: a key of :data:`SCRIPTED`, :data:`STARTS` or :data:`ARMS`.
+        seeds: contiguous episode seeds.
+        workers: processes.
+        ship_dir: where the arms' zips are.
+        deterministic: greedy actions (False: sampled, seeded by the episode's seed).
+        shield_changes: fields of the saved shield changed.
+        episode_s: the env's ``duration``.
+
+    Returns:
+        The episodes, in seed order.
+    """
+    short = {} if episode_s is None else {"duration": episode_s}
+    if name in SCRIPTED:
+        return run_policy(SCRIPTED[name][0], "rhs-highway-v0", {**scripted_kwargs(name), **short}, seeds, workers)
+    path = str(arm_policies((name,), ship_dir)[name])
+    env_id, kwargs = resolve_env(path)
+    shield = None
+    if shield_changes:
+        from agents.evaluate import policy_metadata
+
+        shield = {**policy_metadata(path)["shield"], **shield_changes}
+    return run_policy(path, env_id, {**kwargs, **short}, seeds, workers, deterministic, shield)
 
 
 SLIM_KEYS = ("seed", "return", "steps", "crashed", "mean_speed", "position_rmse_m")
@@ -224,7 +300,7 @@ def rl_fingerprint() -> list[float]:
 
 @dataclass(frozen=True)
 class FreshSeeds:
-    """The options of a study on fresh seeds (this one, :mod:`rhs_studies.rl_lane_rule_trial`): its validation and
+    """The options of a study on fresh seeds (this one, :mod:`rhs_studies.driving.rl_lane_rule_trial`): its validation and
     test seeds, workers and folders; ``ValueError`` when a set has fewer than two episodes or the sets overlap."""
 
     validation_seed: int = option(7000, "first validation seed (the choice)")
@@ -254,7 +330,9 @@ def check_zips(ship_dir: Path, arms: list[str]) -> None:
         raise ValueError(f"no shipped zip for {missing} in {ship_dir}: run scripts/rl_finetune.py first")
 
 
-__all__ = ["ARMS", "ENV_ID", "HYPERPARAMS", "LABELS", "SHIELD_ARMS", "SHIELD_CONTROL", "SHIPPED_DIR", "SHIPPED_START",
+__all__ = ["ALGOS", "ANTENNA_STUDY", "DATA", "DENSE_ID", "FINE_SPEEDS", "KINEMATICS_ALL_AROUND", "SHIPPED",
+           "SLAM_ENV_KWARGS", "SLAM_ID", "TARGETS", "TRUTH_ID", "target_path",
+           "ARMS", "ENV_ID", "HYPERPARAMS", "LABELS", "SHIELD_ARMS", "SHIELD_CONTROL", "SHIPPED_DIR", "SHIPPED_START",
            "SLIM_KEYS", "STARTS", "STUDENT", "TARGET_COLLISIONS", "TARGET_GAIN", "TARGET_SPEED_MPS", "TARGET_VS_IDM",
            "Arm", "FreshSeeds", "arm_policies", "check_zips", "drive_arm", "drive_seeds", "evaluate_rows", "rl_fingerprint", "run_policy",
-           "start_of", "targets"]
+           "start_of", "targets", "SCRIPTED", "drive_row", "scripted_kwargs"]

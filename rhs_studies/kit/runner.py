@@ -87,7 +87,7 @@ def parse_options(options_type: type, argv: list[str] | None, description: str |
 class Study:
     """What a study is to the runner (:func:`run_study`)."""
 
-    #: the results' file stem: ``OUT_DIR/NAME.json`` and ``.md``
+    #: the results' file stem: ``OUT_DIR/NAME.json`` and ``.md`` ("": the options' ``result_name``)
     name: str
     #: the launcher whose command the results record (``scripts/NAME.py``) and the fingerprint's key
     launcher: str
@@ -125,10 +125,10 @@ def run_study(study: Study, argv: list[str] | None = None) -> int:
             ap.error(str(err))
     started = time.time()
     result = study.run(opts)
-    out = Path(opts.out_dir)
-    write_json(out / f"{study.name}.json", result, study.launcher, opts, started, study.fingerprint, argv)
+    out, name = Path(opts.out_dir), study.name or opts.result_name
+    write_json(out / f"{name}.json", result, study.launcher, opts, started, study.fingerprint, argv)
     text = study.markdown(result)
-    (out / f"{study.name}.md").write_text(text)
+    (out / f"{name}.md").write_text(text)
     print(text)
     return 0
 

@@ -97,5 +97,16 @@ def collisions(runs: list[dict[str, Any]]) -> int:
     return sum(bool(e["crashed"]) for e in runs)
 
 
+def snr_at(pd: list[float], snr_db: np.ndarray, level: float) -> float | None:
+    """SNR (dB) where a Pd curve first reaches ``level`` (linear interpolation), None if never."""
+    p = np.maximum.accumulate(np.asarray(pd, float))
+    if p[-1] < level:
+        return None
+    k = int(np.argmax(p >= level))
+    if k == 0:
+        return float(snr_db[0])
+    return float(np.interp(level, [p[k - 1], p[k]], [snr_db[k - 1], snr_db[k]]))
+
+
 __all__ = ["HEADER", "RULE", "SLIM", "collisions", "mean_return", "met_text", "paired", "paired_text", "row_summary",
-           "slim_runs", "table_row", "targets_line"]
+           "slim_runs", "snr_at", "table_row", "targets_line"]

@@ -33,7 +33,7 @@ from rhs_env.patterns.metrics import pattern_report
 from rhs_env.patterns.sdr import SDRSettings, build_sdr
 from rhs_studies.kit.provenance import write_json
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def subset(angles: np.ndarray, n: int | None) -> np.ndarray:

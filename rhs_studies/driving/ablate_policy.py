@@ -41,10 +41,10 @@ from typing import Any
 
 import yaml
 
+from rhs_studies.kit.driving import FINE_SPEEDS  # target speeds down to 10 m/s (highway-env's default: 20, 25, 30)
 from rhs_studies.kit.provenance import STATE_AT_START, write_json
-from rhs_studies.train_policy import FINE_SPEEDS  # target speeds down to 10 m/s (highway-env's default: 20, 25, 30)
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 TRUTH, SLAM = "rhs-highway-v0", "rhs-highway-slam-v0"
 FIVE_DEG = {"radar": {"scan": {"grid_deg": 5}}}

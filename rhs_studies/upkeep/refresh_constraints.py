@@ -25,7 +25,7 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 CONSTRAINTS = ROOT / "constraints"
 TORCH = "torch==2.13.0"  # the local CPU build (README); never a range that admits a CUDA build
 ENVIRONMENTS = {"base": ".[test,docs]", "rllib": ".[rllib,test]"}

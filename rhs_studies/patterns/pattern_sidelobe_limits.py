@@ -36,7 +36,7 @@ from rhs_env.patterns.fast import FastSettings, build_fast
 from rhs_env.patterns.metrics import pattern_report
 from rhs_studies.kit.provenance import write_json
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 MET_TOL_DB = 0.01  # a cap counts as met when the fine-grid PSLR is within this of it
 

@@ -49,7 +49,7 @@ import numpy as np
 from rhs_studies.kit.pool import map_seeds
 from rhs_studies.kit.provenance import write_json
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 DEFAULT_POLICY = "agents/data/dagger_rhs_highway_slam.zip"
 #: the same recipe (agents/hyperparams/dagger.yml, FINE_SPEEDS, 5-degree grid) at half the DAgger student's env steps

@@ -30,7 +30,7 @@ from pathlib import Path
 
 from rhs_studies.kit.provenance import load_fingerprints, verification
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 DOCS = ROOT / "docs"
 BLOCK = re.compile(r"(<!-- results:(?P<name>[\w.-]+) -->\n)(?P<body>.*?)(<!-- /results:(?P=name) -->)", re.DOTALL)
@@ -128,7 +128,7 @@ def _registration(d: dict) -> tuple[str, str]:
 def _detection(d: dict) -> tuple[str, str]:
     import numpy as np
 
-    from rhs_studies.detection_curves import snr_at
+    from rhs_studies.kit.tables import snr_at
 
     def snr(detector: str) -> str:
         v = snr_at(d["measured"]["rhs"][detector], np.asarray(d["snr_db"], float), 0.9)

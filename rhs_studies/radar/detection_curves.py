@@ -43,6 +43,7 @@ from rhs_env.point_cloud import os_cfar_threshold
 from rhs_env.radar import DetectionConfig, RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers
 from rhs_studies.kit.provenance import write_json
+from rhs_studies.kit.tables import snr_at
 
 DETECTORS = ("summed", "footprint")
 ANTENNAS = ("rhs", "phased")
@@ -159,17 +160,6 @@ def time_detectors(antenna: str, repeats: int, seed: int = 0) -> dict:
             "detect_ratio_footprint_over_summed": med["footprint"] / med["summed"],
             "scan_ratio_footprint_over_summed": med_scan["footprint"] / med_scan["summed"],
             "points_last_scan": points, "repeats": repeats}
-
-
-def snr_at(pd: list[float], snr_db: np.ndarray, level: float) -> float | None:
-    """SNR (dB) where a Pd curve first reaches ``level`` (linear interpolation), None if never."""
-    p = np.maximum.accumulate(np.asarray(pd, float))
-    if p[-1] < level:
-        return None
-    k = int(np.argmax(p >= level))
-    if k == 0:
-        return float(snr_db[0])
-    return float(np.interp(level, [p[k - 1], p[k]], [snr_db[k - 1], snr_db[k]]))
 
 
 def write_outputs(res: dict, out_dir: Path) -> None:

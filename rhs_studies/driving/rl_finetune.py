@@ -61,7 +61,7 @@ differences in the table are against each row's start.
     OMP_NUM_THREADS=1 python scripts/rl_finetune.py --runs runs/rl     # evaluate trained arms
     OMP_NUM_THREADS=1 python scripts/rl_finetune.py --arms dagger_lookahead --keep student idm ...  # one new arm
 
-:mod:`rhs_studies.rl_confirm` repeats the choice between the best shield arms and their test on fresh seeds.
+:mod:`rhs_studies.driving.rl_confirm` repeats the choice between the best shield arms and their test on fresh seeds.
 
 ``--keep ROW ...`` takes those rows' episodes from the existing ``results/rl_finetune.json`` (same seeds) instead of
 driving them again: for policies and code unchanged since (the fingerprint test says whether the code changed); the

@@ -31,7 +31,7 @@ from rhs_env.array_models import ScanConfig
 from rhs_env.radar import RadarConfig, RadarSystem
 from rhs_studies.kit.provenance import command_line, numbers, write_json
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def evaluate(cfg: RadarConfig, scenes: int, seed: int, noise_draws: int = 1, scene: Callable | None = None) -> dict:

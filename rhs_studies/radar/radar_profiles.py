@@ -35,7 +35,7 @@ import numpy as np
 
 from rhs_studies.kit.provenance import numbers, write_json
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 #: name -> radar kwargs over the default (the processing settings only: the scene and antenna stay)
 PROFILES: dict[str, dict] = {
@@ -110,7 +110,7 @@ def study(names: list[str], grid_deg: float, repeats: int, scenes: int, seed: in
           noise_draws: int = 1) -> dict:
     from tqdm.auto import tqdm
 
-    from rhs_studies.radar_quality import evaluate
+    from rhs_studies.radar.radar_quality import evaluate
 
     times = time_profiles(names, grid_deg, repeats, seed)
     quality = {n: evaluate(radar_config(PROFILES[n], grid_deg), scenes, seed, noise_draws)
@@ -157,7 +157,7 @@ def markdown(res: dict) -> str:
 
 def fingerprint() -> list[float | None]:
     """Quality of two profiles on two scenes of the 5-degree grid (no timings: they are not reproducible)."""
-    from rhs_studies.radar_quality import evaluate
+    from rhs_studies.radar.radar_quality import evaluate
 
     return numbers({n: evaluate(radar_config(PROFILES[n], 5.0), 2, 0, 2) for n in ("default", "newton1_refine1")})
 

@@ -65,7 +65,7 @@ import numpy as np
 
 from rhs_studies.kit.provenance import command_line, write_json
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 SECTIONS = ("envs", "start", "floor", "load", "vec", "radar", "patterns", "traffic", "training")
 GOALS = {"radar_env_over_base": 0.75, "slam_env_over_base": 0.67, "loaded_over_quiet": 0.85,
@@ -193,7 +193,7 @@ def bench_envs_runs(steps: int, seed: int, grid_deg: float, block: int = 5, runs
     """
     results = []
     for i in range(runs):
-        code = (f"import json; from rhs_studies.benchmark import bench_envs; print('RESULT ' + json.dumps(bench_envs("
+        code = (f"import json; from rhs_studies.bench.benchmark import bench_envs; print('RESULT ' + json.dumps(bench_envs("
                 f"{steps}, {seed}, {grid_deg}, block={block}, numpy_kernels={i == 0})))")
         done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=False)
         line = next((ln for ln in done.stdout.splitlines() if ln.startswith("RESULT ")), None)
@@ -837,12 +837,12 @@ def _run_section(sec: str, args: argparse.Namespace) -> dict:
     if sec == "vec":
         return bench_vec(args.steps, args.seed, args.grid_deg)
     if sec == "radar":
-        from rhs_studies.benchmark_radar import benchmark_radar
+        from rhs_studies.bench.benchmark_radar import benchmark_radar
 
         return {f"{a}_{f}": benchmark_radar(antenna=a, grid_deg=args.grid_deg, fidelity=f)
                 for a in ("rhs", "phased") for f in ("iq", "range")}
     if sec == "patterns":
-        from rhs_studies.benchmark_patterns import benchmark_patterns
+        from rhs_studies.bench.benchmark_patterns import benchmark_patterns
 
         return benchmark_patterns(grid_deg=1.0)
     if sec == "traffic":

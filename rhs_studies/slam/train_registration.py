@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     from rhs_env.wrappers import RadarObservation
     from slam.core.cnn_registration import GridMapConfig
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def paper_like_env(rng: np.random.Generator, radar: dict | None) -> RadarObservation:

@@ -58,12 +58,11 @@ from typing import Any
 
 from agents.decision import SLOWER
 from rhs_common.stats import mean_interval, paired_difference, wilson_interval
-from rhs_studies.kit.driving import drive_seeds, run_policy
+from rhs_studies.kit.driving import ANTENNA_STUDY, TARGETS, drive_seeds, run_policy, target_path
 from rhs_studies.kit.provenance import write_json
 from rhs_studies.kit.tables import paired
-from rhs_studies.train_policy import ANTENNA_STUDY, TARGETS, target_path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 REWARD_AIM, COLLISION_AIM = 0.8, 1.5
 #: the driving targets: return vs always-SLOWER, collision rate, return vs the ground-truth policy

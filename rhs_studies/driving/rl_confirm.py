@@ -1,7 +1,7 @@
 """A fresh test of the RL study's shield arms (the fine-tune, PPO from scratch): chosen on new validation seeds,
 judged once on new test seeds.
 
-The RL study (:mod:`rhs_studies.rl_finetune`) judged its shield fine-tunes on seeds 3000-3099 after it had looked
+The RL study (:mod:`rhs_studies.driving.rl_finetune`) judged its shield fine-tunes on seeds 3000-3099 after it had looked
 at them more than once (the shield changed between looks), and chose between its two exploring fine-tunes on only
 50 validation episodes. This study repeats the choice and the test on seeds nothing has been trained, chosen, tuned
 or judged on, with a protocol fixed before any of them was driven:
@@ -10,8 +10,8 @@ or judged on, with a protocol fixed before any of them was driven:
    candidate (:data:`CANDIDATES`); the candidate with the highest paired return gain over the start (the same as
    the highest mean return: the seeds are common) is chosen. Nothing else is read from these seeds.
 2. **Test** on the test seeds (``--seed``, 6000..), driven once: the chosen arm, its start, the DAgger control of the
-   same budget (:data:`rhs_studies.rl_finetune.SHIELD_CONTROL`) and IDM + MOBIL. The targets are the RL study's
-   (:func:`rhs_studies.rl_finetune.targets`): return >= 1.08x IDM + MOBIL, collisions <= 2 per 100, mean speed
+   same budget (:data:`rhs_studies.driving.rl_finetune.SHIELD_CONTROL`) and IDM + MOBIL. The targets are the RL study's
+   (:func:`rhs_studies.driving.rl_finetune.targets`): return >= 1.08x IDM + MOBIL, collisions <= 2 per 100, mean speed
    >= 24 m/s, a paired gain over the start >= +3 with its 95 % interval above 0, more than the DAgger control.
 
 The same for PPO from scratch under the shield (``--parts scratch``): its greedy policies are one-action reflexes
@@ -35,48 +35,29 @@ from __future__ import annotations
 
 import json
 import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from rhs_studies.kit.driving import (
-    LABELS,
-    SHIELD_CONTROL,
-    SHIPPED_DIR,
-    FreshSeeds,
-    arm_policies,
-    check_zips,
-    drive_arm,
-    evaluate_rows,
-    rl_fingerprint,
-    run_policy,
-    targets,
-)
+from rhs_studies.kit.driving import LABELS, SHIELD_CONTROL, SHIPPED_DIR, FreshSeeds, check_zips, rl_fingerprint
+from rhs_studies.kit.protocol import Drive, load_spec, row_driver, run_comparison
 from rhs_studies.kit.runner import Study, option, run_study
-from rhs_studies.kit.tables import mean_return, paired, paired_text, row_summary, slim_runs, table_row, targets_line
+from rhs_studies.kit.tables import paired_text, table_row, targets_line
 
+#: the two parts of the study as comparisons (rhs_studies/driving/specs/: the arms, the choice rule, the rows, the
+#: targets), each run by the kit's one select-then-test protocol (:func:`rhs_studies.kit.protocol.run_comparison`)
+SPECS = Path(__file__).resolve().parent / "specs"
+FINETUNE_SPEC = load_spec(SPECS / "rl_confirm_finetune.yml")
+SCRATCH_SPEC = load_spec(SPECS / "rl_confirm_scratch.yml")
 #: the exploring fine-tunes the choice is between (the RL study's two best shield arms on its seeds)
-CANDIDATES = ("shield_explore", "shield_flank_explore")
+CANDIDATES = tuple(r.name for r in FINETUNE_SPEC.candidates)
 #: the rows besides the candidates: their start, on both seed sets
-START = "shipped"
+START = FINETUNE_SPEC.choice.reference
 #: PPO from scratch under the shield, the RL study's three arms
-SCRATCH_CANDIDATES = ("shield_scratch", "shield_scratch_explore", "shield_scratch_cost")
+SCRATCH_CANDIDATES = tuple(r.name for r in SCRATCH_SPEC.candidates)
 #: PPO from scratch's targets: return vs IDM + MOBIL, collisions per episode
-SCRATCH_VS_IDM, SCRATCH_COLLISIONS = 1.0, 0.04
+SCRATCH_VS_IDM, SCRATCH_COLLISIONS = SCRATCH_SPEC.targets.return_vs_idm, SCRATCH_SPEC.targets.collision_rate
 PARTS = ("finetune", "scratch")
-
-
-def choose(runs: dict[str, list[dict]], candidates: tuple[str, ...] = CANDIDATES) -> tuple[str, dict[str, Any]]:
-    """The candidate with the highest paired gain over :data:`START` on the validation episodes ``runs``, and
-    each candidate's gain.
-
-    >>> ep = lambda *r: [{"seed": s, "return": x} for s, x in enumerate(r)]
-    >>> choose({"shipped": ep(1, 2), "a": ep(2, 3), "b": ep(3, 3)}, ("a", "b"))[0]
-    'b'
-    """
-    gains = {arm: paired(runs[arm], runs[START]) for arm in candidates}
-    return max(candidates, key=lambda arm: gains[arm]["mean"]), gains
 
 
 def markdown(result: dict[str, Any]) -> str:
@@ -123,52 +104,22 @@ def scratch_markdown(part: dict[str, Any]) -> list[str]:
 
 
 def confirm(validation_seeds: list[int], test_seeds: list[int], workers: int, ship_dir: Path = SHIPPED_DIR,
-            candidates: tuple[str, ...] = CANDIDATES) -> dict[str, Any]:
-    """Steps 1 and 2 of the protocol (the module's docstring); the result without provenance."""
-    t0 = time.perf_counter()
-    val = evaluate_rows(arm_policies((START, *candidates), ship_dir), validation_seeds, workers,
-                        skip=("slower", "idm", "headway", "lookahead"))
-    chosen, gains = choose(val, candidates)
-    print(f"rl_confirm: chose {chosen} ({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
-    test = evaluate_rows(arm_policies((START, chosen, SHIELD_CONTROL), ship_dir), test_seeds, workers,
-                         skip=("slower", "headway", "lookahead"))
-    rows = {k: row_summary(r) for k, r in test.items()}
-    return {
-        "candidates": list(candidates),
-        "validation": {"seeds": validation_seeds, "gains": gains, "chosen": chosen,
-                       "rows": {k: row_summary(r) for k, r in val.items()},
-                       "runs": slim_runs(val)},
-        "test": {"seeds": test_seeds, "rows": rows,
-                 "vs_start": {k: paired(r, test[START]) for k, r in test.items() if k not in (START, "idm")},
-                 "targets": targets(rows, test, chosen, SHIELD_CONTROL),
-                 "runs": slim_runs(test)},
-    }
+            drive: Drive | None = None) -> dict[str, Any]:
+    """Steps 1 and 2 of the protocol (the module's docstring: :data:`FINETUNE_SPEC` run by
+    :func:`rhs_studies.kit.protocol.run_comparison`); ``drive``: drives one row (default: the shipped arms); the
+    result without provenance."""
+    out = run_comparison(FINETUNE_SPEC, drive or row_driver(workers, ship_dir), validation_seeds, test_seeds,
+                         log="rl_confirm")
+    return {"candidates": list(CANDIDATES), **out}
 
 
 def confirm_scratch(validation_seeds: list[int], test_seeds: list[int], workers: int, ship_dir: Path = SHIPPED_DIR,
-                    idm: list[dict] | None = None, candidates: tuple[str, ...] = SCRATCH_CANDIDATES) -> dict[str, Any]:
-    """Steps 3 and 4 of the protocol (the module's docstring); ``idm``: IDM + MOBIL's test episodes when driven
+                    idm: list[dict] | None = None, drive: Drive | None = None) -> dict[str, Any]:
+    """Steps 3 and 4 of the protocol (:data:`SCRATCH_SPEC`); ``idm``: IDM + MOBIL's test episodes when driven
     already (the first part's), else driven here."""
-    val = {arm: drive_arm(arm, validation_seeds, workers, ship_dir, False) for arm in candidates}
-    chosen = max(candidates, key=lambda arm: mean_return(val[arm]))
-    print(f"rl_confirm: chose {chosen} from scratch", file=sys.stderr)
-    test = {"sampled": drive_arm(chosen, test_seeds, workers, ship_dir, False),
-            "greedy": drive_arm(chosen, test_seeds, workers, ship_dir, True),
-            "idm": idm if idm is not None else run_policy("idm", "rhs-highway-v0", {}, test_seeds, workers)}
-    rows = {k: row_summary(r) for k, r in test.items()}
-    s = rows["sampled"]
-    vs_idm = s["return"]["mean"] / rows["idm"]["return"]["mean"]
-    return {
-        "candidates": list(candidates),
-        "validation": {"seeds": validation_seeds, "chosen": chosen,
-                       "rows": {k: row_summary(r) for k, r in val.items()}, "runs": slim_runs(val)},
-        "test": {"seeds": test_seeds, "rows": rows, "vs_idm": {k: paired(r, test["idm"]) for k, r in test.items()
-                                                              if k != "idm"},
-                 "targets": {"arm": chosen, "return_vs_idm": vs_idm, "collision_rate": s["collision_rate"],
-                             "met": {"return_vs_idm": vs_idm >= SCRATCH_VS_IDM,
-                                     "collisions": s["collision_rate"] <= SCRATCH_COLLISIONS}},
-                 "runs": slim_runs(test)},
-    }
+    out = run_comparison(SCRATCH_SPEC, drive or row_driver(workers, ship_dir), validation_seeds, test_seeds,
+                         given={"idm": idm} if idm is not None else None, log="rl_confirm")
+    return {"candidates": list(SCRATCH_CANDIDATES), **out}
 
 
 def kept_parts(path: Path, parts: list[str], validation: list[int], test: list[int]) -> tuple[dict, dict[str, str]]:

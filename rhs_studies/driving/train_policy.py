@@ -68,43 +68,20 @@ import sys
 import time
 from pathlib import Path
 
+from rhs_studies.kit.driving import (
+    ALGOS,
+    ANTENNA_STUDY,
+    DATA,
+    FINE_SPEEDS,
+    SHIPPED,
+    SLAM_ENV_KWARGS,
+    SLAM_ID,
+    TARGETS,
+    target_path,
+)
 from rhs_studies.kit.provenance import provenance, write_json
 
-ROOT = Path(__file__).resolve().parent.parent
-
-DATA = ROOT / "agents" / "data"
-SLAM_ID, TRUTH_ID, DENSE_ID = "rhs-highway-slam-v0", "rhs-highway-v0", "rhs-dense-v0"
-ALGOS = ("dagger", "ppo")
-#: highway-env's Kinematics observation with the followers in view: 8 vehicles, behind as well as ahead (the
-#: default sees the 4 nearest vehicles ahead only, not the followers the expert checks before a lane change)
-KINEMATICS_ALL_AROUND = {"observation": {"type": "Kinematics", "vehicles_count": 8, "see_behind": True}}
-#: name -> (env id, radar kwargs merged over --slam-env-kwargs; None: a ground-truth env, no radar[, env kwargs])
-TARGETS: dict[str, tuple] = {
-    "slam": (SLAM_ID, {}),
-    "truth": (TRUTH_ID, None),
-    "truth_all_around": (TRUTH_ID, None, KINEMATICS_ALL_AROUND),
-    # the antenna study, does the antenna matter for driving: the same student on the RHS and on a phased array,
-    # and both on the dense roadside
-    "slam_rhs": (SLAM_ID, {"antenna": "rhs"}),
-    "slam_phased": (SLAM_ID, {"antenna": "phased"}),
-    "dense": (DENSE_ID, {}),
-    "dense_phased": (DENSE_ID, {"antenna": "phased"}),
-}
-SHIPPED = ("slam", "truth")
-#: the radar / SLAM envs train on a 5-degree beam grid (18 beams per sweep, ~2x faster than the 1-degree default)
-SLAM_ENV_KWARGS = {"radar": {"scan": {"grid_deg": 5}}}
-#: every policy's env (``--env-kwargs``): highway-env's DiscreteMetaAction with target speeds down to 10 m/s
-#: instead of [20, 25, 30]. With them the expert can slow behind a slower leader instead of crashing into it
-#: (results/ablations.json, 200 seeds: 2 collisions against 5) and its students learn that.
-FINE_SPEEDS = {"action": {"type": "DiscreteMetaAction", "target_speeds": [10, 15, 20, 25, 30]}}
-ANTENNA_STUDY = ("slam_rhs", "slam_phased", "dense", "dense_phased")
-
-
-def target_path(algo: str, name: str, data_dir: Path = DATA) -> Path:
-    """Where the ``name`` policy trained by ``algo`` goes: ``<algo>_rhs_highway_<name>.zip``, the antenna
-    study's other policies in ``antenna/``."""
-    sub = "" if name in SHIPPED else ("truth/" if name.startswith("truth") else "antenna/")
-    return Path(data_dir) / f"{sub}{algo}_rhs_highway_{name}.zip"
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def target_env_kwargs(name: str, slam_kwargs: dict, env_kwargs: dict | None = None) -> dict:

@@ -1,20 +1,20 @@
 """The RL fine-tune behind a stricter lane-change rule of the radar shield: the rule chosen on validation seeds,
 the choice tested once on seeds nothing has touched.
 
-The fresh test of the RL stage (:mod:`rhs_studies.rl_confirm`, seeds 6000-6099) met every target of the fine-tune
+The fresh test of the RL stage (:mod:`rhs_studies.driving.rl_confirm`, seeds 6000-6099) met every target of the fine-tune
 but collisions: 3 in 100 against <= 2. Two of the three were lane changes into a car a few metres ahead in the target
 lane that the radar saw with two points. The shield's lane rule (:class:`agents.shield.ShieldConfig`) vetoes a lane
 change when an object in the target lane is nearer than ``lane_gap_m + lane_time_s * closing speed``; this study asks
 whether a stricter rule closes the gap, with a protocol fixed before any of its seeds was driven:
 
-1. **Choice** on the validation seeds (``--validation-seed``, 7000.., where :mod:`rhs_studies.rl_confirm` chose the
+1. **Choice** on the validation seeds (``--validation-seed``, 7000.., where :mod:`rhs_studies.driving.rl_confirm` chose the
    fine-tune): :data:`FINETUNE` behind each rule of :data:`LANE_RULES` (each changes one field of the shield saved
    in the fine-tune's record). The rule with the fewest collisions is chosen, ties broken by the higher mean return.
    The fine-tune behind its own rule on the same seeds (from ``rl_confirm.json``) is shown beside them, not chosen.
 2. **Test** on the test seeds (``--seed``, 8000..), driven once: the fine-tune behind the chosen rule, its start
    (the shield student, shipped then, behind its own shield), the DAgger control of the same budget
-   (:data:`rhs_studies.rl_finetune.SHIELD_CONTROL`, behind its own shield) and IDM + MOBIL. The targets are the RL
-   study's (:func:`rhs_studies.rl_finetune.targets`): return >= 1.08x IDM + MOBIL, collisions <= 2 per 100, mean
+   (:data:`rhs_studies.driving.rl_finetune.SHIELD_CONTROL`, behind its own shield) and IDM + MOBIL. The targets are the RL
+   study's (:func:`rhs_studies.driving.rl_finetune.targets`): return >= 1.08x IDM + MOBIL, collisions <= 2 per 100, mean
    speed >= 24 m/s, a paired gain over the start >= +3 with its 95 % interval above 0, more than the DAgger control.
 
 ``--ship`` (after the test, from its ``rl_lane_test.json``) ships the fine-tune behind the chosen rule when every
@@ -33,57 +33,29 @@ from __future__ import annotations
 import json
 import shutil
 import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from agents.evaluate import policy_metadata
-from rhs_studies.kit.driving import (
-    LABELS,
-    ROOT,
-    SHIELD_CONTROL,
-    SHIPPED_DIR,
-    FreshSeeds,
-    arm_policies,
-    check_zips,
-    drive_arm,
-    evaluate_rows,
-    rl_fingerprint,
-    targets,
-)
+from rhs_studies.kit.driving import LABELS, ROOT, SHIELD_CONTROL, SHIPPED_DIR, FreshSeeds, check_zips, rl_fingerprint
+from rhs_studies.kit.protocol import Drive, load_spec, row_driver, run_comparison
 from rhs_studies.kit.runner import Study, option, parse_options, parser_for, run_study
 from rhs_studies.kit.seeds import USED_SEEDS, check_fresh
-from rhs_studies.kit.tables import collisions, mean_return, paired, row_summary, slim_runs, table_row, targets_line
+from rhs_studies.kit.tables import row_summary, table_row, targets_line
 
 #: the launcher of this study: the command its results record and its key in results/fingerprints.json (the module
 #: was called rl_lane_test like it; renamed so that no module of the kit matches pytest's test-file pattern)
 LAUNCHER = "scripts/rl_lane_test.py"
-#: the fine-tune under test: the one :mod:`rhs_studies.rl_confirm` chose on seeds 7000-7099
-FINETUNE = "shield_flank_explore"
+#: the trial as a comparison (rhs_studies/driving/specs/rl_lane_rule_trial.yml), run by the kit's one protocol
+SPEC = load_spec(Path(__file__).resolve().parent / "specs" / "rl_lane_rule_trial.yml")
+#: the fine-tune under test: the one :mod:`rhs_studies.driving.rl_confirm` chose on seeds 7000-7099
+FINETUNE = SPEC.candidates[0].policy
 #: the candidate lane rules, each one field of the shield (defaults: lane_gap_m 4.0, lane_time_s 1.5); measured on
 #: the analysis seeds 5000-5059 before this study: each removed one lane-change crash of two, -0.2 and -0.7 in return
-LANE_RULES: dict[str, dict[str, float]] = {"lane_time": {"lane_time_s": 2.5}, "lane_gap": {"lane_gap_m": 6.0}}
+LANE_RULES: dict[str, dict[str, float]] = {r.name: dict(r.shield or {}) for r in SPEC.candidates}
 #: the rows besides the fine-tune on the test seeds: its start (the shield student, shipped then)
 START = "shipped"
-
-
-def choose(runs: dict[str, list[dict]]) -> str:
-    """The rule with the fewest collisions on the validation episodes ``runs``, ties broken by the higher mean
-    return.
-
-    >>> ep = lambda crashes, ret: [{"return": ret, "crashed": c} for c in crashes]
-    >>> choose({"a": ep([1, 0], 9.0), "b": ep([0, 0], 1.0), "c": ep([0, 0], 2.0)})
-    'c'
-    """
-    return min(runs, key=lambda k: (collisions(runs[k]), -mean_return(runs[k])))
-
-
-def drive_with_rule(rule: dict[str, float], seeds: list[int], workers: int, ship_dir: Path = SHIPPED_DIR,
-                    arm: str = FINETUNE) -> list[dict]:
-    """``arm`` on ``seeds`` behind the shield saved in its record with the fields of ``rule`` changed."""
-    shield = {**policy_metadata(ship_dir / f"{arm}.zip")["shield"], **rule}
-    return drive_arm(arm, seeds, workers, ship_dir, shield=shield)
 
 
 def overlap(seeds: list[int]) -> list[tuple[int, int]]:
@@ -97,30 +69,22 @@ def overlap(seeds: list[int]) -> list[tuple[int, int]]:
 
 
 def lane_test(validation_seeds: list[int], test_seeds: list[int], workers: int, ship_dir: Path = SHIPPED_DIR,
-              baseline: list[dict] | None = None) -> dict[str, Any]:
-    """Steps 1 and 2 of the protocol (the module's docstring); ``baseline``: the fine-tune behind its own rule on
-    the validation seeds, shown beside the rules. The result without provenance."""
-    t0 = time.perf_counter()
-    val = {name: drive_with_rule(rule, validation_seeds, workers, ship_dir) for name, rule in LANE_RULES.items()}
-    chosen = choose(val)
-    print(f"rl_lane_test: chose {chosen} ({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
-    test = {FINETUNE: drive_with_rule(LANE_RULES[chosen], test_seeds, workers, ship_dir),
-            **evaluate_rows(arm_policies((START, SHIELD_CONTROL), ship_dir), test_seeds, workers,
-                            skip=("slower", "headway", "lookahead"))}
-    rows = {k: row_summary(r) for k, r in test.items()}
-    shown = {**({"own_rule": baseline} if baseline else {}), **val}
-    return {
-        "finetune": FINETUNE, "lane_rules": LANE_RULES,
-        "validation": {"seeds": validation_seeds, "chosen": chosen, "rule": LANE_RULES[chosen],
-                       "rows": {k: row_summary(r) for k, r in shown.items()}, "runs": slim_runs(val)},
-        "test": {"seeds": test_seeds, "rows": rows,
-                 "vs_start": {k: paired(r, test[START]) for k, r in test.items() if k not in (START, "idm")},
-                 "targets": targets(rows, test, FINETUNE, SHIELD_CONTROL), "runs": slim_runs(test)},
-    }
+              baseline: list[dict] | None = None, drive: Drive | None = None) -> dict[str, Any]:
+    """Steps 1 and 2 of the protocol (the module's docstring: :data:`SPEC` run by
+    :func:`rhs_studies.kit.protocol.run_comparison`); ``baseline``: the fine-tune behind its own rule on the
+    validation seeds, shown beside the rules; ``drive``: drives one row (default: the shipped arms). The result
+    without provenance."""
+    out = run_comparison(SPEC, drive or row_driver(workers, ship_dir), validation_seeds, test_seeds,
+                         log="rl_lane_test")
+    v = out["validation"]
+    rows = {**({"own_rule": row_summary(baseline)} if baseline else {}), **v["rows"]}
+    validation = {"seeds": v["seeds"], "chosen": v["chosen"], "rule": LANE_RULES[v["chosen"]], "rows": rows,
+                  "runs": v["runs"]}
+    return {"finetune": FINETUNE, "lane_rules": LANE_RULES, "validation": validation, "test": out["test"]}
 
 
 def confirmed_baseline(path: Path, seeds: list[int]) -> list[dict] | None:
-    """The fine-tune's episodes behind its own rule on ``seeds`` from :mod:`rhs_studies.rl_confirm`'s result, when
+    """The fine-tune's episodes behind its own rule on ``seeds`` from :mod:`rhs_studies.driving.rl_confirm`'s result, when
     it drove them."""
     if not path.exists():
         return None

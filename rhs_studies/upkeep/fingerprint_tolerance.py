@@ -105,7 +105,8 @@ def run_setting(label: str, env: dict[str, str], names: list[str], python: str) 
     """The fingerprints of ``names`` computed by ``python`` in a fresh process with ``env`` added."""
     t0 = time.time()
     full = study_env(env, blas_single_thread=False)  # one OpenMP thread, as the tests run; a setting may add more
-    proc = subprocess.run([python, "-m", "rhs_studies.fingerprint_tolerance", "--worker", *names], cwd=ROOT, env=full, capture_output=True,
+    proc = subprocess.run([python, "-m", "rhs_studies.upkeep.fingerprint_tolerance", "--worker", *names], cwd=ROOT, env=full,
+                          capture_output=True,
                           text=True, check=False)
     if proc.returncode != 0:
         raise RuntimeError(f"setting {label} failed (exit {proc.returncode}):\n{proc.stderr[-3000:]}")

@@ -44,7 +44,7 @@ from rhs_studies.kit.pool import map_seeds
 from rhs_studies.kit.provenance import write_json
 from rhs_studies.kit.tables import paired, row_summary
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 ENV_ID = "rhs-highway-v0"
 ACTION = {"type": "DiscreteMetaAction", "target_speeds": [10, 15, 20, 25, 30]}
 DECISION_STEPS = 5  # env steps per decision (1 Hz at highway-env's 5 Hz)

@@ -80,7 +80,7 @@ from rhs_env.radar import RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers
 from rhs_studies.kit.provenance import write_json
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 LEVELS = ("pointcloud", "elements", "slam")
 PAPER_RATIO = 1.0 / 3.0
@@ -798,7 +798,7 @@ def main(argv: list[str] | None = None) -> int:
     data = finite_json(build_results(cfg, units, cache, systems, time.perf_counter() - t0))
     data["provenance"] = write_json(out / f"{stem}.json", data, __file__, run_config(cfg, cache_dir, a.report_only),
                                     started, fingerprint_fn=None if a.small else fingerprint, argv=argv)  # fmt: skip
-    from rhs_studies.claim_study_report import make_figures, write_markdown
+    from rhs_studies.slam.claim_study_report import make_figures, write_markdown
 
     write_markdown(data, out / f"{stem}.md")
     make_figures(data, out, stem)

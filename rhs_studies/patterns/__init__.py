@@ -1,0 +1,7 @@
+"""Pattern studies: the pattern libraries, the synthesis methods, the sidelobe limits.
+
+Each module is a study (or a part of one); it imports :mod:`rhs_studies.kit` and the packages, never another
+study (``tests/test_architecture.py``).
+"""
+
+__all__: list[str] = []
