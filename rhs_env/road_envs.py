@@ -145,7 +145,7 @@ class RHSRoundaboutEnv(RHSRoadEnv, RoundaboutEnv):
 
 
 class RHSIntersectionEnv(RHSRoadEnv, IntersectionEnv):
-    """highway-env's ``intersection-v0`` (a four-way junction, the ego turning left) with landmarks beside
+    """highway-env's ``intersection-v0`` (a four-way junction the ego crosses to its destination) with landmarks beside
     the approaches and the corners' kerbs."""
 
     ROAD = IntersectionEnv
