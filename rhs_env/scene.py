@@ -398,10 +398,17 @@ def place_roadside_landmarks(network, config: LandmarkConfig, rng: np.random.Gen
     return Landmarks(points[keep], values[keep])
 
 
-def lane_coordinates(lane, xy_he: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def lane_coordinates(lane: Any, xy_he: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``lane.local_coordinates`` of many points (N, 2) at once: (longitudinal, lateral) arrays.
 
     Vectorized for ``StraightLane``, ``SineLane`` and ``CircularLane`` (highway-env's formulas), a loop otherwise.
+
+    Args:
+        lane: a highway-env lane.
+        xy_he: (N, 2) points in highway-env coordinates.
+
+    Returns:
+        (N,) longitudinal and (N,) lateral coordinates, m.
     """
     from highway_env.road.lane import CircularLane, SineLane, StraightLane
 
@@ -421,7 +428,7 @@ def lane_coordinates(lane, xy_he: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return coords[:, 0], coords[:, 1]
 
 
-def off_lanes(network, xy_he: np.ndarray) -> np.ndarray:
+def off_lanes(network: Any, xy_he: np.ndarray) -> np.ndarray:
     """(N,) bool: the points (highway-env frame) lying strictly inside no lane of ``network``.
 
     Inside a lane means ``0 <= s <= length`` and ``|lateral| < width / 2`` in its
