@@ -86,6 +86,27 @@ def test_slam_vector_envs_sync_and_async():
         env.close()
 
 
+@pytest.mark.parametrize("vec", ["dummy", "subproc"])
+def test_sb3_vec_envs_on_the_racetrack(vec):
+    """stable-baselines3's vector envs on a road with a Box action (the racetrack's steering), whole episodes."""
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    cls, vkw = (DummyVecEnv, None) if vec == "dummy" else (SubprocVecEnv, {"start_method": "fork"})
+    venv = make_vec_env("rhs-racetrack-slam-v0", n_envs=2, seed=0, vec_env_cls=cls, vec_env_kwargs=vkw,
+                        env_kwargs={"duration": 0.4, **small_env_kwargs(max_points=32), **SLAM_KW})
+    try:
+        venv.reset()
+        dones = 0
+        for _ in range(2):
+            obs, _, done, _ = venv.step(np.zeros((2, 1), dtype=np.float32))
+            assert np.all(np.isfinite(obs["pose"]))
+            dones += int(done.sum())
+        assert dones == 2
+    finally:
+        venv.close()
+
+
 def _roundabout(seed: int) -> RHSRoundaboutEnv:
     env = RHSRoundaboutEnv(**with_cheap_base_observation({}))
     env.reset(seed=seed)
