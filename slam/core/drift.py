@@ -32,6 +32,8 @@ import math
 
 import numpy as np
 
+from slam.core.pose_uncertainty import adaptive_drift_step
+
 __all__ = ["DriftCovariance", "drift_step"]
 
 
@@ -66,4 +68,10 @@ class DriftCovariance:
     def step(self, heading: float, motion: np.ndarray) -> np.ndarray:
         """Propagate over one cycle's motion from the estimated heading (rad) before it; returns ``P``."""
         self.cov = drift_step(self.cov, heading, motion, self.densities)
+        return self.cov
+
+    def step_measured(self, heading: float, motion: np.ndarray, increment: np.ndarray) -> np.ndarray:
+        """Propagate over one cycle's motion with the cycle's measured increment ``Q`` (3, 3) (map frame) in
+        place of the densities (``pose_covariance="adaptive"``, :mod:`slam.core.pose_uncertainty`); returns ``P``."""
+        self.cov = adaptive_drift_step(self.cov, heading, motion, increment)
         return self.cov

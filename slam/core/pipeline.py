@@ -40,17 +40,18 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from rhs_common.geometry import apply_motion, points_in_frame
-from rhs_common.validation import check_int, check_range, check_types
+from rhs_common.geometry import apply_motion, compose, points_in_frame
+from rhs_common.validation import check_choice, check_int, check_range, check_types
 from slam.core.association import bearing_sectors, estimate_ego_velocity, point_covariance, static_mask
 from slam.core.drift import DriftCovariance
 from slam.core.health import HealthConfig, TrackHealth
+from slam.core.pose_uncertainty import CycleInformation, cycle_information
 from slam.core.rbpf import RBPFSlam, SlamConfig, SlamEstimate
 from slam.core.registration import ICPRegistration, OdometryRegistration, Registration
 
 __all__ = [
     "CycleResult", "DOPPLER_GATE_CROSS_M", "DRIFT_ALONG_M2PM", "DRIFT_CROSS_M2PM", "DRIFT_HEADING_RAD2PM",
-    "LATERAL_ACCEL_MAX", "PipelineConfig", "RECHECK_BELOW", "RECHECK_GAIN", "RELOC_CELL_M", "RELOC_GATE_M",
+    "LATERAL_ACCEL_MAX", "POSE_COVARIANCE_MODELS", "PipelineConfig", "RECHECK_BELOW", "RECHECK_GAIN", "RELOC_CELL_M", "RELOC_GATE_M",
     "RELOC_GRID", "RELOC_MAX_SIGMAS", "RELOC_MIN_FRACTION", "RELOC_MIN_POINTS", "RELOC_REACH_M", "RELOC_YAW_RAD",
     "RELOC_YAW_STEPS", "SLIP_FREE", "SLIP_REGISTRATION_CHECK", "SLIP_TURN_END", "SlamPipeline", "TURN_GAIN",
     "TURN_RATE_MIN", "WIDE_YAW_STARTS", "doppler_displacement", "doppler_ego_motion", "forward_speed_fit",
@@ -65,6 +66,8 @@ __all__ = [
 DRIFT_ALONG_M2PM = 1e-7
 DRIFT_CROSS_M2PM = 3e-6
 DRIFT_HEADING_RAD2PM = 1.4e-9
+#: the models of the drift's increment (:class:`PipelineConfig` ``pose_covariance``)
+POSE_COVARIANCE_MODELS = ("drift-constants", "adaptive")
 #: the Doppler gate's half-axis across the Doppler displacement (m; :class:`PipelineConfig`). Random drives on
 #: rhs-highway-slam-v0, seeds 1229, 1244 and 1249: at a lane change's onset (10-12 m/s) the registration found
 #: the true motion, 1.0-1.2 m away from the displacement of the turn-free Doppler velocity, and the 1 m circle
@@ -102,6 +105,12 @@ class PipelineConfig:
     [0, 1] (rad^2 per m): the random-walk densities of the map-relative drift that the particles share
     (:mod:`slam.core.drift`), added to their covariance in the reported pose uncertainty
     (:meth:`SlamPipeline.pose_covariance`); measured on the tuning drives (module :mod:`slam.core.drift`).
+    ``pose_covariance`` (:data:`POSE_COVARIANCE_MODELS`): the drift's increment per cycle. ``"drift-constants"``
+    (the default): the three densities above times the distance driven, measured on one radar configuration
+    (the 5-degree scan grid of the shipped policies); ``"adaptive"``: measured each cycle from the static points
+    paired with the map, their covariances and the residuals, times the fraction of landmarks the cycle renews
+    (:mod:`slam.core.pose_uncertainty`), so it follows the configured radar; the densities are then unused.
+    Only ``slam_pose_cov`` / ``slam_pose_std`` (the info) change with it, not the observation.
     """
 
     use_doppler: bool = True
@@ -114,6 +123,7 @@ class PipelineConfig:
     drift_along_m2pm: float = DRIFT_ALONG_M2PM
     drift_cross_m2pm: float = DRIFT_CROSS_M2PM
     drift_heading_rad2pm: float = DRIFT_HEADING_RAD2PM
+    pose_covariance: str = "drift-constants"
 
     def __post_init__(self) -> None:
         check_types(self)
@@ -126,6 +136,7 @@ class PipelineConfig:
         check_range("drift_along_m2pm", self.drift_along_m2pm, 0.0, 1.0)
         check_range("drift_cross_m2pm", self.drift_cross_m2pm, 0.0, 1.0)
         check_range("drift_heading_rad2pm", self.drift_heading_rad2pm, 0.0, 1.0)
+        check_choice("pose_covariance", self.pose_covariance, POSE_COVARIANCE_MODELS)
 
 
 #: yaw rate (rad/s) from which the Doppler fit with the turn (:func:`doppler_ego_motion`) replaces the
@@ -397,6 +408,8 @@ class SlamPipeline:
         self.health = TrackHealth(health)
         o = self.options
         self.drift = DriftCovariance((o.drift_along_m2pm, o.drift_cross_m2pm, o.drift_heading_rad2pm))
+        # the adaptive model's drift (pose_covariance="adaptive"; slam.core.pose_uncertainty): its densities unused
+        self.measured_drift = DriftCovariance((0.0, 0.0, 0.0))
         self._reloc_icp = ICPRegistration(
             max_gate_m=RELOC_GATE_M, yaw_search_rad=RELOC_YAW_RAD, yaw_search_steps=RELOC_YAW_STEPS
         )
@@ -428,6 +441,10 @@ class SlamPipeline:
         self.registration_pairs = 0  # the kept registration's point pairs (0: it returned its guess)
         self.health.reset()
         self.drift.reset()
+        self.measured_drift.reset()
+        self.drift_information: CycleInformation | None = None  # the adaptive model's last measurement
+        self._held_increment: np.ndarray | None = None  # its last J^-1 (held while a cycle pins nothing)
+        self._chi2, self._dof = 0.0, 0  # the pairs' residual chi-square and degrees of freedom over the map
         self.heading = 0.0  # the estimated heading of the last cycle (rad): the drift's Jacobian
         self.distance_since_loss = 0.0  # m driven since the current loss started
         self.relocalisations = 0
@@ -506,11 +523,50 @@ class SlamPipeline:
             motion = doppler_displacement(v_dop, float(yaw), dt)
         return motion, pairs
 
+    def _adaptive_drift(
+        self, before: SlamEstimate | None, rows: np.ndarray, cov: np.ndarray | None, first_new_id: int,
+        motion: np.ndarray,
+    ) -> None:
+        """The drift's step with the increment measured in this cycle (:mod:`slam.core.pose_uncertainty`): the
+        static points ``rows`` and their covariances ``cov`` (None: the filter's fixed model) against the map
+        ``before`` the cycle's update, from the pose predicted by the cycle's motion; the residuals' chi-square
+        and degrees of freedom accumulate over the map (:attr:`residual_scale`)."""
+        born = self.slam.next_id - first_new_id
+        if before is None or self.cycle == 0:
+            self.drift_information = CycleInformation(None, float("nan"), 0, born, 1.0 if born else 0.0)
+            return
+        c = self.config
+        if cov is None:
+            fixed = np.column_stack([rows[:, :4], np.full(len(rows), c.range_std_m), np.full(len(rows), c.bearing_std_rad),
+                                     np.zeros(len(rows))])
+            cov = point_covariance(fixed)
+        cov = np.asarray(cov, dtype=float).reshape(-1, 2, 2) + c.measurement_floor_m**2 * np.eye(2)
+        finite = np.all(np.isfinite(rows[:, :2]), axis=1) & np.all(np.isfinite(cov), axis=(1, 2))
+        predicted = compose(np.asarray(before.pose, dtype=float), motion)
+        info = cycle_information(predicted, rows[finite, :2], cov[finite], before.landmarks, before.landmark_cov,
+                                 np.zeros(len(before.landmarks), dtype=bool), born)
+        self.drift_information = info
+        self._chi2 += info.chi2
+        self._dof += info.dof
+        if info.cov is not None:
+            self._held_increment = info.cov
+        increment = np.zeros((3, 3)) if self._held_increment is None else info.fraction * self._held_increment
+        self.measured_drift.step_measured(self.heading, motion, increment)
+
+    @property
+    def residual_scale(self) -> float:
+        """The adaptive model's ``s^2``: the chi-square of the pairs' residuals over their degrees of freedom,
+        accumulated since the map began (1 before any pair: the covariances as the radar states them)."""
+        return self._chi2 / self._dof if self._dof > 0 else 1.0
+
     def pose_covariance(self) -> np.ndarray:
         """The reported pose covariance (3, 3) (m^2, m rad, rad^2): the particles' variances plus the
-        shared map drift (:mod:`slam.core.drift`)."""
+        shared map drift (:mod:`slam.core.drift`), with the increments of :class:`PipelineConfig`
+        ``pose_covariance`` (the densities, or measured each cycle: :mod:`slam.core.pose_uncertainty`)."""
         est = self.slam.last_estimate
         var = np.zeros(3) if est is None else np.square(np.asarray(est.pose_std, dtype=float))
+        if self.options.pose_covariance == "adaptive":
+            return self.residual_scale * (np.diag(var) + self.measured_drift.cov)
         return np.diag(var) + self.drift.cov
 
     def honest_pose_std(self) -> np.ndarray:
@@ -568,6 +624,8 @@ class SlamPipeline:
         if self.health.lost_cycles >= self.options.new_map_after_cycles:
             self.slam.restart_at(est.pose)
             self.drift.reset()
+            self.measured_drift.reset()
+            self._chi2, self._dof = 0.0, 0
             self.map_breaks += 1
             self.health.new_map()
         return est
@@ -763,6 +821,7 @@ class SlamPipeline:
         # the moving-point filter runs here, with each point's radar (the filter's own one assumes the origin)
         static = self._static_mask(pts, sensors)
         first_new_id = self.slam.next_id  # landmarks this cycle adds get this id and above
+        before = self.slam.last_estimate  # the map before this cycle (the adaptive covariance's pairs)
         est = self.slam.update(pts[static], motion, dt, cov=None if cov is None else cov[static])
         est.n_static_points = int(static.sum())
         est.stage_times["registration"] = reg_time
@@ -777,7 +836,9 @@ class SlamPipeline:
             self.distance_since_loss = 0.0 if not was_lost else self.distance_since_loss + math.hypot(*motion[:2])
             est = self._recover(est, pts[static])
         est.stage_times["health"] = time.perf_counter() - t_health
-        if self.cycle > 0:
+        if self.options.pose_covariance == "adaptive":
+            self._adaptive_drift(before, rows[static], None if cov is None else cov[static], first_new_id, motion)
+        if self.cycle > 0:  # the densities' drift runs in either model (the adaptive one reports it for comparison)
             self.drift.step(self.heading, motion)
         self.heading = float(est.pose[2])
         self.prev_static = pts[static]

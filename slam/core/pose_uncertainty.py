@@ -1,0 +1,168 @@
+"""The map drift's per-cycle increment measured from the cycle itself (``pose_covariance="adaptive"``).
+
+:mod:`slam.core.drift` accumulates the map-relative drift that the particles share as a random walk. With
+``pose_covariance="drift-constants"`` (:class:`slam.core.pipeline.PipelineConfig`) its increment is a density per
+metre driven, measured once on one radar configuration. The adaptive model measures the increment each cycle from
+what the filter saw, so it follows the radar that produced the cloud (scan grid, antenna, SNR, landmark density):
+
+1. **Information of the cycle's pose against the map.** Each static point ``p`` (vehicle frame, covariance ``C``
+   from the radar's range and angle stds, :func:`slam.core.association.point_covariance`) is moved into the map
+   frame with the estimated pose, ``m = t + R(th) p``, and paired with the nearest landmark ``l`` (covariance
+   ``L``) that existed before this cycle, within the 99 % Mahalanobis gate of ``S = R C R^T + L``; one point per
+   landmark (the filter clusters a landmark's points into one observation). With ``H = [I_2, dR(th)/dth p]`` the
+   pose information is ``J = sum H^T S^-1 H`` (3 x 3, map frame) and ``J^-1`` is the covariance of a pose fitted to
+   those landmarks.
+2. **The residuals' scale.** ``s^2 = sum r^T S^-1 r / (2 n - 3)`` with ``r = l - m``: the factor by which the
+   pairs scatter more than their covariances say. It only raises ``J^-1`` (``max(s^2, 1)``): the radar's stds are
+   the thermal floor, grid quantisation, multipath and ambiguous pairs add to it.
+3. **The hand-over.** The map drifts because new landmarks are initialised from the current pose: each cycle
+   the landmarks born in it (``n_new``) join the ``n_old`` landmarks the cycle matched, and carry the pose's error
+   against the old ones into the map. A reference set that renews the fraction ``f = n_new / (n_new + n_old)`` per
+   cycle moves by ``f`` times that error; the errors of successive cycles are correlated over the ``1 / f``
+   cycles a landmark lives (the same landmarks pin them), so over a landmark's life the set moves by about one
+   pose error: the increment per cycle is ``Q = f s^2 J^-1`` (map frame).
+
+``Q`` replaces ``G diag(q d) G^T`` in :func:`slam.core.drift.drift_step` (:func:`adaptive_drift_step`); ``F`` still
+turns a heading error into cross-track error with the distance driven. No constant of this model is fitted to a
+drive. A cycle that pins nothing (fewer than two pairs, or ``J`` singular) holds the last measured ``s^2 J^-1``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+__all__ = ["CHI2_GATE_2DOF", "CycleInformation", "adaptive_drift_step", "cycle_information"]
+
+#: the 99 % quantile of the chi-square distribution with 2 degrees of freedom: the pairing gate
+CHI2_GATE_2DOF = 9.2103
+#: a pair's information is only counted with at least this many pairs (a 3-dof pose from 2-d points)
+MIN_PAIRS = 2
+#: Gauss-Newton steps of the pose fitted to the pairs (from the predicted pose: one step is near the optimum)
+GAUSS_NEWTON_STEPS = 2
+
+
+@dataclass(frozen=True)
+class CycleInformation:
+    """One cycle's measurement of the pose against the map (module docstring).
+
+    ``cov`` (3, 3): ``s^2 J^-1`` (m^2, m rad, rad^2; map frame), or None when the cycle pinned nothing;
+    ``scale``: ``s^2`` before the floor at 1 (nan with fewer than 2 pairs); ``n_old``: landmarks paired;
+    ``n_new``: landmarks born in the cycle; ``fraction``: ``n_new / (n_new + n_old)`` (0 when both are 0).
+    """
+
+    cov: np.ndarray | None
+    scale: float
+    n_old: int
+    n_new: int
+    fraction: float
+    chi2: float = 0.0
+    dof: int = 0
+
+
+def cycle_information(
+    pose: np.ndarray,
+    points: np.ndarray,
+    point_cov: np.ndarray,
+    landmarks: np.ndarray,
+    landmark_cov: np.ndarray,
+    new: np.ndarray,
+    born: int | None = None,
+) -> CycleInformation:
+    """Measure the cycle's pose information against the landmarks that existed before it.
+
+    Args:
+        pose: (3,) the estimated pose ``(x, y, th)`` (map frame; m, m, rad).
+        points: (N, >=2) the cycle's static points, x, y in the vehicle frame (m).
+        point_cov: (N, 2, 2) their vehicle-frame covariances (m^2).
+        landmarks: (L, 2) the map's landmarks after the cycle (map frame, m).
+        landmark_cov: (L, 2, 2) their covariances (m^2).
+        new: (L,) bool, the landmarks born in this cycle (left out of the pairing).
+        born: the landmarks born in this cycle, reported ones or not (the filter's tentative landmarks);
+            None: ``new.sum()``.
+
+    Returns:
+        The :class:`CycleInformation` of the cycle.
+    """
+    new = np.asarray(new, dtype=bool).reshape(-1)
+    n_new = int(new.sum()) if born is None else int(born)
+    lm = np.asarray(landmarks, dtype=float).reshape(-1, 2)[~new]
+    lcov = np.asarray(landmark_cov, dtype=float).reshape(-1, 2, 2)[~new]
+    pts = np.asarray(points, dtype=float)
+    pts = pts.reshape(-1, pts.shape[-1] if pts.ndim == 2 else 2)[:, :2]
+    pcov = np.asarray(point_cov, dtype=float).reshape(-1, 2, 2)
+    none = CycleInformation(None, float("nan"), 0, n_new, 1.0 if n_new else 0.0)
+    if not len(lm) or not len(pts):
+        return none
+    x, y, th = (float(v) for v in np.asarray(pose, dtype=float).reshape(3))
+    c, s = math.cos(th), math.sin(th)
+    R = np.array([[c, -s], [s, c]])
+    world = pts @ R.T + np.array([x, y])
+    # candidates: the nearest few landmarks in distance, then the best by Mahalanobis distance
+    k = min(4, len(lm))
+    _, idx = cKDTree(lm).query(world, k=k)
+    idx = np.asarray(idx).reshape(len(pts), k)
+    S = R[None, None] @ pcov[:, None] @ R.T[None, None] + lcov[idx]  # (N, k, 2, 2)
+    r = lm[idx] - world[:, None, :]  # (N, k, 2)
+    Sinv = np.linalg.inv(S)
+    d2 = np.einsum("nki,nkij,nkj->nk", r, Sinv, r)
+    best = np.argmin(d2, axis=1)
+    rows = np.arange(len(pts))
+    d2b, lmb = d2[rows, best], idx[rows, best]
+    ok = d2b <= CHI2_GATE_2DOF
+    # one point per landmark: the closest in Mahalanobis distance
+    order = np.argsort(d2b)
+    seen: set[int] = set()
+    keep = np.zeros(len(pts), dtype=bool)
+    for i in order:
+        if ok[i] and int(lmb[i]) not in seen:
+            seen.add(int(lmb[i]))
+            keep[i] = True
+    n_old = int(keep.sum())
+    fraction = n_new / (n_new + n_old) if n_new + n_old else 0.0
+    if n_old < MIN_PAIRS:
+        return CycleInformation(None, float("nan"), n_old, n_new, fraction)
+    Si = Sinv[rows, best][keep]  # (n, 2, 2)
+    pv, target = pts[keep], lm[lmb[keep]]
+    pose_fit = np.array([x, y, th])
+    J = np.zeros((3, 3))
+    for _ in range(GAUSS_NEWTON_STEPS + 1):  # the pose fitted to the pairs: residuals with 2 n - 3 dof
+        c, s = math.cos(pose_fit[2]), math.sin(pose_fit[2])
+        R = np.array([[c, -s], [s, c]])
+        r = target - (pv @ R.T + pose_fit[:2])
+        H = np.zeros((n_old, 2, 3))
+        H[:, 0, 0] = H[:, 1, 1] = 1.0
+        H[:, :, 2] = np.column_stack([-s * pv[:, 0] - c * pv[:, 1], c * pv[:, 0] - s * pv[:, 1]])  # d(R p)/dth
+        J = np.einsum("nji,njk,nkl->il", H, Si, H)
+        if np.linalg.cond(J) > 1e12:
+            return CycleInformation(None, float("nan"), n_old, n_new, fraction)
+        pose_fit = pose_fit + np.linalg.solve(J, np.einsum("nji,njk,nk->i", H, Si, r))
+    d2 = float(np.einsum("ni,nij,nj->", r, Si, r))
+    dof = 2 * n_old - 3
+    scale = d2 / dof if dof > 0 else float("nan")
+    cov = np.linalg.inv(J)
+    return CycleInformation(0.5 * (cov + cov.T), scale, n_old, n_new, fraction, d2, max(dof, 0))
+
+
+def adaptive_drift_step(cov: np.ndarray, heading: float, motion: np.ndarray, increment: np.ndarray) -> np.ndarray:
+    """``P' = F P F^T + Q`` (:func:`slam.core.drift.drift_step` with the cycle's measured increment).
+
+    Args:
+        cov: (3, 3) the drift covariance before the motion.
+        heading: the estimated heading before the motion (rad).
+        motion: (3,) ``(dx, dy, dpsi)`` in the previous vehicle frame.
+        increment: (3, 3) ``Q`` in the map frame (``f s^2 J^-1``).
+
+    Returns:
+        A new (3, 3) array.
+    """
+    m = np.asarray(motion, dtype=float).reshape(3)
+    if not np.all(np.isfinite(m)):
+        return np.array(cov, dtype=float, copy=True)
+    c, s = math.cos(heading), math.sin(heading)
+    F = np.array([[1.0, 0.0, -(s * m[0] + c * m[1])], [0.0, 1.0, c * m[0] - s * m[1]], [0.0, 0.0, 1.0]])
+    out = F @ np.asarray(cov, dtype=float) @ F.T + np.asarray(increment, dtype=float)
+    return 0.5 * (out + out.T)
