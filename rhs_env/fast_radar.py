@@ -13,15 +13,18 @@
 4. each detected pair's range, angle, radial-velocity and amplitude errors drawn as one measured vector from the
    pool of its SNR bin (bootstrap: the joint distribution as measured); extra points (a split target) at the
    measured rate;
-5. false points: a count drawn from the measured per-scan counts, each a measured false point (radar, range,
-   angle, velocity, amplitude);
+5. false points: beside each visible pair, a Poisson number of *linked* false points at the measured rate of its
+   class and SNR, each a measured offset from its pair (the split and displaced points the exact radar makes
+   beside targets, most of its false points and its ghosts in the ego's path); and *free* ones, a count drawn
+   from the measured per-scan counts, each a measured free false point (radar, range, angle, velocity,
+   amplitude);
 6. the per-point range / angle stds as the exact path computes them (:func:`rhs_env.uncertainty.attach_uncertainty`).
 
 The table comes from :func:`rhs_env.fast_radar_calibration.load_table` (shipped for the default radar, keyed by
 the radar settings). Its agreement with the exact radar is published by ``scripts/fast_radar_fidelity.py``
-(``docs/results/fast-radar.md``). What it does not model: the correlation of false points with the scene
-(they are drawn independently of where the targets are), errors that depend on the scene beyond SNR and class
-(two targets in one cell are only in the average), and scenes unlike the calibration's highway.
+(``docs/results/fast-radar.md``). What it does not model: where the free false points fall relative to the scene,
+errors that depend on the scene beyond SNR and class (two targets in one cell are only in the average), and
+scenes unlike the calibration's highway.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ from rhs_env.fast_radar_calibration import (
     cached_table_path,
     expected_snr,
     extra_rate_of,
+    link_rate_of,
     load_table,
     measure,
     pd_of,
@@ -68,7 +72,8 @@ class FastRadarSystem(RadarSystem):
         rng: numpy Generator of every draw.
         table: the calibration; default :func:`load_table` for ``config``.
         calibrate_missing: calibrate ``config`` now when no table exists (see :func:`load_table`).
-        patterns, antennas: as :class:`RadarSystem`.
+        patterns: as :class:`RadarSystem`.
+        antennas: as :class:`RadarSystem`.
     """
 
     def __init__(self, config: RadarConfig | None = None, rng: np.random.Generator | None = None,
@@ -109,6 +114,16 @@ class FastRadarSystem(RadarSystem):
                 rep = np.repeat(src, n_extra)
                 extra = t.extra_pool[rng.integers(0, t.extra_pool.shape[0], rep.size)]
                 src, err = np.concatenate([src, rep]), np.concatenate([err, extra])
+            # linked false points (split / displaced points beside a target): Poisson per visible pair, an offset each
+            n_link = rng.poisson(link_rate_of(t, snr_db, static))
+            if n_link.sum() and t.link_pool.shape[0]:
+                rep_l = np.repeat(np.arange(rr.size), n_link)
+                c = static[rep_l].astype(int)
+                lo, hi = t.link_start[c], t.link_start[c + 1]
+                empty = hi <= lo  # a class without linked points: the other class's
+                lo, hi = np.where(empty, t.link_start[1 - c], lo), np.where(empty, t.link_start[2 - c], hi)
+                off = t.link_pool[lo + np.floor(rng.random(rep_l.size) * (hi - lo)).astype(int)]
+                src, err = np.concatenate([src, rep_l]), np.concatenate([err, off])
             radar.append(rr[src])
             rng_m.append(r_t[src] + err[:, 0])
             theta.append(_wrap(th_t[src] + err[:, 1]))

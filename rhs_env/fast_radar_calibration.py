@@ -13,10 +13,12 @@ the project's highway scenes:
   (vehicle frame). A pair with a point is *detected*; its first (nearest) point gives the estimate errors
   (range, angle, radial velocity, log amplitude over the expected); further points on the same pair are
   *extra* points (a target split by the OMP); a point with no pair within the gate is a *false* point
-  (noise alarms, sidelobes, merged cells) and is kept with its radar, range, angle, velocity and amplitude;
+  (sidelobes, split or displaced points, noise alarms); within :data:`LINK_M` of a pair it is *linked* to the
+  nearest one and kept as its offset from that pair (range, angle, velocity, log amplitude), else it is *free* and
+  kept with its radar, range, angle, velocity and amplitude;
 * by SNR bin and scatterer class (moving / static: vehicles' faces share cells, landmarks mostly do not) the
-  table holds ``P_d``, the extra-point rate, a pool of measured error vectors, the false points per scan and a
-  pool of false points.
+  table holds ``P_d``, the extra-point rate, a pool of measured error vectors and the linked false points per
+  visible pair (with a pool of their offsets per class); the free false points per scan and a pool of them.
 
 :class:`FastRadarTable` is the table (a small ``.npz``); :func:`table_key` names it by the radar settings it
 depends on (everything but the kernels, the synthesis path and the uncertainty floors, which the fast radar
@@ -47,6 +49,7 @@ __all__ = [
     "calibration_scenes",
     "expected_snr",
     "extra_rate_of",
+    "link_rate_of",
     "load_table",
     "match_scan",
     "measure",
@@ -62,7 +65,11 @@ ERROR_COLUMNS = ("range_m", "angle_rad", "velocity_mps", "log_amplitude")
 FALSE_COLUMNS = ("radar", "range_m", "angle_rad", "velocity_mps", "amplitude")
 #: settings that do not change what the detector measures (left out of :func:`table_key`)
 _KEY_EXCLUDED = ("kernels", "fidelity", "range_std_floor_m", "angle_std_floor_deg")
-TABLE_VERSION = 1
+TABLE_VERSION = 2
+#: a false point within this distance (vehicle frame) of a visible scatterer of its radar is *linked* to it
+#: (a split or displaced point beside a target: most false points of the exact radar, and every ghost in the
+#: ego's path measured, lie 1-3 m from a scatterer); farther ones are *free* (noise alarms)
+LINK_M = 5.0
 #: P_d bins: 2 dB of expected coherent SNR from -10 to 100 dB (clamped outside)
 PD_EDGES_DB = np.arange(-10.0, 101.0, 2.0)
 #: error-pool bins: 2 dB
@@ -146,6 +153,9 @@ class ScanRecord:
         extra_errors: (X, 4) errors of those points.
         false_points: (F, 5) :data:`FALSE_COLUMNS`.
         false_xy: (F, 2) the false points in the vehicle frame.
+        false_link: (F,) the pair a false point is linked to (:data:`LINK_M`), -1 for a free one.
+        link_offsets: (F, 4) a linked false point's offset from its pair (:data:`ERROR_COLUMNS`), NaN when free.
+        linked: (P,) linked false points per pair.
     """
 
     snr_db: np.ndarray
@@ -156,6 +166,9 @@ class ScanRecord:
     extra_errors: np.ndarray
     false_points: np.ndarray
     false_xy: np.ndarray
+    false_link: np.ndarray
+    link_offsets: np.ndarray
+    linked: np.ndarray
 
 
 def match_scan(system: Any, cloud: Any, scatterers: Any, occluders: Any, gate_m: float = 1.0) -> ScanRecord:
@@ -186,7 +199,10 @@ def match_scan(system: Any, cloud: Any, scatterers: Any, occluders: Any, gate_m:
         d2[p_radar[:, None] != rr[None, :]] = np.inf
         owner = np.argmin(d2, axis=1)
         dist = np.sqrt(d2[np.arange(n_p), owner])
+        nearest = owner.copy()
         owner[dist > gate_m] = -1
+    else:
+        nearest = np.full(n_p, -1)
     if rr.size:
         rng_m, ang, unit = frame
         r_t, th_t = rng_m[rr, kk], ang[rr, kk]
@@ -211,10 +227,20 @@ def match_scan(system: Any, cloud: Any, scatterers: Any, occluders: Any, gate_m:
     false = np.flatnonzero(owner < 0)
     fp = np.column_stack([p_radar[false], cloud.range_m[false], cloud.angle_rad[false], cloud.points[false, 2],
                           cloud.points[false, 3]]) if false.size else np.zeros((0, 5))
+    link = np.where(dist[false] <= LINK_M, nearest[false], -1) if false.size else np.zeros(0, int)
+    offsets = np.full((false.size, 4), np.nan)
+    lk = np.flatnonzero(link >= 0)
+    if lk.size:
+        pair, f = link[lk], false[lk]
+        offsets[lk] = np.column_stack([cloud.range_m[f] - r_t[pair], _wrap(cloud.angle_rad[f] - th_t[pair]),
+                                       cloud.points[f, 2] - v_t[pair],
+                                       np.log(np.maximum(cloud.points[f, 3], 1e-12) / np.sqrt(np.maximum(snr[pair], 1e-300)))])
+    linked = np.bincount(link[lk], minlength=rr.size) if lk.size else np.zeros(rr.size, int)
     static = scatterers.is_static[kk].astype(bool) if rr.size else np.zeros(0, bool)
     return ScanRecord(snr_db=10 * np.log10(np.maximum(snr, 1e-30)), static=static, detected=~np.isnan(errors[:, 0]),
                       errors=errors, extra=extra, extra_errors=np.concatenate(extra_err) if extra_err else empty4,
-                      false_points=fp, false_xy=cloud.xy[false] if false.size else np.zeros((0, 2)))
+                      false_points=fp, false_xy=cloud.xy[false] if false.size else np.zeros((0, 2)),
+                      false_link=link, link_offsets=offsets, linked=linked)
 
 
 @dataclass(frozen=True)
@@ -233,10 +259,14 @@ class FastRadarTable:
             nearest bin with :data:`MIN_POOL` errors).
         err_stop: (2, E) the groups' ends.
         extra_pool: (X, 4) errors of extra points.
-        false_counts: (S,) false points of each calibration scan.
-        false_pool: (F, 5) false points (:data:`FALSE_COLUMNS`).
+        link_rate: (2, B) linked false points per visible pair.
+        link_pool: (L, 4) their offsets from the pair (:data:`ERROR_COLUMNS`), class 0 first.
+        link_start: (3,) offsets of each class's group in ``link_pool`` (a class without any: the other's).
+        false_counts: (S,) free false points of each calibration scan.
+        false_pool: (F, 5) free false points (:data:`FALSE_COLUMNS`).
         false_scale: the drawn false-point count's scale (:func:`refine`: a drawn false point that lands within the
             gate of a scatterer is no false point, so the fast radar draws slightly more to measure the same rate).
+        link_scale: the linked false points' rate scale (:func:`refine`, the same reason).
         meta: provenance (scenes, seeds, scans, version).
     """
 
@@ -250,9 +280,13 @@ class FastRadarTable:
     err_start: np.ndarray
     err_stop: np.ndarray
     extra_pool: np.ndarray
+    link_rate: np.ndarray
+    link_pool: np.ndarray
+    link_start: np.ndarray
     false_counts: np.ndarray
     false_pool: np.ndarray
     false_scale: float = 1.0
+    link_scale: float = 1.0
     meta: dict[str, Any] = field(default_factory=dict)
 
     def save(self, path: Path) -> None:
@@ -264,6 +298,8 @@ class FastRadarTable:
                             err_pool=self.err_pool.astype(np.float32), err_start=self.err_start, err_stop=self.err_stop,
                             extra_pool=self.extra_pool.astype(np.float32), false_counts=self.false_counts,
                             false_pool=self.false_pool.astype(np.float32), false_scale=self.false_scale,
+                            link_rate=self.link_rate, link_pool=self.link_pool.astype(np.float32),
+                            link_start=self.link_start, link_scale=self.link_scale,
                             meta=json.dumps(self.meta))
         tmp.replace(path)
 
@@ -281,10 +317,10 @@ class FastRadarTable:
             raise ValueError(f"{path}: fast-radar table version {meta.get('version')}, this package reads "
                              f"{TABLE_VERSION}; recalibrate with scripts/calibrate_fast_radar.py")
         arrays["key"] = str(arrays["key"])
-        arrays["false_scale"] = float(arrays["false_scale"])
-        scalars = ("key", "false_scale")
+        scalars = ("key", "false_scale", "link_scale")
         return cls(**{k: (v.astype(float) if v.dtype == np.float32 else v) for k, v in arrays.items()
-                      if k not in scalars}, key=arrays["key"], false_scale=arrays["false_scale"], meta=meta)
+                      if k not in scalars}, key=arrays["key"], false_scale=float(arrays["false_scale"]),
+                   link_scale=float(arrays["link_scale"]), meta=meta)
 
 
 class TableBuilder:
@@ -313,7 +349,7 @@ class TableBuilder:
             raise ValueError("no scans recorded: calibrate on at least one scan")
         rng = np.random.default_rng(seed)
         cat = {name: np.concatenate([getattr(r, name) for r in self.records])
-               for name in ("snr_db", "static", "detected", "errors", "extra", "extra_errors", "false_points")}
+               for name in ("snr_db", "static", "detected", "errors", "extra", "extra_errors", "linked")}
         cls_ = cat["static"].astype(int)
         n_pd = PD_EDGES_DB.size - 1
         pbin = np.clip(np.digitize(cat["snr_db"], PD_EDGES_DB) - 1, 0, n_pd - 1)
@@ -358,13 +394,25 @@ class TableBuilder:
         err_pool = np.concatenate(pools) if pools else np.zeros((0, 4))
         if not err_pool.shape[0]:
             raise ValueError("the calibration detected nothing: no error vectors to draw from")
-        counts = np.array([r.false_points.shape[0] for r in self.records])
+        counts = np.array([int(np.sum(r.false_link < 0)) for r in self.records])
+        free = np.concatenate([r.false_points[r.false_link < 0] for r in self.records])
+        linked_n = np.zeros((2, n_pd))
+        np.add.at(linked_n, (cls_, pbin), cat["linked"])
+        link_rate = _fill_rates(linked_n, trials, default=0.0)
+        link_cls = np.concatenate([cls_[r_off + r.false_link[r.false_link >= 0]]
+                                   for r, r_off in zip(self.records, np.cumsum([0] + [r.snr_db.size for r in
+                                                                                     self.records[:-1]]), strict=True)])
+        link_off = np.concatenate([r.link_offsets[r.false_link >= 0] for r in self.records])
+        order = np.argsort(link_cls, kind="stable")
+        link_pool, link_cls = link_off[order], link_cls[order]
+        link_start = np.searchsorted(link_cls, [0, 1, 2])
         meta = {**meta, "version": TABLE_VERSION, "scans": len(self.records), "pairs": int(cls_.size),
-                "detected": int(cat["detected"].sum()), "false_points": int(counts.sum())}
+                "detected": int(cat["detected"].sum()), "free_false_points": int(counts.sum()),
+                "linked_false_points": int(link_pool.shape[0])}
         return FastRadarTable(key=key, pd_edges_db=PD_EDGES_DB.copy(), pd=pd, pd_trials=trials, extra_rate=extra_rate,
                               err_edges_db=ERR_EDGES_DB.copy(), err_pool=err_pool, err_start=start, err_stop=stop,
-                              extra_pool=cat["extra_errors"], false_counts=counts, false_pool=cat["false_points"],
-                              meta=meta)
+                              extra_pool=cat["extra_errors"], link_rate=link_rate, link_pool=link_pool,
+                              link_start=link_start, false_counts=counts, false_pool=free, meta=meta)
 
 
 def _fill_rates(num: np.ndarray, den: np.ndarray, default: float | None = None) -> np.ndarray:
@@ -501,7 +549,7 @@ def refine(table: FastRadarTable, fast: Any, scenes: list[tuple[Any, Any]], exac
     from dataclasses import replace
 
     hits_e, trials = _pd_counts(exact, table.pd_edges_db)
-    false_e = sum(r.false_points.shape[0] for r in exact)
+    free_e, link_e = _false_counts(exact)
     target = np.where(trials > 0, hits_e / np.maximum(trials, 1), table.pd)
     history = []
     for it in range(iterations + 1):
@@ -510,16 +558,23 @@ def refine(table: FastRadarTable, fast: Any, scenes: list[tuple[Any, Any]], exac
         recs = [match_scan(fast, fast.scan(sc, occ), sc, occ, gate_m) for sc, occ in scenes]
         hits_f, trials_f = _pd_counts(recs, table.pd_edges_db)
         measured = np.where(trials_f > 0, hits_f / np.maximum(trials_f, 1), table.pd)
-        false_f = sum(r.false_points.shape[0] for r in recs)
+        free_f, link_f = _false_counts(recs)
         ok = trials >= 30
         history.append({"max_pd_diff": float(np.max(np.abs(measured - target)[ok])) if ok.any() else 0.0,
-                        "false_ratio": float(false_f / max(false_e, 1))})
+                        "free_false_ratio": float(free_f / max(free_e, 1)),
+                        "linked_false_ratio": float(link_f / max(link_e, 1))})
         if it == iterations:
             break
         pd = np.clip(table.pd + np.where(ok, target - measured, 0.0), 0.0, 1.0)
-        scale = table.false_scale * false_e / max(false_f, 1)
-        table = replace(table, pd=pd, false_scale=float(scale))
+        table = replace(table, pd=pd, false_scale=float(table.false_scale * free_e / max(free_f, 1)),
+                        link_scale=float(table.link_scale * link_e / max(link_f, 1)))
     return replace(table, meta={**table.meta, "refine": history})
+
+
+def _false_counts(records: list[ScanRecord]) -> tuple[int, int]:
+    """(free, linked) false points of the records."""
+    free = sum(int(np.sum(r.false_link < 0)) for r in records)
+    return free, sum(int(np.sum(r.false_link >= 0)) for r in records)
 
 
 def _pd_counts(records: list[ScanRecord], edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -546,10 +601,19 @@ def pd_of(table: FastRadarTable, snr_db: np.ndarray, static: np.ndarray) -> np.n
 
 def extra_rate_of(table: FastRadarTable, snr_db: np.ndarray, static: np.ndarray) -> np.ndarray:
     """Extra points per detected pair, per pair (as :func:`pd_of`)."""
+    return _rate_of(table, table.extra_rate, snr_db, static)
+
+
+def link_rate_of(table: FastRadarTable, snr_db: np.ndarray, static: np.ndarray) -> np.ndarray:
+    """Linked false points per visible pair, per pair (as :func:`pd_of`), times the table's ``link_scale``."""
+    return table.link_scale * _rate_of(table, table.link_rate, snr_db, static)
+
+
+def _rate_of(table: FastRadarTable, rate: np.ndarray, snr_db: np.ndarray, static: np.ndarray) -> np.ndarray:
     centres = 0.5 * (table.pd_edges_db[1:] + table.pd_edges_db[:-1])
     out = np.empty(snr_db.size)
     for c in (0, 1):
         sel = static == bool(c)
-        out[sel] = np.interp(snr_db[sel], centres, table.extra_rate[c])
+        out[sel] = np.interp(snr_db[sel], centres, rate[c])
     return out
 

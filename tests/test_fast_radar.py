@@ -136,6 +136,8 @@ def test_calibration_on_a_tiny_config_makes_a_table(tmp_path, monkeypatch) -> No
     back = FastRadarTable.load(path)
     np.testing.assert_allclose(back.pd, table.pd)
     assert back.key == table.key and back.false_scale == pytest.approx(table.false_scale)
+    assert back.link_scale == pytest.approx(table.link_scale)
+    np.testing.assert_array_equal(back.link_start, table.link_start)
     cloud = FastRadarSystem(config, np.random.default_rng(0), table=back).scan(*_scene(config))
     assert cloud.points.shape[1] == 4
 
