@@ -20,7 +20,7 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any
 
-from rhs_studies.kit.driving import ARMS, LABELS, ROOT, SHIPPED_DIR, check_zips, rl_fingerprint
+from rhs_studies.kit.driving import ARMS, LABELS, DriveOptions, check_zips, rl_fingerprint
 from rhs_studies.kit.protocol import Comparison, SeedSpec, load_spec, row_driver, run_comparison
 from rhs_studies.kit.runner import Study, option, run_study
 from rhs_studies.kit.seeds import check_fresh
@@ -30,15 +30,13 @@ SPECS = Path(__file__).resolve().parent / "specs"
 
 
 @dataclass(frozen=True)
-class Options:
-    """The spec file and how to drive it; ``episodes`` / ``episode_s`` shorten a run (a smoke test)."""
+class Options(DriveOptions):
+    """The spec file and how to drive it (:class:`rhs_studies.kit.driving.DriveOptions`); ``episodes`` /
+    ``episode_s`` shorten a run (a smoke test)."""
 
     spec: Path = option(SPECS / "lane_rule_both_fields.yml", "the comparison's YAML file")
     episodes: int = option(0, "episodes per seed set from each set's first seed (0: the spec's sets)")
     episode_s: float = option(0.0, "episode length in seconds (0: the spec's, else the env's)")
-    workers: int = option(2)
-    ship_dir: Path = option(SHIPPED_DIR, "the RL study's shipped arms")
-    out_dir: Path = option(ROOT / "results")
 
     def __post_init__(self) -> None:
         if self.episodes == 1 or self.episodes < 0:

@@ -299,17 +299,24 @@ def rl_fingerprint() -> list[float]:
 
 
 @dataclass(frozen=True)
-class FreshSeeds:
-    """The options of a study on fresh seeds (this one, :mod:`rhs_studies.driving.rl_lane_rule_trial`): its validation and
-    test seeds, workers and folders; ``ValueError`` when a set has fewer than two episodes or the sets overlap."""
+class DriveOptions:
+    """The options every driving study shares: workers and folders."""
+
+    workers: int = option(2)
+    ship_dir: Path = option(SHIPPED_DIR, "the RL study's shipped arms")
+    out_dir: Path = option(ROOT / "results")
+
+
+@dataclass(frozen=True)
+class FreshSeeds(DriveOptions):
+    """The options of a study on fresh seeds (:mod:`rhs_studies.driving.rl_confirm`,
+    :mod:`rhs_studies.driving.rl_lane_rule_trial`): :class:`DriveOptions` and its validation and test seeds;
+    ``ValueError`` when a set has fewer than two episodes or the sets overlap."""
 
     validation_seed: int = option(7000, "first validation seed (the choice)")
     validation_episodes: int = option(100)
     seed: int = option(6000, "first test seed")
     episodes: int = option(100, "test episodes")
-    workers: int = option(2)
-    ship_dir: Path = option(SHIPPED_DIR, "the RL study's shipped arms")
-    out_dir: Path = option(ROOT / "results")
 
     def __post_init__(self) -> None:
         if self.episodes < 2 or self.validation_episodes < 2:
@@ -330,9 +337,9 @@ def check_zips(ship_dir: Path, arms: list[str]) -> None:
         raise ValueError(f"no shipped zip for {missing} in {ship_dir}: run scripts/rl_finetune.py first")
 
 
-__all__ = ["ALGOS", "ANTENNA_STUDY", "DATA", "DENSE_ID", "FINE_SPEEDS", "KINEMATICS_ALL_AROUND", "SHIPPED",
-           "SLAM_ENV_KWARGS", "SLAM_ID", "TARGETS", "TRUTH_ID", "target_path",
-           "ARMS", "ENV_ID", "HYPERPARAMS", "LABELS", "SHIELD_ARMS", "SHIELD_CONTROL", "SHIPPED_DIR", "SHIPPED_START",
-           "SLIM_KEYS", "STARTS", "STUDENT", "TARGET_COLLISIONS", "TARGET_GAIN", "TARGET_SPEED_MPS", "TARGET_VS_IDM",
-           "Arm", "FreshSeeds", "arm_policies", "check_zips", "drive_arm", "drive_seeds", "evaluate_rows", "rl_fingerprint", "run_policy",
-           "start_of", "targets", "SCRIPTED", "drive_row", "scripted_kwargs"]
+__all__ = ["ALGOS", "ANTENNA_STUDY", "ARMS", "Arm", "DATA", "DENSE_ID", "DriveOptions", "ENV_ID", "FINE_SPEEDS",
+           "FreshSeeds", "HYPERPARAMS", "KINEMATICS_ALL_AROUND", "LABELS", "SCRIPTED", "SHIELD_ARMS",
+           "SHIELD_CONTROL", "SHIPPED", "SHIPPED_DIR", "SHIPPED_START", "SLAM_ENV_KWARGS", "SLAM_ID", "SLIM_KEYS",
+           "STARTS", "STUDENT", "TARGETS", "TARGET_COLLISIONS", "TARGET_GAIN", "TARGET_SPEED_MPS", "TARGET_VS_IDM",
+           "TRUTH_ID", "arm_policies", "check_zips", "drive_arm", "drive_row", "drive_seeds", "evaluate_rows",
+           "rl_fingerprint", "run_policy", "scripted_kwargs", "start_of", "target_path", "targets"]
