@@ -22,9 +22,12 @@ Bad cache files. A truncated or overwritten ``.nbi`` / ``.nbc`` file of a kernel
 kernel compiled again (one :class:`KernelCacheWarning` per process), and a cache folder that turns
 out unwritable leaves the kernels compiled in memory (:func:`_checked_cache`).
 
-Notice. The first compile of a kernel in a process prints one line to stderr
+Progress. The first compile of a kernel in a process prints one line to stderr
 (:data:`NOTICE`), once per process: a new install compiles every kernel once
-(seconds, see :mod:`rhs_env.kernels` for the measured cost).
+(seconds, see :mod:`rhs_env.kernels` for the measured cost). Once compiling has taken more than
+:data:`PROGRESS_AFTER_S`, a count of the kernels compiled so far follows (in place on a terminal), and a summary
+at exit; nothing when every kernel loads from the cache, nothing at all with ``RHS_SLAM_QUIET=1``
+(:data:`QUIET_ENV`). :func:`compile_stats` names the kernels compiled in this process.
 
 Vector envs. Worker processes started on an empty cache would each compile every kernel
 (seconds of CPU per worker); :func:`warm_cache` runs a workload once in the parent first, so the
@@ -56,9 +59,9 @@ if TYPE_CHECKING:
     import numpy as np
 
 __all__ = [
-    "COMPILE_LOCK", "KERNELS", "LOCK_STALE_S", "NOTICE", "KernelCacheWarning", "Tiered", "background_compile_running",
-    "cache_index", "compile_lock", "discard_cache_entry", "njit", "numba_module", "python_body", "sort_small",
-    "warm_cache", "watch_compiles",
+    "COMPILE_LOCK", "KERNELS", "LOCK_STALE_S", "NOTICE", "QUIET_ENV", "KernelCacheWarning", "Tiered",
+    "background_compile_running", "cache_index", "compile_lock", "compile_stats", "discard_cache_entry", "njit",
+    "numba_module", "python_body", "sort_small", "warm_cache", "watch_compiles",
 ]
 
 #: the kernel implementations a config may choose: compiled (default) or the numpy reference
@@ -142,28 +145,123 @@ def _configure_cache() -> None:
 _NUMBA: Any = None
 
 
+#: ``RHS_SLAM_QUIET=1``: no compile notice, progress or summary on stderr
+QUIET_ENV = "RHS_SLAM_QUIET"
+#: the first progress report comes once the kernels compiled in this process have taken this long (s)
+PROGRESS_AFTER_S = 1.0
+#: without a terminal (a log file), one progress line at most every this many seconds
+PROGRESS_EVERY_S = 5.0
+
+
+class _Progress:
+    """What this process compiled of the project's kernels: names, compile seconds, and what stderr was told."""
+
+    def __init__(self) -> None:
+        self.kernels: list[str] = []
+        self.seconds = 0.0
+        self.depth = 0
+        self.started = 0.0
+        self.announced = False
+        self.reported = False
+        self.last_line = 0.0
+        self.live = False  # a progress line on a terminal waits for its end
+
+    def quiet(self) -> bool:
+        return os.environ.get(QUIET_ENV, "0") not in ("", "0")
+
+    def write(self, text: str, end: str = "\n") -> None:
+        if self.live:
+            text = "\r\x1b[K" + text
+        sys.stderr.write(text + end)
+        sys.stderr.flush()
+        self.live = end == ""
+
+    def start(self, name: str) -> None:
+        if self.depth == 0:
+            self.started = time.perf_counter()
+        self.depth += 1
+        if not self.announced and not self.quiet():
+            self.announced = True
+            self.write(NOTICE)
+            import atexit
+
+            atexit.register(self.summary)
+
+    def end(self, name: str) -> None:
+        self.kernels.append(name)
+        self.depth -= 1
+        if self.depth:
+            return
+        self.seconds += time.perf_counter() - self.started
+        if self.quiet() or self.seconds < PROGRESS_AFTER_S:
+            return
+        stage = "SLAM" if name.startswith("slam.") else "radar"
+        line = (f"rhs-slam: {len(self.kernels)} kernels compiled, {self.seconds:.0f} s so far (a {stage} kernel: "
+                f"{name.rsplit('.', 1)[-1]}) ...")
+        tty = sys.stderr.isatty()
+        now = time.monotonic()
+        if tty or now - self.last_line >= PROGRESS_EVERY_S:
+            self.last_line = now
+            self.reported = True
+            self.write(line, end="" if tty else "\n")
+
+    def summary(self) -> None:
+        """At exit: how many kernels compiled in how long, and where they are cached (after a progress report)."""
+        if self.reported and not self.quiet():
+            folder = os.environ.get("NUMBA_CACHE_DIR") or "__pycache__ beside the package's sources"
+            self.write(f"rhs-slam: compiled {len(self.kernels)} kernels in {self.seconds:.1f} s; cached in {folder}, "
+                       f"the next runs load them")
+
+
+_PROGRESS = _Progress()
+
+
+def compile_stats() -> dict[str, Any]:
+    """The project's kernels numba compiled in this process so far (nothing when every kernel came from the cache).
+
+    Returns:
+        ``{"kernels": [module.name, ...] (in the order their compiles ended, callees before their callers),
+        "seconds": compile wall seconds (outermost compiles only)}``.
+
+    Examples:
+        >>> from rhs_common.jit import compile_stats
+        >>> sorted(compile_stats())
+        ['kernels', 'seconds']
+    """
+    return {"kernels": list(_PROGRESS.kernels), "seconds": _PROGRESS.seconds}
+
+
+def _progress_listener() -> Any:
+    """The numba compile-event listener that feeds :data:`_PROGRESS` (registered once, by :func:`_numba`).
+
+    The first compile of one of the project's kernels in a process prints :data:`NOTICE`; once compiling has taken
+    :data:`PROGRESS_AFTER_S`, a count follows (rewritten in place on a terminal, a line every
+    :data:`PROGRESS_EVERY_S` in a log) and one summary line at exit. Nothing when every kernel loads from the cache,
+    nothing at all with ``RHS_SLAM_QUIET=1``.
+    """
+    from numba.core import event
+
+    class _CompileProgress(event.Listener):
+        def on_start(self, ev: Any) -> None:
+            if name := _project_kernel(ev):
+                _PROGRESS.start(name)
+
+        def on_end(self, ev: Any) -> None:
+            if name := _project_kernel(ev):
+                _PROGRESS.end(name)
+
+    return _CompileProgress()
+
+
 def _numba() -> Any:
-    """numba, imported on first use (after the cache directory is chosen, with the compile notice registered)."""
+    """numba, imported on first use (after the cache directory is chosen, with the compile progress registered)."""
     global _NUMBA
     if _NUMBA is None:
         _configure_cache()
         import numba
         from numba.core import event
 
-        class _CompileNotice(event.Listener):
-            """Prints :data:`NOTICE` once per process when one of the project's kernels starts compiling."""
-
-            announced = False
-
-            def on_start(self, ev: Any) -> None:
-                if not _CompileNotice.announced and _project_kernel(ev):
-                    _CompileNotice.announced = True
-                    print(NOTICE, file=sys.stderr, flush=True)
-
-            def on_end(self, ev: Any) -> None:
-                pass
-
-        event.register("numba:compile", _CompileNotice())
+        event.register("numba:compile", _progress_listener())
         _NUMBA = numba
     return _NUMBA
 

@@ -272,13 +272,14 @@ def stages_before_after(envs: dict) -> dict:
 #: the cold / warm start of a new user: imports, gym.make, reset and one step of the SLAM env
 START_CODE = """
 import time
-t0 = time.perf_counter()
+t0, c0 = time.perf_counter(), time.process_time()
 import gymnasium as gym
 import rhs_env  # noqa: F401
 env = gym.make("rhs-highway-slam-v0")
 env.reset(seed=0)
 env.step(1)
-print(time.perf_counter() - t0)
+from rhs_common.jit import compile_stats
+print(time.perf_counter() - t0, time.process_time() - c0, len(compile_stats()["kernels"]))
 """
 
 
@@ -290,6 +291,9 @@ def bench_start(repeats: int = 1) -> dict:
     again (warm: loaded from the cache) once the background compile has ended (``background_runs_s``: when its lock
     went, seconds from the cold process' start; it compiles the one-call OMP last, after the cold first step).
     ``*_s`` is the time inside the process (imports + make + reset + step), ``*_process_s`` the whole process.
+    ``next_*``: a process started as soon as the cold one ended (the background compile may still run: a new user's
+    second run); ``cpu_runs_s``: each process' own CPU seconds (the host's load inflates wall time, not these);
+    ``kernels_compiled``: the project's kernels each process compiled (:func:`rhs_common.jit.compile_stats`).
     """
     import tempfile
 
@@ -299,17 +303,29 @@ def bench_start(repeats: int = 1) -> dict:
     cold_p: list[float] = []
     warm_p: list[float] = []
     background: list[float] = []
+    nxt: list[float] = []
+    cpu: dict[str, list[float]] = {"cold": [], "next": [], "warm": []}
+    compiled: dict[str, list[int]] = {"cold": [], "next": [], "warm": []}
     for _ in range(repeats):
         with tempfile.TemporaryDirectory() as cache:
-            env = {**os.environ, "NUMBA_CACHE_DIR": cache, "OMP_NUM_THREADS": "1", "RHS_SLAM_BACKGROUND_COMPILE": "1"}
-            for inside, whole in ((cold, cold_p), (warm, warm_p)):
+            env = {**os.environ, "NUMBA_CACHE_DIR": cache, "OMP_NUM_THREADS": "1", "RHS_SLAM_BACKGROUND_COMPILE": "1",
+                   "RHS_SLAM_QUIET": "1"}
+            # cold; next: started as the cold one ends (its background compile may still run); warm: after it ended
+            for kind, inside, whole in (("cold", cold, cold_p), ("next", nxt, []), ("warm", warm, warm_p)):
                 t0 = time.perf_counter()
                 res = subprocess.run([sys.executable, "-c", START_CODE], cwd=ROOT, env=env, capture_output=True,
                                      text=True, check=True)
                 whole.append(time.perf_counter() - t0)
-                inside.append(float(res.stdout.strip().splitlines()[-1]))
-                if inside is cold:
-                    background.append(_wait_for_background_compile(Path(cache), t0))
+                wall, cpu_s, n = res.stdout.strip().splitlines()[-1].split()
+                inside.append(float(wall))
+                cpu[kind].append(round(float(cpu_s), 2))
+                compiled[kind].append(int(n))
+                if kind == "cold":
+                    t_cold = t0
+                if kind == "next":
+                    background.append(_wait_for_background_compile(Path(cache), t_cold))
+    out.update(next_s=float(np.median(nxt)), next_runs_s=[round(v, 2) for v in nxt], cpu_runs_s=cpu,
+               kernels_compiled=compiled)
     out.update(cold_s=float(np.median(cold)), warm_s=float(np.median(warm)), cold_process_s=float(np.median(cold_p)),
                warm_process_s=float(np.median(warm_p)), repeats=repeats, cold_runs_s=[round(v, 2) for v in cold],
                warm_runs_s=[round(v, 2) for v in warm], background_runs_s=[round(v, 2) for v in background])
@@ -698,7 +714,16 @@ def _md_start(result: dict) -> list[str]:
             + (" The cold process' background compile ended "
                f"{', '.join(f'{v:.1f}' for v in st['background_runs_s'])} s after that process started (it compiles "
                "the one-call OMP last: the first scans run its Python body on the compiled stages, the same numbers)."
-               if st.get("background_runs_s") else ""), ""]
+               if st.get("background_runs_s") else "")
+            + (f" A second process started as the cold one ended (its background compile still running): "
+               f"{st['next_s']:.1f} s ({', '.join(f'{v:.1f}' for v in st['next_runs_s'])} s). CPU seconds per process "
+               f"(cold / next / warm): {_cpu_triples(st['cpu_runs_s'])}; kernels compiled: "
+               f"{_cpu_triples(st['kernels_compiled'])}." if "next_s" in st else ""), ""]
+
+
+def _cpu_triples(d: dict[str, list]) -> str:
+    """``a / b / c`` per repeat of the start section's cold, next and warm processes, ``;``-separated."""
+    return "; ".join(" / ".join(f"{v:g}" for v in vals) for vals in zip(d["cold"], d["next"], d["warm"]))
 
 
 def _md_ratios(result: dict) -> list[str]:

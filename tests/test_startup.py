@@ -1,0 +1,70 @@
+"""Start-up on a new install: the kernel-compile progress on a cold cache, silence on a warm one, and a second process
+that finds every kernel the first one compiled in the cache (counted by rhs_common.jit.compile_stats)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+from rhs_common.jit import NOTICE
+
+ROOT = Path(__file__).resolve().parent.parent
+
+#: two small radar kernels and the shared sort (a few seconds of compile); progress shown from the first compile on
+SMALL = """
+    import json, sys
+    import numpy as np
+    import rhs_common.jit as jit
+    jit.PROGRESS_AFTER_S = 0.0
+    from rhs_env.kernels import tone_spectra
+    tone_spectra(np.zeros(2), np.ones(2, complex), 8, 2, 4, np.array([0.2, 0.3]))
+    v = np.array([3.0, 1.0, 2.0]); jit.sort_small(v)
+    print(json.dumps(jit.compile_stats()))
+"""
+
+#: the first SLAM-env step of a process (the background compile on, as for a user)
+ENV_STEP = """
+    import json
+    import gymnasium as gym
+    import rhs_env
+    from rhs_common.jit import compile_stats
+    env = gym.make("rhs-highway-slam-v0"); env.reset(seed=0); env.step(1)
+    print(json.dumps(compile_stats()))
+"""
+
+
+def _run(code: str, cache: Path, **env: str) -> tuple[dict, str]:
+    res = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=ROOT, capture_output=True, text=True,
+                         env={**os.environ, "OMP_NUM_THREADS": "1", "NUMBA_CACHE_DIR": str(cache),
+                              "RHS_SLAM_QUIET": "0", **env}, timeout=900)
+    assert res.returncode == 0, res.stderr[-3000:]
+    return json.loads(res.stdout.strip().splitlines()[-1]), res.stderr
+
+
+def test_compile_progress_on_a_cold_cache_and_silence_on_a_warm_one(tmp_path):
+    """Cold: the notice, a count of the kernels compiled so far and the summary at exit; warm: nothing compiles and
+    nothing is printed; RHS_SLAM_QUIET=1 on another cold cache: the kernels compile, stderr stays empty."""
+    stats, err = _run(SMALL, tmp_path / "a")
+    assert {"rhs_env.kernels.tone_spectra", "rhs_common.jit._sort_small"} <= set(stats["kernels"])
+    assert stats["seconds"] > 0
+    assert err.count(NOTICE) == 1
+    assert "kernels compiled, " in err and f"rhs-slam: compiled {len(stats['kernels'])} kernels in " in err
+    warm, err = _run(SMALL, tmp_path / "a")
+    assert warm == {"kernels": [], "seconds": 0.0}
+    assert "rhs-slam" not in err
+    quiet, err = _run(SMALL, tmp_path / "b", RHS_SLAM_QUIET="1")
+    assert quiet["kernels"] and "rhs-slam" not in err
+
+
+def test_a_second_process_finds_every_kernel_of_the_first_step_cached(tmp_path):
+    """A new user's first two runs: the first SLAM-env step on an empty cache compiles its kernels (with the progress
+    on stderr), a second process started right after it (its background compile may still run) compiles none."""
+    first, err = _run(ENV_STEP, tmp_path)
+    assert len(first["kernels"]) >= 10 and err.count(NOTICE) == 1 and "kernels compiled, " in err
+    second, err = _run(ENV_STEP, tmp_path)
+    assert second["kernels"] == [], second
+    assert NOTICE not in err
