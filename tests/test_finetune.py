@@ -280,16 +280,16 @@ def test_the_study_judges_the_longest_fine_tune_against_its_own_budgets_control(
     assert ARMS[arm].timesteps == ARMS[control].timesteps  # the control has the same env-step budget
     t = targets({k: row_summary(v) for k, v in runs.items()}, runs, arm, control)
     assert t["gain_over_student"]["mean"] == pytest.approx(6.0)
-    assert t["gain_over_dagger_continue"]["mean"] == pytest.approx(1.0)
-    assert t["met"]["gain_over_student"] and t["met"]["beats_dagger_continue"] and t["met"]["mean_speed"]
+    assert t["gain_over_control"]["mean"] == pytest.approx(1.0)
+    assert t["met"]["gain_over_student"] and t["met"]["beats_control"] and t["met"]["mean_speed"]
     del runs["finetune_horizon_80k"]
     assert headline_arm(runs) == ("finetune", "dagger_continue")
     # a shield arm is judged against its own start (the shipped policy) and the DAgger continuation under the shield
     runs.update(shipped=runs_of(158.0), shield_warmup=runs_of(161.5), shield_dagger=runs_of(162.0, 4))
     t = targets({k: row_summary(v) for k, v in runs.items()}, runs, "shield_warmup", SHIELD_CONTROL)
     assert ARMS["shield_warmup"].start == "shipped" and t["gain_over_student"]["mean"] == pytest.approx(3.5)
-    assert t["gain_over_dagger_continue"]["mean"] == pytest.approx(-0.5)
-    assert t["met"]["gain_over_student"] and not t["met"]["beats_dagger_continue"]
+    assert t["gain_over_control"]["mean"] == pytest.approx(-0.5)
+    assert t["met"]["gain_over_student"] and not t["met"]["beats_control"]
     assert ARMS[SHIELD_CONTROL].start == "shipped" and ARMS[SHIELD_CONTROL].timesteps == ARMS[SHIELD_ARMS[0]].timesteps
 
 
@@ -431,7 +431,7 @@ def test_the_confirmation_chooses_on_validation_seeds_and_judges_the_choice_once
     assert list(result["test"]["vs_start"]) == ["shield_flank_explore", "shield_dagger"]
     t = result["test"]["targets"]
     assert t["arm"] == "shield_flank_explore" and t["gain_over_student"]["mean"] == pytest.approx(3.0)
-    assert t["gain_over_dagger_continue"]["mean"] == pytest.approx(2.5) and t["met"]["gain_over_student"]
+    assert t["gain_over_control"]["mean"] == pytest.approx(2.5) and t["met"]["gain_over_student"]
     assert "Chosen: **" in rl_confirm.markdown(result)
     with pytest.raises(SystemExit):  # validation and test seeds must not overlap
         rl_confirm.main(["--validation-seed", "6050", "--out-dir", str(tmp_path)])

@@ -284,7 +284,7 @@ def markdown(result: dict[str, Any]) -> str:
             continue
         met = ", ".join(f"{k} {'met' if v else 'not met'}" for k, v in t["met"].items())
         name = LABELS.get(t.get("arm", "finetune"), t.get("arm", "finetune"))
-        against = t.get("gain_over_dagger_continue")
+        against = t.get("gain_over_control")
         gain = t["gain_over_student"]
         vs = f" ({paired_text(gain)} over its start"
         vs += ")" if against is None else f"; {paired_text(against)} over {LABELS.get(t['control'], t['control'])})"

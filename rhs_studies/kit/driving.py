@@ -210,13 +210,13 @@ def targets(rows: dict[str, dict[str, Any]], runs: dict[str, list[dict]], arm: s
         "gain_over_student": gain,
     }
     if control in runs:
-        out["gain_over_dagger_continue"] = paired(runs[arm], runs[control])
+        out["gain_over_control"] = paired(runs[arm], runs[control])
     out["met"] = {
         "return_vs_idm": out["return_vs_idm"] >= TARGET_VS_IDM,
         "collisions": s["collision_rate"] <= TARGET_COLLISIONS,
         "mean_speed": out["mean_speed_mps"] >= TARGET_SPEED_MPS,
         "gain_over_student": gain["mean"] >= TARGET_GAIN and gain["low"] > 0,
-        "beats_dagger_continue": ("gain_over_dagger_continue" in out and out["gain_over_dagger_continue"]["low"] > 0),
+        "beats_control": ("gain_over_control" in out and out["gain_over_control"]["low"] > 0),
     }
     return out
 

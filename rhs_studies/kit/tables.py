@@ -79,7 +79,7 @@ def targets_line(tg: Mapping[str, Any], judged: str) -> str:
     return (f"Targets judged on {judged}: {tg['return_vs_idm']:.3f}x IDM + MOBIL, "
             f"{100 * tg['collision_rate']:.0f} % collisions, {tg['mean_speed_mps']:.1f} m/s, "
             f"{paired_text(tg['gain_over_student'])} over the shield student, "
-            f"{paired_text(tg['gain_over_dagger_continue'])} over the DAgger control; targets: {met_text(tg['met'])}.")
+            f"{paired_text(tg['gain_over_control'])} over the DAgger control; targets: {met_text(tg['met'])}.")
 
 
 def slim_runs(runs: Mapping[str, list[dict]], fields: tuple[str, ...] = SLIM) -> dict[str, list[dict]]:

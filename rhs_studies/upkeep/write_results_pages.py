@@ -153,7 +153,7 @@ def _rl_confirm(d: dict) -> tuple[str, str]:
 
     v, t = d["validation"], d["test"]
     arm, tg = v["chosen"], t["targets"]
-    s, gain, control = t["rows"][arm], tg["gain_over_student"], tg["gain_over_dagger_continue"]
+    s, gain, control = t["rows"][arm], tg["gain_over_student"], tg["gain_over_control"]
     return (f"PPO fine-tune of the DAgger student behind the radar shield ({ARMS[arm].timesteps} env "
             f"steps; chosen on {len(v['seeds'])} validation seeds, tested once on {len(t['seeds'])} fresh seeds, "
             "behind the shield it trained with): return, collisions, paired gain over its start and over DAgger at "
@@ -168,7 +168,7 @@ def _rl_lane_test(d: dict) -> tuple[str, str]:
 
     v, t = d["validation"], d["test"]
     tg = t["targets"]
-    s, gain, control = t["rows"][d["finetune"]], tg["gain_over_student"], tg["gain_over_dagger_continue"]
+    s, gain, control = t["rows"][d["finetune"]], tg["gain_over_student"], tg["gain_over_control"]
     rule = ", ".join(f"{k} {x:g}" for k, x in v["rule"].items())
     return (f"The same fine-tune behind a stricter lane rule of the shield ({rule}, chosen on {len(v['seeds'])} "
             f"validation seeds, tested once on {len(t['seeds'])} fresh seeds; the shipped policy): return, "
