@@ -102,6 +102,9 @@ STEPS: tuple[Step, ...] = (
           "--out", "results/slam_accuracy_before", "--no-progress"),
          ("slam_accuracy_before.json",), 1800, on_request=True, no_fingerprint="the 'before' record of the SLAM change, "
          "kept for comparison: measured on the code before it; the command is the first-round model at HEAD"),
+    Step("slam_roads", "slam_accuracy.py", ("--parts", "roads", "--out", "results/slam_roads", "--no-progress"),
+         ("slam_roads.json",), 1800, "the SLAM on highway-env's merge, roundabout, intersection, exit and racetrack "
+         "(IDM + MOBIL and random actions, 20 held-out seeds each, the 5-degree scan grid; ~25 min on 2 cores)"),
     Step("train_policy", "train_policy.py", ("--no-progress", "--algo", "dagger", "--only", "slam", "truth",
                                              "truth_all_around", "slam_rhs", "slam_phased", "dense", "dense_phased"),
          ("train_policy.json",), 7200,
@@ -127,6 +130,12 @@ STEPS: tuple[Step, ...] = (
     Step("detection_curves", "detection_curves.py", (), ("detection_curves.json",), 600),
     Step("low_snr_slam", "low_snr_slam.py", ("--seeds", "100", "101", "102", "103", "104", "105", "106", "107"),
          ("low_snr_slam.json",), 900),
+    Step("pose_covariance", "pose_covariance.py",
+         ("--seeds", *(str(s) for s in range(12000, 12010)), "--cycles", "100", "--workers", "2"),
+         ("pose_covariance.json",), 1500,
+         "NEES of the adaptive pose covariance and of the drift densities, 6 radar configurations x 10 held-out seeds",
+         no_fingerprint="a calibration measurement of a report-only, opt-in covariance (pipeline option "
+         "pose_covariance='adaptive'): no default path's numbers depend on it; its tests check it on a short drive"),
     Step("claim_study", "claim_study.py", (), ("claim_study.json",), 3600,
          "point-cloud, element and SLAM levels; resumes from results/claim_study_cache_*.jsonl"),
     Step("ablations", "ablate_policy.py", ("--fresh",), ("ablations.json",), 4500,
@@ -137,6 +146,12 @@ STEPS: tuple[Step, ...] = (
          "the compiled traffic core against highway-env, 50 seeds x 200 steps per scene",
          no_fingerprint="an equivalence check of two implementations, not numbers of the code: its differences are "
          "rounding-level and vary by CPU; a short version runs in tests/test_traffic_core.py on every test run"),
+    Step("fast_radar_calibration", "calibrate_fast_radar.py", (), (), 600,
+         "rebuilds the fast radar's shipped table (rhs_env/data/fast_radar_<key>.npz) from the exact radar",
+         no_fingerprint="writes package data (the fast radar's table), no results file; what the table makes the fast "
+         "radar do is fingerprinted by the fast_radar_fidelity step"),
+    Step("fast_radar_fidelity", "fast_radar_fidelity.py", ("--workers", "4"), ("fast_radar_fidelity.json",), 1500,
+         "the fast radar against the exact one on the same scenes, the SLAM on 20 paired seeds, steps/s"),
     Step("benchmark_radar", "benchmark_radar.py", (), ("benchmark_radar.json",), 60, "timings",
          no_fingerprint="timings"),
     Step("benchmark", "benchmark.py", ("--out", "results/benchmark.json"), ("benchmark.json",), 900, "timings",

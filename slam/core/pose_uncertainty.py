@@ -6,25 +6,35 @@ metre driven, measured once on one radar configuration. The adaptive model measu
 what the filter saw, so it follows the radar that produced the cloud (scan grid, antenna, SNR, landmark density):
 
 1. **Information of the cycle's pose against the map.** Each static point ``p`` (vehicle frame, covariance ``C``
-   from the radar's range and angle stds, :func:`slam.core.association.point_covariance`) is moved into the map
-   frame with the estimated pose, ``m = t + R(th) p``, and paired with the nearest landmark ``l`` (covariance
-   ``L``) that existed before this cycle, within the 99 % Mahalanobis gate of ``S = R C R^T + L``; one point per
-   landmark (the filter clusters a landmark's points into one observation). With ``H = [I_2, dR(th)/dth p]`` the
-   pose information is ``J = sum H^T S^-1 H`` (3 x 3, map frame) and ``J^-1`` is the covariance of a pose fitted to
-   those landmarks.
-2. **The residuals' scale.** ``s^2 = sum r^T S^-1 r / (2 n - 3)`` with ``r = l - m``: the factor by which the
-   pairs scatter more than their covariances say. It only raises ``J^-1`` (``max(s^2, 1)``): the radar's stds are
-   the thermal floor, grid quantisation, multipath and ambiguous pairs add to it.
+   from the radar's range and angle stds, :func:`slam.core.association.point_covariance`, plus the filter's
+   floor) is moved into the map frame with the pose predicted by the cycle's motion, ``m = t + R(th) p``, and
+   paired with the landmark ``l`` (covariance ``L``) of the map *before* the cycle's update that is nearest in
+   the Mahalanobis distance of ``S = R C R^T + L`` among the 4 nearest, within the 99 % gate; one point per
+   landmark (the filter clusters a landmark's points into one observation). The pose is fitted to the pairs
+   (Gauss-Newton from the prediction). With ``H = [I_2, dR(th)/dth p]`` the pose information is
+   ``J = sum H^T S^-1 H`` (3 x 3, map frame) and ``J^-1`` the covariance of a pose fitted to those landmarks.
+2. **The residuals' scale.** ``s^2 = sum r^T S^-1 r / (2 n - 3)`` with ``r = l - m`` at the fitted pose: the
+   factor by which the pairs scatter more (or less) than the radar's stated covariances say. The pipeline
+   accumulates the chi-square and the degrees of freedom over the map's cycles
+   (:attr:`slam.core.pipeline.SlamPipeline.residual_scale`) and scales the whole reported covariance by it:
+   on the default 1-degree scan the pairs scatter at ~0.03-0.05 of their stated variance, on the 5-degree grid
+   at ~0.4.
 3. **The hand-over.** The map drifts because new landmarks are initialised from the current pose: each cycle
    the landmarks born in it (``n_new``) join the ``n_old`` landmarks the cycle matched, and carry the pose's error
    against the old ones into the map. A reference set that renews the fraction ``f = n_new / (n_new + n_old)`` per
    cycle moves by ``f`` times that error; the errors of successive cycles are correlated over the ``1 / f``
    cycles a landmark lives (the same landmarks pin them), so over a landmark's life the set moves by about one
-   pose error: the increment per cycle is ``Q = f s^2 J^-1`` (map frame).
+   pose error: the increment per cycle is ``Q = f J^-1`` (map frame).
 
 ``Q`` replaces ``G diag(q d) G^T`` in :func:`slam.core.drift.drift_step` (:func:`adaptive_drift_step`); ``F`` still
-turns a heading error into cross-track error with the distance driven. No constant of this model is fitted to a
-drive. A cycle that pins nothing (fewer than two pairs, or ``J`` singular) holds the last measured ``s^2 J^-1``.
+turns a heading error into cross-track error with the distance driven. The reported covariance is
+``s^2 (particles' variances + P)``. No constant of this model is fitted to a drive. A cycle that pins nothing
+(fewer than two pairs, or ``J`` singular) holds the last measured ``J^-1``.
+
+Its known limit: an error that persists from scan to scan (the angle quantisation of a coarse scan grid, a
+landmark's multipath) moves the landmark and the point alike, so the scan-to-map residuals do not see it and
+``s^2`` under-reads it; it shows only as drift. The results page (``docs/results/pose-covariance.md``) measures
+where that matters.
 """
 
 from __future__ import annotations
@@ -49,9 +59,11 @@ GAUSS_NEWTON_STEPS = 2
 class CycleInformation:
     """One cycle's measurement of the pose against the map (module docstring).
 
-    ``cov`` (3, 3): ``s^2 J^-1`` (m^2, m rad, rad^2; map frame), or None when the cycle pinned nothing;
-    ``scale``: ``s^2`` before the floor at 1 (nan with fewer than 2 pairs); ``n_old``: landmarks paired;
-    ``n_new``: landmarks born in the cycle; ``fraction``: ``n_new / (n_new + n_old)`` (0 when both are 0).
+    ``cov`` (3, 3): ``J^-1`` (m^2, m rad, rad^2; map frame), or None when the cycle pinned nothing;
+    ``scale``: the cycle's ``s^2`` (nan with fewer than 2 pairs); ``n_old``: landmarks paired;
+    ``n_new``: landmarks born in the cycle; ``fraction``: ``n_new / (n_new + n_old)`` (0 when both are 0);
+    ``chi2``, ``dof``: the residuals' chi-square and its degrees of freedom (0 without a fit); ``fitted`` (3,):
+    the pose fitted to the pairs (None without a fit).
     """
 
     cov: np.ndarray | None
@@ -61,6 +73,7 @@ class CycleInformation:
     fraction: float
     chi2: float = 0.0
     dof: int = 0
+    fitted: np.ndarray | None = None
 
 
 def cycle_information(
@@ -72,13 +85,13 @@ def cycle_information(
     new: np.ndarray,
     born: int | None = None,
 ) -> CycleInformation:
-    """Measure the cycle's pose information against the landmarks that existed before it.
+    """Measure the cycle's pose information against the landmarks that existed before it (module docstring).
 
     Args:
-        pose: (3,) the estimated pose ``(x, y, th)`` (map frame; m, m, rad).
+        pose: (3,) the pose ``(x, y, th)`` the pairing starts from (map frame; m, m, rad): the prediction.
         points: (N, >=2) the cycle's static points, x, y in the vehicle frame (m).
         point_cov: (N, 2, 2) their vehicle-frame covariances (m^2).
-        landmarks: (L, 2) the map's landmarks after the cycle (map frame, m).
+        landmarks: (L, 2) the map's landmarks (map frame, m).
         landmark_cov: (L, 2, 2) their covariances (m^2).
         new: (L,) bool, the landmarks born in this cycle (left out of the pairing).
         born: the landmarks born in this cycle, reported ones or not (the filter's tentative landmarks);
@@ -144,7 +157,7 @@ def cycle_information(
     dof = 2 * n_old - 3
     scale = d2 / dof if dof > 0 else float("nan")
     cov = np.linalg.inv(J)
-    return CycleInformation(0.5 * (cov + cov.T), scale, n_old, n_new, fraction, d2, max(dof, 0))
+    return CycleInformation(0.5 * (cov + cov.T), scale, n_old, n_new, fraction, d2, max(dof, 0), pose_fit)
 
 
 def adaptive_drift_step(cov: np.ndarray, heading: float, motion: np.ndarray, increment: np.ndarray) -> np.ndarray:
@@ -154,7 +167,7 @@ def adaptive_drift_step(cov: np.ndarray, heading: float, motion: np.ndarray, inc
         cov: (3, 3) the drift covariance before the motion.
         heading: the estimated heading before the motion (rad).
         motion: (3,) ``(dx, dy, dpsi)`` in the previous vehicle frame.
-        increment: (3, 3) ``Q`` in the map frame (``f s^2 J^-1``).
+        increment: (3, 3) ``Q`` in the map frame (``f J^-1``).
 
     Returns:
         A new (3, 3) array.
