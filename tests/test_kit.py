@@ -171,3 +171,14 @@ def test_the_protocol_replaces_the_three_copies_with_the_same_blocks():
     assert [k for k in saved if k != "provenance"] == list(lane) and lane["validation"]["chosen"] == "lane_time"
     assert list(lane["validation"]) == list(saved["validation"]) and list(lane["test"]) == list(saved["test"])
     assert list(lane["test"]["rows"]) == list(saved["test"]["rows"]) and lane["lane_rules"] == saved["lane_rules"]
+
+
+def test_the_fresh_seed_studies_refuse_a_test_set_already_driven(tmp_path, capsys):
+    """rl_confirm and the lane rule trial check their test seeds against the ledger (their own set allowed)."""
+    from rhs_studies.driving import rl_confirm, rl_lane_rule_trial
+
+    for module, flags in ((rl_confirm, ["--seed", "3000"]), (rl_lane_rule_trial, ["--seed", "3050"])):
+        with pytest.raises(SystemExit):
+            module.main([*flags, "--out-dir", str(tmp_path)])
+        assert "rl_finetune_heldout (3000-3099)" in capsys.readouterr().err
+    rl_confirm.check(rl_confirm.Options(out_dir=tmp_path, parts=("finetune", "scratch")))  # its own set: fine

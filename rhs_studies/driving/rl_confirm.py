@@ -42,6 +42,7 @@ from typing import Any
 from rhs_studies.kit.driving import LABELS, SHIELD_CONTROL, SHIPPED_DIR, FreshSeeds, check_zips, rl_fingerprint
 from rhs_studies.kit.protocol import Drive, load_spec, row_driver, run_comparison
 from rhs_studies.kit.runner import Study, option, run_study
+from rhs_studies.kit.seeds import check_fresh
 from rhs_studies.kit.tables import paired_text, table_row, targets_line
 
 #: the two parts of the study as comparisons (rhs_studies/driving/specs/: the arms, the choice rule, the rows, the
@@ -169,9 +170,11 @@ class Options(FreshSeeds):
 
 
 def check(opts: Options) -> None:
-    """The zips of the parts driven are present and the parts kept are on the same seeds (:func:`kept_parts`)."""
+    """The zips of the parts driven are present, the test seeds touch no set of the seed ledger but this study's own
+    (``rl_confirm_test``), and the parts kept are on the same seeds (:func:`kept_parts`)."""
     arms = [*CANDIDATES, SHIELD_CONTROL] * ("finetune" in opts.parts) + [*SCRATCH_CANDIDATES] * ("scratch" in opts.parts)
     check_zips(opts.ship_dir, arms)
+    check_fresh(opts.seed_sets()[1], "the test seeds", allow=FINETUNE_SPEC.test_seeds.allow)
     kept_parts(Path(opts.out_dir) / "rl_confirm.json", [p for p in PARTS if p not in opts.parts], *opts.seed_sets())
 
 
