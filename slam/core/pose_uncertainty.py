@@ -110,11 +110,30 @@ def cycle_information(
     none = CycleInformation(None, float("nan"), 0, n_new, 1.0 if n_new else 0.0)
     if not len(lm) or not len(pts):
         return none
-    x, y, th = (float(v) for v in np.asarray(pose, dtype=float).reshape(3))
+    pv, target, Si = _pairs(np.asarray(pose, dtype=float).reshape(3), pts, pcov, lm, lcov)
+    n_old = len(pv)
+    fraction = n_new / (n_new + n_old) if n_new + n_old else 0.0
+    if n_old < MIN_PAIRS:
+        return CycleInformation(None, float("nan"), n_old, n_new, fraction)
+    fit = _fit_pose(np.asarray(pose, dtype=float).reshape(3), pv, target, Si)
+    if fit is None:
+        return CycleInformation(None, float("nan"), n_old, n_new, fraction)
+    pose_fit, J, d2 = fit
+    dof = 2 * n_old - 3
+    scale = d2 / dof if dof > 0 else float("nan")
+    cov = np.linalg.inv(J)
+    return CycleInformation(0.5 * (cov + cov.T), scale, n_old, n_new, fraction, d2, max(dof, 0), pose_fit)
+
+
+def _pairs(
+    pose: np.ndarray, pts: np.ndarray, pcov: np.ndarray, lm: np.ndarray, lcov: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each point's landmark (the Mahalanobis-nearest of the 4 nearest, within the gate), one point per landmark:
+    the paired points (n, 2) (vehicle frame), their landmarks (n, 2) and ``S^-1`` (n, 2, 2)."""
+    x, y, th = (float(v) for v in pose)
     c, s = math.cos(th), math.sin(th)
     R = np.array([[c, -s], [s, c]])
     world = pts @ R.T + np.array([x, y])
-    # candidates: the nearest few landmarks in distance, then the best by Mahalanobis distance
     k = min(4, len(lm))
     _, idx = cKDTree(lm).query(world, k=k)
     idx = np.asarray(idx).reshape(len(pts), k)
@@ -126,38 +145,36 @@ def cycle_information(
     rows = np.arange(len(pts))
     d2b, lmb = d2[rows, best], idx[rows, best]
     ok = d2b <= CHI2_GATE_2DOF
-    # one point per landmark: the closest in Mahalanobis distance
-    order = np.argsort(d2b)
     seen: set[int] = set()
     keep = np.zeros(len(pts), dtype=bool)
-    for i in order:
+    for i in np.argsort(d2b):  # one point per landmark: the closest in Mahalanobis distance
         if ok[i] and int(lmb[i]) not in seen:
             seen.add(int(lmb[i]))
             keep[i] = True
-    n_old = int(keep.sum())
-    fraction = n_new / (n_new + n_old) if n_new + n_old else 0.0
-    if n_old < MIN_PAIRS:
-        return CycleInformation(None, float("nan"), n_old, n_new, fraction)
-    Si = Sinv[rows, best][keep]  # (n, 2, 2)
-    pv, target = pts[keep], lm[lmb[keep]]
-    pose_fit = np.array([x, y, th])
+    return pts[keep], lm[lmb[keep]], Sinv[rows, best][keep]
+
+
+def _fit_pose(
+    pose: np.ndarray, pv: np.ndarray, target: np.ndarray, Si: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The pose fitted to the pairs by Gauss-Newton from ``pose``: the fitted pose, its information ``J`` (3, 3)
+    at the fit and the residuals' chi-square; None when ``J`` is singular."""
+    pose_fit = np.array(pose, dtype=float)
+    n = len(pv)
     J = np.zeros((3, 3))
-    for _ in range(GAUSS_NEWTON_STEPS + 1):  # the pose fitted to the pairs: residuals with 2 n - 3 dof
+    r = np.zeros((n, 2))
+    for _ in range(GAUSS_NEWTON_STEPS + 1):
         c, s = math.cos(pose_fit[2]), math.sin(pose_fit[2])
         R = np.array([[c, -s], [s, c]])
         r = target - (pv @ R.T + pose_fit[:2])
-        H = np.zeros((n_old, 2, 3))
+        H = np.zeros((n, 2, 3))
         H[:, 0, 0] = H[:, 1, 1] = 1.0
         H[:, :, 2] = np.column_stack([-s * pv[:, 0] - c * pv[:, 1], c * pv[:, 0] - s * pv[:, 1]])  # d(R p)/dth
         J = np.einsum("nji,njk,nkl->il", H, Si, H)
         if np.linalg.cond(J) > 1e12:
-            return CycleInformation(None, float("nan"), n_old, n_new, fraction)
+            return None
         pose_fit = pose_fit + np.linalg.solve(J, np.einsum("nji,njk,nk->i", H, Si, r))
-    d2 = float(np.einsum("ni,nij,nj->", r, Si, r))
-    dof = 2 * n_old - 3
-    scale = d2 / dof if dof > 0 else float("nan")
-    cov = np.linalg.inv(J)
-    return CycleInformation(0.5 * (cov + cov.T), scale, n_old, n_new, fraction, d2, max(dof, 0), pose_fit)
+    return pose_fit, J, float(np.einsum("ni,nij,nj->", r, Si, r))
 
 
 def adaptive_drift_step(cov: np.ndarray, heading: float, motion: np.ndarray, increment: np.ndarray) -> np.ndarray:
