@@ -223,7 +223,12 @@ def check_vector_info_flags(kwargs: Mapping[str, Any], force: bool = False) -> N
 
 
 def register_envs() -> None:
-    """Register every id once (re-importing or calling again is a no-op)."""
+    """Register every id once (re-importing or calling again is a no-op), each with its native vector env."""
     for env_id, entry_point in ENV_SPECS + SLAM_ENV_SPECS:
         if env_id not in gym.registry:
-            gym.register(id=env_id, entry_point=entry_point)
+            gym.register(id=env_id, entry_point=entry_point, vector_entry_point=vector_entry_point(env_id))
+
+
+def vector_entry_point(env_id: str) -> str:
+    """The id's native vector env (:mod:`rhs_env.vector_native`): ``"rhs_env.vector_native:make_rhs_highway_v0"``."""
+    return f"rhs_env.vector_native:make_{env_id.replace('-', '_')}"
