@@ -152,6 +152,12 @@ STEPS: tuple[Step, ...] = (
          "radar do is fingerprinted by the fast_radar_fidelity step"),
     Step("fast_radar_fidelity", "fast_radar_fidelity.py", ("--workers", "4"), ("fast_radar_fidelity.json",), 1500,
          "the fast radar against the exact one on the same scenes, the SLAM on 20 paired seeds, steps/s"),
+    Step("fast_radar_calibration", "calibrate_fast_radar.py", (), (), 600,
+         "rebuilds the fast radar's shipped table (rhs_env/data/fast_radar_<key>.npz) from the exact radar",
+         no_fingerprint="writes package data (the fast radar's table), no results file; what the table makes the fast "
+         "radar do is fingerprinted by the fast_radar_fidelity step"),
+    Step("fast_radar_fidelity", "fast_radar_fidelity.py", ("--workers", "4"), ("fast_radar_fidelity.json",), 1500,
+         "the fast radar against the exact one on the same scenes, the SLAM on 20 paired seeds, steps/s"),
     Step("benchmark_radar", "benchmark_radar.py", (), ("benchmark_radar.json",), 60, "timings",
          no_fingerprint="timings"),
     Step("benchmark", "benchmark.py", ("--out", "results/benchmark.json"), ("benchmark.json",), 900, "timings",
