@@ -195,8 +195,9 @@ class _Progress:
         self.seconds += time.perf_counter() - self.started
         if self.quiet() or self.seconds < PROGRESS_AFTER_S:
             return
-        stage = "SLAM" if name.startswith("slam.") else "radar"
-        line = (f"rhs-slam: {len(self.kernels)} kernels compiled, {self.seconds:.0f} s so far (a {stage} kernel: "
+        stage = {"slam": "SLAM", "rhs_env": "radar"}.get(name.split(".")[0], "shared")
+        n = len(self.kernels)
+        line = (f"rhs-slam: {n} kernel{'s' * (n != 1)} compiled, {self.seconds:.0f} s so far (a {stage} kernel: "
                 f"{name.rsplit('.', 1)[-1]}) ...")
         tty = sys.stderr.isatty()
         now = time.monotonic()
@@ -209,7 +210,8 @@ class _Progress:
         """At exit: how many kernels compiled in how long, and where they are cached (after a progress report)."""
         if self.reported and not self.quiet():
             folder = os.environ.get("NUMBA_CACHE_DIR") or "__pycache__ beside the package's sources"
-            self.write(f"rhs-slam: compiled {len(self.kernels)} kernels in {self.seconds:.1f} s; cached in {folder}, "
+            n = len(self.kernels)
+            self.write(f"rhs-slam: compiled {n} kernel{'s' * (n != 1)} in {self.seconds:.1f} s; cached in {folder}, "
                        f"the next runs load them")
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -52,7 +53,8 @@ def test_compile_progress_on_a_cold_cache_and_silence_on_a_warm_one(tmp_path):
     assert {"rhs_env.kernels.tone_spectra", "rhs_common.jit._sort_small"} <= set(stats["kernels"])
     assert stats["seconds"] > 0
     assert err.count(NOTICE) == 1
-    assert "kernels compiled, " in err and f"rhs-slam: compiled {len(stats['kernels'])} kernels in " in err
+    assert re.search(r"rhs-slam: \d+ kernels? compiled, \d+ s so far", err)
+    assert f"rhs-slam: compiled {len(stats['kernels'])} kernels in " in err
     warm, err = _run(SMALL, tmp_path / "a")
     assert warm == {"kernels": [], "seconds": 0.0}
     assert "rhs-slam" not in err
@@ -64,7 +66,29 @@ def test_a_second_process_finds_every_kernel_of_the_first_step_cached(tmp_path):
     """A new user's first two runs: the first SLAM-env step on an empty cache compiles its kernels (with the progress
     on stderr), a second process started right after it (its background compile may still run) compiles none."""
     first, err = _run(ENV_STEP, tmp_path)
-    assert len(first["kernels"]) >= 10 and err.count(NOTICE) == 1 and "kernels compiled, " in err
+    assert len(first["kernels"]) >= 10 and err.count(NOTICE) == 1 and re.search(r"\d+ kernels? compiled, ", err)
     second, err = _run(ENV_STEP, tmp_path)
     assert second["kernels"] == [], second
     assert NOTICE not in err
+
+
+def test_the_parent_says_when_it_exits_before_its_background_compile(capsys, monkeypatch):
+    """slam.gym.precompile: at exit, one line while the background compile still runs; none once it ended, none with
+    RHS_SLAM_QUIET=1."""
+    from slam.gym.precompile import _tell_if_running
+
+    monkeypatch.setenv("RHS_SLAM_QUIET", "0")
+    running = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    done = subprocess.Popen([sys.executable, "-c", "pass"])
+    done.wait()
+    try:
+        _tell_if_running(running)
+        assert f"background kernel compile (pid {running.pid}) goes on" in capsys.readouterr().err
+        _tell_if_running(done)
+        assert capsys.readouterr().err == ""
+        monkeypatch.setenv("RHS_SLAM_QUIET", "1")
+        _tell_if_running(running)
+        assert capsys.readouterr().err == ""
+    finally:
+        running.kill()
+        running.wait()

@@ -24,7 +24,8 @@ One background process per cache at a time: a lock file (:data:`rhs_common.jit.C
 background process' pid) beside the one-call OMP's cache index, stale after
 :data:`rhs_common.jit.LOCK_STALE_S` or once that process is gone; nothing runs with ``NUMBA_DISABLE_JIT=1``,
 with a warm cache, or with ``RHS_SLAM_BACKGROUND_COMPILE=0``. The background process prints nothing and needs
-nothing from its parent: if the parent reaches a kernel first, it compiles it itself, as before.
+nothing from its parent: if the parent reaches a kernel first, it compiles it itself, as before. When the parent
+exits first, it says so in one stderr line (not with ``RHS_SLAM_QUIET=1``).
 
     python -m slam.gym.precompile     # the workload in this process (what the background process runs)
 """
@@ -79,7 +80,21 @@ def start() -> bool:
                             start_new_session=True)
     with contextlib.suppress(OSError):
         lock.write_text(str(proc.pid))  # the lock now lives as long as the background process
+    import atexit
+
+    atexit.register(_tell_if_running, proc)
     return True
+
+
+def _tell_if_running(proc: subprocess.Popen) -> None:
+    """At exit: one stderr line when the background compile still runs (it goes on, and caches the kernels it
+    compiles for the next runs), unless ``RHS_SLAM_QUIET=1``."""
+    from rhs_common.jit import QUIET_ENV
+
+    if proc.poll() is None and os.environ.get(QUIET_ENV, "0") in ("", "0"):
+        print(f"rhs-slam: the background kernel compile (pid {proc.pid}) goes on and caches the last kernels for the "
+              f"next runs (a run started meanwhile runs the OMP's Python body on its compiled stages until then)",
+              file=sys.stderr, flush=True)
 
 
 def synthetic_cloud(pose: np.ndarray, velocity: np.ndarray, landmarks: np.ndarray, sensors: np.ndarray,
