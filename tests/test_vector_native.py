@@ -199,3 +199,20 @@ def test_ppo_learns_through_the_adapter():
         assert model.num_timesteps >= 256
     finally:
         venv.close()
+
+
+def test_benchmark_section_times_native_sync_and_single(monkeypatch):
+    from rhs_studies.bench import benchmark
+
+    monkeypatch.setattr(benchmark, "machine_scaling", lambda: {"two_over_one_median": 1.9})
+    r = benchmark.bench_vec_native(steps=4, seed=0, block=1, n=2, env_id=HW)
+    assert r["env_steps_each"] == 4
+    for k in ("single", "native", "sync"):
+        assert r[f"{k}_steps_per_s"] > 0
+    lo, hi = r["vec_native_over_single_ci"]
+    assert lo <= r["vec_native_over_single"] <= hi
+    assert "vec_native" in benchmark.SECTIONS
+    line = benchmark._md_vec_native(r)[0]
+    assert f"2 x `{HW}`" in line and "1.90 x" in line
+    goals = benchmark._goals({"vec_native": r})
+    assert goals["vec_native_over_single"]["goal"] == 1.4

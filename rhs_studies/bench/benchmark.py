@@ -43,6 +43,9 @@ every section and printed beside it. Sections (``--sections``, default all):
 * ``training``: PPO training steps/s with 2 subprocess envs on
   ``rhs-highway-slam-v0`` against ``rhs-highway-v0`` at the steady rate (from the second rollout on),
   with each run's start-up seconds beside it; goal >= 0.7x.
+* ``vec_native``: the native vector env (``vectorization_mode="vector_entry_point"``) of 8
+  ``rhs-highway-slam-fast-v0`` against one such env and gymnasium's ``SyncVectorEnv`` of 8, round-robin in
+  one process, with the machine's two-process scaling as the ceiling; goal >= 1.4x one env.
 
     python scripts/benchmark.py --out results/benchmark.json      # also writes results/benchmark.md
     python scripts/benchmark.py --sections envs load vec --steps 30   # keeps the other sections of --out
@@ -67,9 +70,9 @@ from rhs_studies.kit.provenance import command_line, write_json
 
 ROOT = Path(__file__).resolve().parents[2]
 
-SECTIONS = ("envs", "start", "floor", "load", "vec", "radar", "patterns", "traffic", "training")
+SECTIONS = ("envs", "start", "floor", "load", "vec", "radar", "patterns", "traffic", "training", "vec_native")
 GOALS = {"radar_env_over_base": 0.75, "slam_env_over_base": 0.67, "loaded_over_quiet": 0.85,
-         "two_workers_over_one": 1.8, "ppo_slam_over_base": 0.7}
+         "two_workers_over_one": 1.8, "ppo_slam_over_base": 0.7, "vec_native_over_single": 1.4}
 START_GOALS_S = {"cold_s": 30.0, "warm_s": 5.0}  # first step of a new user: empty kernel cache / warm cache
 LIBRARY_GOAL_S = 30.0  # the fast M = 60, 1-degree library, 2 workers, every grid pointing within half a grid
 
@@ -574,6 +577,91 @@ def bench_vec(steps: int, seed: int, grid_deg: float) -> dict:
     return out
 
 
+#: the ``vec_native`` section's envs and id (the fast SLAM env: the goal's "8 fast envs")
+VEC_NATIVE_ENVS = 8
+VEC_NATIVE_ID = "rhs-highway-slam-fast-v0"
+
+
+def bench_vec_native(steps: int, seed: int, block: int = 5, n: int = VEC_NATIVE_ENVS,
+                     env_id: str = VEC_NATIVE_ID) -> dict:
+    """Env steps/s of the native vector env against one env and gymnasium's ``SyncVectorEnv``, in this process.
+
+    The native env (``gym.make_vec(env_id, n, vectorization_mode="vector_entry_point")``), ``SyncVectorEnv`` of
+    ``n`` and one env take turns, ``block`` vector steps each (the single env: ``block * n`` steps), after one
+    untimed block each, for ``steps`` env steps each in all; the machine's two-process scaling
+    (:func:`machine_scaling`) is the ceiling beside them (the native env runs on one core).
+
+    Args:
+        steps: env steps per contender (rounded up to whole blocks).
+        seed: reset seed and action seed.
+        block: vector steps per turn.
+        n: envs of the vector envs.
+        env_id: the id.
+
+    Returns:
+        Steps/s per contender, ``vec_native_over_single`` with its 95 % block-bootstrap interval, ``sync_over_single``
+        and ``machine_scaling``.
+    """
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401  (registers the ids)
+
+    single = gym.make(env_id)
+    vecs = {"native": gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point"),
+            "sync": gym.make_vec(env_id, num_envs=n, vectorization_mode="sync")}
+    single.reset(seed=seed)
+    single.action_space.seed(seed)
+    for v in vecs.values():
+        v.reset(seed=seed)
+        v.action_space.seed(seed)
+
+    def run_single() -> float:
+        t0 = time.perf_counter()
+        for _ in range(block * n):
+            _, _, term, trunc, _ = single.step(single.action_space.sample())
+            if term or trunc:
+                single.reset()
+        return time.perf_counter() - t0
+
+    def run_vec(v: Any) -> float:
+        t0 = time.perf_counter()
+        for _ in range(block):
+            v.step(v.action_space.sample())
+        return time.perf_counter() - t0
+
+    run_single()
+    for v in vecs.values():
+        run_vec(v)
+    times: dict[str, list[float]] = {"single": [], "native": [], "sync": []}
+    for _ in range(max(1, -(-steps // (block * n)))):
+        times["single"].append(run_single())
+        for name, v in vecs.items():
+            times[name].append(run_vec(v))
+    single.close()
+    for v in vecs.values():
+        v.close()
+    env_steps = block * n * len(times["single"])
+    out: dict[str, Any] = {"env_id": env_id, "num_envs": n, "env_steps_each": env_steps,
+                           **{f"{k}_steps_per_s": env_steps / sum(t) for k, t in times.items()}}
+    out["vec_native_over_single"] = out["native_steps_per_s"] / out["single_steps_per_s"]
+    out["vec_native_over_single_ci"] = ratio_interval(np.array(times["single"]), np.array(times["native"]))
+    out["sync_over_single"] = out["sync_steps_per_s"] / out["single_steps_per_s"]
+    out["machine_scaling"] = machine_scaling()
+    return out
+
+
+def _md_vec_native(r: dict) -> list[str]:
+    """The ``vec_native`` section's line."""
+    ci = r["vec_native_over_single_ci"]
+    return [f"Native vector env (`vectorization_mode=\"vector_entry_point\"`), {r['num_envs']} x `{r['env_id']}` in "
+            f"one process: {r['native_steps_per_s']:.1f} env steps/s against one env's {r['single_steps_per_s']:.1f} "
+            f"({r['vec_native_over_single']:.2f} x [95 % {ci[0]:.2f}, {ci[1]:.2f}], goal >= "
+            f"{GOALS['vec_native_over_single']} x) and gymnasium's SyncVectorEnv's {r['sync_steps_per_s']:.1f} "
+            f"({r['sync_over_single']:.2f} x). The ceiling, the machine's two-process scaling: "
+            f"{r['machine_scaling']['two_over_one_median']:.2f} x; the native env steps its envs in turn on one core.",
+            ""]
+
+
 #: the work of :func:`machine_scaling`: an integer sum in the interpreter (no memory traffic, no shared state)
 SPIN_CODE = "import time\nt = time.perf_counter()\ns = 0\nfor i in range(8_000_000):\n    s += i\nprint(time.perf_counter() - t)"
 
@@ -802,6 +890,8 @@ def markdown(result: dict) -> str:
     lines += _md_ratios(result)
     if "traffic" in result:
         lines += _md_traffic(result)
+    if "vec_native" in result:
+        lines += _md_vec_native(result["vec_native"])
     if "radar" in result:
         lines += ["| one 4-radar scan, typical scene | synthesis (ms) | range/CFAR (ms) | OMP (ms) | total (ms) |",
                   "|---|---:|---:|---:|---:|"]
@@ -861,6 +951,8 @@ def _run_section(sec: str, args: argparse.Namespace) -> dict:
         return bench_load(args.steps, args.seed, args.grid_deg)
     if sec == "vec":
         return bench_vec(args.steps, args.seed, args.grid_deg)
+    if sec == "vec_native":
+        return bench_vec_native(args.steps, args.seed, block=args.block)
     if sec == "radar":
         from rhs_studies.bench.benchmark_radar import benchmark_radar
 
@@ -938,7 +1030,7 @@ def main(argv: list[str] | None = None) -> int:
 def _goals(result: dict) -> dict:
     """Each speed ratio present in the result, its goal and whether it is met."""
     found: dict[str, dict[str, Any]] = {}
-    for sec in ("envs", "load", "vec", "training"):
+    for sec in ("envs", "load", "vec", "training", "vec_native"):
         for k, goal in GOALS.items():
             if k in result.get(sec, {}):
                 v = float(result[sec][k])
