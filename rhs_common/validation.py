@@ -479,6 +479,8 @@ def check_output_path(field: str, path: Any, directory: bool = False) -> None:
             return
         if p.is_dir():
             raise ValueError(f"{field}: {p} is a directory, expected a file path")
+        if p.exists() and not p.is_file():  # a FIFO would block the open below, a device would take the output
+            raise ValueError(f"{field}: {p} is not a regular file (a named pipe, device or socket); give a file path")
         p.parent.mkdir(parents=True, exist_ok=True)
         if p.exists():
             with p.open("a"):

@@ -93,6 +93,8 @@ FAULTS = [
           ("--out", "named pipe")),
     Fault("evaluate --out is a named pipe", ["evaluate", "--policy", "constant:1", *FAST_ENV, "--out", "fifo.json"],
           {"fifo.json": FIFO}, ("--out", "named pipe")),
+    Fault("patterns --out is a named pipe", ["patterns", "--grid-deg", "10", "--out", "fifo.npz"], {"fifo.npz": FIFO},
+          ("--out", "named pipe")),
     Fault("scan scene is /dev/zero", ["scan", "/dev/zero", "--out", "out.json"], {}, ("/dev/zero", "character device")),
     Fault("scan scene is a directory", ["scan", "d", "--out", "out.json"], {"d": DIR}, ("d", "directory")),
     Fault("scan scene over the size limit", ["scan", "big.json", "--out", "out.json"],
