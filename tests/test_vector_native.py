@@ -22,8 +22,9 @@ HW_KW = {"vehicles_count": 6, "lanes_count": 3, "duration": 1.0}
 RADAR_KW = small_env_kwargs(slam=False, max_points=32, vehicles_count=3, lanes_count=2, duration=1.0)
 
 
-#: highway-env's reset info holds ``action_space.sample()`` of an unseeded action space: random in any vector env
-UNSEEDED = {"action", "_action"}
+#: highway-env's reset info holds ``action_space.sample()`` of an unseeded action space, and the racetrack's its
+#: reward term: random in any vector env (and in single envs)
+UNSEEDED = {"action", "_action", "action_reward", "_action_reward"}
 
 
 def _same(a, b, path="obs") -> None:
@@ -77,6 +78,17 @@ def test_native_equals_sync_highway(mode):
 def test_native_equals_sync_radar():
     ends = _run_pair(RADAR, RADAR_KW, n=2, steps=12)
     assert ends >= 2
+
+
+@pytest.mark.parametrize("env_id", ["rhs-highway-slam-fast-v0", "rhs-racetrack-slam-v0"])
+def test_native_equals_sync_slam(env_id):
+    """A SLAM id (fast radar, compiled traffic) and a road with a Box action: 2-step episodes, autoreset twice."""
+    kw = {"slam": {"n_particles": 8}, "max_landmarks": 8, "duration": 0.4}
+    if env_id.startswith("rhs-highway"):  # the fast radar's calibration is the default radar's
+        kw.update(vehicles_count=3, lanes_count=2)
+    else:
+        kw.update(small_env_kwargs(max_points=32))
+    assert _run_pair(env_id, kw, n=2, steps=6) >= 4
 
 
 def test_every_id_has_a_vector_entry_point():
