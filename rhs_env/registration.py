@@ -10,7 +10,8 @@ imports ``rhs_env`` first, which registers the ids. ``gym.make_vec`` needs no
 prefix (it ships the resolved spec, whose entry point imports the package). Inside
 ``gym.make_vec`` the entry points refuse the info flags gymnasium cannot stack
 (:func:`check_vector_info_flags`); :mod:`rhs_env.vector` has vector-env helpers whose faults are
-named and never hang.
+named and never hang. Every id also registers a ``vector_entry_point`` (:func:`vector_entry_point`): the native
+vector env of :mod:`rhs_env.vector_native`, ``gym.make_vec``'s choice when no ``vectorization_mode`` is given.
 
 =========================  ==============================================  =====================
 id                         entry point                                     observation
