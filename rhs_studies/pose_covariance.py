@@ -102,7 +102,7 @@ def episode(env: Any, seed: int, cycles: int) -> dict[str, Any]:
         if term or trunc:
             break
     return {"seed": seed, "cycles": len(err_m), "nees": out, "position_error_m": err_m, "lost": lost,
-            "parts": np.asarray(parts).round(10).tolist()}
+            "parts": [[float(f"{v:.4g}") for v in row] for row in parts]}  # 4 significant digits: a record
 
 
 def summarize(runs: list[dict[str, Any]], model: str) -> dict[str, Any]:
