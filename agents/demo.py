@@ -43,7 +43,7 @@ from agents.evaluate import (
 
 __all__ = ["GIF_LEGEND", "configure", "plot_demo", "run", "with_legend"]
 
-#: GIF legend: the colours drawn over highway-env's frame (rhs_env.wrappers, slam.gym.wrapper, rhs_env.envs)
+#: GIF legend: the colours drawn over highway-env's frame (rhs_env.wrappers, slam.gym.wrappers, rhs_env.envs)
 GIF_LEGEND = (
     ((255, 40, 40), "radar points"),
     ((60, 220, 60), "true landmarks"),

@@ -209,7 +209,7 @@ def worker_env_id(env_id: str) -> str:
 #: imported once by the forkserver, so each worker forked from it starts with them loaded
 #: (highway-env alone imports matplotlib and pygame: seconds per worker otherwise)
 FORKSERVER_PRELOAD = ("rhs_env", "rhs_env.envs", "rhs_env.registration", "rhs_env.wrappers", "slam.gym.envs",
-                      "slam.gym.wrapper", "slam.gym.metrics_info")
+                      "slam.gym.wrappers", "slam.gym.metrics_info")
 
 
 def _preload_forkserver() -> None:

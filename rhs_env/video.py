@@ -3,7 +3,7 @@
 Works on every id of the project (and any env rendering ``rgb_array`` frames): the frames are the env's
 own ``render()``, which on the radar ids already has the radar points drawn over the road
 (:meth:`rhs_env.wrappers.RadarObservation.render`) and on the SLAM ids also the true and estimated
-trajectory and the estimated map (:meth:`slam.gym.wrapper.SlamObservation.render`). Below each frame
+trajectory and the estimated map (:meth:`slam.gym.wrappers.SlamObservation.render`). Below each frame
 the wrapper adds a white strip (never over the road) with a colour legend of those layers and one
 status line read from the step's ``info``: time, return so far, speed and, where the info has them,
 the SLAM track health (a bar from red, 0, to green, 1), the position error against the filter's own
@@ -44,7 +44,7 @@ __all__ = ["FORMATS", "LEGEND", "RADAR_LABELS", "SLAM_LABELS", "VIDEO_HINT", "Re
            "check_video_path", "legend_for", "status_line", "write_video"]
 
 #: what the frames show, colour -> label (rhs_env.wrappers.POINT_COLOR, rhs_env.envs.LANDMARK_COLOR,
-#: slam.gym.wrapper.TRUE_COLOR and EST_COLOR, highway-env's ego and IDM vehicles; tests/test_video.py checks them)
+#: slam.gym.wrappers.TRUE_COLOR and EST_COLOR, highway-env's ego and IDM vehicles; tests/test_video.py checks them)
 LEGEND: tuple[tuple[tuple[int, int, int], str], ...] = (
     ((255, 40, 40), "radar points"),
     ((60, 220, 60), "landmarks"),

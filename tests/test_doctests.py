@@ -13,7 +13,7 @@ MODULES = (
     "rhs_common.jit",
     "rhs_env.radar_config",
     "rhs_env.wrappers",
-    "slam.gym.wrapper",
+    "slam.gym.wrappers",
     "slam.gym.metrics_info",
     "agents.decision",
     "agents.shield",

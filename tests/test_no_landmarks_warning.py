@@ -1,7 +1,7 @@
 """The SLAM on a scene with nothing static to map says so: one warning at reset, and a health that drops.
 
 highway-env's own roads (roundabout, intersection, exit, racetrack...) have no roadside landmarks: wrapped
-in :class:`slam.gym.wrapper.SlamObservation` the filter can only dead-reckon, so it must not report a
+in :class:`slam.gym.wrappers.SlamObservation` the filter can only dead-reckon, so it must not report a
 confident pose (:mod:`slam.core.health`, the anchor score).
 """
 
@@ -16,7 +16,7 @@ import pytest
 import rhs_env  # noqa: F401
 from rhs_env.wrappers import RadarObservation
 from slam.core.health import HealthConfig, TrackHealth
-from slam.gym.wrapper import SlamObservation, static_features
+from slam.gym.wrappers import SlamObservation, static_features
 
 FAST_RADAR = {"scan": {"grid_deg": 5}}
 

@@ -4,7 +4,9 @@
   ``scripts/write_results_pages.py`` does;
 * ``scripts/rl_lane_test.py``, the command ``results/rl_lane_test.json`` records and the study's key in
   ``results/fingerprints.json``, runs :mod:`rhs_studies.rl_lane_rule_trial`, and ``reproduce`` finds that module's
-  ``fingerprint()`` through it.
+  ``fingerprint()`` through it;
+* ``slam.gym.wrapper`` (now :mod:`slam.gym.wrappers`, like ``rhs_env.wrappers``) still gives the same objects, with a
+  ``DeprecationWarning``.
 """
 
 from __future__ import annotations
@@ -54,3 +56,18 @@ def test_the_lane_rule_study_keeps_its_recorded_command_and_fingerprint_key():
     assert provenance.script_name(rl_lane_rule_trial.LAUNCHER) in provenance.load_fingerprints()
     recorded = json.loads((provenance.RESULTS / "rl_lane_test.json").read_text())["provenance"]["command"]
     assert recorded[1] == f"scripts/{step.script}"
+
+
+def test_the_old_wrapper_module_gives_the_same_objects_with_a_warning():
+    import slam.gym.wrapper as old
+    import slam.gym.wrappers as new
+
+    with pytest.warns(DeprecationWarning, match="slam.gym.wrappers"):
+        assert old.SlamObservation is new.SlamObservation
+    assert old.__all__ == new.__all__ and "SlamObservation" in new.__all__
+    namespace: dict = {}
+    with pytest.warns(DeprecationWarning):
+        exec("from slam.gym.wrapper import *", namespace)
+    assert {n: namespace[n] for n in new.__all__} == {n: getattr(new, n) for n in new.__all__}
+    with pytest.raises(AttributeError):
+        old.no_such_name  # noqa: B018

@@ -14,7 +14,7 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 import rhs_env  # noqa: F401  (registers the ids)
 from agents.decision import IDLE
 from rhs_env.wrappers import RadarObservation
-from slam.gym.wrapper import SlamObservation
+from slam.gym.wrappers import SlamObservation
 
 HIGHWAY_SLAM = "rhs-highway-slam-v0"
 PAPER = "rhs-paper-v0"

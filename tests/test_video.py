@@ -64,7 +64,7 @@ def test_the_legend_colours_are_the_drawn_ones():
 
     from rhs_env.envs import LANDMARK_COLOR
     from rhs_env.wrappers import POINT_COLOR
-    from slam.gym.wrapper import EST_COLOR, TRUE_COLOR
+    from slam.gym.wrappers import EST_COLOR, TRUE_COLOR
 
     colours = {label: c for c, label in video.LEGEND}
     assert colours == {"radar points": POINT_COLOR, "landmarks": LANDMARK_COLOR, "true trajectory": TRUE_COLOR,

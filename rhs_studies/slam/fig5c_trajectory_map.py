@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> dict:
 
     from slam.core.metrics import map_metrics
     from slam.core.registration import apply_motion
-    from slam.gym.wrapper import SlamObservation
+    from slam.gym.wrappers import SlamObservation
 
     env = make_paper_env(args, args.antenna, args.tx_power)
     slam = env

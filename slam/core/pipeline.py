@@ -1,7 +1,7 @@
 """One SLAM cycle from a raw point cloud: ego velocity, moving-point filter, registration, RBPF.
 
 This is the single code path shared by the env's SLAM wrapper
-(:class:`slam.gym.wrapper.SlamObservation`) and the scripted runs of
+(:class:`slam.gym.wrappers.SlamObservation`) and the scripted runs of
 :func:`slam.core.scenario.run_scenario` (``rhs-slam scenario``).
 
 Per cycle, with cloud ``A_z`` (N, 4) in the vehicle frame and cycle length dt (s)

@@ -28,7 +28,7 @@ def make_slam_env(env_cls: type[gym.Env] | str, kwargs: dict[str, Any]) -> gym.E
     from rhs_env.registration import check_vector_info_flags, route_kwargs, with_cheap_base_observation
     from rhs_env.wrappers import RadarObservation
     from slam.gym.metrics_info import SlamMetricsInfo
-    from slam.gym.wrapper import SlamObservation
+    from slam.gym.wrappers import SlamObservation
 
     check_vector_info_flags(kwargs)
     scene = getattr(envs, env_cls) if isinstance(env_cls, str) else env_cls

@@ -1,7 +1,7 @@
 """Ground truth and SLAM errors in ``info``, apart from the observation.
 
 :class:`SlamMetricsInfo` wraps a SLAM env (an env with a
-:class:`slam.gym.wrapper.SlamObservation` inside), in the manner of gymnasium's
+:class:`slam.gym.wrappers.SlamObservation` inside), in the manner of gymnasium's
 ``RecordEpisodeStatistics``: it changes nothing but ``info``. Per step it adds
 (all fixed-size, so vector envs can stack them):
 
@@ -44,7 +44,7 @@ class SlamMetricsInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Adds the SLAM's ground truth and errors to ``info`` (see the module docstring).
 
     Args:
-        env: an env wrapping a :class:`slam.gym.wrapper.SlamObservation`.
+        env: an env wrapping a :class:`slam.gym.wrappers.SlamObservation`.
         map_gate_m: gate of the Hungarian map metric (m), > 0.
         landmarks_in_info: also add the variable-length true and estimated landmark arrays.
 
