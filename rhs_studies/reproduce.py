@@ -104,7 +104,9 @@ STEPS: tuple[Step, ...] = (
          "kept for comparison: measured on the code before it; the command is the first-round model at HEAD"),
     Step("slam_roads", "slam_accuracy.py", ("--parts", "roads", "--out", "results/slam_roads", "--no-progress"),
          ("slam_roads.json",), 1800, "the SLAM on highway-env's merge, roundabout, intersection, exit and racetrack "
-         "(IDM + MOBIL and random actions, 20 held-out seeds each, the 5-degree scan grid; ~25 min on 2 cores)"),
+         "(IDM + MOBIL and random actions, 20 held-out seeds each, the 5-degree scan grid; ~25 min on 2 cores)",
+         no_fingerprint="a part of scripts/slam_accuracy.py, whose code the slam_accuracy step fingerprints (one "
+         "fingerprinted step per script); the roads' own figures are checked by tests/test_road_envs.py"),
     Step("train_policy", "train_policy.py", ("--no-progress", "--algo", "dagger", "--only", "slam", "truth",
                                              "truth_all_around", "slam_rhs", "slam_phased", "dense", "dense_phased"),
          ("train_policy.json",), 7200,
@@ -146,12 +148,6 @@ STEPS: tuple[Step, ...] = (
          "the compiled traffic core against highway-env, 50 seeds x 200 steps per scene",
          no_fingerprint="an equivalence check of two implementations, not numbers of the code: its differences are "
          "rounding-level and vary by CPU; a short version runs in tests/test_traffic_core.py on every test run"),
-    Step("fast_radar_calibration", "calibrate_fast_radar.py", (), (), 600,
-         "rebuilds the fast radar's shipped table (rhs_env/data/fast_radar_<key>.npz) from the exact radar",
-         no_fingerprint="writes package data (the fast radar's table), no results file; what the table makes the fast "
-         "radar do is fingerprinted by the fast_radar_fidelity step"),
-    Step("fast_radar_fidelity", "fast_radar_fidelity.py", ("--workers", "4"), ("fast_radar_fidelity.json",), 1500,
-         "the fast radar against the exact one on the same scenes, the SLAM on 20 paired seeds, steps/s"),
     Step("fast_radar_calibration", "calibrate_fast_radar.py", (), (), 600,
          "rebuilds the fast radar's shipped table (rhs_env/data/fast_radar_<key>.npz) from the exact radar",
          no_fingerprint="writes package data (the fast radar's table), no results file; what the table makes the fast "
