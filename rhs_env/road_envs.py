@@ -32,6 +32,8 @@ it (at the same config), and the landmarks are a function of the seed too.
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from highway_env import utils
@@ -49,8 +51,8 @@ from rhs_env.scene import LandmarkConfig
 
 __all__ = [
     "ROAD_ENVS", "RHSExitEnv", "RHSIntersectionEnv", "RHSMergeEnv", "RHSRacetrackEnv", "RHSRoadEnv",
-    "RHSRoundaboutEnv", "make_exit_radar", "make_intersection_radar", "make_merge_radar", "make_racetrack_radar",
-    "make_road_radar", "make_roundabout_radar",
+    "RHSRoundaboutEnv", "intersection_vehicle_type", "make_exit_radar", "make_intersection_radar", "make_merge_radar",
+    "make_racetrack_radar", "make_road_radar", "make_roundabout_radar",
 ]
 
 #: the decision / radar / SLAM cycle rate of every road, Hz
@@ -144,11 +146,46 @@ class RHSRoundaboutEnv(RHSRoadEnv, RoundaboutEnv):
     ROAD = RoundaboutEnv
 
 
+def intersection_vehicle_type(type_path: str) -> str:
+    """The import path of a subclass of ``type_path`` private to the intersection (made once per class).
+
+    highway-env's intersection sets ``DISTANCE_WANTED``, ``COMFORT_ACC_MAX`` and ``COMFORT_ACC_MIN`` on the other
+    vehicles' *class* when it builds its traffic, so every env made later in the process (a highway, a SLAM env)
+    drove with the intersection's IDM constants. On the subclass the same values reach the intersection's
+    vehicles only.
+    """
+    base = utils.class_from_path(type_path)
+    if base.__module__ == __name__:
+        return type_path
+    name = f"Intersection{base.__name__}"
+    if name not in globals():
+        globals()[name] = type(name, (base,), {"__module__": __name__, "__qualname__": name})
+    return f"{__name__}.{name}"
+
+
 class RHSIntersectionEnv(RHSRoadEnv, IntersectionEnv):
     """highway-env's ``intersection-v0`` (a four-way junction the ego crosses to its destination) with landmarks beside
-    the approaches and the corners' kerbs."""
+    the approaches and the corners' kerbs. Its traffic is highway-env's; the IDM constants highway-env sets for it
+    stay on a private subclass (:func:`intersection_vehicle_type`)."""
 
     ROAD = IntersectionEnv
+
+    @contextlib.contextmanager
+    def _private_vehicle_type(self) -> Iterator[None]:
+        original = self.config["other_vehicles_type"]
+        self.config["other_vehicles_type"] = intersection_vehicle_type(original)
+        try:
+            yield
+        finally:
+            self.config["other_vehicles_type"] = original
+
+    def _make_vehicles(self, n_vehicles: int = 10) -> None:
+        with self._private_vehicle_type():
+            super()._make_vehicles(n_vehicles)
+
+    def _spawn_vehicle(self, *args: Any, **kwargs: Any) -> Any:
+        with self._private_vehicle_type():
+            return super()._spawn_vehicle(*args, **kwargs)
 
 
 class RHSExitEnv(RHSRoadEnv, ExitEnv):

@@ -223,3 +223,20 @@ def test_slam_accuracy_roads_part(tmp_path):
     page = out.with_suffix(".md").read_text()
     assert page.startswith("# SLAM accuracy on highway-env's roads") and "| racetrack | idm |" in page
     assert "DRO 0.18 %" in page and "simulated" in page
+
+
+def test_the_intersection_keeps_its_idm_constants_to_itself():
+    """highway-env's intersection sets its IDM constants on the other vehicles' class: made in the same process, a
+    highway afterwards drove with them (a SLAM drive's error changed). They now live on a private subclass."""
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    before = {k: getattr(IDMVehicle, k) for k in ("DISTANCE_WANTED", "COMFORT_ACC_MAX", "COMFORT_ACC_MIN")}
+    env = gym.make("rhs-intersection-v0")
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(env.action_space.sample())
+    others = [v for v in env.unwrapped.road.vehicles if v is not env.unwrapped.vehicle]
+    env.close()
+    assert others and all(isinstance(v, IDMVehicle) for v in others)
+    assert all((v.DISTANCE_WANTED, v.COMFORT_ACC_MAX, v.COMFORT_ACC_MIN) == (7, 6, -3) for v in others)
+    assert {k: getattr(IDMVehicle, k) for k in before} == before
