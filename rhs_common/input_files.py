@@ -30,6 +30,7 @@ or a boolean, finite".
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -39,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "file_sha256",
     "InputError", "MAX_BYTES", "MAX_DEPTH", "MAX_INPUT_ENV", "MAX_INT_DIGITS", "MAX_YAML_ALIASES", "MAX_YAML_BYTES",
     "MAX_YAML_NODES", "check_number", "expanded_nodes", "file_kind", "max_input_bytes", "nesting_depth", "parse_json",
     "read_json", "read_text", "read_yaml",
@@ -353,3 +355,12 @@ def check_number(field: str, value: Any, low: float | None = None, high: float |
         bounds = f" in [{'-inf' if low is None else f'{low:g}'}, {'inf' if high is None else f'{high:g}'}]"
         raise ValueError(f"{field} must be a finite number{bounds}, got {value!r}")
     return v
+
+
+def file_sha256(path: str | Path) -> str:
+    """sha256 hex digest of a file's bytes, read in 1 MiB chunks (the checksums of the shipped artifacts)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()

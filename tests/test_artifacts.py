@@ -25,6 +25,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from rhs_common.input_files import file_sha256
 from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.patterns import library as L
 from slam.core import cnn_registration as C
@@ -253,7 +254,7 @@ def test_shipped_weights_match_their_record_and_load_as_before() -> None:
     import torch
 
     record = json.loads(C.weights_record(C.DEFAULT_WEIGHTS).read_text())
-    assert record["sha256"] == C._file_sha256(C.DEFAULT_WEIGHTS)
+    assert record["sha256"] == file_sha256(C.DEFAULT_WEIGHTS)
     reg = C.CNNRegistration()
     blob = torch.load(C.DEFAULT_WEIGHTS, weights_only=True)
     for k, v in reg.net.state_dict().items():

@@ -42,6 +42,7 @@ import numpy as np
 
 from rhs_common.cache_dir import CACHE_ENV as _CACHE_ENV
 from rhs_common.cache_dir import cache_subdir
+from rhs_common.input_files import file_sha256
 from rhs_common.validation import check_choice, config_json
 from rhs_env.array_models import RHSConfig, ScanConfig, check_amplitudes
 
@@ -260,15 +261,6 @@ def cache_dir() -> Path:
 
 def cache_path(fields: dict[str, Any]) -> Path:
     return cache_dir() / f"patterns_{fields_hash(fields)[:20]}.npz"
-
-
-def file_sha256(path: Path) -> str:
-    """sha256 hex digest of a file's bytes."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            digest.update(chunk)
-    return digest.hexdigest()
 
 
 def write_checksums(directory: Path) -> Path:

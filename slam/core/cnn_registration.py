@@ -23,7 +23,6 @@ missing) naming it and how to regenerate it (:data:`TRAIN_COMMAND`).
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -34,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from rhs_common.geometry import compose, points_in_frame
+from rhs_common.input_files import file_sha256
 from rhs_common.validation import check_int, check_range, check_types
 
 __all__ = [
@@ -141,14 +141,6 @@ def weights_record(path: str | Path) -> Path:
     return Path(path).with_suffix(".json")
 
 
-def _file_sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            digest.update(chunk)
-    return digest.hexdigest()
-
-
 def _same_file(a: Path, b: Path) -> bool:
     try:
         return a.resolve() == Path(b).resolve()
@@ -164,7 +156,7 @@ def _refuse_weights(path: Path, problem: str, shipped: bool) -> ValueError:
 
 def _record_for(path: Path, state: dict[str, Any], meta: dict[str, Any]) -> dict[str, Any]:
     """What :func:`weights_record` holds for a weights file: its sha256, grid and network sizes."""
-    return {"file": path.name, "sha256": _file_sha256(path), "grid": meta["grid"], "channels": meta["channels"],
+    return {"file": path.name, "sha256": file_sha256(path), "grid": meta["grid"], "channels": meta["channels"],
             "hidden": meta["hidden"], "tensors": {k: list(v.shape) for k, v in state.items()},
             "made_by": TRAIN_COMMAND}
 
@@ -215,7 +207,7 @@ def load_weights(path: str | Path, shipped: bool = False) -> tuple[dict[str, Any
             raise _refuse_weights(path, f"its record {record_path} is unreadable ({exc})", shipped) from None
         if not isinstance(record, dict) or not isinstance(record.get("sha256"), str):
             raise _refuse_weights(path, f"its record {record_path} holds no sha256", shipped)
-        if _file_sha256(path) != record["sha256"]:
+        if file_sha256(path) != record["sha256"]:
             raise _refuse_weights(path, f"the file's sha256 differs from the one in {record_path} (truncated, "
                                         f"replaced or edited)", shipped)
     elif shipped:
