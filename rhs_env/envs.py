@@ -106,6 +106,16 @@ def check_manual_control(render_mode: str | None) -> None:
                          "SDL_VIDEODRIVER=dummy); set manual_control=False")
 
 
+def check_display_config(config: Mapping[str, Any], defaults: Mapping[str, Any]) -> None:
+    """The checks every rhs env makes first: the value types against ``defaults``, the screen size, the scaling and
+    the frame's memory (:func:`check_render_memory`)."""
+    check_config_types(config, defaults)
+    check_range("screen_width", config["screen_width"], 1, 4096)
+    check_range("screen_height", config["screen_height"], 1, 4096)
+    check_range("scaling", config["scaling"], MIN_SCALING, 1000.0)
+    check_render_memory(config)
+
+
 def check_render_memory(config: Mapping[str, Any]) -> None:
     """``ValueError`` (:func:`rhs_common.validation.check_memory`) when a frame's lane stripes would exhaust memory."""
     from highway_env.road.graphics import LaneGraphics
@@ -310,11 +320,7 @@ class RHSHighwayEnv(HighwayEnv):
 
     def _validate_config(self) -> None:
         c = self.config
-        check_config_types(c, self.default_config())
-        check_range("screen_width", c["screen_width"], 1, 4096)
-        check_range("screen_height", c["screen_height"], 1, 4096)
-        check_range("scaling", c["scaling"], MIN_SCALING, 1000.0)
-        check_render_memory(c)
+        check_display_config(c, self.default_config())
         check_int("lanes_count", c["lanes_count"], 1, 20)
         check_int("vehicles_count", c["vehicles_count"], 0, 500)
         check_int("controlled_vehicles", c["controlled_vehicles"], 1, 10)
@@ -542,5 +548,6 @@ class RHSPaperEnv(RHSHighwayEnv):
 
 __all__ = [
     "EnvClosedError", "MAX_OBSTACLES", "PAPER_OBSTACLES", "PAPER_START", "RHSDenseEnv", "RHSHighwayEnv", "RHSPaperEnv",
-    "check_action", "check_config_types", "check_manual_control", "check_render_memory", "check_reset_options",
+    "check_action", "check_config_types", "check_display_config", "check_manual_control", "check_render_memory",
+    "check_reset_options",
 ]

@@ -45,7 +45,7 @@ from highway_env.envs.racetrack_env import RacetrackEnv
 from highway_env.envs.roundabout_env import RoundaboutEnv
 
 from rhs_common.validation import check_int, check_range
-from rhs_env.envs import MIN_SCALING, RHSHighwayEnv, check_config_types, check_render_memory
+from rhs_env.envs import RHSHighwayEnv, check_display_config
 from rhs_env.highway_config import CHECKS
 from rhs_env.scene import LandmarkConfig
 
@@ -105,11 +105,7 @@ class RHSRoadEnv(RHSHighwayEnv):
     def _validate_config(self) -> None:
         """The checks of :class:`RHSHighwayEnv` that apply to every road (the keys this road has)."""
         c = self.config
-        check_config_types(c, self.default_config())
-        check_range("screen_width", c["screen_width"], 1, 4096)
-        check_range("screen_height", c["screen_height"], 1, 4096)
-        check_range("scaling", c["scaling"], MIN_SCALING, 1000.0)
-        check_render_memory(c)
+        check_display_config(c, self.default_config())
         check_range("simulation_frequency", c["simulation_frequency"], 1.0, 1000.0)
         check_range("policy_frequency", c["policy_frequency"], 0.0, c["simulation_frequency"], low_open=True)
         for key, high in (("controlled_vehicles", 10), ("vehicles_count", 500), ("initial_vehicle_count", 500), ("lanes_count", 20),
