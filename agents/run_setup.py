@@ -266,11 +266,15 @@ def make_vec_env(
     ``monitor_dir/<i><monitor_suffix>.monitor.csv`` (a resumed run: a new file beside the earlier ones).
     The subprocess workers ignore SIGINT (:class:`EnvFactory`, :func:`start_forkserver_ignoring_sigint`): a
     Ctrl-C in a terminal signals the whole process group, and the run's own handler stops them cleanly.
-    The envs are built as stable-baselines3's ``make_vec_env`` builds them (same seeds).
+    The envs are built as stable-baselines3's ``make_vec_env`` builds them (same seeds). The workers run in
+    :class:`rhs_env.vector.SubprocVecEnv` (stable-baselines3's, fault-safe): a worker's exception (a bad env kwarg,
+    a bad action) is raised in this process with its type and message, naming the worker, and a killed worker is a
+    :class:`rhs_env.vector.WorkerError`, never a ``ConnectionResetError`` or a wait.
     """
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+    from stable_baselines3.common.vec_env import DummyVecEnv
 
     from agents.decision import HoldAction, check_decision_interval, fill_action
+    from rhs_env.vector import SubprocVecEnv  # SB3's, with the workers' errors raised here and dead workers named
 
     if n_envs < 1:
         raise ValueError(f"n_envs must be >= 1, got {n_envs}")

@@ -225,9 +225,12 @@ def check_vector_info_flags(kwargs: Mapping[str, Any], force: bool = False) -> N
 
 def register_envs() -> None:
     """Register every id once (re-importing or calling again is a no-op), each with its native vector env."""
+    from rhs_env.vector import SpecKwargs  # gym.make_vec(id, num_envs=0) is its ValueError (rhs_env.vector)
+
     for env_id, entry_point in ENV_SPECS + SLAM_ENV_SPECS:
         if env_id not in gym.registry:
-            gym.register(id=env_id, entry_point=entry_point, vector_entry_point=vector_entry_point(env_id))
+            gym.register(id=env_id, entry_point=entry_point, vector_entry_point=vector_entry_point(env_id),
+                         kwargs=SpecKwargs())
 
 
 def vector_entry_point(env_id: str) -> str:

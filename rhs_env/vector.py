@@ -26,8 +26,11 @@ This module's helpers do it cleanly:
   dead worker instead of waiting on its pipe.
 
 ``gym.make_vec`` itself (with ``vectorization_mode="sync"`` or ``"async"``) also refuses the
-unstackable info flags when it makes an env of these ids (:func:`check_vector_info_flags`);
-its ``num_envs=0`` stays gymnasium's own error, before any of this package's code runs.
+unstackable info flags when it makes an env of these ids (:func:`check_vector_info_flags`), and
+its ``num_envs`` out of range (0, -1, 2.5) is the same ``ValueError`` as :func:`check_num_envs`'s
+instead of gymnasium's ``IndexError``: the ids are registered with :class:`SpecKwargs`, whose
+``pop("num_envs", n)`` (gymnasium's ``make_vec`` reads the spec's own ``num_envs`` that way before it
+builds any env) checks ``n``.
 
 Example:
     >>> import rhs_env
@@ -57,6 +60,7 @@ __all__ = [
     "MAX_ENVS",
     "UNSTACKABLE_INFO_FLAGS",
     "AsyncVectorEnv",
+    "SpecKwargs",
     "WorkerError",
     "check_num_envs",
     "check_vector_info_flags",
@@ -84,6 +88,28 @@ def check_num_envs(num_envs: Any) -> int:
             or not 1 <= num_envs <= MAX_ENVS:
         raise ValueError(f"num_envs must be an integer in [1, {MAX_ENVS}], got {num_envs!r}")
     return int(num_envs)
+
+
+class SpecKwargs(dict):
+    """The kwargs dict of the project's registered specs: a plain dict whose ``pop("num_envs", n)`` checks ``n``.
+
+    gymnasium's ``make_vec`` deep-copies the spec (the class is kept) and calls
+    ``spec_kwargs.pop("num_envs", num_envs)`` before it builds any env, so ``gym.make_vec(id, num_envs=0)``
+    (any mode) is :func:`check_num_envs`'s ``ValueError``. A ``num_envs`` set in the dict itself is left to gymnasium.
+
+    >>> SpecKwargs().pop("num_envs", 0)
+    Traceback (most recent call last):
+    ...
+    ValueError: num_envs must be an integer in [1, 256], got 0
+    >>> SpecKwargs(a=1).pop("a")
+    1
+    """
+
+    def pop(self, key: Any, *default: Any) -> Any:
+        """``dict.pop``; ``pop("num_envs", n)`` with no ``num_envs`` in the dict checks ``n`` first."""
+        if key == "num_envs" and default and key not in self:
+            check_num_envs(default[0])
+        return super().pop(key, *default)
 
 
 def _flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:

@@ -56,6 +56,26 @@ def test_make_vec_num_envs_is_named(n):
         make_vec(HW, num_envs=n, **SMALL)
 
 
+@pytest.mark.parametrize("mode", ["sync", "async", "vector_entry_point", None])
+@pytest.mark.parametrize("n", [0, -1, 2.5])
+def test_gym_make_vec_num_envs_is_named(mode, n):
+    """gymnasium's own ``make_vec`` on the project's ids: the spec kwargs' check, not gymnasium's IndexError."""
+    with pytest.raises(ValueError, match=r"num_envs must be an integer in \[1, 256\]"):
+        _within(30, lambda: gym.make_vec(HW, num_envs=n, vectorization_mode=mode, **SMALL))
+
+
+def test_gym_make_vec_spec_kwargs_stay_a_dict():
+    """The registered kwargs (:class:`rhs_env.vector.SpecKwargs`) act as a dict: one env per num_envs, kwargs kept."""
+    from rhs_env.vector import SpecKwargs
+
+    assert isinstance(gym.spec(HW).kwargs, SpecKwargs) and gym.spec(HW).kwargs == {}
+    env = gym.make_vec(HW, num_envs=2, vectorization_mode="sync", **SMALL)
+    try:
+        assert env.num_envs == 2 and env.spec.kwargs["vehicles_count"] == 2
+    finally:
+        env.close()
+
+
 def test_async_vector_env_of_no_envs_is_named():
     with pytest.raises(ValueError, match="num_envs"):
         AsyncVectorEnv([])
@@ -202,5 +222,29 @@ def test_subproc_whole_episodes_with_variable_info():
             assert np.all(np.isfinite(reward)) and all("true_landmarks" in i for i in infos)
             dones += int(done.sum())
         assert dones == 2
+    finally:
+        _within(30, venv.close)
+
+
+# --------------------------------------------------------------------------- training runs (agents.run_setup)
+def test_training_vector_env_bad_kwarg_in_a_worker_reaches_the_parent():
+    """A training run's workers (``agents.run_setup.make_vec_env``, rhs_env.vector's SubprocVecEnv): the worker's
+    ValueError naming the field, not SB3's ConnectionResetError."""
+    from agents.run_setup import make_vec_env
+
+    with pytest.raises(ValueError, match=r"in vector env worker \d: .*vehicles_count must be in \[0, 500\]"):
+        _within(120, lambda: make_vec_env(HW, 2, 0, env_kwargs={**SMALL, "vehicles_count": -1}))
+
+
+def test_training_vector_env_bad_action_reaches_the_parent_and_close_returns():
+    from agents.run_setup import make_vec_env
+    from rhs_env.vector import SubprocVecEnv
+
+    venv = _within(120, lambda: make_vec_env(HW, 2, 0, env_kwargs=SMALL))
+    try:
+        assert isinstance(venv, SubprocVecEnv)
+        venv.reset()
+        with pytest.raises(Exception, match=r"in vector env worker \d"):
+            _within(60, lambda: venv.step(np.array([99, 99])))
     finally:
         _within(30, venv.close)
