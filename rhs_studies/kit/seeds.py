@@ -53,6 +53,9 @@ LEDGER: tuple[SeedSet, ...] = (
     SeedSet("rl_confirm_validation", 7000, 7099, "rl_confirm: the fine-tune and PPO from scratch chosen"),
     SeedSet("lane_rule_test", 8000, 8099, "rl_lane_rule_trial: the fine-tune behind the chosen lane rule tested"),
     SeedSet("training_eval", 10000, 10999, "the training runs' evaluation envs"),
+    SeedSet("campaign_validation", 20000, 20099, "the training campaign: the checkpoints chosen (driving.campaign)"),
+    SeedSet("campaign_pilot_test", 21000, 21009, "the campaign pilot's shield table, fast and exact env"),
+    SeedSet("campaign_training", 1_000_000, 99_999_999, "the training campaign's training envs (driving.campaign)"),
 )
 BY_NAME = {s.name: s for s in LEDGER}
 
