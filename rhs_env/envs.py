@@ -43,7 +43,7 @@ from highway_env.road.lane import LineType, StraightLane
 from highway_env.road.road import Road, RoadNetwork
 
 from rhs_common.validation import check_bool, check_choice, check_int, check_memory, check_range
-from rhs_env.highway_config import check_highway_config, check_numbers, merge_config, plain
+from rhs_env.highway_config import check_highway_config, check_numbers, compiled_unsupported, merge_config, plain
 from rhs_env.scene import (
     DENSE_LANDMARKS,
     MAX_SCATTER_RANGE_M,
@@ -201,7 +201,9 @@ class RHSHighwayEnv(HighwayEnv):
                 "screen_width": 600,
                 "screen_height": 200,  # room for the roadside landmarks
                 "landmarks": LandmarkConfig().to_dict(),
-                "sim": "highway-env",  # or "compiled": rhs_env.traffic's core steps the traffic
+                # who steps the traffic (rhs_env.traffic): "auto" the compiled core where it ports the config and
+                # the scene, else highway-env; "compiled" the core (an unported config is an error); "highway-env"
+                "sim": "auto",
             },
         )
         return config
@@ -268,22 +270,36 @@ class RHSHighwayEnv(HighwayEnv):
 
     # ---- traffic: highway-env's Python, or the compiled core (config "sim", :mod:`rhs_env.traffic`)
     def _compiled_traffic(self) -> Any:
-        """The env's :class:`rhs_env.traffic.engine.CompiledTraffic` when ``sim="compiled"``, else None."""
-        if self.config.get("sim") != "compiled":
+        """The env's :class:`rhs_env.traffic.engine.CompiledTraffic` when it steps the current scene, else None.
+
+        ``sim="compiled"``: always (an unported scene raises); ``sim="auto"``: when the config and the scene are
+        ones the core ports (:func:`rhs_env.highway_config.compiled_unsupported`,
+        :func:`rhs_env.traffic.state.unsupported`); ``sim="highway-env"`` (or a config without ``sim``): never.
+        """
+        sim = self.config.get("sim")
+        if sim not in ("auto", "compiled") or (sim == "auto" and compiled_unsupported(self.config)):
             return None
         traffic = getattr(self, "_traffic", None)
-        if traffic is None or traffic[0] is not self.road:  # a new scene (reset): pack it again
-            from rhs_env.traffic.engine import CompiledTraffic
+        if traffic is None or traffic[0] is not self.road or traffic[1].strict != (sim == "compiled"):
+            from rhs_env.traffic.engine import CompiledTraffic  # a new scene (reset): pack it again
 
-            traffic = self._traffic = (self.road, CompiledTraffic())
-        return traffic[1]
+            traffic = self._traffic = (self.road, CompiledTraffic(strict=sim == "compiled"))
+        return traffic[1] if traffic[1].supports(self) else None
+
+    @property
+    def traffic_sim(self) -> str:
+        """Who steps the current scene's traffic: ``"compiled"`` (:mod:`rhs_env.traffic`) or ``"highway-env"`` (before
+        the first reset: what the config selects)."""
+        if getattr(self, "road", None) is None or getattr(self.action_type, "controlled_vehicle", None) is None:
+            sim = self.config.get("sim")
+            ported = sim == "compiled" or (sim == "auto" and not compiled_unsupported(self.config))
+            return "compiled" if ported else "highway-env"
+        return "highway-env" if self._compiled_traffic() is None else "compiled"
 
     def _simulate(self, action: Any = None) -> None:
         traffic = self._compiled_traffic()
-        if traffic is None:
+        if traffic is None or not traffic.simulate(self, action):
             super()._simulate(action)
-        else:
-            traffic.simulate(self, action)
 
     def _rewards(self, action: Any) -> dict[str, float]:
         traffic = self._compiled_traffic()

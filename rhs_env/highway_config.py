@@ -28,8 +28,8 @@ import numpy as np
 from rhs_common.validation import check_choice, check_int, check_range
 
 __all__ = [
-    "ACTION_TYPES", "CHECKS", "KINEMATICS_FEATURES", "MAX_OBSERVED_VEHICLES", "MAX_SPEED_MPS", "OBSERVATION_TYPES",
-    "SIMS", "check_highway_config", "check_numbers", "merge_config", "plain", "same_value",
+    "ACTION_TYPES", "CHECKS", "COMPILED_NEEDS", "KINEMATICS_FEATURES", "MAX_OBSERVED_VEHICLES", "MAX_SPEED_MPS", "OBSERVATION_TYPES",
+    "SIMS", "check_highway_config", "check_numbers", "compiled_unsupported", "merge_config", "plain", "same_value",
 ]
 
 #: highway-env's action and observation types (``action_factory`` / ``observation_factory``) that these
@@ -184,27 +184,45 @@ def _check_offscreen_rendering(c: MutableMapping[str, Any]) -> None:
         raise TypeError(f"offscreen_rendering must be None, True or False, got {v!r} ({type(v).__name__})")
 
 
-#: the values of the ``sim`` key (:mod:`rhs_env.traffic`): highway-env's own Python, or the compiled core
-SIMS = ("highway-env", "compiled")
+#: the values of the ``sim`` key (:mod:`rhs_env.traffic`): ``"auto"`` (the default: the compiled core where it ports
+#: the config and the scene, highway-env's own Python elsewhere), highway-env's own Python, or the compiled core
+SIMS = ("auto", "highway-env", "compiled")
+#: the config the compiled core ports: key -> the one value it supports
+COMPILED_NEEDS: dict[str, Any] = {
+    "action.type": "DiscreteMetaAction",
+    "controlled_vehicles": 1,
+    "other_vehicles_type": "highway_env.vehicle.behavior.IDMVehicle",
+    "show_trajectories": False,
+    "manual_control": False,
+}
+
+
+def compiled_unsupported(c: Mapping[str, Any]) -> str:
+    """Why the compiled core cannot step a scene of config ``c`` ("" when it can): the first key of
+    :data:`COMPILED_NEEDS` whose value differs, as ``"needs action.type='DiscreteMetaAction', got 'ContinuousAction'"``."""
+    action = c.get("action")
+    values = {
+        "action.type": action.get("type") if isinstance(action, Mapping) else None,
+        "controlled_vehicles": c.get("controlled_vehicles", 1),
+        "other_vehicles_type": c.get("other_vehicles_type"),
+        "show_trajectories": bool(c.get("show_trajectories", False)),
+        "manual_control": bool(c.get("manual_control", False)),
+    }
+    for key, wanted in COMPILED_NEEDS.items():
+        if values[key] != wanted:
+            return f"needs {key}={wanted!r}, got {values[key]!r}"
+    return ""
 
 
 def _check_sim(c: MutableMapping[str, Any]) -> None:
-    """``sim``: one of :data:`SIMS`; ``"compiled"`` needs what the core ports (``DiscreteMetaAction``, one
-    controlled vehicle, IDM traffic, no trajectories, no manual control)."""
+    """``sim``: one of :data:`SIMS`; ``"compiled"`` needs what the core ports (:data:`COMPILED_NEEDS`:
+    ``DiscreteMetaAction``, one controlled vehicle, IDM traffic, no trajectories, no manual control), else a
+    ``ValueError``; ``"auto"`` then takes highway-env's own code, without an error."""
     check_choice("sim", c["sim"], SIMS)
-    if c["sim"] != "compiled":
-        return
-    needs = {
-        "action.type": (c["action"].get("type"), "DiscreteMetaAction"),
-        "controlled_vehicles": (c.get("controlled_vehicles", 1), 1),
-        "other_vehicles_type": (c.get("other_vehicles_type"), "highway_env.vehicle.behavior.IDMVehicle"),
-        "show_trajectories": (bool(c.get("show_trajectories", False)), False),
-        "manual_control": (bool(c.get("manual_control", False)), False),
-    }
-    for key, (value, wanted) in needs.items():
-        if value != wanted:
-            raise ValueError(f"sim='compiled' needs {key}={wanted!r}, got {value!r}; use sim='highway-env' "
-                             "(highway-env's own code) for this config")
+    why = compiled_unsupported(c) if c["sim"] == "compiled" else ""
+    if why:
+        raise ValueError(f"sim='compiled' {why}; use sim='highway-env' (highway-env's own code) or sim='auto' "
+                         "(the compiled core where it ports the config) for this config")
 
 
 def _check_screen(key: str) -> Callable[[MutableMapping[str, Any]], None]:

@@ -32,9 +32,13 @@ three ids: ``rhs-<road>-v0`` (``rhs_env.road_envs:RHS<Road>Env``, highway-env's 
 The fast variants (labelled, as highway-env's ``highway-fast-v0``): ``rhs-highway-radar-fast-v0``
 (``rhs_env.registration:make_highway_radar_fast``) and ``rhs-highway-slam-fast-v0``
 (``slam.gym.envs:make_highway_slam_fast``) draw the point cloud from the exact radar's measured detector
-(``radar_model="fast"``, :mod:`rhs_env.fast_radar`) and step the compiled traffic (``sim="compiled"``, aligned
-with highway-env on this scene; ``sim="highway-env"`` selects the original). Policies trained on them are to be
-evaluated on the exact ids.
+(``radar_model="fast"``, :mod:`rhs_env.fast_radar`). Policies trained on them are to be evaluated on the exact ids.
+
+Traffic: every straight-road id (``rhs-highway-*``, ``rhs-dense-v0``, ``rhs-paper-v0``) steps its traffic with the
+compiled core of :mod:`rhs_env.traffic` by default (``sim="auto"``: aligned with highway-env to the bit on these
+scenes, ``results/traffic_alignment.md``), and with highway-env's own Python where the config or the scene is one
+the core does not port (``sim="auto"`` falls back without an error; ``sim="compiled"`` makes that an error);
+``sim="highway-env"`` selects the original. The ``rhs-<road>-*`` ids always run highway-env's own code.
 
 Keyword arguments of ``gym.make`` go to the entry point: env config keys
 (``lanes_count=3``, ``landmarks={"spacing_m": 10}``, ``config={...}``,
@@ -103,27 +107,24 @@ def make_highway_radar(**kwargs: Any) -> gym.Env:
 
 
 def fast_variant_kwargs(kwargs: dict[str, Any], env_id: str) -> dict[str, Any]:
-    """``kwargs`` of a ``-fast-`` id: ``radar_model="fast"`` and, unless given, ``sim="compiled"``.
+    """``kwargs`` of a ``-fast-`` id: ``radar_model="fast"`` (the traffic: the ids' default ``sim="auto"``).
 
     Args:
         kwargs: the ``gym.make`` kwargs.
         env_id: the id, for the error message.
 
     Returns:
-        The kwargs with the fast variant's defaults; ``radar_model="exact"`` is a ``ValueError`` naming the exact id.
+        The kwargs with the fast variant's radar; ``radar_model="exact"`` is a ``ValueError`` naming the exact id.
     """
     model = kwargs.get("radar_model", "fast")
     if model not in ("fast", "fast-calibrate"):
         raise ValueError(f"{env_id} is the fast radar variant; radar_model={model!r} is not one of 'fast', "
                          f"'fast-calibrate'. For the exact radar use {env_id.replace('-fast', '')}")
-    config = kwargs.get("config")
-    given_sim = "sim" in kwargs or (isinstance(config, Mapping) and "sim" in config)
-    return {**kwargs, "radar_model": model, **({} if given_sim else {"sim": "compiled"})}
+    return {**kwargs, "radar_model": model}
 
 
 def make_highway_radar_fast(**kwargs: Any) -> gym.Env:
-    """``rhs-highway-radar-fast-v0``: :func:`make_highway_radar` with the fast radar and the compiled traffic
-    (:func:`fast_variant_kwargs`)."""
+    """``rhs-highway-radar-fast-v0``: :func:`make_highway_radar` with the fast radar (:func:`fast_variant_kwargs`)."""
     return make_highway_radar(**fast_variant_kwargs(kwargs, HIGHWAY_RADAR_FAST_ID))
 
 

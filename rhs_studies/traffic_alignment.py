@@ -1,6 +1,6 @@
 """Traffic alignment: the compiled traffic core (``sim="compiled"``) against highway-env, seed by seed.
 
-``python scripts/traffic_alignment.py [--seeds 50] [--steps 200] [--scenes highway dense paper]
+``python scripts/traffic_alignment.py [--seeds 50] [--steps 200] [--scenes highway dense paper paper-default]
 [--out results/traffic_alignment.json]`` drives every scene with both sims for ``--steps`` uniformly
 random meta-actions per seed (:func:`rhs_env.traffic.alignment.align_episode`) and writes the comparison
 (JSON + a Markdown table beside it). The acceptance, per scene:
@@ -97,7 +97,9 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--seeds", type=int, default=50)
     p.add_argument("--steps", type=int, default=200)
-    p.add_argument("--scenes", nargs="+", default=["highway", "dense", "paper"], choices=["highway", "dense", "paper"])
+    from rhs_env.traffic.alignment import SCENES
+
+    p.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
     p.add_argument("--out", default="results/traffic_alignment.json")
     a = p.parse_args(argv)
     if a.seeds < 1 or a.steps < 1:

@@ -46,7 +46,7 @@ def test_fast_radar_id_passes_check_env() -> None:
     try:
         wrapper = _unwrap_to_radar(env)
         assert isinstance(wrapper.radar, FastRadarSystem)
-        assert env.unwrapped.config["sim"] == "compiled"  # the fast ids step the compiled traffic
+        assert env.unwrapped.traffic_sim == "compiled"  # the fast ids step the compiled traffic (the default)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # "env is wrapped" notes from check_env on gym.make envs
             check_env(env, skip_render_check=True)

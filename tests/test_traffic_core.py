@@ -71,7 +71,7 @@ def test_sim_option_is_validated():
         gym.make("rhs-highway-v0", sim="compiled", action={"type": "ContinuousAction"})
     with pytest.raises(ValueError, match="other_vehicles_type"):
         gym.make("rhs-highway-v0", sim="compiled", other_vehicles_type="highway_env.vehicle.behavior.LinearVehicle")
-    assert gym.make("rhs-highway-v0").unwrapped.config["sim"] == "highway-env"  # the default is the original
+    assert gym.make("rhs-highway-v0").unwrapped.config["sim"] == "auto"  # the default: the core where it ports
 
 
 def test_objects_are_written_back():

@@ -23,12 +23,16 @@ import numpy as np
 
 __all__ = ["SCENES", "EpisodeAlignment", "align_episode", "make_scene"]
 
-#: scene name -> (env class path, config): the straight-road scenes of the rhs ids (their traffic; the radar
-#: and SLAM wrappers of the ``-radar`` / ``-slam`` ids do not touch it)
+#: scene name -> (env class path, config): the straight-road scenes of the rhs ids, whose default traffic is the
+#: compiled core (their traffic; the radar and SLAM wrappers of the ``-radar`` / ``-slam`` ids do not touch it).
+#: ``paper`` is the paper's scene with 10 IDM vehicles added, ``paper-default`` ``rhs-paper-v0`` as shipped (the ego
+#: alone beside its five obstacles: the obstacles are radar landmarks, not highway-env road objects, so they do not
+#: collide and the traffic does not see them)
 SCENES: dict[str, tuple[str, dict[str, Any]]] = {
     "highway": ("rhs_env.envs:RHSHighwayEnv", {}),
     "dense": ("rhs_env.envs:RHSDenseEnv", {}),
     "paper": ("rhs_env.envs:RHSPaperEnv", {"vehicles_count": 10}),
+    "paper-default": ("rhs_env.envs:RHSPaperEnv", {}),
 }
 #: a base observation that costs nothing (the comparison reads the road)
 CHEAP_OBSERVATION = {"type": "AttributesObservation", "attributes": []}

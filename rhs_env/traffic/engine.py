@@ -1,12 +1,19 @@
-"""The compiled traffic of one env: packs highway-env's scene, runs :func:`rhs_env.traffic.core.simulate`, writes back.
+"""The compiled traffic of one env: packs highway-env's scene, steps it (:func:`rhs_env.traffic.core.simulate`).
 
 :class:`CompiledTraffic` replaces ``AbstractEnv._simulate`` and ``HighwayEnv._reward`` of an env made with
-``sim="compiled"``. highway-env builds the scene at reset; the first step after it (or after the vehicle list,
-the controlled vehicle or the road changed: :func:`rhs_env.traffic.state.scene_key`) packs it into arrays, and
-every step writes the arrays back into the vehicle objects (:func:`rhs_env.traffic.sync.write_back`), so that the
-observation, ``info``, rendering, the radar's scatterers and a user's ``env.unwrapped.road`` read the stepped
-state. Edits to a vehicle's attributes between steps are not read back (add, remove or replace the vehicle
-instead: that repacks).
+``sim="compiled"`` or (the default) ``sim="auto"``. highway-env builds the scene at reset; the first step after it
+(or after the vehicle list, the controlled vehicle or the road changed: :func:`rhs_env.traffic.state.scene_key`)
+packs it into arrays, and every step writes the arrays back into the vehicle objects
+(:func:`rhs_env.traffic.sync.write_back`), so that the observation, ``info``, rendering, the radar's scatterers
+and a user's ``env.unwrapped.road`` read the stepped state; before every step the vehicles' state is read in again
+(:func:`rhs_env.traffic.sync.read_in`), so that what a user or a driver set on a vehicle between steps (its
+position, speed, target lane or target speed) is stepped as highway-env would step it. Adding, removing or
+replacing a vehicle repacks; the per-vehicle parameters (lengths, gains, IDM constants) are read at packing.
+
+A scene the core does not port (:func:`rhs_env.traffic.state.unsupported`: road objects, a vehicle class other than
+``IDMVehicle`` / ``MDPVehicle``, ...) is an :class:`UnsupportedScene` error with ``strict`` (``sim="compiled"``);
+without it (``sim="auto"``) :meth:`CompiledTraffic.supports` is False and the env steps it with highway-env's own
+code, from the objects (which the core kept up to date), for as long as the scene stays so.
 """
 
 from __future__ import annotations
@@ -15,14 +22,12 @@ from typing import Any
 
 import numpy as np
 
+from rhs_env.highway_config import SIMS
 from rhs_env.traffic import core
 from rhs_env.traffic.state import TrafficState, pack, scene_key, unsupported
-from rhs_env.traffic.sync import write_back
+from rhs_env.traffic.sync import read_in, write_back
 
 __all__ = ["CompiledTraffic", "SIMS", "UnsupportedScene"]
-
-#: the values of the ``sim`` config key: highway-env's own Python (the reference) or the compiled core
-SIMS = ("highway-env", "compiled")
 
 
 class UnsupportedScene(ValueError):
@@ -32,23 +37,52 @@ class UnsupportedScene(ValueError):
 class CompiledTraffic:
     """Steps an env's traffic with the compiled core (see the module docstring)."""
 
-    def __init__(self) -> None:
+    def __init__(self, strict: bool = True) -> None:
         self.state: TrafficState | None = None
+        #: an unported scene raises (``sim="compiled"``) rather than falling back (``sim="auto"``)
+        self.strict = strict
+        #: :func:`scene_key` of the last scene found unported (not strict): not checked again while it stays
+        self._unsupported_key: tuple[int, ...] | None = None
+
+    def supports(self, env: Any) -> bool:
+        """Whether the core steps ``env``'s current scene (packing it if new); an unported scene is an
+        :class:`UnsupportedScene` error when :attr:`strict`, else False."""
+        controlled = env.action_type.controlled_vehicle
+        key = scene_key(env.road, controlled)
+        if self.state is not None and self.state.key == key:
+            return True
+        if key == self._unsupported_key:
+            return False
+        why = unsupported(env.road, controlled)
+        if why:
+            if self.strict:
+                raise UnsupportedScene(f"sim='compiled' cannot step this scene: {why}; use sim='highway-env' or "
+                                       "sim='auto' (highway-env's own code where the core does not port the scene)")
+            self.state, self._unsupported_key = None, key
+            return False
+        self.state, self._unsupported_key = pack(env.road, controlled), None
+        return True
 
     def _state(self, env: Any) -> TrafficState:
-        controlled = env.action_type.controlled_vehicle
-        if self.state is None or self.state.key != scene_key(env.road, controlled):
-            why = unsupported(env.road, controlled)
-            if why:
-                raise UnsupportedScene(f"sim='compiled' cannot step this scene: {why}; use sim='highway-env'")
-            self.state = pack(env.road, controlled)
+        if not self.supports(env) or self.state is None:
+            raise UnsupportedScene("the compiled traffic does not step this scene (CompiledTraffic.supports is False)")
         return self.state
 
-    def simulate(self, env: Any, action: Any) -> None:
-        """``AbstractEnv._simulate(action)`` on the arrays (``env.steps`` advanced), then written back."""
+    def simulate(self, env: Any, action: Any) -> bool:
+        """``AbstractEnv._simulate(action)`` on the arrays (``env.steps`` advanced), then written back.
+
+        Returns:
+            True; False, with nothing stepped, when the scene read in is no longer one the core ports (not
+            :attr:`strict`: the caller steps it with highway-env's code).
+        """
         c = env.config
         frames = int(c["simulation_frequency"] // c["policy_frequency"])
         s = self._state(env)
+        if not read_in(s):  # a vehicle left the road's edge: check the scene and pack it again
+            self.state = None
+            if not self.supports(env):
+                return False
+            s = self._state(env)
         code, action_frame = -1, -1
         if action is not None and not c["manual_control"]:
             action_frame = next((fr for fr in range(frames) if (env.steps + fr) % frames == 0), -1)
@@ -68,6 +102,7 @@ class CompiledTraffic:
             env.steps += frames
             write_back(s)
         env.enable_auto_render = False
+        return True
 
     def rewards(self, env: Any) -> dict[str, float]:
         """``HighwayEnv._rewards`` of the controlled vehicle from the arrays."""

@@ -15,8 +15,9 @@ other than the host's, whose vector calling convention would differ) the functio
 
 Dot products. highway-env's ``np.dot`` of two 2-vectors (lane coordinates, the IDM's closing speed, the polygon
 projections, ``np.linalg.norm``) runs BLAS's ``ddot``, which on a CPU with FMA (x86-64 since 2013, every ARM64)
-computes ``fma(a1, b1, a0 * b0)``; :func:`dot2` always does (LLVM's ``fma``: exact on any CPU), and
-:func:`numpy_dot_is_fma` checks that numpy does so here.
+computes ``fma(a1, b1, a0 * b0)`` (LLVM's ``fma`` in :func:`dot2`: exact on any CPU), except where OpenBLAS's
+kernel for the CPU rounds each product (AMD EPYC, OpenBLAS 0.3.31's Zen kernel): :data:`DOT_FMA` says which
+numpy does here (:func:`numpy_dot_is_fma`, :func:`numpy_dot_is_plain`), and :func:`dot2` does the same.
 
 Cache. The choices are fixed when a kernel is compiled: :data:`USE_SVML` follows from the CPU and numba's target,
 both part of numba's cache key, so a cached kernel always matches the process that loads it.
@@ -33,7 +34,7 @@ import numpy as np
 
 from rhs_common.jit import njit, numba_module
 
-__all__ = ["USE_SVML", "arcsin", "arctan", "dot2", "numpy_dot_is_fma", "power", "tan"]
+__all__ = ["DOT_FMA", "USE_SVML", "arcsin", "arctan", "dot2", "numpy_dot_is_fma", "numpy_dot_is_plain", "power", "tan"]
 
 #: SVML function -> number of arguments
 SVML_FUNCTIONS = {"__svml_asin8_ha": 1, "__svml_atan8_ha": 1, "__svml_tan8_ha": 1, "__svml_pow8_ha": 2}
@@ -185,7 +186,30 @@ else:
     _fma = _fma_intrinsic()
 
 
-@njit
-def dot2(a0: float, a1: float, b0: float, b1: float) -> float:
-    """``np.dot([a0, a1], [b0, b1])`` as BLAS's ``ddot`` computes it on a CPU with FMA."""
-    return _fma(a1, b1, a0 * b0)
+def numpy_dot_is_plain() -> bool:
+    """Whether numpy's ``np.dot`` of 2-vectors rounds as ``a0 * b0 + a1 * b1`` (no FMA) here (the same probe as
+    :func:`numpy_dot_is_fma`): OpenBLAS's ``ddot`` on some CPUs with FMA (AMD's Zen kernels) does."""
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(0.0, 1e3, (64, 2)), rng.normal(0.0, 1.0, (64, 2))
+    return [float(np.dot(x, y)) for x, y in zip(a, b, strict=True)] == [
+        float(x[0] * y[0]) + float(x[1] * y[1]) for x, y in zip(a, b, strict=True)]
+
+
+#: how :func:`dot2` rounds: as numpy's ``np.dot`` here, fused (``fma(a1, b1, a0 * b0)``) unless numpy's BLAS
+#: rounds each product (:func:`numpy_dot_is_plain`). Fixed when the kernels compile; numba's cache key holds the
+#: CPU, which picks OpenBLAS's kernel, so a cached kernel matches the numpy of the process that compiled it
+DOT_FMA = not numpy_dot_is_plain()
+
+if DOT_FMA:
+
+    @njit
+    def dot2(a0: float, a1: float, b0: float, b1: float) -> float:
+        """``np.dot([a0, a1], [b0, b1])`` as BLAS's ``ddot`` computes it on a CPU with FMA."""
+        return _fma(a1, b1, a0 * b0)
+
+else:
+
+    @njit
+    def dot2(a0: float, a1: float, b0: float, b1: float) -> float:
+        """``np.dot([a0, a1], [b0, b1])`` as BLAS's ``ddot`` computes it here (each product rounded)."""
+        return a0 * b0 + a1 * b1
