@@ -101,18 +101,28 @@ def main(argv: list[str] | None = None) -> int:
 
     p.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
     p.add_argument("--out", default="results/traffic_alignment.json")
+    p.add_argument("--add", nargs="*", default=[], metavar="JSON",
+                   help="results of other runs of this script (other --scenes, the same --seeds and --steps) whose "
+                        "scenes go into --out beside this run's (their provenance kept under 'parts')")
     a = p.parse_args(argv)
     if a.seeds < 1 or a.steps < 1:
         p.error(f"--seeds and --steps must be >= 1, got {a.seeds} and {a.steps}")
     started = time.time()
-    scenes = []
-    for scene in a.scenes:
+    parts = [json.loads(Path(f).read_text()) for f in a.add]
+    for part in parts:
+        config = part["provenance"]["config"]
+        if (config["seeds"], config["steps"]) != (a.seeds, a.steps):
+            p.error(f"--add: a run of {config['seeds']} seeds x {config['steps']} steps, not {a.seeds} x {a.steps}")
+    added = [s for part in parts for s in part["scenes"] if s["scene"] not in a.scenes]
+    scenes: list[dict[str, Any]] = []
+    out = Path(a.out)
+    for scene in a.scenes:  # the file written after every scene: a long run leaves the scenes it finished
         scenes.append(scene_summary(scene, a.seeds, a.steps))
         print(json.dumps({k: v for k, v in scenes[-1].items() if k != "episodes"}), flush=True)
-    result = {"scenes": scenes, "passes": all(s["passes"] for s in scenes)}
-    out = Path(a.out)
-    write_json(out, result, __file__, a, started, argv=argv)  # no fingerprint: see rhs_studies.reproduce
-    out.with_suffix(".md").write_text(markdown(result))
+        result = {"scenes": scenes + added, "passes": all(s["passes"] for s in scenes + added),
+                  "parts": [part["provenance"] for part in parts]}
+        write_json(out, result, __file__, a, started, argv=argv)  # no fingerprint: see rhs_studies.reproduce
+        out.with_suffix(".md").write_text(markdown(result))
     print(f"acceptance {'met' if result['passes'] else 'NOT met'} (results in {out.with_suffix('.md')})", flush=True)
     return 0  # a record of the comparison, as the benchmark's goals are (scripts/reproduce.py runs on)
 
