@@ -99,7 +99,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--steps", type=int, default=200)
     from rhs_env.traffic.alignment import SCENES
 
-    p.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
+    p.add_argument("--scenes", nargs="*", default=list(SCENES), choices=list(SCENES),
+                   help="scenes to drive (none: only merge the --add files)")
     p.add_argument("--out", default="results/traffic_alignment.json")
     p.add_argument("--add", nargs="*", default=[], metavar="JSON",
                    help="results of other runs of this script (other --scenes, the same --seeds and --steps) whose "
@@ -113,12 +114,18 @@ def main(argv: list[str] | None = None) -> int:
         config = part["provenance"]["config"]
         if (config["seeds"], config["steps"]) != (a.seeds, a.steps):
             p.error(f"--add: a run of {config['seeds']} seeds x {config['steps']} steps, not {a.seeds} x {a.steps}")
-    added = [s for part in parts for s in part["scenes"] if s["scene"] not in a.scenes]
+    added: list[dict[str, Any]] = []
+    for s in (s for part in parts for s in part["scenes"]):  # each scene once: this run's, else the first part's
+        if s["scene"] not in a.scenes and s["scene"] not in [t["scene"] for t in added]:
+            added.append(s)
     scenes: list[dict[str, Any]] = []
     out = Path(a.out)
-    for scene in a.scenes:  # the file written after every scene: a long run leaves the scenes it finished
-        scenes.append(scene_summary(scene, a.seeds, a.steps))
-        print(json.dumps({k: v for k, v in scenes[-1].items() if k != "episodes"}), flush=True)
+    if not a.scenes and not added:
+        p.error("nothing to do: give --scenes, or --add files to merge")
+    for scene in [*a.scenes, None][:max(1, len(a.scenes))]:  # written after every scene: a long run keeps what ended
+        if scene is not None:
+            scenes.append(scene_summary(scene, a.seeds, a.steps))
+            print(json.dumps({k: v for k, v in scenes[-1].items() if k != "episodes"}), flush=True)
         result = {"scenes": scenes + added, "passes": all(s["passes"] for s in scenes + added),
                   "parts": [part["provenance"] for part in parts]}
         write_json(out, result, __file__, a, started, argv=argv)  # no fingerprint: see rhs_studies.reproduce
