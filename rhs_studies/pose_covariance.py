@@ -1,20 +1,23 @@
-"""Pose covariance per radar configuration: the drift densities against the adaptive model.
+"""Pose covariance per radar configuration: the calibrated model against the adaptive one and the drift densities.
 
 ``python scripts/pose_covariance.py [--seeds 12000 ...] [--cycles 150] [--configs default grid5 ...] [--out-dir results]``
 
 For each configuration (:data:`CONFIGS`: the default 1-degree env, ``grid_deg`` 5, the phased and random
-antennas, the dense env, low SNR) and held-out seed, one IDM + MOBIL drive (``agents.evaluate.IDMMobilPolicy``)
-of ``--cycles`` cycles with ``pipeline={"pose_covariance": "adaptive"}``. The covariance is report-only (the
-filter's estimate does not depend on it), so each cycle scores both models on the same estimate: the adaptive
-one (``slam_pose_cov``) and the drift densities (the pipeline's ``drift`` term plus the particles' variances:
-what ``pose_covariance="drift-constants"``, the default, reports). 3-dof NEES ``e^T P^-1 e`` with ``e`` the
-estimated minus the true pose (heading wrapped), floors and the loss's std as in
-``rhs_studies.slam_accuracy.pose_nees`` (reimplemented here: studies do not import each other).
+antennas, the dense env, low SNR, the fast radar) and held-out seed, one IDM + MOBIL drive
+(``agents.evaluate.IDMMobilPolicy``) of ``--cycles`` cycles with ``pipeline={"pose_covariance": "calibrated"}``:
+the env attaches the configuration's calibration (:mod:`slam.gym.pose_calibration`: shipped, cached, or fitted
+at first use on the calibration seeds 13000-13003, which no evaluation uses). The covariance is report-only (the
+filter's estimate does not depend on it), so each cycle scores the three models on the same estimate: the
+calibrated one (``slam_pose_cov``), the adaptive one (its terms unscaled) and the drift densities (the pipeline's
+``drift`` term plus the particles' variances: what ``pose_covariance="drift-constants"``, the default, reports).
+3-dof NEES ``e^T P^-1 e`` with ``e`` the estimated minus the true pose (heading wrapped), floors and the loss's std
+as in ``rhs_studies.slam_accuracy.pose_nees`` (reimplemented here: studies do not import each other).
 
-Reported per configuration and model: cycles inside / below / above the 95 % chi-square band (3 dof), the
-median NEES, and the ANEES (mean NEES over the runs' cycles) with its 95 % interval (``chi2(3 n) / n`` for
-``n`` cycles: the interval for independent cycles; successive cycles are correlated, so it is narrower than
-the ANEES's real spread). Output: ``pose_covariance.json`` (every episode, provenance) and ``pose_covariance.md``.
+Reported per configuration and model (:func:`slam.core.pose_calibration.nees_coverage`): cycles below / inside /
+above the 95 % chi-square band (3 dof), the median NEES, and the ANEES (mean NEES over the runs' cycles) with its
+95 % interval (``chi2(3 n) / n`` for ``n`` cycles: the interval for independent cycles; successive cycles are
+correlated, so it is narrower than the ANEES's real spread). Output: ``pose_covariance.json`` (every episode, the
+calibrations, provenance) and ``pose_covariance.md``.
 """
 
 from __future__ import annotations
@@ -38,8 +41,9 @@ CONFIGS: dict[str, tuple[str, dict[str, Any]]] = {
     "random": ("rhs-highway-slam-v0", {"antenna": "random"}),
     "dense": ("rhs-dense-v0", {}),
     "low_snr": ("rhs-highway-slam-v0", {"radar": {"link": {"tx_power_dbm": 20.0}}}),
+    "fast": ("rhs-highway-slam-fast-v0", {}),
 }
-MODELS = ("adaptive", "drift-constants")
+MODELS = ("calibrated", "adaptive", "drift-constants")
 #: held-out seeds (the densities were fitted on 1000-1009)
 SEEDS = tuple(range(12000, 12020))
 NEES_FLOOR = np.array([1e-3, 1e-3, 1e-4])  # std floors (m, m, rad), as slam_accuracy's
@@ -87,14 +91,18 @@ def episode(env: Any, seed: int, cycles: int) -> dict[str, Any]:
         obs, _, term, trunc, info = env.step(int(a) if a.ndim == 0 else action)
         e = np.asarray(info["estimated_pose"], float) - np.asarray(info["true_pose"], float)
         e[2] = float(wrap_angle(e[2]))
-        std_adaptive = np.asarray(info["slam_pose_std"], float)
-        cov_adaptive = np.asarray(info["slam_pose_cov"], float)
+        std_cal = np.asarray(info["slam_pose_std"], float)
+        cov_cal = np.asarray(info["slam_pose_cov"], float)
         var = np.square(np.asarray(pipe.slam.last_estimate.pose_std, float))
         cov_const = np.diag(var) + pipe.drift.cov
-        parts.append([*e, *var, *pipe.measured_drift.cov.ravel(), pipe.residual_scale])
+        cov_adaptive = pipe.residual_scale * (np.diag(var) + pipe.measured_drift.cov)
+        parts.append([*e, *var, *pipe.measured_drift.cov.ravel(), pipe.residual_scale, pipe.heading])
         std_const = np.sqrt(np.maximum(np.diag(cov_const), 0.0))
-        if info["slam_lost"]:  # the loss's floor (honest_pose_std), the same for both
-            std_const = np.maximum(std_const, std_adaptive)
+        std_adaptive = np.sqrt(np.maximum(np.diag(cov_adaptive), 0.0))
+        if info["slam_lost"]:  # the loss's floor (honest_pose_std), the same for all three
+            std_const = np.maximum(std_const, std_cal)
+            std_adaptive = np.maximum(std_adaptive, std_cal)
+        out["calibrated"].append(nees(e, cov_cal, std_cal))
         out["adaptive"].append(nees(e, cov_adaptive, std_adaptive))
         out["drift-constants"].append(nees(e, cov_const, std_const))
         err_m.append(float(info["position_error_m"]))
@@ -106,35 +114,51 @@ def episode(env: Any, seed: int, cycles: int) -> dict[str, Any]:
 
 
 def summarize(runs: list[dict[str, Any]], model: str) -> dict[str, Any]:
-    """Coverage inside / below / above the 95 % band, median NEES, ANEES and its 95 % interval over ``runs``."""
-    lo, hi = chi2_band(3)
+    """Coverage below / inside / above the 95 % band, median NEES, ANEES and its 95 % interval over ``runs``
+    (:func:`slam.core.pose_calibration.nees_coverage`)."""
+    from slam.core.pose_calibration import nees_coverage
+
     x = np.concatenate([np.asarray(r["nees"][model], float) for r in runs]) if runs else np.zeros(0)
-    n = len(x)
-    if not n:
-        return {"cycles": 0}
-    a_lo, a_hi = chi2_band(3 * n)
-    anees = float(np.mean(x))
-    return {
-        "cycles": n, "inside": float(np.mean((x >= lo) & (x <= hi))), "below": float(np.mean(x < lo)),
-        "above": float(np.mean(x > hi)), "median": float(np.median(x)), "anees": anees,
-        "anees_interval": [a_lo / n, a_hi / n], "anees_inside": bool(a_lo / n <= anees <= a_hi / n),
-        "goal_met": bool(np.mean((x >= lo) & (x <= hi)) >= 0.9 and np.mean(x < lo) <= 0.07 and np.mean(x > hi) <= 0.07),
-    }
+    return nees_coverage(x)
+
+
+def _calibration(name: str) -> dict[str, Any]:
+    """The calibration the configuration's env attached (its factors, key, seeds, cycles)."""
+    from slam.gym.pose_calibration import slam_wrapper
+
+    env = _WORKER_ENVS.get(name)
+    if env is None:  # the drives ran in worker processes: make one here (it finds the cached calibration)
+        _task_env(name)
+        env = _WORKER_ENVS[name]
+    cal = slam_wrapper(env).pipeline.pose_calibration
+    return {} if cal is None else {k: v for k, v in json.loads(cal.to_json()).items() if k != "setup"}
 
 
 _WORKER_ENVS: dict[str, Any] = {}
 
 
-def _task(task: tuple[str, int, int]) -> dict[str, Any]:
-    """One (configuration, seed, cycles) drive on this process's env for the configuration."""
+def _task_env(name: str) -> None:
+    """This process's env of the configuration ``name`` (the calibrated model: its calibration attached)."""
     import gymnasium as gym
 
     import rhs_env  # noqa: F401
 
-    name, seed, cycles = task
     if name not in _WORKER_ENVS:
         env_id, kw = CONFIGS[name]
-        _WORKER_ENVS[name] = gym.make(env_id, **kw, pipeline={"pose_covariance": "adaptive"})
+        _WORKER_ENVS[name] = gym.make(env_id, **kw, pipeline={"pose_covariance": "calibrated"})
+
+
+def _prepare(name: str) -> None:
+    """Make this process's env of ``name`` (its calibration found, or fitted at first use and cached)."""
+    t0 = time.perf_counter()
+    _task_env(name)
+    print(f"{name}: env and calibration {time.perf_counter() - t0:.0f} s", flush=True)
+
+
+def _task(task: tuple[str, int, int]) -> dict[str, Any]:
+    """One (configuration, seed, cycles) drive on this process's env for the configuration."""
+    name, seed, cycles = task
+    _task_env(name)
     t0 = time.perf_counter()
     out = episode(_WORKER_ENVS[name], seed, cycles)
     print(f"{name} seed {seed}: {out['cycles']} cycles, {time.perf_counter() - t0:.0f} s", flush=True)
@@ -145,18 +169,22 @@ def run(configs: list[str], seeds: list[int], cycles: int, workers: int = 1) -> 
     """Every (configuration, seed) drive (over ``workers`` processes; an episode does not depend on which
     process ran it) and the summaries per configuration and model."""
     tasks = [(name, seed, cycles) for name in configs for seed in seeds]
+    # each configuration's calibration found or fitted (and cached) once, before its drives
     if workers > 1:
         from concurrent.futures import ProcessPoolExecutor
 
         with ProcessPoolExecutor(workers) as pool:
+            list(pool.map(_prepare, configs))
             runs = list(pool.map(_task, tasks))
     else:
+        for name in configs:
+            _prepare(name)
         runs = [_task(t) for t in tasks]
     res: dict[str, Any] = {"nees_band": chi2_band(3), "cycles": cycles, "seeds": seeds, "configs": {}}
     for name in configs:
         mine = [r for t, r in zip(tasks, runs) if t[0] == name]
         env_id, kw = CONFIGS[name]
-        res["configs"][name] = {"env_id": env_id, "kwargs": kw, "runs": mine,
+        res["configs"][name] = {"env_id": env_id, "kwargs": kw, "runs": mine, "calibration": _calibration(name),
                                 "summary": {m: summarize(mine, m) for m in MODELS}}
     return res
 
@@ -166,28 +194,40 @@ def _pct(x: float | None) -> str:
 
 
 def markdown(res: dict[str, Any]) -> str:
-    """The results table: per configuration and model, coverage below / inside / above, median NEES, ANEES."""
+    """The results table: per configuration and model, coverage below / inside / above, median NEES, ANEES;
+    then each configuration's calibration (factors, calibration seeds)."""
     lo, hi = res["nees_band"]
+    seeds = res["seeds"]
     lines = [
         "# Pose covariance per radar configuration", "",
-        f"IDM + MOBIL drives of up to {res['cycles']} cycles, held-out seeds {res['seeds'][0]}-{res['seeds'][-1]} "
-        f"({len(res['seeds'])} per configuration). 3-dof NEES of the estimated minus the true pose against the "
-        f"reported covariance; 95 % band [{lo:.3f}, {hi:.2f}]. `adaptive`: `pipeline={{\"pose_covariance\": "
-        "\"adaptive\"}` (the drift's increment measured each cycle); `drift-constants`: the default (densities per "
-        "metre fitted on the 5-degree grid). Goal: inside >= 90 %, neither tail above 7 %, ANEES inside its interval "
-        "(the interval assumes independent cycles).", "",
-        "| configuration | model | cycles | below | inside | above | median NEES | ANEES [95 % interval] | goal |",
+        f"IDM + MOBIL drives of up to {res['cycles']} cycles, held-out seeds {seeds[0]}-{seeds[-1]} "
+        f"({len(seeds)} per configuration). 3-dof NEES of the estimated minus the true pose against the "
+        f"reported covariance; 95 % band [{lo:.3f}, {hi:.2f}]. `calibrated`: `pipeline={{\"pose_covariance\": "
+        "\"calibrated\"}` (the adaptive model's terms scaled by the configuration's own calibration, fitted on "
+        "other seeds); `adaptive`: the drift's increment measured each cycle, unscaled; `drift-constants`: the "
+        "default (densities per metre fitted on the 5-degree grid). Goal: inside >= 90 %, neither tail above 7 %, "
+        "ANEES inside its interval (the interval assumes independent cycles).", "",
+        "| configuration | model | cycles | below | inside | above | median NEES | ANEES [95 % interval] | coverage goal |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for name, c in res["configs"].items():
         for m in MODELS:
-            s = c["summary"][m]
+            s = c["summary"].get(m, {})
             if not s.get("cycles"):
                 continue
             a_lo, a_hi = s["anees_interval"]
             lines.append(f"| {name} | {m} | {s['cycles']} | {_pct(s['below'])} | {_pct(s['inside'])} | "
-                         f"{_pct(s['above'])} | {s['median']:.2f} | {s['anees']:.2f} [{a_lo:.2f}, {a_hi:.2f}] | "
-                         f"{'met' if s['goal_met'] and s['anees_inside'] else 'not met'} |")
+                         f"{_pct(s['above'])} | {s['median']:.2f} | {s['anees']:.2f} [{a_lo:.2f}, {a_hi:.2f}]"
+                         f"{'' if s['anees_inside'] else ' (outside)'} | {'met' if s['goal_met'] else 'not met'} |")
+    lines += ["", "Calibrations (`k_p`, `k_along`, `k_cross`, `k_heading`; the model: `slam.core.pose_calibration`):", "",
+              "| configuration | key | k_p | k_along | k_cross | k_heading | calibration seeds | cycles per drive |",
+              "|---|---|---|---|---|---|---|---|"]
+    for name, c in res["configs"].items():
+        k = c.get("calibration") or {}
+        if k:
+            cs = k.get("seeds", [])
+            lines.append(f"| {name} | `{k['key']}` | {k['particles']:.3g} | {k['along']:.3g} | {k['cross']:.3g} | "
+                         f"{k['heading']:.3g} | {cs[0]}-{cs[-1]} | {k['cycles']} |" if cs else f"| {name} | - |")
     return "\n".join(lines) + "\n"
 
 

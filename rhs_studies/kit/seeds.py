@@ -53,6 +53,8 @@ LEDGER: tuple[SeedSet, ...] = (
     SeedSet("rl_confirm_validation", 7000, 7099, "rl_confirm: the fine-tune and PPO from scratch chosen"),
     SeedSet("lane_rule_test", 8000, 8099, "rl_lane_rule_trial: the fine-tune behind the chosen lane rule tested"),
     SeedSet("training_eval", 10000, 10999, "the training runs' evaluation envs"),
+    SeedSet("pose_covariance_heldout", 12000, 12019, "pose_covariance: the pose covariance models judged"),
+    SeedSet("pose_calibration", 13000, 13009, "slam.gym.pose_calibration: the pose covariance's factors fitted"),
     SeedSet("campaign_validation", 20000, 20099, "the training campaign: the checkpoints chosen (driving.campaign)"),
     SeedSet("campaign_pilot_test", 21000, 21009, "the campaign pilot's shield table, fast and exact env"),
     SeedSet("campaign_training", 1_000_000, 99_999_999, "the training campaign's training envs (driving.campaign)"),

@@ -45,6 +45,7 @@ from rhs_common.validation import check_choice, check_int, check_range, check_ty
 from slam.core.association import bearing_sectors, estimate_ego_velocity, point_covariance, static_mask
 from slam.core.drift import DriftCovariance
 from slam.core.health import HealthConfig, TrackHealth
+from slam.core.pose_calibration import PoseCalibration, calibrated_covariance
 from slam.core.pose_uncertainty import CycleInformation, cycle_information
 from slam.core.rbpf import RBPFSlam, SlamConfig, SlamEstimate
 from slam.core.registration import ICPRegistration, OdometryRegistration, Registration
@@ -67,7 +68,7 @@ DRIFT_ALONG_M2PM = 1e-7
 DRIFT_CROSS_M2PM = 3e-6
 DRIFT_HEADING_RAD2PM = 1.4e-9
 #: the models of the drift's increment (:class:`PipelineConfig` ``pose_covariance``)
-POSE_COVARIANCE_MODELS = ("drift-constants", "adaptive")
+POSE_COVARIANCE_MODELS = ("drift-constants", "adaptive", "calibrated")
 #: the Doppler gate's half-axis across the Doppler displacement (m; :class:`PipelineConfig`). Random drives on
 #: rhs-highway-slam-v0, seeds 1229, 1244 and 1249: at a lane change's onset (10-12 m/s) the registration found
 #: the true motion, 1.0-1.2 m away from the displacement of the turn-free Doppler velocity, and the 1 m circle
@@ -109,7 +110,10 @@ class PipelineConfig:
     (the default): the three densities above times the distance driven, measured on one radar configuration
     (the 5-degree scan grid of the shipped policies); ``"adaptive"``: measured each cycle from the static points
     paired with the map, their covariances and the residuals, times the fraction of landmarks the cycle renews
-    (:mod:`slam.core.pose_uncertainty`), so it follows the configured radar; the densities are then unused.
+    (:mod:`slam.core.pose_uncertainty`), so it follows the configured radar; the densities are then unused;
+    ``"calibrated"``: the adaptive model's terms scaled by four factors fitted on calibration drives of the
+    configuration itself (:mod:`slam.core.pose_calibration`; :attr:`SlamPipeline.pose_calibration`, which the
+    gym envs set from the shipped, cached or first-use calibration: :mod:`slam.gym.pose_calibration`).
     Only ``slam_pose_cov`` / ``slam_pose_std`` (the info) change with it, not the observation.
     """
 
@@ -410,6 +414,8 @@ class SlamPipeline:
         self.drift = DriftCovariance((o.drift_along_m2pm, o.drift_cross_m2pm, o.drift_heading_rad2pm))
         # the adaptive model's drift (pose_covariance="adaptive"; slam.core.pose_uncertainty): its densities unused
         self.measured_drift = DriftCovariance((0.0, 0.0, 0.0))
+        # the calibrated model's factors (pose_covariance="calibrated"; slam.core.pose_calibration); None: all 1
+        self.pose_calibration: PoseCalibration | None = None
         self._reloc_icp = ICPRegistration(
             max_gate_m=RELOC_GATE_M, yaw_search_rad=RELOC_YAW_RAD, yaw_search_steps=RELOC_YAW_STEPS
         )
@@ -565,6 +571,9 @@ class SlamPipeline:
         ``pose_covariance`` (the densities, or measured each cycle: :mod:`slam.core.pose_uncertainty`)."""
         est = self.slam.last_estimate
         var = np.zeros(3) if est is None else np.square(np.asarray(est.pose_std, dtype=float))
+        if self.options.pose_covariance == "calibrated":
+            k = np.ones(4) if self.pose_calibration is None else self.pose_calibration.factors
+            return calibrated_covariance(var, self.measured_drift.cov, self.heading, self.residual_scale, k)
         if self.options.pose_covariance == "adaptive":
             return self.residual_scale * (np.diag(var) + self.measured_drift.cov)
         return np.diag(var) + self.drift.cov
@@ -836,7 +845,7 @@ class SlamPipeline:
             self.distance_since_loss = 0.0 if not was_lost else self.distance_since_loss + math.hypot(*motion[:2])
             est = self._recover(est, pts[static])
         est.stage_times["health"] = time.perf_counter() - t_health
-        if self.options.pose_covariance == "adaptive":
+        if self.options.pose_covariance in ("adaptive", "calibrated"):
             self._adaptive_drift(before, rows[static], None if cov is None else cov[static], first_new_id, motion)
         if self.cycle > 0:  # the densities' drift runs in either model (the adaptive one reports it for comparison)
             self.drift.step(self.heading, motion)

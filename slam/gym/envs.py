@@ -34,7 +34,14 @@ def make_slam_env(env_cls: type[gym.Env] | str, kwargs: dict[str, Any]) -> gym.E
     scene = getattr(envs, env_cls) if isinstance(env_cls, str) else env_cls
     (radar_kw, slam_kw, metrics_kw), env_kw = route_kwargs(kwargs, RadarObservation, SlamObservation, SlamMetricsInfo)
     base = scene(**with_cheap_base_observation(env_kw))
-    return SlamMetricsInfo(SlamObservation(RadarObservation(base, **radar_kw), **slam_kw), **metrics_kw)
+    slam_env = SlamObservation(RadarObservation(base, **radar_kw), **slam_kw)
+    env = SlamMetricsInfo(slam_env, **metrics_kw)
+    env.slam_make_args = (scene.__name__, dict(kwargs))  # type: ignore[attr-defined]  # the pose calibration reads it
+    if slam_env.pipeline_config.pose_covariance == "calibrated":  # the configuration's factors: shipped, cached or fitted
+        from slam.gym.pose_calibration import attach
+
+        attach(env, scene.__name__, kwargs, make_slam_env)
+    return env
 
 
 def make_highway_slam(**kwargs: Any) -> gym.Env:
