@@ -201,3 +201,123 @@ def test_rendering_frame_by_frame_matches():
         np.testing.assert_array_equal(a, b)
     xa, xb = (np.array([v.position for v in env.unwrapped.road.vehicles]) for env in envs)
     np.testing.assert_allclose(xa, xb, rtol=0, atol=POSITION_TOL)
+
+
+# ---- the default (sim="auto"): the core on the straight-road ids where it ports the config and the scene
+STRAIGHT_ROAD_IDS = ("rhs-highway-v0", "rhs-highway-radar-v0", "rhs-highway-slam-v0", "rhs-highway-radar-fast-v0",
+                     "rhs-highway-slam-fast-v0", "rhs-dense-v0", "rhs-paper-v0")
+
+
+@pytest.mark.parametrize("env_id", STRAIGHT_ROAD_IDS)
+def test_straight_road_ids_default_to_the_compiled_core(env_id):
+    env = gym.make(env_id)
+    try:
+        base = env.unwrapped
+        assert base.config["sim"] == "auto" and base.traffic_sim == "compiled"
+        base.reset(seed=0)  # the scene alone (the radar and SLAM wrappers do not touch the traffic)
+        assert base.traffic_sim == "compiled"
+        assert gym.make(env_id, sim="highway-env").unwrapped.traffic_sim == "highway-env"
+    finally:
+        env.close()
+
+
+def test_other_roads_keep_highway_env():
+    env = gym.make("rhs-merge-v0")
+    env.reset(seed=0)
+    env.step(1)
+    assert "sim" not in env.unwrapped.config and env.unwrapped.traffic_sim == "highway-env"
+
+
+@pytest.mark.parametrize("config", [{"action": {"type": "ContinuousAction"}},
+                                    {"other_vehicles_type": "highway_env.vehicle.behavior.LinearVehicle"},
+                                    {"controlled_vehicles": 2}])
+def test_auto_falls_back_to_highway_env_on_an_unported_config(config):
+    """The default takes highway-env's code for a config the core does not port, without an error; the same steps as
+    ``sim="highway-env"``."""
+    envs = [gym.make("rhs-highway-v0", vehicles_count=8, **config, **sim) for sim in ({}, {"sim": "highway-env"})]
+    for env in envs:
+        env.reset(seed=1)
+        assert env.unwrapped.traffic_sim == "highway-env"
+    for _ in range(3):
+        action = envs[0].action_space.sample()
+        (_, ra, *_), (_, rb, *_) = (env.step(action) for env in envs)
+        assert ra == rb
+    xa, xb = (np.array([v.position for v in env.unwrapped.road.vehicles]) for env in envs)
+    np.testing.assert_array_equal(xa, xb)
+
+
+def test_auto_falls_back_on_an_unported_scene_and_returns():
+    """A road object added mid-episode: ``sim="auto"`` steps the scene with highway-env's code from the (up to date)
+    objects, as ``sim="highway-env"`` does, and with the core again once it is gone; ``sim="compiled"`` raises."""
+    from highway_env.vehicle.objects import Obstacle
+
+    envs = [make_scene("highway", sim, vehicles_count=10) for sim in ("highway-env", "auto")]
+    for env in envs:
+        env.reset(seed=6)
+        env.step(1)
+    assert envs[1].traffic_sim == "compiled"
+    for env in envs:
+        env.road.objects.append(Obstacle(env.road, env.vehicle.position + np.array([60.0, 0.0])))
+    assert envs[1].traffic_sim == "highway-env"
+    for action in (3, 1, 0):
+        for env in envs:
+            env.step(action)
+    for env in envs:
+        env.road.objects.clear()
+    assert envs[1].traffic_sim == "compiled"
+    for action in (1, 2, 4):
+        (_, ra, ta, *_), (_, rb, tb, *_) = (env.step(action) for env in envs)
+        assert abs(ra - rb) <= REWARD_TOL and ta == tb
+    a, b = (scene_state(env) for env in envs)
+    np.testing.assert_allclose(a, b, rtol=0, atol=POSITION_TOL)
+
+
+def scene_state(env) -> np.ndarray:
+    """Every vehicle's position, heading, speed, lane, target lane, target speed and crash flag."""
+    return np.array([[*v.position, v.heading, v.speed, v.lane_index[2], v.target_lane_index[2], v.target_speed,
+                      float(v.crashed)] for v in env.unwrapped.road.vehicles])
+
+
+def test_edits_between_steps_are_stepped_as_highway_env_steps_them():
+    """A user's (or a driver's) edits of the vehicles between steps: speed, position, target lane and target speed of
+    an IDM vehicle and the ego's target speed are read in before the next step, as highway-env reads them."""
+    envs = [make_scene("highway", sim, vehicles_count=10) for sim in ("highway-env", "compiled")]
+    for env in envs:
+        env.reset(seed=8)
+        env.step(1)
+        other = env.road.vehicles[3]
+        other.speed += 3.0
+        other.position[1] += 0.5
+        other.target_lane_index = (*other.target_lane_index[:2], (other.target_lane_index[2] + 1) % 4)
+        other.target_speed = 27.0
+        env.vehicle.target_speed = 21.0
+    for action in (1, 1, 3, 1):
+        for env in envs:
+            env.step(action)
+    a, b = (scene_state(env) for env in envs)
+    np.testing.assert_allclose(a, b, rtol=0, atol=POSITION_TOL)
+
+
+@pytest.mark.parametrize("driver", ["headway", "lookahead", "idm"])
+def test_drivers_see_the_same_traffic(driver):
+    """The privileged drivers of :mod:`agents` read ``env.unwrapped.road`` every step: on the core's written-back
+    objects they choose the same actions as on highway-env's, and the scenes stay equal."""
+    from agents.evaluate import IDMMobilPolicy
+    from agents.expert import HeadwayDriver
+    from agents.lookahead import LookaheadDriver
+
+    make = {"headway": HeadwayDriver, "lookahead": LookaheadDriver, "idm": IDMMobilPolicy}[driver]
+    envs = [gym.make("rhs-highway-v0", sim=sim, vehicles_count=12) for sim in ("highway-env", "compiled")]
+    drivers = [make(env) for env in envs]
+    obs = [env.reset(seed=9)[0] for env in envs]
+    for _ in range(15):
+        actions = [int(np.asarray(d.predict(o)[0])) for d, o in zip(drivers, obs, strict=True)]
+        assert actions[0] == actions[1]
+        out = [env.step(a) for env, a in zip(envs, actions, strict=True)]
+        obs = [o[0] for o in out]
+        assert out[0][2] == out[1][2] and abs(out[0][1] - out[1][1]) <= REWARD_TOL
+        if out[0][2] or out[0][3]:
+            break
+    a, b = (scene_state(env) for env in envs)
+    np.testing.assert_allclose(a, b, rtol=0, atol=POSITION_TOL)
+    assert envs[1].unwrapped.traffic_sim == "compiled"
