@@ -29,7 +29,7 @@ ROOMS: dict[str, tuple[str, ...]] = {
     "radar": ("radar_quality", "radar_profiles", "detection_curves", "fig5b_pointcloud_vs_elements"),
     "patterns": ("build_patterns", "compare_pattern_methods", "pattern_sidelobe_limits"),
     "slam": ("fig5a_slam_rmse", "fig5c_trajectory_map", "low_snr_slam", "registration_in_loop", "train_registration",
-             "compare_drives", "claim_study", "claim_study_report"),
+             "compare_drives", "claim_study", "claim_study_report", "long_drive"),
     "driving": ("train_policy", "evaluate_policies", "ablate_policy", "rl_finetune", "rl_confirm",
                 "rl_lane_rule_trial", "teachers", "crash_analysis", "shield_sensing", "comparisons"),
     "bench": ("benchmark", "benchmark_radar", "benchmark_patterns", "benchmark_rllib"),

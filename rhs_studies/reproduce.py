@@ -130,6 +130,9 @@ STEPS: tuple[Step, ...] = (
     Step("crash_analysis", "crash_analysis.py", (), ("crash_analysis.json",), 700,
          "the shipped radar + SLAM student's crashes against the expert's labels"),
     Step("detection_curves", "detection_curves.py", (), ("detection_curves.json",), 600),
+    Step("long_drive", "long_drive.py", (), ("long_drive.json",), 3600,
+         "3,000-cycle (10 min) highway SLAM drives, IDM + MOBIL at 15 m/s, 3 seeds: NEES, KITTI drift, memory, "
+         "step time against the cycle (~10-20 min per seed on 2 cores)"),
     Step("low_snr_slam", "low_snr_slam.py", ("--seeds", "100", "101", "102", "103", "104", "105", "106", "107"),
          ("low_snr_slam.json",), 900),
     Step("pose_covariance", "pose_covariance.py",
