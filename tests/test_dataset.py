@@ -125,6 +125,56 @@ def test_behaviour_cloning_from_the_dataset(recorded, tmp_path):
         env.close()
 
 
+def test_decision_labels_take_every_kth_recorded_action(recorded):
+    from rhs_studies import bc_from_dataset
+
+    _, ds = recorded
+    ep = next(ds.iterate_episodes())
+    rows, y = bc_from_dataset.label_rows(ep, "decisions", 5)
+    assert rows.tolist() == [0, 5] and y.tolist() == np.asarray(ep.actions).reshape(-1)[[0, 5]].tolist()
+    obs, y_all = bc_from_dataset.load_samples([ds, ds], "decisions", 5)
+    assert len(y_all) == 8 and obs["points"].shape == (8, 256, 7)  # 2 datasets x 2 episodes x rows 0 and 5
+    with pytest.raises(ValueError, match="decision interval"):
+        bc_from_dataset.load_samples(ds, "decisions", 0)
+
+
+def test_paired_ratio_interval():
+    from rhs_studies.bc_from_dataset import paired_ratio
+
+    a, b = [10.0, 20.0, 30.0, 40.0], [10.0, 21.0, 29.0, 41.0]
+    r = paired_ratio(a, b)
+    assert r["ratio"] == pytest.approx(100 / 101) and r["low"] <= r["ratio"] <= r["high"] and r["n"] == 4
+    assert r["high"] - r["low"] < 0.1  # paired: the seeds' shared spread cancels
+    with pytest.raises(ValueError, match="paired"):
+        paired_ratio([1.0], [1.0])
+
+
+def test_clone_like_a_policy_compared_on_paired_seeds(recorded, tmp_path, capsys):
+    """--labels decisions --like (the shipped policy's interval, mode and shield) --compare, --results with
+    provenance and its Markdown table; the compared runs are cached and reused."""
+    from agents.evaluate import SHIPPED_POLICY, policy_metadata
+    from rhs_studies import bc_from_dataset
+
+    root, _ = recorded
+    out, res = tmp_path / "bc", tmp_path / "bc.json"
+    argv = ["--dataset-id", DATASET_ID, "--datasets", str(root), "--out", str(out), "--labels", "decisions",
+            "--like", str(SHIPPED_POLICY), "--epochs", "2", "--eval-episodes", "2", "--eval-seed", "900",
+            "--compare", "headway", "--results", str(res)]
+    assert bc_from_dataset.main(argv) == 0
+    summary = json.loads(res.read_text())
+    shipped = policy_metadata(SHIPPED_POLICY)
+    assert summary["decision_interval"] == shipped["decision_interval"] and summary["shield"] == shipped["shield"]
+    assert summary["samples"] == 4 and summary["label_every"] == 5
+    cmp_ = summary["comparison"]
+    assert cmp_["ratio"]["n"] == 2 and [r["seed"] for r in summary["compare"]["runs"]] == [900, 901]
+    assert "commit" in json.dumps(summary["provenance"]) and res.with_suffix(".md").read_text().count("|") > 6
+    cached = (out / "compare_runs.json").stat().st_mtime
+    assert bc_from_dataset.main(["--compare-only", *argv[:-2]]) == 0
+    assert (out / "compare_runs.json").stat().st_mtime == cached  # same policy, env and seeds: reused
+    assert bc_from_dataset.main([*argv[:-2], "--eval-episodes", "1"]) == 2
+    assert "--eval-episodes >= 2" in capsys.readouterr().err
+
+
 def test_ctrl_c_keeps_the_finished_episodes(tmp_path, monkeypatch, capsys):
     """Interrupted in the second episode, the first is written (without reference scores) and the exit is 130."""
     calls = []
