@@ -1,0 +1,108 @@
+"""The training campaign (rhs_studies.driving.campaign): chunks that accumulate and resume from their saved state,
+the checkpoint chosen on validation seeds, the curves over seeds, the seeds in the ledger (tiny configs)."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from rhs_studies.driving import campaign
+from rhs_studies.kit.seeds import overlap, seed_set
+
+TINY = campaign.Recipe("tiny", env_kwargs={**campaign.CAMPAIGN_ENV_KWARGS, "duration": 3},
+                       hyperparams={"n_steps": 8, "batch_size": 8, "n_epochs": 1})
+
+
+def _weights(folder):
+    from stable_baselines3 import PPO
+
+    return torch.cat([p.detach().reshape(-1) for p in PPO.load(folder / "model.zip", device="cpu").policy.parameters()])
+
+
+def test_recipe_checks_and_records():
+    with pytest.raises(ValueError, match="recipe.n_envs"):
+        campaign.Recipe("x", n_envs=0)
+    with pytest.raises(ValueError, match="unknown"):
+        campaign.Recipe("x", hyperparams={"n_step": 8})
+    with pytest.raises(ValueError, match="recipe.name"):
+        campaign.Recipe("a/b")
+    assert json.loads(json.dumps(campaign.RECIPES["ppo_scratch"].record()))["env_id"] == "rhs-highway-slam-fast-v0"
+    assert campaign.RECIPES["ppo_scratch"].ppo_args()["policy_kwargs"]["net_arch"] == [64, 64]
+
+
+def test_seeds_come_from_the_ledger_and_runs_do_not_share_them():
+    train = seed_set("campaign_training")
+    firsts = [campaign.training_seed(k, c, 2) for k in range(3) for c in (0, 1, 499_999)]
+    assert all(s in train and s + 1 in train for s in firsts)
+    assert len(set(firsts)) == len(firsts)
+    assert campaign.training_seed(1, 0, 2) > campaign.training_seed(0, 499_999, 2) + 1
+    with pytest.raises(ValueError, match="training seeds"):
+        campaign.training_seed(0, 500_000, 2)
+    val = campaign.validation_seeds(5)
+    assert [s.name for s in overlap(val)] == ["campaign_validation"]
+    assert not overlap(firsts, allow=("campaign_training",))
+
+
+def test_rng_state_round_trip():
+    torch.manual_seed(3)
+    np.random.seed(3)  # noqa: NPY002
+    saved = json.loads(json.dumps(campaign._rng_state()))
+    a = (torch.rand(3), np.random.rand(3))  # noqa: NPY002
+    torch.manual_seed(99)
+    np.random.seed(99)  # noqa: NPY002
+    campaign._set_rng_state(saved)
+    b = (torch.rand(3), np.random.rand(3))  # noqa: NPY002
+    assert torch.equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+def test_chunks_accumulate_resume_exactly_and_keep_the_best(tmp_path):
+    s1 = campaign.train_chunk(TINY, tmp_path / "a", 0, 32, validation_episodes=1)
+    assert s1["env_steps"] >= 32 and s1["chunks"] == 1 and not s1["interrupted"]
+    torch.manual_seed(12345)  # a session in between: the next chunk restores the saved RNG states
+    np.random.seed(6)  # noqa: NPY002
+    s2 = campaign.train_chunk(TINY, tmp_path / "a", 0, 32, validation_episodes=1)
+    assert s2["chunks"] == 2 and s2["env_steps"] > s1["env_steps"]
+    assert [p["env_steps"] for p in s2["curve"]] == [s1["env_steps"], s2["env_steps"]]
+    assert s2["train_wall_s"] > s1["train_wall_s"] > 0
+    best = max(s2["curve"], key=lambda p: p["validation"]["return"])
+    assert s2["best"]["env_steps"] == best["env_steps"]
+    run = tmp_path / "a" / "tiny" / "seed0"
+    record = json.loads((run / "best.json").read_text())
+    assert record["env_id"] == "rhs-highway-slam-v0" and record["decision_interval"] == 5
+    assert (run / "model.zip").stat().st_size < 1_000_000
+    # the same two chunks in another folder, without the disturbance: the same weights
+    campaign.train_chunk(TINY, tmp_path / "b", 0, 32, validation_episodes=1)
+    campaign.train_chunk(TINY, tmp_path / "b", 0, 32, validation_episodes=1)
+    assert torch.allclose(_weights(run), _weights(tmp_path / "b" / "tiny" / "seed0"), atol=1e-6)
+    with pytest.raises(ValueError, match="not tiny seed 1"):
+        (tmp_path / "a" / "tiny" / "seed1").mkdir()
+        (tmp_path / "a" / "tiny" / "seed1" / "state.json").write_text((run / "state.json").read_text())
+        campaign.train_chunk(TINY, tmp_path / "a", 1, 32, validation_episodes=1)
+
+
+def test_a_signal_stops_the_chunk_with_whole_files(tmp_path):
+    from agents.resume import InterruptGuard
+
+    guard = InterruptGuard("test")
+    guard.requested = 2  # a SIGINT before the first rollout
+    state = campaign.train_chunk(TINY, tmp_path, 0, 64, validation_episodes=1, guard=guard)
+    assert state["interrupted"] and state["env_steps"] < 64
+    assert campaign.load_state(tmp_path / "tiny" / "seed0")["chunks"] == 1
+
+
+def test_campaign_round_robin_deadline_and_curves(tmp_path):
+    import time
+
+    assert campaign.train_campaign(TINY, tmp_path, [0, 1], 32, 32, 1, deadline=time.time() - 1,
+                                   log=lambda s: None) == {0: {"env_steps": 0}, 1: {"env_steps": 0}}
+    states = campaign.train_campaign(TINY, tmp_path, [0, 1], 32, 32, 1, log=lambda s: None)
+    assert all(s["env_steps"] >= 32 for s in states.values())
+    c = campaign.curves(tmp_path, "tiny", [0, 1, 2], points=5)
+    assert sorted(c["runs"]) == ["0", "1"] and c["by_env_steps"]["runs"] == 2
+    spread = c["by_env_steps"]
+    assert all(lo <= m <= hi for lo, m, hi in zip(spread["min"], spread["mean"], spread["max"]))
+    assert c["by_wall_s"]["train_wall_s"]
+    assert campaign._deadline(None) is None
+    with pytest.raises(ValueError, match="--until"):
+        campaign._deadline("6h")
