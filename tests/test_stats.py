@@ -1,72 +1,105 @@
-"""rhs_studies.kit.stats against rliable's published definitions (IQM = scipy's 25 % trimmed mean over every score,
-the stratified bootstrap resampling runs within each task, percentile intervals, score-distribution profiles)."""
+"""rhs_common.stats: every interval against scipy's own implementation (or its definition, computed with scipy)."""
+
+from __future__ import annotations
+
+import math
 
 import numpy as np
 import pytest
-import scipy.stats
+from scipy import stats
 
-from rhs_studies.kit import stats
-
-
-@pytest.mark.parametrize("shape", [(3, 1), (4, 1), (5, 2), (10, 7), (1, 9)])
-def test_iqm_is_scipys_quarter_trimmed_mean(shape):
-    x = np.random.default_rng(sum(shape)).normal(size=shape) ** 3
-    assert stats.iqm(x) == pytest.approx(scipy.stats.trim_mean(x, proportiontocut=0.25, axis=None), rel=1e-12)
-
-
-def test_iqm_ignores_the_outer_quarters():
-    x = np.arange(8.0)[:, None]
-    assert stats.iqm(x) == pytest.approx(np.mean([2, 3, 4, 5]))
-    x[-1] = 1e9  # an outlier run moves the mean, not the IQM
-    assert stats.iqm(x) == pytest.approx(3.5) and stats.mean(x) > 1e8
+from rhs_common.stats import (
+    mean_half_record,
+    mean_interval,
+    normal_quantile,
+    paired_difference,
+    ratio_bootstrap,
+    rmse_interval,
+    t_quantile,
+    wilson_interval,
+)
 
 
-def test_mean_median_and_optimality_gap_follow_rliable():
-    m = np.array([[0.5, 1.2, 2.0], [0.7, 0.8, 1.0]])
-    assert stats.mean(m) == pytest.approx(np.mean(m))
-    assert stats.median(m) == pytest.approx(np.median(m.mean(axis=0)))
-    assert stats.optimality_gap(m) == pytest.approx(np.mean(1 - np.minimum(m, 1)))
-    assert stats.optimality_gap(m, gamma=2.0) == pytest.approx(np.mean(2 - np.minimum(m, 2)))
+@pytest.mark.parametrize("level", [0.9, 0.95, 0.99])
+@pytest.mark.parametrize("n", [2, 5, 30])
+def test_mean_interval_is_scipys_student_t_interval(n, level):
+    x = np.random.default_rng(n).normal(3.0, 2.0, n)
+    iv = mean_interval(x, level)
+    lo, hi = stats.t.interval(level, n - 1, loc=x.mean(), scale=stats.sem(x))
+    assert iv.n == n and iv.mean == pytest.approx(x.mean())
+    assert (iv.low, iv.high) == pytest.approx((lo, hi), rel=1e-12)
+    assert iv.std == pytest.approx(x.std(ddof=1))
 
 
-def test_bootstrap_resamples_runs_within_each_task():
-    rows = np.repeat(np.arange(5.0)[:, None], 4, axis=1)  # every task's score is the run's index
-    mixed = []
-    stats.stratified_bootstrap(rows, lambda m: mixed.append(bool((m != m[:, :1]).any())) or 0.0, reps=50)
-    assert any(mixed)  # tasks draw their runs independently (rliable's task_bootstrap=False)
-    const = np.tile(np.array([1.0, 2.0, 3.0]), (6, 1))  # no spread over runs: a zero-width interval
-    point, band = stats.stratified_bootstrap(const, stats.mean, reps=200)
-    assert float(point) == pytest.approx(2.0) and band[0] == pytest.approx(2.0) and band[1] == pytest.approx(2.0)
+def test_mean_interval_drops_nan_and_none_and_is_nan_below_two():
+    iv = mean_interval([1.0, None, float("nan"), 3.0])
+    assert (iv.n, iv.n_dropped, iv.mean) == (2, 2, 2.0)
+    assert iv.half_width == pytest.approx(stats.t.ppf(0.975, 1) * math.sqrt(2) / math.sqrt(2))
+    one = mean_interval([4.0])
+    assert one.mean == 4.0 and math.isnan(one.half_width) and math.isnan(one.std)
+    assert math.isnan(mean_interval([]).mean)
+    assert math.isnan(t_quantile(1))
 
 
-def test_bootstrap_interval_covers_like_the_normal_one():
-    x = np.random.default_rng(1).normal(10.0, 2.0, size=(400, 1))
-    point, (lo, hi) = stats.stratified_bootstrap(x, stats.mean, reps=2000, seed=3)
-    half = 1.96 * x.std(ddof=1) / np.sqrt(x.size)
-    assert lo < float(point) < hi
-    assert (hi - lo) / 2 == pytest.approx(half, rel=0.15)
-    assert stats.stratified_bootstrap(x, stats.mean, reps=100, seed=3)[1] == pytest.approx(
-        stats.stratified_bootstrap(x, stats.mean, reps=100, seed=3)[1])  # seeded: reproducible
+def test_a_wider_interval_at_a_higher_level_and_the_t_wider_than_the_normal():
+    x = np.arange(10.0)
+    assert mean_interval(x, 0.99).half_width > mean_interval(x, 0.95).half_width > mean_interval(x, 0.9).half_width
+    assert t_quantile(10) > normal_quantile() == pytest.approx(1.959963984540054)
+    with pytest.raises(ValueError, match="level must be in"):
+        mean_interval(x, 1.0)
 
 
-def test_performance_profile_is_the_score_distribution():
-    m = np.array([[0.2, 0.9], [1.1, 1.5], [0.6, 0.8]])
-    taus = [0.0, 0.7, 1.0, 2.0]
-    p = stats.performance_profile(m, taus, reps=200)
-    assert p["profile"] == pytest.approx([np.mean(m > t) for t in taus])
-    assert all(a >= b for a, b in zip(p["profile"], p["profile"][1:]))
-    assert all(lo <= v <= hi for lo, v, hi in zip(p["low"], p["profile"], p["high"]))
+def test_paired_difference_is_scipys_paired_t_interval():
+    rng = np.random.default_rng(1)
+    shared = rng.normal(0.0, 10.0, 12)  # a large per-seed effect the pairing cancels
+    a, b = shared + rng.normal(1.0, 0.5, 12), shared + rng.normal(0.0, 0.5, 12)
+    iv = paired_difference(a, b)
+    ci = stats.ttest_rel(a, b).confidence_interval(0.95)
+    assert (iv.low, iv.high) == pytest.approx((ci.low, ci.high), rel=1e-10)
+    assert iv.high - iv.low < mean_interval(a).half_width  # pairing: far tighter than either sample's spread
+    with pytest.raises(ValueError, match="same length"):
+        paired_difference([1.0, 2.0], [1.0])
 
 
-def test_aggregate_and_bad_input():
-    agg = stats.aggregate(np.random.default_rng(0).uniform(size=(5, 3)), reps=100)
-    assert set(agg) == {"iqm", "mean", "median", "optimality_gap"}
-    assert all(v["low"] <= v["value"] <= v["high"] for v in agg.values())
-    with pytest.raises(ValueError, match="finite"):
-        stats.iqm([[1.0], [np.nan]])
-    with pytest.raises(ValueError, match="matrix"):
-        stats.iqm(np.zeros((2, 2, 2)))
-    with pytest.raises(ValueError, match="size"):
-        stats.stratified_bootstrap([[1.0]], stats.mean, size=1.5)
-    with pytest.raises(ValueError, match="reps"):
-        stats.stratified_bootstrap([[1.0]], stats.mean, reps=1)
+@pytest.mark.parametrize(("k", "n"), [(0, 30), (3, 30), (15, 30), (30, 30), (1, 7)])
+def test_wilson_interval_is_scipys(k, n):
+    ci = stats.binomtest(k, n).proportion_ci(0.95, method="wilson")
+    assert wilson_interval(k, n) == pytest.approx((ci.low, ci.high), abs=1e-12)
+    assert all(math.isnan(v) for v in wilson_interval(0, 0))
+    with pytest.raises(ValueError, match="k must be in"):
+        wilson_interval(4, 3)
+
+
+def test_rmse_interval_delta_method_against_a_monte_carlo_of_the_rmse():
+    e = np.random.default_rng(2).normal(0.0, 2.0, 400)
+    rmse, half, n = rmse_interval(e)
+    assert n == 400 and rmse == pytest.approx(np.sqrt(np.mean(e**2)))
+    # the standard error of the RMSE of 400 N(0, 2^2) errors, by simulation: sigma / sqrt(2 n) = 0.0707
+    sims = np.sqrt(np.mean(np.random.default_rng(3).normal(0.0, 2.0, (4000, 400)) ** 2, axis=1))
+    assert half / stats.t.ppf(0.975, n - 1) == pytest.approx(sims.std(), rel=0.1)
+    assert all(math.isnan(v) for v in rmse_interval([1.0])[:2])
+
+
+def test_ratio_bootstrap_matches_scipys_percentile_bootstrap():
+    rng = np.random.default_rng(4)
+    a, b = rng.exponential(2.0, 40), rng.exponential(1.0, 50)
+    r, lo, hi = ratio_bootstrap(a, b, np.random.default_rng(5), n_boot=20000)
+    ref = stats.bootstrap((a, b), lambda x, y, axis=-1: x.mean(axis=axis) / y.mean(axis=axis), paired=False,
+                          n_resamples=20000, method="percentile", vectorized=True, random_state=6).confidence_interval
+    assert r == pytest.approx(a.mean() / b.mean())
+    assert (lo, hi) == pytest.approx((ref.low, ref.high), rel=0.03)  # two Monte Carlo draws of the same quantiles
+    assert lo < r < hi
+    assert all(math.isnan(v) for v in ratio_bootstrap([1.0], b, rng))
+
+
+def test_the_json_records_of_the_studies():
+    st = mean_interval([1.0, 2.0, 4.0, None]).to_dict()
+    assert st["n"] == 3 and st["n_failed"] == 1 and st["mean"] == pytest.approx(7 / 3)
+    sd = float(np.std([1.0, 2.0, 4.0], ddof=1))
+    half = stats.t.ppf(0.975, 2) * sd / math.sqrt(3)  # 4.30 s / sqrt(3): wider than the normal 1.96
+    assert st["std"] == pytest.approx(sd) and st["ci95_half_width"] == pytest.approx(half)
+    assert st["ci95"] == pytest.approx([7 / 3 - half, 7 / 3 + half])
+    one = mean_interval([0.5]).to_dict()
+    assert one["mean"] == 0.5 and one["std"] is None and one["ci95"] is None  # no interval from one seed
+    assert mean_half_record([1.0, 3.0]) == {"mean": 2.0, "ci95": pytest.approx(stats.t.ppf(0.975, 1)), "n": 2}
+    assert mean_half_record([]) == {"mean": None, "ci95": None, "n": 0}
