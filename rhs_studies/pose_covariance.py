@@ -1,6 +1,7 @@
 """Pose covariance per radar configuration: the calibrated model against the adaptive one and the drift densities.
 
 ``python scripts/pose_covariance.py [--seeds 12000 ...] [--cycles 150] [--configs default grid5 ...] [--out-dir results]``
+(``--merge a/pose_covariance.json b/pose_covariance.json`` combines runs of disjoint configurations)
 
 For each configuration (:data:`CONFIGS`: the default 1-degree env, ``grid_deg`` 5, the phased and random
 antennas, the dense env, low SNR, the fast radar) and held-out seed, one IDM + MOBIL drive
@@ -231,6 +232,25 @@ def markdown(res: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _merge(paths: list[str], out: Path, argv: list[str] | None) -> int:
+    """Write one results file from several runs' (disjoint configurations, the same seeds and cycles)."""
+    from rhs_common.output_files import write_text_atomic
+
+    parts = [json.loads(Path(q).read_text()) for q in paths]
+    first = parts[0]
+    if any(r["seeds"] != first["seeds"] or r["cycles"] != first["cycles"] for r in parts):
+        raise SystemExit("--merge: the runs differ in seeds or cycles")
+    res: dict[str, Any] = {"nees_band": first["nees_band"], "cycles": first["cycles"], "seeds": first["seeds"],
+                           "configs": {}, "runs_provenance": [r["provenance"] for r in parts]}
+    for r in parts:
+        res["configs"].update(r["configs"])
+    out.mkdir(parents=True, exist_ok=True)
+    config = {"merged": [str(q) for q in paths], "configs": list(res["configs"])}
+    res["provenance"] = write_json(out / "pose_covariance.json", res, __file__, config, time.time(), argv=argv)
+    write_text_atomic(out / "pose_covariance.md", markdown(res))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--configs", nargs="+", default=list(CONFIGS), choices=list(CONFIGS))
@@ -238,7 +258,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cycles", type=int, default=150, help="cycles per drive (default 150)")
     p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     p.add_argument("--out-dir", default="results")
+    p.add_argument("--merge", nargs="+", metavar="JSON", help="combine the configurations of earlier runs' "
+                   "pose_covariance.json (same seeds and cycles; each run's provenance kept) instead of driving")
     a = p.parse_args(argv)
+    if a.merge:
+        return _merge(a.merge, Path(a.out_dir), argv)
     if a.cycles < 1:
         p.error(f"--cycles must be >= 1, got {a.cycles}")
     if a.workers < 1:
