@@ -87,7 +87,11 @@ def test_a_signal_stops_the_chunk_with_whole_files(tmp_path):
     guard = InterruptGuard("test")
     guard.requested = 2  # a SIGINT before the first rollout
     state = campaign.train_chunk(TINY, tmp_path, 0, 64, validation_episodes=1, guard=guard)
-    assert state["interrupted"] and state["env_steps"] < 64
+    assert state["interrupted"] and state["env_steps"] == 0  # nothing trained: nothing written
+    assert campaign.load_state(tmp_path / "tiny" / "seed0") is None
+    first = campaign.train_chunk(TINY, tmp_path, 0, 16, validation_episodes=1)
+    again = campaign.train_chunk(TINY, tmp_path, 0, 64, validation_episodes=1, guard=guard)
+    assert again["interrupted"] and again["env_steps"] == first["env_steps"]
     assert campaign.load_state(tmp_path / "tiny" / "seed0")["chunks"] == 1
 
 

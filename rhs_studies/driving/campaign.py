@@ -344,6 +344,8 @@ def train_chunk(recipe: Recipe, root: str | Path, seed: int, chunk_steps: int, v
         venv.close()
         if own:
             guard.__exit__()
+    if stopper.stopped and int(model.num_timesteps) == state["decisions"]:  # nothing trained: the run stays as it was
+        return {**state, "interrupted": True}
     state["rng"] = _rng_state()
     state["decisions"] = int(model.num_timesteps)
     state["env_steps"] = state["decisions"] * recipe.decision_interval

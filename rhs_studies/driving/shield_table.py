@@ -210,6 +210,17 @@ def drive_all(arms: Sequence[str], envs: Sequence[str], seeds: Sequence[int], en
     return episodes
 
 
+def _merged(paths: Sequence[Path], seeds: list[int], env_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """The episodes of earlier results ``paths``; ``ValueError`` when one drove other seeds or env settings."""
+    out: dict[str, Any] = {}
+    for path in paths:
+        old = json.loads(Path(path).read_text())
+        if old["seeds"] != seeds or old["env_kwargs"] != env_kwargs:
+            raise ValueError(f"--merge {path}: other seeds or env settings than this run's; the table pairs seeds")
+        out.update(old["episodes"])
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     """``scripts/shield_table.py``: drive the arms, write ``results/<name>.json``."""
     import argparse
@@ -225,18 +236,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--recipe", choices=sorted(RECIPES), default="ppo_scratch", help="the env settings' recipe")
     ap.add_argument("--root", type=Path, default=CAMPAIGN_DIR)
     ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parents[2] / "results" / "shield_table.json")
+    ap.add_argument("--merge", type=Path, nargs="*", default=[],
+                    help="results of earlier runs (same seeds and env settings) whose arms join the table")
     args = ap.parse_args(argv)
     seeds = test_seeds(args.seed, args.episodes)
     env_kwargs = dict(RECIPES[args.recipe].env_kwargs)
     started = time.time()
+    earlier = _merged(args.merge, seeds, env_kwargs)
 
     def write(episodes: dict[str, Any]) -> None:
+        episodes = {**earlier, **episodes}
         stats = {f"{env}_{sh}": training_seed_stats(episodes, args.recipe, env, sh)
                  for env in args.envs for sh in ("off", "on")}
         result = {"seeds": seeds, "env_kwargs": env_kwargs, "arms": list(episodes), "table": table(episodes),
                   "training_seeds": stats, "episodes": episodes}
         write_json(args.out, result, "scripts/shield_table.py", vars(args), started, argv=argv)
 
-    drive_all(args.arms, args.envs, seeds, env_kwargs, args.root, log=lambda s: print(s, flush=True), done=write)
+    write(drive_all(args.arms, args.envs, seeds, env_kwargs, args.root, log=lambda s: print(s, flush=True),
+                    done=write))
     print(json.dumps({"wrote": str(args.out)}))
     return 0
