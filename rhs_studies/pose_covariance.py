@@ -5,7 +5,8 @@
 
 For each configuration (:data:`CONFIGS`: the default 1-degree env, ``grid_deg`` 5, the phased and random
 antennas, the dense env, low SNR, the fast radar) and held-out seed, one IDM + MOBIL drive
-(``agents.evaluate.IDMMobilPolicy``) of ``--cycles`` cycles with ``pipeline={"pose_covariance": "calibrated"}``:
+(``agents.evaluate.IDMMobilPolicy``; on ``policy_env``, the shipped policy's env, that policy: :data:`POLICIES`)
+of ``--cycles`` cycles with ``pipeline={"pose_covariance": "calibrated"}``:
 the env attaches the configuration's calibration (:mod:`slam.gym.pose_calibration`: shipped, cached, or fitted
 at first use on the calibration seeds 13000-13003, which no evaluation uses). The covariance is report-only (the
 filter's estimate does not depend on it), so each cycle scores the three models on the same estimate: the
@@ -43,7 +44,12 @@ CONFIGS: dict[str, tuple[str, dict[str, Any]]] = {
     "dense": ("rhs-dense-v0", {}),
     "low_snr": ("rhs-highway-slam-v0", {"radar": {"link": {"tx_power_dbm": 20.0}}}),
     "fast": ("rhs-highway-slam-fast-v0", {}),
+    # the shipped policy's env (agents/data/shipped.json: its action setting does not enter the calibration key)
+    "policy_env": ("rhs-highway-slam-v0", {"action": {"type": "DiscreteMetaAction", "target_speeds": [10, 15, 20, 25, 30]},
+                                           "radar": {"scan": {"grid_deg": 5}}}),
 }
+#: the configurations' driver: IDM + MOBIL unless named here (the shipped policy, a byte copy of this experiment)
+POLICIES: dict[str, str] = {"policy_env": "agents/data/rl/shield_flank_explore_lane_time.zip"}
 MODELS = ("calibrated", "adaptive", "drift-constants")
 #: held-out seeds (the densities were fitted on 1000-1009)
 SEEDS = tuple(range(12000, 12020))
@@ -72,12 +78,13 @@ def _pipeline(env: Any) -> Any:
     return e.pipeline
 
 
-def episode(env: Any, seed: int, cycles: int) -> dict[str, Any]:
-    """One IDM + MOBIL drive of at most ``cycles`` cycles; per-cycle NEES of both models and the drift term."""
+def episode(env: Any, seed: int, cycles: int, driver: str = "idm") -> dict[str, Any]:
+    """One drive of at most ``cycles`` cycles by ``driver`` (``agents.evaluate.load_policy``: ``idm`` or a
+    policy zip); per-cycle NEES of the three models and the drift term."""
     from agents.evaluate import load_policy
     from rhs_common.geometry import wrap_angle
 
-    policy = load_policy("idm", env, seed=seed)
+    policy = load_policy(driver, env, seed=seed)
     if callable(getattr(policy, "reset", None)):
         policy.reset()
     obs, info = env.reset(seed=seed)
@@ -159,9 +166,10 @@ def _prepare(name: str) -> None:
 def _task(task: tuple[str, int, int]) -> dict[str, Any]:
     """One (configuration, seed, cycles) drive on this process's env for the configuration."""
     name, seed, cycles = task
+    driver = POLICIES.get(name, "idm")
     _task_env(name)
     t0 = time.perf_counter()
-    out = episode(_WORKER_ENVS[name], seed, cycles)
+    out = episode(_WORKER_ENVS[name], seed, cycles, driver)
     print(f"{name} seed {seed}: {out['cycles']} cycles, {time.perf_counter() - t0:.0f} s", flush=True)
     return out
 
@@ -185,7 +193,8 @@ def run(configs: list[str], seeds: list[int], cycles: int, workers: int = 1) -> 
     for name in configs:
         mine = [r for t, r in zip(tasks, runs) if t[0] == name]
         env_id, kw = CONFIGS[name]
-        res["configs"][name] = {"env_id": env_id, "kwargs": kw, "runs": mine, "calibration": _calibration(name),
+        res["configs"][name] = {"env_id": env_id, "kwargs": kw, "policy": POLICIES.get(name, "idm"), "runs": mine,
+                                "calibration": _calibration(name),
                                 "summary": {m: summarize(mine, m) for m in MODELS}}
     return res
 
@@ -201,7 +210,7 @@ def markdown(res: dict[str, Any]) -> str:
     seeds = res["seeds"]
     lines = [
         "# Pose covariance per radar configuration", "",
-        f"IDM + MOBIL drives of up to {res['cycles']} cycles, held-out seeds {seeds[0]}-{seeds[-1]} "
+        f"IDM + MOBIL drives (`policy_env`: the shipped policy) of up to {res['cycles']} cycles, held-out seeds {seeds[0]}-{seeds[-1]} "
         f"({len(seeds)} per configuration). 3-dof NEES of the estimated minus the true pose against the "
         f"reported covariance; 95 % band [{lo:.3f}, {hi:.2f}]. `calibrated`: `pipeline={{\"pose_covariance\": "
         "\"calibrated\"}` (the adaptive model's terms scaled by the configuration's own calibration, fitted on "
