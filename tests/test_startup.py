@@ -92,3 +92,29 @@ def test_the_parent_says_when_it_exits_before_its_background_compile(capsys, mon
     finally:
         running.kill()
         running.wait()
+
+
+#: a straight-road env on a cold cache: the first steps on highway-env's code while the traffic kernels compile in
+#: the background (rhs_env.traffic.warm), then the core, loaded from the cache, with nothing compiled here
+TRAFFIC = """
+    import json, time
+    import gymnasium as gym
+    import rhs_env
+    from rhs_common.jit import compile_stats
+    env = gym.make("rhs-highway-v0"); env.reset(seed=0)
+    t0 = time.perf_counter(); env.step(1); first = time.perf_counter() - t0
+    sims = [env.unwrapped.traffic_sim]
+    while sims[-1] != "compiled" and time.perf_counter() - t0 < 600:
+        env.step(1); time.sleep(0.2); sims.append(env.unwrapped.traffic_sim)
+    env.step(1)
+    print(json.dumps({"first_step_s": first, "sims": sims, **compile_stats()}))
+"""
+
+
+def test_traffic_kernels_compile_in_the_background_while_highway_env_steps(tmp_path):
+    """sim="auto" on an empty cache: the first step does not wait for the traffic core's kernels (highway-env's
+    code steps it), the background process caches them, and the env then steps with the core, compiling nothing."""
+    out, _ = _run(TRAFFIC, tmp_path)
+    assert out["sims"][0] == "highway-env" and out["sims"][-1] == "compiled", out["sims"]
+    assert not [k for k in out["kernels"] if k.startswith("rhs_env.traffic")], out["kernels"]
+    assert out["first_step_s"] < 5.0, out

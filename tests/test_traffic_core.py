@@ -204,6 +204,13 @@ def test_rendering_frame_by_frame_matches():
 
 
 # ---- the default (sim="auto"): the core on the straight-road ids where it ports the config and the scene
+@pytest.fixture(autouse=True)
+def _foreground_traffic_compile(monkeypatch):
+    """The kernels compile in this process (on a cold cache ``sim="auto"`` would step highway-env's code until a
+    background process cached them: tests/test_startup.py covers that)."""
+    monkeypatch.setenv("RHS_SLAM_BACKGROUND_COMPILE", "0")
+
+
 STRAIGHT_ROAD_IDS = ("rhs-highway-v0", "rhs-highway-radar-v0", "rhs-highway-slam-v0", "rhs-highway-radar-fast-v0",
                      "rhs-highway-slam-fast-v0", "rhs-dense-v0", "rhs-paper-v0")
 

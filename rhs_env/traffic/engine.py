@@ -13,7 +13,8 @@ replacing a vehicle repacks; the per-vehicle parameters (lengths, gains, IDM con
 A scene the core does not port (:func:`rhs_env.traffic.state.unsupported`: road objects, a vehicle class other than
 ``IDMVehicle`` / ``MDPVehicle``, ...) is an :class:`UnsupportedScene` error with ``strict`` (``sim="compiled"``);
 without it (``sim="auto"``) :meth:`CompiledTraffic.supports` is False and the env steps it with highway-env's own
-code, from the objects (which the core kept up to date), for as long as the scene stays so.
+code, from the objects (which the core kept up to date), for as long as the scene stays so; as it does while the
+kernels compile in a background process on a cold cache (:mod:`rhs_env.traffic.warm`).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from rhs_env.highway_config import SIMS
-from rhs_env.traffic import core
+from rhs_env.traffic import core, warm
 from rhs_env.traffic.state import TrafficState, pack, scene_key, unsupported
 from rhs_env.traffic.sync import read_in, write_back
 
@@ -51,6 +52,8 @@ class CompiledTraffic:
         key = scene_key(env.road, controlled)
         if self.state is not None and self.state.key == key:
             return True
+        if not self.strict and not warm.ready():  # the kernels compile in the background: highway-env meanwhile
+            return False
         if key == self._unsupported_key:
             return False
         why = unsupported(env.road, controlled)
