@@ -267,6 +267,7 @@ def compare_runs(policy: str | Path, env_id: str, env_kwargs: dict[str, Any], se
     from rhs_studies.provenance import git_state
 
     key = {"policy": str(policy), "env_id": env_id, "env_kwargs": env_kwargs, "seeds": seeds}
+    _wait_for(cache.with_name(cache.name + ".lock"))
     if cache.exists():
         saved = json.loads(cache.read_text())
         if json.loads(json.dumps(saved.get("key"))) == json.loads(json.dumps(key, default=str)):
@@ -277,6 +278,18 @@ def compare_runs(policy: str | Path, env_id: str, env_kwargs: dict[str, Any], se
     cache.parent.mkdir(parents=True, exist_ok=True)
     cache.write_text(json.dumps({**record, "runs": runs}, indent=1, default=str))
     return runs, record
+
+
+def _wait_for(lock: Path, timeout_s: float = 4 * 3600.0, poll_s: float = 10.0) -> None:
+    """Wait while ``lock`` exists (another process still driving the compared policy into the cache), at most
+    ``timeout_s``; then a ``ValueError`` naming it."""
+    deadline = time.time() + timeout_s
+    if lock.exists():
+        print(f"bc_from_dataset: waiting for {lock} to go (its runs are being driven)", file=sys.stderr, flush=True)
+    while lock.exists():
+        if time.time() > deadline:
+            raise ValueError(f"{lock} is still there after {timeout_s:.0f} s: delete it if no run drives that cache")
+        time.sleep(poll_s)
 
 
 def paired_ratio(a: list[float], b: list[float], reps: int = 10_000, seed: int = 0,
