@@ -129,15 +129,38 @@ def expected_snr(system: Any, radar: np.ndarray, range_m: np.ndarray, theta: np.
     """
     hn2 = np.zeros(radar.size)
     dics = system.dictionaries
-    done: dict[int, list[int]] = {}
-    for r, dic in enumerate(dics):
-        done.setdefault(id(dic), []).append(r)
-    for radars in done.values():
+    groups, gain, noise = _snr_constants(system)
+    for radars in groups:
+        if len(groups) == 1 and radar.size:  # one dictionary for every radar: every pair, no selection
+            hn2 = np.sum(np.abs(dics[radars[0]].atoms(theta)[0]) ** 2, axis=0)
+            break
         sel = np.isin(radar, radars)
         if np.any(sel):
             h = dics[radars[0]].atoms(theta[sel])[0]
             hn2[sel] = np.sum(np.abs(h) ** 2, axis=0)
-    return np.asarray(system.config.unit_gain_snr(range_m, rcs), float) * hn2
+    # RadarConfig.unit_gain_snr with its window gain and noise power kept (the same operations)
+    return np.asarray(system.config.echo_power_w(range_m, rcs) * gain / noise, float) * hn2
+
+
+def _snr_constants(system: Any) -> tuple[list[list[int]], float, float]:
+    """The radars grouped by shared dictionary, the window gain ``C (sum w)^2 / sum w^2`` and ``sigma_n^2`` (W) of
+    :meth:`rhs_env.radar_config.RadarConfig.unit_gain_snr`, computed once per system (and again when its config or
+    dictionaries are replaced)."""
+    from rhs_env.windows import make_window
+
+    config, dics = system.config, system.dictionaries
+    cached = system.__dict__.get("_snr_constants")
+    if cached is not None and cached[0] is config and cached[1] == [id(d) for d in dics]:
+        return cached[2]
+    done: dict[int, list[int]] = {}
+    for r, dic in enumerate(dics):
+        done.setdefault(id(dic), []).append(r)
+    wf = config.waveform
+    w = make_window(wf.window, wf.samples).astype(float)
+    gain = wf.chirps_per_slot * w.sum() ** 2 / np.sum(w ** 2)
+    out = (list(done.values()), gain, config.noise_power_w)
+    system.__dict__["_snr_constants"] = (config, [id(d) for d in dics], out)
+    return out
 
 
 @dataclass

@@ -193,7 +193,7 @@ def estimate_ego_velocity(
 
 
 def cluster_points(
-    points: np.ndarray, radius: float = 1.0
+    points: np.ndarray, radius: float = 1.0, kernels: str = "numpy"
 ) -> tuple[np.ndarray, np.ndarray]:
     """Merge points of one object into single observations.
 
@@ -207,6 +207,8 @@ def cluster_points(
 
     Returns ``(observations (C, 4), labels (N,))`` with ``labels[i]`` the cluster of
     point i. ``radius <= 0`` disables clustering (one observation per point).
+    ``kernels="numba"`` finds the components with :func:`slam.core.kernels.radius_components` (the same pairs and
+    labels as the cKDTree and ``connected_components`` of the reference).
     """
     pts = np.asarray(points, dtype=float).reshape(-1, 4)
     n = pts.shape[0]
@@ -214,11 +216,18 @@ def cluster_points(
         return np.zeros((0, 4)), np.zeros(0, dtype=int)
     if radius <= 0 or n == 1:
         return pts.copy(), np.arange(n)
-    pairs = cKDTree(pts[:, :2]).query_pairs(radius, output_type="ndarray")
-    if len(pairs) == 0:
-        return pts.copy(), np.arange(n)
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    n_c, labels = connected_components(graph, directed=False)
+    if kernels == "numba":
+        from slam.core.kernels import radius_components
+
+        n_c, labels = radius_components(np.ascontiguousarray(pts[:, :2]), float(radius))
+        if n_c == n:  # no pair within the radius
+            return pts.copy(), np.arange(n)
+    else:
+        pairs = cKDTree(pts[:, :2]).query_pairs(radius, output_type="ndarray")
+        if len(pairs) == 0:
+            return pts.copy(), np.arange(n)
+        graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+        n_c, labels = connected_components(graph, directed=False)
     amp = np.maximum(pts[:, 3], 0.0)
     w = np.bincount(labels, weights=amp, minlength=n_c)
     cnt = np.bincount(labels, minlength=n_c).astype(float)

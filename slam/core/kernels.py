@@ -22,7 +22,7 @@ import numpy as np
 from rhs_common.jit import njit, sort_small
 
 __all__ = ["doppler_ransac", "icp_fit", "icp_search", "landmark_update", "mahalanobis_association", "proposal_information",
-           "proposal_terms"]
+           "proposal_terms", "prune_mask", "radius_components"]
 
 NEW = -1  # slam.association.NEW
 DROPPED = -2  # slam.association.DROPPED
@@ -43,55 +43,85 @@ def mahalanobis_association(obs_map: np.ndarray, a00: np.ndarray, a01: np.ndarra
     Then :func:`slam.core.association.mahalanobis_associate`: ``rounds`` rounds accepting the pairs that are each
     other's nearest among the free observations and landmarks within ``gate2``; a free observation
     is DROPPED when some landmark is within ``new_gate2``, else NEW. Returns idx (P, M) into ``used``.
+
+    Only what decides the result is computed: a pair with ``|nu|^2 > 2 new_gate2 (s00 + s11)`` is beyond both
+    gates (``d2 >= |nu|^2 / lambda_max(S)`` and ``lambda_max <= trace S``, with a factor 2 of margin for
+    round-off) and is skipped; the rounds run on each observation's list of in-gate landmarks (in slot order,
+    so the first of equal minima wins, as ``np.argmin``), with accepted rows and columns marked instead of
+    overwritten. The same pairs and the same distances as the dense matrix of the numpy reference.
     """
     n_p, n_m = a00.shape
     n_l = used.size
     idx = np.full((n_p, n_m), NEW, np.int64)
-    cost = np.empty((n_m, n_l))
+    fin_q = np.empty((n_m, n_l), np.int64)  # per observation: its in-gate landmarks (sub-index), in order
+    fin_c = np.empty((n_m, n_l))
+    fin_n = np.empty(n_m, np.int64)
     near = np.empty(n_m, np.bool_)
+    row_dead = np.empty(n_m, np.bool_)
+    col_dead = np.empty(n_l, np.bool_)
     best_l = np.empty(n_m, np.int64)
     best_c = np.empty(n_m)
     best_m = np.empty(n_l, np.int64)
     best_mc = np.empty(n_l)
+    act = np.empty(n_l, np.int64)  # the particle's active landmarks (sub-index) and their means and covariances
+    lx, ly, l00, l01, l11 = np.empty(n_l), np.empty(n_l), np.empty(n_l), np.empty(n_l), np.empty(n_l)
     for p in range(n_p):
+        n_act = 0
+        for q in range(n_l):
+            l = used[q]
+            if active[p, l]:
+                act[n_act] = q
+                lx[n_act], ly[n_act] = mean[p, l, 0], mean[p, l, 1]
+                l00[n_act], l01[n_act], l11[n_act] = cov[p, l, 0, 0], cov[p, l, 0, 1], cov[p, l, 1, 1]
+                n_act += 1
         for m in range(n_m):
             lowest = np.inf
-            for q in range(n_l):
-                l = used[q]
-                if not active[p, l]:
-                    cost[m, q] = np.inf
+            k = 0
+            ox, oy = obs_map[p, m, 0], obs_map[p, m, 1]
+            b00, b01, b11 = a00[p, m], a01[p, m], a11[p, m]
+            for j in range(n_act):
+                nx = ox - lx[j]
+                ny = oy - ly[j]
+                s00 = b00 + l00[j]
+                s11 = b11 + l11[j]
+                if nx * nx + ny * ny > 2.0 * new_gate2 * (s00 + s11):
                     continue
-                s00 = a00[p, m] + cov[p, l, 0, 0]
-                s01 = a01[p, m] + cov[p, l, 0, 1]
-                s11 = a11[p, m] + cov[p, l, 1, 1]
+                q = act[j]
+                s01 = b01 + l01[j]
                 det = max(s00 * s11 - s01 * s01, 1e-300)
                 i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-                nx = obs_map[p, m, 0] - mean[p, l, 0]
-                ny = obs_map[p, m, 1] - mean[p, l, 1]
                 d2 = i00 * nx * nx + 2.0 * i01 * nx * ny + i11 * ny * ny
                 lowest = min(lowest, d2)
-                cost[m, q] = d2 if d2 <= gate2 else np.inf
+                if d2 <= gate2:
+                    fin_q[m, k] = q
+                    fin_c[m, k] = d2
+                    k += 1
+            fin_n[m] = k
             near[m] = lowest <= new_gate2
+            row_dead[m] = False
+        col_dead[:] = False
         for _ in range(rounds):
+            for q in range(n_l):
+                best_mc[q] = np.inf
             for m in range(n_m):  # argmin over landmarks (first of equal minima, as np.argmin)
-                best_l[m], best_c[m] = 0, cost[m, 0]
-                for q in range(1, n_l):
-                    if cost[m, q] < best_c[m]:
-                        best_l[m], best_c[m] = q, cost[m, q]
-            for q in range(n_l):  # argmin over observations
-                best_m[q], best_mc[q] = 0, cost[0, q]
-                for m in range(1, n_m):
-                    if cost[m, q] < best_mc[q]:
-                        best_m[q], best_mc[q] = m, cost[m, q]
+                best_l[m], best_c[m] = 0, np.inf
+                if row_dead[m]:
+                    continue
+                for j in range(fin_n[m]):
+                    q = fin_q[m, j]
+                    if not col_dead[q] and fin_c[m, j] < best_c[m]:
+                        best_l[m], best_c[m] = q, fin_c[m, j]
+                for j in range(fin_n[m]):  # argmin over observations, m in order (first of equal minima)
+                    q = fin_q[m, j]
+                    if not col_dead[q] and fin_c[m, j] < best_mc[q]:
+                        best_m[q], best_mc[q] = m, fin_c[m, j]
             found = False
             for m in range(n_m):
                 if np.isfinite(best_c[m]) and best_m[best_l[m]] == m:
                     idx[p, m] = best_l[m]
                     found = True
-                    for q in range(n_l):
-                        cost[m, q] = np.inf
-                    for k in range(n_m):
-                        cost[k, best_l[m]] = np.inf
+                    row_dead[m] = True
+                    col_dead[best_l[m]] = True
             if not found:
                 break
         for m in range(n_m):
@@ -518,3 +548,83 @@ def proposal_terms(pose: np.ndarray, cth: np.ndarray, sth: np.ndarray, z: np.nda
         H[k, 1, 0], H[k, 1, 1], H[k, 1, 2] = s, -c, -hx
         det_s[k] = det
     return H, Si, nu, det_s
+
+
+@njit
+def prune_mask(active: np.ndarray, last_seen: np.ndarray, hits: np.ndarray, cycle: int, prune_after: int,
+               min_hits: int, tentative_after: int) -> tuple[np.ndarray, int]:
+    """The landmarks :meth:`slam.core.rbpf.RBPFSlam._prune` keeps, and how many it drops, in one pass.
+
+    With ``age = cycle - last_seen`` (cycles), a held landmark is dropped when ``age > prune_after`` or
+    (``hits < min_hits`` and ``age > tentative_after``).
+
+    Args:
+        active: (P, L) bool, the landmarks each particle holds.
+        last_seen: (P, L) the cycle each was last updated.
+        hits: (P, L) its update count.
+        cycle: the current cycle.
+        prune_after: cycles without an update before a landmark goes.
+        min_hits: updates that confirm a landmark.
+        tentative_after: cycles an unconfirmed landmark waits.
+
+    Returns:
+        ``(active & ~kill (P, L), number of dropped landmarks)``.
+    """
+    after = active.copy()
+    n_kill = 0
+    n_p, n_l = active.shape
+    for p in range(n_p):
+        for l in range(n_l):
+            if active[p, l]:
+                age = cycle - last_seen[p, l]
+                if age > prune_after or (hits[p, l] < min_hits and age > tentative_after):
+                    after[p, l] = False
+                    n_kill += 1
+    return after, n_kill
+
+
+@njit
+def _root(parent: np.ndarray, i: int) -> int:
+    """The root of ``i`` in the union-find forest ``parent``, halving the path on the way."""
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@njit
+def radius_components(xy: np.ndarray, radius: float) -> tuple[int, np.ndarray]:
+    """Connected components of the radius graph of ``xy`` (N, 2): points ``i, j`` linked when
+    ``(x_i - x_j)^2 + (y_i - y_j)^2 <= radius^2`` (m^2), the pairs of ``cKDTree.query_pairs(radius)``.
+
+    Components are numbered in the order of their first point, as ``scipy.sparse.csgraph.connected_components``
+    numbers them. Every pair is tested (the clouds hold tens of points).
+
+    Args:
+        xy: (N, 2) positions, m.
+        radius: link distance, m.
+
+    Returns:
+        ``(number of components, labels (N,))``.
+    """
+    n = xy.shape[0]
+    parent = np.arange(n)
+    r2 = radius * radius
+    for i in range(n):
+        for j in range(i + 1, n):
+            dx = xy[i, 0] - xy[j, 0]
+            dy = xy[i, 1] - xy[j, 1]
+            if dx * dx + dy * dy <= r2:
+                a, b = _root(parent, i), _root(parent, j)
+                if a != b:
+                    parent[max(a, b)] = min(a, b)
+    labels = np.empty(n, np.int64)
+    of_root = np.full(n, -1, np.int64)
+    n_c = 0
+    for i in range(n):
+        r = _root(parent, i)
+        if of_root[r] < 0:
+            of_root[r] = n_c
+            n_c += 1
+        labels[i] = of_root[r]
+    return n_c, labels

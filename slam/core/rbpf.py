@@ -441,7 +441,7 @@ class RBPFSlam:
             ev = np.asarray(ego_velocity, dtype=float).ravel()
             keep = static_mask(pts, ev[:2], c.dynamic_threshold_mps, yaw_rate=float(ev[2]) if ev.size > 2 else 0.0)
             pts, cov = pts[keep], cov[keep]
-        obs, labels = cluster_points(pts, c.cluster_radius_m)
+        obs, labels = cluster_points(pts, c.cluster_radius_m, kernels=c.kernels)
         Q = np.zeros((0, 2, 2))
         if len(obs):
             obs[:, :2], Q = cluster_covariance(pts, labels, cov, len(obs))
@@ -756,14 +756,22 @@ class RBPFSlam:
     def _prune(self) -> None:
         """Drop landmarks not re-observed for K cycles; free empty slots."""
         c = self.config
-        age = self.cycle - self.last_seen
-        kill = self.active & (
-            (age > c.prune_after_cycles)
-            | ((self.hits < c.min_hits) & (age > c.tentative_prune_after_cycles))
-        )
-        if not kill.any():
-            return
-        after = self.active & ~kill
+        if c.kernels == "numba":  # the same test per held landmark, compiled, one pass
+            from slam.core.kernels import prune_mask
+
+            after, n_kill = prune_mask(self.active, self.last_seen, self.hits, self.cycle, c.prune_after_cycles,
+                                       c.min_hits, c.tentative_prune_after_cycles)
+            if n_kill == 0:
+                return
+        else:
+            age = self.cycle - self.last_seen
+            kill = self.active & (
+                (age > c.prune_after_cycles)
+                | ((self.hits < c.min_hits) & (age > c.tentative_prune_after_cycles))
+            )
+            if not kill.any():
+                return
+            after = self.active & ~kill
         gone = np.flatnonzero(self.slot_used & ~after.any(axis=0))
         self._retire(gone)  # statistics from the state before the kill
         self.active = after
