@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -134,7 +136,8 @@ def test_machine_scaling_times_one_and_two_spin_processes():
 def test_training_rounds_pool_each_rate_and_keep_each_rounds_ratio(monkeypatch):
     import agents.train
 
-    rates = iter([30.0, 50.0, 40.0, 60.0, 20.0, 50.0, 40.0, 60.0])  # (slam, base) x (auto, default) x 2 rounds
+    # per round: (slam, base) with update_threads="auto", then (slam, base, fast slam) with the default threads
+    rates = iter([30.0, 50.0, 40.0, 60.0, 200.0, 20.0, 50.0, 40.0, 60.0, 240.0])
 
     def fake_train(algo, env_id, timesteps, out, **kwargs):
         rate = next(rates)
@@ -151,5 +154,46 @@ def test_training_rounds_pool_each_rate_and_keep_each_rounds_ratio(monkeypatch):
     assert t["update_threads_auto"]["ratio_runs"] == [0.6, 0.4]
     assert t["ppo_slam_over_base"] == pytest.approx(40.0 / 60.0) and t["repeats"] == 2
     assert t["rhs-highway-v0"] is t["default"]["rhs-highway-v0"]
+    fast = t["default"]["rhs-highway-slam-fast-v0"]
+    assert fast["steady_steps_per_s"] == pytest.approx(2 / (1 / 200 + 1 / 240))
+    assert "rhs-highway-slam-fast-v0" not in t["update_threads_auto"]
+    assert t["ppo_fast_over_exact"] == pytest.approx(fast["steady_steps_per_s"] / 40.0)
+    assert t["ppo_fast_over_exact_runs"] == [5.0, 6.0]
     text = "\n".join(benchmark._md_ratios({"training": t}))
     assert "0.667 x" in text and "Pooled over 2 rounds" in text and "0.60, 0.40" in text
+    assert "fast SLAM env over the exact SLAM env, steady rate: 5.45 x (goal >= 5; each round: 5.00, 6.00)" in text
+    assert benchmark._goals({"training": t})["ppo_fast_over_exact"]["met"]
+
+
+
+def test_kernel_clock_times_the_wrapped_kernels_and_restores_them():
+    import types
+
+    mod = types.SimpleNamespace(k=lambda x: (time.sleep(0.01), 2 * x)[1])
+    original = mod.k
+    clock = benchmark._KernelClock({"slam": [(mod, "k")]})
+    with clock:
+        assert mod.k(3) == 6 and mod.k is not original
+    assert mod.k is original and clock.seconds["slam"] >= 0.009  # one call of 10 ms
+    targets = benchmark._kernel_targets()
+    assert {name for _, name in targets["slam"]} >= {"mahalanobis_association", "proposal_terms", "icp_search"}
+    assert [name for _, name in targets["traffic"]] == ["simulate"]
+
+
+def test_targets_table_ratios_and_goals():
+    def env(rate, radar=0.0, slam=0.0, floors=None):
+        return {"steps": 10, "steps_per_s": rate, "step_ms": 1e3 / rate, "radar_ms": radar, "slam_ms": slam,
+                "traffic_and_rest_ms": 1e3 / rate - radar - slam, "floors": floors or {}}
+
+    t = {"load_average_start": [1.0, 1.0, 1.0], "highway-fast-v0": env(20.0),
+         "rhs-highway-slam-v0": env(32.0, 12.0, 8.0, {"traffic_kernels_ms": 0.8, "slam_kernels_ms": 2.5}),
+         "rhs-highway-slam-fast-v0": env(130.0, 2.0, 3.0, {"traffic_kernels_ms": 0.8, "slam_kernels_ms": 2.0}),
+         "slam_over_highway_fast": 1.6, "slam_over_highway_fast_ci": [1.5, 1.7],
+         "slam_fast_over_highway_fast": 6.5, "slam_fast_over_highway_fast_ci": [6.1, 6.9]}
+    text = "\n".join(benchmark._md_targets({"targets": t, "floor": {"floor_ms": 4.5}}))
+    assert "| rhs-highway-slam-fast-v0 | 130.0 | 7.69 | 2.00 | 3.00 | 2.69 | 0.80 / 2.00 |" in text
+    assert "`rhs-highway-slam-v0` 1.60 x `highway-fast-v0` (95 % [1.50, 1.70], goal >= 1.5 x)" in text
+    assert "sample floor (noise + range FFT of every IQ sample): 4.5 ms" in text
+    goals = benchmark._goals({"targets": t})
+    assert goals["slam_fast_over_highway_fast"]["met"] and goals["slam_fast_over_highway_fast"]["ci"] == [6.1, 6.9]
+    assert not benchmark._goals({"targets": {**t, "slam_over_highway_fast": 1.4}})["slam_over_highway_fast"]["met"]

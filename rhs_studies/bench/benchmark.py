@@ -46,6 +46,14 @@ every section and printed beside it. Sections (``--sections``, default all):
 * ``vec_native``: the native vector env (``vectorization_mode="vector_entry_point"``) of 8
   ``rhs-highway-slam-fast-v0`` against one such env and gymnasium's ``SyncVectorEnv`` of 8, round-robin in
   one process, with the machine's two-process scaling as the ceiling; goal >= 1.4x one env.
+* ``targets``: the speed targets against highway-env's own ``highway-fast-v0`` in one process, round-robin on
+  the same actions, warm kernels (:func:`bench_targets`): the default SLAM env (goal >= 1.5x) and the fast one
+  (goal >= 6x), with each env's step split into traffic, radar, SLAM and the rest, and each stage's floor beside
+  it (the compiled traffic core's and the SLAM's compiled kernels' own time, the radar's sample floor from the
+  ``floor`` section). With ``training`` and ``vec_native`` in the same run, all the speed targets are shown
+  together (``training`` also trains PPO on ``rhs-highway-slam-fast-v0``: goal >= 5x PPO on the exact SLAM env).
+
+    python scripts/benchmark.py --sections targets vec_native training   # the speed targets, one run
 
     python scripts/benchmark.py --out results/benchmark.json      # also writes results/benchmark.md
     python scripts/benchmark.py --sections envs load vec --steps 30   # keeps the other sections of --out
@@ -70,9 +78,11 @@ from rhs_studies.kit.provenance import command_line, write_json
 
 ROOT = Path(__file__).resolve().parents[2]
 
-SECTIONS = ("envs", "start", "floor", "load", "vec", "radar", "patterns", "traffic", "training", "vec_native")
+SECTIONS = ("envs", "start", "floor", "load", "vec", "radar", "patterns", "traffic", "training", "vec_native",
+            "targets")
 GOALS = {"radar_env_over_base": 0.75, "slam_env_over_base": 0.67, "loaded_over_quiet": 0.85,
-         "two_workers_over_one": 1.8, "ppo_slam_over_base": 0.7, "vec_native_over_single": 1.4}
+         "two_workers_over_one": 1.8, "ppo_slam_over_base": 0.7, "vec_native_over_single": 1.4,
+         "slam_over_highway_fast": 1.5, "slam_fast_over_highway_fast": 6.0, "ppo_fast_over_exact": 5.0}
 START_GOALS_S = {"cold_s": 30.0, "warm_s": 5.0}  # first step of a new user: empty kernel cache / warm cache
 LIBRARY_GOAL_S = 30.0  # the fast M = 60, 1-degree library, 2 workers, every grid pointing within half a grid
 
@@ -662,6 +672,170 @@ def _md_vec_native(r: dict) -> list[str]:
             ""]
 
 
+#: the ``targets`` section's envs: (label, id, kwargs); ``highway-fast-v0`` is the yardstick of every ratio
+TARGET_RUNS: tuple[tuple[str, str, dict[str, Any]], ...] = (
+    ("highway-fast-v0", "highway-fast-v0", {}),
+    ("rhs-highway-slam-v0", "rhs-highway-slam-v0", {"stage_times_in_info": True}),
+    ("rhs-highway-slam-fast-v0", "rhs-highway-slam-fast-v0", {"stage_times_in_info": True}),
+    ("rhs-highway-radar-fast-v0", "rhs-highway-radar-fast-v0", {"stage_times_in_info": True}),
+    ("rhs-highway-v0 bare (compiled)", "bare", {"sim": "compiled"}),
+)
+#: the ratios of the ``targets`` section: goal key -> the env over ``highway-fast-v0``
+TARGET_RATIOS = {"slam_over_highway_fast": "rhs-highway-slam-v0", "slam_fast_over_highway_fast": "rhs-highway-slam-fast-v0"}
+
+
+class _KernelClock:
+    """Seconds spent inside chosen compiled kernels: each ``module.name`` is replaced by a timing wrapper while the
+    clock is open (the callers look the kernels up on their module at call time), restored on exit."""
+
+    def __init__(self, targets: dict[str, list[tuple[Any, str]]]) -> None:
+        self.targets = targets
+        self.seconds = dict.fromkeys(targets, 0.0)
+        self._saved: list[tuple[Any, str, Any]] = []
+
+    def __enter__(self) -> _KernelClock:
+        for stage, items in self.targets.items():
+            for module, name in items:
+                fn = getattr(module, name)
+                self._saved.append((module, name, fn))
+                setattr(module, name, self._timed(stage, fn))
+        return self
+
+    def _timed(self, stage: str, fn: Any) -> Any:
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                self.seconds[stage] += time.perf_counter() - t0
+        return timed
+
+    def __exit__(self, *exc: Any) -> None:
+        for module, name, fn in reversed(self._saved):
+            setattr(module, name, fn)
+        self._saved.clear()
+
+
+def _kernel_targets() -> dict[str, list[tuple[Any, str]]]:
+    """The compiled kernels whose own time is a stage's floor: the traffic core's step, the SLAM's kernels."""
+    import slam.core.kernels as slam_kernels
+    from rhs_env.traffic import core
+
+    names = [n for n in slam_kernels.__all__ if callable(getattr(slam_kernels, n))]
+    return {"traffic": [(core, "simulate")], "slam": [(slam_kernels, n) for n in names]}
+
+
+def _stage_split(rec: dict[str, Any]) -> dict[str, float]:
+    """ms per step of an env's radar and SLAM stages (from its step infos) and of the rest of its step."""
+    n = max(rec["n"], 1)
+    radar = 1e3 * sum(d.get("total", 0.0) for d in rec["radar"]) / n
+    slam = 1e3 * sum(sum(d.values()) for d in rec["slam"]) / n
+    step = 1e3 * rec["dt"] / n
+    return {"step_ms": step, "radar_ms": radar, "slam_ms": slam, "traffic_and_rest_ms": step - radar - slam}
+
+
+def _kernel_floors(recs: dict[str, dict[str, Any]], steps: int, seed: int) -> dict[str, dict[str, float]]:
+    """ms per step inside the compiled traffic core and SLAM kernels of each env, over ``steps`` untimed steps."""
+    floors = {}
+    actions = np.random.default_rng(seed + 1).choice([1, 1, 1, 3, 4], size=steps)
+    for label, rec in recs.items():
+        if label == "highway-fast-v0":
+            continue
+        clock = _KernelClock(_kernel_targets())
+        probe = {**rec, "n": 0, "dt": 0.0, "blocks": [], "radar": [], "slam": []}
+        with clock:
+            _time_block(probe, actions, seed)
+        floors[label] = {f"{k}_kernels_ms": 1e3 * v / steps for k, v in clock.seconds.items()}
+    return floors
+
+
+def bench_targets(steps: int, seed: int, block: int = 5, floor_steps: int = 40) -> dict:
+    """The speed targets against highway-env's ``highway-fast-v0``, round-robin in this process, warm.
+
+    :data:`TARGET_RUNS` step ``block`` steps each in turn on the same actions (a load drift slows every env alike)
+    after one untimed warm-up block each (and every SLAM kernel compiled or loaded first,
+    :func:`slam.gym.precompile.workload`). Each env's step is split into its radar and SLAM stages (its
+    ``stage_times_in_info``) and the rest (traffic, wrappers, metrics). Floors beside them, from ``floor_steps``
+    further untimed steps: the time inside the compiled traffic core (:func:`rhs_env.traffic.core.simulate`) and
+    inside the SLAM's compiled kernels (:mod:`slam.core.kernels`), the arithmetic those stages cannot go below
+    as written; the rest of a stage is interpreter work around them. ``rhs-highway-radar-fast-v0`` (no SLAM) and
+    the bare compiled traffic (no observation) are the fast SLAM env's floors without its SLAM and radar.
+
+    Args:
+        steps: timed env steps per env (rounded up to whole blocks).
+        seed: reset and action seed.
+        block: steps per turn.
+        floor_steps: untimed steps per env of the kernel-floor pass.
+
+    Returns:
+        Steps/s, ms per step and the stage split per env; :data:`TARGET_RATIOS` with their 95 % block-bootstrap
+        intervals (:func:`ratio_interval`); ``floors`` per env; the load average at the start and the end.
+    """
+    import warnings
+
+    from rhs_common.jit import watch_compiles
+    from slam.gym.precompile import workload
+
+    workload()
+    out: dict[str, Any] = {"block_steps": block, "load_average_start": [round(x, 2) for x in os.getloadavg()]}
+    actions = np.random.default_rng(seed).choice([1, 1, 1, 3, 4], size=max(steps, block))
+    recs = {label: {"env": _make_traffic_env(i, kw), "n": 0, "blocks": [], "dt": 0.0, "slam": [], "radar": []}
+            for label, i, kw in TARGET_RUNS}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for rec in recs.values():
+            rec["env"].reset(seed=seed)
+            _time_block(rec, actions[:2 * block], seed)
+            rec.update(n=0, blocks=[], dt=0.0, slam=[], radar=[])
+            rec["env"].reset(seed=seed)
+        with watch_compiles() as compiled:
+            for lo in range(0, steps, block):
+                for rec in recs.values():
+                    _time_block(rec, actions[lo:lo + block], seed)
+        out["kernels_compiled_while_timed"] = sorted(compiled)
+        floors = _kernel_floors(recs, floor_steps, seed)
+    for label, rec in recs.items():
+        out[label] = {"steps": rec["n"], "steps_per_s": rec["n"] / rec["dt"], **_stage_split(rec),
+                      "floors": floors.get(label, {})}
+        rec["env"].close()
+    base = recs["highway-fast-v0"]
+    for key, label in TARGET_RATIOS.items():
+        out[key] = out[label]["steps_per_s"] / out["highway-fast-v0"]["steps_per_s"]
+        out[f"{key}_ci"] = ratio_interval(np.asarray(base["blocks"]), np.asarray(recs[label]["blocks"]))
+    out["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
+    return out
+
+
+def _md_targets(result: dict) -> list[str]:
+    """The ``targets`` section's table, its ratios and the floors."""
+    t = result["targets"]
+    lines = [f"| against `highway-fast-v0` (one process, round-robin, warm; load {t['load_average_start'][0]:.1f}) "
+             "| steps/s | ms/step | radar (ms) | SLAM (ms) | traffic + rest (ms) | floors: traffic core / SLAM kernels "
+             "(ms) |", "|---|---:|---:|---:|---:|---:|---|"]
+    for label, _, _ in TARGET_RUNS:
+        if label not in t:
+            continue
+        r, f = t[label], t[label].get("floors", {})
+        fl = (f"{f['traffic_kernels_ms']:.2f} / {f['slam_kernels_ms']:.2f}" if f else "-")
+        lines.append(f"| {label} | {r['steps_per_s']:.1f} | {r['step_ms']:.2f} | {r['radar_ms']:.2f} | "
+                     f"{r['slam_ms']:.2f} | {r['traffic_and_rest_ms']:.2f} | {fl} |")
+    parts = []
+    for key, label in TARGET_RATIOS.items():
+        ci = t[f"{key}_ci"]
+        parts.append(f"`{label}` {t[key]:.2f} x `highway-fast-v0` (95 % [{ci[0]:.2f}, {ci[1]:.2f}], goal >= "
+                     f"{GOALS[key]:g} x)")
+    lines += ["", "; ".join(parts) + ". The floors are the time inside the compiled traffic core and inside the "
+              "SLAM's compiled kernels per step: what those stages cost as arithmetic; the rest of each stage is "
+              "interpreter work around them."]
+    if t.get("kernels_compiled_while_timed"):
+        lines[-1] += f" Kernels compiled while timed (counted as step time): {', '.join(t['kernels_compiled_while_timed'])}."
+    if "floor" in result:
+        f = result["floor"]
+        lines[-1] += (f" The exact radar's sample floor (noise + range FFT of every IQ sample): {f['floor_ms']:.1f} ms "
+                      "per scan; the fast radar synthesises no sample.")
+    return lines + [""]
+
+
 #: the work of :func:`machine_scaling`: an integer sum in the interpreter (no memory traffic, no shared state)
 SPIN_CODE = "import time\nt = time.perf_counter()\ns = 0\nfor i in range(8_000_000):\n    s += i\nprint(time.perf_counter() - t)"
 
@@ -681,6 +855,11 @@ def machine_scaling(repeats: int = 5) -> dict[str, Any]:
     return {"two_over_one_median": float(np.median(ratios)), "two_over_one_runs": [round(r, 3) for r in ratios]}
 
 
+#: the ``training`` section's ids: the SLAM env, the base env (the ``ppo_slam_over_base`` goal) and the fast SLAM env
+#: (``ppo_fast_over_exact``: its PPO steps/s over the exact SLAM env's, default threads only)
+TRAINING_IDS = ("rhs-highway-slam-v0", "rhs-highway-v0", "rhs-highway-slam-fast-v0")
+
+
 def bench_training(timesteps: int, seed: int, repeats: int = 3) -> dict:
     """PPO steps/s with 2 subprocess envs on rhs-highway-slam-v0 and on rhs-highway-v0.
 
@@ -695,7 +874,9 @@ def bench_training(timesteps: int, seed: int, repeats: int = 3) -> dict:
     busy one, see :func:`agents.run_setup.update_threads_for`), the four runs in turn, ``repeats`` rounds: one
     run's steady rate moved by ~15 % between runs, so each rate is pooled over the rounds (their steps over their
     time: the harmonic mean of the rounds' rates, each round having the same steps), and each round's ratio is kept
-    (``ratio_runs``).
+    (``ratio_runs``). With the default threads, PPO also trains on ``rhs-highway-slam-fast-v0`` in each round:
+    ``ppo_fast_over_exact`` is its pooled steady rate over the exact SLAM env's (each round's in
+    ``ppo_fast_over_exact_runs``).
     """
     import tempfile
 
@@ -704,7 +885,7 @@ def bench_training(timesteps: int, seed: int, repeats: int = 3) -> dict:
     rounds: dict[str, dict[str, list[dict]]] = {}
     for _ in range(repeats):
         for label, threads in (("update_threads_auto", "auto"), ("default", None)):
-            for env_id in ("rhs-highway-slam-v0", "rhs-highway-v0"):
+            for env_id in TRAINING_IDS if label == "default" else TRAINING_IDS[:2]:
                 with tempfile.TemporaryDirectory() as tmp:
                     s = train("ppo", env_id, timesteps, tmp, seed=seed, n_envs=2, eval_freq=10**9,
                               checkpoint_freq=10**9, progress=False, update_threads=threads)
@@ -726,9 +907,13 @@ def bench_training(timesteps: int, seed: int, repeats: int = 3) -> dict:
         out[label]["ppo_slam_over_base_learn_wall"] = slam["steps_per_s_learn"] / base["steps_per_s_learn"]
         out[label]["ratio_runs"] = [round(a["steady_steps_per_s"] / b["steady_steps_per_s"], 3)
                                     for a, b in zip(by_env["rhs-highway-slam-v0"], by_env["rhs-highway-v0"])]
-    for env_id in ("rhs-highway-slam-v0", "rhs-highway-v0"):
+    for env_id in TRAINING_IDS:
         out[env_id] = out["default"][env_id]
     out["ppo_slam_over_base"] = out["default"]["ppo_slam_over_base"]
+    fast, exact = out["default"][TRAINING_IDS[2]], out["default"]["rhs-highway-slam-v0"]
+    out["ppo_fast_over_exact"] = fast["steady_steps_per_s"] / exact["steady_steps_per_s"]
+    out["ppo_fast_over_exact_runs"] = [round(a["steady_steps_per_s"] / b["steady_steps_per_s"], 3) for a, b in
+                                       zip(rounds["default"][TRAINING_IDS[2]], rounds["default"]["rhs-highway-slam-v0"])]
     return out
 
 
@@ -841,7 +1026,7 @@ def _md_ratios(result: dict) -> list[str]:
             lines += ["| PPO, 2 subprocess envs | update threads | steady steps/s | collect / update per rollout (s) "
                       "| start-up (s) |", "|---|---:|---:|---|---:|"]
             for label in ("default", "update_threads_auto"):
-                for k in ("rhs-highway-slam-v0", "rhs-highway-v0"):
+                for k in (i for i in TRAINING_IDS if i in t[label]):
                     r = t[label][k]
                     lines.append(f"| `{k}` | {r['update_threads'] or 1} | {r['steady_steps_per_s']:.1f} | "
                                  f"{r['steady_collect_s_per_rollout']:.2f} / {r['steady_update_s_per_rollout']:.2f} | "
@@ -854,6 +1039,10 @@ def _md_ratios(result: dict) -> list[str]:
                       f"{GOALS['ppo_slam_over_base']}; with update_threads='auto': "
                       f"{t['update_threads_auto']['ppo_slam_over_base']:.3f} x). Start-up: the run's wall time less its "
                       "steps at the steady rate." + rounds, ""]
+            if "ppo_fast_over_exact" in t:
+                lines[-1:-1] = [f"PPO on the fast SLAM env over the exact SLAM env, steady rate: "
+                                f"{t['ppo_fast_over_exact']:.2f} x (goal >= {GOALS['ppo_fast_over_exact']:g}; each "
+                                f"round: {', '.join(f'{x:.2f}' for x in t['ppo_fast_over_exact_runs'])})."]
         else:
             lines += ["| PPO, 2 subprocess envs | steps/s |", "|---|---:|"]
             lines += [f"| `{k}` | {t[k]['steps_per_s']:.1f} |" for k in ("rhs-highway-slam-v0", "rhs-highway-v0")]
@@ -890,6 +1079,8 @@ def markdown(result: dict) -> str:
     lines += _md_ratios(result)
     if "traffic" in result:
         lines += _md_traffic(result)
+    if "targets" in result:
+        lines += _md_targets(result)
     if "vec_native" in result:
         lines += _md_vec_native(result["vec_native"])
     if "radar" in result:
@@ -964,6 +1155,8 @@ def _run_section(sec: str, args: argparse.Namespace) -> dict:
         return benchmark_patterns(grid_deg=1.0)
     if sec == "traffic":
         return bench_traffic(args.steps, args.seed, block=args.block)
+    if sec == "targets":
+        return bench_targets(args.steps, args.seed, block=args.block)
     return bench_training(args.train_steps, args.seed, args.train_repeats)
 
 
@@ -1030,7 +1223,7 @@ def main(argv: list[str] | None = None) -> int:
 def _goals(result: dict) -> dict:
     """Each speed ratio present in the result, its goal and whether it is met."""
     found: dict[str, dict[str, Any]] = {}
-    for sec in ("envs", "load", "vec", "training", "vec_native"):
+    for sec in ("envs", "load", "vec", "training", "vec_native", "targets"):
         for k, goal in GOALS.items():
             if k in result.get(sec, {}):
                 v = float(result[sec][k])
