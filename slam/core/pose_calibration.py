@@ -141,8 +141,8 @@ def nees(err: np.ndarray, cov: np.ndarray, std: np.ndarray | None = None) -> flo
     return float(err @ np.linalg.solve(P, err))
 
 
-def _batch(rows: np.ndarray, factors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """NEES (T,) and ``ln det C`` (T,) of rows (T, 18) under ``factors``, vectorised."""
+def _batch(rows: np.ndarray, factors: np.ndarray, floor: np.ndarray = NEES_FLOOR) -> tuple[np.ndarray, np.ndarray]:
+    """NEES (T,) and ``ln det C`` (T,) of rows (T, 18) under ``factors``, the std floors ``floor``, vectorised."""
     e, v, P = rows[:, 0:3], rows[:, 3:6], rows[:, 6:15].reshape(-1, 3, 3)
     scale, th = rows[:, 15], rows[:, 16]
     k = np.asarray(factors, dtype=float)
@@ -152,15 +152,19 @@ def _batch(rows: np.ndarray, factors: np.ndarray) -> tuple[np.ndarray, np.ndarra
     M = G @ np.diag(np.sqrt(k[1:]))[None] @ np.transpose(G, (0, 2, 1))
     C = scale[:, None, None] * (k[0] * v[:, None, :] * np.eye(3)[None] + M @ P @ np.transpose(M, (0, 2, 1)))
     i = np.arange(3)
-    C[:, i, i] = np.maximum(C[:, i, i], NEES_FLOOR**2)
+    C[:, i, i] = np.maximum(C[:, i, i], np.square(floor))
+    if not np.all(floor > 0):  # without floors a zero term (no drift yet, one particle) would be singular
+        C[:, i, i] += 1e-300
     x = np.einsum("ni,ni->n", e, np.linalg.solve(C, e[..., None])[..., 0])
     return x, np.linalg.slogdet(C)[1]
 
 
-def row_nees(rows: np.ndarray, factors: np.ndarray) -> np.ndarray:
+def row_nees(rows: np.ndarray, factors: np.ndarray, floor: np.ndarray = NEES_FLOOR) -> np.ndarray:
     """The NEES (T,) of calibration rows (T, 18) (:data:`ROW_COLUMNS`) under ``factors`` (4,), lost cycles
-    included (their std is the loss's: the model's covariance there is what :func:`fit_calibration` skips)."""
-    return _batch(np.asarray(rows, dtype=float).reshape(-1, len(ROW_COLUMNS)), factors)[0]
+    included (their std is the loss's: the model's covariance there is what :func:`fit_calibration` skips);
+    ``floor`` (3,): the std floors (m, m, rad; zeros: the model's covariance alone)."""
+    return _batch(np.asarray(rows, dtype=float).reshape(-1, len(ROW_COLUMNS)), factors,
+                  np.asarray(floor, dtype=float))[0]
 
 
 def fit_calibration(rows: np.ndarray) -> tuple[np.ndarray, int]:
