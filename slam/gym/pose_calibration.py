@@ -67,9 +67,10 @@ SHIPPED_CONFIGS: dict[str, tuple[str, dict[str, Any]]] = {
     "fast": ("rhs-highway-slam-fast-v0", {}),
 }
 DATA_DIR = Path(__file__).resolve().parent.parent / "data" / "pose_calibration"
-#: gym.make settings that change only what the env reports, renders or how fast it runs (left out of the key)
+#: gym.make settings that change only what the env reports, renders, how fast it runs, how long an episode lasts
+#: or how the ego is driven (left out of the key)
 _KEY_EXCLUDED = frozenset({"render_mode", "blas_threads", "stage_times_in_info", "health_in_obs", "velocity_in_obs",
-                           "max_landmarks", "action", "radar", "slam", "icp", "pipeline", "registration", "screen_width",
+                           "max_landmarks", "action", "duration", "radar", "slam", "icp", "pipeline", "registration", "screen_width",
                            "screen_height", "offscreen_rendering", "show_trajectories"})
 _RADAR_EXCLUDED = ("kernels", "fidelity")
 
