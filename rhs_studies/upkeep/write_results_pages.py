@@ -6,9 +6,11 @@ measured it), so every number shown comes from a script a user can run. A headin
 file's first line is dropped: the page around the block has its own. Blocks whose file
 does not exist are left as they are.
 
-Two blocks are built here from the results JSONs instead of copied: ``headline`` (the
-README's short table of headline results, each row linking to its results page) and
-``unverified`` (the list of results not verified against the code).
+Some blocks are built here instead of copied: ``headline`` (the README's short table of
+headline results, each row linking to its results page), ``unverified`` (the list of results
+not verified against the code), ``tolerances`` (each fingerprint's measured tolerance) and
+``reproduce.STEP`` (a page's "how to reproduce" line: the :mod:`rhs_studies.reproduce` step
+``STEP``'s command and the script it runs, so a page cannot name a command that is gone).
 
 When ``results/NAME.json`` is not verified against the code (written before provenance
 existed, or the code's fingerprint changed since the run, see ``rhs_studies/provenance.py``),
@@ -70,10 +72,10 @@ PAGE = {
     "fig5a": "docs/results/fig5a.md",
     "slam_accuracy": "docs/results/slam-accuracy.md",
     "registration": "docs/results/registration.md",
-    "policies": "docs/results/driving.md",
-    "rl_finetune": "docs/results/driving.md",
-    "rl_confirm": "docs/results/driving.md",
-    "rl_lane_test": "docs/results/driving.md",
+    "policies": "docs/results/driving/policies.md",
+    "rl_finetune": "docs/results/driving/rl-finetune.md",
+    "rl_confirm": "docs/results/driving/rl-confirm.md",
+    "rl_lane_test": "docs/results/driving/rl-lane-rule-trial.md",
     "benchmark": "docs/results/speed.md",
     "detection_curves": "docs/results/detection.md",
 }
@@ -252,6 +254,34 @@ def tolerance_table(results_dir: Path, fingerprints: dict) -> str | None:
 GENERATED: dict[str, Callable[[Path, dict], str | None]] = {"headline": headline, "unverified": unverified_list,
                                                              "tolerances": tolerance_table}
 
+#: a block ``reproduce.STEP`` is the "how to reproduce" line of step ``STEP`` (:func:`reproduce_line`)
+REPRODUCE = "reproduce."
+
+
+def reproduce_line(step_name: str) -> str:
+    """The "how to reproduce" line of the :mod:`rhs_studies.reproduce` step ``step_name``.
+
+    Args:
+        step_name: a step of ``rhs_studies.reproduce.STEPS``.
+
+    Returns:
+        One markdown line: ``python scripts/reproduce.py --only STEP``, the script command it runs and the results
+        files it writes.
+
+    Raises:
+        ValueError: no step of that name (the page names a command that does not exist).
+    """
+    from rhs_studies.reproduce import STEPS
+
+    step = next((s for s in STEPS if s.name == step_name), None)
+    if step is None:
+        raise ValueError(f"results block reproduce.{step_name}: no step {step_name!r} in rhs_studies/reproduce.py "
+                         f"(steps: {', '.join(s.name for s in STEPS)})")
+    command = " ".join(["python", f"scripts/{step.script}", *step.args])
+    writes = ", ".join(f"`results/{r}`" for r in step.results)
+    return (f"**How to reproduce:** `python scripts/reproduce.py --only {step.name}` (it runs `{command}`"
+            + (f", which writes {writes}" if writes else "") + ", then rewrites the tables on this page).")
+
 
 def figure_links(md: str, page: Path | None) -> str:
     """``md`` with its links to ``results/NAME.png`` made relative to ``page``.
@@ -273,6 +303,8 @@ def render(text: str, results_dir: Path, page: Path | None = None) -> str:
 
     def sub(m: re.Match) -> str:
         name = m.group("name")
+        if name.startswith(REPRODUCE):
+            return f"{m.group(1)}{reproduce_line(name[len(REPRODUCE):])}\n{m.group(4)}"
         if name in GENERATED:
             body = GENERATED[name](results_dir, fingerprints)
             return m.group(0) if body is None else f"{m.group(1)}{body.rstrip()}\n{m.group(4)}"

@@ -1,0 +1,60 @@
+"""The driving results, one page per study: each page opens with its "how to reproduce" line, the index and the
+site's nav list every page, and the line is built from the reproduce step it names."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+import yaml
+
+from rhs_studies import reproduce
+from rhs_studies.upkeep import write_results_pages
+
+ROOT = Path(__file__).resolve().parent.parent
+DRIVING = ROOT / "docs" / "results" / "driving"
+
+
+def _pages() -> list[Path]:
+    return sorted(DRIVING.glob("*.md"))
+
+
+def test_every_driving_page_opens_with_a_command_that_exists():
+    assert len(_pages()) >= 8
+    for page in _pages():
+        text = page.read_text()
+        head = text[:1500]
+        assert "**How to reproduce:**" in head, f"{page.name}: no 'How to reproduce' line near its top"
+        line = head[head.index("**How to reproduce:**"):].split("\n")[0]
+        scripts = re.findall(r"`python (scripts/\w+\.py)", line)
+        assert scripts and all((ROOT / s).is_file() for s in scripts), f"{page.name}: {line}"
+        for step in re.findall(r"--only (\w+)", line):
+            assert step in reproduce.BY_NAME, f"{page.name}: no reproduce step {step}"
+
+
+def test_the_index_and_the_nav_list_every_page_in_order():
+    index = (ROOT / "docs" / "results" / "driving.md").read_text()
+    linked = re.findall(r"\]\(driving/([\w-]+\.md)\)", index)
+    assert sorted(linked) == sorted(p.name for p in _pages()) and len(linked) == len(set(linked))
+    nav = yaml.safe_load("nav:\n" + (ROOT / "mkdocs.yml").read_text().split("\nnav:\n", 1)[1])  # the nav alone
+    results = next(item["Results"] for item in nav["nav"] if "Results" in item)
+    driving = next(item["Driving"] for item in results if "Driving" in item)
+    assert [next(iter(x.values())) for x in driving] == ["results/driving.md", *(f"results/driving/{n}" for n in linked)]
+    # the old sections' anchors still resolve on the index (links recorded elsewhere name them)
+    for anchor in ("a-radar-safety-shield", "a-fresh-test-of-the-rl-stage", "what-limits-learning",
+                   "a-stricter-lane-rule-and-the-shipped-rl-policy", "crash-analysis", "a-teacher-that-looks-ahead",
+                   "reinforcement-learning-on-top-of-imitation"):
+        assert f'id="{anchor}"' in index, anchor
+
+
+def test_a_reproduce_block_is_filled_from_its_step_and_an_unknown_step_is_refused(tmp_path):
+    text = "x\n<!-- results:reproduce.policies -->\nstale\n<!-- /results:reproduce.policies -->\n"
+    out = write_results_pages.render(text, ROOT / "results", DRIVING / "policies.md")
+    step = reproduce.BY_NAME["policies"]
+    assert f"`python scripts/reproduce.py --only policies` (it runs `python scripts/{step.script}`" in out
+    assert "stale" not in out and "`results/policies.json`" in out
+    with pytest.raises(ValueError, match="no step 'nope'"):
+        write_results_pages.render(text.replace("policies", "nope"), ROOT / "results")
+    # the README's headline rows link the study's own page
+    assert all(Path(ROOT / p).is_file() for p in write_results_pages.PAGE.values())
