@@ -85,9 +85,17 @@ class RHSRoadEnv(RHSHighwayEnv):
         return config
 
     # ---- the road's own scene, traffic, rewards and ends (RHSHighwayEnv / HighwayEnv define these too)
+    #: ``reset`` keeps the landmarks of the previous episode when :attr:`keep_landmarks` is set (the SLAM
+    #: wrapper's ``reset(options={"keep_map": True})``: the same world, mapped before); read once, then cleared
+    keep_landmarks = False
+
     def _reset(self) -> None:
         self.ROAD._reset(self)
-        self._create_landmarks()
+        previous = getattr(self, "landmarks", None) if self.keep_landmarks else None
+        self._create_landmarks()  # drawn in any case: the traffic's draws after it stay the same
+        if previous is not None:
+            self.landmarks = previous
+        self.keep_landmarks = False
 
     def _reward(self, action: Any) -> float:
         return self.ROAD._reward(self, action)

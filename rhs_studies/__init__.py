@@ -29,11 +29,11 @@ ROOMS: dict[str, tuple[str, ...]] = {
     "radar": ("radar_quality", "radar_profiles", "detection_curves", "fig5b_pointcloud_vs_elements"),
     "patterns": ("build_patterns", "compare_pattern_methods", "pattern_sidelobe_limits"),
     "slam": ("fig5a_slam_rmse", "fig5c_trajectory_map", "low_snr_slam", "registration_in_loop", "train_registration",
-             "compare_drives", "claim_study", "claim_study_report", "long_drive"),
+             "compare_drives", "claim_study", "claim_study_report", "long_drive", "racetrack_loops"),
     "driving": ("train_policy", "evaluate_policies", "ablate_policy", "rl_finetune", "rl_confirm",
                 "rl_lane_rule_trial", "teachers", "crash_analysis", "shield_sensing", "comparisons"),
     "bench": ("benchmark", "benchmark_radar", "benchmark_patterns", "benchmark_rllib"),
-    "upkeep": ("write_results_pages", "fingerprint_tolerance", "refresh_constraints"),
+    "upkeep": ("write_results_pages", "fingerprint_tolerance", "refresh_constraints", "ship_policy"),
 }
 #: a study's name -> its module path in its room
 MOVED: dict[str, str] = {name: f"{__name__}.{room}.{name}" for room, names in ROOMS.items() for name in names}

@@ -133,6 +133,8 @@ STEPS: tuple[Step, ...] = (
     Step("long_drive", "long_drive.py", (), ("long_drive.json",), 3600,
          "3,000-cycle (10 min) highway SLAM drives, IDM + MOBIL at 15 m/s, 3 seeds: NEES, KITTI drift, memory, "
          "step time against the cycle (~10-20 min per seed on 2 cores)"),
+    Step("racetrack_loops", "racetrack_loops.py", ("--seeds", "1710", "1711", "1712"), ("racetrack_loops.json",),
+         2400, "the racetrack over 5 laps with the loop closure off and on, then a keep_map episode (3 seeds)"),
     Step("low_snr_slam", "low_snr_slam.py", ("--seeds", "100", "101", "102", "103", "104", "105", "106", "107"),
          ("low_snr_slam.json",), 900),
     Step("pose_covariance", "pose_covariance.py",

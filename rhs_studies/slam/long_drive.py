@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from rhs_studies.kit.provenance import write_json
 from rhs_studies.kit.runner import Study, option, run_study
 from rhs_studies.kit.slam_metrics import (
     CFEAR_DRIFT_PCT,
@@ -227,10 +228,23 @@ def plot(runs: list[dict[str, Any]], path: Path) -> None:
     plt.close(fig)
 
 
+def _result(o: Options, runs: list[dict[str, Any]]) -> dict[str, Any]:
+    return {"env": ENV_ID, "driver": f"idm:{o.speed:g}", "cycles": o.cycles, "grid_deg": o.grid_deg, "runs": runs,
+            "summary": pooled(runs), "seeds_done": [r["seed"] for r in runs], "nees_interval": nees_interval(),
+            "dro_drift_pct": DRO_DRIFT_PCT, "cfear_drift_pct": list(CFEAR_DRIFT_PCT)}
+
+
 def run(o: Options) -> dict[str, Any]:
-    """Every seed's drive, the pooled figures and the plot."""
-    runs = []
+    """Every seed's drive, the pooled figures and the plot. After each seed but the last, the seeds so far go to
+    ``long_drive.json`` without a fingerprint (an interrupted run keeps them, marked unverified)."""
+    runs: list[dict[str, Any]] = []
+    started = time.time()
     for seed in o.seeds:
+        if runs:
+            write_json(Path(o.out_dir) / "long_drive.json", _result(o, runs), STUDY.launcher, o, started)
+            (Path(o.out_dir) / "long_drive.md").write_text(markdown(_result(o, runs)))
+            if not o.no_plot:
+                plot(runs, Path(o.out_dir) / "long_drive_step_time.png")
         t0 = time.perf_counter()
         row, _ = drive(int(seed), o)
         runs.append({**row, "wall_s": time.perf_counter() - t0})
@@ -240,8 +254,7 @@ def run(o: Options) -> dict[str, Any]:
     if not o.no_plot:
         Path(o.out_dir).mkdir(parents=True, exist_ok=True)
         plot(runs, Path(o.out_dir) / "long_drive_step_time.png")
-    return {"env": ENV_ID, "driver": f"idm:{o.speed:g}", "cycles": o.cycles, "grid_deg": o.grid_deg, "runs": runs, "summary": pooled(runs),
-            "nees_interval": nees_interval(), "dro_drift_pct": DRO_DRIFT_PCT, "cfear_drift_pct": list(CFEAR_DRIFT_PCT)}
+    return _result(o, runs)
 
 
 def _yes(flag: bool | None) -> str:

@@ -45,6 +45,7 @@ from rhs_common.validation import check_choice, check_int, check_range, check_ty
 from slam.core.association import bearing_sectors, estimate_ego_velocity, point_covariance, static_mask
 from slam.core.drift import DriftCovariance
 from slam.core.health import HealthConfig, TrackHealth
+from slam.core.loop_closure import LoopCloser
 from slam.core.pose_calibration import PoseCalibration, calibrated_covariance
 from slam.core.pose_uncertainty import CycleInformation, cycle_information
 from slam.core.rbpf import RBPFSlam, SlamConfig, SlamEstimate
@@ -408,6 +409,8 @@ class SlamPipeline:
             registration.kernels = self.config.kernels
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         self.use_doppler = self.options.use_doppler
+        #: the loop closure (:mod:`slam.core.loop_closure`), off by default (None)
+        self.loop_closer: LoopCloser | None = None
         self.slam = RBPFSlam(self.config, self.rng)
         self.health = TrackHealth(health)
         o = self.options
@@ -455,6 +458,8 @@ class SlamPipeline:
         self.distance_since_loss = 0.0  # m driven since the current loss started
         self.relocalisations = 0
         self.map_breaks = 0
+        if self.loop_closer is not None:
+            self.loop_closer.reset()
 
     def _fit_fraction(self, tree: cKDTree | None, cur: np.ndarray, motion: np.ndarray) -> float:
         """Fraction of the current points within the registration's ``min_gate_m`` of a previous point."""
@@ -638,6 +643,24 @@ class SlamPipeline:
             self.map_breaks += 1
             self.health.new_map()
         return est
+
+    def _close_loop(self, est: SlamEstimate) -> SlamEstimate:
+        """A loop closure against the archived map (:class:`slam.core.loop_closure.LoopCloser`): when one moved
+        the state, the estimate of the moved state; the map-relative drift restarts (the pose is re-anchored to
+        the old map)."""
+        assert self.loop_closer is not None
+        t0 = time.perf_counter()
+        if not self.loop_closer.check(self.slam, est, self.cycle):
+            est.stage_times["loop_closure"] = time.perf_counter() - t0
+            return est
+        new = self.slam._estimate()
+        new.ess, new.n_static_points, new.n_observations = est.ess, est.n_static_points, est.n_observations
+        new.n_matched, new.stage_times = est.n_matched, est.stage_times
+        self.slam.last_estimate = new
+        self.drift.reset()
+        self.measured_drift.reset()
+        new.stage_times["loop_closure"] = time.perf_counter() - t0
+        return new
 
     def _static_mask(self, pts: np.ndarray, sensors: np.ndarray | None) -> np.ndarray:
         """Points that fit a static scatterer at the current velocity and yaw rate, seen from their radar."""
@@ -845,6 +868,8 @@ class SlamPipeline:
             self.distance_since_loss = 0.0 if not was_lost else self.distance_since_loss + math.hypot(*motion[:2])
             est = self._recover(est, pts[static])
         est.stage_times["health"] = time.perf_counter() - t_health
+        if self.loop_closer is not None and not self.health.lost:
+            est = self._close_loop(est)
         if self.options.pose_covariance in ("adaptive", "calibrated"):
             self._adaptive_drift(before, rows[static], None if cov is None else cov[static], first_new_id, motion)
         if self.cycle > 0:  # the densities' drift runs in either model (the adaptive one reports it for comparison)

@@ -52,6 +52,7 @@ from rhs_common.geometry import apply_motion, relative_motion
 from rhs_common.threads import blas_threads_limit, check_blas_threads
 from rhs_common.validation import build, check_bool, check_int
 from rhs_env.scene import draw_disks, get_landmarks, he_to_world_xy, world_pose, world_surface_pixels
+from slam.core.loop_closure import LoopCloser, LoopClosureConfig, relocalise, seed_landmarks
 from slam.core.pipeline import PipelineConfig, SlamPipeline
 from slam.core.rbpf import SlamConfig, SlamEstimate
 from slam.core.registration import (
@@ -95,6 +96,13 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         stage_times_in_info: add ``slam_stage_times`` to ``info`` (non-deterministic values).
         health_in_obs: add ``slam_health`` and ``slam_lost`` to the observation.
         velocity_in_obs: add ``velocity`` (the Doppler ego velocity: vx, vy m/s, yaw rate rad/s) to the observation.
+        loop_closure: None (default: off), ``True`` or a :class:`slam.core.loop_closure.LoopClosureConfig` or a dict
+            of its fields: close loops against the archived map (:mod:`slam.core.loop_closure`).
+
+    ``reset(options={"keep_map": True})`` starts the episode from the previous episode's map: the map frame stays
+    the previous one, the map goes into the new filter's archive, and the first cloud relocalises the car in it
+    (:func:`slam.core.loop_closure.relocalise`; ``info["slam_map_kept"]`` says whether it did: if not, a new map
+    starts at the car, as a plain reset does).
         blas_threads: BLAS / OpenMP threads inside ``step`` / ``reset``, restored after
             each call (:mod:`rhs_common.threads`); default 1, ``None`` leaves them alone.
 
@@ -120,11 +128,12 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         blas_threads: int | None = 1,
         health_in_obs: bool = False,
         velocity_in_obs: bool = False,
+        loop_closure: Any = None,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self, slam=slam, registration=registration, icp=icp, pipeline=pipeline,
             max_landmarks=max_landmarks, stage_times_in_info=stage_times_in_info, blas_threads=blas_threads,
-            health_in_obs=health_in_obs, velocity_in_obs=velocity_in_obs,
+            health_in_obs=health_in_obs, velocity_in_obs=velocity_in_obs, loop_closure=loop_closure,
         )
         gym.ObservationWrapper.__init__(self, env)
         space = env.observation_space
@@ -154,6 +163,10 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         self.pipeline = SlamPipeline(
             reg, self.slam_config, np.random.default_rng(0), self.pipeline_config, sensor_xy=sensor_xy
         )
+        if loop_closure is not None and loop_closure is not False:
+            lc = build(LoopClosureConfig, {} if loop_closure is True else loop_closure, "loop_closure")
+            self.pipeline.loop_closer = LoopCloser(lc) if lc.enabled else None
+        self.map_kept: bool | None = None  # None: the last reset did not ask to keep the map
         self.max_landmarks = int(max_landmarks)
         self._warned_no_static = False  # the no-static-scene warning is given once per wrapper
         self.stage_times_in_info = bool(stage_times_in_info)
@@ -195,7 +208,14 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             return self._reset(seed, options)
 
     def _reset(self, seed: int | None, options: dict[str, Any] | None):
-        obs, info = self.env.reset(seed=seed, options=options)
+        options = dict(options or {})
+        keep = options.pop("keep_map", False)
+        check_bool("reset options keep_map", keep)
+        kept = self._kept_map() if keep else None
+        old_origin = self.origin
+        if kept is not None and hasattr(self._base, "keep_landmarks"):  # a road scene keeps its world
+            self._base.keep_landmarks = True
+        obs, info = self.env.reset(seed=seed, options=options or None)
         self._reset_state()
         parent = self._base.np_random
         rng = np.random.default_rng(int(parent.integers(0, 2**63 - 1)))
@@ -204,7 +224,36 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         self.pipeline.reset(rng)
         self._check_static_scene()
         self.origin = world_pose(self._base.vehicle)
+        self.map_kept = (kept is not None and self._start_in_map(obs, kept, old_origin)) if keep else None
         return self._observe(obs), self._with_info(info)
+
+    def _kept_map(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The map of the episode so far (archived landmarks and the current estimate), or None when empty."""
+        xy, ids = self.pipeline.slam.full_map()
+        return (xy, ids) if len(xy) else None
+
+    def _start_in_map(self, obs: dict[str, np.ndarray], kept: tuple[np.ndarray, np.ndarray],
+                      old_origin: np.ndarray) -> bool:
+        """Relocalise the new episode's start in the ``kept`` map (frame: ``old_origin``): the first cloud's
+        points matched to its landmarks; on success every particle starts at the found pose, the map frame stays
+        the old one and the kept landmarks go into the filter's archive (those near the car into its particles).
+        """
+        pts = np.asarray(obs["points"], dtype=float)[np.asarray(obs["points_mask"]) > 0][:, :2]
+        xy, ids = kept
+        m = relocalise(pts, xy)
+        if m is None:
+            return False
+        slam = self.pipeline.slam
+        slam.pose[:] = np.array([m.t[0], m.t[1], m.phi])
+        slam.retired_xy, slam.retired_ids = np.asarray(xy, float).copy(), np.asarray(ids, np.int64).copy()
+        slam.next_id = int(np.max(ids)) + 1
+        near = np.flatnonzero(np.hypot(*(xy - m.t).T) <= 100.0)
+        std = self.pipeline.loop_closer.config.landmark_std_m if self.pipeline.loop_closer is not None else 0.1
+        n = seed_landmarks(slam, xy[near], ids[near], std)
+        keep = ~np.isin(slam.retired_ids, ids[near[:n]])
+        slam.retired_xy, slam.retired_ids = slam.retired_xy[keep], slam.retired_ids[keep]
+        self.origin = old_origin
+        return True
 
     def _check_static_scene(self) -> None:
         """Tell the health signal whether the scene holds anything static (:func:`static_features`), and warn
@@ -294,6 +343,11 @@ class SlamObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             "slam_pose_std": pipe.honest_pose_std(),
             "slam_pose_cov": pipe.pose_covariance(),
         }
+        if pipe.loop_closer is not None:
+            out["slam_loop_closures"] = int(pipe.loop_closer.closures)
+            out["slam_landmarks_merged"] = int(pipe.loop_closer.merged)
+        if self.map_kept is not None:
+            out["slam_map_kept"] = bool(self.map_kept)
         if self.stage_times_in_info:
             out["slam_stage_times"] = dict(self.stage_times)
         return out
