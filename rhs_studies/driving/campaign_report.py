@@ -1,0 +1,212 @@
+"""The campaign's page: the throughput floor, the learning curves over training seeds, the shield table.
+
+* :func:`floor`: env steps/s of the fast SLAM env alone (the native vector env, one env, in this process) and of
+  the exact env, measured here, beside the campaign's PPO rates (env steps per second of ``learn``, per chunk, from
+  the runs' ``state.json``), and the hours ``steps x seeds x recipes`` need at the PPO rate on one core. The machine's
+  load average is recorded with them (the rates are those of a shared machine).
+* :func:`markdown`: the page from ``results/campaign_<recipe>.json`` (:func:`rhs_studies.driving.campaign.curves`),
+  ``results/shield_table.json`` (:mod:`rhs_studies.driving.shield_table`) and the floor.
+
+    OMP_NUM_THREADS=1 python scripts/campaign_report.py floor
+    python scripts/campaign_report.py page
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rhs_env.registration import HIGHWAY_SLAM_FAST_ID, HIGHWAY_SLAM_ID
+
+__all__ = ["env_rate", "floor", "main", "markdown"]
+
+RESULTS = Path(__file__).resolve().parents[2] / "results"
+
+
+def env_rate(env_id: str, steps: int, env_kwargs: dict[str, Any], seed: int = 21_500) -> float:
+    """Env steps per second of ``env_id`` alone (uniform random actions, seeded), after one warm-up episode step."""
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+
+    vec = gym.make_vec(env_id, num_envs=1, vectorization_mode="vector_entry_point", **env_kwargs)
+    rng = np.random.default_rng(seed)
+    try:
+        vec.reset(seed=seed)
+        vec.step(np.array([1]))
+        t = time.perf_counter()
+        for _ in range(steps):
+            vec.step(rng.integers(0, 5, size=1))
+        return steps / (time.perf_counter() - t)
+    finally:
+        vec.close()
+
+
+def floor(root: str | Path, recipes: list[str], seeds: list[int], steps: int = 400, target_steps: int = 2_000_000,
+          env_kwargs: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The throughput floor (see the module docstring).
+
+    Args:
+        root: the campaign folder.
+        recipes: the recipes whose runs' PPO rates are read (and counted in the hours).
+        seeds: the training seeds per recipe.
+        steps: env steps timed per env.
+        target_steps: the env steps per run the hours are for.
+        env_kwargs: the envs' kwargs (default: the campaign's).
+
+    Returns:
+        ``fast_env_steps_per_s``, ``exact_env_steps_per_s``, ``ppo_steps_per_s`` (median over the chunks of the
+        runs, with min / max), ``hours`` at that rate for ``target_steps x len(seeds) x len(recipes)`` on one core,
+        ``loadavg``.
+    """
+    from rhs_studies.driving.campaign import CAMPAIGN_ENV_KWARGS, load_state, run_dir
+
+    kwargs = dict(CAMPAIGN_ENV_KWARGS if env_kwargs is None else env_kwargs)
+    load = list(os.getloadavg())
+    fast = env_rate(HIGHWAY_SLAM_FAST_ID, steps, kwargs)
+    exact = env_rate(HIGHWAY_SLAM_ID, max(steps // 4, 10), kwargs)
+    rates = [p["steps_per_s"] for r in recipes for s in seeds if (st := load_state(run_dir(root, r, s)))
+             for p in st["curve"]]
+    ppo = float(np.median(rates)) if rates else None
+    total = target_steps * len(seeds) * len(recipes)
+    return {"fast_env_steps_per_s": round(fast, 2), "exact_env_steps_per_s": round(exact, 2),
+            "ppo_steps_per_s": None if ppo is None else {"median": round(ppo, 2), "min": min(rates),
+                                                         "max": max(rates), "chunks": len(rates)},
+            "target": {"steps_per_run": target_steps, "seeds": len(seeds), "recipes": len(recipes),
+                       "env_steps": total},
+            "hours_one_core_at_ppo_rate": None if not ppo else round(total / ppo / 3600, 1),
+            "hours_one_core_at_env_rate": round(total / fast / 3600, 1),
+            "loadavg_before": load, "loadavg_after": list(os.getloadavg()), "cores": os.cpu_count()}
+
+
+def _fmt(x: Any, nd: int = 1) -> str:
+    return "-" if x is None else f"{x:.{nd}f}"
+
+
+def _curve_lines(cur: dict[str, Any]) -> list[str]:
+    lines = ["| run | env steps | train wall (s) | PPO env steps/s | validation return (last) | best checkpoint "
+             "(env steps, validation return) |", "|---|---:|---:|---:|---:|---|"]
+    for s, r in cur["runs"].items():
+        b = r["best"]
+        lines.append(f"| seed {s} | {r['env_steps'][-1]} | {r['train_wall_s'][-1]:.0f} | "
+                     f"{np.median(r['steps_per_s']):.1f} | {r['validation_return'][-1]:.1f} | "
+                     f"{b['env_steps']}, {b['validation_return']:.1f} |")
+    g = cur.get("by_env_steps")
+    if g:
+        lines += ["", "Validation return over the seeds (mean [min, max]) against env steps:", "",
+                  "| env steps | " + " | ".join(f"{x:.0f}" for x in g["env_steps"][::max(1, len(g['env_steps']) // 6)])
+                  + " |", "|---|" + "---:|" * len(g["env_steps"][::max(1, len(g['env_steps']) // 6)]),
+                  "| return | " + " | ".join(f"{m:.1f} [{lo:.1f}, {hi:.1f}]" for m, lo, hi in
+                                           list(zip(g["mean"], g["min"], g["max"]))[::max(1, len(g['env_steps']) // 6)])
+                  + " |"]
+    return lines
+
+
+def _shield_lines(table: dict[str, Any]) -> list[str]:
+    lines = ["| arm | env | shield | return | collisions | mean speed (m/s) | overrides / step | episodes with an "
+             "override | shield: return gain [95 %] | prevented | caused |",
+             "|---|---|---|---:|---:|---:|---:|---:|---|---:|---:|"]
+    for arm, row in table.items():
+        for env in ("exact", "fast"):
+            if env not in row:
+                continue
+            eff = row[env].get("shield_effect")
+            for sh in ("off", "on"):
+                if sh not in row[env]:
+                    continue
+                a = row[env][sh]
+                gain = (f"{eff['return_gain']:+.1f} [{eff['interval'][0]:+.1f}, {eff['interval'][1]:+.1f}]"
+                        if eff and sh == "on" else "")
+                lines.append(f"| {arm} | {env} | {sh} | {a['return']:.1f} | {a['collisions']}/{a['episodes']} | "
+                             f"{_fmt(a['mean_speed'])} | {_fmt(a.get('override_rate_step'), 3)} | "
+                             f"{_fmt(a.get('override_rate_episode'), 2)} | {gain} | "
+                             f"{eff['collisions_prevented'] if eff and sh == 'on' else ''} | "
+                             f"{eff['collisions_caused'] if eff and sh == 'on' else ''} |")
+    return lines
+
+
+def _gap_lines(table: dict[str, Any]) -> list[str]:
+    lines = ["| arm | shield | return exact - fast [95 %] | crashed on exact only | on fast only |",
+             "|---|---|---|---:|---:|"]
+    for arm, row in table.items():
+        for sh, g in row.get("sim_to_sim", {}).items():
+            lines.append(f"| {arm} | {sh} | {g['return_diff']:+.2f} [{g['interval'][0]:+.2f}, {g['interval'][1]:+.2f}]"
+                         f" | {g['only_a_crashed']} | {g['only_b_crashed']} |")
+    return lines
+
+
+def _stats_lines(stats: dict[str, Any]) -> list[str]:
+    lines = ["| env, shield | runs | IQM [95 %] | mean [95 %] | optimality gap [95 %] |", "|---|---:|---|---|---|"]
+    for key, s in stats.items():
+        if s is None:
+            continue
+        cell = [f"{s[m]['value']:.3f} [{s[m]['low']:.3f}, {s[m]['high']:.3f}]" for m in ("iqm", "mean",
+                                                                                        "optimality_gap")]
+        lines.append(f"| {key.replace('_', ', shield ')} | {len(s['runs'])} | " + " | ".join(cell) + " |")
+    return lines
+
+
+def markdown(curves: dict[str, Any] | None, shield: dict[str, Any] | None, floor_result: dict[str, Any] | None) -> str:
+    """The campaign page (any part may be missing)."""
+    out = ["# Training campaign: pilot", "",
+           "Generated by `python scripts/campaign_report.py page` from `results/campaign_ppo_scratch.json`, "
+           "`results/shield_table.json` and `results/campaign_floor.json` (each records its commit and command).", ""]
+    if floor_result:
+        f, p = floor_result, floor_result.get("ppo_steps_per_s") or {}
+        out += ["## Throughput floor", "",
+                f"- fast SLAM env alone: **{f['fast_env_steps_per_s']:.1f}** env steps/s; exact env "
+                f"{f['exact_env_steps_per_s']:.1f} (one env, this process; load average "
+                f"{f['loadavg_before'][0]:.1f} on {f['cores']} cores while measured);",
+                f"- PPO on the fast env (native vector env, 2 envs, 1 process): median **{_fmt(p.get('median'))}** "
+                f"env steps/s over {p.get('chunks', 0)} chunks (min {_fmt(p.get('min'))}, max {_fmt(p.get('max'))});",
+                f"- {f['target']['steps_per_run']:,} env steps x {f['target']['seeds']} seeds x "
+                f"{f['target']['recipes']} recipe(s) = {f['target']['env_steps']:,} env steps: "
+                f"**{_fmt(f['hours_one_core_at_ppo_rate'])} h** on one core at that PPO rate "
+                f"({_fmt(f['hours_one_core_at_env_rate'])} h at the env's own rate, no learning).", ""]
+    if curves:
+        out += ["## Learning curves (PPO from scratch, fast env, validation seeds 20000..)", "", *_curve_lines(curves),
+                ""]
+    if shield:
+        out += [f"## The shield, measured (seeds {shield['seeds'][0]}-{shield['seeds'][-1]}, fresh)", "",
+                *_shield_lines(shield["table"]), "", "Sim-to-sim gap (same seed, same arm):", "",
+                *_gap_lines(shield["table"]), "",
+                "Over the training seeds (score: return / IDM + MOBIL's on the same seed and env; stratified "
+                "bootstrap):", "", *_stats_lines(shield.get("training_seeds", {})), ""]
+    return "\n".join(out)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``floor``: measure and write ``results/campaign_floor.json``; ``page``: write ``results/campaign_pilot.md``."""
+    import argparse
+
+    from rhs_studies.driving.campaign import CAMPAIGN_DIR
+    from rhs_studies.kit.provenance import write_json
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("command", choices=("floor", "page"))
+    ap.add_argument("--root", type=Path, default=CAMPAIGN_DIR)
+    ap.add_argument("--recipes", nargs="+", default=["ppo_scratch"])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--steps", type=int, default=400)
+    ap.add_argument("--results", type=Path, default=RESULTS)
+    args = ap.parse_args(argv)
+    if args.command == "floor":
+        started = time.time()
+        result = floor(args.root, args.recipes, args.seeds, args.steps)
+        write_json(args.results / "campaign_floor.json", result, "scripts/campaign_report.py", vars(args), started,
+                   argv=argv)
+        print(json.dumps(result))
+        return 0
+
+    def read(name: str) -> dict[str, Any] | None:
+        path = args.results / name
+        return json.loads(path.read_text()) if path.exists() else None
+    page = markdown(read(f"campaign_{args.recipes[0]}.json"), read("shield_table.json"), read("campaign_floor.json"))
+    (args.results / "campaign_pilot.md").write_text(page + "\n")
+    print(page)
+    return 0

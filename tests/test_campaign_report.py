@@ -1,0 +1,38 @@
+"""The campaign page (rhs_studies.driving.campaign_report): the floor's rate and hours, the page's tables."""
+
+import pytest
+
+from rhs_studies.driving import campaign_report as cr
+from rhs_studies.driving import shield_table as st
+
+
+def _ep(seed, ret, crashed, overrides=None):
+    return {"seed": seed, "return": ret, "crashed": crashed, "steps": 10, "mean_speed": 20.0, "overrides": overrides}
+
+
+def test_env_rate_is_positive_and_the_page_renders():
+    kw = {"action": {"type": "DiscreteMetaAction", "target_speeds": [10, 15, 20, 25, 30]}, "duration": 2}
+    assert cr.env_rate("rhs-highway-slam-fast-v0", 5, kw) > 0
+    eps = {"campaign:r:seed0": {"exact": {"off": [_ep(0, 9.0, True)], "on": [_ep(0, 11.0, False, {"front": 1})]},
+                                "fast": {"off": [_ep(0, 10.0, False)], "on": [_ep(0, 11.0, False, {"front": 2})]}},
+           "idm": {"exact": {"off": [_ep(0, 10.0, False)]}}}
+    shield = {"seeds": [0], "table": st.table(eps), "training_seeds": {"exact_off": None}}
+    curves = {"runs": {"0": {"env_steps": [640, 1280], "train_wall_s": [10.0, 20.0], "steps_per_s": [64.0, 64.0],
+                             "validation_return": [5.0, 7.0], "best": {"env_steps": 1280, "validation_return": 7.0}}},
+              "by_env_steps": {"env_steps": [640.0, 1280.0], "mean": [5.0, 7.0], "min": [5.0, 7.0], "max": [5.0, 7.0]}}
+    floor = {"fast_env_steps_per_s": 80.0, "exact_env_steps_per_s": 15.0, "loadavg_before": [1.0], "cores": 2,
+             "ppo_steps_per_s": {"median": 40.0, "min": 30.0, "max": 50.0, "chunks": 2},
+             "target": {"steps_per_run": 2_000_000, "seeds": 3, "recipes": 2, "env_steps": 12_000_000},
+             "hours_one_core_at_ppo_rate": 83.3, "hours_one_core_at_env_rate": 41.7}
+    page = cr.markdown(curves, shield, floor)
+    assert "**83.3 h**" in page and "| campaign:r:seed0 | exact | on | 11.0 | 0/1 |" in page
+    assert "| seed 0 | 1280 | 20 | 64.0 | 7.0 | 1280, 7.0 |" in page
+    assert "| campaign:r:seed0 | off | -1.00" in page  # exact - fast, paired
+    assert cr.markdown(None, None, None).startswith("# Training campaign")
+
+
+def test_floor_hours_follow_the_rate(tmp_path, monkeypatch):
+    monkeypatch.setattr(cr, "env_rate", lambda env_id, steps, kw, seed=0: 100.0)
+    out = cr.floor(tmp_path, ["ppo_scratch"], [0, 1, 2], steps=10)
+    assert out["ppo_steps_per_s"] is None and out["hours_one_core_at_ppo_rate"] is None
+    assert out["hours_one_core_at_env_rate"] == pytest.approx(6_000_000 / 100 / 3600, abs=0.05)
