@@ -1,7 +1,7 @@
 """``rhs-slam demo``: one SLAM-in-the-loop episode with the shipped policy.
 
-Drives the default env (``rhs-highway-slam-v0``) with the policy shipped in
-``agents/data`` (``--policy FILE`` for another zip, ``--policy random`` for a
+Drives the default env (``rhs-highway-slam-v0``) with the shipped policy, :data:`agents.SHIPPED_POLICY`
+(``agents/data/shipped.zip``; its record names the experiment it came from) (``--policy FILE`` for another zip, ``--policy random`` for a
 uniformly random policy, ``--policy constant:4`` for one action at every step), on the env kwargs saved beside the policy
 (``--env-kwargs`` is merged over them, see :mod:`agents.evaluate`). Shows a
 per-step progress bar, prints the return, collision, mean speed and SLAM errors
@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
+from agents import SHIPPED_POLICY
 from agents.evaluate import (
     DEFAULT_ENV,
-    SHIPPED_POLICY,
     episode_steps,
     json_default,
     load_policy,

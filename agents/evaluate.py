@@ -20,7 +20,8 @@ k > 1 (saved in the same JSON, :mod:`agents.decision`) is loaded as a
 action between, so every policy is scored per env step on the same seeds. A record with a ``shield``
 (:mod:`agents.shield`) drives the policy behind the radar safety shield; ``--shield`` puts any policy behind
 it, ``--no-shield`` drives a shielded one without. The default policy is the shipped one,
-``agents/data/rl/shield_flank_explore_lane_time.zip`` (with its ``.json`` record): a PPO fine-tune (privileged
+``agents/data/shipped.zip`` (:data:`agents.SHIPPED_POLICY`, with its ``.json`` record; a copy of the experiment
+``agents/data/rl/shield_flank_explore_lane_time.zip``, which its record names): a PPO fine-tune (privileged
 critic, 40k env steps, :mod:`agents.finetune`) of the DAgger student below, trained and driven behind the radar
 shield, whose lane-change rule (``lane_time_s`` 2.5) was chosen on validation seeds (:mod:`rhs_studies.rl_lane_rule_trial`).
 Its start, ``agents/data/rl/dagger_cruise30_close.zip``, is the DAgger student of
@@ -49,6 +50,7 @@ from typing import Any
 
 import numpy as np
 
+from agents import SHIPPED_POLICY as _SHIPPED_ROLE
 from agents.decision import held
 from agents.expert import HeadwayDriver
 from agents.lookahead import LookaheadDriver
@@ -86,8 +88,9 @@ DAGGER_CRUISE30_CLOSE_POLICY = DATA_DIR / "rl" / "dagger_cruise30_close.zip"
 #: the PPO fine-tune of DAGGER_CRUISE30_CLOSE_POLICY under the shield (rhs_studies/rl_finetune.py's
 #: ``shield_flank_explore`` arm) behind the lane rule rhs_studies/rl_lane_rule_trial.py chose and tested (``--ship``)
 RL_FINETUNE_POLICY = DATA_DIR / "rl" / "shield_flank_explore_lane_time.zip"
-#: the policy of ``rhs-slam demo`` / ``evaluate`` by default, and the ground-truth student of the same expert
-SHIPPED_POLICY, SHIPPED_TRUTH_POLICY = RL_FINETUNE_POLICY, DAGGER_TRUTH_POLICY
+#: the policy of ``rhs-slam demo`` / ``evaluate`` by default (:data:`agents.SHIPPED_POLICY`, ``agents/data/shipped.zip``:
+#: a byte copy of RL_FINETUNE_POLICY, its record naming that lineage), and the ground-truth student of the same expert
+SHIPPED_POLICY, SHIPPED_TRUTH_POLICY = _SHIPPED_ROLE, DAGGER_TRUTH_POLICY
 DEFAULT_ENV = "rhs-highway-slam-v0"
 
 

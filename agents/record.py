@@ -101,7 +101,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def default_dataset_id(env_id: str, policy: str) -> str:
-    """``rhs-slam/highway-slam/shield_flank_explore_lane_time-v0`` for the shipped policy on the default env."""
+    """``rhs-slam/highway-slam/shipped-v0`` for the shipped policy (``agents/data/shipped.zip``) on the default env."""
     env_name = re.sub(r"^rhs-", "", re.sub(r"-v\d+$", "", env_id.split(":")[-1]))
     name = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(policy).stem if policy.endswith(".zip") else policy)
     return f"{NAMESPACE}/{env_name}/{name}-v0"

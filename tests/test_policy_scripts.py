@@ -22,14 +22,19 @@ def test_targets_merge_the_radar_settings_and_ship_where_evaluate_looks():
     assert train_policy.target_path("dagger", "slam") == DAGGER_POLICY
     # the shipped policy (the RL fine-tune) continues that student (through the study's DAgger continuation and the
     # 30 m/s teacher's two students), where the study ships its arms; every link of the chain is shipped
-    assert SHIPPED_POLICY.parent == SHIPPED_DIR
+    # the shipped policy has a role name; its record names the experiment it is a byte copy of, shipped by the study
+    import agents
+
+    assert SHIPPED_POLICY == agents.SHIPPED_POLICY and SHIPPED_POLICY.name == "shipped.zip"
+    experiment = train_policy.ROOT / policy_metadata(SHIPPED_POLICY)["lineage"]["experiment"]
+    assert experiment.parent == SHIPPED_DIR and SHIPPED_POLICY.read_bytes() == experiment.read_bytes()
     chain, link = [], SHIPPED_POLICY
     while link.resolve() != DAGGER_POLICY.resolve() and len(chain) < 6:
         chain.append(link)
         link = train_policy.ROOT / policy_metadata(link)["init_policy"]
         assert link.exists(), f"{chain[-1]} continues {link}, which is not shipped"
     assert link.resolve() == DAGGER_POLICY.resolve() and len(chain) == 4
-    assert [p.name for p in chain] == ["shield_flank_explore_lane_time.zip", "dagger_cruise30_close.zip",
+    assert [p.name for p in chain] == ["shipped.zip", "dagger_cruise30_close.zip",
                                        "dagger_cruise30_gap.zip", "dagger_continue_80k.zip"]
     shipped = policy_metadata(SHIPPED_POLICY)
     assert shipped["shield"]["min_points"] >= 2 and shipped["algo"] == "finetune"  # RL, behind the radar shield
