@@ -213,6 +213,9 @@ CASES: list[Case] = [
     Case("rhs carrier 1 Hz", "make", (RADAR, {**SMALL, "radar": {**CHEAP_RADAR, "rhs": {"elements": 24,
                                                                                        "carrier_hz": 1.0}}}),
          fragments=("radar.rhs.carrier_hz",)),
+    Case("rhs tx_feed == rx_feed", "make", (RADAR, {**SMALL, "radar": {**CHEAP_RADAR, "rhs": {"elements": 24,
+                                                                                       "tx_feed": 0, "rx_feed": 0}}}),
+         fragments=("radar.rhs.tx_feed", "rx_feed", "different")),
     Case("action MultiAgentAction", "make", (HW, {**SMALL, "action": {"type": "MultiAgentAction"}}),
          fragments=("action.type", "DiscreteMetaAction")),
     Case("observation Kinematics on a SLAM env", "make", (SLAM, {**SLAM_KW, "observation": {"type": "Kinematics"}}),
@@ -505,8 +508,8 @@ def run_case(case: Case, folder: Path) -> Outcome:
             return Outcome(True, finite=_finite(fn()))
     except (ValueError, TypeError) as exc:
         return Outcome(False, message=f"{type(exc).__name__}: {exc}", clean=True)
-    except RuntimeError as exc:  # gymnasium's lifecycle errors (rhs_env.envs.EnvClosedError) are refusals too
-        if type(exc).__name__ != "EnvClosedError":
+    except RuntimeError as exc:  # gymnasium's lifecycle errors (rhs_env.envs.EnvClosedError) and a vector env's
+        if type(exc).__name__ not in ("EnvClosedError", "WorkerError"):  # dead worker (rhs_env.vector) are refusals
             raise
         return Outcome(False, message=f"{type(exc).__name__}: {exc}", clean=True)
     raise ValueError(f"unknown case kind {case.kind!r}")
