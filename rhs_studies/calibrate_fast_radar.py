@@ -22,6 +22,8 @@ import sys
 import time
 from pathlib import Path
 
+from rhs_studies.kit.seeds import first
+
 __all__ = ["main"]
 
 
@@ -29,7 +31,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--radar", default=None, help="radar settings as JSON (RadarConfig fields); default: the default radar")
     p.add_argument("--seeds", type=int, default=100)
-    p.add_argument("--first-seed", type=int, default=100_000)
+    p.add_argument("--first-seed", type=int, default=first("fast_radar_calibration"))
     p.add_argument("--steps", type=int, default=40)
     p.add_argument("--out", default=None, help="table path (default: shipped for the default radar, else the cache)")
     a = p.parse_args(argv)

@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from rhs_studies.kit.provenance import write_json
+from rhs_studies.kit.seeds import first
 
 __all__ = ["fingerprint", "main", "markdown", "radar_fidelity", "slam_fidelity", "throughput"]
 
@@ -52,7 +53,7 @@ PD_BIN_DB = 5.0
 KS_POINTS = 2000
 #: ghosts: false points in the ego's lane ahead (vehicle frame)
 GHOST_X_M, GHOST_Y_M = 40.0, 2.0
-RADAR_FIRST_SEED, SLAM_FIRST_SEED = 200_000, 300_000
+RADAR_FIRST_SEED, SLAM_FIRST_SEED = first("fast_radar_fidelity"), first("fast_radar_slam")
 
 
 def _scan_pair(config: Any, seeds: list[int], steps: int) -> dict[str, Any]:

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from rhs_studies.episodes import start_study
+from rhs_studies.kit.seeds import first
 from rhs_studies.provenance import write_json
 
 #: the front page's file must stay small
@@ -27,12 +28,12 @@ MAX_BYTES = 2_000_000
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    from agents.evaluate import SHIPPED_POLICY
+    from agents import SHIPPED_POLICY
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--policy", default=SHIPPED_POLICY, help="policy, as rhs-slam demo takes it (default: shipped)")
     ap.add_argument("--env", default=None, help="env id (default: the policy's)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=first("scenes"))
     ap.add_argument("--seconds", type=float, default=16.0, help="simulated seconds recorded (the episode's duration)")
     ap.add_argument("--every", type=int, default=1, help="keep every k-th step's frame")
     ap.add_argument("--scale", type=float, default=1.0, help="resize factor of the frames")

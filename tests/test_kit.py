@@ -31,6 +31,22 @@ def test_the_ledger_names_every_driven_set_and_refuses_a_driven_set_as_fresh():
     assert all(a[1] < b[0] for a, b in zip(ranges, ranges[1:], strict=False)), "ledger sets are disjoint"
 
 
+def test_the_studies_seed_defaults_are_read_from_named_sets_with_the_numbers_published():
+    from rhs_studies.driving import crash_analysis, rl_lane_rule_trial
+    from rhs_studies.kit import driving
+
+    assert seeds.first("policies_table") == 1000 and seeds.first("shield_validation", 50) == 4050
+    assert crash_analysis.DEFAULT_SEEDS == (1000, 2000)
+    assert (driving.FreshSeeds.validation_seed, driving.FreshSeeds.seed) == (7000, 6000)
+    assert rl_lane_rule_trial.Options.seed == 8000
+    assert seeds.seed_set("fast_radar_calibration").first == 100_000 and seeds.first("scenes") == 0
+    with pytest.raises(ValueError, match="offset"):
+        seeds.first("lane_analysis", 60)  # past the set's last seed
+    # the scene sets are named, but outside the driving ledger's freshness check
+    assert not {s.name for s in seeds.SCENE_SETS} & set(seeds.BY_NAME)
+    assert seeds.overlap(range(100_000, 100_010)) == []
+
+
 def _chunk_threads(chunk: list[int], tag: str) -> list[tuple[int, str, int]]:
     from threadpoolctl import threadpool_info
 

@@ -43,6 +43,7 @@ import yaml
 
 from rhs_studies.kit.driving import FINE_SPEEDS  # target speeds down to 10 m/s (highway-env's default: 20, 25, 30)
 from rhs_studies.kit.provenance import STATE_AT_START, write_json
+from rhs_studies.kit.seeds import first
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -256,9 +257,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("variants", nargs="*", metavar="VARIANT",
                     help=f"of: {', '.join(known)} (default: {' '.join(REPRODUCE)})")
     ap.add_argument("--timesteps", type=int, default=15000)
-    ap.add_argument("--seed", type=int, default=0, help="training seed")
+    ap.add_argument("--seed", type=int, default=first("training"), help="training seed")
     ap.add_argument("--episodes", type=int, default=20)
-    ap.add_argument("--eval-seed", type=int, default=1000)
+    ap.add_argument("--eval-seed", type=int, default=first("policies_table"))
     ap.add_argument("--n-envs", type=int, default=None)
     ap.add_argument("--out", default=str(ROOT / "results" / "ablations.json"))
     ap.add_argument("--fresh", action="store_true", help="start a new table (drop the records already in --out)")

@@ -48,13 +48,14 @@ import numpy as np
 
 from rhs_studies.kit.pool import map_seeds
 from rhs_studies.kit.provenance import write_json
+from rhs_studies.kit.seeds import first
 
 ROOT = Path(__file__).resolve().parents[2]
 
 DEFAULT_POLICY = "agents/data/dagger_rhs_highway_slam.zip"
 #: the same recipe (agents/hyperparams/dagger.yml, FINE_SPEEDS, 5-degree grid) at half the DAgger student's env steps
 BUDGET_ABLATION = "agents/data/budget/dagger_rhs_highway_slam_40k.zip"
-DEFAULT_SEEDS = (1000, 2000)
+DEFAULT_SEEDS = (first("policies_table"), first("heldout_2000"))
 CATEGORIES = ("seen, student disagreed", "not seen", "expert too")
 #: vehicles within this distance of the ego are kept at each decision (the hit one is among them), m
 NEAR_M = 60.0

@@ -60,6 +60,7 @@ from agents.decision import SLOWER
 from rhs_common.stats import mean_interval, paired_difference, wilson_interval
 from rhs_studies.kit.driving import ANTENNA_STUDY, TARGETS, drive_seeds, run_policy, target_path
 from rhs_studies.kit.provenance import write_json
+from rhs_studies.kit.seeds import first
 from rhs_studies.kit.tables import paired
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -449,7 +450,7 @@ def rerun_antenna(args: argparse.Namespace, started: float, argv: list[str] | No
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--episodes", type=int, default=100)
-    ap.add_argument("--seed", type=int, default=1000, help="first seed (training used 0.. and 10000..)")
+    ap.add_argument("--seed", type=int, default=first("policies_table"), help="first seed (training used 0.. and 10000..)")
     ap.add_argument("--workers", type=int, default=2, help="processes per policy")
     ap.add_argument("--slam-policy", default=None,
                     help="the radar + SLAM student compared with --truth-policy at the same budget "

@@ -102,6 +102,7 @@ from rhs_studies.kit.driving import (
     targets,
 )
 from rhs_studies.kit.provenance import git_state, write_json
+from rhs_studies.kit.seeds import first
 from rhs_studies.kit.tables import paired, paired_text, row_summary
 from rhs_studies.kit.tables import table_row as _table_row
 
@@ -334,9 +335,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--arms", nargs="+", default=list(ARMS), choices=list(ARMS))
     ap.add_argument("--train", action="store_true", help="train the arms whose run folder has no model.zip")
     ap.add_argument("--timesteps", type=int, default=20000, help="env steps per arm")
-    ap.add_argument("--train-seed", type=int, default=0)
+    ap.add_argument("--train-seed", type=int, default=first("training"))
     ap.add_argument("--episodes", type=int, default=100)
-    ap.add_argument("--seed", type=int, default=3000, help="first held-out evaluation seed")
+    ap.add_argument("--seed", type=int, default=first("rl_finetune_heldout"), help="first held-out evaluation seed")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out-dir", type=Path, default=ROOT / "results")
     ap.add_argument("--ship-dir", type=Path, default=SHIPPED_DIR, help="where the arms' actor zips are copied")

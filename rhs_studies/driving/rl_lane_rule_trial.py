@@ -41,7 +41,7 @@ from agents.evaluate import policy_metadata
 from rhs_studies.kit.driving import LABELS, ROOT, SHIELD_CONTROL, SHIPPED_DIR, FreshSeeds, check_zips, rl_fingerprint
 from rhs_studies.kit.protocol import Drive, load_spec, row_driver, run_comparison
 from rhs_studies.kit.runner import Study, option, parse_options, parser_for, run_study
-from rhs_studies.kit.seeds import USED_SEEDS, check_fresh
+from rhs_studies.kit.seeds import USED_SEEDS, check_fresh, first
 from rhs_studies.kit.tables import row_summary, table_row, targets_line
 
 #: the launcher of this study: the command its results record and its key in results/fingerprints.json (the module
@@ -152,7 +152,7 @@ def fingerprint() -> list[float]:
 class Options(FreshSeeds):
     """This study's options: :class:`rhs_studies.kit.driving.FreshSeeds` with test seeds from 8000, and ``--ship``."""
 
-    seed: int = option(8000, "first test seed")
+    seed: int = option(first("lane_rule_test"), "first test seed")
     ship: bool = option(False, "drive nothing: ship the fine-tune behind the rule chosen in --out-dir's "
                         "rl_lane_test.json, if it met every target")
 

@@ -42,6 +42,7 @@ import numpy as np
 
 from rhs_studies.kit.pool import map_seeds
 from rhs_studies.kit.provenance import write_json
+from rhs_studies.kit.seeds import first
 from rhs_studies.kit.tables import paired, row_summary
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -182,7 +183,7 @@ def fingerprint() -> list[float]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--episodes", type=int, default=20)
-    ap.add_argument("--seed", type=int, default=4000, help="first validation seed")
+    ap.add_argument("--seed", type=int, default=first("shield_validation"), help="first validation seed")
     ap.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--duration", type=float, default=None, help="episode length, s (default: the env's, 40 s)")

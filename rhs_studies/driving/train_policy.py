@@ -80,6 +80,7 @@ from rhs_studies.kit.driving import (
     target_path,
 )
 from rhs_studies.kit.provenance import provenance, write_json
+from rhs_studies.kit.seeds import first
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -235,7 +236,7 @@ def main(argv: list[str] | None = None) -> int:
         "--timesteps", type=int, default=None, help="env steps per policy (default: n_timesteps of the algo's YAML)"
     )
     ap.add_argument("--n-envs", type=int, default=2, help="subprocess envs (default 2)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=first("training"))
     ap.add_argument("--slam-env-kwargs", default=json.dumps(SLAM_ENV_KWARGS),
                     help="JSON env kwargs of the radar / SLAM policies' envs (saved with them; default: %(default)s)")
     ap.add_argument("--env-kwargs", default=json.dumps(FINE_SPEEDS),

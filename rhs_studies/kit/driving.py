@@ -25,7 +25,7 @@ from agents.decision import SLOWER
 from agents.evaluate import DAGGER_CRUISE30_CLOSE_POLICY, resolve_env
 from rhs_studies.kit.pool import map_seeds
 from rhs_studies.kit.runner import option
-from rhs_studies.kit.seeds import consecutive
+from rhs_studies.kit.seeds import consecutive, first
 from rhs_studies.kit.tables import paired
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -313,9 +313,9 @@ class FreshSeeds(DriveOptions):
     :mod:`rhs_studies.driving.rl_lane_rule_trial`): :class:`DriveOptions` and its validation and test seeds;
     ``ValueError`` when a set has fewer than two episodes or the sets overlap."""
 
-    validation_seed: int = option(7000, "first validation seed (the choice)")
+    validation_seed: int = option(first("rl_confirm_validation"), "first validation seed (the choice)")
     validation_episodes: int = option(100)
-    seed: int = option(6000, "first test seed")
+    seed: int = option(first("rl_confirm_test"), "first test seed")
     episodes: int = option(100, "test episodes")
 
     def __post_init__(self) -> None:

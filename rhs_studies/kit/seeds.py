@@ -4,6 +4,13 @@ A comparison judged on seeds that chose its arm, or tuned its shield, is not a f
 once, with the study that drove it and what for; :func:`overlap` says which sets a list of seeds touches, so that a
 study refuses to call a driven set fresh (:func:`check_fresh`). A new study that drives a new set adds it here.
 
+The studies that drive no policy (radar, pattern, SLAM, registration, video) draw scene and noise seeds from the
+sets of :data:`SCENE_SETS`, named here too but outside the driving ledger's freshness check. Every study's seed
+default is read from a named set (:func:`first`), so the number a study starts from says which set it draws:
+
+>>> first("policies_table"), first("shield_validation", 50), first("fast_radar_calibration")
+(1000, 4050, 100000)
+
 >>> [s.name for s in overlap(range(6099, 6101))]
 ['rl_confirm_test']
 >>> overlap(range(9000, 9100))
@@ -63,17 +70,49 @@ LEDGER: tuple[SeedSet, ...] = (
 )
 BY_NAME = {s.name: s for s in LEDGER}
 
+#: the seed sets of the studies that drive no policy: scene, traffic and noise seeds. Not driving episodes, so outside
+#: :data:`LEDGER` and its freshness check (the ``scenes`` set shares its numbers with ``training``)
+SCENE_SETS: tuple[SeedSet, ...] = (
+    SeedSet("scenes", 0, 999, "the radar, pattern, SLAM, registration and video studies' scene and noise seeds "
+            "(seed 0 by default; fig5a and registration_in_loop take seeds 0..N-1)"),
+    SeedSet("low_snr_slam", 100, 107, "low_snr_slam: the SLAM at low SNR (100-102 by default, 100-107 published)"),
+    SeedSet("fast_radar_calibration", 100_000, 100_099, "calibrate_fast_radar: the fast radar's detection tables"),
+    SeedSet("fast_radar_fidelity", 200_000, 299_999, "fast_radar_fidelity: the radar comparison's scenes "
+            "(200000-200059 published)"),
+    SeedSet("fast_radar_slam", 300_000, 399_999, "fast_radar_fidelity: the SLAM comparison's seeds "
+            "(300000-300019 published)"),
+)
+_NAMED = {s.name: s for s in (*LEDGER, *SCENE_SETS)}
+
 #: the sets the project's policies were trained near, chosen, tuned or judged on before the lane rule trial, as
 #: (first, last): what that trial's ``overlap`` names (its own test set, ``lane_rule_test``, it reruns on; its check
 #: now refuses every set of the ledger but its own, ``heldout_2000`` too)
-USED_SEEDS = tuple((s.first, s.last) for s in LEDGER if s.name not in ("lane_rule_test", "heldout_2000"))
+#: the sets the ledger added after the trial (later studies' sets) are not among them
+USED_SEEDS = tuple((BY_NAME[n].first, BY_NAME[n].last) for n in (
+    "training", "policies_table", "rl_finetune_heldout", "shield_validation", "lane_analysis", "rl_confirm_test",
+    "rl_confirm_validation", "training_eval"))
 
 
 def seed_set(name: str) -> SeedSet:
-    """The ledger's set ``name``; ``ValueError`` naming the known sets otherwise."""
-    if name not in BY_NAME:
-        raise ValueError(f"seed set {name!r} is not in the ledger (rhs_studies/kit/seeds.py): known {sorted(BY_NAME)}")
-    return BY_NAME[name]
+    """The set ``name`` of the ledger or of :data:`SCENE_SETS`; ``ValueError`` naming the known sets otherwise."""
+    if name not in _NAMED:
+        raise ValueError(f"seed set {name!r} is not in the ledger (rhs_studies/kit/seeds.py): known {sorted(_NAMED)}")
+    return _NAMED[name]
+
+
+def first(name: str, offset: int = 0) -> int:
+    """The first seed of the named set (:func:`seed_set`), or the seed ``offset`` after it: a study's seed default.
+
+    Args:
+        name: a set of :data:`LEDGER` or :data:`SCENE_SETS`.
+        offset: seeds after the set's first (a default that starts inside a set), ``0 <= offset`` and inside it.
+
+    Returns:
+        ``seed_set(name).first + offset``.
+    """
+    s = seed_set(name)
+    check_int(f"seed set {name} offset", offset, 0, s.last - s.first)
+    return s.first + offset
 
 
 def overlap(seeds: Iterable[int], ledger: Iterable[SeedSet] = LEDGER, allow: Iterable[str] = ()) -> list[SeedSet]:
@@ -113,4 +152,5 @@ def consecutive(first: int, count: int) -> list[int]:
     return list(range(first, first + count))
 
 
-__all__ = ["BY_NAME", "LEDGER", "USED_SEEDS", "SeedSet", "check_fresh", "consecutive", "overlap", "seed_set"]
+__all__ = ["BY_NAME", "LEDGER", "SCENE_SETS", "USED_SEEDS", "SeedSet", "check_fresh", "consecutive", "first", "overlap",
+           "seed_set"]

@@ -43,6 +43,7 @@ from rhs_env.point_cloud import os_cfar_threshold
 from rhs_env.radar import DetectionConfig, RadarConfig, RadarSystem
 from rhs_env.scatterers import Scatterers
 from rhs_studies.kit.provenance import write_json
+from rhs_studies.kit.seeds import first
 from rhs_studies.kit.tables import snr_at
 
 DETECTORS = ("summed", "footprint")
@@ -234,7 +235,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--snr-max", type=float, default=-4.0)
     p.add_argument("--snr-step", type=float, default=1.5)
     p.add_argument("--timing-repeats", type=int, default=15)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=first("scenes"))
     p.add_argument("--quick", action="store_true", help="few trials and points (a smoke run)")
     p.add_argument("--out-dir", default="results")
     a = p.parse_args(argv)

@@ -32,6 +32,7 @@ from rhs_env.array_models import RHSConfig, ScanConfig
 from rhs_env.radar import RadarConfig, RadarSystem
 from rhs_studies.kit.episodes import landmark_scene
 from rhs_studies.kit.provenance import write_json
+from rhs_studies.kit.seeds import first
 
 
 def evaluate(cfg: RadarConfig, cycles: int, seed: int) -> dict:
@@ -161,7 +162,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--elements", type=int, nargs="+", default=[20, 40, 60, 80, 100])
     p.add_argument("--grids", type=float, nargs="+", default=[1.0, 2.0, 3.0, 4.0, 5.0])
     p.add_argument("--cycles", type=int, default=5)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=first("scenes"))
     p.add_argument("--out", default="results/fig5b")
     p.add_argument("--render-only", action="store_true",
                    help="redraw the PNG and the table from the existing JSON (no scans; the JSON is unchanged)")

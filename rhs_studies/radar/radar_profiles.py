@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from rhs_studies.kit.provenance import numbers, write_json
+from rhs_studies.kit.seeds import first
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -168,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--grid-deg", type=float, default=1.0)
     ap.add_argument("--repeats", type=int, default=15)
     ap.add_argument("--scenes", type=int, default=100)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=first("scenes"))
     ap.add_argument("--noise-draws", type=int, default=3,
                     help="noise realizations of each scene, pooled in the quality metrics (default 3)")
     ap.add_argument("--out", default=None, help="JSON (and .md beside it), e.g. results/radar_profiles.json")

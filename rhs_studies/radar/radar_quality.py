@@ -30,6 +30,7 @@ from rhs_common.stats import mean_half_record, rmse_interval
 from rhs_env.array_models import ScanConfig
 from rhs_env.radar import RadarConfig, RadarSystem
 from rhs_studies.kit.provenance import command_line, numbers, write_json
+from rhs_studies.kit.seeds import first
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -82,7 +83,7 @@ def fingerprint() -> list[float | None]:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--scenes", type=int, default=100)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=first("scenes"))
     p.add_argument("--antenna", default="rhs")
     p.add_argument("--grid-deg", type=float, default=1.0)
     p.add_argument("--fidelity", default=None, help="RadarConfig.fidelity (default: the config's default)")

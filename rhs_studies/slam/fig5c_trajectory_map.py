@@ -30,6 +30,7 @@ import numpy as np
 from rhs_common.geometry import wrap_angle
 from rhs_studies.kit.episodes import ANTENNAS, add_episode_args, drive, make_paper_env, start_study
 from rhs_studies.kit.provenance import write_json
+from rhs_studies.kit.seeds import first
 
 
 def run(args: argparse.Namespace) -> dict:
@@ -186,7 +187,7 @@ def markdown(result: dict) -> str:
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--antenna", choices=ANTENNAS, default="rhs")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=first("scenes"))
     p.add_argument("--tx-power", type=float, default=30.0, help="Tx power (dBm)")
     add_episode_args(p, "tiny run for tests: 5-degree grid, 10 cycles")
     a = p.parse_args(argv)

@@ -24,6 +24,7 @@ import numpy as np
 
 from rhs_studies.kit.episodes import POLICY_HZ, drive
 from rhs_studies.kit.provenance import write_json
+from rhs_studies.kit.seeds import seed_set
 
 ANTENNAS = ("rhs", "phased")
 DETECTORS = ("summed", "footprint")
@@ -105,7 +106,7 @@ def fingerprint() -> list[float]:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--seeds", type=int, nargs="+", default=[100, 101, 102])
+    p.add_argument("--seeds", type=int, nargs="+", default=seed_set("low_snr_slam").seeds[:3])
     p.add_argument("--rcs", type=float, default=0.005, help="obstacle RCS, m^2")
     p.add_argument("--power", type=float, default=30.0, help="Tx power, dBm")
     p.add_argument("--cycles", type=int, default=50)

@@ -29,6 +29,7 @@ import numpy as np
 
 from rhs_common.geometry import wrap_angle
 from rhs_studies.kit.provenance import write_json
+from rhs_studies.kit.seeds import first
 
 if TYPE_CHECKING:
     from rhs_env.wrappers import RadarObservation
@@ -167,7 +168,7 @@ def main(argv=None) -> int:
     ap.add_argument("--prior-std-m", type=float, default=0.5)
     ap.add_argument("--prior-std-rad", type=float, default=0.02)
     ap.add_argument("--epochs", type=int, default=40)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=first("scenes"))
     ap.add_argument("--grid-deg", type=float, default=1.0, help="radar beam grid (deg)")
     ap.add_argument("--small", action="store_true", help="tiny config for tests (2+1 episodes, 8 steps, 2 epochs)")
     ap.add_argument("--out", default=str(ROOT / "slam" / "data" / "registration_cnn.pt"))
