@@ -16,7 +16,10 @@ points ``NUMBA_CACHE_DIR`` at the user cache directory
 (:func:`rhs_common.cache_dir.cache_subdir`: ``$RHS_SLAM_CACHE/numba`` or
 ``platformdirs.user_cache_dir("rhs-slam")/numba``, a private temporary folder with one warning when
 that cannot be written) before numba is imported; a ``NUMBA_CACHE_DIR`` that cannot be written
-falls back the same way.
+falls back the same way. numba checks only a kernel's own file before it loads its cache entry, while a
+kernel's machine code holds its callees' (in the other modules of a kernel package such as
+:mod:`rhs_env.kernels`): an entry of a package's kernel is therefore stamped with every module of the package
+(:func:`_package_stamp`), so an edit of any of them compiles the package's kernels again, as an edit of one file did.
 
 Bad cache files. A truncated or overwritten ``.nbi`` / ``.nbc`` file of a kernel is removed and the
 kernel compiled again (one :class:`KernelCacheWarning` per process), and a cache folder that turns
@@ -24,7 +27,7 @@ out unwritable leaves the kernels compiled in memory (:func:`_checked_cache`).
 
 Progress. The first compile of a kernel in a process prints one line to stderr
 (:data:`NOTICE`), once per process: a new install compiles every kernel once
-(seconds, see :mod:`rhs_env.kernels` for the measured cost). Once compiling has taken more than
+(seconds; the measured cost is on the speed page, ``docs/results/speed.md``). Once compiling has taken more than
 :data:`PROGRESS_AFTER_S`, a count of the kernels compiled so far follows (in place on a terminal), and a summary
 at exit; nothing when every kernel loads from the cache, nothing at all with ``RHS_SLAM_QUIET=1``
 (:data:`QUIET_ENV`). :func:`compile_stats` names the kernels compiled in this process.
@@ -75,11 +78,19 @@ LOCK_STALE_S = 300.0
 
 
 def _project_kernel(ev: Any) -> str:
-    """``module.name`` of the function a numba compile event is for when it is one of the project's kernels, else ""."""
-    func = getattr((ev.data or {}).get("dispatcher"), "py_func", None)
+    """``module.name`` of the function a numba compile event is for when it is one of the project's kernels, else "".
+
+    The module is the one users import the kernel from: the package when it re-exports the kernel of one of its
+    modules (``rhs_env.kernels.tone_spectra``, defined in ``rhs_env.kernels.synthesis``).
+    """
+    dispatcher = (ev.data or {}).get("dispatcher")
+    func = getattr(dispatcher, "py_func", None)
     module = getattr(func, "__module__", "") or ""
     if func is None or module.split(".")[0] not in ("rhs_env", "slam", "rhs_common"):
         return ""
+    package = sys.modules.get(module.rpartition(".")[0])
+    if package is not None and getattr(package, func.__name__, None) is dispatcher:
+        module = package.__name__
     return f"{module}.{func.__qualname__}"
 
 
@@ -128,7 +139,7 @@ def _configure_cache() -> None:
                 return
             path = fallback_root(f"NUMBA_CACHE_DIR={user}", reason, "NUMBA_CACHE_DIR") / "numba"
             path.mkdir(parents=True, exist_ok=True)
-        elif _writable(_PACKAGE_ROOT / "rhs_env"):
+        elif _writable(_PACKAGE_ROOT / "rhs_env" / "kernels"):
             return
         else:
             path = cache_subdir("numba")
@@ -325,6 +336,12 @@ def _checked_cache() -> type:
         from numba.core.caching import FunctionCache
 
         class CheckedCache(FunctionCache):
+            def __init__(self, py_func: Callable) -> None:
+                super().__init__(py_func)
+                package = _package_stamp(py_func)
+                if package:
+                    self._cache_file._source_stamp = (self._cache_file._source_stamp, package)
+
             def load_overload(self, sig: Any, target_context: Any) -> Any:
                 try:
                     return super().load_overload(sig, target_context)
@@ -346,6 +363,20 @@ def _checked_cache() -> type:
 
         _CHECKED_CACHE = CheckedCache
     return _CHECKED_CACHE
+
+
+def _package_stamp(py_func: Callable) -> tuple:
+    """``(name, mtime, size)`` of every module of the kernel package ``py_func`` is defined in (a package named
+    ``kernels``, as :mod:`rhs_env.kernels`); () for a kernel in a plain module (its own file's stamp suffices)."""
+    code = getattr(py_func, "__code__", None)
+    folder = Path(code.co_filename).parent if code is not None else None
+    if folder is None or folder.name != "kernels" or not (folder / "__init__.py").is_file():
+        return ()
+    stamp = []
+    for source in sorted(folder.glob("*.py")):
+        st = source.stat()
+        stamp.append((source.name, st.st_mtime, st.st_size))
+    return tuple(stamp)
 
 
 def _jit(func: Callable, options: dict[str, Any]) -> Any:
@@ -417,8 +448,9 @@ def warm_cache(run: Callable[[], Any], probe: Any, key: str = "") -> bool:
         return False
     folder = index.parent
     digest = hashlib.sha256(f"{key}|{numba.__version__}".encode())
-    for module in ("rhs_env/kernels.py", "slam/core/kernels.py", "rhs_common/jit.py", "rhs_common/native.py"):
-        source = _PACKAGE_ROOT / module
+    sources = [*sorted((_PACKAGE_ROOT / "rhs_env" / "kernels").glob("*.py")),
+               *(_PACKAGE_ROOT / module for module in ("slam/core/kernels.py", "rhs_common/jit.py", "rhs_common/native.py"))]
+    for source in sources:
         if source.is_file():
             digest.update(source.read_bytes())
     marker = folder / f"rhs-slam-warm-{digest.hexdigest()[:16]}"
