@@ -8,7 +8,7 @@ antennas, the dense env, low SNR, the fast radar) and held-out seed, one IDM + M
 (``agents.evaluate.IDMMobilPolicy``; on ``policy_env``, the shipped policy's env, that policy: :data:`POLICIES`)
 of ``--cycles`` cycles with ``pipeline={"pose_covariance": "calibrated"}``:
 the env attaches the configuration's calibration (:mod:`slam.gym.pose_calibration`: shipped, cached, or fitted
-at first use on the calibration seeds 13000-13003, which no evaluation uses). The covariance is report-only (the
+at first use on the calibration seeds 13000-13009, which no evaluation uses). The covariance is report-only (the
 filter's estimate does not depend on it), so each cycle scores the three models on the same estimate: the
 calibrated one (``slam_pose_cov``), the adaptive one (its terms unscaled) and the drift densities (the pipeline's
 ``drift`` term plus the particles' variances: what ``pose_covariance="drift-constants"``, the default, reports).

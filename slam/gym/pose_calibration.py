@@ -18,7 +18,7 @@ changes how accurately the filter tracks, nothing that only changes what it repo
    (:func:`slam.core.pose_calibration.fit_calibration`) and written to the cache atomically
    (:func:`rhs_common.output_files.write_text_atomic`). On the default radar that takes ~1-3 minutes, once.
 
-The calibration seeds (13000-13003) are not evaluation seeds (``rhs_studies.kit.seeds``).
+The calibration seeds (13000-13009) are not evaluation seeds (``rhs_studies.kit.seeds``).
 """
 
 from __future__ import annotations
@@ -54,9 +54,9 @@ __all__ = [
 ]
 
 #: the calibration drives' seeds (disjoint from every evaluation seed set: rhs_studies.kit.seeds)
-CALIBRATION_SEEDS = (13000, 13001, 13002, 13003)
+CALIBRATION_SEEDS = tuple(range(13000, 13010))
 #: cycles per calibration drive
-CALIBRATION_CYCLES = 60
+CALIBRATION_CYCLES = 50
 #: the configurations whose calibrations the package ships (name -> env id, gym.make settings): the default env,
 #: the 5-degree grid of the shipped policies (their ``action`` setting does not enter the key), the dense env, the
 #: fast radar
