@@ -24,8 +24,10 @@ datasets folder: load with ``MINARI_DATASETS_PATH=OUT`` and ``minari.load_datase
   seeds of the same env (``minari.get_normalized_score``), and the env spec to rebuild the env
   (``dataset.recover_environment()`` after ``import rhs_env``).
 
-Ctrl-C keeps the episodes that finished: they are written (without reference scores), the summary says
-``"interrupted": "SIGINT"`` and the command exits 130. The package ``minari`` (with ``h5py``) is the optional
+Ctrl-C (SIGINT) or SIGTERM keeps the episodes that finished: they are written (without reference scores), the
+summary says ``"interrupted": "SIGINT"`` (or ``"SIGTERM"``) and the command exits 128 + the signal number (130,
+143). Both signals are handled even where the shell started the command in the background with SIGINT ignored.
+The package ``minari`` (with ``h5py``) is the optional
 extra ``dataset``:
 ``pip install -c constraints/base.txt -e ".[dataset]"``.
 """
@@ -282,21 +284,9 @@ def run(args: argparse.Namespace) -> int:
     seeds = [args.seed + k for k in range(args.episodes)]
     print(f"rhs-slam record: {args.episodes} episode(s) of {env_id} with {args.policy} -> {root / dataset_id}",
           file=sys.stderr)
-    buffers: list = []
-    refs: dict[str, float] = {}
-    interrupted = False
     try:
         recorder = StepRecorder(env)
-        try:
-            for k, s in enumerate(tqdm(seeds, desc="record")):
-                buffers.append(record_episode(env, policy, s, recorder, k))
-            refs = reference_returns(env, seeds[: args.reference_episodes]) if args.reference_episodes else {}
-        except KeyboardInterrupt:  # the finished episodes are kept (without reference scores)
-            if not buffers:
-                raise
-            interrupted, refs = True, {}
-            print(f"rhs-slam record: interrupted (Ctrl-C) after {len(buffers)} of {args.episodes} episode(s); "
-                  "writing those", file=sys.stderr)
+        buffers, refs, interrupted = _record_all(env, policy, seeds, recorder, args.reference_episodes, tqdm)
         dataset = write_dataset(root, dataset_id, buffers, env, refs, len(seeds[: args.reference_episodes]),
                                 str(args.policy), _description(env_id, env_kwargs, args.policy, recorder))
     finally:
@@ -309,9 +299,43 @@ def run(args: argparse.Namespace) -> int:
         "expert_agreement": _agreement(buffers),
     }
     if interrupted:
-        summary["interrupted"] = "SIGINT"
+        summary["interrupted"] = interrupted
     print(json.dumps(summary, indent=2, default=json_default))
-    return 128 + int(signal.SIGINT) if interrupted else 0
+    return 128 + int(signal.Signals[interrupted]) if interrupted else 0
+
+
+def _record_all(env: Any, policy: Any, seeds: list[int], recorder: StepRecorder, reference_episodes: int,
+                progress: Any) -> tuple[list, dict[str, float], str | None]:
+    """Every episode of ``seeds``, then the reference returns; a SIGINT (Ctrl-C) or SIGTERM keeps the finished ones.
+
+    The two signals are handled here (a background job started by a shell ignores SIGINT; SIGTERM is what ``kill``
+    and job schedulers send). Returns the buffers, the reference returns (``{}`` when interrupted) and the signal's
+    name (None when every episode finished).
+    """
+    from agents.evaluate import Interrupted, _raise_interrupted
+
+    buffers: list = []
+    previous = {}
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        try:
+            previous[sig] = signal.signal(sig, _raise_interrupted)
+        except ValueError:  # not the main thread: the default handling stays
+            pass
+    try:
+        for k, s in enumerate(progress(seeds, desc="record")):
+            buffers.append(record_episode(env, policy, s, recorder, k))
+        refs = reference_returns(env, seeds[:reference_episodes]) if reference_episodes else {}
+        return buffers, refs, None
+    except (KeyboardInterrupt, Interrupted) as exc:  # the finished episodes are kept (without reference scores)
+        if not buffers:
+            raise KeyboardInterrupt from None
+        name = signal.Signals(exc.signum).name if isinstance(exc, Interrupted) else "SIGINT"
+        print(f"rhs-slam record: interrupted ({name}) after {len(buffers)} of {len(seeds)} episode(s); writing those",
+              file=sys.stderr)
+        return buffers, {}, name
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
 
 
 def write_dataset(root: Path, dataset_id: str, buffers: list, env: Any, refs: dict[str, float], reference_episodes: int,

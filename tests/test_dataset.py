@@ -195,3 +195,34 @@ def test_ctrl_c_keeps_the_finished_episodes(tmp_path, monkeypatch, capsys):
     assert summary["interrupted"] == "SIGINT" and summary["episodes"] == 1 and summary["seeds"] == [0]
     ds = minari.load_dataset(DATASET_ID)
     assert ds.total_episodes == 1 and "ref_min_score" not in ds.storage.metadata
+
+
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT ignored by the shell"])
+def test_a_signal_keeps_the_finished_episodes(sig, tmp_path, monkeypatch, capsys):
+    """SIGTERM (kill, a scheduler), and SIGINT where a background job started with it ignored: the first episode
+    is written and the exit is 128 + the signal number."""
+    import signal
+
+    signum = signal.SIGTERM if sig == "SIGTERM" else signal.SIGINT
+    calls = []
+    real = record.record_episode
+
+    def signalled_second(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            os.kill(os.getpid(), signum)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(record, "record_episode", signalled_second)
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN) if signum == signal.SIGINT else None
+    try:
+        code = main(["record", "--policy", "headway", "--episodes", "3", "--env-kwargs", json.dumps(SMALL),
+                     "--out", str(tmp_path)])
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
+    assert code == 128 + int(signum)
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["interrupted"] == signum.name and summary["episodes"] == 1 and summary["seeds"] == [0]
+    assert minari.load_dataset(DATASET_ID).total_episodes == 1
