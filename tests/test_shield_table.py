@@ -63,3 +63,14 @@ def test_arms_resolve_and_a_tiny_drive(tmp_path):
     assert set(eps["constant:3"]["fast"]) == {"off", "on"} and set(eps["idm"]["fast"]) == {"off"}
     assert eps["constant:3"]["fast"]["on"][0]["overrides"] is not None
     assert eps["constant:3"]["fast"]["off"][0]["overrides"] is None
+
+
+def test_merge_takes_only_the_same_seeds_and_settings(tmp_path):
+    import json
+
+    kw = {"duration": 2}
+    (tmp_path / "a.json").write_text(json.dumps({"seeds": [21000], "env_kwargs": kw,
+                                                 "episodes": {"idm": {"exact": {"off": [_ep(21000, 1.0, False)]}}}}))
+    assert list(st._merged([tmp_path / "a.json"], [21000], kw)) == ["idm"]
+    with pytest.raises(ValueError, match="other seeds or env settings"):
+        st._merged([tmp_path / "a.json"], [21000, 21001], kw)

@@ -229,7 +229,7 @@ def main(argv: list[str] | None = None) -> int:
     from rhs_studies.kit.provenance import write_json
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--arms", nargs="+", default=list(DEFAULT_ARMS))
+    ap.add_argument("--arms", nargs="*", default=list(DEFAULT_ARMS), help="none: only --merge")
     ap.add_argument("--envs", nargs="+", choices=sorted(ENVS), default=["exact", "fast"])
     ap.add_argument("--seed", type=int, default=21000)
     ap.add_argument("--episodes", type=int, default=10)
