@@ -696,7 +696,7 @@ def test_fft_pow2_is_the_dft():
 
 def test_whole_omp_runs_compiled_on_the_default_radar(monkeypatch):
     """The default radar takes the one-call OMP (not the step-by-step path) and it gives the numpy result."""
-    import rhs_env.point_cloud as pc
+    import rhs_env.omp as pc
 
     radars = _pair()
     used = []
