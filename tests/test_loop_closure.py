@@ -93,3 +93,17 @@ def test_keep_map_relocalises_the_next_episode_in_the_old_map():
         with pytest.raises(TypeError, match="keep_map"):
             env.reset(seed=3, options={"keep_map": "yes"})
     env.close()
+
+
+def test_a_landmark_mapped_again_merges_with_its_archived_twin():
+    from slam.core.loop_closure import LoopCloser, LoopClosureConfig, seed_landmarks
+    from slam.core.rbpf import RBPFSlam, SlamConfig
+
+    slam = RBPFSlam(SlamConfig(n_particles=4, max_landmarks=8), 0)
+    seed_landmarks(slam, np.array([[5.0, 0.0], [0.0, 5.0]]), np.array([10, 11]), 0.1)
+    slam.retired_xy, slam.retired_ids = np.array([[5.2, 0.1], [100.0, 100.0]]), np.array([3, 4])
+    closer = LoopCloser(LoopClosureConfig(every_cycles=1))
+    assert closer.check(slam, slam._estimate(), 0)
+    assert sorted(slam.slot_id[slam.slot_used]) == [3, 11]  # the re-mapped landmark is landmark 3 again
+    assert list(slam.retired_ids) == [4] and closer.merged == 1
+    assert not closer.check(slam, slam._estimate(), 0)  # nothing left to merge

@@ -5,7 +5,9 @@ The filter keeps at most ``max_landmarks`` landmarks in its particles; a landmar
 only). Driving back past archived landmarks, the filter maps them again as new ones, in a frame that has drifted
 since: duplicates, and a pose that never returns to the old map. :class:`LoopCloser` closes that loop:
 
-1. every ``every_cycles`` cycles, the archived landmarks within ``search_radius_m`` of the pose that no particle
+0. every ``every_cycles`` cycles, an active landmark within ``merge_gate_m`` of an archived one (the filter mapped
+   it again after pruning it) takes the archived landmark's id and the archive drops the twin;
+1. then the archived landmarks within ``search_radius_m`` of the pose that no particle
    holds are the *old* map near the car, the active landmarks within that radius the *current* one;
 2. :func:`rigid_match` finds the rigid transform ``T`` (rotation ``R(phi)``, translation ``t``) that puts the most
    current landmarks within ``match_gate_m`` of an old one: hypotheses from every pair of current landmarks and
@@ -51,7 +53,8 @@ class LoopClosureConfig:
     transform within this distance; ``pair_tol_m`` (0, 5]: two pairs of the same separation within this make a
     hypothesis; ``min_inliers`` [3, 1000] and ``min_fraction`` [0, 1]: the verification; ``max_correction_m``
     (0, 1e4]: the largest move of the car a closure may make; ``max_hypotheses`` [1, 10^6]: the scored hypotheses'
-    cap; ``landmark_std_m`` (0, 10]: the position std a re-activated landmark starts with.
+    cap; ``landmark_std_m`` (0, 10]: the position std a re-activated landmark starts with; ``merge_gate_m`` [0, 10]:
+    an active landmark this close to an archived one is that landmark mapped again (merged at every check).
     """
 
     enabled: bool = True
@@ -64,6 +67,7 @@ class LoopClosureConfig:
     max_correction_m: float = 10.0
     max_hypotheses: int = 20_000
     landmark_std_m: float = 0.1
+    merge_gate_m: float = 0.5
 
     def __post_init__(self) -> None:
         check_types(self)
@@ -77,6 +81,7 @@ class LoopClosureConfig:
         check_range("loop_closure.max_correction_m", self.max_correction_m, 0.0, 1e4, low_open=True)
         check_int("loop_closure.max_hypotheses", self.max_hypotheses, 1, 1_000_000)
         check_range("loop_closure.landmark_std_m", self.landmark_std_m, 0.0, 10.0, low_open=True)
+        check_range("loop_closure.merge_gate_m", self.merge_gate_m, 0.0, 10.0)
 
 
 @dataclass(frozen=True)
@@ -239,8 +244,44 @@ class LoopCloser:
     def check(self, slam: Any, est: Any, cycle: int) -> bool:
         """One check after the cycle's update (``est``: its estimate); True when the state moved or merged."""
         c = self.config
-        if not c.enabled or cycle % c.every_cycles or len(slam.retired_xy) < c.min_inliers:
+        if not c.enabled or cycle % c.every_cycles or len(slam.retired_xy) == 0:
             return False
+        merged = self._merge_twins(slam, est)
+        if len(slam.retired_xy) < c.min_inliers:
+            return merged
+        return self._close(slam, est) or merged
+
+    def _merge_twins(self, slam: Any, est: Any) -> bool:
+        """Merge each active landmark with the archived landmark within ``merge_gate_m`` of it (nearest first,
+        one each): the filter mapped it again after it was pruned; it takes the archived id, the archive drops
+        the twin. Roadside landmarks stand metres apart, so a twin that close is the same landmark."""
+        c = self.config
+        cur = np.asarray(est.landmarks, float).reshape(-1, 2)
+        held = np.isin(slam.retired_ids, est.landmark_ids)
+        old = np.flatnonzero(~held)
+        if len(cur) == 0 or len(old) == 0:
+            return False
+        d, j = cKDTree(slam.retired_xy[old]).query(cur, k=1, distance_upper_bound=c.merge_gate_m)
+        pairs = sorted((float(d[i]), i, int(j[i])) for i in np.flatnonzero(d <= c.merge_gate_m))
+        slot_of_id = {int(i): k for k, i in enumerate(slam.slot_id) if slam.slot_used[k]}
+        taken: set[int] = set()
+        twins = []
+        for _, i, k in pairs:
+            s = slot_of_id.get(int(est.landmark_ids[i]))
+            if k in taken or s is None:
+                continue
+            taken.add(k)
+            slam.slot_id[s] = int(slam.retired_ids[old[k]])
+            twins.append(int(slam.retired_ids[old[k]]))
+        if not twins:
+            return False
+        _drop_archived(slam, np.asarray(twins, dtype=np.int64))
+        self.merged += len(twins)
+        return True
+
+    def _close(self, slam: Any, est: Any) -> bool:
+        """The verified rigid closure of the module docstring's steps 1-4."""
+        c = self.config
         pose = np.asarray(est.pose, float)
         old_d = np.hypot(*(slam.retired_xy - pose[:2]).T)
         held = np.isin(slam.retired_ids, est.landmark_ids)
