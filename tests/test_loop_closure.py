@@ -107,3 +107,19 @@ def test_a_landmark_mapped_again_merges_with_its_archived_twin():
     assert sorted(slam.slot_id[slam.slot_used]) == [3, 11]  # the re-mapped landmark is landmark 3 again
     assert list(slam.retired_ids) == [4] and closer.merged == 1
     assert not closer.check(slam, slam._estimate(), 0)  # nothing left to merge
+
+
+def test_the_loop_closure_is_off_by_default():
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+
+    for kw, on in (({}, False), ({"loop_closure": {"enabled": False}}, False), ({"loop_closure": {"every_cycles": 2}}, True)):
+        env = gym.make("rhs-racetrack-slam-v0", radar={"scan": {"grid_deg": 5}}, **kw)
+        closer = env.get_wrapper_attr("pipeline").loop_closer
+        assert (closer is not None) is on
+        if on:
+            assert closer.config.every_cycles == 2
+        env.close()
+    with pytest.raises(ValueError, match="loop_closure.every_cycles"):
+        gym.make("rhs-racetrack-slam-v0", loop_closure={"every_cycles": 0})
