@@ -62,7 +62,7 @@ if TYPE_CHECKING:
     import numpy as np
 
 __all__ = [
-    "COMPILE_LOCK", "KERNELS", "LOCK_STALE_S", "NOTICE", "QUIET_ENV", "KernelCacheWarning", "Tiered",
+    "COMPILE_LOCK", "KERNELS", "LOCK_STALE_S", "NOTICE", "QUIET_ENV", "KernelCacheWarning", "KernelTable", "Tiered",
     "background_compile_running", "cache_index", "compile_lock", "compile_stats", "discard_cache_entry", "njit",
     "numba_module", "python_body", "sort_small", "warm_cache", "watch_compiles",
 ]
@@ -431,6 +431,71 @@ def __getattr__(name: str) -> Any:
         compiled = globals()["sort_small"] = njit(_sort_small)
         return compiled
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+class KernelTable:
+    """The stages of one module, each written twice: compiled (``"numba"``) and the numpy reference (``"numpy"``).
+
+    The choice between the two is made here, once per config, not at every call site: a module registers each
+    stage's two functions with :meth:`stage` and its object keeps ``table.choose(config.kernels)``, whose
+    attributes are the chosen functions (``impl.statistic(self, spec)``). A compiled function that cannot take an
+    input (a dtype or layout its kernel does not cover) calls the numpy one itself; the numpy functions never import
+    numba, so ``kernels="numpy"`` runs without it.
+
+    Examples:
+        >>> from rhs_common.jit import KernelTable
+        >>> table = KernelTable("demo")
+        >>> @table.stage("double", "numpy")
+        ... def _double_numpy(v):
+        ...     return 2 * v
+        >>> @table.stage("double", "numba")
+        ... def _double_numba(v):
+        ...     return v + v
+        >>> table.choose("numba").double(3), table.choose("numpy").double(3)
+        (6, 6)
+        >>> table.choose("fortran")
+        Traceback (most recent call last):
+        ...
+        ValueError: kernels: expected one of 'numba', 'numpy', got 'fortran'
+    """
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.stages: dict[str, dict[str, Callable]] = {}
+        self._chosen: dict[str, types.SimpleNamespace] = {}
+
+    def stage(self, name: str, kernels: str) -> Callable[[Callable], Callable]:
+        """Decorator: the function is stage ``name``'s implementation for ``kernels`` ("numba" or "numpy")."""
+        _check_kernels(kernels)
+
+        def register(func: Callable) -> Callable:
+            self.stages.setdefault(name, {})[kernels] = func
+            self._chosen.clear()
+            return func
+
+        return register
+
+    def choose(self, kernels: str) -> Any:
+        """The chosen implementations, one attribute per stage (and ``kernels``, the choice).
+
+        Raises:
+            ValueError: ``kernels`` is not one of :data:`KERNELS`, or a stage lacks one of its two implementations.
+        """
+        chosen = self._chosen.get(kernels)
+        if chosen is None:
+            _check_kernels(kernels)
+            missing = sorted(f"{stage} ({k})" for stage, impls in self.stages.items() for k in KERNELS if k not in impls)
+            if missing:
+                raise ValueError(f"{self.name}: stages without an implementation: {', '.join(missing)}")
+            chosen = types.SimpleNamespace(kernels=kernels, **{s: impls[kernels] for s, impls in self.stages.items()})
+            self._chosen[kernels] = chosen
+        return chosen
+
+
+def _check_kernels(kernels: str) -> None:
+    """ValueError unless ``kernels`` is one of :data:`KERNELS`."""
+    if kernels not in KERNELS:
+        raise ValueError(f"kernels: expected one of {', '.join(map(repr, KERNELS))}, got {kernels!r}")
 
 
 def warm_cache(run: Callable[[], Any], probe: Any, key: str = "") -> bool:

@@ -79,6 +79,7 @@ import functools
 import numpy as np
 from scipy import special, stats
 
+from rhs_common.jit import KernelTable
 from rhs_env.point_cloud import AngleDictionary, cfar_alpha
 from rhs_env.radar_config import DETECTORS, RadarConfig
 
@@ -285,6 +286,7 @@ class FootprintDetector:
         self._null = int(np.argmax(np.diff(resp[: resp.size // 2]) > 0))  # first null of the main lobe, padded bins
         self._margin = 10 ** (cfg.detection.sidelobe_margin_db / 10)
         self.kernels = getattr(cfg, "kernels", "numpy")
+        self._impl = _STAGES.choose(self.kernels)  # the compiled or the numpy statistic and detector
 
     def _training_cells(self, n: int) -> np.ndarray:
         """(n, 2 train) training-cell indices of each of n cells (cached per profile length).
@@ -312,11 +314,10 @@ class FootprintDetector:
         longer profile): :func:`rhs_env.kernels.footprint_statistic`
         (each footprint's few slots summed instead of the dense product; within 1-2 float32 ulp).
         """
-        if (self.kernels == "numba" and spec.dtype == np.complex64 and spec.ndim == 4
-                and spec.strides[-1] == spec.itemsize):
-            from rhs_env.kernels import footprint_statistic
+        return np.asarray(self._impl.statistic(self, spec))
 
-            return footprint_statistic(spec.view(np.float32), self._slots, self._starts)
+    def _statistic_numpy(self, spec: np.ndarray) -> np.ndarray:
+        """:meth:`statistic` in numpy (the reference)."""
         if spec.dtype == np.complex64 and spec.strides[-1] == spec.itemsize:
             f = spec.view(np.float32)  # (R, I, C, 2 K): re, im interleaved
             p = np.einsum("ricb,ricb->rib", f, f)
@@ -354,13 +355,11 @@ class FootprintDetector:
         (:func:`rhs_env.kernels.footprint_detections`, the same steps).
         """
         stat = self.statistic(spec)
-        if self.kernels == "numba":
-            from rhs_env.kernels import footprint_detections
+        rd, kd, strength = self._impl.detect(self, stat, in_range)
+        return rd, kd, strength
 
-            method = {"os": 0, "ca": 1}.get(self.method, 2)
-            return footprint_detections(stat, np.ascontiguousarray(in_range, dtype=bool), self.alpha, self.floor,
-                                        self.cap, self._training_cells(stat.shape[-1]), method, self.rank,
-                                        self._leak, self._margin, self._null)
+    def _detect_numpy(self, stat: np.ndarray, in_range: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`detect` after the statistic, in numpy (the reference)."""
         t = stat[:, :, 1:-1]
         lo = (self.alpha * self.floor).astype(np.float32)[None, :, None]  # no threshold is lower
         peak = np.zeros(stat.shape, bool)
@@ -394,3 +393,33 @@ class FootprintDetector:
             keep = strength >= self._margin * leak.max(axis=1)
             rd, kd, strength = rd[keep], kd[keep], strength[keep]
         return rd, kd, strength
+
+
+#: the detector's stages, compiled (:mod:`rhs_env.kernels.detection`) or numpy, chosen by the config's ``kernels``
+_STAGES = KernelTable("rhs_env.detection")
+_STAGES.stage("statistic", "numpy")(FootprintDetector._statistic_numpy)
+_STAGES.stage("detect", "numpy")(FootprintDetector._detect_numpy)
+
+
+@_STAGES.stage("statistic", "numba")
+def _statistic_numba(det: FootprintDetector, spec: np.ndarray) -> np.ndarray:
+    """:meth:`FootprintDetector.statistic` compiled (:func:`rhs_env.kernels.footprint_statistic`) for complex64 spectra
+    (R, I, C, K) contiguous along the bins; numpy for any other."""
+    if spec.dtype != np.complex64 or spec.ndim != 4 or spec.strides[-1] != spec.itemsize:
+        return det._statistic_numpy(spec)
+    from rhs_env.kernels import footprint_statistic
+
+    return np.asarray(footprint_statistic(spec.view(np.float32), det._slots, det._starts))
+
+
+@_STAGES.stage("detect", "numba")
+def _detect_numba(det: FootprintDetector, stat: np.ndarray,
+                  in_range: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:meth:`FootprintDetector.detect` after the statistic, compiled (:func:`rhs_env.kernels.footprint_detections`)."""
+    from rhs_env.kernels import footprint_detections
+
+    method = {"os": 0, "ca": 1}.get(det.method, 2)
+    rd, kd, strength = footprint_detections(stat, np.ascontiguousarray(in_range, dtype=bool), det.alpha, det.floor,
+                                            det.cap, det._training_cells(stat.shape[-1]), method, det.rank, det._leak,
+                                            det._margin, det._null)
+    return rd, kd, strength

@@ -23,11 +23,13 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.fft as sfft
 from scipy import stats
 
+from rhs_common.jit import KernelTable
 from rhs_common.linalg import batched_lstsq
 from rhs_env.array_models import ArrayAntenna, steering
 
@@ -35,6 +37,12 @@ __all__ = [
     "AngleDictionary", "DopplerOMPResult", "OMPResult", "atom_norms", "joint_refine", "omp_angles", "omp_doppler",
     "parabolic_offset", "residual_threshold", "warm_refinement_kernels",
 ]
+
+
+#: the OMP's stages that have a compiled twin (:mod:`rhs_env.kernels`), chosen by the dictionary's ``kernels``
+#: (:meth:`AngleDictionary.use_kernels`) or a ``kernels`` argument; each numba function computes what its numpy one
+#: does, or calls it where its kernel does not apply (no Taylor table, a wide search)
+_STAGES = KernelTable("rhs_env.omp")
 
 
 def parabolic_offset(ym: np.ndarray, y0: np.ndarray, yp: np.ndarray) -> np.ndarray:
@@ -86,14 +94,14 @@ class AngleDictionary:
         take more than :data:`rhs_env.kernels.TABLE_WORK_MAX` to build (thousands of elements).
         """
         self.kernels = kernels
-        if kernels == "numba" and self._taylor is None:
-            from rhs_env.kernels import TABLE_WORK_MAX, TAYLOR_ORDER, taylor_tables
-
-            work = self.candidates.size * self._x.size * self._w2.shape[1]
-            if 2 * (TAYLOR_ORDER + 1) < self._x.size and work <= TABLE_WORK_MAX:
-                table, u_c, x_c = taylor_tables(self._w2, self._x, self.candidates)
-                self._taylor = (table.view(np.float64), u_c, x_c)  # re, im interleaved: the kernels' layout
+        if self._taylor is None:
+            self._taylor = self._impl.taylor_table(self)
         return self
+
+    @property
+    def _impl(self) -> Any:
+        """The chosen stages (:data:`_STAGES`) of the dictionary's ``kernels`` ("numpy" on a bare dictionary)."""
+        return _STAGES.choose(getattr(self, "kernels", "numpy"))
 
     @property
     def slots(self) -> int:
@@ -153,13 +161,11 @@ class AngleDictionary:
         (the same values to ~1e-14 relative; for a uniform array the two-way gain's own series, 13 x I coefficients
         per angle against the product's 3 x M x 2 I complex multiply-adds).
         """
-        taylor = getattr(self, "_taylor", None)  # (absent on the bare dictionaries of angle_crb)
-        if taylor is not None and self.kernels == "numba":
-            from rhs_env.kernels import taylor_atoms
+        rows: list[np.ndarray] = self._impl.atom_rows(self, th, order)
+        return rows
 
-            table, u_c, x_c = taylor
-            return list(taylor_atoms(table, u_c, x_c, float(self.candidates[0]), float(self.step), self._w2, self._x,
-                                     np.ascontiguousarray(th, dtype=float), order))
+    def _atom_rows_numpy(self, th: np.ndarray, order: int) -> list[np.ndarray]:
+        """:meth:`_atom_rows` by the direct product (the reference)."""
         n_t, n_i = th.size, self._w2.shape[1] // 2
         a = self._steering(th)  # (T, M)
         if order == 0:
@@ -186,13 +192,12 @@ def _newton_refine(dic: AngleDictionary, theta: np.ndarray, resid: np.ndarray, s
     ``-f' / f''`` where f is concave, clipped to half a candidate spacing. Compiled with the
     dictionary's ``kernels="numba"`` (:func:`rhs_env.kernels.newton_refine`, the same equations per row).
     """
-    taylor = getattr(dic, "_taylor", None)
-    if taylor is not None and dic.kernels == "numba":
-        from rhs_env.kernels import newton_refine
+    return np.asarray(dic._impl.newton_refine(dic, theta, resid, steps))
 
-        table, u_c, x_c = taylor
-        return newton_refine(table, u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2, dic._x,
-                             np.ascontiguousarray(theta, dtype=float), np.ascontiguousarray(resid, dtype=complex), steps)
+
+@_STAGES.stage("newton_refine", "numpy")
+def _newton_refine_numpy(dic: AngleDictionary, theta: np.ndarray, resid: np.ndarray, steps: int = 2) -> np.ndarray:
+    """:func:`_newton_refine` in numpy (the reference)."""
     half = 0.5 * dic.step
     n_i = dic.slots
     for _ in range(steps):
@@ -239,11 +244,7 @@ def _lstsq(atoms: np.ndarray, iota: np.ndarray, kernels: str = "numpy") -> np.nd
     ``kernels="numba"`` and one right-hand side (iota (D, I, 1)) a compiled Cholesky solve
     (:func:`rhs_env.kernels.lstsq`, the same s to round-off).
     """
-    if kernels == "numba" and iota.ndim == 3 and iota.shape[2] == 1:
-        from rhs_env.kernels import lstsq
-
-        return lstsq(np.ascontiguousarray(atoms, dtype=complex), np.ascontiguousarray(iota[..., 0], dtype=complex))[..., None]
-    return batched_lstsq(atoms, iota)
+    return np.asarray(_STAGES.choose(kernels).lstsq(atoms, iota))
 
 
 @dataclass
@@ -383,13 +384,9 @@ def _doppler_grid_refine(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: 
     t, n_t, consecutive = _time_index(tgrid)
     nfft = 1 << math.ceil(math.log2(max(4 * n_t, 64)))
     half = 1 << math.ceil(math.log2(math.ceil(float(np.max(span)) * nfft / (2 * np.pi)) + 1))  # few kernels
-    narrow = _narrow_dtft(tgrid, span) if kernels == "numba" else None
+    narrow = _STAGES.choose(kernels).narrow_refine(h, r, tgrid, span, t, n_t)  # compiled: a narrow search
     if narrow is not None:
-        from rhs_env.kernels import doppler_dtft_refine
-
-        w, kern_re, kern_im, nfft = narrow
-        return doppler_dtft_refine(np.ascontiguousarray(h, dtype=complex), np.ascontiguousarray(r, dtype=complex),
-                                   t, n_t, kern_re, kern_im, w, np.ascontiguousarray(span, dtype=float), nfft)
+        return np.asarray(narrow)
     prod = (h.conj()[:, :, None] * r).reshape(d, -1)
     if consecutive:
         q = prod  # every chirp has its own time (Doppler phase runs across slots)
@@ -427,14 +424,8 @@ def _joint_grid_search(dic: AngleDictionary, r: np.ndarray, w0: np.ndarray, span
     om = w0[:, None] + span[:, None] * u[None, :]  # (D, H)
     t_slot, t_chirp = tgrid[:, :1] - tgrid[0, 0], tgrid[0] - tgrid[0, 0]
     separable = np.array_equal(tgrid, tgrid[0, 0] + t_slot + t_chirp[None, :])  # t_ic = t_i + t_c
-    if separable and dic.kernels == "numba":  # the same sums and phases, compiled, rounded to complex64 once
-        from rhs_env.kernels import joint_rho
-
-        rho = joint_rho(np.ascontiguousarray(r, dtype=complex), np.ascontiguousarray(om), t_chirp.astype(float),
-                        (tgrid[0, 0] + t_slot[:, 0]).astype(float))
-    elif separable:
-        rho = np.einsum("dic,dhc->dhi", r, np.exp(-1j * om[:, :, None] * t_chirp))
-        rho *= np.exp(-1j * om[:, :, None] * (tgrid[0, 0] + t_slot[:, 0]))
+    if separable:  # compiled: the same sums and phases, rounded to complex64 once
+        rho = dic._impl.separable_rho(r, om, t_chirp, tgrid[0, 0] + t_slot[:, 0])
     else:
         rho = np.einsum("dic,dhic->dhi", r, np.exp(-1j * om[:, :, None, None] * tgrid[None, None]))
     corr = np.abs(rho.astype(np.complex64) @ dic.Hn_conj) ** 2  # (D, H, I_c)
@@ -452,20 +443,12 @@ def _joint_grid_search(dic: AngleDictionary, r: np.ndarray, w0: np.ndarray, span
 def _phasors(dic: AngleDictionary, w: np.ndarray, tgrid: np.ndarray, sign: float = -1.0) -> np.ndarray:
     """``exp(sign j w t)`` (P, I, C) for w (P,) and tgrid (I, C); compiled with the dictionary's ``kernels="numba"``
     (:func:`rhs_env.kernels.phasors`, the same values to ~1e-16 relative)."""
-    if dic.kernels == "numba":
-        from rhs_env.kernels import phasors
-
-        return phasors(np.ascontiguousarray(w, dtype=float), np.ascontiguousarray(tgrid, dtype=float), float(sign))
-    return np.exp((-1j if sign < 0 else 1j) * w[:, None, None] * tgrid[None])
+    return np.asarray(dic._impl.phasors(w, tgrid, sign))
 
 
 def atom_norms(atoms: np.ndarray, kernels: str = "numpy") -> np.ndarray:
     """``np.linalg.norm(atoms, axis=1)`` of atoms (D, Q, L); compiled with ``kernels="numba"`` (:func:`rhs_env.kernels.atom_norms`)."""
-    if kernels == "numba":
-        from rhs_env.kernels import atom_norms as compiled
-
-        return compiled(np.ascontiguousarray(atoms, dtype=complex))
-    return np.linalg.norm(atoms, axis=1)
+    return np.asarray(_STAGES.choose(kernels).atom_norms(atoms))
 
 
 def _doppler_atoms(dic: AngleDictionary, theta: np.ndarray, omega: np.ndarray, tgrid: np.ndarray,
@@ -512,20 +495,10 @@ def joint_refine(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, thet
         atoms[dd, :, kk] = _doppler_atoms(dic, theta[dd, kk], domega[dd, kk], tgrid)
     a = atoms.copy()
     s = _lstsq(a, flat[..., None], dic.kernels)[..., 0] if amp is None else amp.copy()
-    taylor = getattr(dic, "_taylor", None)
-    narrow = _narrow_dtft(tgrid, span) if taylor is not None and dic.kernels == "numba" and dd.size else None
-    if narrow is not None and taylor is not None:
-        from rhs_env import kernels
-
-        table, u_c, x_c = taylor
-        t, n_t, _ = _time_index(tgrid)
-        w, kern_re, kern_im, nfft = narrow
-        return kernels.joint_refine(table, u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2, dic._x,
-                                    np.ascontiguousarray(flat, dtype=complex), np.ascontiguousarray(tgrid, dtype=float),
-                                    t, n_t, kern_re, kern_im, w, nfft, np.ascontiguousarray(theta, dtype=float),
-                                    np.ascontiguousarray(domega, dtype=float), np.ascontiguousarray(valid),
-                                    np.ascontiguousarray(span, dtype=float), passes, newton_steps, a,
-                                    np.ascontiguousarray(s, dtype=complex), float(tol))
+    if dd.size:  # compiled (Taylor atoms, a narrow Doppler search): every pass in one call
+        one_call = dic._impl.refine_call(dic, flat, tgrid, theta, domega, valid, span, passes, newton_steps, a, s, tol)
+        if one_call is not None:
+            return one_call
     base = _phasors(dic, domega[dd, kk], tgrid)  # exp(-j d_omega t) of each pair, (P, I, C)
     moving = np.zeros(d, bool)  # the rows still refined
     moving[dd] = True
@@ -620,8 +593,14 @@ def _compiled_operands(dic: AngleDictionary, tgrid: np.ndarray) -> tuple | None:
     ``w2``, ``x``, the chirp times (contiguous), their time index ``t`` and count ``n_t``, the fine DTFT grid (re, im,
     w) and its ``nfft``; None where the one-call OMP does not apply (numpy kernels, no Taylor table, chirp times
     not ``t_ic = t_i + t_c``, a wide fine grid)."""
+    return dic._impl.one_call_operands(dic, tgrid)
+
+
+@_STAGES.stage("one_call_operands", "numba")
+def _one_call_operands_compiled(dic: AngleDictionary, tgrid: np.ndarray) -> tuple | None:
+    """:func:`_compiled_operands` with the compiled stages (None without a Taylor table)."""
     taylor = getattr(dic, "_taylor", None)
-    if taylor is None or dic.kernels != "numba":
+    if taylor is None:
         return None
     t_slot, t_chirp = tgrid[:, :1] - tgrid[0, 0], tgrid[0] - tgrid[0, 0]
     if not np.array_equal(tgrid, tgrid[0, 0] + t_slot + t_chirp[None, :]):
@@ -753,3 +732,168 @@ def omp_doppler(dic: AngleDictionary, data: np.ndarray, tgrid: np.ndarray, max_t
 def residual_threshold(noise_var: float | np.ndarray, slots: int, pfa: float) -> np.ndarray:
     """delta_r = sigma^2 Gamma^{-1}(1 - pfa; I): ||n||^2 of I complex Gaussian noise cells exceeds it w.p. pfa."""
     return np.asarray(noise_var) * stats.gamma.isf(pfa, slots)
+
+
+_STAGES.stage("atom_rows", "numpy")(AngleDictionary._atom_rows_numpy)
+_STAGES.stage("one_call_operands", "numpy")(lambda dic, tgrid: None)
+
+
+@_STAGES.stage("taylor_table", "numpy")
+def _taylor_table_numpy(dic: AngleDictionary) -> None:
+    """No Taylor table: the numpy atoms are the direct product."""
+
+
+@_STAGES.stage("taylor_table", "numba")
+def _taylor_table_compiled(dic: AngleDictionary) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The Taylor table of :func:`rhs_env.kernels.taylor_tables` (re, im interleaved: the kernels' layout), ``u_c``,
+    ``x_c``; None where the series does not pay: an array with fewer elements than it has terms (M <= 2 (N + 1),
+    the 10-element phased array), or a table past :data:`rhs_env.kernels.TABLE_WORK_MAX` (thousands of elements)."""
+    from rhs_env.kernels import TABLE_WORK_MAX, TAYLOR_ORDER, taylor_tables
+
+    work = dic.candidates.size * dic._x.size * dic._w2.shape[1]
+    if 2 * (TAYLOR_ORDER + 1) >= dic._x.size or work > TABLE_WORK_MAX:
+        return None
+    table, u_c, x_c = taylor_tables(dic._w2, dic._x, dic.candidates)
+    return table.view(np.float64), u_c, x_c
+
+
+@_STAGES.stage("atom_rows", "numba")
+def _atom_rows_compiled(dic: AngleDictionary, th: np.ndarray, order: int) -> list[np.ndarray]:
+    """:meth:`AngleDictionary._atom_rows` from the Taylor series (:func:`rhs_env.kernels.taylor_atoms`), the direct
+    product without a table."""
+    taylor = getattr(dic, "_taylor", None)  # (absent on the bare dictionaries of angle_crb)
+    if taylor is None:
+        return dic._atom_rows_numpy(th, order)
+    from rhs_env.kernels import taylor_atoms
+
+    table, u_c, x_c = taylor
+    return list(taylor_atoms(table, u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2, dic._x,
+                             np.ascontiguousarray(th, dtype=float), order))
+
+
+@_STAGES.stage("newton_refine", "numba")
+def _newton_refine_compiled(dic: AngleDictionary, theta: np.ndarray, resid: np.ndarray, steps: int = 2) -> np.ndarray:
+    """:func:`_newton_refine` on the Taylor atoms (:func:`rhs_env.kernels.newton_refine`), numpy without a table."""
+    taylor = getattr(dic, "_taylor", None)
+    if taylor is None:
+        return _newton_refine_numpy(dic, theta, resid, steps)
+    from rhs_env.kernels import newton_refine
+
+    table, u_c, x_c = taylor
+    return np.asarray(newton_refine(table, u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2, dic._x,
+                                    np.ascontiguousarray(theta, dtype=float), np.ascontiguousarray(resid, dtype=complex),
+                                    steps))
+
+
+@_STAGES.stage("lstsq", "numpy")
+def _lstsq_numpy(atoms: np.ndarray, iota: np.ndarray) -> np.ndarray:
+    """:func:`_lstsq` by :func:`rhs_common.linalg.batched_lstsq` (the reference)."""
+    return np.asarray(batched_lstsq(atoms, iota))
+
+
+@_STAGES.stage("lstsq", "numba")
+def _lstsq_compiled(atoms: np.ndarray, iota: np.ndarray) -> np.ndarray:
+    """:func:`_lstsq` for one right-hand side (iota (D, I, 1)) by a compiled Cholesky solve
+    (:func:`rhs_env.kernels.lstsq`, the same s to round-off); numpy for several."""
+    if iota.ndim != 3 or iota.shape[2] != 1:
+        return _lstsq_numpy(atoms, iota)
+    from rhs_env.kernels import lstsq
+
+    return np.asarray(lstsq(np.ascontiguousarray(atoms, dtype=complex),
+                            np.ascontiguousarray(iota[..., 0], dtype=complex))[..., None])
+
+
+@_STAGES.stage("narrow_refine", "numpy")
+def _narrow_refine_numpy(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: np.ndarray, t: np.ndarray,
+                         n_t: int) -> None:
+    """numpy: no separate narrow search (:func:`_doppler_grid_refine` computes every search itself)."""
+
+
+@_STAGES.stage("narrow_refine", "numba")
+def _narrow_refine_compiled(h: np.ndarray, r: np.ndarray, tgrid: np.ndarray, span: np.ndarray, t: np.ndarray,
+                            n_t: int) -> np.ndarray | None:
+    """:func:`_doppler_grid_refine`'s narrow search compiled (:func:`rhs_env.kernels.doppler_dtft_refine`: the same
+    samples, summed in float64); None for a wide search (the FFT, numpy)."""
+    narrow = _narrow_dtft(tgrid, span)
+    if narrow is None:
+        return None
+    from rhs_env.kernels import doppler_dtft_refine
+
+    w, kern_re, kern_im, nfft = narrow
+    return np.asarray(doppler_dtft_refine(np.ascontiguousarray(h, dtype=complex), np.ascontiguousarray(r, dtype=complex),
+                                          t, n_t, kern_re, kern_im, w, np.ascontiguousarray(span, dtype=float), nfft))
+
+
+@_STAGES.stage("separable_rho", "numpy")
+def _separable_rho_numpy(r: np.ndarray, om: np.ndarray, t_chirp: np.ndarray, t_slot: np.ndarray) -> np.ndarray:
+    """``rho_dhi = sum_c r_dic exp(-j om_dh (t_i + t_c))`` (D, H, I) for separable chirp times ``t_ic = t_i + t_c``."""
+    rho = np.einsum("dic,dhc->dhi", r, np.exp(-1j * om[:, :, None] * t_chirp))
+    rho *= np.exp(-1j * om[:, :, None] * t_slot)
+    return np.asarray(rho)
+
+
+@_STAGES.stage("separable_rho", "numba")
+def _separable_rho_compiled(r: np.ndarray, om: np.ndarray, t_chirp: np.ndarray, t_slot: np.ndarray) -> np.ndarray:
+    """:func:`_separable_rho_numpy` compiled (:func:`rhs_env.kernels.joint_rho`: the same sums and phases, complex64)."""
+    from rhs_env.kernels import joint_rho
+
+    return np.asarray(joint_rho(np.ascontiguousarray(r, dtype=complex), np.ascontiguousarray(om), t_chirp.astype(float),
+                                np.asarray(t_slot).astype(float)))
+
+
+@_STAGES.stage("phasors", "numpy")
+def _phasors_numpy(w: np.ndarray, tgrid: np.ndarray, sign: float) -> np.ndarray:
+    """``exp(sign j w t)`` (P, I, C), numpy (the reference)."""
+    return np.exp((-1j if sign < 0 else 1j) * w[:, None, None] * tgrid[None])
+
+
+@_STAGES.stage("phasors", "numba")
+def _phasors_compiled(w: np.ndarray, tgrid: np.ndarray, sign: float) -> np.ndarray:
+    """:func:`_phasors_numpy` compiled (:func:`rhs_env.kernels.phasors`, the same values to ~1e-16 relative)."""
+    from rhs_env.kernels import phasors
+
+    return np.asarray(phasors(np.ascontiguousarray(w, dtype=float), np.ascontiguousarray(tgrid, dtype=float),
+                              float(sign)))
+
+
+@_STAGES.stage("atom_norms", "numpy")
+def _atom_norms_numpy(atoms: np.ndarray) -> np.ndarray:
+    """``np.linalg.norm(atoms, axis=1)`` (the reference)."""
+    return np.asarray(np.linalg.norm(atoms, axis=1))
+
+
+@_STAGES.stage("atom_norms", "numba")
+def _atom_norms_compiled(atoms: np.ndarray) -> np.ndarray:
+    """:func:`_atom_norms_numpy` compiled (:func:`rhs_env.kernels.atom_norms`)."""
+    from rhs_env.kernels import atom_norms as compiled
+
+    return np.asarray(compiled(np.ascontiguousarray(atoms, dtype=complex)))
+
+
+@_STAGES.stage("refine_call", "numpy")
+def _refine_call_numpy(dic: AngleDictionary, *args: Any) -> None:
+    """numpy: :func:`joint_refine` runs its passes step by step."""
+
+
+@_STAGES.stage("refine_call", "numba")
+def _refine_call_compiled(dic: AngleDictionary, flat: np.ndarray, tgrid: np.ndarray, theta: np.ndarray,
+                          domega: np.ndarray, valid: np.ndarray, span: np.ndarray, passes: int, newton_steps: int,
+                          a: np.ndarray, s: np.ndarray, tol: float) -> tuple | None:
+    """:func:`joint_refine`'s passes in one compiled call (:func:`rhs_env.kernels.joint_refine`, the same steps) with
+    Taylor atoms and a narrow Doppler search; None otherwise (the numpy steps)."""
+    taylor = getattr(dic, "_taylor", None)
+    narrow = _narrow_dtft(tgrid, span) if taylor is not None else None
+    if narrow is None or taylor is None:
+        return None
+    from rhs_env import kernels
+
+    table, u_c, x_c = taylor
+    t, n_t, _ = _time_index(tgrid)
+    w, kern_re, kern_im, nfft = narrow
+    out: tuple = kernels.joint_refine(
+        table, u_c, x_c, float(dic.candidates[0]), float(dic.step), dic._w2, dic._x,
+        np.ascontiguousarray(flat, dtype=complex), np.ascontiguousarray(tgrid, dtype=float), t, n_t, kern_re, kern_im, w,
+        nfft, np.ascontiguousarray(theta, dtype=float), np.ascontiguousarray(domega, dtype=float),
+        np.ascontiguousarray(valid), np.ascontiguousarray(span, dtype=float), passes, newton_steps, a,
+        np.ascontiguousarray(s, dtype=complex), float(tol))
+    return out

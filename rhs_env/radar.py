@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 import scipy.fft as sfft
 
+from rhs_common.jit import KernelTable
 from rhs_common.linalg import batched_lstsq
 from rhs_env.antenna_factory import make_antenna
 from rhs_env.array_models import SPEED_OF_LIGHT, ArrayAntenna
@@ -142,6 +143,7 @@ class RadarSystem:
                  patterns: tuple[np.ndarray, np.ndarray] | None = None,
                  antennas: ArrayAntenna | list[ArrayAntenna] | None = None) -> None:
         self.config = config = config or RadarConfig()
+        self._impl = _STAGES.choose(config.kernels)  # the compiled or the numpy stages (one choice, here)
         self.rng = rng if rng is not None else np.random.default_rng()
         self.positions, self.boresights = config.mounting.mounts()
         if antennas is not None:
@@ -218,14 +220,10 @@ class RadarSystem:
         rng_m, ang, _ = self.radar_frame(scatterers.xy) if frame is None else frame
         half = np.deg2rad(self.config.scan.sector_deg) / 2
         fov = (np.abs(ang) <= half) & (rng_m <= self.config.max_range_m) & (rng_m >= self.config.min_range_m)
-        if self.config.kernels == "numba" and occluders is not None and len(occluders) and len(scatterers):
-            from rhs_env.kernels import line_of_sight
+        return np.asarray(self._impl.line_of_sight(self, fov, scatterers, occluders), dtype=bool)
 
-            # the same test per (radar, point) in the field of view, up to its first crossing
-            return line_of_sight(self.positions, np.ascontiguousarray(scatterers.xy, dtype=float),
-                                 np.ascontiguousarray(occluders.segments, dtype=float),
-                                 np.ascontiguousarray(scatterers.object_id), np.ascontiguousarray(occluders.object_id),
-                                 np.ascontiguousarray(fov), LOS_EPS)
+    def _line_of_sight_numpy(self, fov: np.ndarray, scatterers: Scatterers, occluders: Occluders | None) -> np.ndarray:
+        """``fov & visible_mask(...)`` (4, K) in numpy (the reference of :meth:`visible`)."""
         return np.asarray(fov & visible_mask(self.positions, scatterers, occluders), dtype=bool)
 
     def in_view(self, scatterers: Scatterers, occluders: Occluders | None = None) -> np.ndarray:
@@ -265,7 +263,7 @@ class RadarSystem:
         for g, (dic, _) in enumerate(self._groups):
             sel = self._radar_group[rr] == g
             if np.any(sel):  # compiled: the dictionary's series (the same gains to ~1e-15), else the direct product
-                h[:, sel] = dic.atoms(th_k[sel])[0] if cfg.kernels == "numba" else dic.antenna.two_way_gain(th_k[sel])
+                h[:, sel] = self._impl.gains(dic, th_k[sel])
         omega = 4 * np.pi * v_k * cfg.waveform.chirp_s / lam  # rad per chirp
         f_tot = 2 * cfg.waveform.slope * r_k / SPEED_OF_LIGHT + 2 * v_k / lam  # Hz
         slot_t = np.arange(i_slots)[:, None] * (cfg.waveform.chirps_per_slot if cfg.waveform.slot_doppler else 0)
@@ -376,29 +374,22 @@ class RadarSystem:
         spectrum (:func:`rhs_env.kernels.add_tone_products`); the noise stays numpy.
         """
         cfg = self.config
-        i_slots, c, n, z, kb = cfg.scan.slots, cfg.waveform.chirps_per_slot, cfg.waveform.samples, cfg.waveform.zero_pad, self._bin_hi
-        spec = self._noise_spectrum((4, i_slots, c))
+        spec = self._noise_spectrum((4, cfg.scan.slots, cfg.waveform.chirps_per_slot))
         tones = self._echoes(scatterers, occluders)
-        if tones is not None and cfg.kernels == "numba":
-            from rhs_common.native import cgemm_address
-            from rhs_env import kernels
-            from rhs_env.point_cloud import window_exponentials
-
-            rr, g_mat, omega, f_tot = tones
-            mu, coef = window_exponentials(cfg.waveform.window, n)
-            wk = kernels.tone_spectra(mu, coef, n, z, kb, np.ascontiguousarray(f_tot / cfg.waveform.sample_rate_hz))
-            gp, ep = kernels.tone_operands(g_mat, omega, wk, c)
-            bounds = np.searchsorted(rr, np.arange(5))  # rr sorted: radar r's tones are lo_r:hi_r
-            # each radar's own tones only (no product with padding), added straight into the spectrum view
-            kernels.add_tone_products(gp, ep, bounds, spec, cgemm_address())
-        elif tones is not None:
-            rr, g_mat, omega, f_tot = tones
-            wk = tone_spectra(cfg.waveform.window, n, z, kb, f_tot / cfg.waveform.sample_rate_hz)  # (P, K_b)
-            e_mat = (np.exp(1j * omega[:, None] * np.arange(c))[:, :, None] * wk[:, None, :]).reshape(rr.size, c * kb)
-            sig = self._buffer("sig", (4, i_slots, c * kb), np.complex64)
-            self._mix(rr, g_mat, e_mat, sig)
-            spec += sig.reshape(spec.shape)
+        if tones is not None:
+            self._impl.add_tones(self, spec, tones)
         return spec
+
+    def _add_tones_numpy(self, spec: np.ndarray, tones: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]) -> None:
+        """Add the tones (:meth:`_echoes`) into the spectrum ``spec`` (4, I, C, K_b), numpy (the reference)."""
+        cfg = self.config
+        i_slots, c, n, z, kb = cfg.scan.slots, cfg.waveform.chirps_per_slot, cfg.waveform.samples, cfg.waveform.zero_pad, self._bin_hi
+        rr, g_mat, omega, f_tot = tones
+        wk = tone_spectra(cfg.waveform.window, n, z, kb, f_tot / cfg.waveform.sample_rate_hz)  # (P, K_b)
+        e_mat = (np.exp(1j * omega[:, None] * np.arange(c))[:, :, None] * wk[:, None, :]).reshape(rr.size, c * kb)
+        sig = self._buffer("sig", (4, i_slots, c * kb), np.complex64)
+        self._mix(rr, g_mat, e_mat, sig)
+        spec += sig.reshape(spec.shape)
 
     def _noise_spectrum(self, shape: tuple[int, ...]) -> np.ndarray:
         """``FFT_{Z N}(w * eps)[..., :K_b]``, eps ~ CN(0, sigma_n^2) i.i.d. (zeros without noise): shape + (K_b,), a view.
@@ -430,21 +421,11 @@ class RadarSystem:
             buf[:, :kb] = 0
             return buf[:, :kb].reshape(shape + (kb,))
         bits = self.rng.bit_generator.random_raw(m * n).view(np.int32)  # 2 m n independent 32-bit words
-        if cfg.kernels == "numba":  # the same float32 operations, the elementwise passes fused (numpy's log1p, cos, sin)
-            from rhs_env.kernels import noise_samples, noise_uniforms
+        return np.asarray(self._impl.noise(self, bits, m, n)[:, :kb].reshape(shape + (kb,)))
 
-            neg_u1 = self._buffer("nu1", (m, n), np.float32)
-            ph = self._buffer("nph", (m, n), np.float32)
-            noise_uniforms(bits, np.float32(2.0 ** -24), np.float32(0.5), np.float32(2 * np.pi), neg_u1.reshape(-1),
-                           ph.reshape(-1))
-            np.log1p(neg_u1, out=neg_u1)
-            cos_ph = self._buffer("ncos", (m, n), np.float32)
-            np.cos(ph, out=cos_ph)
-            np.sin(ph, out=ph)
-            samples = self._buffer("nsmp", (m, n), np.complex64)
-            noise_samples(neg_u1, cos_ph, ph, self._noise_window, samples.view(np.float32))
-            spec = sfft.fft(samples, n=z * n, axis=-1, workers=1)  # zero-padded inside pocketfft: the same spectrum
-            return spec[:, :kb].reshape(shape + (kb,))
+    def _noise_numpy(self, bits: np.ndarray, m: int, n: int) -> np.ndarray:
+        """The noise spectra (m, Z n) of :meth:`_noise_spectrum` from the raw words ``bits``, numpy (the reference)."""
+        z = self.config.waveform.zero_pad
         buf = self._buffer("nfft", (m, z * n), np.complex64)
         np.right_shift(bits, 8, out=bits)  # 24-bit signed: [-2^23, 2^23)
         u = self._buffer("nu", (2, m, n), np.float32)
@@ -464,8 +445,7 @@ class RadarSystem:
         np.sin(ph, out=tmp)
         np.multiply(tmp, rad, out=buf.imag[:, :n])
         buf[:, n:] = 0
-        spec = sfft.fft(buf, axis=-1, workers=1, overwrite_x=True)  # in place: spec is buf
-        return spec[:, :kb].reshape(shape + (kb,))
+        return np.asarray(sfft.fft(buf, axis=-1, workers=1, overwrite_x=True))  # in place: the result is buf
 
     # ------------------------------------------------------------------ processing
     def range_spectrum(self, y: np.ndarray) -> np.ndarray:
@@ -576,13 +556,7 @@ class RadarSystem:
         """
         cfg = self.config
         kk = self._neighbour_bins(kd, spec.shape[-1])
-        win = None
-        if cfg.kernels == "numba":  # the neighbouring bins of _target_bins and the OMP's data in one pass over Y
-            from rhs_env.kernels import gather_bins
-
-            win, yd = gather_bins(spec, rd.astype(np.int64), kk, kk.shape[1] // 2)
-        else:
-            yd = spec[rd, :, :, kd].astype(np.complex128)  # (D, I, C)
+        win, yd = self._impl.gather(spec, rd, kd, kk)  # compiled: the bins of _target_bins too, in one pass over Y
         est = _Targets.empty(rd.size, cfg.estimation.max_targets)
         y_var = cfg.noise_power_w * self._win_energy  # noise variance per cell of Y
         rel = 10 ** (cfg.estimation.residual_rel_db / 10)
@@ -615,18 +589,12 @@ class RadarSystem:
         main lobe, +-2 bins). Compiled with ``kernels="numba"`` (:func:`rhs_env.kernels.bin_amplitudes`), on the
         bins already gathered (``win`` (D, I, C, W), :func:`rhs_env.kernels.gather_bins`) or read from the spectrum.
         """
-        half = kk.shape[1] // 2
-        if self.config.kernels == "numba":  # the same least squares, compiled
-            from rhs_env.kernels import bin_amplitudes, range_offsets
+        return np.asarray(self._impl.target_bins(self, spec, rd, kk, atoms, win))
 
-            a = np.ascontiguousarray(atoms, dtype=complex)
-            if win is None:
-                s_nb = bin_amplitudes(a, spec, rd.astype(np.int64), kk)
-            else:  # Y := win, radar d, bins 0..W-1: the same values, read contiguously
-                s_nb = bin_amplitudes(a, win, np.arange(rd.size, dtype=np.int64),
-                                      np.ascontiguousarray(np.broadcast_to(np.arange(kk.shape[1]), kk.shape)))
-            # the parabola compiled (rhs_env.kernels.range_offsets); the logarithm stays numpy's (its SIMD log)
-            return range_offsets(np.log(np.abs(s_nb) ** 2 + 1e-300), half)
+    def _target_bins_numpy(self, spec: np.ndarray, rd: np.ndarray, kk: np.ndarray, atoms: np.ndarray,
+                           win: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`_target_bins` in numpy (the reference; ``win`` unused)."""
+        half = kk.shape[1] // 2
         nb = spec[rd[:, None], :, :, kk].reshape(rd.size, 2 * half + 1, -1)  # (D, W, I C)
         s_nb = batched_lstsq(atoms, np.swapaxes(nb, 1, 2).astype(complex))  # (D, L, W)
         return self._peak_offsets(np.log(np.abs(s_nb) ** 2 + 1e-300), half)
@@ -649,10 +617,8 @@ class RadarSystem:
         outside [min_range_m, max_range_m] and range sidelobes of stronger points
         at the same angle (:meth:`_sidelobe_points`) are dropped.
         """
-        cfg = self.config
-        if cfg.kernels == "numba":
-            return self._assemble_points_compiled(rd, kd, est)
-        return self._assemble_points_numpy(rd, kd, est)
+        cloud: PointCloud = self._impl.points(self, rd, kd, est)
+        return cloud
 
     def _assemble_points_numpy(self, rd: np.ndarray, kd: np.ndarray, est: _Targets) -> PointCloud:
         """:meth:`_assemble_points` in numpy (the reference)."""
@@ -711,9 +677,11 @@ class RadarSystem:
         (:func:`rhs_env.point_cloud.warm_refinement_kernels`): the first part of a background compile's radar work
         (:mod:`slam.gym.precompile`), while an env's first scan compiles the synthesis, the detector and the OMP's
         search. Each ``warm_*`` method does nothing with ``kernels="numpy"``."""
+        self._impl.warm_refinement(self)
+
+    def _warm_refinement_compiled(self) -> None:
+        """:meth:`warm_refinement` (the compiled stages)."""
         cfg = self.config
-        if cfg.kernels != "numba":
-            return
         from rhs_env.point_cloud import warm_refinement_kernels
 
         for dic, _ in self._groups:
@@ -723,9 +691,11 @@ class RadarSystem:
     def warm_points(self) -> None:
         """Compile (or load) the points' kernels (:meth:`_target_bins`, :meth:`_assemble_points`) on one synthetic
         target in each of the four cells of :meth:`_warm_cells`."""
+        self._impl.warm_points(self)
+
+    def _warm_points_compiled(self) -> None:
+        """:meth:`warm_points` (the compiled stages)."""
         cfg = self.config
-        if cfg.kernels != "numba":
-            return
         from rhs_env.kernels import gather_bins
 
         n_q, n_l = cfg.scan.slots * cfg.waveform.chirps_per_slot, cfg.estimation.max_targets
@@ -741,8 +711,10 @@ class RadarSystem:
         """Compile (or load) the one-call OMP (:func:`rhs_env.kernels.omp_doppler`) with the scan's own operand types,
         on the noise of :meth:`_warm_cells`: the last thing a background compile does, after which an env's scans
         switch from its Python body to it (:data:`rhs_env.kernels.omp_doppler_tiered`)."""
-        if self.config.kernels != "numba":
-            return
+        self._impl.warm_one_call_omp(self)
+
+    def _warm_one_call_omp_compiled(self) -> None:
+        """:meth:`warm_one_call_omp` (the compiled stages)."""
         from rhs_env.kernels import omp_doppler_tiered
 
         rd, kd, spec = self._warm_cells()
@@ -820,3 +792,125 @@ class RadarSystem:
         view = self.in_view(scatterers, occluders)
         return pointcloud_metrics(cloud.xy, scatterers.xy[view], gate_m,
                                   scatterers.object_id[view] if per_object else None)
+
+
+def _nothing(radar: RadarSystem) -> None:
+    """A compiled path's warm-up with ``kernels="numpy"``: nothing to compile."""
+
+
+#: the radar's stages that have a compiled twin (:mod:`rhs_env.kernels`), chosen once by ``RadarConfig.kernels``
+#: (:attr:`RadarSystem._impl`); each numba function computes what its numpy one does (the equivalence tests)
+_STAGES = KernelTable("rhs_env.radar")
+_STAGES.stage("line_of_sight", "numpy")(RadarSystem._line_of_sight_numpy)
+_STAGES.stage("add_tones", "numpy")(RadarSystem._add_tones_numpy)
+_STAGES.stage("noise", "numpy")(RadarSystem._noise_numpy)
+_STAGES.stage("target_bins", "numpy")(RadarSystem._target_bins_numpy)
+_STAGES.stage("points", "numpy")(RadarSystem._assemble_points_numpy)
+_STAGES.stage("points", "numba")(RadarSystem._assemble_points_compiled)
+_STAGES.stage("warm_refinement", "numba")(RadarSystem._warm_refinement_compiled)
+_STAGES.stage("warm_points", "numba")(RadarSystem._warm_points_compiled)
+_STAGES.stage("warm_one_call_omp", "numba")(RadarSystem._warm_one_call_omp_compiled)
+for _warm in ("warm_refinement", "warm_points", "warm_one_call_omp"):
+    _STAGES.stage(_warm, "numpy")(_nothing)
+
+
+@_STAGES.stage("line_of_sight", "numba")
+def _line_of_sight_compiled(radar: RadarSystem, fov: np.ndarray, scatterers: Scatterers,
+                            occluders: Occluders | None) -> np.ndarray:
+    """:meth:`RadarSystem.visible`'s line of sight compiled (:func:`rhs_env.kernels.line_of_sight`): the same test per
+    (radar, point) in the field of view, up to its first crossing; numpy without occluders or scatterers."""
+    if occluders is None or not len(occluders) or not len(scatterers):
+        return radar._line_of_sight_numpy(fov, scatterers, occluders)
+    from rhs_env.kernels import line_of_sight
+
+    return np.asarray(line_of_sight(radar.positions, np.ascontiguousarray(scatterers.xy, dtype=float),
+                                    np.ascontiguousarray(occluders.segments, dtype=float),
+                                    np.ascontiguousarray(scatterers.object_id), np.ascontiguousarray(occluders.object_id),
+                                    np.ascontiguousarray(fov), LOS_EPS))
+
+
+@_STAGES.stage("gains", "numpy")
+def _gains_numpy(dic: AngleDictionary, theta: np.ndarray) -> np.ndarray:
+    """The slot gains h (I, P) toward the angles ``theta`` (P,): the antenna's direct product (the reference)."""
+    return np.asarray(dic.antenna.two_way_gain(theta))
+
+
+@_STAGES.stage("gains", "numba")
+def _gains_compiled(dic: AngleDictionary, theta: np.ndarray) -> np.ndarray:
+    """:func:`_gains_numpy` from the dictionary's series (:meth:`AngleDictionary.atoms`: the same gains to ~1e-15)."""
+    return np.asarray(dic.atoms(theta)[0])
+
+
+@_STAGES.stage("add_tones", "numba")
+def _add_tones_compiled(radar: RadarSystem, spec: np.ndarray,
+                        tones: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]) -> None:
+    """:meth:`RadarSystem._add_tones_numpy` compiled: the tone spectra and the product's operands
+    (:func:`rhs_env.kernels.tone_spectra`, :func:`rhs_env.kernels.tone_operands`), each radar's own tones only (no
+    padding to the largest count), each product added by BLAS straight into the spectrum view
+    (:func:`rhs_env.kernels.add_tone_products`)."""
+    from rhs_common.native import cgemm_address
+    from rhs_env import kernels
+    from rhs_env.point_cloud import window_exponentials
+
+    cfg = radar.config
+    c, n, z, kb = cfg.waveform.chirps_per_slot, cfg.waveform.samples, cfg.waveform.zero_pad, radar._bin_hi
+    rr, g_mat, omega, f_tot = tones
+    mu, coef = window_exponentials(cfg.waveform.window, n)
+    wk = kernels.tone_spectra(mu, coef, n, z, kb, np.ascontiguousarray(f_tot / cfg.waveform.sample_rate_hz))
+    gp, ep = kernels.tone_operands(g_mat, omega, wk, c)
+    bounds = np.searchsorted(rr, np.arange(5))  # rr sorted: radar r's tones are lo_r:hi_r
+    kernels.add_tone_products(gp, ep, bounds, spec, cgemm_address())
+
+
+@_STAGES.stage("noise", "numba")
+def _noise_compiled(radar: RadarSystem, bits: np.ndarray, m: int, n: int) -> np.ndarray:
+    """:meth:`RadarSystem._noise_numpy` with the elementwise passes fused (:func:`rhs_env.kernels.noise_uniforms`,
+    :func:`rhs_env.kernels.noise_samples`) around numpy's ``log1p``, ``cos`` and ``sin``, the FFT padding each row
+    itself: the same float32 operations, the same spectrum bit for bit."""
+    from rhs_env.kernels import noise_samples, noise_uniforms
+
+    neg_u1 = radar._buffer("nu1", (m, n), np.float32)
+    ph = radar._buffer("nph", (m, n), np.float32)
+    noise_uniforms(bits, np.float32(2.0 ** -24), np.float32(0.5), np.float32(2 * np.pi), neg_u1.reshape(-1),
+                   ph.reshape(-1))
+    np.log1p(neg_u1, out=neg_u1)
+    cos_ph = radar._buffer("ncos", (m, n), np.float32)
+    np.cos(ph, out=cos_ph)
+    np.sin(ph, out=ph)
+    samples = radar._buffer("nsmp", (m, n), np.complex64)
+    noise_samples(neg_u1, cos_ph, ph, radar._noise_window, samples.view(np.float32))
+    # zero-padded inside pocketfft: the same spectrum
+    return np.asarray(sfft.fft(samples, n=radar.config.waveform.zero_pad * n, axis=-1, workers=1))
+
+
+@_STAGES.stage("gather", "numpy")
+def _gather_numpy(spec: np.ndarray, rd: np.ndarray, kd: np.ndarray, kk: np.ndarray) -> tuple[None, np.ndarray]:
+    """The OMP's data ``Y[rd, :, :, kd]`` (D, I, C) complex128, numpy (no window of bins: None)."""
+    return None, spec[rd, :, :, kd].astype(np.complex128)
+
+
+@_STAGES.stage("gather", "numba")
+def _gather_compiled(spec: np.ndarray, rd: np.ndarray, kd: np.ndarray, kk: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The neighbouring bins ``kk`` of :meth:`RadarSystem._target_bins` (D, I, C, W) and the OMP's data in one pass
+    over Y (:func:`rhs_env.kernels.gather_bins`)."""
+    from rhs_env.kernels import gather_bins
+
+    win, yd = gather_bins(spec, rd.astype(np.int64), kk, kk.shape[1] // 2)
+    return win, yd
+
+
+@_STAGES.stage("target_bins", "numba")
+def _target_bins_compiled(radar: RadarSystem, spec: np.ndarray, rd: np.ndarray, kk: np.ndarray, atoms: np.ndarray,
+                          win: np.ndarray | None = None) -> np.ndarray:
+    """:meth:`RadarSystem._target_bins` compiled: the same least squares (:func:`rhs_env.kernels.bin_amplitudes`) on
+    the bins already gathered (``win``) or read from the spectrum, and the parabola
+    (:func:`rhs_env.kernels.range_offsets`); the logarithm stays numpy's (its SIMD log)."""
+    from rhs_env.kernels import bin_amplitudes, range_offsets
+
+    a = np.ascontiguousarray(atoms, dtype=complex)
+    if win is None:
+        s_nb = bin_amplitudes(a, spec, rd.astype(np.int64), kk)
+    else:  # Y := win, radar d, bins 0..W-1: the same values, read contiguously
+        s_nb = bin_amplitudes(a, win, np.arange(rd.size, dtype=np.int64),
+                              np.ascontiguousarray(np.broadcast_to(np.arange(kk.shape[1]), kk.shape)))
+    return np.asarray(range_offsets(np.log(np.abs(s_nb) ** 2 + 1e-300), kk.shape[1] // 2))

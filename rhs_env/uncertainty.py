@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rhs_common.jit import KernelTable
 from rhs_env.point_cloud import AngleDictionary, range_crb
 
 __all__ = ["RANGE_CRB_FACTOR", "angle_information", "point_std", "attach_uncertainty", "point_rows", "POINT_COLUMNS"]
@@ -58,13 +59,28 @@ def angle_information(dic: AngleDictionary, theta_rad: np.ndarray) -> np.ndarray
     if th.size == 0:
         return np.zeros(th.shape)
     h, h1 = dic.atoms(th.reshape(-1), order=1)  # (I, T)
-    if getattr(dic, "kernels", "numpy") == "numba":
-        from rhs_env.kernels import angle_information as information
+    return np.asarray(_STAGES.choose(getattr(dic, "kernels", "numpy")).information(h, h1)).reshape(th.shape)
 
-        return information(np.ascontiguousarray(h.T), np.ascontiguousarray(h1.T)).reshape(th.shape)
+
+#: the angle information's sums, compiled (:func:`rhs_env.kernels.angle_information`) or numpy, as the dictionary's
+#: ``kernels``
+_STAGES = KernelTable("rhs_env.uncertainty")
+
+
+@_STAGES.stage("information", "numpy")
+def _information_numpy(h: np.ndarray, h1: np.ndarray) -> np.ndarray:
+    """``||P_perp h'||^2 / ||h||^2`` (T,) of the atoms h and their derivatives h1 (I, T), numpy (the reference)."""
     nh = np.sum(np.abs(h) ** 2, axis=0)
     proj = np.sum(np.abs(h1) ** 2, axis=0) - np.abs(np.sum(h.conj() * h1, axis=0)) ** 2 / nh
-    return (np.maximum(proj, 1e-300) / nh).reshape(th.shape)
+    return np.asarray(np.maximum(proj, 1e-300) / nh)
+
+
+@_STAGES.stage("information", "numba")
+def _information_numba(h: np.ndarray, h1: np.ndarray) -> np.ndarray:
+    """:func:`_information_numpy` compiled (:func:`rhs_env.kernels.angle_information`: the same sums per angle)."""
+    from rhs_env.kernels import angle_information as information
+
+    return np.asarray(information(np.ascontiguousarray(h.T), np.ascontiguousarray(h1.T)))
 
 
 def point_std(

@@ -776,3 +776,28 @@ def test_no_taylor_table_past_the_build_limit(monkeypatch):
     assert dic._taylor is None
     for a, b in zip(dic._atom_rows(th, 1), ref):
         np.testing.assert_array_equal(a, b)
+
+
+def test_kernel_tables_choose_once_and_cover_every_stage_twice():
+    """rhs_common.jit.KernelTable: each radar module's stages have a numba and a numpy implementation, the choice is
+    validated and cached, and the modules it serves compare no ``kernels`` string at a call site."""
+    import re
+
+    from rhs_common.jit import KernelTable
+    from rhs_env import detection, omp, radar, uncertainty
+
+    for table in (detection._STAGES, omp._STAGES, radar._STAGES, uncertainty._STAGES):
+        numba, numpy_ = table.choose("numba"), table.choose("numpy")
+        assert numba is table.choose("numba") and numba.kernels == "numba" and numpy_.kernels == "numpy"
+        assert all(set(impls) == {"numba", "numpy"} for impls in table.stages.values()), table.name
+        assert all(getattr(numba, s) is not getattr(numpy_, s) for s in table.stages), table.name
+    with pytest.raises(ValueError, match="kernels: expected one of 'numba', 'numpy', got 'fortran'"):
+        radar._STAGES.choose("fortran")
+    half = KernelTable("half")
+    half.stage("only", "numpy")(len)
+    with pytest.raises(ValueError, match=r"half: stages without an implementation: only \(numba\)"):
+        half.choose("numpy")
+    branch = re.compile(r"kernels\"?\)?\s*(==|!=)\s*\"num(ba|py)\"")
+    for module in (detection, omp, radar, uncertainty):
+        assert not branch.search(Path(module.__file__).read_text()), module.__name__
+    assert RadarSystem(RadarConfig(kernels="numpy"), np.random.default_rng(0))._impl is radar._STAGES.choose("numpy")
