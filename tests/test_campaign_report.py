@@ -12,7 +12,8 @@ def _ep(seed, ret, crashed, overrides=None):
 
 def test_env_rate_is_positive_and_the_page_renders():
     kw = {"action": {"type": "DiscreteMetaAction", "target_speeds": [10, 15, 20, 25, 30]}, "duration": 2}
-    assert cr.env_rate("rhs-highway-slam-fast-v0", 5, kw) > 0
+    rate = cr.env_rate("rhs-highway-slam-fast-v0", 5, kw)
+    assert rate["wall"] > 0 and rate["cpu"] > 0
     eps = {"campaign:r:seed0": {"exact": {"off": [_ep(0, 9.0, True)], "on": [_ep(0, 11.0, False, {"front": 1})]},
                                 "fast": {"off": [_ep(0, 10.0, False)], "on": [_ep(0, 11.0, False, {"front": 2})]}},
            "idm": {"exact": {"off": [_ep(0, 10.0, False)]}}}
@@ -21,6 +22,8 @@ def test_env_rate_is_positive_and_the_page_renders():
                              "validation_return": [5.0, 7.0], "best": {"env_steps": 1280, "validation_return": 7.0}}},
               "by_env_steps": {"env_steps": [640.0, 1280.0], "mean": [5.0, 7.0], "min": [5.0, 7.0], "max": [5.0, 7.0]}}
     floor = {"fast_env_steps_per_s": 80.0, "exact_env_steps_per_s": 15.0, "loadavg_before": [1.0], "cores": 2,
+             "fast_env_steps_per_cpu_s": 90.0, "exact_env_steps_per_cpu_s": 16.0,
+             "ppo_measured": {"wall": 30.0, "cpu": 40.0, "env_steps": 640},
              "ppo_steps_per_s": {"median": 40.0, "min": 30.0, "max": 50.0, "chunks": 2},
              "target": {"steps_per_run": 2_000_000, "seeds": 3, "recipes": 2, "env_steps": 12_000_000},
              "hours_one_core_at_ppo_rate": 83.3, "hours_one_core_at_env_rate": 41.7}
@@ -32,7 +35,10 @@ def test_env_rate_is_positive_and_the_page_renders():
 
 
 def test_floor_hours_follow_the_rate(tmp_path, monkeypatch):
-    monkeypatch.setattr(cr, "env_rate", lambda env_id, steps, kw, seed=0: 100.0)
+    monkeypatch.setattr(cr, "env_rate", lambda env_id, steps, kw, seed=0: {"wall": 50.0, "cpu": 100.0})
+    monkeypatch.setattr(cr, "ppo_rate", lambda recipe, steps: {"wall": 20.0, "cpu": 40.0, "env_steps": steps})
     out = cr.floor(tmp_path, ["ppo_scratch"], [0, 1, 2], steps=10)
-    assert out["ppo_steps_per_s"] is None and out["hours_one_core_at_ppo_rate"] is None
+    assert out["ppo_steps_per_s"] is None  # no campaign chunks in tmp_path
     assert out["hours_one_core_at_env_rate"] == pytest.approx(6_000_000 / 100 / 3600, abs=0.05)
+    assert out["hours_one_core_at_ppo_rate"] == pytest.approx(6_000_000 / 40 / 3600, abs=0.05)
+    assert cr.floor(tmp_path, ["ppo_scratch"], [0], steps=10, ppo_steps=0)["hours_one_core_at_ppo_rate"] is None

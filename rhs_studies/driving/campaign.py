@@ -9,7 +9,8 @@ in ``<root>/<recipe>/seed<k>/``:
 * ``model.zip``: the latest policy with its optimizer state (stable-baselines3's zip: ``policy.pth`` and
   ``policy.optimizer.pth``), and ``model.json`` beside it (the record :func:`agents.evaluate.load_policy` reads);
 * ``best.zip`` / ``best.json``: the checkpoint with the highest mean validation return so far;
-* ``state.json``: the env steps and decisions trained, the chunks, the training wall time, the RNG states
+* ``state.json``: the env steps and decisions trained, the chunks, the training wall and CPU time (the CPU
+  seconds of this process: on a shared machine, steps per CPU second is the rate one free core would give), the RNG states
   (torch, numpy, Python) at the end of the last chunk, and the learning curve: per chunk, the env steps, the
   cumulative wall seconds, the training episodes' mean return / crash rate, and the validation return, collisions
   and mean speed.
@@ -336,9 +337,9 @@ def train_chunk(recipe: Recipe, root: str | Path, seed: int, chunk_steps: int, v
         venv.seed(training_seed(seed, state["chunks"], recipe.n_envs))
         stopper = StopOnSignal(guard)
         decisions = -(-chunk_steps // recipe.decision_interval)
-        t_learn = time.perf_counter()
+        t_learn, cpu_learn = time.perf_counter(), time.process_time()
         model.learn(total_timesteps=decisions, callback=[_episode_logger(), stopper], reset_num_timesteps=False)
-        learn_s = time.perf_counter() - t_learn
+        learn_s, learn_cpu_s = time.perf_counter() - t_learn, time.process_time() - cpu_learn
         training = _episodes_of(venv)
     finally:
         venv.close()
@@ -351,12 +352,15 @@ def train_chunk(recipe: Recipe, root: str | Path, seed: int, chunk_steps: int, v
     state["env_steps"] = state["decisions"] * recipe.decision_interval
     state["chunks"] += 1
     state["train_wall_s"] += learn_s
+    state["train_cpu_s"] = state.get("train_cpu_s", 0.0) + learn_cpu_s
     state["commit"] = git_state()["commit"]
     validation = _validate(model, recipe, validation_seeds(validation_episodes))
     state["curve"].append({"chunk": state["chunks"], "env_steps": state["env_steps"],
                            "train_wall_s": round(state["train_wall_s"], 2), "chunk_wall_s": round(time.perf_counter()
                                                                                                     - t0, 2),
-                           "steps_per_s": round((state["env_steps"] - before) / max(learn_s, 1e-9), 2), "training": training,
+                           "steps_per_s": round((state["env_steps"] - before) / max(learn_s, 1e-9), 2),
+                           "steps_per_cpu_s": round((state["env_steps"] - before) / max(learn_cpu_s, 1e-9), 2),
+                           "training": training,
                            "validation": validation, "commit": state["commit"]})
     _save_zip(model, folder / "model.zip")
     _write_atomic(folder / "model.json", json.dumps(_policy_record(recipe, seed, state, folder / "model.zip"),

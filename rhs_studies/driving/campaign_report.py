@@ -28,8 +28,9 @@ __all__ = ["env_rate", "floor", "main", "markdown"]
 RESULTS = Path(__file__).resolve().parents[2] / "results"
 
 
-def env_rate(env_id: str, steps: int, env_kwargs: dict[str, Any], seed: int = 21_500) -> float:
-    """Env steps per second of ``env_id`` alone (uniform random actions, seeded), after one warm-up episode step."""
+def env_rate(env_id: str, steps: int, env_kwargs: dict[str, Any], seed: int = 21_500) -> dict[str, float]:
+    """Env steps per wall second and per CPU second of this process (``time.process_time``: what one free core
+    gives on a shared machine) of ``env_id`` alone (uniform random actions, seeded), after one warm-up step."""
     import gymnasium as gym
 
     import rhs_env  # noqa: F401
@@ -39,16 +40,36 @@ def env_rate(env_id: str, steps: int, env_kwargs: dict[str, Any], seed: int = 21
     try:
         vec.reset(seed=seed)
         vec.step(np.array([1]))
-        t = time.perf_counter()
+        t, cpu = time.perf_counter(), time.process_time()
         for _ in range(steps):
             vec.step(rng.integers(0, 5, size=1))
-        return steps / (time.perf_counter() - t)
+        return {"wall": steps / (time.perf_counter() - t), "cpu": steps / max(time.process_time() - cpu, 1e-9)}
     finally:
         vec.close()
 
 
+def ppo_rate(recipe_name: str, steps: int) -> dict[str, float]:
+    """Env steps per wall / CPU second of the recipe's PPO ``learn`` on its vector env (collection and updates),
+    from a fresh model, after a first rollout (kernel warm-up) that is not timed."""
+    from rhs_studies.driving.campaign import RECIPES, _new_model, make_train_env
+
+    recipe = RECIPES[recipe_name]
+    venv = make_train_env(recipe)
+    try:
+        model = _new_model(recipe, venv, 0)
+        rollout = int(model.n_steps) * recipe.n_envs
+        model.learn(total_timesteps=rollout)
+        t, cpu = time.perf_counter(), time.process_time()
+        model.learn(total_timesteps=max(rollout, steps // recipe.decision_interval), reset_num_timesteps=False)
+        done = (int(model.num_timesteps) - rollout) * recipe.decision_interval
+        return {"wall": done / (time.perf_counter() - t), "cpu": done / max(time.process_time() - cpu, 1e-9),
+                "env_steps": done}
+    finally:
+        venv.close()
+
+
 def floor(root: str | Path, recipes: list[str], seeds: list[int], steps: int = 400, target_steps: int = 2_000_000,
-          env_kwargs: dict[str, Any] | None = None) -> dict[str, Any]:
+          env_kwargs: dict[str, Any] | None = None, ppo_steps: int = 1280) -> dict[str, Any]:
     """The throughput floor (see the module docstring).
 
     Args:
@@ -58,11 +79,13 @@ def floor(root: str | Path, recipes: list[str], seeds: list[int], steps: int = 4
         steps: env steps timed per env.
         target_steps: the env steps per run the hours are for.
         env_kwargs: the envs' kwargs (default: the campaign's).
+        ppo_steps: env steps of the timed PPO ``learn`` (:func:`ppo_rate`, the first recipe; 0: none).
 
     Returns:
-        ``fast_env_steps_per_s``, ``exact_env_steps_per_s``, ``ppo_steps_per_s`` (median over the chunks of the
-        runs, with min / max), ``hours`` at that rate for ``target_steps x len(seeds) x len(recipes)`` on one core,
-        ``loadavg``.
+        The fast and exact env's steps per wall and per CPU second, the PPO rate measured here
+        (``ppo_measured``) and the campaign chunks' wall rates (``ppo_steps_per_s``: median, min, max), the hours
+        ``target_steps x len(seeds) x len(recipes)`` need on one free core at the PPO CPU rate and at the env's alone,
+        the load average.
     """
     from rhs_studies.driving.campaign import CAMPAIGN_ENV_KWARGS, load_state, run_dir
 
@@ -70,18 +93,40 @@ def floor(root: str | Path, recipes: list[str], seeds: list[int], steps: int = 4
     load = list(os.getloadavg())
     fast = env_rate(HIGHWAY_SLAM_FAST_ID, steps, kwargs)
     exact = env_rate(HIGHWAY_SLAM_ID, max(steps // 4, 10), kwargs)
+    ppo_now = ppo_rate(recipes[0], ppo_steps) if ppo_steps else None
     rates = [p["steps_per_s"] for r in recipes for s in seeds if (st := load_state(run_dir(root, r, s)))
              for p in st["curve"]]
     ppo = float(np.median(rates)) if rates else None
     total = target_steps * len(seeds) * len(recipes)
-    return {"fast_env_steps_per_s": round(fast, 2), "exact_env_steps_per_s": round(exact, 2),
+    per_core = ppo_now["cpu"] if ppo_now else None
+    return {"fast_env_steps_per_s": round(fast["wall"], 2), "fast_env_steps_per_cpu_s": round(fast["cpu"], 2),
+            "exact_env_steps_per_s": round(exact["wall"], 2), "exact_env_steps_per_cpu_s": round(exact["cpu"], 2),
+            "ppo_measured": ppo_now,
             "ppo_steps_per_s": None if ppo is None else {"median": round(ppo, 2), "min": min(rates),
                                                          "max": max(rates), "chunks": len(rates)},
             "target": {"steps_per_run": target_steps, "seeds": len(seeds), "recipes": len(recipes),
                        "env_steps": total},
-            "hours_one_core_at_ppo_rate": None if not ppo else round(total / ppo / 3600, 1),
-            "hours_one_core_at_env_rate": round(total / fast / 3600, 1),
+            "hours_one_core_at_ppo_rate": None if not per_core else round(total / per_core / 3600, 1),
+            "hours_one_core_at_env_rate": round(total / fast["cpu"] / 3600, 1),
             "loadavg_before": load, "loadavg_after": list(os.getloadavg()), "cores": os.cpu_count()}
+
+
+def _floor_lines(f: dict[str, Any]) -> list[str]:
+    p, m = f.get("ppo_steps_per_s") or {}, f.get("ppo_measured") or {}
+    return ["## Throughput floor", "",
+            f"- fast SLAM env alone: **{f['fast_env_steps_per_cpu_s']:.1f}** env steps per CPU second "
+            f"({f['fast_env_steps_per_s']:.1f} per wall second); exact env {f['exact_env_steps_per_cpu_s']:.1f} "
+            f"({f['exact_env_steps_per_s']:.1f}); one env, this process, load average {f['loadavg_before'][0]:.1f} on "
+            f"{f['cores']} cores while measured (CPU seconds: what one free core gives);",
+            f"- PPO on the fast env (the recipe's native vector env, collection and updates): "
+            f"**{_fmt(m.get('cpu'))}** env steps per CPU second ({_fmt(m.get('wall'))} per wall second, "
+            f"{m.get('env_steps', 0)} env steps timed); the campaign's chunks ran at a median "
+            f"{_fmt(p.get('median'))} per wall second ({p.get('chunks', 0)} chunks, min {_fmt(p.get('min'))}, "
+            f"max {_fmt(p.get('max'))}) on the shared machine;",
+            f"- {f['target']['steps_per_run']:,} env steps x {f['target']['seeds']} seeds x "
+            f"{f['target']['recipes']} recipe(s) = {f['target']['env_steps']:,} env steps: "
+            f"**{_fmt(f['hours_one_core_at_ppo_rate'])} h** of one free core at the PPO rate "
+            f"({_fmt(f['hours_one_core_at_env_rate'])} h at the env's own rate, no learning).", ""]
 
 
 def _fmt(x: Any, nd: int = 1) -> str:
@@ -157,17 +202,7 @@ def markdown(curves: dict[str, Any] | None, shield: dict[str, Any] | None, floor
            "Generated by `python scripts/campaign_report.py page` from `results/campaign_ppo_scratch.json`, "
            "`results/shield_table.json` and `results/campaign_floor.json` (each records its commit and command).", ""]
     if floor_result:
-        f, p = floor_result, floor_result.get("ppo_steps_per_s") or {}
-        out += ["## Throughput floor", "",
-                f"- fast SLAM env alone: **{f['fast_env_steps_per_s']:.1f}** env steps/s; exact env "
-                f"{f['exact_env_steps_per_s']:.1f} (one env, this process; load average "
-                f"{f['loadavg_before'][0]:.1f} on {f['cores']} cores while measured);",
-                f"- PPO on the fast env (native vector env, 2 envs, 1 process): median **{_fmt(p.get('median'))}** "
-                f"env steps/s over {p.get('chunks', 0)} chunks (min {_fmt(p.get('min'))}, max {_fmt(p.get('max'))});",
-                f"- {f['target']['steps_per_run']:,} env steps x {f['target']['seeds']} seeds x "
-                f"{f['target']['recipes']} recipe(s) = {f['target']['env_steps']:,} env steps: "
-                f"**{_fmt(f['hours_one_core_at_ppo_rate'])} h** on one core at that PPO rate "
-                f"({_fmt(f['hours_one_core_at_env_rate'])} h at the env's own rate, no learning).", ""]
+        out += _floor_lines(floor_result)
     if curves:
         out += ["## Learning curves (PPO from scratch, fast env, validation seeds 20000..)", "", *_curve_lines(curves),
                 ""]
@@ -192,12 +227,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--root", type=Path, default=CAMPAIGN_DIR)
     ap.add_argument("--recipes", nargs="+", default=["ppo_scratch"])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    ap.add_argument("--steps", type=int, default=400)
+    ap.add_argument("--steps", type=int, default=400, help="floor: env steps timed per env")
+    ap.add_argument("--ppo-steps", type=int, default=1280, help="floor: env steps of the timed PPO learn")
     ap.add_argument("--results", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
     if args.command == "floor":
         started = time.time()
-        result = floor(args.root, args.recipes, args.seeds, args.steps)
+        result = floor(args.root, args.recipes, args.seeds, args.steps, ppo_steps=args.ppo_steps)
         write_json(args.results / "campaign_floor.json", result, "scripts/campaign_report.py", vars(args), started,
                    argv=argv)
         print(json.dumps(result))
