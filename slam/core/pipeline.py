@@ -645,9 +645,9 @@ class SlamPipeline:
         return est
 
     def _close_loop(self, est: SlamEstimate) -> SlamEstimate:
-        """A loop closure against the archived map (:class:`slam.core.loop_closure.LoopCloser`): when one moved
-        the state, the estimate of the moved state; the map-relative drift restarts (the pose is re-anchored to
-        the old map)."""
+        """A loop closure against the archived map (:class:`slam.core.loop_closure.LoopCloser`): when it moved
+        the state or merged a re-mapped landmark with its archived twin, the estimate of the new state, and the
+        map-relative drift restarts (the pose is re-anchored to landmarks of the old map)."""
         assert self.loop_closer is not None
         t0 = time.perf_counter()
         if not self.loop_closer.check(self.slam, est, self.cycle):
