@@ -73,6 +73,7 @@ def test_the_wheel_holds_every_file_of_the_packages(wheel):
     assert not missing, f"{len(missing)} files of the packages are not in the wheel (pyproject.toml package-data): {missing}"
     data = [n for n in package_files() if not n.endswith(".py")]
     assert any(n.startswith("agents/data/rl/") for n in data), "the shipped policies live in agents/data/rl/"
+    assert {"agents/data/shipped.zip", "agents/data/shipped.json"} <= names, "the shipped policy, under its role name"
     for pkg in PACKAGES:
         assert f"{pkg}/py.typed" in names, f"{pkg} ships no py.typed marker"
     tops = {n.split("/", 1)[0] for n in names}
@@ -133,6 +134,7 @@ def test_the_installed_wheel_runs_the_demo_and_every_env(wheel, tmp_path):
     _run([str(python.parent / "rhs-slam"), "demo", "--env-kwargs", json.dumps(SHORT_DEMO), "--out", str(out)], cwd)
     summary = json.loads((out / "demo.json").read_text())
     assert Path(summary["policy"]).is_relative_to(purelib), f"the demo's policy is not the installed one: {summary['policy']}"
+    assert Path(summary["policy"]).name == "shipped.zip", summary["policy"]
     assert summary["env_id"] == "rhs-highway-slam-v0" and summary["steps"] == 10, summary
     assert (out / "trajectory_map.png").stat().st_size > 0
 
