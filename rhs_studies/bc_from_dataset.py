@@ -209,7 +209,10 @@ def _fit(dataset: Any, env_id: str, obs: Any, y: np.ndarray, epochs: int | None,
     if epochs is not None:
         config = replace(config, epochs=epochs)
     rng = np.random.default_rng(seed)
-    env = dataset.recover_environment()
+    import gymnasium as gym
+
+    spec_id, spec_kwargs = env_of(dataset)  # the spaces only (recover_environment also compares wrapper specs)
+    env = gym.make(spec_id, **spec_kwargs)
     try:
         model = PPO(run.policy, env, seed=seed, device="cpu", verbose=0, policy_kwargs=run.hp.get("policy_kwargs") or {})
         optimizer = torch.optim.Adam(model.policy.parameters(), lr=config.learning_rate)
