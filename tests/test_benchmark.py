@@ -140,6 +140,12 @@ def test_training_rounds_pool_each_rate_and_keep_each_rounds_ratio(monkeypatch):
     rates = iter([30.0, 50.0, 40.0, 60.0, 200.0, 20.0, 50.0, 40.0, 60.0, 240.0])
 
     def fake_train(algo, env_id, timesteps, out, **kwargs):
+        if env_id == "rhs-highway-slam-fast-v0":  # the exact SLAM env's hyperparameters, under the fast id
+            from agents.run_setup import load_hyperparams
+
+            assert load_hyperparams(algo, env_id, kwargs["hyperparams"]) == load_hyperparams(algo, "rhs-highway-slam-v0")
+        else:
+            assert kwargs["hyperparams"] is None
         rate = next(rates)
         timing = {"update_threads": 2 if kwargs["update_threads"] else None, "setup_s": 1.0, "learn_s": timesteps / rate,
                   "steady_steps_per_s": rate, "steady_collect_s_per_rollout": 5.0, "steady_update_s_per_rollout": 0.1}

@@ -860,6 +860,20 @@ def machine_scaling(repeats: int = 5) -> dict[str, Any]:
 TRAINING_IDS = ("rhs-highway-slam-v0", "rhs-highway-v0", "rhs-highway-slam-fast-v0")
 
 
+def _fast_hyperparams(folder: str) -> Path:
+    """A PPO hyperparameter file in ``folder`` whose fast-SLAM-env entry is the shipped SLAM env's (the same spaces:
+    the fast variant changes the radar only), so the two envs train with the same settings."""
+    import yaml
+
+    from agents.run_setup import HYPERPARAMS_DIR
+    from rhs_common.input_files import read_yaml
+
+    table = read_yaml(HYPERPARAMS_DIR / "ppo.yml")
+    path = Path(folder) / "ppo_fast.yml"
+    path.write_text(yaml.safe_dump({TRAINING_IDS[2]: table[TRAINING_IDS[0]]}))
+    return path
+
+
 def bench_training(timesteps: int, seed: int, repeats: int = 3) -> dict:
     """PPO steps/s with 2 subprocess envs on rhs-highway-slam-v0 and on rhs-highway-v0.
 
@@ -888,7 +902,8 @@ def bench_training(timesteps: int, seed: int, repeats: int = 3) -> dict:
             for env_id in TRAINING_IDS if label == "default" else TRAINING_IDS[:2]:
                 with tempfile.TemporaryDirectory() as tmp:
                     s = train("ppo", env_id, timesteps, tmp, seed=seed, n_envs=2, eval_freq=10**9,
-                              checkpoint_freq=10**9, progress=False, update_threads=threads)
+                              checkpoint_freq=10**9, progress=False, update_threads=threads,
+                              hyperparams=_fast_hyperparams(tmp) if env_id == TRAINING_IDS[2] else None)
                 t = s["timing"]
                 whole = t["setup_s"] + t["learn_s"]
                 steady = t["steady_steps_per_s"] or s["steps_per_s"]
