@@ -226,7 +226,7 @@ def check_vector_info_flags(kwargs: Mapping[str, Any], force: bool = False) -> N
 
 def register_envs() -> None:
     """Register every id once (re-importing or calling again is a no-op), each with its native vector env."""
-    from rhs_env.vector import SpecKwargs  # gym.make_vec(id, num_envs=0) is its ValueError (rhs_env.vector)
+    from rhs_env.num_envs import SpecKwargs  # gym.make_vec(id, num_envs=0) is its ValueError
 
     for env_id, entry_point in ENV_SPECS + SLAM_ENV_SPECS:
         if env_id not in gym.registry:

@@ -52,8 +52,8 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 
+from rhs_env.num_envs import MAX_ENVS, SpecKwargs, check_num_envs
 from rhs_env.registration import UNSTACKABLE_INFO_FLAGS, check_vector_info_flags
 
 __all__ = [
@@ -69,8 +69,6 @@ __all__ = [
     "make_vec",
 ]
 
-#: most envs of one vector env (the CLI's ``--n-envs`` bound)
-MAX_ENVS = 256
 #: seconds ``close()`` waits for a pending call of a failed vector env before it terminates the workers
 CLOSE_TIMEOUT_S = 10.0
 #: seconds between the parent's checks that a worker it waits on is still alive
@@ -80,36 +78,6 @@ _PIPE_ERRORS = (BrokenPipeError, ConnectionResetError, EOFError, OSError)
 
 class WorkerError(RuntimeError):
     """A vector env's worker failed or is gone; the message names the worker (and its error, when it sent one)."""
-
-
-def check_num_envs(num_envs: Any) -> int:
-    """``num_envs`` as an int in [1, :data:`MAX_ENVS`] (numpy integers too); ``ValueError`` naming it otherwise."""
-    if isinstance(num_envs, (bool, np.bool_)) or not isinstance(num_envs, (int, np.integer)) \
-            or not 1 <= num_envs <= MAX_ENVS:
-        raise ValueError(f"num_envs must be an integer in [1, {MAX_ENVS}], got {num_envs!r}")
-    return int(num_envs)
-
-
-class SpecKwargs(dict):
-    """The kwargs dict of the project's registered specs: a plain dict whose ``pop("num_envs", n)`` checks ``n``.
-
-    gymnasium's ``make_vec`` deep-copies the spec (the class is kept) and calls
-    ``spec_kwargs.pop("num_envs", num_envs)`` before it builds any env, so ``gym.make_vec(id, num_envs=0)``
-    (any mode) is :func:`check_num_envs`'s ``ValueError``. A ``num_envs`` set in the dict itself is left to gymnasium.
-
-    >>> SpecKwargs().pop("num_envs", 0)
-    Traceback (most recent call last):
-    ...
-    ValueError: num_envs must be an integer in [1, 256], got 0
-    >>> SpecKwargs(a=1).pop("a")
-    1
-    """
-
-    def pop(self, key: Any, *default: Any) -> Any:
-        """``dict.pop``; ``pop("num_envs", n)`` with no ``num_envs`` in the dict checks ``n`` first."""
-        if key == "num_envs" and default and key not in self:
-            check_num_envs(default[0])
-        return super().pop(key, *default)
 
 
 def _flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
