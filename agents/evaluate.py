@@ -62,7 +62,7 @@ from slam.gym.trajectory import sim_time
 
 __all__ = [
     "ConstantPolicy", "DAGGER_CONTINUED_POLICY", "DAGGER_CRUISE30_CLOSE_POLICY", "DAGGER_CRUISE30_GAP_POLICY",
-    "DAGGER_POLICY", "DAGGER_TRUTH_POLICY", "DATA_DIR", "DEFAULT_ENV", "IDMMobilPolicy", "Interrupted",
+    "DAGGER_POLICY", "DAGGER_TRUTH_POLICY", "DATA_DIR", "DEFAULT_ENV", "IDMMobilPolicy", "Interrupted", "raise_interrupted",
     "MAX_UNCONFIRMED_HOURS", "PPO_POLICY", "PPO_TRUTH_POLICY", "PointColumnAdapter", "RADAR_STEPS_PER_S",
     "RL_FINETUNE_POLICY", "RandomPolicy", "SHIPPED_POLICY", "SHIPPED_TRUTH_POLICY", "SLAM_ENV_IDS", "STEPS_PER_S",
     "check_flags", "check_spaces", "configure", "env_action", "episode_steps", "estimate_hours", "evaluate",
@@ -588,7 +588,8 @@ class Interrupted(Exception):
         self.signum = signum
 
 
-def _raise_interrupted(signum, frame) -> None:
+def raise_interrupted(signum, frame) -> None:
+    """A signal handler that raises :class:`Interrupted` (the evaluation and the recorder stop cleanly on it)."""
     raise Interrupted(signum)
 
 
@@ -631,7 +632,7 @@ def evaluate(
     try:
         for sig in (signal.SIGTERM, signal.SIGINT):
             try:
-                previous[sig] = signal.signal(sig, _raise_interrupted)
+                previous[sig] = signal.signal(sig, raise_interrupted)
             except ValueError:  # not the main thread: the default handling stays
                 pass
         env = make_env(env_id, kwargs)

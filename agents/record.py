@@ -312,13 +312,13 @@ def _record_all(env: Any, policy: Any, seeds: list[int], recorder: StepRecorder,
     and job schedulers send). Returns the buffers, the reference returns (``{}`` when interrupted) and the signal's
     name (None when every episode finished).
     """
-    from agents.evaluate import Interrupted, _raise_interrupted
+    from agents.evaluate import Interrupted, raise_interrupted
 
     buffers: list = []
     previous = {}
     for sig in (signal.SIGTERM, signal.SIGINT):
         try:
-            previous[sig] = signal.signal(sig, _raise_interrupted)
+            previous[sig] = signal.signal(sig, raise_interrupted)
         except ValueError:  # not the main thread: the default handling stays
             pass
     try:

@@ -31,7 +31,8 @@ ROOMS: dict[str, tuple[str, ...]] = {
     "slam": ("fig5a_slam_rmse", "fig5c_trajectory_map", "low_snr_slam", "registration_in_loop", "train_registration",
              "compare_drives", "claim_study", "claim_study_report", "long_drive", "racetrack_loops"),
     "driving": ("train_policy", "evaluate_policies", "ablate_policy", "rl_finetune", "rl_confirm",
-                "rl_lane_rule_trial", "teachers", "crash_analysis", "shield_sensing", "comparisons"),
+                "rl_lane_rule_trial", "teachers", "crash_analysis", "shield_sensing", "comparisons", "campaign",
+                "campaign_report", "shield_table"),
     "bench": ("benchmark", "benchmark_radar", "benchmark_patterns", "benchmark_rllib"),
     "upkeep": ("write_results_pages", "fingerprint_tolerance", "refresh_constraints", "ship_policy"),
 }

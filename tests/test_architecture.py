@@ -199,6 +199,8 @@ ROOM_PARTS = {
     ("bench.benchmark", "bench.benchmark_radar"): "the benchmark suite runs the radar benchmark as its radar section",
     ("bench.benchmark", "bench.benchmark_patterns"): "the benchmark suite runs the pattern benchmark as its section",
     ("radar.radar_profiles", "radar.radar_quality"): "the radar profiles are scored with the radar quality metric",
+    ("driving.campaign_report", "driving.campaign"): "the campaign's floor and page: a part of that study (its recipes)",
+    ("driving.shield_table", "driving.campaign"): "the shield table drives the campaign's checkpoints (its folder, recipes)",
 }
 #: what the upkeep tools read besides the kit: the steps of the reproduction (the study registry)
 UPKEEP_READS = ("rhs_studies.reproduce",)

@@ -387,7 +387,7 @@ def test_evaluate_writes_what_it_has_when_interrupted(sig, tmp_path, capsys, mon
     summary = json.loads(out.read_text())
     assert summary["interrupted"] == sig.name and summary["episodes"] == 2 and summary["seeds"] == [0, 1]
     assert out.with_suffix(".png").exists()
-    assert signal.getsignal(sig) is not ev._raise_interrupted  # the handlers are restored
+    assert signal.getsignal(sig) is not ev.raise_interrupted  # the handlers are restored
 
 
 def test_evaluate_estimate_needs_yes(tmp_path, capsys):

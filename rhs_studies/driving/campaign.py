@@ -50,7 +50,7 @@ import numpy as np
 from rhs_common.validation import check_int
 from rhs_env.registration import HIGHWAY_SLAM_FAST_ID, HIGHWAY_SLAM_ID
 
-__all__ = ["CAMPAIGN_DIR", "RECIPES", "Recipe", "curves", "load_state", "run_dir", "train_chunk", "train_campaign",
+__all__ = ["CAMPAIGN_DIR", "RECIPES", "Recipe", "curves", "load_state", "new_model", "run_dir", "train_chunk", "train_campaign",
            "training_seed", "validation_seeds"]
 
 #: where the shipped campaign's checkpoints live (committed, small)
@@ -212,7 +212,7 @@ def make_train_env(recipe: Recipe) -> Any:
     return VecMonitor(to_sb3(vec), info_keywords=("crashed",))
 
 
-def _new_model(recipe: Recipe, venv: Any, seed: int) -> Any:
+def new_model(recipe: Recipe, venv: Any, seed: int) -> Any:
     """A PPO model for ``recipe`` (``init_policy``: its weights loaded from the student's zip)."""
     from stable_baselines3 import PPO
 
@@ -331,7 +331,7 @@ def train_chunk(recipe: Recipe, root: str | Path, seed: int, chunk_steps: int, v
     try:
         if own:
             guard.__enter__()
-        model = _load_model(folder / "model.zip", venv) if state["chunks"] else _new_model(recipe, venv, seed)
+        model = _load_model(folder / "model.zip", venv) if state["chunks"] else new_model(recipe, venv, seed)
         if state["rng"] is not None:
             _set_rng_state(state["rng"])
         venv.seed(training_seed(seed, state["chunks"], recipe.n_envs))

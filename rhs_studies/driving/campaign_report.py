@@ -51,12 +51,12 @@ def env_rate(env_id: str, steps: int, env_kwargs: dict[str, Any], seed: int = 21
 def ppo_rate(recipe_name: str, steps: int) -> dict[str, float]:
     """Env steps per wall / CPU second of the recipe's PPO ``learn`` on its vector env (collection and updates),
     from a fresh model, after a first rollout (kernel warm-up) that is not timed."""
-    from rhs_studies.driving.campaign import RECIPES, _new_model, make_train_env
+    from rhs_studies.driving.campaign import RECIPES, make_train_env, new_model
 
     recipe = RECIPES[recipe_name]
     venv = make_train_env(recipe)
     try:
-        model = _new_model(recipe, venv, 0)
+        model = new_model(recipe, venv, 0)
         rollout = int(model.n_steps) * recipe.n_envs
         model.learn(total_timesteps=rollout)
         t, cpu = time.perf_counter(), time.process_time()

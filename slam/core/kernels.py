@@ -57,77 +57,105 @@ def mahalanobis_association(obs_map: np.ndarray, a00: np.ndarray, a01: np.ndarra
     fin_c = np.empty((n_m, n_l))
     fin_n = np.empty(n_m, np.int64)
     near = np.empty(n_m, np.bool_)
-    row_dead = np.empty(n_m, np.bool_)
-    col_dead = np.empty(n_l, np.bool_)
-    best_l = np.empty(n_m, np.int64)
-    best_c = np.empty(n_m)
-    best_m = np.empty(n_l, np.int64)
-    best_mc = np.empty(n_l)
     act = np.empty(n_l, np.int64)  # the particle's active landmarks (sub-index) and their means and covariances
-    lx, ly, l00, l01, l11 = np.empty(n_l), np.empty(n_l), np.empty(n_l), np.empty(n_l), np.empty(n_l)
+    lm = np.empty((5, n_l))  # x, y, Lambda00, Lambda01, Lambda11 of those landmarks
     for p in range(n_p):
-        n_act = 0
-        for q in range(n_l):
-            l = used[q]
-            if active[p, l]:
-                act[n_act] = q
-                lx[n_act], ly[n_act] = mean[p, l, 0], mean[p, l, 1]
-                l00[n_act], l01[n_act], l11[n_act] = cov[p, l, 0, 0], cov[p, l, 0, 1], cov[p, l, 1, 1]
-                n_act += 1
-        for m in range(n_m):
-            lowest = np.inf
-            k = 0
-            ox, oy = obs_map[p, m, 0], obs_map[p, m, 1]
-            b00, b01, b11 = a00[p, m], a01[p, m], a11[p, m]
-            for j in range(n_act):
-                nx = ox - lx[j]
-                ny = oy - ly[j]
-                s00 = b00 + l00[j]
-                s11 = b11 + l11[j]
-                if nx * nx + ny * ny > 2.0 * new_gate2 * (s00 + s11):
-                    continue
-                q = act[j]
-                s01 = b01 + l01[j]
-                det = max(s00 * s11 - s01 * s01, 1e-300)
-                i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-                d2 = i00 * nx * nx + 2.0 * i01 * nx * ny + i11 * ny * ny
-                lowest = min(lowest, d2)
-                if d2 <= gate2:
-                    fin_q[m, k] = q
-                    fin_c[m, k] = d2
-                    k += 1
-            fin_n[m] = k
-            near[m] = lowest <= new_gate2
-            row_dead[m] = False
-        col_dead[:] = False
-        for _ in range(rounds):
-            for q in range(n_l):
-                best_mc[q] = np.inf
-            for m in range(n_m):  # argmin over landmarks (first of equal minima, as np.argmin)
-                best_l[m], best_c[m] = 0, np.inf
-                if row_dead[m]:
-                    continue
-                for j in range(fin_n[m]):
-                    q = fin_q[m, j]
-                    if not col_dead[q] and fin_c[m, j] < best_c[m]:
-                        best_l[m], best_c[m] = q, fin_c[m, j]
-                for j in range(fin_n[m]):  # argmin over observations, m in order (first of equal minima)
-                    q = fin_q[m, j]
-                    if not col_dead[q] and fin_c[m, j] < best_mc[q]:
-                        best_m[q], best_mc[q] = m, fin_c[m, j]
-            found = False
-            for m in range(n_m):
-                if np.isfinite(best_c[m]) and best_m[best_l[m]] == m:
-                    idx[p, m] = best_l[m]
-                    found = True
-                    row_dead[m] = True
-                    col_dead[best_l[m]] = True
-            if not found:
-                break
+        n_act = _active_landmarks(p, used, active, mean, cov, act, lm)
+        _in_gate_lists(p, obs_map, a00, a01, a11, act, lm, n_act, gate2, new_gate2, fin_q, fin_c, fin_n, near)
+        _mutual_nearest_rounds(idx[p], fin_q, fin_c, fin_n, n_l, rounds)
         for m in range(n_m):
             if idx[p, m] == NEW and near[m]:
                 idx[p, m] = DROPPED
     return idx
+
+
+@njit
+def _active_landmarks(p: int, used: np.ndarray, active: np.ndarray, mean: np.ndarray, cov: np.ndarray,
+                      act: np.ndarray, lm: np.ndarray) -> int:
+    """Particle ``p``'s active landmarks among ``used``: their sub-indices into ``act`` and their means and
+    covariance entries into the rows of ``lm`` (x, y, Lambda00, Lambda01, Lambda11); returns how many."""
+    n_act = 0
+    for q in range(used.size):
+        l = used[q]
+        if active[p, l]:
+            act[n_act] = q
+            lm[0, n_act], lm[1, n_act] = mean[p, l, 0], mean[p, l, 1]
+            lm[2, n_act], lm[3, n_act], lm[4, n_act] = cov[p, l, 0, 0], cov[p, l, 0, 1], cov[p, l, 1, 1]
+            n_act += 1
+    return n_act
+
+
+@njit
+def _in_gate_lists(p: int, obs_map: np.ndarray, a00: np.ndarray, a01: np.ndarray, a11: np.ndarray,
+                   act: np.ndarray, lm: np.ndarray, n_act: int, gate2: float, new_gate2: float,
+                   fin_q: np.ndarray, fin_c: np.ndarray, fin_n: np.ndarray, near: np.ndarray) -> None:
+    """Per observation m of particle ``p``: the landmarks within ``gate2`` (sub-index ``fin_q[m, :fin_n[m]]``,
+    distance ``fin_c``, in slot order) and whether any is within ``new_gate2`` (``near[m]``); the squared
+    Mahalanobis distance ``d2 = nu^T S^-1 nu`` with ``S = A + Lambda``, skipped where ``|nu|^2`` puts the pair
+    beyond both gates."""
+    for m in range(a00.shape[1]):
+        lowest = np.inf
+        k = 0
+        ox, oy = obs_map[p, m, 0], obs_map[p, m, 1]
+        b00, b01, b11 = a00[p, m], a01[p, m], a11[p, m]
+        for j in range(n_act):
+            nx = ox - lm[0, j]
+            ny = oy - lm[1, j]
+            s00 = b00 + lm[2, j]
+            s11 = b11 + lm[4, j]
+            if nx * nx + ny * ny > 2.0 * new_gate2 * (s00 + s11):
+                continue
+            q = act[j]
+            s01 = b01 + lm[3, j]
+            det = max(s00 * s11 - s01 * s01, 1e-300)
+            i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+            d2 = i00 * nx * nx + 2.0 * i01 * nx * ny + i11 * ny * ny
+            lowest = min(lowest, d2)
+            if d2 <= gate2:
+                fin_q[m, k] = q
+                fin_c[m, k] = d2
+                k += 1
+        fin_n[m] = k
+        near[m] = lowest <= new_gate2
+
+
+@njit
+def _mutual_nearest_rounds(idx_p: np.ndarray, fin_q: np.ndarray, fin_c: np.ndarray, fin_n: np.ndarray, n_l: int,
+                           rounds: int) -> None:
+    """``rounds`` rounds accepting the (observation, landmark) pairs that are each other's nearest among the free
+    ones, on the in-gate lists (first of equal minima wins, as ``np.argmin``); writes the accepted sub-indices
+    into ``idx_p`` (the others stay as they are)."""
+    n_m = fin_n.size
+    row_dead = np.zeros(n_m, np.bool_)
+    col_dead = np.zeros(n_l, np.bool_)
+    best_l = np.empty(n_m, np.int64)
+    best_c = np.empty(n_m)
+    best_m = np.empty(n_l, np.int64)
+    best_mc = np.empty(n_l)
+    for _ in range(rounds):
+        for q in range(n_l):
+            best_mc[q] = np.inf
+        for m in range(n_m):  # argmin over landmarks (first of equal minima, as np.argmin)
+            best_l[m], best_c[m] = 0, np.inf
+            if row_dead[m]:
+                continue
+            for j in range(fin_n[m]):
+                q = fin_q[m, j]
+                if not col_dead[q] and fin_c[m, j] < best_c[m]:
+                    best_l[m], best_c[m] = q, fin_c[m, j]
+            for j in range(fin_n[m]):  # argmin over observations, m in order (first of equal minima)
+                q = fin_q[m, j]
+                if not col_dead[q] and fin_c[m, j] < best_mc[q]:
+                    best_m[q], best_mc[q] = m, fin_c[m, j]
+        found = False
+        for m in range(n_m):
+            if np.isfinite(best_c[m]) and best_m[best_l[m]] == m:
+                idx_p[m] = best_l[m]
+                found = True
+                row_dead[m] = True
+                col_dead[best_l[m]] = True
+        if not found:
+            break
 
 
 @njit
