@@ -149,7 +149,8 @@ def rigid_match(src: np.ndarray, dst: np.ndarray, gate: float, tol: float, cap: 
     """The rigid transform that puts the most of ``src`` (N, 2) within ``gate`` of ``dst`` (M, 2).
 
     Args:
-        src, dst: point sets (m).
+        src: the point set to move (N, 2), m.
+        dst: the point set it is matched to (M, 2), m.
         gate: inlier distance (m).
         tol: separation tolerance of a pair hypothesis (m).
         cap: at most this many hypotheses are scored.
