@@ -275,6 +275,34 @@ def record_fingerprint(name: str, fp: dict[str, Any], results: list[str], note: 
     path.write_text(json.dumps(dict(sorted(data.items())), indent=1) + "\n")
 
 
+def same_code_elsewhere(recorded: dict[str, Any], fp: dict[str, Any]) -> bool:
+    """Whether a new run's fingerprint ``fp`` differs from the ``recorded`` entry of ``fingerprints.json`` only as
+    another machine's would: another hash, every value within the entry's measured tolerance (the bound
+    ``tests/test_results_fresh.py`` applies, from ``scripts/fingerprint_tolerance.py``).
+
+    Then the recorded fingerprint stays the code's, and the results already made with it stay verified: a hash of
+    rounded digits alone would call them stale on every CPU whose BLAS rounds the last digit otherwise.
+
+    >>> entry = {"hash": "a", "values": [1.0, 2.0], "tolerance": {"rtol": 1e-4, "atol": 0.0}}
+    >>> same_code_elsewhere(entry, {"hash": "b", "values": [1.00002, 2.0]})
+    True
+    >>> same_code_elsewhere(entry, {"hash": "c", "values": [1.001, 2.0]})
+    False
+    >>> same_code_elsewhere({"hash": "a", "values": [1.0]}, {"hash": "b", "values": [1.00002]})  # no tolerance
+    False
+    """
+    if not recorded or not recorded.get("tolerance") or recorded.get("hash") == fp["hash"]:
+        return False
+    return fingerprint_matches(recorded, fp["values"])[0]
+
+
+def record_results(name: str, results: list[str], path: Path = FINGERPRINTS) -> None:
+    """Set the results files listed under script ``name``'s fingerprint in ``fingerprints.json`` (the rest kept)."""
+    data = load_fingerprints(path)
+    data[name] = {**data[name], "results": sorted(results)}
+    path.write_text(json.dumps(dict(sorted(data.items())), indent=1) + "\n")
+
+
 def _in_results(path: Path) -> bool:
     try:
         Path(path).resolve().relative_to(RESULTS.resolve())
@@ -296,10 +324,16 @@ def write_json(path: str | Path, result: dict[str, Any], script: str | Path, con
     prov = provenance(script, config, started, argv)
     if fingerprint_fn is not None:
         fp = compute_fingerprint(fingerprint_fn)
-        prov["fingerprint"] = {"name": script_name(script), "hash": fp["hash"], "seconds": fp["seconds"]}
+        name = script_name(script)
+        prov["fingerprint"] = {"name": name, "hash": fp["hash"], "seconds": fp["seconds"]}
         if _in_results(path):
-            known = load_fingerprints().get(script_name(script), {}).get("results", [])
-            record_fingerprint(script_name(script), fp, sorted({*known, path.name}), "full run")
+            recorded = load_fingerprints(FINGERPRINTS).get(name, {})
+            known = recorded.get("results", [])
+            if same_code_elsewhere(recorded, fp):  # this machine's last digits: the recorded fingerprint stands
+                prov["fingerprint"].update(hash=recorded["hash"], this_run_hash=fp["hash"])
+                record_results(name, sorted({*known, path.name}), FINGERPRINTS)
+            else:
+                record_fingerprint(name, fp, sorted({*known, path.name}), "full run", FINGERPRINTS)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps({**result, "provenance": prov}, indent=1, default=jsonable) + "\n")
     return prov

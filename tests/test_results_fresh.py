@@ -299,3 +299,15 @@ def test_recorded_paths_inside_the_repository_are_relative(tmp_path):
     """A results file names no machine's folders: paths inside the repository are recorded from its root."""
     cfg = prov.jsonable({"lib": prov.ROOT / "rhs_env" / "patterns" / "data", "out": tmp_path / "x.json"})
     assert cfg["lib"] == "rhs_env/patterns/data" and cfg["out"] == str(tmp_path / "x.json")
+
+
+def test_a_run_within_the_measured_tolerance_keeps_the_recorded_fingerprint():
+    """Another CPU's last digits (within the step's measured tolerance) leave the recorded fingerprint the code's, so
+    the results made with it stay verified; a value beyond the tolerance, or an entry without one, is new code."""
+    entry = {"hash": "old", "values": [0.00153005, None, 1.0], "tolerance": {"rtol": 7.84e-05, "atol": 7.84e-08}}
+    assert prov.same_code_elsewhere(entry, {"hash": "new", "values": [0.00153002, None, 1.0]})
+    assert not prov.same_code_elsewhere(entry, {"hash": "new", "values": [0.00154, None, 1.0]})
+    assert not prov.same_code_elsewhere(entry, {"hash": "new", "values": [0.00153002, 0.5, 1.0]})
+    assert not prov.same_code_elsewhere({k: v for k, v in entry.items() if k != "tolerance"},
+                                        {"hash": "new", "values": [0.00153002, None, 1.0]})
+    assert not prov.same_code_elsewhere({}, {"hash": "new", "values": [1.0]})
