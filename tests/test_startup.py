@@ -107,14 +107,20 @@ TRAFFIC = """
     while sims[-1] != "compiled" and time.perf_counter() - t0 < 600:
         env.step(1); time.sleep(0.2); sims.append(env.unwrapped.traffic_sim)
     env.step(1)
-    print(json.dumps({"first_step_s": first, "sims": sims, **compile_stats()}))
+    from rhs_env.traffic import warm
+    started = [warm.background().wait(60)] if warm.background() else []
+    print(json.dumps({"first_step_s": first, "sims": sims, "background_rc": started, **compile_stats()}))
 """
 
 
 def test_traffic_kernels_compile_in_the_background_while_highway_env_steps(tmp_path):
     """sim="auto" on an empty cache: the first step does not wait for the traffic core's kernels (highway-env's
-    code steps it), the background process caches them, and the env then steps with the core, compiling nothing."""
+    code steps it until they are cached), one background process caches them, and the env then steps with the
+    core, compiling nothing itself. On a fast machine the background compile can end during the reset (which
+    compiles the radar's kernels in the foreground): then the first step already uses the core."""
     out, _ = _run(TRAFFIC, tmp_path)
-    assert out["sims"][0] == "highway-env" and out["sims"][-1] == "compiled", out["sims"]
+    assert out["background_rc"] == [0], out
+    assert set(out["sims"]) <= {"highway-env", "compiled"} and out["sims"][-1] == "compiled", out["sims"]
+    assert out["sims"] == sorted(out["sims"], key=lambda s: s == "compiled"), out["sims"]  # never back
     assert not [k for k in out["kernels"] if k.startswith("rhs_env.traffic")], out["kernels"]
     assert out["first_step_s"] < 5.0, out

@@ -25,7 +25,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-__all__ = ["cached", "main", "ready", "start", "workload"]
+__all__ = ["background", "cached", "main", "ready", "start", "workload"]
 
 _ENV_SWITCH = "RHS_SLAM_BACKGROUND_COMPILE"
 #: this process' background compile (started once per process)
@@ -74,6 +74,11 @@ def ready() -> bool:
     if cached():
         return True
     return not start()
+
+
+def background() -> subprocess.Popen | None:
+    """The background compile this process started (:func:`start`), or None if it started none."""
+    return _STARTED[0] if _STARTED else None
 
 
 def start() -> bool:
