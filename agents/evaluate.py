@@ -15,17 +15,17 @@ it was trained on. Without ``--env`` the policy's env is used; with the same
 env, its ``env_kwargs`` are the defaults and ``--env-kwargs`` is merged over
 them (key by key, top level), so the policy always meets the observation it
 was trained on unless asked otherwise. A policy trained with a ``decision_interval``
-k > 1 (saved in the same JSON, :mod:`agents.decision`) is loaded as a
-:class:`agents.decision.HeldPolicy`: it decides every k env steps and repeats its
+k > 1 (saved in the same JSON, :mod:`agents.policies.decision`) is loaded as a
+:class:`agents.policies.decision.HeldPolicy`: it decides every k env steps and repeats its
 action between, so every policy is scored per env step on the same seeds. A record with a ``shield``
-(:mod:`agents.shield`) drives the policy behind the radar safety shield; ``--shield`` puts any policy behind
+(:mod:`agents.policies.shield`) drives the policy behind the radar safety shield; ``--shield`` puts any policy behind
 it, ``--no-shield`` drives a shielded one without. The default policy is the shipped one,
 ``agents/data/shipped.zip`` (:data:`agents.SHIPPED_POLICY`, with its ``.json`` record; a copy of the experiment
 ``agents/data/rl/shield_flank_explore_lane_time.zip``, which its record names): a PPO fine-tune (privileged
-critic, 40k env steps, :mod:`agents.finetune`) of the DAgger student below, trained and driven behind the radar
+critic, 40k env steps, :mod:`agents.algos.finetune`) of the DAgger student below, trained and driven behind the radar
 shield, whose lane-change rule (``lane_time_s`` 2.5) was chosen on validation seeds (:mod:`rhs_studies.rl_lane_rule_trial`).
 Its start, ``agents/data/rl/dagger_cruise30_close.zip``, is the DAgger student of
-:class:`agents.expert.HeadwayDriver` (:mod:`agents.imitation`), ``agents/data/dagger_rhs_highway_slam.zip``,
+:class:`agents.policies.expert.HeadwayDriver` (:mod:`agents.algos.imitation`), ``agents/data/dagger_rhs_highway_slam.zip``,
 continued with DAgger for 80k env steps (``rl/dagger_continue_80k.zip``), then 40k with the headway driver
 at 30 m/s and a 2.0 s gap (``rl/dagger_cruise30_gap.zip``) and 40k more with it following at 5 m
 (``agents/hyperparams/dagger_cruise30_close.yml``), driven behind the radar shield (the policy shipped before);
@@ -51,11 +51,11 @@ from typing import Any
 import numpy as np
 
 from agents import SHIPPED_POLICY as _SHIPPED_ROLE
-from agents.decision import held
-from agents.expert import HeadwayDriver
-from agents.lookahead import LookaheadDriver
-from agents.run_setup import parse_env_kwargs
-from agents.shield import ShieldedPolicy, check_shield_env, shield_record
+from agents.algos.run_checks import parse_env_kwargs
+from agents.policies.decision import held
+from agents.policies.expert import HeadwayDriver
+from agents.policies.lookahead import LookaheadDriver
+from agents.policies.shield import ShieldedPolicy, check_shield_env, shield_record
 from rhs_env.registration import SLAM_ENV_SPECS
 from slam.core.trajectory_formats import FORMAT_CHOICES, formats_of
 from slam.gym.trajectory import sim_time
@@ -72,7 +72,7 @@ __all__ = [
 ]
 
 DATA_DIR = Path(__file__).parent / "data"
-#: DAgger students of agents.expert.HeadwayDriver, 80k env steps each: on radar + SLAM (shipped) and ground truth
+#: DAgger students of agents.policies.expert.HeadwayDriver, 80k env steps each: on radar + SLAM (shipped) and ground truth
 DAGGER_POLICY = DATA_DIR / "dagger_rhs_highway_slam.zip"
 DAGGER_TRUTH_POLICY = DATA_DIR / "dagger_rhs_highway_truth.zip"
 #: PPO at its own budget (agents/hyperparams/ppo.yml, 40k env steps): results/policies.md compares
@@ -183,9 +183,9 @@ class RandomPolicy:
 
 def policy_metadata(policy: str | Path, required: bool = False) -> dict[str, Any]:
     """A policy's record (env id, env kwargs, training settings): the JSON beside the zip (or beside the file a
-    symbolic link names), else the one inside the zip (:func:`agents.policy_record.read_record`); ``{}`` for a
+    symbolic link names), else the one inside the zip (:func:`agents.policies.policy_record.read_record`); ``{}`` for a
     scripted driver. Without any record: ``{}``, or (``required``) a ``ValueError`` naming the missing JSON."""
-    from agents.policy_record import read_record
+    from agents.policies.policy_record import read_record
 
     if is_scripted(policy):
         return {}
@@ -231,15 +231,15 @@ def make_env(env_id: str, kwargs: dict[str, Any], **extra: Any):
 
 def load_policy(policy: str | Path, env=None, seed: int = 0):
     """``"random"``, ``"constant:<action>"``, ``"idm[:<m/s>]"``, ``"headway[:<k>]"``
-    (:class:`agents.expert.HeadwayDriver`, the DAgger expert; with k, pulsed every k steps), ``"lookahead[:<k>]"``
-    (:class:`agents.lookahead.LookaheadDriver`, the rollout teacher), or a
+    (:class:`agents.policies.expert.HeadwayDriver`, the DAgger expert; with k, pulsed every k steps), ``"lookahead[:<k>]"``
+    (:class:`agents.policies.lookahead.LookaheadDriver`, the rollout teacher), or a
     stable-baselines3 zip (PPO, DQN or a DAgger student: from the JSON beside it, else PPO and DQN tried in turn).
 
     With ``env``, the policy's observation space is checked against the env's. A zip whose JSON
-    has ``decision_interval`` k > 1 comes back as a :class:`agents.decision.HeldPolicy` (decides every
+    has ``decision_interval`` k > 1 comes back as a :class:`agents.policies.decision.HeldPolicy` (decides every
     k ``predict`` calls; :func:`run_episode` resets it at each episode start); one whose JSON has a
-    ``shield`` (the shipped policy, or a fine-tune trained under it: :mod:`agents.shield`) behind a
-    :class:`agents.shield.ShieldedPolicy`.
+    ``shield`` (the shipped policy, or a fine-tune trained under it: :mod:`agents.policies.shield`) behind a
+    :class:`agents.policies.shield.ShieldedPolicy`.
     """
     if is_scripted(policy):
         if env is None:
@@ -268,7 +268,7 @@ def load_policy(policy: str | Path, env=None, seed: int = 0):
         return _load_rllib(path, env)
     from stable_baselines3 import DQN, PPO
 
-    classes = {"ppo": PPO, "dqn": DQN, "dagger": PPO}  # a DAgger student is a PPO policy (agents.imitation)
+    classes = {"ppo": PPO, "dqn": DQN, "dagger": PPO}  # a DAgger student is a PPO policy (agents.algos.imitation)
     algo = str(policy_metadata(path).get("algo", "")).lower()
     order = [classes[algo]] if algo in classes else [PPO, DQN]
     errors = []
@@ -301,7 +301,7 @@ def _with_saved_shield(policy: Any, meta: dict[str, Any], env=None) -> Any:
 def _privileged_driver(policy: str, env):
     """``"headway"``: the HeadwayDriver deciding every step; ``"headway:<k>"``: deciding every k steps, IDLE
     between (decision_mode pulse: how the DAgger students drive and how the expert labelled their states);
-    ``"lookahead[:<k>]"`` the same for the :class:`agents.lookahead.LookaheadDriver` (the rollout teacher)."""
+    ``"lookahead[:<k>]"`` the same for the :class:`agents.policies.lookahead.LookaheadDriver` (the rollout teacher)."""
     name, _, k_text = policy.partition(":")
     driver = HeadwayDriver(env) if name == "headway" else LookaheadDriver(env)
     if not k_text:
@@ -316,8 +316,8 @@ def _privileged_driver(policy: str, env):
 def _load_rllib(path: Path, env=None):
     """The RLModule of an RLlib checkpoint directory (``rhs-slam train --backend rllib``); a run with a decision
     interval k > 1 (``decision_interval`` in the JSON beside the directory) comes back as a
-    :class:`agents.decision.HeldPolicy`, and one trained under the shield behind it, as a zip does."""
-    from agents.rllib_policy import MODULE_SUBDIR, RLlibPolicy, is_rllib_checkpoint
+    :class:`agents.policies.decision.HeldPolicy`, and one trained under the shield behind it, as a zip does."""
+    from agents.policies.rllib_policy import MODULE_SUBDIR, RLlibPolicy, is_rllib_checkpoint
 
     if not is_rllib_checkpoint(path):
         raise ValueError(f"{path} is a directory but not an RLlib checkpoint (no {'/'.join(MODULE_SUBDIR)})")
@@ -442,7 +442,7 @@ def run_episode(
 
     ``frames`` collects ``env.render()`` per step; ``trace`` the ``(obs, info)`` of the reset and of
     every step; ``bar`` (a tqdm bar) is advanced by one per step. A policy with a ``reset()``
-    (:class:`agents.decision.HeldPolicy`) is reset first; with ``deterministic=False`` the sampling is seeded with
+    (:class:`agents.policies.decision.HeldPolicy`) is reset first; with ``deterministic=False`` the sampling is seeded with
     ``seed`` (:func:`seed_sampling`).
     """
     if callable(getattr(policy, "reset", None)):
@@ -556,12 +556,12 @@ def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def model_shield(policy: Any):
-    """The :class:`agents.shield.RadarShield` a loaded policy drives through, or None."""
+    """The :class:`agents.policies.shield.RadarShield` a loaded policy drives through, or None."""
     return policy.shield if isinstance(policy, ShieldedPolicy) else None
 
 
 def _override_totals(runs: list[dict[str, Any]]) -> dict[str, int] | None:
-    """The shield's replacements (:mod:`agents.shield`) summed over episodes, per reason; None when unshielded."""
+    """The shield's replacements (:mod:`agents.policies.shield`) summed over episodes, per reason; None when unshielded."""
     counts: list[dict[str, int]] = [r["shield_overrides"] for r in runs if r.get("shield_overrides") is not None]
     return {k: int(sum(c[k] for c in counts)) for k in counts[0]} if counts else None
 
@@ -606,7 +606,7 @@ def evaluate(
 ) -> dict[str, Any]:
     """Evaluate ``policy`` on ``episodes`` seeded episodes; returns the JSON-ready summary.
 
-    ``shield`` (a :class:`agents.shield.ShieldConfig` as a dict; ``{}`` or ``True``: its defaults) drives the
+    ``shield`` (a :class:`agents.policies.shield.ShieldConfig` as a dict; ``{}`` or ``True``: its defaults) drives the
     policy through the radar safety shield, in place of any shield saved beside it; ``False`` drives it without
     one; None: as its record says.
 
@@ -738,7 +738,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--stochastic", action="store_true", help="sample actions instead of the greedy action")
     parser.add_argument(
         "--shield", nargs="?", const="{}", default=None, metavar="JSON",
-        help="drive through the radar safety shield (agents.shield; optional JSON of ShieldConfig fields, e.g. "
+        help="drive through the radar safety shield (agents.policies.shield; optional JSON of ShieldConfig fields, e.g. "
         "'{\"front_time_s\": 1.5}'), in place of a shield saved beside the policy",
     )
     parser.add_argument("--no-shield", action="store_true",
@@ -838,7 +838,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def parse_shield(text: str) -> dict[str, Any]:
-    """``--shield``'s JSON object of :class:`agents.shield.ShieldConfig` fields, validated."""
+    """``--shield``'s JSON object of :class:`agents.policies.shield.ShieldConfig` fields, validated."""
     from rhs_common.input_files import parse_json
 
     value = parse_json(text, "--shield")

@@ -11,7 +11,7 @@ datasets folder: load with ``MINARI_DATASETS_PATH=OUT`` and ``minari.load_datase
   from the dataset runs on the env as it is;
 * ``actions``: what the driving policy did (behind its shield, where it has one);
 * ``infos`` (one entry per observation, ``T + 1`` of them): ``expert_action``, the label of
-  :class:`agents.expert.HeadwayDriver` at that state (-1 where the ego is not a meta-action
+  :class:`agents.policies.expert.HeadwayDriver` at that state (-1 where the ego is not a meta-action
   vehicle); ``kinematics``, highway-env's ground-truth Kinematics table
   (:data:`KINEMATICS_FEATURES`, :data:`KINEMATICS_VEHICLES` rows, the ego first and absolute, the
   others relative to it, m and m/s in highway-env's frame); ``world_pose``; ``points_cov``, each
@@ -57,7 +57,7 @@ from agents.evaluate import (
     resolve_env,
     run_episode,
 )
-from agents.expert import HeadwayDriver
+from agents.policies.expert import HeadwayDriver
 
 if TYPE_CHECKING:
     from minari.data_collector import EpisodeBuffer

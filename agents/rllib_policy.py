@@ -1,76 +1,16 @@
-"""A trained RLlib checkpoint as a policy: what ``rhs-slam evaluate`` / ``demo`` load from ``rhs-slam train --backend
-rllib`` (:mod:`agents.rllib` trains; this module only reads, so evaluation never imports the trainer).
+"""The old path of :mod:`agents.policies.rllib_policy`, kept for saved policies and code written before the subpackages.
 
-:class:`RLlibPolicy` rebuilds the RLModule of ``DIR/rllib_checkpoint`` and runs it behind the
-``predict(obs, deterministic)`` interface of stable-baselines3 models; a module trained with a privileged
-critic (:class:`agents.rllib.PointSetPPOModule`) acts on the observation without the privileged key.
+``agents.rllib_policy`` is that module itself (one module object under both names, so its classes unpickle, its
+names import and a patched attribute is seen by both): saved policies, recorded commands and code written before
+name it here.
 """
 
-from __future__ import annotations
+import sys
+from typing import TYPE_CHECKING
 
-from pathlib import Path
+from agents.policies import rllib_policy as _module
 
-import gymnasium as gym
-import numpy as np
+if TYPE_CHECKING:  # the public names, for static type checkers (at run time the module itself stands here)
+    from agents.policies.rllib_policy import *  # noqa: F403
 
-__all__ = ["CHECKPOINT_DIR", "MODULE_SUBDIR", "RLlibPolicy", "is_rllib_checkpoint", "require_ray"]
-
-CHECKPOINT_DIR = "rllib_checkpoint"
-#: the RLModule inside an algorithm checkpoint (single-agent: the default module id)
-MODULE_SUBDIR = ("learner_group", "learner", "rl_module", "default_policy")
-
-
-def require_ray():
-    """Import ray, or raise ``ValueError`` telling how to install the extra."""
-    try:
-        import ray
-        from ray.rllib.algorithms.ppo import PPOConfig  # noqa: F401
-    except ImportError as exc:
-        raise ValueError(
-            f"the rllib backend needs Ray RLlib ({exc}): pip install torch==2.13.0 && pip install -e '.[rllib]'"
-        ) from None
-    return ray
-
-
-def is_rllib_checkpoint(path: str | Path) -> bool:
-    """A directory holding an RLlib algorithm checkpoint (or its RLModule)."""
-    p = Path(path)
-    return p.is_dir() and (p.joinpath(*MODULE_SUBDIR).is_dir() or (p / "class_and_ctor_args.pkl").exists())
-
-
-class RLlibPolicy:
-    """The RLModule of an RLlib checkpoint behind the ``predict(obs, deterministic)`` interface of SB3 models.
-
-    Needs only torch and ray.rllib (no Ray cluster): the module is rebuilt from
-    the checkpoint and run on one observation at a time; ``deterministic``
-    takes the arg-max action, else samples the categorical distribution.
-    """
-
-    def __init__(self, path: str | Path):
-        require_ray()
-        from ray.rllib.core.rl_module.rl_module import RLModule
-
-        p = Path(path)
-        module_dir = p.joinpath(*MODULE_SUBDIR) if p.joinpath(*MODULE_SUBDIR).is_dir() else p
-        self.module = RLModule.from_checkpoint(str(module_dir.resolve()))
-        self.module.eval()
-        space = self.module.observation_space
-        if isinstance(space, gym.spaces.Dict):  # the actor never reads a privileged critic's key
-            from agents.privileged import without_privileged
-
-            space = without_privileged(space)
-        self.observation_space = space
-        self.action_space = self.module.action_space
-
-    def predict(self, obs, deterministic: bool = True):
-        import torch
-
-        def batch1(x):
-            return torch.as_tensor(np.asarray(x))[None]
-
-        o = {k: batch1(v) for k, v in obs.items()} if isinstance(obs, dict) else batch1(obs)
-        with torch.no_grad():
-            logits = self.module.forward_inference({"obs": o})["action_dist_inputs"][0]
-        if deterministic:
-            return int(torch.argmax(logits)), None
-        return int(torch.distributions.Categorical(logits=logits).sample()), None
+sys.modules[__name__] = _module

@@ -34,7 +34,7 @@ at exit; nothing when every kernel loads from the cache, nothing at all with ``R
 
 Vector envs. Worker processes started on an empty cache would each compile every kernel
 (seconds of CPU per worker); :func:`warm_cache` runs a workload once in the parent first, so the
-workers only load (``agents.run_setup.make_vec_env`` does it before its subprocess workers start).
+workers only load (``agents.algos.vec_env.make_vec_env`` does it before its subprocess workers start).
 
 Tiers. A kernel that strings ten compiled stages together (the OMP) costs seconds more to compile than
 its stages (numba links every callee's code into the caller's module and optimises the whole tree

@@ -24,7 +24,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "patterns": ("rhs_env.patterns.cli", "build or load a holographic pattern library and report it"),
     "scan": ("rhs_env.scan_cli", "one radar cycle on targets from a scene JSON file"),
     "scenario": ("slam.gym.scenario_cli", "SLAM on a scripted run from a scenario JSON file"),
-    "train": ("agents.train", "train a driving agent with stable-baselines3"),
+    "train": ("agents.algos.train", "train a driving agent with stable-baselines3"),
     "evaluate": ("agents.evaluate", "evaluate a driving policy with SLAM metrics"),
     "record": ("agents.record", "drive a policy and write the episodes as a Minari dataset"),
 }

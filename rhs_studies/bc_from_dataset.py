@@ -2,7 +2,7 @@
 
 Fits a stable-baselines3 ``ActorCriticPolicy`` (the DAgger students' network: the env's entry of
 ``agents/hyperparams/dagger.yml``, its ``epochs``, ``batch_size``, ``learning_rate`` and
-``class_weight_power``; fresh weights) by weighted maximum likelihood (:func:`agents.imitation.fit`) of the
+``class_weight_power``; fresh weights) by weighted maximum likelihood (:func:`agents.algos.imitation.fit`) of the
 datasets' labels at their observations (``--dataset-id`` takes one or more datasets of the same env):
 
 * ``--labels expert`` (default): the headway expert's ``infos["expert_action"]`` at every state;
@@ -39,12 +39,12 @@ from typing import Any
 
 import numpy as np
 
-from agents.imitation import DaggerConfig, Dataset, agreement, fit
+from agents.algos.imitation import DaggerConfig, Dataset, agreement, fit
 
 __all__ = ["FIT_FIELDS", "LABELS", "LIKE_FIELDS", "ArrayDataset", "clone", "compare_runs", "env_of", "evaluate_clone",
            "label_rows", "load_samples", "main", "paired_ratio", "parse_args", "write_markdown"]
 
-#: the fields of :class:`agents.imitation.DaggerConfig` that the supervised fit reads
+#: the fields of :class:`agents.algos.imitation.DaggerConfig` that the supervised fit reads
 FIT_FIELDS = ("epochs", "batch_size", "learning_rate", "class_weight_power")
 #: the label choices (the module docstring)
 LABELS = ("expert", "actions", "decisions")
@@ -53,7 +53,7 @@ LIKE_FIELDS = ("decision_interval", "decision_mode", "shield")
 
 
 class ArrayDataset(Dataset):
-    """A :class:`agents.imitation.Dataset` over arrays already stacked (the dataset's observations)."""
+    """A :class:`agents.algos.imitation.Dataset` over arrays already stacked (the dataset's observations)."""
 
     def __init__(self, obs: Any, actions: np.ndarray) -> None:
         super().__init__()
@@ -163,7 +163,7 @@ def clone(datasets: Any, out: str | Path, labels: str = "expert", epochs: int | 
     import torch
 
     import rhs_env  # noqa: F401  (registers the ids the dataset's spec names)
-    from agents.run_setup import limit_threads
+    from agents.algos.threads import limit_threads
 
     datasets = list(datasets) if isinstance(datasets, (list, tuple)) else [datasets]
     envs = {json.dumps(env_of(d), sort_keys=True, default=str) for d in datasets}
@@ -202,7 +202,7 @@ def _fit(dataset: Any, env_id: str, obs: Any, y: np.ndarray, epochs: int | None,
     import torch
     from stable_baselines3 import PPO
 
-    from agents.run_setup import run_settings
+    from agents.algos.hyperparams import run_settings
 
     run = run_settings("dagger", env_id, 1, 1, None, None)
     config = DaggerConfig(**{k: run.hp[k] for k in FIT_FIELDS if k in run.hp})

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.decision import IDLE
+from agents.policies.decision import IDLE
 from rhs_common.geometry import wrap_angle
 from rhs_env.array_models import ANTENNA_KINDS
 from slam.core.registration import DEFAULT_REGISTRATION, REGISTRATIONS

@@ -63,7 +63,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.decision import IDLE, SLOWER
+from agents.policies.decision import IDLE, SLOWER
 from rhs_common.stats import mean_half_record as ci95
 from rhs_studies.kit.slam_metrics import (
     CFEAR_DRIFT_PCT,

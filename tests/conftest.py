@@ -75,7 +75,7 @@ def privileged_space() -> Any:
     import gymnasium as gym
     import numpy as np
 
-    from agents.privileged import PRIVILEGED_DIM, PRIVILEGED_KEY
+    from agents.policies.privileged import PRIVILEGED_DIM, PRIVILEGED_KEY
 
     return gym.spaces.Dict({
         "points": gym.spaces.Box(-100.0, 100.0, shape=(8, 3), dtype=np.float32),
@@ -90,7 +90,7 @@ def reward_two_env() -> Any:
     something for PPO to move towards, in a few hundred steps."""
     import gymnasium as gym
 
-    from agents.privileged import without_privileged
+    from agents.policies.privileged import without_privileged
 
     class RewardTwoEnv(gym.Env):
         observation_space = without_privileged(privileged_space())

@@ -22,6 +22,7 @@ import torch
 from conftest import small_env_kwargs, tiny_hyperparams
 
 import rhs_env  # noqa: F401  (registers the ids)
+from agents.algos.train import ALGOS, load_hyperparams, train, update_threads_for, worker_env_id
 from agents.evaluate import (
     SHIPPED_POLICY,
     SHIPPED_TRUTH_POLICY,
@@ -31,8 +32,7 @@ from agents.evaluate import (
     resolve_env,
     run_episode,
 )
-from agents.features import GridExtractor, PointSetExtractor
-from agents.train import ALGOS, load_hyperparams, train, update_threads_for, worker_env_id
+from agents.policies.features import GridExtractor, PointSetExtractor
 from rhs_slam.cli import main as cli_main
 
 SLAM = "rhs-highway-slam-v0"
@@ -98,7 +98,7 @@ def test_ppo_training_run_writes_everything(trained):
 def test_update_threads_and_phase_timer():
     import os
 
-    from agents.callbacks import PhaseTimer, UpdateThreads
+    from agents.algos.callbacks import PhaseTimer, UpdateThreads
 
     cores = len(os.sched_getaffinity(0))
     assert update_threads_for(1, 2) is None  # the default: no switch
@@ -179,7 +179,7 @@ def test_hyperparams_and_worker_ids():
             assert hp["policy"] in ("MultiInputPolicy", "MlpPolicy")
             assert hp["n_envs"] >= 1
     # the shipped YAML writes policy_kwargs as the Python expression rl-baselines3-zoo evals
-    from agents.run_setup import resolve_policy_kwargs
+    from agents.algos.hyperparams import resolve_policy_kwargs
 
     pk = resolve_policy_kwargs(load_hyperparams("ppo", SLAM)["policy_kwargs"])
     assert pk["features_extractor_class"] is PointSetExtractor
@@ -455,7 +455,7 @@ def test_shipped_truth_policy_loads_and_acts():
 
 
 def test_rllib_settings_map_the_sb3_yaml():
-    from agents.rllib import ppo_settings
+    from agents.algos.rllib import ppo_settings
 
     hp = load_hyperparams("ppo", SLAM)
     for key in ("policy", "n_envs", "n_timesteps", "env_kwargs", "policy_kwargs"):
@@ -480,7 +480,7 @@ def test_rllib_backend_without_ray_says_how_to_install(tmp_path, capsys):
 def test_rllib_backend_reads_the_shipped_yaml_policy_kwargs():
     """The shipped ppo.yml writes policy_kwargs as rl-baselines3-zoo's expression; the RLlib backend takes the
     extractor by name (``rhs-slam train --backend rllib --env rhs-highway-slam-v0`` with the shipped YAML)."""
-    from agents.train import load_hyperparams, policy_kwargs_by_name
+    from agents.algos.train import load_hyperparams, policy_kwargs_by_name
 
     hp = load_hyperparams("ppo", "rhs-highway-slam-v0")
     assert isinstance(hp["policy_kwargs"], str)

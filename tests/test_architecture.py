@@ -317,3 +317,26 @@ def test_an_integer_for_a_float_field_names_the_same_config():
     from rhs_env.array_models import ScanConfig
 
     assert ScanConfig(grid_deg=5) == ScanConfig(grid_deg=5.0) and isinstance(ScanConfig(grid_deg=5).grid_deg, float)
+
+
+#: the agents modules users run (the top of the agents package, above its subpackages)
+AGENTS_ENTRY = ("agents.evaluate", "agents.record", "agents.demo")
+
+
+def test_the_agents_policies_import_nothing_of_the_training_side():
+    """agents.policies (drivers and policy parts) sits below agents.algos (training) and the entry modules."""
+    upward = sorted(f"{src} -> {dst}" for src, dsts in _graph().items() if src.startswith("agents.policies")
+                    for dst in dsts if dst.startswith("agents.algos") or dst in AGENTS_ENTRY)
+    assert upward == []
+
+
+def test_no_module_imports_an_old_agents_path():
+    """The old flat paths of agents (agents.OLD_PATHS) are kept for saved policies and code outside; the project's
+    own modules, the studies and the scripts import the modules where they are."""
+    from agents import OLD_PATHS
+
+    files = [path for pkg in (*LAYERS, STUDIES, "scripts") for path in sorted((ROOT / pkg).rglob("*.py"))]
+    old = [f"{path.relative_to(ROOT)}: {a}" for path in files
+           if ".".join(path.relative_to(ROOT).with_suffix("").parts) not in OLD_PATHS
+           for a in _imported_names(path) if a in OLD_PATHS]
+    assert old == []

@@ -134,14 +134,14 @@ def test_machine_scaling_times_one_and_two_spin_processes():
 
 
 def test_training_rounds_pool_each_rate_and_keep_each_rounds_ratio(monkeypatch):
-    import agents.train
+    import agents.algos.train
 
     # per round: (slam, base) with update_threads="auto", then (slam, base, fast slam) with the default threads
     rates = iter([30.0, 50.0, 40.0, 60.0, 200.0, 20.0, 50.0, 40.0, 60.0, 240.0])
 
     def fake_train(algo, env_id, timesteps, out, **kwargs):
         if env_id == "rhs-highway-slam-fast-v0":  # the exact SLAM env's hyperparameters, under the fast id
-            from agents.run_setup import load_hyperparams
+            from agents.algos.hyperparams import load_hyperparams
 
             assert load_hyperparams(algo, env_id, kwargs["hyperparams"]) == load_hyperparams(algo, "rhs-highway-slam-v0")
         else:
@@ -151,7 +151,7 @@ def test_training_rounds_pool_each_rate_and_keep_each_rounds_ratio(monkeypatch):
                   "steady_steps_per_s": rate, "steady_collect_s_per_rollout": 5.0, "steady_update_s_per_rollout": 0.1}
         return {"timesteps": timesteps, "steps_per_s": rate, "timing": timing}
 
-    monkeypatch.setattr(agents.train, "train", fake_train)
+    monkeypatch.setattr(agents.algos.train, "train", fake_train)
     t = benchmark.bench_training(512, seed=0, repeats=2)
     slam = t["default"]["rhs-highway-slam-v0"]
     assert slam["steady_runs"] == [40.0, 40.0] and slam["steady_steps_per_s"] == pytest.approx(40.0)

@@ -82,7 +82,7 @@ def test_chunks_accumulate_resume_exactly_and_keep_the_best(tmp_path):
 
 
 def test_a_signal_stops_the_chunk_with_whole_files(tmp_path):
-    from agents.resume import InterruptGuard
+    from agents.algos.resume import InterruptGuard
 
     guard = InterruptGuard("test")
     guard.requested = 2  # a SIGINT before the first rollout

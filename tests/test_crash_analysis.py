@@ -83,7 +83,7 @@ def test_fisher_p_separates_9_from_1_in_100():
 def test_run_seeds_labels_with_a_headway_driver_of_those_settings(monkeypatch):
     """run_seeds -> _chunk -> HeadwayDriver(env, expert): the settings reach the driver that labels the decisions."""
     import agents.evaluate
-    import agents.expert
+    import agents.policies.expert
 
     class Env:
         def close(self):
@@ -93,7 +93,7 @@ def test_run_seeds_labels_with_a_headway_driver_of_those_settings(monkeypatch):
     monkeypatch.setattr(agents.evaluate, "resolve_env", lambda policy, env_id, kwargs: ("rhs-highway-slam-v0", {}))
     monkeypatch.setattr(agents.evaluate, "make_env", lambda env_id, kwargs: Env())
     monkeypatch.setattr(agents.evaluate, "load_policy", lambda policy, env, seed: SimpleNamespace())
-    monkeypatch.setattr(agents.expert, "HeadwayDriver", lambda env, config=None: made.append(config) or "driver")
+    monkeypatch.setattr(agents.policies.expert, "HeadwayDriver", lambda env, config=None: made.append(config) or "driver")
     monkeypatch.setattr(ca, "run_labelled", lambda env, labelled, seed, margin, window: {"seed": seed,
                                                                                        "expert": labelled.expert})
     runs = ca.run_seeds("p.zip", [7, 8], 1.0, 3, 1, {"cruise_speed_mps": 30})

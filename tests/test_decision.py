@@ -1,4 +1,4 @@
-"""The decision interval (agents.decision): HoldAction's step accounting, the
+"""The decision interval (agents.policies.decision): HoldAction's step accounting, the
 ``decision_interval`` validation, and a policy trained with an interval being
 evaluated with it (re-deciding every k env steps, reset at each episode).
 
@@ -17,9 +17,9 @@ import pytest
 from gymnasium import spaces
 
 import rhs_env  # noqa: F401  (registers the ids)
-from agents.decision import HeldPolicy, HoldAction, check_decision_interval, check_decision_mode, fill_action, held
+from agents.algos.train import train, train_rllib_backend
 from agents.evaluate import evaluate, load_policy, make_env, run_episode
-from agents.train import train, train_rllib_backend
+from agents.policies.decision import HeldPolicy, HoldAction, check_decision_interval, check_decision_mode, fill_action, held
 
 TRUTH = "rhs-highway-v0"
 TRUTH_SMALL = {"vehicles_count": 5, "lanes_count": 3, "duration": 4}  # 20 env steps per episode

@@ -10,7 +10,7 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 from highway_env.road.road import RoadNetwork
 
 import rhs_env  # noqa: F401  (registers the ids)
-from agents.decision import IDLE
+from agents.policies.decision import IDLE
 from rhs_env.scene import DENSE_LANDMARKS, LandmarkConfig, get_landmarks, place_roadside_landmarks
 
 DENSE = "rhs-dense-v0"

@@ -18,6 +18,7 @@ test checks that a run leaves the work tree as it found it.
 
 from __future__ import annotations
 
+import importlib
 import os
 import re
 import subprocess
@@ -146,7 +147,9 @@ def test_api_reference_lists_every_module_of_each_package():
         package = page.stem
         assert f"<!-- api: {package} -->" in page.read_text()
         names = site.modules(package)
+        old = getattr(importlib.import_module(package), "OLD_PATHS", {})  # modules kept only at an old path
         files = [p for p in (ROOT / package).rglob("*.py") if p.name == "__init__.py" or not p.name.startswith("_")]
+        files = [p for p in files if ".".join(p.relative_to(ROOT).with_suffix("").parts) not in old]
         assert names[0] == package and len(names) == len(files), (package, names)
     text = site.on_page_markdown("# x\n\n<!-- api: rhs_slam -->\n", None, None, None)
     assert "::: rhs_slam\n\n::: rhs_slam.cli" in text

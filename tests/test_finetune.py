@@ -12,8 +12,7 @@ from conftest import privileged_space, reward_two_env, small_env_kwargs, tiny_hy
 from stable_baselines3 import PPO
 from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 
-from agents.expert import HeadwayDriver, bumper_gap
-from agents.finetune import (
+from agents.algos.finetune import (
     AnchoredPPO,
     FinetuneConfig,
     PrivilegedCriticPolicy,
@@ -23,7 +22,8 @@ from agents.finetune import (
     export_actor,
     load_actor,
 )
-from agents.privileged import (
+from agents.policies.expert import HeadwayDriver, bumper_gap
+from agents.policies.privileged import (
     GAP_SCALE_M,
     LANE_FEATURES,
     PRIVILEGED_DIM,
@@ -33,7 +33,7 @@ from agents.privileged import (
 )
 
 SPACE = privileged_space()
-POLICY_KWARGS = {"features_extractor_class": __import__("agents.features", fromlist=["x"]).PointSetExtractor,
+POLICY_KWARGS = {"features_extractor_class": __import__("agents.policies.features", fromlist=["x"]).PointSetExtractor,
                  "features_extractor_kwargs": {"point_dim": 8, "box_dim": 4}, "net_arch": [8]}
 
 
@@ -190,9 +190,9 @@ def test_privileged_features_read_the_true_road():
 def test_finetune_cli_trains_and_exports_a_plain_student(tmp_path, shield):
     """End to end on the small SLAM env: a student zip -> measured prior -> PPO with the anchor -> a plain zip;
     with a ``shield`` entry, PPO trains under the radar shield and the policy is loaded behind it."""
+    from agents.algos.train import train
     from agents.evaluate import load_policy, make_env
-    from agents.shield import ShieldedPolicy
-    from agents.train import train
+    from agents.policies.shield import ShieldedPolicy
 
     env_id = "rhs-highway-slam-v0"
     kwargs = small_env_kwargs(duration=4)
@@ -360,7 +360,7 @@ def test_the_study_derives_a_control_yaml_with_the_keys_set(tmp_path):
 
 def test_time_to_collision_shaping_penalises_closing_in_on_a_leader():
     import rhs_env  # noqa: F401
-    from agents.shaping import RewardShaping, ShapingConfig, time_to_collision, ttc_penalty
+    from agents.algos.shaping import RewardShaping, ShapingConfig, time_to_collision, ttc_penalty
 
     env = RewardShaping(gym.make("rhs-highway-v0", vehicles_count=3), {"ttc_s": 3.0, "weight": 0.5})
     env.reset(seed=0)
@@ -384,7 +384,7 @@ def test_time_to_collision_shaping_penalises_closing_in_on_a_leader():
 
 def test_the_shield_cost_is_charged_on_the_steps_the_shield_replaced():
     import rhs_env  # noqa: F401
-    from agents.shaping import RewardShaping
+    from agents.algos.shaping import RewardShaping
 
     class Shielded(gym.Wrapper):  # the shield's report, one replaced step in two
         n = 0

@@ -1,4 +1,4 @@
-"""The privileged expert (agents.expert.HeadwayDriver) and DAgger (agents.imitation).
+"""The privileged expert (agents.policies.expert.HeadwayDriver) and DAgger (agents.algos.imitation).
 
 Scenes are built by hand on an empty 3-lane road (vehicles placed at chosen gaps and
 speeds), so each test asserts one rule of the driver; DAgger runs on the
@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 import rhs_env  # noqa: F401  (registers the ids)
-from agents.decision import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER
+from agents.algos.imitation import EXPERT_KEY, DaggerConfig, Dataset, ExpertActionInfo, agreement, fit
 from agents.evaluate import evaluate, load_policy, policy_metadata
-from agents.expert import HeadwayDriver, HeadwayDriverConfig
-from agents.imitation import EXPERT_KEY, DaggerConfig, Dataset, ExpertActionInfo, agreement, fit
+from agents.policies.decision import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER
+from agents.policies.expert import HeadwayDriver, HeadwayDriverConfig
 
 TRUTH = "rhs-highway-v0"
 
@@ -189,7 +189,7 @@ def _subset(obs, actions, action):
 
 
 def test_rhs_slam_train_dagger_writes_a_policy_that_evaluate_loads(tmp_path):
-    from agents.train import train
+    from agents.algos.train import train
 
     hp = tmp_path / "dagger.yml"
     hp.write_text(
@@ -224,8 +224,8 @@ def test_rhs_slam_train_dagger_writes_a_policy_that_evaluate_loads(tmp_path):
 def test_dagger_resume_goes_on_from_the_last_finished_round(tmp_path, monkeypatch):
     """A run killed after round 1 of 3 resumes with round 2 only: the saved data, records and beta schedule go on,
     the total decisions are the planned ones; a resume with another budget is refused."""
-    from agents import imitation
-    from agents.train import train
+    from agents.algos import imitation
+    from agents.algos.train import train
 
     hp = tmp_path / "dagger.yml"
     hp.write_text(
@@ -273,8 +273,8 @@ def test_dagger_continuation_starts_from_the_parent_and_counts_its_budget(tmp_pa
     any fit), beta starts at first_beta, and the record adds the parent's env steps to this run's."""
     import torch
 
-    from agents.imitation import load_student
-    from agents.train import train
+    from agents.algos.imitation import load_student
+    from agents.algos.train import train
 
     hp = tmp_path / "dagger.yml"
     base = (f"{TRUTH}:\n  policy: MlpPolicy\n  n_envs: 1\n  n_timesteps: 120\n  iterations: 2\n  beta_decay: 0.5\n"
@@ -313,9 +313,9 @@ def test_labels_between_decisions_come_with_the_next_decision_and_add_samples_no
     """ExpertActionInfo(between=k) inside HoldAction(k): each decision's info carries the k - 1 states passed
     through since the previous decision, each with the expert's action there; DAgger with label_between
     trains on them (k x the samples) while its budget stays the env steps."""
-    from agents.decision import HoldAction
-    from agents.imitation import BETWEEN_KEY
-    from agents.train import train
+    from agents.algos.imitation import BETWEEN_KEY
+    from agents.algos.train import train
+    from agents.policies.decision import HoldAction
 
     kw = {"vehicles_count": 5, "duration": 6}
     env = HoldAction(ExpertActionInfo(gym.make(TRUTH, **kw), between=3), 3, fill=1)
@@ -364,8 +364,8 @@ def test_a_student_continues_onto_an_added_box_key_as_the_same_function(tmp_path
     import torch
     from stable_baselines3 import PPO
 
-    from agents.features import PointSetExtractor
-    from agents.imitation import load_student
+    from agents.algos.imitation import load_student
+    from agents.policies.features import PointSetExtractor
 
     kw = {"features_extractor_class": PointSetExtractor, "features_extractor_kwargs": {"point_dim": 8, "box_dim": 4},
           "net_arch": [8]}
@@ -400,9 +400,9 @@ def test_a_student_continues_onto_an_added_box_key_as_the_same_function(tmp_path
 def test_dagger_under_the_shield_drives_through_it_and_saves_it(tmp_path):
     """``shield`` in the YAML: every collected step goes through the radar shield (its info key is there), the
     labels stay the teacher's, and the record keeps the full shield so evaluation drives the student behind it."""
-    from agents.imitation import labelled_env
-    from agents.shield import ShieldAction, ShieldedPolicy
-    from agents.train import train
+    from agents.algos.imitation import labelled_env
+    from agents.algos.train import train
+    from agents.policies.shield import ShieldAction, ShieldedPolicy
 
     radar = "rhs-highway-radar-v0"
     kw = {"vehicles_count": 5, "duration": 4}

@@ -1,4 +1,4 @@
-"""The lookahead teacher (agents.lookahead.LookaheadDriver): its forecast is the simulator's future, it steers away
+"""The lookahead teacher (agents.policies.lookahead.LookaheadDriver): its forecast is the simulator's future, it steers away
 from a forecast crash, it labels DAgger's decisions only, and it drives as a scripted policy. No test measures time."""
 
 from __future__ import annotations
@@ -10,11 +10,11 @@ import pytest
 from test_imitation import _place, _road
 
 import rhs_env  # noqa: F401  (registers the ids)
-from agents.decision import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER
+from agents.algos.imitation import EXPERT_KEY, ExpertActionInfo, make_teacher
 from agents.evaluate import evaluate
-from agents.expert import HeadwayDriver
-from agents.imitation import EXPERT_KEY, ExpertActionInfo, make_teacher
-from agents.lookahead import LookaheadDriver, LookaheadDriverConfig
+from agents.policies.decision import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER
+from agents.policies.expert import HeadwayDriver
+from agents.policies.lookahead import LookaheadDriver, LookaheadDriverConfig
 from rhs_common.validation import build
 
 TRUTH = "rhs-highway-v0"
@@ -100,7 +100,7 @@ def test_lookahead_is_a_scripted_policy_at_least_as_good_as_its_base(tmp_path):
 
 
 def test_rhs_slam_train_dagger_from_the_lookahead_teacher(tmp_path):
-    from agents.train import train
+    from agents.algos.train import train
 
     hp = tmp_path / "dagger.yml"
     hp.write_text(f"{TRUTH}:\n  policy: MlpPolicy\n  n_envs: 1\n  n_timesteps: 60\n  decision_interval: 5\n"
@@ -144,17 +144,17 @@ def test_the_teachers_study_writes_its_table_with_the_decision_statistics(tmp_pa
 
 
 def test_a_headway_variant_of_the_teachers_study_drives_with_its_own_settings(monkeypatch):
-    import agents.expert
+    import agents.policies.expert
     from rhs_studies.teachers import VARIANTS, drive
 
     made = []
 
-    class Recording(agents.expert.HeadwayDriver):
+    class Recording(agents.policies.expert.HeadwayDriver):
         def __init__(self, env, config=None):
             super().__init__(env, config)
             made.append(self.config)
 
-    monkeypatch.setattr(agents.expert, "HeadwayDriver", Recording)
+    monkeypatch.setattr(agents.policies.expert, "HeadwayDriver", Recording)
     run = drive("headway_cruise30", 4000, duration=0.4)
     assert run["steps"] == 2 and len(made) == 1
     assert made[0].cruise_speed_mps == 30.0 and made[0].margin_mps == 1.0
@@ -167,7 +167,7 @@ def test_teachers_study_variants_are_the_teachers_of_the_30_mps_students(variant
     """The study measures the teacher each 30 m/s student's YAML trains with (its ``expert`` entry)."""
     import yaml
 
-    from agents.run_setup import HYPERPARAMS_DIR
+    from agents.algos.hyperparams import HYPERPARAMS_DIR
     from rhs_studies.teachers import VARIANTS
 
     table = yaml.safe_load((HYPERPARAMS_DIR / hyperparams).read_text())

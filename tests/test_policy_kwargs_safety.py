@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from agents.policy_kwargs import parse_policy_kwargs
-from agents.run_setup import load_hyperparams
+from agents.algos.hyperparams import load_hyperparams
+from agents.algos.policy_kwargs import parse_policy_kwargs
 
 SENTINEL = "rhs_slam_policy_kwargs_ran"
 
@@ -46,7 +46,7 @@ def escapes(sentinel: str) -> list[str]:
 def test_the_shipped_form_parses_to_the_classes():
     from torch import nn
 
-    from agents.features import PointSetExtractor
+    from agents.policies.features import PointSetExtractor
 
     got = parse_policy_kwargs("dict(features_extractor_class=importlib.import_module('agents.features')"
                               ".PointSetExtractor, features_extractor_kwargs=dict(point_dim=64, box_dim=32), "

@@ -195,7 +195,7 @@ def test_adopt_ships_another_runs_policies_and_merges_their_records(tmp_path):
     import json
     import shutil
 
-    from agents.train import metadata_path
+    from agents.algos.train import metadata_path
 
     shipped = train_policy.target_path("dagger", "slam_rhs")
     run_zip = tmp_path / "run" / "antenna" / "dagger_rhs_highway_dense.zip"
@@ -262,7 +262,7 @@ def test_kept_episodes_match_policy_env_and_kwargs_and_split_missing_seeds_into_
     assert ep.kept_runs(previous, "idm", "E", {})[1000]["return"] == 3.0
     assert ep.kept_runs({}, "idm", "E", {}) == {}
     # behind the radar shield: kept only behind the same shield, every field recorded
-    from agents.shield import shield_record
+    from agents.policies.shield import shield_record
 
     shield = shield_record({})
     previous["rows"][0]["shield"] = shield_record({"alongside_m": 0.0})

@@ -24,10 +24,7 @@ pytest.importorskip("ray.rllib", reason="Ray RLlib is an optional extra: pip ins
 torch = pytest.importorskip("torch")
 
 import rhs_env  # noqa: E402, F401  (registers the ids)
-from agents.decision import IDLE, HeldPolicy, HoldAction  # noqa: E402
-from agents.evaluate import evaluate, load_policy, resolve_env  # noqa: E402
-from agents.privileged import PRIVILEGED_DIM, PRIVILEGED_KEY, without_privileged  # noqa: E402
-from agents.rllib import (  # noqa: E402
+from agents.algos.rllib import (  # noqa: E402
     CHECKPOINT_DIR,
     PointSetPPOModule,
     RLlibPolicy,
@@ -38,6 +35,9 @@ from agents.rllib import (  # noqa: E402
     make_env,
     student_actor_state,
 )
+from agents.evaluate import evaluate, load_policy, resolve_env  # noqa: E402
+from agents.policies.decision import IDLE, HeldPolicy, HoldAction  # noqa: E402
+from agents.policies.privileged import PRIVILEGED_DIM, PRIVILEGED_KEY, without_privileged  # noqa: E402
 from rhs_slam.cli import main as cli_main  # noqa: E402
 
 SLAM = "rhs-highway-slam-v0"
@@ -145,7 +145,7 @@ def _obs(space: gym.spaces.Dict, n: int = 6, seed: int = 0) -> dict:
 def _student(space: gym.spaces.Dict, seed: int = 0):
     from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 
-    from agents.features import PointSetExtractor
+    from agents.policies.features import PointSetExtractor
 
     torch.manual_seed(seed)
     return MultiInputActorCriticPolicy(space, gym.spaces.Discrete(5), lambda _: 1e-3,
@@ -200,7 +200,7 @@ def test_the_module_actor_ignores_the_privileged_key_and_the_critic_reads_it():
 
 
 def test_the_corrected_student_moves_into_the_module_and_back():
-    from agents.finetune import correct_class_prior
+    from agents.algos.finetune import correct_class_prior
 
     actor_space = without_privileged(SPACE)
     student = _student(actor_space)
@@ -214,7 +214,7 @@ def test_the_corrected_student_moves_into_the_module_and_back():
         module.load_actor_state(student_actor_state(student, 1, privileged=True))
         torch.testing.assert_close(_log_probs(module.forward_inference({"obs": obs})["action_dist_inputs"]),
                                    _sb3_logits(student, actor_obs))
-        # the critic's encoder starts from the student's extractor too (agents.finetune.load_actor)
+        # the critic's encoder starts from the student's extractor too (agents.algos.finetune.load_actor)
         torch.testing.assert_close(module.vf_encoder(actor_obs), module.encoder(actor_obs))
         for p in module.pi.parameters():  # training moves the actor; the export carries the move
             p.add_(0.1)
@@ -236,8 +236,8 @@ def _kl_after_training(coef: float, warmup: float = 0.0) -> tuple[float, list[fl
     warm-up over ``warmup`` of the run; with ``coef`` 0, the second list is the ``critic_warmup`` flag per update."""
     import copy
 
-    from agents.finetune import FinetuneConfig
-    from agents.rllib import build_config, ppo_settings
+    from agents.algos.finetune import FinetuneConfig
+    from agents.algos.rllib import build_config, ppo_settings
 
     env_id = "rhs-test-reward-two-v0"
     if env_id not in gym.registry:
@@ -296,7 +296,7 @@ def test_finetune_on_rllib_trains_from_the_student_and_exports_a_plain_zip(tmp_p
     env = eval_env(SLAM, SMALL)
     student = PPO("MultiInputPolicy", env, device="cpu", seed=0,
                   policy_kwargs={**TINY_POLICY_KWARGS, "features_extractor_class":
-                                 __import__("agents.features", fromlist=["x"]).PointSetExtractor})
+                                 __import__("agents.policies.features", fromlist=["x"]).PointSetExtractor})
     zip_path = tmp_path / "student.zip"
     student.save(zip_path)
     record = {"algo": "dagger", "env_id": SLAM, "env_kwargs": SMALL, "decision_interval": 5,

@@ -1,4 +1,4 @@
-"""The radar safety shield (agents.shield): its rules on hand-made scans, its config, and the evaluation path.
+"""The radar safety shield (agents.policies.shield): its rules on hand-made scans, its config, and the evaluation path.
 
 The scans are built in the vehicle frame (x forward, y left, m; radial velocity m/s, negative when the range
 shrinks), two points per car (the shield's ``min_points``), with the SLAM pose that the rules read.
@@ -14,9 +14,9 @@ import pytest
 from conftest import small_env_kwargs
 
 import rhs_env  # noqa: F401  (registers the ids)
-from agents.decision import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER
 from agents.evaluate import evaluate, load_policy
-from agents.shield import RadarShield, ShieldAction, ShieldConfig, ShieldedPolicy, objects
+from agents.policies.decision import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER
+from agents.policies.shield import RadarShield, ShieldAction, ShieldConfig, ShieldedPolicy, objects
 from rhs_slam.cli import main as cli_main
 
 
@@ -165,10 +165,10 @@ def test_evaluate_cli_shield_flag(tmp_path, capsys):
 
 
 def test_both_training_backends_wrap_the_shield_inside_the_decision_interval():
-    from agents.decision import HoldAction
-    from agents.finetune import training_wrapper
-    from agents.rllib import env_config, make_env
-    from agents.shaping import RewardShaping
+    from agents.algos.finetune import training_wrapper
+    from agents.algos.rllib import env_config, make_env
+    from agents.algos.shaping import RewardShaping
+    from agents.policies.decision import HoldAction
 
     kw = small_env_kwargs(slam=False, vehicles_count=5, duration=2)
     env = make_env("rhs-highway-radar-v0", env_config(kw, 5, "pulse", False, {"front_time_s": 1.5}, {"ttc_s": 2.0}))

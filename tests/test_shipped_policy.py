@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from agents import SHIPPED_POLICY
-from agents.policy_record import read_record
+from agents.policies.policy_record import read_record
 from rhs_studies.upkeep import ship_policy
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -12,7 +12,7 @@ from conftest import small_env_kwargs
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
 import rhs_env  # noqa: F401  (registers the ids)
-from agents.decision import IDLE
+from agents.policies.decision import IDLE
 from rhs_env.wrappers import RadarObservation
 from slam.gym.wrappers import SlamObservation
 

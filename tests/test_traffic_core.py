@@ -310,8 +310,8 @@ def test_drivers_see_the_same_traffic(driver):
     """The privileged drivers of :mod:`agents` read ``env.unwrapped.road`` every step: on the core's written-back
     objects they choose the same actions as on highway-env's, and the scenes stay equal."""
     from agents.evaluate import IDMMobilPolicy
-    from agents.expert import HeadwayDriver
-    from agents.lookahead import LookaheadDriver
+    from agents.policies.expert import HeadwayDriver
+    from agents.policies.lookahead import LookaheadDriver
 
     make = {"headway": HeadwayDriver, "lookahead": LookaheadDriver, "idm": IDMMobilPolicy}[driver]
     envs = [gym.make("rhs-highway-v0", sim=sim, vehicles_count=12) for sim in ("highway-env", "compiled")]

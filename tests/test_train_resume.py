@@ -44,7 +44,7 @@ def _env() -> dict[str, str]:
 
 
 def test_sigterm_then_resume_reaches_the_uninterrupted_step_count(tmp_path):
-    from agents.resume import latest_checkpoint
+    from agents.algos.resume import latest_checkpoint
 
     hp = tmp_path / "ppo.yml"
     hp.write_text(YAML)
@@ -79,7 +79,7 @@ def test_sigterm_then_resume_reaches_the_uninterrupted_step_count(tmp_path):
 
 
 def test_latest_checkpoint_picks_the_most_steps(tmp_path):
-    from agents.resume import latest_checkpoint
+    from agents.algos.resume import latest_checkpoint
 
     assert latest_checkpoint(tmp_path, "ppo") is None
     folder = tmp_path / "checkpoints"

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.resume import checkpoint_problem, checkpoints, latest_checkpoint
+from agents.algos.resume import checkpoint_problem, checkpoints, latest_checkpoint
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV_KWARGS = {"vehicles_count": 2, "lanes_count": 2, "duration": 2}
@@ -88,7 +88,7 @@ def test_ctrl_c_to_the_process_group_twice_then_resume_loses_nothing(tmp_path):
     """Subprocess workers: Ctrl-C, resume, Ctrl-C, resume to the end; the earlier logs never change."""
     from stable_baselines3 import PPO
 
-    from agents.policy_record import embedded_record
+    from agents.policies.policy_record import embedded_record
 
     hp = tmp_path / "ppo.yml"
     hp.write_text(_yaml(n_envs=2, n_steps=16, total=100_000))
@@ -252,7 +252,7 @@ def test_a_trained_zip_carries_its_record_so_a_copy_or_a_link_drives_the_same_en
     from stable_baselines3 import PPO
 
     from agents.evaluate import load_policy, resolve_env
-    from agents.policy_record import RECORD_MEMBER, embedded_record
+    from agents.policies.policy_record import RECORD_MEMBER, embedded_record
 
     out, _ = _finished_run(tmp_path)
     side = json.loads((out / "model.json").read_text())
@@ -284,7 +284,7 @@ def test_demo_refuses_the_shipped_policy_without_its_record(tmp_path, capsys):
     import shutil
 
     from agents.evaluate import SHIPPED_POLICY
-    from agents.policy_record import embedded_record
+    from agents.policies.policy_record import embedded_record
     from rhs_slam.cli import main
 
     assert embedded_record(SHIPPED_POLICY) is None and Path(SHIPPED_POLICY).with_suffix(".json").exists()

@@ -228,16 +228,16 @@ def test_subproc_whole_episodes_with_variable_info():
 
 # --------------------------------------------------------------------------- training runs (agents.run_setup)
 def test_training_vector_env_bad_kwarg_in_a_worker_reaches_the_parent():
-    """A training run's workers (``agents.run_setup.make_vec_env``, rhs_env.vector's SubprocVecEnv): the worker's
+    """A training run's workers (``agents.algos.vec_env.make_vec_env``, rhs_env.vector's SubprocVecEnv): the worker's
     ValueError naming the field, not SB3's ConnectionResetError."""
-    from agents.run_setup import make_vec_env
+    from agents.algos.vec_env import make_vec_env
 
     with pytest.raises(ValueError, match=r"in vector env worker \d: .*vehicles_count must be in \[0, 500\]"):
         _within(120, lambda: make_vec_env(HW, 2, 0, env_kwargs={**SMALL, "vehicles_count": -1}))
 
 
 def test_training_vector_env_bad_action_reaches_the_parent_and_close_returns():
-    from agents.run_setup import make_vec_env
+    from agents.algos.vec_env import make_vec_env
     from rhs_env.vector import SubprocVecEnv
 
     venv = _within(120, lambda: make_vec_env(HW, 2, 0, env_kwargs=SMALL))

@@ -36,7 +36,7 @@ def test_zoo_trains_with_the_shipped_yaml(env_id, tmp_path, monkeypatch):
     from rl_zoo3.train import train
     from stable_baselines3 import PPO
 
-    from agents.features import PointSetExtractor
+    from agents.policies.features import PointSetExtractor
 
     monkeypatch.setattr(sys, "argv", zoo_argv(env_id, tmp_path))
     train()

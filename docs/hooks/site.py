@@ -6,11 +6,14 @@
   ``docs/results/`` shows one with ``![...](NAME.png)`` and MkDocs checks the link like any other.
 * ``on_page_markdown``: a line ``<!-- api: PACKAGE -->`` in a page becomes one
   mkdocstrings ``::: MODULE`` directive per module of that package, found by walking its
-  folder when the site is built, so the API reference follows the packages as they are.
+  folder when the site is built, so the API reference follows the packages as they are. A module kept only at
+  an old path (the package's ``OLD_PATHS``: ``agents.features`` is ``agents.policies.features``) is left out: its
+  page is the module it stands for.
 """
 
 from __future__ import annotations
 
+import importlib
 import re
 from pathlib import Path
 
@@ -28,14 +31,18 @@ def on_files(files: Files, config) -> Files:
 
 
 def modules(package: str) -> list[str]:
-    """Dotted names of ``package`` and every module below it (``__main__`` left out), in folder order."""
+    """Dotted names of ``package`` and every module below it (``__main__`` and the old paths left out), in folder
+    order."""
     folder = ROOT.joinpath(*package.split("."))
+    old = getattr(importlib.import_module(package), "OLD_PATHS", {})
     names = []
     for path in sorted(folder.rglob("*.py")):
         parts = path.relative_to(ROOT).with_suffix("").parts
         if parts[-1] == "__main__" or any(p.startswith((".", "_")) and p != "__init__" for p in parts):
             continue
-        names.append(".".join(parts[:-1] if parts[-1] == "__init__" else parts))
+        name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        if name not in old:
+            names.append(name)
     return sorted(names, key=lambda n: (n != package, n))
 
 

@@ -865,7 +865,7 @@ def _fast_hyperparams(folder: str) -> Path:
     the fast variant changes the radar only), so the two envs train with the same settings."""
     import yaml
 
-    from agents.run_setup import HYPERPARAMS_DIR
+    from agents.algos.hyperparams import HYPERPARAMS_DIR
     from rhs_common.input_files import read_yaml
 
     table = read_yaml(HYPERPARAMS_DIR / "ppo.yml")
@@ -878,14 +878,14 @@ def bench_training(timesteps: int, seed: int, repeats: int = 3) -> dict:
     """PPO steps/s with 2 subprocess envs on rhs-highway-slam-v0 and on rhs-highway-v0.
 
     The speed that hours of training run at is the steady rate: env steps per second from the second
-    rollout to the end (:class:`agents.callbacks.PhaseTimer`); the ratio goal is on it. The one-off cost of a
+    rollout to the end (:class:`agents.algos.callbacks.PhaseTimer`); the ratio goal is on it. The one-off cost of a
     run is reported beside it: ``startup_s``, the whole run's wall time (vector env with its workers and
     kernel warm-up, model, learning) less its timesteps at the steady rate; the first run in the process (the
     SLAM env with ``update_threads_auto``) also carries the process's one-time costs (imports, the forkserver with
     its preloaded modules, the first kernel-cache loads: ~12 s against ~3-4 s for a later run, load ~1). Each env
     id runs with the default (the learner's one torch thread throughout) and with ``update_threads="auto"``
     (the updates also take the cores of the waiting env workers: faster on a quiet machine, much slower on a
-    busy one, see :func:`agents.run_setup.update_threads_for`), the four runs in turn, ``repeats`` rounds: one
+    busy one, see :func:`agents.algos.threads.update_threads_for`), the four runs in turn, ``repeats`` rounds: one
     run's steady rate moved by ~15 % between runs, so each rate is pooled over the rounds (their steps over their
     time: the harmonic mean of the rounds' rates, each round having the same steps), and each round's ratio is kept
     (``ratio_runs``). With the default threads, PPO also trains on ``rhs-highway-slam-fast-v0`` in each round:
@@ -894,7 +894,7 @@ def bench_training(timesteps: int, seed: int, repeats: int = 3) -> dict:
     """
     import tempfile
 
-    from agents.train import train
+    from agents.algos.train import train
 
     rounds: dict[str, dict[str, list[dict]]] = {}
     for _ in range(repeats):

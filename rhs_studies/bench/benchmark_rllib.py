@@ -36,7 +36,7 @@ DEFAULT_ENV_KWARGS = {"radar": {"scan": {"grid_deg": 5}}}
 
 def train_batch(env_id: str) -> int:
     """Env steps per PPO iteration of the ``ppo.yml`` entry: ``n_steps * n_envs``."""
-    from agents.train import load_hyperparams
+    from agents.algos.train import load_hyperparams
 
     hp = load_hyperparams("ppo", env_id)
     return int(hp["n_steps"]) * int(hp.get("n_envs", 1))
@@ -44,7 +44,7 @@ def train_batch(env_id: str) -> int:
 
 def run_once(env_id: str, runners: int, iterations: int, batch: int, env_kwargs: dict, seed: int) -> dict:
     """Train ``iterations`` PPO iterations with ``runners`` env runners; steps/s excluding the first."""
-    from agents.train import train_rllib_backend
+    from agents.algos.train import train_rllib_backend
 
     with tempfile.TemporaryDirectory() as out:
         summary = train_rllib_backend(env_id, iterations * batch, out, seed=seed, env_kwargs=env_kwargs,
@@ -97,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
     if any(r < 1 for r in a.runners):
         ap.error(f"--runners must be >= 1, got {a.runners}")
     os.environ.setdefault("OMP_NUM_THREADS", "1")  # before numpy / torch load: one BLAS thread per process
-    from agents.rllib import init_ray, require_ray
+    from agents.algos.rllib import init_ray, require_ray
 
     require_ray()
     started = time.time()

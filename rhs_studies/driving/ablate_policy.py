@@ -18,7 +18,7 @@ Variants (``VARIANTS``):
 * PPO: reward terms and normalisation (highway-env's ``collision_reward``,
   ``high_speed_reward``, ``normalize_reward``), discount, entropy bonus, the
   decision interval (``hold5_*``: the action held for 5 env steps,
-  :mod:`agents.decision`; evaluation still scores every env step), and the
+  :mod:`agents.policies.decision`; evaluation still scores every env step), and the
   observation (ground-truth Kinematics on ``rhs-highway-v0`` vs radar point cloud
   + SLAM on ``rhs-highway-slam-v0`` with the 5-degree grid; ``grid_*``: the
   ego-centred occupancy grid encoder instead of the point-set one);
@@ -68,7 +68,7 @@ VARIANTS: dict[str, tuple[str, dict, dict]] = {
     "grid_slam": (SLAM, FIVE_DEG, {"policy_kwargs": {"features_extractor_class": "grid", "net_arch": [64, 64]}}),
     "grid_no_norm_slam": (SLAM, {**FIVE_DEG, **NO_NORM},
                           {"policy_kwargs": {"features_extractor_class": "grid", "net_arch": [64, 64]}}),
-    # a decision every 5 env steps (1 Hz, highway-env's own rate; agents.decision.HoldAction), with
+    # a decision every 5 env steps (1 Hz, highway-env's own rate; agents.policies.decision.HoldAction), with
     # highway-env's 1 Hz discount 0.8; --timesteps stays the env-step budget (timesteps / 5 decisions)
     "hold5_truth": (TRUTH, {}, HOLD5),
     "hold5_slam": (SLAM, FIVE_DEG, HOLD5),
@@ -90,8 +90,8 @@ REPRODUCE = ("ref_slower", "ref_idm", "ref_headway", "ref_headway_fine_speeds", 
 
 def run_variant(name: str, timesteps: int, seed: int, episodes: int, eval_seed: int, n_envs: int | None) -> dict:
     """Train the variant, evaluate it on the default reward; returns its record."""
+    from agents.algos.train import HYPERPARAMS_DIR, train
     from agents.evaluate import evaluate, summarize
-    from agents.train import HYPERPARAMS_DIR, train
 
     algo = "dagger" if name in DAGGER_VARIANTS else "ppo"
     env_id, env_kwargs, overrides = (DAGGER_VARIANTS if algo == "dagger" else VARIANTS)[name]

@@ -18,10 +18,10 @@ in ``<root>/<recipe>/seed<k>/``:
 One **chunk** (:func:`train_chunk`) loads the run (or creates it), restores the RNG states, makes the native vector
 env (``gym.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")`` through
 :func:`rhs_env.vector_native.to_sb3`; with a decision interval ``k > 1`` its envs are wrapped in
-:class:`agents.decision.HoldAction`), resets its env ``i`` with seed ``s_c + i`` (``s_c`` from
+:class:`agents.policies.decision.HoldAction`), resets its env ``i`` with seed ``s_c + i`` (``s_c`` from
 :func:`training_seed`: the campaign's training seeds), trains ``chunk_steps`` env steps (PPO rounds them up to
 whole rollouts), validates the policy on the validation seeds, and writes the files atomically. SIGINT / SIGTERM
-stop at the next rollout boundary (:class:`agents.resume.InterruptGuard`) and the run is saved where it stands; a
+stop at the next rollout boundary (:class:`agents.algos.resume.InterruptGuard`) and the run is saved where it stands; a
 second signal exits at once, the files of the last finished chunk intact. The same chunks give the same
 weights wherever they run (one process per chunk, each from the saved state): a campaign grows by sessions.
 
@@ -93,7 +93,7 @@ class Recipe:
     deterministic: bool = True
 
     def __post_init__(self) -> None:
-        from agents.decision import check_decision_interval, check_decision_mode
+        from agents.policies.decision import check_decision_interval, check_decision_mode
 
         if not self.name or "/" in self.name:
             raise ValueError(f"recipe.name must be a non-empty folder name, got {self.name!r}")
@@ -106,7 +106,7 @@ class Recipe:
 
     def ppo_args(self) -> dict[str, Any]:
         """PPO's keyword arguments: :data:`PPO_DEFAULTS` under the recipe's, ``policy_kwargs`` evaluated."""
-        from agents.run_setup import resolve_policy_kwargs
+        from agents.algos.hyperparams import resolve_policy_kwargs
 
         args = {**PPO_DEFAULTS, **self.hyperparams}
         args["policy_kwargs"] = resolve_policy_kwargs(args["policy_kwargs"])
@@ -203,7 +203,7 @@ def make_train_env(recipe: Recipe) -> Any:
         vec = gym.make_vec(recipe.env_id, num_envs=recipe.n_envs, vectorization_mode="vector_entry_point",
                            autoreset_mode="SameStep", **kwargs)
     else:  # the entry point builds plain envs; the held action wraps each one (same envs, same seeds)
-        from agents.decision import HoldAction, fill_action
+        from agents.policies.decision import HoldAction, fill_action
 
         def make_one() -> gym.Env:
             return HoldAction(gym.make(recipe.env_id, **kwargs), recipe.decision_interval,
@@ -234,8 +234,8 @@ def _validate(model: Any, recipe: Recipe, seeds: list[int]) -> dict[str, Any]:
     """Mean return, collisions and mean speed of ``model`` on the fast env over ``seeds`` (one episode each)."""
     import gymnasium as gym
 
-    from agents.decision import held
     from agents.evaluate import run_episode
+    from agents.policies.decision import held
 
     env = gym.make(recipe.env_id, **dict(recipe.env_kwargs))
     try:
@@ -308,12 +308,12 @@ def train_chunk(recipe: Recipe, root: str | Path, seed: int, chunk_steps: int, v
         seed: the training seed (the model's seed, and the env seeds through :func:`training_seed`).
         chunk_steps: env steps to add (rounded up by PPO to whole rollouts of ``n_steps x n_envs`` decisions).
         validation_episodes: validation seeds driven after the chunk (:func:`validation_seeds`).
-        guard: an :class:`agents.resume.InterruptGuard` (None: one of its own for the chunk).
+        guard: an :class:`agents.algos.resume.InterruptGuard` (None: one of its own for the chunk).
 
     Returns:
         The run's new state (``state.json``); ``state["interrupted"]`` True when a signal cut the chunk short.
     """
-    from agents.resume import InterruptGuard, StopOnSignal
+    from agents.algos.resume import InterruptGuard, StopOnSignal
     from rhs_studies.kit.provenance import git_state
 
     check_int("chunk_steps", chunk_steps, 1, 10**9)
@@ -386,7 +386,7 @@ def train_campaign(recipe: Recipe, root: str | Path, seeds: list[int], total_ste
     Returns:
         Each seed's state after its last chunk of this call.
     """
-    from agents.resume import InterruptGuard
+    from agents.algos.resume import InterruptGuard
 
     states = {s: load_state(run_dir(root, recipe.name, s)) or {"env_steps": 0} for s in seeds}
     last_chunk_s = 0.0

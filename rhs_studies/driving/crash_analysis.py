@@ -3,10 +3,10 @@
 What limits learning to drive on radar SLAM? This script replays
 policies (default: the radar + SLAM DAgger student, 80k env steps, the shipped policy's start; then the
 budget ablation) on held-out seeds with the
-DAgger expert (:class:`agents.expert.HeadwayDriver`, on the simulator state)
+DAgger expert (:class:`agents.policies.expert.HeadwayDriver`, on the simulator state)
 labelling every state it reaches. For each collision it takes the student's last
 ``--window`` decisions before the crash (decisions every ``decision_interval`` env
-steps, :class:`agents.decision.HeldPolicy`), and the first of them where the
+steps, :class:`agents.policies.decision.HeldPolicy`), and the first of them where the
 student's action differs from the expert's (the last one when none does), and reports:
 
 * the student's and the expert's meta-actions over the window, and at that decision;
@@ -106,7 +106,7 @@ def _neighbours(env) -> dict[int, tuple[np.ndarray, float, float, float]]:
 class LabelledPolicy:
     """``model`` as :func:`agents.evaluate.run_episode` drives it, with the expert's label at each of its decisions.
 
-    A decision is every k-th ``predict`` of an episode (:class:`agents.decision.HeldPolicy` decides on those);
+    A decision is every k-th ``predict`` of an episode (:class:`agents.policies.decision.HeldPolicy` decides on those);
     at each, ``decisions`` gets the env step, both actions, the observation's radar points and the neighbours.
     """
 
@@ -183,9 +183,9 @@ def drive_chunk(seeds: list[int], policy: str, margin: float, window: int, env_k
                 expert: dict | None = None) -> list[dict]:
     """Labelled episodes of ``policy`` on ``seeds`` in this process (one chunk of :func:`run_seeds`)."""
     import rhs_env  # noqa: F401
-    from agents.decision import HeldPolicy
     from agents.evaluate import load_policy, make_env, resolve_env
-    from agents.expert import HeadwayDriver
+    from agents.policies.decision import HeldPolicy
+    from agents.policies.expert import HeadwayDriver
 
     env_id, kwargs = resolve_env(policy, None, None)
     env = make_env(env_id, {**kwargs, **(env_kwargs or {})})
@@ -217,7 +217,7 @@ def summarize(runs: list[dict]) -> dict[str, Any]:
 
 def training_steps(policy: str) -> int | None:
     """The env steps a policy was trained with (``timesteps`` of the JSON beside its zip), None if unknown."""
-    from agents.run_setup import metadata_path
+    from agents.algos.run_records import metadata_path
 
     meta = metadata_path(policy)
     return json.loads(meta.read_text()).get("timesteps") if meta.exists() else None
@@ -300,7 +300,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--window", type=int, default=3, help="the student's last decisions before a crash that are examined")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--expert", type=json.loads, default=None, metavar="JSON",
-                    help='the headway driver\'s settings (agents.expert.HeadwayDriverConfig), e.g. '
+                    help='the headway driver\'s settings (agents.policies.expert.HeadwayDriverConfig), e.g. '
                          '\'{"cruise_speed_mps": 30, "margin_mps": 1}\' for the faster teacher (default: its defaults)')
     ap.add_argument("--out", default=str(ROOT / "results" / "crash_analysis.json"))
     args = ap.parse_args(argv)

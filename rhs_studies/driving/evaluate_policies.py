@@ -5,11 +5,11 @@ Rows (every policy meets the same traffic: episode k uses seed ``--seed + k``):
 * ``DAgger, continued, radar shield (shipped)``: ``agents/data/rl/dagger_cruise30_close.zip``, the
   shipped policy (:data:`agents.evaluate.SHIPPED_POLICY`): the radar + SLAM student below continued
   with DAgger for 80k env steps, then 40k + 40k with the headway driver at 30 m/s (2.0 s gap, then
-  5 m standstill gap), driven behind the radar safety shield (:mod:`agents.shield`, saved in its record);
+  5 m standstill gap), driven behind the radar safety shield (:mod:`agents.policies.shield`, saved in its record);
 * ``DAgger, continued 80k (shipped before)``: ``agents/data/rl/dagger_continue_80k.zip``, the first
   continuation alone;
 * ``DAgger``: ``agents/data/dagger_rhs_highway_slam.zip`` (a student of
-  the HeadwayDriver, :mod:`agents.imitation`) on ``rhs-highway-slam-v0`` with the
+  the HeadwayDriver, :mod:`agents.algos.imitation`) on ``rhs-highway-slam-v0`` with the
   env kwargs saved beside it (SLAM in the loop), at the ground-truth student's budget;
 * ``DAgger (ground truth)``: ``agents/data/dagger_rhs_highway_truth.zip`` on
   ``rhs-highway-v0`` (highway-env Kinematics observation of the same scene), and
@@ -17,7 +17,7 @@ Rows (every policy meets the same traffic: episode k uses seed ``--seed + k``):
 * ``PPO`` on either observation (``agents/data/ppo_rhs_highway_{slam,truth}.zip``,
   the same env-step budget);
 * ``random``: uniformly random actions on the SLAM env and config;
-* ``HeadwayDriver``: the DAgger expert (:class:`agents.expert.HeadwayDriver`, a
+* ``HeadwayDriver``: the DAgger expert (:class:`agents.policies.expert.HeadwayDriver`, a
   scripted time-gap driver on the simulator state), on ``rhs-highway-v0``, deciding
   every step and, as it taught the students, every k steps with IDLE between
   (``headway:<k>``, k the students' decision interval);
@@ -56,7 +56,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from agents.decision import SLOWER
+from agents.policies.decision import SLOWER
 from rhs_common.stats import mean_interval, paired_difference, wilson_interval
 from rhs_studies.kit.driving import ANTENNA_STUDY, TARGETS, drive_seeds, run_policy, target_path
 from rhs_studies.kit.provenance import write_json
@@ -90,10 +90,10 @@ def _contiguous(seeds: list[int]) -> list[list[int]]:
 
 
 def saved_shield(policy: str) -> dict[str, Any] | None:
-    """The radar shield a policy drives behind (:func:`agents.shield.shield_record` of its record's ``shield``: every
+    """The radar shield a policy drives behind (:func:`agents.policies.shield.shield_record` of its record's ``shield``: every
     field, the present defaults filled in), or None."""
     from agents.evaluate import policy_metadata
-    from agents.shield import shield_record
+    from agents.policies.shield import shield_record
 
     return shield_record(policy_metadata(policy).get("shield"))
 

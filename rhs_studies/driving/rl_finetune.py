@@ -1,26 +1,26 @@
 """Reinforcement learning on top of imitation: the PPO fine-tune of the DAgger student against its controls.
 
 Arms (same env-step budget each, ``--timesteps``, on ``rhs-highway-slam-v0`` with the student's env kwargs,
-decisions at 1 Hz in pulse mode; :mod:`agents.finetune`):
+decisions at 1 Hz in pulse mode; :mod:`agents.algos.finetune`):
 
 * ``finetune``: PPO from the student with the privileged critic, the class-prior correction and the KL anchor
   decaying to zero at half the run (``agents/hyperparams/finetune.yml``);
 * ``finetune_no_anchor``: the same without the anchor (``anchor_coef: 0``);
 * ``finetune_horizon``: the fine-tune with a longer horizon (``gamma: 0.95`` at one decision per second: a crash
-  then costs about 20 s of lost reward instead of 5) and the time-to-collision shaping of :mod:`agents.shaping`;
+  then costs about 20 s of lost reward instead of 5) and the time-to-collision shaping of :mod:`agents.algos.shaping`;
 * ``dagger_continue``: DAgger going on from the student, the expert labelling the states it reaches
   (``agents/hyperparams/dagger_continue.yml``);
 * ``finetune_horizon_80k`` and ``dagger_continue_80k``: the longer-horizon fine-tune and its DAgger control with
   four times the budget (80k env steps each); the targets judge this pair when it was evaluated;
 * ``dagger_lookahead``: DAgger going on from the student with the lookahead teacher
-  (:class:`agents.lookahead.LookaheadDriver`: each meta-action forecast on a copy of the true traffic, the best
+  (:class:`agents.policies.lookahead.LookaheadDriver`: each meta-action forecast on a copy of the true traffic, the best
   taken; ``agents/hyperparams/dagger_lookahead.yml``, 48k env steps), judged by the same targets against the 80k
   DAgger continuation of the headway expert;
 * ``scratch``: PPO from scratch with the privileged critic (``finetune.yml`` without a student, with PPO's usual
   learning rate 5e-4, clip range 0.2, an entropy bonus 0.01 and the time-to-collision shaping of
-  :mod:`agents.shaping`), on request (``--arms ... scratch``).
+  :mod:`agents.algos.shaping`), on request (``--arms ... scratch``).
 
-Arms under the radar safety shield (:mod:`agents.shield`), from the shield student (``shipped``: the 30 m/s DAgger
+Arms under the radar safety shield (:mod:`agents.policies.shield`), from the shield student (``shipped``: the 30 m/s DAgger
 student that drives behind the shield, :data:`agents.evaluate.DAGGER_CRUISE30_CLOSE_POLICY`) instead of the student
 above, and
 evaluated behind the shield their records keep:
@@ -32,7 +32,7 @@ evaluated behind the shield their records keep:
 * ``shield_explore``: the warm-up fine-tune without the anchor, with an entropy bonus of 0.02 and learning rate
   3e-4 (exploration the shield makes safe), 40k env steps;
 * ``shield_flank_explore``: ``shield_explore`` trained again under the shield with its flank rule (one radar point
-  beside the ego blocks a lane change, :mod:`agents.shield`), which the arms above were trained without (they are
+  beside the ego blocks a lane change, :mod:`agents.policies.shield`), which the arms above were trained without (they are
   driven behind it);
 * ``shield_dagger``: their DAgger control, DAgger going on from the shield student with its own teacher, the
   student's actions driven through the shield (``agents/hyperparams/dagger_shielded.yml``), 40k env steps;
@@ -41,7 +41,7 @@ evaluated behind the shield their records keep:
 * ``shield_scratch_explore``: the same with the ``scratch`` arm's PPO settings (learning rate 5e-4, clip range 0.2,
   entropy bonus 0.01), 60k env steps;
 * ``shield_scratch_cost``: ``shield_scratch_explore`` with a cost of 0.5 for every env step whose action the shield
-  replaced (:mod:`agents.shaping`'s ``shield_cost``: the braking and the vetoes left to the shield become the
+  replaced (:mod:`agents.algos.shaping`'s ``shield_cost``: the braking and the vetoes left to the shield become the
   policy's loss), 60k env steps.
 
 Evaluation on ``--episodes`` seeds from ``--seed`` (3000..: never used in training, where the envs draw seeds

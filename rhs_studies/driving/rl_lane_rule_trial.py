@@ -3,7 +3,7 @@ the choice tested once on seeds nothing has touched.
 
 The fresh test of the RL stage (:mod:`rhs_studies.driving.rl_confirm`, seeds 6000-6099) met every target of the fine-tune
 but collisions: 3 in 100 against <= 2. Two of the three were lane changes into a car a few metres ahead in the target
-lane that the radar saw with two points. The shield's lane rule (:class:`agents.shield.ShieldConfig`) vetoes a lane
+lane that the radar saw with two points. The shield's lane rule (:class:`agents.policies.shield.ShieldConfig`) vetoes a lane
 change when an object in the target lane is nearer than ``lane_gap_m + lane_time_s * closing speed``; this study asks
 whether a stricter rule closes the gap, with a protocol fixed before any of its seeds was driven:
 

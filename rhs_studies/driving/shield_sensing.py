@@ -9,11 +9,11 @@ the radar points with the simulator:
   velocity against that vehicle's true relative radial velocity: median, and the share off by more than 3 m/s;
 * **ghosts**: the share of scans with a point in the ego's path (``|Y| < path_half_width_m``, ``0 < X < 40`` m) farther
   than 1.5 m from every vehicle box;
-* **front alarms**: the shield's front rule ``gap < d + T max(0, c)`` (:class:`agents.shield.ShieldConfig`'s front gap
+* **front alarms**: the shield's front rule ``gap < d + T max(0, c)`` (:class:`agents.policies.shield.ShieldConfig`'s front gap
   and time gap) on the true leader in the ego's lane (bumper gap and closing speed from the simulator) against three
   radar estimates of the leader: the nearest single point with its own Doppler; the nearest two-point object with
-  its median Doppler (:func:`agents.shield.objects`); and the shield's tracked leader
-  (:meth:`agents.shield.RadarShield.leader`). Counted: steps where the radar alarms and the truth does not (spurious)
+  its median Doppler (:func:`agents.policies.shield.objects`); and the shield's tracked leader
+  (:meth:`agents.policies.shield.RadarShield.leader`). Counted: steps where the radar alarms and the truth does not (spurious)
   and the reverse (missed), and the tracked closing speed's error quantiles for leaders within 40 m;
 * **flanks**: per env step and side, whether a vehicle is beside the ego in the adjacent lane (its centre within
   ``alongside_m + 2.5`` m along the ego and one lane over, simulator) and how many radar points the shield's lane rule
@@ -73,8 +73,8 @@ def measure(seeds: list[int]) -> dict[str, Any]:
     """The statistics of the module docstring over full episodes on ``seeds``."""
     from agents.evaluate import DAGGER_CRUISE30_CLOSE_POLICY as STUDENT
     from agents.evaluate import load_policy, make_env, resolve_env
-    from agents.expert import bumper_gap
-    from agents.shield import RadarShield, ShieldedPolicy, nearest_object, road_offsets
+    from agents.policies.expert import bumper_gap
+    from agents.policies.shield import RadarShield, ShieldedPolicy, nearest_object, road_offsets
 
     env_id, kwargs = resolve_env(STUDENT)
     env = make_env(env_id, kwargs)

@@ -3,10 +3,10 @@ the same fresh seeds.
 
 Arms (``--arms``): the campaign's runs (``campaign:<recipe>:seed<k>``: the checkpoint chosen on the validation seeds,
 :mod:`rhs_studies.driving.campaign`), highway-env's IDM + MOBIL (``idm``), the privileged headway driver
-(``headway``, :class:`agents.expert.HeadwayDriver`: IDM-like following and lane changes that act through the
+(``headway``, :class:`agents.policies.expert.HeadwayDriver`: IDM-like following and lane changes that act through the
 meta-actions), always IDLE (``constant:1``) and always FASTER (``constant:3``), or any policy
 :func:`agents.evaluate.load_policy` takes. Each arm is driven on each seed four times: shield off / on
-(:class:`agents.shield.ShieldedPolicy`, its default config) on the exact env (``rhs-highway-slam-v0``) and on the fast
+(:class:`agents.policies.shield.ShieldedPolicy`, its default config) on the exact env (``rhs-highway-slam-v0``) and on the fast
 env (``rhs-highway-slam-fast-v0``), with the campaign's env settings.
 
 Per arm, env and shield: mean return, collisions, mean speed (m/s); with the shield, the override rate per step
@@ -93,7 +93,7 @@ def drive_arm(arm: str, env_id: str, env_kwargs: dict[str, Any], seeds: Sequence
               root: str | Path | None = None) -> list[dict[str, Any]]:
     """``arm`` driven on ``seeds`` on ``env_id`` with (``shield``) or without the default radar shield."""
     from agents.evaluate import load_policy, make_env
-    from agents.shield import ShieldedPolicy
+    from agents.policies.shield import ShieldedPolicy
 
     env = make_env(env_id, env_kwargs)
     try:

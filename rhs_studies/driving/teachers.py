@@ -4,7 +4,7 @@ variants, and why a student cannot copy the fastest lookahead.
 Every teacher drives ``rhs-highway-v0`` with the students' target speeds ([10, 15, 20, 25, 30] m/s), deciding once a
 second in pulse mode (IDLE between), as the radar + SLAM students drive, on the validation seeds (4000..: never used
 in training, where the envs draw seeds 0.. and 20000.., nor by the held-out evaluations 1000-1049, 2000-2049,
-3000-3099; the lookahead's settings were chosen on 4000-4009). Variants of :class:`agents.lookahead.LookaheadDriver`:
+3000-3099; the lookahead's settings were chosen on 4000-4009). Variants of :class:`agents.policies.lookahead.LookaheadDriver`:
 
 * ``lookahead``: as shipped (6 s forecasts, a 0.6 s time-gap margin, ``tie_margin`` 0.5), the teacher of
   ``agents/hyperparams/dagger_lookahead.yml``;
@@ -12,7 +12,7 @@ in training, where the envs draw seeds 0.. and 20000.., nor by the held-out eval
 * ``lookahead_margin_1s``: a 1 s margin;
 * ``lookahead_tie_1``: the headway driver's action unless another forecast returns 1 more.
 
-And variants of the headway driver itself (:class:`agents.expert.HeadwayDriverConfig`): ``headway_cruise30`` chooses
+And variants of the headway driver itself (:class:`agents.policies.expert.HeadwayDriverConfig`): ``headway_cruise30`` chooses
 target speeds up to 30 m/s (cruise speed 30 instead of 25) and accelerates with a 1 m/s margin (instead of 2);
 ``headway_cruise30_h1.2`` also holds a 1.2 s time gap (instead of 1.5); ``headway_cruise30_gap`` a 2.0 s time gap and
 1.5 s (instead of 1.0 s) to a faster follower in a lane it changes into (the teacher of
@@ -49,8 +49,8 @@ ROOT = Path(__file__).resolve().parents[2]
 ENV_ID = "rhs-highway-v0"
 ACTION = {"type": "DiscreteMetaAction", "target_speeds": [10, 15, 20, 25, 30]}
 DECISION_STEPS = 5  # env steps per decision (1 Hz at highway-env's 5 Hz)
-#: variant -> (driver, config): "headway" a :class:`agents.expert.HeadwayDriver` with these
-#: :class:`agents.expert.HeadwayDriverConfig` fields, "lookahead" a :class:`agents.lookahead.LookaheadDriver`
+#: variant -> (driver, config): "headway" a :class:`agents.policies.expert.HeadwayDriver` with these
+#: :class:`agents.policies.expert.HeadwayDriverConfig` fields, "lookahead" a :class:`agents.policies.lookahead.LookaheadDriver`
 _CRUISE30 = {"cruise_speed_mps": 30.0, "margin_mps": 1.0}
 _CRUISE30_GAP = {**_CRUISE30, "headway_s": 2.0, "rear_headway_s": 1.5}
 VARIANTS: dict[str, tuple[str, dict[str, float]]] = {
@@ -85,9 +85,9 @@ def drive(variant: str, seed: int, duration: float | None = None) -> dict[str, A
     import gymnasium as gym
 
     import rhs_env  # noqa: F401  (registers the ids)
-    from agents.decision import IDLE
-    from agents.expert import HeadwayDriver
-    from agents.lookahead import LookaheadDriver
+    from agents.policies.decision import IDLE
+    from agents.policies.expert import HeadwayDriver
+    from agents.policies.lookahead import LookaheadDriver
 
     kwargs: dict[str, Any] = {"action": ACTION}
     if duration is not None:

@@ -1,7 +1,7 @@
 """Train the driving policies and record how they were made.
 
 ``--algo dagger`` (default): DAgger students of the privileged
-:class:`agents.expert.HeadwayDriver` (:mod:`agents.imitation`,
+:class:`agents.policies.expert.HeadwayDriver` (:mod:`agents.algos.imitation`,
 ``agents/hyperparams/dagger.yml``):
 
 * ``agents/data/dagger_rhs_highway_slam.zip``: on ``rhs-highway-slam-v0`` (point
@@ -33,14 +33,14 @@ not shipped).
     python scripts/train_policy.py --slam-env-kwargs '{"radar": {"scan": {"grid_deg": 5}}}'
 
 ``--continue-from DIR`` continues each DAgger student from its zip under DIR
-(``agents.imitation``, continuation: ``agents/hyperparams/dagger_continue.yml``,
+(``agents.algos.imitation``, continuation: ``agents/hyperparams/dagger_continue.yml``,
 beta_0 < 1, fresh data on the student's own states) into ``--data-dir``; its
 record keeps the parent and the total budget (``total_timesteps``):
 
     python scripts/train_policy.py --continue-from agents/data --only slam truth --data-dir runs/continued
 
 ``--resume`` goes on from the state a stopped or killed run left in ``--work-dir``
-(DAgger: after its last finished round, :func:`agents.imitation.load_round_state`), so a
+(DAgger: after its last finished round, :func:`agents.algos.imitation.load_round_state`), so a
 student longer than a session is trained in pieces; rerun the same command with it:
 
     python scripts/train_policy.py --only dense dense_phased --resume
@@ -118,7 +118,7 @@ def _registration_weights() -> dict:
 
 
 def train_one(name: str, args: argparse.Namespace, env_kwargs: dict) -> dict:
-    from agents.train import metadata_path, train
+    from agents.algos.train import metadata_path, train
 
     env_id = TARGETS[name][0]
     target = target_path(args.algo, name, Path(args.data_dir))
@@ -182,7 +182,7 @@ def adopt(source: Path, names: list[str] | None, algo: str, record_path: Path, d
     and merge their entries into ``record_path``, each with ``run`` (command, commit, start: the entry's own, stamped
     by its training run, else the source's provenance); returns the keys adopted. ``ValueError`` for a name the
     source has not, or a zip missing."""
-    from agents.train import metadata_path
+    from agents.algos.train import metadata_path
 
     src = _read_record(source)
     prov = src.get("provenance") or {}
@@ -279,7 +279,7 @@ def main(argv: list[str] | None = None) -> int:
             ap.error("--continue-from continues DAgger students (--algo dagger)")
         args.hyperparams = args.hyperparams or str(CONTINUE_YAML)
     if args.timesteps is None:
-        from agents.train import load_hyperparams
+        from agents.algos.train import load_hyperparams
 
         args.timesteps = int(load_hyperparams(args.algo, SLAM_ID, args.hyperparams)["n_timesteps"])
     record_path = Path(args.record)

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from agents.decision import SLOWER
 from agents.evaluate import DAGGER_CRUISE30_CLOSE_POLICY, resolve_env
+from agents.policies.decision import SLOWER
 from rhs_studies.kit.pool import map_seeds
 from rhs_studies.kit.runner import option
 from rhs_studies.kit.seeds import consecutive, first
@@ -175,7 +175,7 @@ def drive_seeds(seeds: list[int], policy: str, env_id: str, env_kwargs: dict, de
 def run_policy(policy: str, env_id: str, env_kwargs: dict, seeds: list[int], workers: int,
                deterministic: bool = True, shield: dict | None = None) -> list[dict]:
     """Episodes on ``seeds`` (contiguous), split over ``workers`` processes; greedy actions, or (``deterministic``
-    False) sampled, seeded by each episode's seed; ``shield`` (a :class:`agents.shield.ShieldConfig` as a dict) in
+    False) sampled, seeded by each episode's seed; ``shield`` (a :class:`agents.policies.shield.ShieldConfig` as a dict) in
     place of the shield saved beside the policy (None: as its record says)."""
     return map_seeds(drive_seeds, seeds, workers, policy, env_id, env_kwargs, deterministic, shield)
 

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from agents import SHIPPED_POLICY
-from agents.policy_record import read_record, sidecar_path
+from agents.policies.policy_record import read_record, sidecar_path
 
 __all__ = ["main", "shipped_record", "ship_policy"]
 
