@@ -20,7 +20,7 @@ def _spectra(radar: RadarSystem, scatterers: Scatterers) -> np.ndarray:
     cfg = radar.config
     y = radar.synthesize(scatterers)
     n = cfg.waveform.zero_pad * cfg.waveform.samples
-    return sfft.fft(y * radar._window, n=n, axis=-1, workers=1)[..., : radar._bin_hi]
+    return sfft.fft(y * radar.range_fft.window, n=n, axis=-1, workers=1)[..., : radar.range_fft.bin_hi]
 
 
 def test_detector_field_is_validated():
@@ -78,7 +78,7 @@ def test_footprint_cfar_false_alarm_rate_matches_design(antenna):
     cfg = RadarConfig(antenna=antenna, detection=DetectionConfig(statistic="footprint", pfa=pfa),
                       scan=ScanConfig(grid_deg=2.0), max_range_m=50.0)
     radar = RadarSystem(cfg, np.random.default_rng(5))
-    det = radar._detectors[0]
+    det = radar.detector.footprint_detectors[0]
     hits = cells = 0
     for _ in range(12):
         ex = det.exceedance(det.statistic(_spectra(radar, Scatterers.empty())))
@@ -98,12 +98,12 @@ def test_footprint_detects_weak_rhs_targets_the_summed_profile_misses():
     rng = np.random.default_rng(12)
     found = dict.fromkeys(radars, 0)
     trials, r_m = 30, 45.0
-    bins_per_m = radars["summed"]._bin_range.size / radars["summed"]._bin_range[-1]
+    bins_per_m = radars["summed"].range_fft.bin_range.size / radars["summed"].range_fft.bin_range[-1]
     for _ in range(trials):
         th = np.deg2rad(rng.uniform(-40, 40))
         sc = Scatterers.static_points([radars["summed"].positions[0] + r_m * np.array([np.cos(th), np.sin(th)])])
         for d, radar in radars.items():
-            rd, kd = radar._detect(_spectra(radar, sc))
+            rd, kd = radar.detector.detect(_spectra(radar, sc))
             found[d] += bool(np.any((rd == 0) & (np.abs(kd - r_m * bins_per_m) <= 3)))
     print(found)
     assert found["footprint"] >= 0.8 * trials

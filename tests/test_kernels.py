@@ -14,6 +14,7 @@ import pytest
 
 from rhs_common.jit import NOTICE
 from rhs_env.radar import DetectionConfig, RadarConfig, RadarSystem
+from rhs_env.radar.estimation import peak_offsets
 from rhs_env.scatterers import Occluders, Scatterers
 from slam.core.rbpf import SlamConfig
 
@@ -60,7 +61,7 @@ def test_compiled_radar_matches_numpy_on_120_scenes():
     n_points = 0
     for _ in range(120):
         spec = radars["numpy"].synthesize_spectrum(*_scene(rng))
-        det = {k: r._detect(spec) for k, r in radars.items()}
+        det = {k: r.detector.detect(spec) for k, r in radars.items()}
         np.testing.assert_array_equal(det["numpy"][0], det["numba"][0])
         np.testing.assert_array_equal(det["numpy"][1], det["numba"][1])
         clouds = {k: r.process_spectrum(spec)[0] for k, r in radars.items()}
@@ -87,14 +88,14 @@ def test_compiled_noise_and_bin_gather_are_the_numpy_values():
     radars = _pair()
     shape = (4, radars["numpy"].config.scan.slots, radars["numpy"].config.waveform.chirps_per_slot)
     for _ in range(3):
-        a, b = (r._noise_spectrum(shape).copy() for r in radars.values())
+        a, b = (r.noise.spectrum(shape, r.rng).copy() for r in radars.values())
         np.testing.assert_array_equal(a, b)
         assert np.abs(a).max() > 0
     radar = radars["numba"]
     spec = radar.synthesize_spectrum(*_scene(np.random.default_rng(3)))
-    rd, kd = radar._detect(spec)
+    rd, kd = radar.detector.detect(spec)
     assert rd.size > 0
-    kk = radar._neighbour_bins(kd, spec.shape[-1])
+    kk = radar.estimator.neighbour_bins(kd, spec.shape[-1])
     win, yd = gather_bins(spec, rd.astype(np.int64), kk, kk.shape[1] // 2)
     np.testing.assert_array_equal(yd, spec[rd, :, :, kd].astype(np.complex128))
     np.testing.assert_array_equal(win, np.moveaxis(spec[rd[:, None], :, :, kk], 1, -1))
@@ -283,9 +284,9 @@ def test_compiled_points_are_the_numpy_values_bit_for_bit():
     n_points = 0
     for _ in range(60):
         spec = radar.synthesize_spectrum(*_scene(rng))
-        rd, kd = radar._detect(spec)
-        est = radar._estimate_angles(spec, rd, kd)
-        compiled, reference = radar._assemble_points_compiled(rd, kd, est), radar._assemble_points_numpy(rd, kd, est)
+        rd, kd = radar.detector.detect(spec)
+        est = radar.estimator.estimate(spec, rd, kd)
+        compiled, reference = radar.assembler._assemble_compiled(rd, kd, est), radar.assembler._assemble_numpy(rd, kd, est)
         for field in ("points", "radar", "range_m", "angle_rad", "range_std_m", "angle_std_rad"):
             np.testing.assert_array_equal(getattr(compiled, field), getattr(reference, field), err_msg=field)
         n_points += len(reference)
@@ -294,7 +295,7 @@ def test_compiled_points_are_the_numpy_values_bit_for_bit():
         pw = rng.normal(size=(6, 3, 11)) * 10
         pw[0, 0] = 1.0
         pw[1, 2, 4:7] = [2.0, 3.0, 4.0]
-        np.testing.assert_array_equal(range_offsets(pw, 5), RadarSystem._peak_offsets(pw, 5))
+        np.testing.assert_array_equal(range_offsets(pw, 5), peak_offsets(pw, 5))
 
 
 def test_compiled_line_of_sight_is_the_numpy_mask():
@@ -706,7 +707,7 @@ def test_whole_omp_runs_compiled_on_the_default_radar(monkeypatch):
     spec = radars["numpy"].synthesize_spectrum(sc, Occluders.empty())
     a, b = (r.process_spectrum(spec)[0] for r in radars.values())
     assert len(used) and pc._compiled_omp(radars["numba"].dictionaries[0], np.ones((1, 90, 4), complex),
-                                          radars["numba"]._chirp_index, 2, np.ones(1), 1.0, 0.0, 0.0, 2, 2, True) is not None
+                                          radars["numba"].estimator.chirp_index, 2, np.ones(1), 1.0, 0.0, 0.0, 2, 2, True) is not None
     _compare_clouds(a, b)
 
 
@@ -755,9 +756,10 @@ def test_footprint_statistic_sums_each_footprints_slots():
     np.testing.assert_allclose(got, want, rtol=1e-6)
     radars = _pair()
     spec = radars["numpy"].synthesize_spectrum(*_scene(np.random.default_rng(9)))
-    assert radars["numba"]._detectors[0].kernels == "numba" and radars["numpy"]._detectors[0].kernels == "numpy"
+    assert (radars["numba"].detector.footprint_detectors[0].kernels == "numba"
+            and radars["numpy"].detector.footprint_detectors[0].kernels == "numpy")
     for view in (spec, spec[..., 3:-5]):  # whole profiles and a bin range (rows strided, as the radar passes them)
-        a, b = (r._detectors[0].statistic(view) for r in radars.values())
+        a, b = (r.detector.footprint_detectors[0].statistic(view) for r in radars.values())
         np.testing.assert_allclose(b, a, rtol=1e-6)
         assert np.mean(a == b) > 0.9  # most cells bit for bit: sums of the same 2-4 terms
 
@@ -784,20 +786,27 @@ def test_kernel_tables_choose_once_and_cover_every_stage_twice():
     import re
 
     from rhs_common.jit import KernelTable
-    from rhs_env import detection, omp, radar, uncertainty
+    from rhs_env import detection, omp, uncertainty
+    from rhs_env.radar import antennas, estimation, mounting, noise, points, synthesis
 
-    for table in (detection._STAGES, omp._STAGES, radar._STAGES, uncertainty._STAGES):
+    stage_modules = (antennas, estimation, mounting, noise, points, synthesis)  # the radar's stages with kernels
+    for table in (detection._STAGES, omp._STAGES, uncertainty._STAGES, *(m._STAGES for m in stage_modules)):
         numba, numpy_ = table.choose("numba"), table.choose("numpy")
         assert numba is table.choose("numba") and numba.kernels == "numba" and numpy_.kernels == "numpy"
         assert all(set(impls) == {"numba", "numpy"} for impls in table.stages.values()), table.name
         assert all(getattr(numba, s) is not getattr(numpy_, s) for s in table.stages), table.name
     with pytest.raises(ValueError, match="kernels: expected one of 'numba', 'numpy', got 'fortran'"):
-        radar._STAGES.choose("fortran")
+        mounting._STAGES.choose("fortran")
     half = KernelTable("half")
     half.stage("only", "numpy")(len)
     with pytest.raises(ValueError, match=r"half: stages without an implementation: only \(numba\)"):
         half.choose("numpy")
     branch = re.compile(r"kernels\"?\)?\s*(==|!=)\s*\"num(ba|py)\"")
-    for module in (detection, omp, radar, uncertainty):
-        assert not branch.search(Path(module.__file__).read_text()), module.__name__
-    assert RadarSystem(RadarConfig(kernels="numpy"), np.random.default_rng(0))._impl is radar._STAGES.choose("numpy")
+    radar_files = sorted(Path(mounting.__file__).parent.glob("*.py"))  # every module of rhs_env.radar
+    assert {Path(m.__file__) for m in stage_modules} < set(radar_files)
+    for path in [Path(m.__file__) for m in (detection, omp, uncertainty)] + radar_files:
+        assert not branch.search(path.read_text()), path.name
+    radar = RadarSystem(RadarConfig(kernels="numpy"), np.random.default_rng(0))
+    stages = {antennas: radar.beams, estimation: radar.estimator, mounting: radar.mounts, noise: radar.noise,
+              points: radar.assembler, synthesis: radar.synthesizer}
+    assert all(stage._impl is module._STAGES.choose("numpy") for module, stage in stages.items())

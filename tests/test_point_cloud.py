@@ -184,7 +184,7 @@ def _two_close_targets(kernels: str, sep_deg: float = 3.0):
     from rhs_env.point_cloud import _doppler_atoms
 
     radar = RadarSystem(RadarConfig(kernels=kernels), np.random.default_rng(0))
-    dic, tgrid = radar.dictionaries[0], radar._chirp_index
+    dic, tgrid = radar.dictionaries[0], radar.estimator.chirp_index
     theta = np.deg2rad([10.0, 10.0 + sep_deg])
     omega = np.array([0.30, 0.32])
     data = (np.array([1.0, 0.8j]) @ _doppler_atoms(dic, theta, omega, tgrid)).reshape(1, *tgrid.shape)

@@ -59,11 +59,11 @@ def test_noise_bins_have_the_covariance_of_the_windowed_fft_of_white_noise(windo
     whether the noise is drawn at half rate (Hann: the alias term is negligible) or at full rate (boxcar)."""
     cfg = replace(SMALL, fidelity="range", waveform=replace(SMALL.waveform, window=window))
     radar = RadarSystem(cfg, np.random.default_rng(5))
-    assert radar._noise_rate == rate
+    assert radar.noise.rate == rate
     cfg = radar.config
     n, z = cfg.waveform.samples, cfg.waveform.zero_pad
     w2 = make_window(cfg.waveform.window, n).astype(float) ** 2
-    ys = [radar.synthesize_spectrum(Scatterers.empty()).reshape(-1, radar._bin_hi).astype(complex) for _ in range(4)]
+    ys = [radar.synthesize_spectrum(Scatterers.empty()).reshape(-1, radar.range_fft.bin_hi).astype(complex) for _ in range(4)]
     y = np.concatenate(ys) / np.sqrt(cfg.noise_power_w)
     for d in range(4):
         want = np.sum(w2 * np.exp(2j * np.pi * d * np.arange(n) / (z * n)))
@@ -85,8 +85,8 @@ def test_cfar_false_alarm_rate_on_noise_only_scans_is_the_design_pfa(fidelity):
             spec = radar.synthesize_spectrum(Scatterers.empty())
         else:
             spec = radar.range_spectrum(radar.synthesize(Scatterers.empty()))
-        prof = radar._profile(spec)[:, edge:-edge]
-        thr = radar._threshold(radar._profile(spec))[:, edge:-edge]
+        prof = radar.detector.profile(spec)[:, edge:-edge]
+        thr = radar.detector.threshold(radar.detector.profile(spec))[:, edge:-edge]
         exceed += int(np.sum(prof > thr))
         cells += prof.size
     rate = exceed / cells

@@ -234,7 +234,7 @@ def gather_bins(spec: np.ndarray, rd: np.ndarray, kk: np.ndarray, centre: int) -
     """The neighbouring bins of every detection, read from the spectrum Y (R, I, C, K) in one pass.
 
     ``win[d, i, c, w] = Y[rd_d, i, c, kk_dw]`` (D, I, C, W) complex64 (the bins of
-    :meth:`rhs_env.radar.RadarSystem._target_bins`) and the OMP's data ``y[d, i, c] = Y[rd_d, i, c, kk_d,centre]``
+    :meth:`rhs_env.radar.estimation.AngleEstimator.target_bins`) and the OMP's data ``y[d, i, c] = Y[rd_d, i, c, kk_d,centre]``
     (D, I, C) complex128 (``kk[:, centre]`` the detection's own bin): each (slot, chirp) row of Y is visited once
     per detection, its W adjacent bins together, and :func:`bin_amplitudes` then reads them contiguously.
     """
@@ -287,7 +287,7 @@ def _cholesky_factor(gram: np.ndarray, chol: np.ndarray) -> None:
 @njit
 def bin_amplitudes(a: np.ndarray, spec: np.ndarray, rd: np.ndarray, kk: np.ndarray) -> np.ndarray:
     """Least-squares amplitudes of fixed atoms at neighbouring range bins (D, L, W), for
-    :meth:`rhs_env.radar.RadarSystem._target_bins`.
+    :meth:`rhs_env.radar.estimation.AngleEstimator.target_bins`.
 
     ``s_d[:, w] = (A_d^H A_d + 1e-12 I)^-1 A_d^H y_dw`` with ``y_dw[(i, c)] = Y[rd_d, i, c, kk_dw]`` read from the
     spectrum Y (R, I, C, K) complex64 (no gathered copy), one Cholesky factor per row for its W bins. The sums over

@@ -1,4 +1,4 @@
-"""Compiled point assembly (numba): the OMP's targets to points (:meth:`rhs_env.radar.RadarSystem._assemble_points`).
+"""Compiled point assembly (numba): the OMP's targets to points (:meth:`rhs_env.radar.points.PointAssembler.assemble`).
 
 :func:`range_offsets` is the parabolic range offset of each target from its neighbouring bins
 (:func:`rhs_env.point_cloud.parabolic_offset` on the first interior maximum); :func:`assemble_points` turns the
@@ -16,7 +16,7 @@ __all__ = ["assemble_points", "range_offsets"]
 
 @njit
 def range_offsets(pw: np.ndarray, half: int) -> np.ndarray:
-    """Per-target range offset from the detection's bin (D, L), padded bins: :meth:`rhs_env.radar.RadarSystem._target_bins`.
+    """Per-target range offset from the detection's bin (D, L), padded bins: :meth:`rhs_env.radar.estimation.AngleEstimator.target_bins`.
 
     ``pw[d, l, w] = log |s_dl(k_d + w - half)|^2`` over the W neighbouring bins; ``j`` the first interior maximum
     (``1 + argmax pw[d, l, 1:W-1]``), then the vertex of the parabola through ``(ym, y0, yp) = pw[d, l, j-1..j+1]``
@@ -46,14 +46,14 @@ def assemble_points(rd: np.ndarray, kd: np.ndarray, theta: np.ndarray, omega: np
                     zero_pad: float, samples: float, c0: float, slope: float, sigma_y: float, min_range_m: float,
                     max_range_m: float, leak: np.ndarray, same_angle: float,
                     margin: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The points of the valid targets (:meth:`rhs_env.radar.RadarSystem._assemble_points`), in ``np.nonzero(valid)`` order.
+    """The points of the valid targets (:meth:`rhs_env.radar.points.PointAssembler.assemble`), in ``np.nonzero(valid)`` order.
 
     Per valid target (d, l) of radar ``r = rd_d``: radial velocity ``v = wrap(omega) lambda / (4 pi T_c)``
     (``wrap(a) = (a + pi) mod 2 pi - pi``), beat frequency ``f = (kd_d + tfrac) f_s / (Z N) - 2 v / lambda``,
     range ``R = c0 f / (2 S)``, position ``p_r + R (cos, sin)(boresight_r + theta)``, amplitude
     ``a = |s| ||atom|| / sigma_Y`` (``amp_abs = |s|`` from numpy: its complex absolute value is its own SIMD
     algorithm, not ``hypot``). Kept: ``min_range_m <= R <= max_range_m`` and not a range sidelobe
-    (:meth:`rhs_env.radar.RadarSystem._sidelobe_points`): with ``b = R 2 S / c0 Z N / f_s`` (padded bins),
+    (:meth:`rhs_env.radar.points.PointAssembler.sidelobe_points`): with ``b = R 2 S / c0 Z N / f_s`` (padded bins),
     ``a^2 < margin max a'^2 leak(|rint(b - b')|)`` over the stronger targets of the same radar within
     ``same_angle`` is a sidelobe. Returns rows (x, y, v, a) (N, 4), radar (N,), R (N,) and theta (N,).
     """

@@ -20,7 +20,7 @@ __all__ = ["add_tone_products", "noise_samples", "noise_uniforms", "tone_operand
 @njit
 def noise_uniforms(words: np.ndarray, scale: np.float32, half: np.float32, two_pi: np.float32, neg_u1: np.ndarray,
                    phase: np.ndarray) -> None:
-    """The polar method's inputs of :meth:`rhs_env.radar.RadarSystem._noise_spectrum` from raw 32-bit words, in one pass.
+    """The polar method's inputs of :meth:`rhs_env.radar.noise.ReceiverNoise.spectrum` from raw 32-bit words, in one pass.
 
     ``u = float32(w >> 8) 2^-24 + 1/2`` (a 24-bit signed word: u uniform on [0, 1) in steps of 2^-24, every
     step exact in float32) of the words ``words`` (2 M,) int32: the first M give ``neg_u1 = -u1``
@@ -95,7 +95,7 @@ def tone_spectra(mu: np.ndarray, coef: np.ndarray, n: int, zero_pad: int, n_bins
 
 @njit
 def tone_operands(g_mat: np.ndarray, omega: np.ndarray, wk: np.ndarray, chirps: int) -> tuple[np.ndarray, np.ndarray]:
-    """The operands of ``Y_s[r] = G_r @ E_r`` (:meth:`rhs_env.radar.RadarSystem._mix`), complex64, the tones in order.
+    """The operands of ``Y_s[r] = G_r @ E_r`` (:func:`rhs_env.radar.synthesis.mix_tones`), complex64, the tones in order.
 
     ``G[i, p]`` (I, P) and ``E[p, (c, k)] = exp(j omega_p c) W_p[k]`` (P, C K) (the product formed in
     complex128 and rounded once, as numpy does). With the tones sorted by radar, radar r's operands are

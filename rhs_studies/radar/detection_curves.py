@@ -55,7 +55,7 @@ def spectra(radar: RadarSystem, scatterers: Scatterers) -> np.ndarray:
     cfg = radar.config
     y = radar.synthesize(scatterers)
     n = cfg.waveform.zero_pad * cfg.waveform.samples
-    return sfft.fft(y * radar._window, n=n, axis=-1, workers=1)[..., : radar._bin_hi]
+    return sfft.fft(y * radar.range_fft.window, n=n, axis=-1, workers=1)[..., : radar.range_fft.bin_hi]
 
 
 def make_radars(antenna: str, pfa: float, max_range: float, seed: int) -> dict[str, RadarSystem]:
@@ -82,7 +82,7 @@ def simulate_pd(radars: dict[str, RadarSystem], snr_db: np.ndarray, trials: int,
             xy = synth.positions + range_m * np.column_stack([np.cos(th), np.sin(th)])
             spec = spectra(synth, Scatterers.static_points(xy, rcs))
             for d, radar in radars.items():
-                rd, kd = radar._detect(spec)
+                rd, kd = radar.detector.detect(spec)
                 near = np.abs(kd[None, :] - range_m * bins_per_m) <= tol
                 hits[d] += int(np.sum(np.any((rd[None, :] == np.arange(4)[:, None]) & near, axis=1)))
         for d in radars:
@@ -93,7 +93,7 @@ def simulate_pd(radars: dict[str, RadarSystem], snr_db: np.ndarray, trials: int,
 def theory_pd(radar: RadarSystem, snr_db: np.ndarray, pfa: float) -> dict[str, list[float]]:
     """Theoretical Pd (module docstring), averaged over angles uniform in +-40 deg."""
     cfg = radar.config
-    det = radar._detectors[0] if radar._detectors else None
+    det = radar.detector.footprint_detectors[0] if radar.detector.footprint_detectors else None
     dic = radar.dictionaries[0]
     theta = np.deg2rad(np.linspace(-40, 40, 161))
     g = np.abs(dic.atoms(theta)[0]) ** 2  # (I, T)
@@ -117,15 +117,15 @@ def measure_pfa(radars: dict[str, RadarSystem], scans: int) -> dict[str, dict]:
     """Fraction of (radar, range cell) above threshold on noise-only sweeps, before peak picking."""
     synth = radars["summed"]
     cfg = synth.config
-    fp = radars["footprint"]._detectors[0]
-    cap = synth._p_noise * 10 ** (cfg.detection.cap_db / 10)
+    fp = radars["footprint"].detector.footprint_detectors[0]
+    cap = synth.detector.noise_mean * 10 ** (cfg.detection.cap_db / 10)
     hits = dict.fromkeys(radars, 0)
     cells = 0
     for _ in range(scans):
         spec = spectra(synth, Scatterers.empty())
         prof = np.sum(np.abs(spec) ** 2, axis=(1, 2))
-        thr = os_cfar_threshold(prof, cfg.detection.guard, cfg.detection.train, cfg.waveform.zero_pad, synth._alpha, synth._rank,
-                                floor=synth._p_noise, cap=cap)
+        thr = os_cfar_threshold(prof, cfg.detection.guard, cfg.detection.train, cfg.waveform.zero_pad, synth.detector.alpha,
+                                synth.detector.rank, floor=synth.detector.noise_mean, cap=cap)
         hits["summed"] += int(np.sum(prof > thr))
         hits["footprint"] += int(fp.exceedance(fp.statistic(spec)).sum())
         cells += prof.size
@@ -137,7 +137,7 @@ def measure_pfa(radars: dict[str, RadarSystem], scans: int) -> dict[str, dict]:
 
 
 def time_detectors(antenna: str, repeats: int, seed: int = 0) -> dict:
-    """Median time (ms) of the detection stage (``RadarSystem._detect``) and of a full scan, both detectors."""
+    """Median time (ms) of the detection stage (``RangeDetector.detect``) and of a full scan, both detectors."""
     from rhs_studies.kit.episodes import typical_scene
 
     scene, occ = typical_scene(np.random.default_rng(seed + 1))
@@ -150,7 +150,7 @@ def time_detectors(antenna: str, repeats: int, seed: int = 0) -> dict:
     for _ in range(repeats):
         for d, radar in radars.items():  # interleaved, so load changes hit both alike
             t0 = time.perf_counter()
-            radar._detect(spec)
+            radar.detector.detect(spec)
             det_ms[d].append(1e3 * (time.perf_counter() - t0))
             cloud = radar.scan(scene, occ)
             scan_ms[d].append(1e3 * cloud.stage_times["total"])
@@ -250,7 +250,7 @@ def main(argv: list[str] | None = None) -> int:
         radars = make_radars(ant, a.pfa, a.max_range, a.seed)
         res["measured"][ant] = simulate_pd(radars, snr, a.trials, a.range, rng)
         res["theory"][ant] = theory_pd(radars["footprint"], snr, a.pfa)
-        fp = radars["footprint"]._detectors[0]
+        fp = radars["footprint"].detector.footprint_detectors[0]
         res.setdefault("footprints", {})[ant] = {"hypotheses": fp.hypotheses, "looks": np.bincount(fp.looks).tolist(),
                                                  "p1": fp.p1, "n_eff": fp.n_eff}
         res["pfa_check"][ant] = measure_pfa(make_radars(ant, a.pfa_check, a.max_range, a.seed + 1), a.pfa_scans)
