@@ -363,15 +363,20 @@ def sym2_inverse(a: np.ndarray, b: np.ndarray, c: np.ndarray):
 
 
 def cluster_covariance(
-    points: np.ndarray, labels: np.ndarray, cov: np.ndarray, n_clusters: int
+    points: np.ndarray, labels: np.ndarray, cov: np.ndarray, n_clusters: int, kernels: str = "numpy"
 ) -> tuple[np.ndarray, np.ndarray]:
     """Information fusion of the points of each cluster: positions (C, 2) and covariances (C, 2, 2).
 
     ``Sigma_c = (sum_i Sigma_i^-1)^-1``, ``x_c = Sigma_c sum_i Sigma_i^-1 x_i`` (independent errors
     of one scatterer). Adding the members' spread to ``Sigma_c`` (for clusters of distinct
     scatterers) was tried and measured worse on the dense-pair scene (RHS ATE 0.14 / 0.10 m ->
-    0.24 / 0.19 m on tuning seeds 0 / 1), so it is not done.
+    0.24 / 0.19 m on tuning seeds 0 / 1), so it is not done. ``kernels="numba"``: the same sums in one compiled
+    pass (:func:`slam.core.kernels.cluster_fusion`).
     """
+    if kernels == "numba":
+        from slam.core.kernels import cluster_fusion
+
+        return cluster_fusion(points, labels, cov, n_clusters)
     i00, i01, i11, _ = sym2_inverse(cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1])
     x, y = points[:, 0], points[:, 1]
     info = [np.bincount(labels, weights=w, minlength=n_clusters) for w in (i00, i01, i11)]

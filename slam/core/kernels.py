@@ -1,18 +1,21 @@
-"""Compiled kernels of the SLAM (numba): the RBPF's association, proposal and landmark update, the ICP, the Doppler fits.
+"""Compiled kernels of the SLAM (numba): the RBPF's association, proposal, landmark update and estimates, the ICP,
+the Doppler fits.
 
 Each kernel computes what the numpy reference computes (:func:`slam.core.association.mahalanobis_associate`
-with the distances of :meth:`slam.core.rbpf.RBPFSlam._associate`; the FastSLAM 2.0 proposal terms and sums and the
-landmarks' Kalman update of :class:`slam.core.rbpf.RBPFSlam`, bit for bit; the fit of
+with the distances of :meth:`slam.core.rbpf.RBPFSlam._associate`; the FastSLAM 2.0 proposal terms and sums, the
+landmarks' Kalman update, the particle-weighted estimates and the pruning of :class:`slam.core.rbpf.RBPFSlam`, bit
+for bit; the clusters' information fusion of :func:`slam.core.association.cluster_covariance`; the fit of
 :class:`slam.core.registration.ICPRegistration` with its ``cKDTree`` queries; the RANSAC Doppler ego-motion fits of
 :func:`slam.core.association.estimate_ego_velocity` and :func:`slam.core.pipeline.doppler_ego_motion`, the same
-hypotheses), with the same variable names and floating-point
-order, per particle or pair instead of on P x M x L tensors. What stays numpy: the per-particle 3 x 3 inverse,
-log-determinant and Cholesky factor of the proposal (LAPACK) and the particle-weighted landmark estimates (numpy's
-einsum, fused multiply-adds): a closed form there moves the results by round-off, and the filter's existence and hit
-thresholds (``exist >= min_existence`` on sums of equal weights) sit exactly on such ties, so a landmark appears or
-not by the last bit. ``SlamConfig(kernels="numpy")``
-(``gym.make(..., slam={"kernels": "numpy"})``) selects the reference; the costs of numba are
-listed in :mod:`rhs_env.kernels`.
+hypotheses), with the same variable names and floating-point order, per particle or pair instead of on P x M x L
+tensors. Where numpy reduces, the kernels add in numpy's order: ``np.sum`` of a contiguous run pairwise
+(:func:`_pairwise_sum`), einsum's contiguous reductions on two accumulator lanes (:func:`_einsum_dot`,
+:func:`_einsum_dot3`: numpy's x86-64 baseline, SSE, mul then add), its outer-axis sums in order: the filter's
+existence and hit thresholds (``exist >= min_existence`` on sums of equal weights) sit exactly on such ties, so a
+landmark appears or not by the last bit. What stays numpy: the transcendental functions (cos, sin, log, exp: numpy's
+own SIMD code) and the per-particle 3 x 3 inverse, log-determinant and Cholesky factor of the proposal (LAPACK).
+``SlamConfig(kernels="numpy")`` (``gym.make(..., slam={"kernels": "numpy"})``) selects the reference; the costs of
+numba are listed in :mod:`rhs_env.kernels`.
 """
 
 from __future__ import annotations
@@ -21,8 +24,10 @@ import numpy as np
 
 from rhs_common.jit import njit, sort_small
 
-__all__ = ["doppler_ransac", "icp_fit", "icp_search", "landmark_update", "mahalanobis_association", "proposal_information",
-           "proposal_terms", "prune_mask", "radius_components"]
+__all__ = ["cluster_fusion", "doppler_ransac", "icp_fit", "icp_search", "landmark_update", "mahalanobis_association",
+           "mahalanobis_association_at", "pose_moments", "proposal_information", "proposal_prior_information",
+           "proposal_sample", "proposal_shift", "proposal_terms", "prune_slots", "radius_components",
+           "slot_estimates"]
 
 NEW = -1  # slam.association.NEW
 DROPPED = -2  # slam.association.DROPPED
@@ -66,6 +71,38 @@ def mahalanobis_association(obs_map: np.ndarray, a00: np.ndarray, a01: np.ndarra
         for m in range(n_m):
             if idx[p, m] == NEW and near[m]:
                 idx[p, m] = DROPPED
+    return idx
+
+
+@njit
+def mahalanobis_association_at(pose: np.ndarray, cth: np.ndarray, sth: np.ndarray, z: np.ndarray, b00: np.ndarray,
+                               b01: np.ndarray, b11: np.ndarray, mean: np.ndarray, cov: np.ndarray, active: np.ndarray,
+                               used: np.ndarray, gate2: float, new_gate2: float, rounds: int) -> np.ndarray:
+    """:meth:`slam.core.rbpf.RBPFSlam._associate` from the particles' poses: :func:`mahalanobis_association` on the
+    observations in each particle's map frame and their covariances there, and the landmark slots it picked.
+
+    Particle p (pose ``pose[p]``, ``cth, sth`` its heading's cosine and sine from numpy), observation m (vehicle
+    frame z, covariance with the pose terms ``B = [[b00, b01], [b01, b11]]``): ``x_map = (p_x + c z_x) - s z_y``,
+    ``y_map = (p_y + s z_x) + c z_y`` (:func:`slam.core.association.to_map_frame`) and ``A = R B R^T``
+    (:func:`slam.core.rbpf.rotate_sym2`), the same operations in the same order. Returns idx (P, M): the slot
+    ``used[q]`` of a match, else NEW or DROPPED.
+    """
+    n_p, n_m = pose.shape[0], z.shape[0]
+    obs_map = np.empty((n_p, n_m, 2))
+    a00 = np.empty((n_p, n_m))
+    a01 = np.empty((n_p, n_m))
+    a11 = np.empty((n_p, n_m))
+    for p in range(n_p):
+        c, s = cth[p], sth[p]
+        for m in range(n_m):
+            obs_map[p, m, 0] = pose[p, 0] + c * z[m, 0] - s * z[m, 1]
+            obs_map[p, m, 1] = pose[p, 1] + s * z[m, 0] + c * z[m, 1]
+            a00[p, m], a01[p, m], a11[p, m] = _rotate_sym2(c, s, b00[m], b01[m], b11[m])
+    idx = mahalanobis_association(obs_map, a00, a01, a11, mean, cov, active, used, gate2, new_gate2, rounds)
+    for p in range(n_p):
+        for m in range(n_m):
+            if idx[p, m] >= 0:
+                idx[p, m] = used[idx[p, m]]
     return idx
 
 
@@ -507,12 +544,13 @@ def _rotate_sym2(c: float, s: float, b00: float, b01: float, b11: float) -> tupl
 
 @njit
 def landmark_update(pose: np.ndarray, cth: np.ndarray, sth: np.ndarray, z: np.ndarray, q: np.ndarray, mean: np.ndarray,
-                    cov: np.ndarray, hits: np.ndarray, last_seen: np.ndarray, pp: np.ndarray, ll: np.ndarray,
-                    cycle: int) -> tuple[np.ndarray, np.ndarray]:
+                    cov: np.ndarray, hits: np.ndarray, last_seen: np.ndarray, pp: np.ndarray, mm: np.ndarray,
+                    ll: np.ndarray, cycle: int) -> tuple[np.ndarray, np.ndarray]:
     """:meth:`slam.core.rbpf.RBPFSlam._landmark_update`'s Kalman update, pair by pair, in place.
 
-    For pair k (particle ``p = pp[k]``, its observation z_k (vehicle frame, covariance q_k (2, 2)), landmark
-    slot ``l = ll[k]``; ``cth, sth`` the cosine and sine of the particle's heading, from numpy):
+    For pair k (particle ``p = pp[k]`` at ``pose[p]``, its observation ``z[mm[k]]`` (vehicle frame, covariance
+    ``q[mm[k]]`` (2, 2)), landmark slot ``l = ll[k]``; ``cth[k], sth[k]`` the cosine and sine of the particle's
+    heading, from numpy):
     ``nu = p_xy + R z - mu``, ``Q = R q R^T``, ``Lambda`` the landmark covariance (off-diagonal symmetrised),
     ``S = Lambda + Q``, ``K = Lambda S^-1``, ``mu += K nu``, ``Lambda <- Lambda - K Lambda`` (symmetrised), hits
     + 1, last seen at ``cycle``. Returns the Mahalanobis distance ``nu^T S^-1 nu`` and ``det S`` (floored at
@@ -522,12 +560,12 @@ def landmark_update(pose: np.ndarray, cth: np.ndarray, sth: np.ndarray, z: np.nd
     maha = np.empty(n)
     det_s = np.empty(n)
     for k in range(n):
-        p, l = pp[k], ll[k]
+        p, m, l = pp[k], mm[k], ll[k]
         c, s = cth[k], sth[k]
-        z0, z1 = z[k, 0], z[k, 1]
-        nu0 = pose[k, 0] + (c * z0 - s * z1) - mean[p, l, 0]
-        nu1 = pose[k, 1] + (s * z0 + c * z1) - mean[p, l, 1]
-        q00, q01, q11 = _rotate_sym2(c, s, q[k, 0, 0], q[k, 0, 1], q[k, 1, 1])
+        z0, z1 = z[m, 0], z[m, 1]
+        nu0 = pose[p, 0] + (c * z0 - s * z1) - mean[p, l, 0]
+        nu1 = pose[p, 1] + (s * z0 + c * z1) - mean[p, l, 1]
+        q00, q01, q11 = _rotate_sym2(c, s, q[m, 0, 0], q[m, 0, 1], q[m, 1, 1])
         l00, l01, l11 = cov[p, l, 0, 0], 0.5 * (cov[p, l, 0, 1] + cov[p, l, 1, 0]), cov[p, l, 1, 1]
         a, b, d = l00 + q00, l01 + q01, l11 + q11
         det = max(a * d - b * b, 1e-300)
@@ -550,10 +588,13 @@ def landmark_update(pose: np.ndarray, cth: np.ndarray, sth: np.ndarray, z: np.nd
 
 @njit
 def proposal_terms(pose: np.ndarray, cth: np.ndarray, sth: np.ndarray, z: np.ndarray, q: np.ndarray, mean: np.ndarray,
-                   cov: np.ndarray, pp: np.ndarray, ll: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                   cov: np.ndarray, pp: np.ndarray, mm: np.ndarray,
+                   ll: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:meth:`slam.core.rbpf.RBPFSlam._proposal_terms` pair by pair: H (K, 2, 3), S^-1 (K, 2, 2), nu (K, 2), det S (K,).
 
-    At the particle's predicted pose (``pose[k]`` of pair k, ``cth, sth`` its heading's cosine and sine from numpy):
+    Pair k: particle ``pp[k]``, observation ``mm[k]`` (``z``, ``q`` its vehicle-frame position and covariance),
+    landmark slot ``ll[k]``. At the particle's predicted pose (``pose[pp[k]]``, ``cth[k], sth[k]`` its heading's
+    cosine and sine from numpy):
     ``d = mu - p_xy``, ``h = R^T d``, ``nu = z - h``, ``S = R^T Lambda R + q``,
     ``H = [[-c, -s, h_y], [s, -c, -h_x]]``; numpy's operations in numpy's order (the same values).
     """
@@ -563,52 +604,19 @@ def proposal_terms(pose: np.ndarray, cth: np.ndarray, sth: np.ndarray, z: np.nda
     nu = np.empty((n, 2))
     det_s = np.empty(n)
     for k in range(n):
-        p, l = pp[k], ll[k]
+        p, m, l = pp[k], mm[k], ll[k]
         c, s = cth[k], sth[k]
-        d0, d1 = mean[p, l, 0] - pose[k, 0], mean[p, l, 1] - pose[k, 1]
+        d0, d1 = mean[p, l, 0] - pose[p, 0], mean[p, l, 1] - pose[p, 1]
         hx, hy = c * d0 + s * d1, -s * d0 + c * d1
-        nu[k, 0], nu[k, 1] = z[k, 0] - hx, z[k, 1] - hy
+        nu[k, 0], nu[k, 1] = z[m, 0] - hx, z[m, 1] - hy
         l00, l01, l11 = _rotate_sym2(c, -s, cov[p, l, 0, 0], cov[p, l, 0, 1], cov[p, l, 1, 1])
-        a, b, dd = l00 + q[k, 0, 0], l01 + q[k, 0, 1], l11 + q[k, 1, 1]
+        a, b, dd = l00 + q[m, 0, 0], l01 + q[m, 0, 1], l11 + q[m, 1, 1]
         det = max(a * dd - b * b, 1e-300)
         Si[k, 0, 0], Si[k, 0, 1], Si[k, 1, 0], Si[k, 1, 1] = dd / det, -b / det, -b / det, a / det
         H[k, 0, 0], H[k, 0, 1], H[k, 0, 2] = -c, -s, hy
         H[k, 1, 0], H[k, 1, 1], H[k, 1, 2] = s, -c, -hx
         det_s[k] = det
     return H, Si, nu, det_s
-
-
-@njit
-def prune_mask(active: np.ndarray, last_seen: np.ndarray, hits: np.ndarray, cycle: int, prune_after: int,
-               min_hits: int, tentative_after: int) -> tuple[np.ndarray, int]:
-    """The landmarks :meth:`slam.core.rbpf.RBPFSlam._prune` keeps, and how many it drops, in one pass.
-
-    With ``age = cycle - last_seen`` (cycles), a held landmark is dropped when ``age > prune_after`` or
-    (``hits < min_hits`` and ``age > tentative_after``).
-
-    Args:
-        active: (P, L) bool, the landmarks each particle holds.
-        last_seen: (P, L) the cycle each was last updated.
-        hits: (P, L) its update count.
-        cycle: the current cycle.
-        prune_after: cycles without an update before a landmark goes.
-        min_hits: updates that confirm a landmark.
-        tentative_after: cycles an unconfirmed landmark waits.
-
-    Returns:
-        ``(active & ~kill (P, L), number of dropped landmarks)``.
-    """
-    after = active.copy()
-    n_kill = 0
-    n_p, n_l = active.shape
-    for p in range(n_p):
-        for l in range(n_l):
-            if active[p, l]:
-                age = cycle - last_seen[p, l]
-                if age > prune_after or (hits[p, l] < min_hits and age > tentative_after):
-                    after[p, l] = False
-                    n_kill += 1
-    return after, n_kill
 
 
 @njit
@@ -656,3 +664,335 @@ def radius_components(xy: np.ndarray, radius: float) -> tuple[int, np.ndarray]:
             n_c += 1
         labels[i] = of_root[r]
     return n_c, labels
+
+
+@njit
+def _einsum_dot3(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> float:
+    """``sum_i a_i b_i`` over 3 terms as numpy's einsum reduces a contiguous axis of length 3 (``"pab,pb->pa"``):
+    two accumulator lanes, the first holding terms 0 and 2, mul then add (the x86-64 baseline's SSE lanes),
+    ``((a0 b0 + 0) + a2 b2) + (a1 b1 + 0)`` added to the zeroed output."""
+    lane0 = a2 * b2 + (a0 * b0 + 0.0)
+    lane1 = 0.0 * 0.0 + (a1 * b1 + 0.0)
+    return (lane0 + lane1) + 0.0
+
+
+@njit
+def _einsum_quad2(r0: float, r1: float, s00: float, s01: float, s10: float, s11: float) -> float:
+    """``r^T S r`` of one pair as numpy's einsum ``"ki,kij,kj->k"`` sums it: ``(r_i S_ij) r_j`` term by term,
+    i, j in row-major order, into the zeroed output."""
+    acc = 0.0 + (r0 * s00) * r0
+    acc = acc + (r0 * s01) * r1
+    acc = acc + (r1 * s10) * r0
+    return acc + (r1 * s11) * r1
+
+
+@njit
+def proposal_prior_information(pp: np.ndarray, H: np.ndarray, Si: np.ndarray, nu: np.ndarray, ok: np.ndarray,
+                               prior_var: np.ndarray, n_particles: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`proposal_information` plus the motion prior's information: ``Lambda_p = Sigma_p^-1 + sum_k H_k^T S_k^-1 H_k``
+    (P, 3, 3) with ``Sigma_p = diag(prior_var)`` (prior_var (3,): ``np.diag(1 / prior_var)`` added entry by entry,
+    zeros off the diagonal), and ``g_p = sum_k H_k^T S_k^-1 nu_k`` (P, 3)."""
+    info, g = proposal_information(pp, H, Si, nu, ok, n_particles)
+    for p in range(n_particles):
+        for a in range(3):
+            for b in range(3):
+                info[p, a, b] += 1.0 / prior_var[a] if a == b else 0.0
+    return info, g
+
+
+@njit
+def proposal_shift(cov: np.ndarray, g: np.ndarray, pp: np.ndarray, H: np.ndarray, Si: np.ndarray, nu: np.ndarray,
+                   gate2: float, check: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The proposal's mean shift and its joint-compatibility test (:meth:`slam.core.rbpf.RBPFSlam._sample_proposal`).
+
+    ``delta_p = Lambda_p^-1 g_p`` (P, 3) from ``cov = Lambda_p^-1`` (numpy's ``inv``), ``sym = (cov + cov^T) / 2``
+    (the Cholesky factor's input); with ``check``, per pair k of particle ``p = pp[k]`` the residual at the
+    corrected pose ``r_k = nu_k - H_k delta_p`` and ``bad_k = r_k^T S_k^-1 r_k > gate2``. The einsums' sums in
+    their order (:func:`_einsum_dot3`, :func:`_einsum_quad2`). Returns (delta, sym, bad (K,) bool, number bad).
+    """
+    n_p = cov.shape[0]
+    delta = np.empty((n_p, 3))
+    sym = np.empty((n_p, 3, 3))
+    for p in range(n_p):
+        for a in range(3):
+            delta[p, a] = _einsum_dot3(cov[p, a, 0], cov[p, a, 1], cov[p, a, 2], g[p, 0], g[p, 1], g[p, 2])
+            for b in range(3):
+                sym[p, a, b] = 0.5 * (cov[p, a, b] + cov[p, b, a])
+    bad = np.zeros(pp.size, np.bool_)
+    n_bad = 0
+    if check:
+        for k in range(pp.size):
+            d = delta[pp[k]]
+            r0 = nu[k, 0] - _einsum_dot3(H[k, 0, 0], H[k, 0, 1], H[k, 0, 2], d[0], d[1], d[2])
+            r1 = nu[k, 1] - _einsum_dot3(H[k, 1, 0], H[k, 1, 1], H[k, 1, 2], d[0], d[1], d[2])
+            if _einsum_quad2(r0, r1, Si[k, 0, 0], Si[k, 0, 1], Si[k, 1, 0], Si[k, 1, 1]) > gate2:
+                bad[k] = True
+                n_bad += 1
+    return delta, sym, bad, n_bad
+
+
+@njit
+def proposal_sample(pp: np.ndarray, ok: np.ndarray, nu: np.ndarray, Si: np.ndarray, logdet: np.ndarray,
+                    g: np.ndarray, delta: np.ndarray, logdet_post: np.ndarray, chol: np.ndarray, noise: np.ndarray,
+                    pose: np.ndarray, log2pi: float) -> np.ndarray:
+    """FastSLAM 2.0's importance weight and pose draw per particle; ``pose`` moved in place.
+
+    With the pairs k of particle p that pass (``ok_k``): ``a_p = sum_k nu_k^T S_k^-1 nu_k``, ``n_p`` their number,
+    ``sum_k log det S_k`` (``logdet``, numpy's log), in pair order as ``np.bincount`` sums; ``quad = a_p -
+    g_p^T delta_p`` and
+
+        log w_p = -quad / 2 - n_p log(2 pi) - (sum_k log det S_k + logdet_post_p) / 2,
+
+    ``logdet_post = log det Sigma_p + log det Lambda_p`` (numpy's ``slogdet``); then
+    ``p_xy,th += delta_p + L_p eps_p`` (``chol`` L, ``noise`` eps ~ N(0, I)). The einsums' sums in their order.
+    Returns log w (P,), the heading not yet wrapped.
+    """
+    n_p = pose.shape[0]
+    quad = np.zeros(n_p)
+    n = np.zeros(n_p)
+    sum_logdet = np.zeros(n_p)
+    for k in range(pp.size):
+        p = pp[k]
+        w = 1.0 if ok[k] else 0.0
+        quad[p] += w * _einsum_quad2(nu[k, 0], nu[k, 1], Si[k, 0, 0], Si[k, 0, 1], Si[k, 1, 0], Si[k, 1, 1])
+        n[p] += w
+        sum_logdet[p] += w * logdet[k]
+    loglik = np.empty(n_p)
+    for p in range(n_p):
+        q = quad[p] - _einsum_dot3(g[p, 0], g[p, 1], g[p, 2], delta[p, 0], delta[p, 1], delta[p, 2])
+        loglik[p] = -0.5 * q - n[p] * log2pi - 0.5 * (sum_logdet[p] + logdet_post[p])
+        for a in range(3):
+            step = _einsum_dot3(chol[p, a, 0], chol[p, a, 1], chol[p, a, 2], noise[p, 0], noise[p, 1], noise[p, 2])
+            pose[p, a] = pose[p, a] + (delta[p, a] + step)
+    return loglik
+
+
+@njit
+def _pairwise_block(a: np.ndarray, lo: int, n: int) -> float:
+    """numpy's pairwise summation of ``a[lo:lo + n]`` for ``n <= 128``: under 8 values in order; else eight running
+    sums ``r_j`` over the blocks of 8, ``((r_0 + r_1) + (r_2 + r_3)) + ((r_4 + r_5) + (r_6 + r_7))``, the rest in order."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r = a[lo:lo + 8].copy()
+    i = 8
+    while i < n - n % 8:
+        for j in range(8):
+            r[j] += a[lo + i + j]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit
+def _pairwise_sum(a: np.ndarray) -> float:
+    """``sum(a)`` as numpy adds a contiguous run (``np.add.reduce``): :func:`_pairwise_block` up to 128 values, a longer
+    run as the sum of its two halves (the first ``n // 2`` rounded down to a multiple of 8), each summed the same way;
+    the recursion unrolled on an explicit stack (numba's cache does not keep recursive kernels)."""
+    seg_lo = np.empty(64, np.int64)
+    seg_n = np.empty(64, np.int64)
+    right = np.zeros(64, np.bool_)  # the segment is its parent's second half
+    left_sum = np.empty(64)
+    seg_lo[0], seg_n[0] = 0, a.size
+    depth = 0
+    while True:
+        n = seg_n[depth]
+        if n > 128:  # descend into the first half
+            half = n // 2 - (n // 2) % 8
+            seg_lo[depth + 1], seg_n[depth + 1], right[depth + 1] = seg_lo[depth], half, False
+            depth += 1
+            continue
+        val = _pairwise_block(a, seg_lo[depth], n)
+        while depth > 0 and right[depth]:  # a second half: close its parent
+            depth -= 1
+            val = left_sum[depth] + val
+        if depth == 0:
+            return val
+        left_sum[depth - 1] = val  # a first half: go on with its sibling
+        parent = depth - 1
+        half = seg_n[depth]
+        seg_lo[depth], seg_n[depth], right[depth] = seg_lo[parent] + half, seg_n[parent] - half, True
+
+
+@njit
+def _einsum_dot(a: np.ndarray, b: np.ndarray) -> float:
+    """``sum_i a_i b_i`` of two contiguous runs as numpy's einsum reduces one (``"ps,ps->s"`` along p): two
+    accumulator lanes (even and odd i), mul then add, blocks of 8 taken last pair first, then pairs with a zero
+    past the end; ``0 + (lane_0 + lane_1)`` (the x86-64 baseline's 2-lane SSE code)."""
+    n = a.size
+    lane0 = 0.0
+    lane1 = 0.0
+    i = 0
+    while n - i >= 8:
+        for j in range(3, -1, -1):
+            lane0 = a[i + 2 * j] * b[i + 2 * j] + lane0
+            lane1 = a[i + 2 * j + 1] * b[i + 2 * j + 1] + lane1
+        i += 8
+    while i < n:
+        lane0 = a[i] * b[i] + lane0
+        lane1 = (a[i + 1] * b[i + 1] if i + 1 < n else 0.0 * 0.0) + lane1
+        i += 2
+    return 0.0 + (lane0 + lane1)
+
+
+@njit
+def slot_estimates(w: np.ndarray, active: np.ndarray, mean: np.ndarray, cov: np.ndarray, hits: np.ndarray,
+                   slots: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:meth:`slam.core.rbpf.RBPFSlam._slot_estimates`: the particle-weighted statistics of landmark ``slots``.
+
+    With ``W_ps = w_p [p holds s]``, the existence ``E_s = sum_p W_ps`` and ``Wn = W / E`` (``/ 1`` where E = 0):
+    ``mu_s = sum_p Wn_ps e_ps``, ``Sigma_s = sum_p Wn_ps Lambda_ps + sum_p Wn_ps (e_ps - mu_s)(e_ps - mu_s)^T``
+    and the hits ``sum_p Wn_ps h_ps``. numpy's order: ``active[:, slots]`` holds each slot's particles contiguous, so
+    E is a pairwise sum (:func:`_pairwise_sum`) and the hits einsum a contiguous reduction (:func:`_einsum_dot`);
+    the mean and covariance einsums add the particles in order (``out = a b + out``, ``(Wn d_i) d_j``).
+    Returns (mu (S, 2), cov (S, 2, 2), E (S,), hits (S,)).
+    """
+    n_p, n_s = w.size, slots.size
+    exist = np.empty(n_s)
+    h = np.empty(n_s)
+    col = np.empty(n_p)
+    wn = np.empty((n_s, n_p))
+    for q in range(n_s):
+        l = slots[q]
+        for p in range(n_p):
+            col[p] = w[p] * (1.0 if active[p, l] else 0.0)
+        exist[q] = _pairwise_sum(col)
+        e = exist[q] if exist[q] > 0 else 1.0
+        for p in range(n_p):
+            wn[q, p] = col[p] / e
+            col[p] = float(hits[p, l])
+        h[q] = _einsum_dot(wn[q], col)
+    mu = np.zeros((n_s, 2))
+    spread = np.zeros((n_s, 2, 2))
+    own = np.zeros((n_s, 2, 2))
+    for q in range(n_s):
+        l = slots[q]
+        for p in range(n_p):
+            mu[q, 0] = wn[q, p] * mean[p, l, 0] + mu[q, 0]
+            mu[q, 1] = wn[q, p] * mean[p, l, 1] + mu[q, 1]
+        for p in range(n_p):
+            v = wn[q, p]
+            d0, d1 = mean[p, l, 0] - mu[q, 0], mean[p, l, 1] - mu[q, 1]
+            for i in range(2):
+                for j in range(2):
+                    own[q, i, j] = v * cov[p, l, i, j] + own[q, i, j]
+            spread[q, 0, 0] = (v * d0) * d0 + spread[q, 0, 0]
+            spread[q, 0, 1] = (v * d0) * d1 + spread[q, 0, 1]
+            spread[q, 1, 0] = (v * d1) * d0 + spread[q, 1, 0]
+            spread[q, 1, 1] = (v * d1) * d1 + spread[q, 1, 1]
+    return mu, own + spread, exist, h
+
+
+@njit
+def prune_slots(active: np.ndarray, last_seen: np.ndarray, hits: np.ndarray, used: np.ndarray, cycle: int,
+                prune_after: int, min_hits: int, tentative_after: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """The landmarks :meth:`slam.core.rbpf.RBPFSlam._prune` keeps, the slots it empties and how many it drops.
+
+    With ``age = cycle - last_seen`` (cycles), a held landmark is dropped when ``age > prune_after`` or
+    (``hits < min_hits`` and ``age > tentative_after``). Only the slots in use are visited (a free slot is held by
+    no particle).
+
+    Args:
+        active: (P, L) bool, the landmarks each particle holds.
+        last_seen: (P, L) the cycle each was last updated.
+        hits: (P, L) its update count.
+        used: the slots in use, ascending.
+        cycle: the current cycle.
+        prune_after: cycles without an update before a landmark goes.
+        min_hits: updates that confirm a landmark.
+        tentative_after: cycles an unconfirmed landmark waits.
+
+    Returns:
+        ``(active & ~kill`` (P, L; ``active`` itself when nothing is dropped), the slots of ``used`` no particle
+        holds afterwards (ascending), the number of dropped landmarks).
+    """
+    n_p = active.shape[0]
+    n_kill = 0
+    for p in range(n_p):
+        for l in used:
+            if active[p, l]:
+                age = cycle - last_seen[p, l]
+                n_kill += age > prune_after or (hits[p, l] < min_hits and age > tentative_after)
+    if n_kill == 0:
+        return active, np.empty(0, np.int64), 0
+    after = active.copy()
+    for p in range(n_p):
+        for l in used:
+            if active[p, l]:
+                age = cycle - last_seen[p, l]
+                if age > prune_after or (hits[p, l] < min_hits and age > tentative_after):
+                    after[p, l] = False
+    held = np.zeros(used.size, np.bool_)
+    for p in range(n_p):
+        for q in range(used.size):
+            held[q] |= after[p, used[q]]
+    return after, used[~held], n_kill
+
+
+@njit
+def pose_moments(w: np.ndarray, pose: np.ndarray, dth: np.ndarray) -> tuple[float, float, float, float, float]:
+    """The weighted mean position and the variances of :meth:`slam.core.rbpf.RBPFSlam._estimate`.
+
+    ``x = sum_p w_p x_p``, ``y = sum_p w_p y_p``, ``var_x = sum_p w_p (x_p - x)^2``, ``var_y`` alike and
+    ``var_th = sum_p w_p dth_p^2`` (``dth`` the headings' wrapped offsets from their circular mean, from numpy),
+    each product array summed as ``np.sum`` sums it (:func:`_pairwise_sum`). Returns (x, y, var_x, var_y, var_th).
+    """
+    n_p = w.size
+    col = np.empty(n_p)
+    for p in range(n_p):
+        col[p] = w[p] * pose[p, 0]
+    x = _pairwise_sum(col)
+    for p in range(n_p):
+        col[p] = w[p] * pose[p, 1]
+    y = _pairwise_sum(col)
+    for p in range(n_p):
+        d = pose[p, 0] - x
+        col[p] = w[p] * (d * d)
+    var_x = _pairwise_sum(col)
+    for p in range(n_p):
+        d = pose[p, 1] - y
+        col[p] = w[p] * (d * d)
+    var_y = _pairwise_sum(col)
+    for p in range(n_p):
+        col[p] = w[p] * (dth[p] * dth[p])
+    return x, y, var_x, var_y, _pairwise_sum(col)
+
+
+@njit
+def cluster_fusion(points: np.ndarray, labels: np.ndarray, cov: np.ndarray,
+                   n_clusters: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`slam.core.association.cluster_covariance`: the information fusion of each cluster's points.
+
+    Point i (position ``points[i, :2]``, covariance ``cov[i]``, cluster ``labels[i]``): ``I_i = Sigma_i^-1``
+    (``[[s11, -s01], [-s01, s00]] / max(det, 1e-300)``); per cluster, in point order (``np.bincount``'s sums),
+    ``J_c = sum_i I_i`` and ``b_c = sum_i I_i x_i``; ``Sigma_c = J_c^-1`` the same way, ``x_c = Sigma_c b_c``.
+    Returns (x_c (C, 2), Sigma_c (C, 2, 2)).
+    """
+    info = np.zeros((n_clusters, 3))
+    vec = np.zeros((n_clusters, 2))
+    for i in range(labels.size):
+        a, b, d = cov[i, 0, 0], cov[i, 0, 1], cov[i, 1, 1]
+        det = max(a * d - b * b, 1e-300)
+        i00, i01, i11 = d / det, -b / det, a / det
+        x, y = points[i, 0], points[i, 1]
+        c = labels[i]
+        info[c, 0] += i00
+        info[c, 1] += i01
+        info[c, 2] += i11
+        vec[c, 0] += i00 * x + i01 * y
+        vec[c, 1] += i01 * x + i11 * y
+    xy = np.empty((n_clusters, 2))
+    out = np.empty((n_clusters, 2, 2))
+    for c in range(n_clusters):
+        a, b, d = info[c, 0], info[c, 1], info[c, 2]
+        det = max(a * d - b * b, 1e-300)
+        c00, c01, c11 = d / det, -b / det, a / det
+        out[c, 0, 0], out[c, 1, 1], out[c, 0, 1], out[c, 1, 0] = c00, c11, c01, c01
+        xy[c, 0] = c00 * vec[c, 0] + c01 * vec[c, 1]
+        xy[c, 1] = c01 * vec[c, 0] + c11 * vec[c, 1]
+    return xy, out

@@ -117,6 +117,8 @@ _LOG2PI = math.log(2.0 * math.pi)
 VARIANTS = ("fastslam2", "fastslam1")
 ASSOCIATIONS = ("mahalanobis", "nearest")
 NOISE_MODELS = ("per_point", "fixed")
+_EYE2 = np.eye(2)
+_EYE2.setflags(write=False)
 
 
 def log_sum_exp(a: np.ndarray) -> np.float64:
@@ -196,8 +198,8 @@ class SlamConfig:
     threshold (m/s). min_range_m: observations closer than this are ignored (m).
     max_retired: cap on archived landmarks. retire_min_hits: updates needed to
     archive a pruned landmark. kernels: "numba" (default: the Mahalanobis association, the
-    FastSLAM 2.0 proposal sums and the ICP fit compiled, :mod:`slam.core.kernels`) | "numpy" (the
-    reference; the same results to round-off).
+    FastSLAM 2.0 proposal, the landmark update, the particle-weighted estimates, the pruning, the cluster fusion
+    and the ICP fit compiled, :mod:`slam.core.kernels`) | "numpy" (the reference; the same results to round-off).
 
     Bounds: Mahalanobis gates and distances at most 1e3, std values 1e3 m (accelerations 1e3), distances
     1e4 m, cycle counts 1e9; ``n_particles x max_landmarks`` state within the memory limit
@@ -444,8 +446,8 @@ class RBPFSlam:
         obs, labels = cluster_points(pts, c.cluster_radius_m, kernels=c.kernels)
         Q = np.zeros((0, 2, 2))
         if len(obs):
-            obs[:, :2], Q = cluster_covariance(pts, labels, cov, len(obs))
-        Q = Q + c.measurement_floor_m**2 * np.eye(2)
+            obs[:, :2], Q = cluster_covariance(pts, labels, cov, len(obs), kernels=c.kernels)
+        Q = Q + c.measurement_floor_m**2 * _EYE2
         far = np.hypot(obs[:, 0], obs[:, 1]) >= c.min_range_m
         return Observations(obs[far, :2], Q[far], obs[far, 3], len(pts))
 
@@ -496,18 +498,19 @@ class RBPFSlam:
         used = np.flatnonzero(self.slot_used)
         if M == 0 or used.size == 0:
             return np.full((P, M), NEW, dtype=np.int64)
+        if c.association == "mahalanobis" and c.kernels == "numba":  # the same frames, distances and rounds, compiled
+            from slam.core.kernels import mahalanobis_association_at
+
+            th = self.pose[:, 2]
+            return mahalanobis_association_at(self.pose, np.cos(th), np.sin(th), obs.z, *self._observation_with_pose(obs),
+                                              self.mean, self.cov, self.active, used, c.gate_mahalanobis**2,
+                                              c.new_gate_mahalanobis**2, c.association_rounds)
         obs_map = to_map_frame(obs.z, self.pose)  # (P, M, 2)
         if c.association == "nearest":
             sub, _ = associate(obs_map, self.mean[:, used], self.active[:, used], c.delta_m)
         else:
             cth, sth = np.cos(self.pose[:, 2])[:, None], np.sin(self.pose[:, 2])[:, None]
             a00, a01, a11 = rotate_sym2(cth, sth, *self._observation_with_pose(obs))  # (P, M)
-            if c.kernels == "numba":  # the same distances and rounds per particle, compiled
-                from slam.core.kernels import mahalanobis_association
-
-                sub = mahalanobis_association(obs_map, a00, a01, a11, self.mean, self.cov, self.active, used,
-                                              c.gate_mahalanobis**2, c.new_gate_mahalanobis**2, c.association_rounds)
-                return np.where(sub >= 0, used[np.maximum(sub, 0)], sub)
             lam = self.cov[:, used]  # (P, L, 2, 2)
             s00 = a00[:, :, None] + lam[:, None, :, 0, 0]
             s01 = a01[:, :, None] + lam[:, None, :, 0, 1]
@@ -548,7 +551,7 @@ class RBPFSlam:
         if self.config.kernels == "numba":  # the same operations pair by pair, compiled
             from slam.core.kernels import proposal_terms
 
-            H, Si, nu, det = proposal_terms(self.pose[pp], cth, sth, obs.z[mm], obs.Q[mm], self.mean, self.cov, pp, ll)
+            H, Si, nu, det = proposal_terms(self.pose, cth, sth, obs.z, obs.Q, self.mean, self.cov, pp, mm, ll)
             return H, Si, nu, np.log(det)
         d = self.mean[pp, ll] - self.pose[pp, :2]
         hx, hy = cth * d[:, 0] + sth * d[:, 1], -sth * d[:, 0] + cth * d[:, 1]
@@ -563,24 +566,26 @@ class RBPFSlam:
         return H, Si, nu, np.log(det)
 
     def _sample_proposal(self, idx: np.ndarray, obs: Observations) -> tuple[np.ndarray, np.ndarray]:
-        """FastSLAM 2.0: sample every pose from its measurement-updated proposal (module docstring)."""
+        """FastSLAM 2.0: sample every pose from its measurement-updated proposal (module docstring).
+
+        ``Lambda_p = Sigma_p^-1 + sum_k H_k^T S_k^-1 H_k``, ``g = sum_k H_k^T S_k^-1 nu_k``, ``delta = Lambda_p^-1 g``;
+        joint compatibility drops the pairs with ``r^T S^-1 r > gate^2``, ``r = nu - H delta``, and solves once
+        more; ``p ~ N(mu + delta, Lambda_p^-1)``. Returns (log w increment (P,), idx without the dropped pairs).
+        """
         c = self.config
+        if c.kernels == "numba":
+            return self._sample_proposal_compiled(idx, obs)
         P = c.n_particles
         pp, mm = _pairs(idx)
         H, Si, nu, logdet = self._proposal_terms(pp, mm, idx[pp, mm], obs)
         prior_var = np.maximum(self.pose_var, 1e-18)
         ok = np.ones(pp.size, dtype=bool)
         for attempt in range(2 if c.joint_compatibility else 1):
-            if c.kernels == "numba":  # the same sums per particle, compiled
-                from slam.core.kernels import proposal_information
-
-                info, g = proposal_information(pp, H, Si, nu, ok, P)
-            else:
-                HtSi = np.einsum("kia,kij->kaj", H, Si) * ok[:, None, None]  # (K, 3, 2)
-                info = np.zeros((P, 3, 3))
-                np.add.at(info, pp, np.einsum("kaj,kjb->kab", HtSi, H))
-                g = np.zeros((P, 3))
-                np.add.at(g, pp, np.einsum("kaj,kj->ka", HtSi, nu))
+            HtSi = np.einsum("kia,kij->kaj", H, Si) * ok[:, None, None]  # (K, 3, 2)
+            info = np.zeros((P, 3, 3))
+            np.add.at(info, pp, np.einsum("kaj,kjb->kab", HtSi, H))
+            g = np.zeros((P, 3))
+            np.add.at(g, pp, np.einsum("kaj,kj->ka", HtSi, nu))
             info += np.diag(1.0 / prior_var)
             cov = np.linalg.inv(info)
             delta = np.einsum("pab,pb->pa", cov, g)
@@ -604,17 +609,47 @@ class RBPFSlam:
         self.pose[:, 2] = wrap_angle(self.pose[:, 2])
         return loglik, idx
 
+    def _sample_proposal_compiled(self, idx: np.ndarray, obs: Observations) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_sample_proposal` on the compiled kernels: the information sums with the prior
+        (:func:`slam.core.kernels.proposal_prior_information`), the shift ``delta`` and the joint-compatibility test
+        (:func:`~slam.core.kernels.proposal_shift`), the weight and the draw (:func:`~slam.core.kernels.proposal_sample`),
+        numpy's sums in numpy's order; the 3 x 3 inverse, log-determinant and Cholesky factor stay numpy's (LAPACK)."""
+        from slam.core.kernels import proposal_prior_information, proposal_sample, proposal_shift
+
+        c = self.config
+        P = c.n_particles
+        pp, mm = _pairs(idx)
+        H, Si, nu, logdet = self._proposal_terms(pp, mm, idx[pp, mm], obs)
+        prior_var = np.maximum(self.pose_var, 1e-18)
+        ok = np.ones(pp.size, dtype=bool)
+        info, g = proposal_prior_information(pp, H, Si, nu, ok, prior_var, P)
+        cov = np.linalg.inv(info)
+        delta, sym, bad, n_bad = proposal_shift(cov, g, pp, H, Si, nu, c.gate_mahalanobis**2, c.joint_compatibility)
+        if n_bad:  # drop the incompatible pairs, solve once more
+            ok = ~bad
+            idx = idx.copy()
+            idx[pp[bad], mm[bad]] = DROPPED
+            info, g = proposal_prior_information(pp, H, Si, nu, ok, prior_var, P)
+            cov = np.linalg.inv(info)
+            delta, sym, _, _ = proposal_shift(cov, g, pp, H, Si, nu, 0.0, False)
+        logdet_post = np.sum(np.log(prior_var)) + np.linalg.slogdet(info)[1]
+        chol = np.linalg.cholesky(sym)
+        loglik = proposal_sample(pp, ok, nu, Si, logdet, g, delta, logdet_post, chol, self.rng.standard_normal((P, 3)),
+                                 self.pose, _LOG2PI)
+        self.pose[:, 2] = wrap_angle(self.pose[:, 2])
+        return loglik, idx
+
     def _landmark_update(self, pp, mm, ll, obs: Observations) -> np.ndarray:
         """Kalman update of the matched landmarks at the particles' poses; log N(nu; 0, S) per pair."""
-        pose = self.pose[pp]
-        cth, sth = np.cos(pose[:, 2]), np.sin(pose[:, 2])
-        z = obs.z[mm]
+        th = self.pose[pp, 2]
+        cth, sth = np.cos(th), np.sin(th)
         if self.config.kernels == "numba":  # the same operations pair by pair, compiled, in place
             from slam.core.kernels import landmark_update
 
-            maha, det = landmark_update(pose, cth, sth, z, obs.Q[mm], self.mean, self.cov, self.hits, self.last_seen,
-                                        pp, ll, self.cycle)
+            maha, det = landmark_update(self.pose, cth, sth, obs.z, obs.Q, self.mean, self.cov, self.hits,
+                                        self.last_seen, pp, mm, ll, self.cycle)
             return -0.5 * maha - _LOG2PI - 0.5 * np.log(det)
+        pose, z = self.pose[pp], obs.z[mm]
         nu = pose[:, :2] + np.stack([cth * z[:, 0] - sth * z[:, 1], sth * z[:, 0] + cth * z[:, 1]], 1) - self.mean[pp, ll]
         q00, q01, q11 = rotate_sym2(cth, sth, obs.Q[mm, 0, 0], obs.Q[mm, 0, 1], obs.Q[mm, 1, 1])
         lam = self.cov[pp, ll]
@@ -727,8 +762,17 @@ class RBPFSlam:
         self.logw = np.full(P, -math.log(P))
 
     def _slot_estimates(self, slots: np.ndarray):
-        """Weighted landmark statistics for ``slots``: mean (S,2), cov (S,2,2), existence, hits."""
+        """Weighted landmark statistics for ``slots``: mean (S,2), cov (S,2,2), existence, hits.
+
+        ``W_ps = w_p [p holds s]``, existence ``E_s = sum_p W_ps``, ``Wn = W / E``; ``mu_s = sum_p Wn_ps e_ps``,
+        ``Sigma_s = sum_p Wn_ps (Lambda_ps + (e_ps - mu_s)(e_ps - mu_s)^T)``, hits ``sum_p Wn_ps h_ps``
+        (compiled: :func:`slam.core.kernels.slot_estimates`, the same sums in the same order).
+        """
         w = self.weights
+        if self.config.kernels == "numba" and self.config.n_particles <= 4096:
+            from slam.core.kernels import slot_estimates
+
+            return slot_estimates(w, self.active, self.mean, self.cov, self.hits, slots)
         W = w[:, None] * self.active[:, slots]  # (P, S)
         exist = W.sum(axis=0)
         Wn = W / np.where(exist > 0, exist, 1.0)
@@ -756,11 +800,12 @@ class RBPFSlam:
     def _prune(self) -> None:
         """Drop landmarks not re-observed for K cycles; free empty slots."""
         c = self.config
-        if c.kernels == "numba":  # the same test per held landmark, compiled, one pass
-            from slam.core.kernels import prune_mask
+        if c.kernels == "numba":  # the same test per held landmark, compiled, over the slots in use
+            from slam.core.kernels import prune_slots
 
-            after, n_kill = prune_mask(self.active, self.last_seen, self.hits, self.cycle, c.prune_after_cycles,
-                                       c.min_hits, c.tentative_prune_after_cycles)
+            after, gone, n_kill = prune_slots(self.active, self.last_seen, self.hits, np.flatnonzero(self.slot_used),
+                                              self.cycle, c.prune_after_cycles, c.min_hits,
+                                              c.tentative_prune_after_cycles)
             if n_kill == 0:
                 return
         else:
@@ -772,7 +817,7 @@ class RBPFSlam:
             if not kill.any():
                 return
             after = self.active & ~kill
-        gone = np.flatnonzero(self.slot_used & ~after.any(axis=0))
+            gone = np.flatnonzero(self.slot_used & ~after.any(axis=0))
         self._retire(gone)  # statistics from the state before the kill
         self.active = after
         self.slot_used[gone] = False
@@ -780,12 +825,18 @@ class RBPFSlam:
     def _estimate(self) -> SlamEstimate:
         c = self.config
         w = self.weights
-        x = float(np.sum(w * self.pose[:, 0]))
-        y = float(np.sum(w * self.pose[:, 1]))
         th = circular_mean(self.pose[:, 2], w)
-        sx = math.sqrt(max(float(np.sum(w * (self.pose[:, 0] - x) ** 2)), 0.0))
-        sy = math.sqrt(max(float(np.sum(w * (self.pose[:, 1] - y) ** 2)), 0.0))
-        sth = math.sqrt(max(float(np.sum(w * wrap_angle(self.pose[:, 2] - th) ** 2)), 0.0))
+        if c.kernels == "numba":  # the same products and sums, compiled
+            from slam.core.kernels import pose_moments
+
+            x, y, vx, vy, vth = pose_moments(w, self.pose, wrap_angle(self.pose[:, 2] - th))
+        else:
+            x = float(np.sum(w * self.pose[:, 0]))
+            y = float(np.sum(w * self.pose[:, 1]))
+            vx = float(np.sum(w * (self.pose[:, 0] - x) ** 2))
+            vy = float(np.sum(w * (self.pose[:, 1] - y) ** 2))
+            vth = float(np.sum(w * wrap_angle(self.pose[:, 2] - th) ** 2))
+        sx, sy, sth = (math.sqrt(max(v, 0.0)) for v in (vx, vy, vth))
         used = np.flatnonzero(self.slot_used)
         if used.size:
             mu, cov, exist, hits = self._slot_estimates(used)
