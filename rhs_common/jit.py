@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import subprocess
 import sys
 import time
 import types
@@ -62,9 +63,10 @@ if TYPE_CHECKING:
     import numpy as np
 
 __all__ = [
-    "COMPILE_LOCK", "KERNELS", "LOCK_STALE_S", "NOTICE", "QUIET_ENV", "KernelCacheWarning", "KernelTable", "Tiered",
-    "background_compile_running", "cache_index", "compile_lock", "compile_stats", "discard_cache_entry", "njit",
-    "numba_module", "python_body", "sort_small", "warm_cache", "watch_compiles",
+    "BACKGROUND_SWITCH", "COMPILE_LOCK", "KERNELS", "LOCK_STALE_S", "NOTICE", "QUIET_ENV", "KernelCacheWarning",
+    "KernelTable", "Tiered", "background_compile_running", "background_main", "cache_index", "compile_lock",
+    "compile_stats", "discard_cache_entry", "njit", "numba_module", "python_body", "sort_small",
+    "spawn_background_compile", "warm_cache", "watch_compiles",
 ]
 
 #: the kernel implementations a config may choose: compiled (default) or the numpy reference
@@ -75,6 +77,9 @@ _PACKAGE_ROOT = Path(__file__).resolve().parent.parent
 COMPILE_LOCK = "rhs-slam-background-compile.lock"
 #: a lock file older than this (s) belongs to a background compile that died: another may start
 LOCK_STALE_S = 300.0
+#: the environment variable that turns the background compiles off (``0``): their kernels then compile in the
+#: foreground; the background process itself runs with it at ``0`` (it starts no other)
+BACKGROUND_SWITCH = "RHS_SLAM_BACKGROUND_COMPILE"
 
 
 def _project_kernel(ev: Any) -> str:
@@ -565,6 +570,41 @@ def background_compile_running(kernel: Any) -> bool:
         except PermissionError:  # alive, another user's
             pass
     return True
+
+
+def spawn_background_compile(module: str, lock: Path) -> subprocess.Popen | None:
+    """Start ``python -m module --lock LOCK`` as a detached, single-threaded background compile holding ``lock``
+    (:data:`COMPILE_LOCK`: written with this pid first, then the child's, so it lives as long as the child);
+    None when the lock's folder cannot be written (nothing to share the kernels through: compile in the
+    foreground). The module's ``main`` is :func:`background_main`."""
+    try:
+        lock.parent.mkdir(parents=True, exist_ok=True)
+        lock.write_text(str(os.getpid()))
+    except OSError:
+        return None
+    env = {**os.environ, BACKGROUND_SWITCH: "0", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
+           "MKL_NUM_THREADS": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", module, "--lock", str(lock)], env=env, stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    with contextlib.suppress(OSError):
+        lock.write_text(str(proc.pid))
+    return proc
+
+
+def background_main(workload: Callable[[], None], description: str, argv: list[str] | None = None) -> int:
+    """The command line of a background compile (:func:`spawn_background_compile`): runs ``workload`` (the calls
+    whose kernels it compiles and caches), then removes the ``--lock`` file, also when the workload failed."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--lock", help="the lock file to remove when done")
+    a = ap.parse_args(argv)
+    try:
+        workload()
+    finally:
+        if a.lock:
+            Path(a.lock).unlink(missing_ok=True)
+    return 0
 
 
 def python_body(kernel: Any, *python_callees: str) -> Callable:

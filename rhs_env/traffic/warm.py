@@ -18,16 +18,15 @@ One background process per cache at a time: the lock file :data:`rhs_common.jit.
 
 from __future__ import annotations
 
-import contextlib
 import os
 import subprocess
 import sys
-from pathlib import Path
 from typing import Any
+
+from rhs_common.jit import BACKGROUND_SWITCH
 
 __all__ = ["background", "cached", "main", "ready", "start", "workload"]
 
-_ENV_SWITCH = "RHS_SLAM_BACKGROUND_COMPILE"
 #: this process' background compile (started once per process)
 _STARTED: list[subprocess.Popen] = []
 
@@ -56,7 +55,7 @@ def _foreground() -> bool:
     """The kernels compile in the foreground here: background compiles off, no JIT, or no cache to share through."""
     from rhs_common.jit import cache_index, numba_module
 
-    if os.environ.get(_ENV_SWITCH, "1") == "0" or numba_module().config.DISABLE_JIT:
+    if os.environ.get(BACKGROUND_SWITCH, "1") == "0" or numba_module().config.DISABLE_JIT:
         return True
     return cache_index(_entry_kernels()[0]) is None
 
@@ -83,7 +82,7 @@ def background() -> subprocess.Popen | None:
 
 def start() -> bool:
     """Start :func:`workload` in a background process (once per process, one per cache); True if it started."""
-    from rhs_common.jit import background_compile_running, compile_lock
+    from rhs_common.jit import background_compile_running, compile_lock, spawn_background_compile
 
     if _STARTED or _foreground():
         return False
@@ -91,18 +90,10 @@ def start() -> bool:
     lock = compile_lock(simulate)
     if lock is None or background_compile_running(simulate):
         return False
-    try:
-        lock.parent.mkdir(parents=True, exist_ok=True)
-        lock.write_text(str(os.getpid()))
-    except OSError:  # a cache folder we may not write: compile in the foreground
+    proc = spawn_background_compile("rhs_env.traffic.warm", lock)
+    if proc is None:  # a cache folder we may not write: compile in the foreground
         return False
-    env = {**os.environ, _ENV_SWITCH: "0", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-    proc = subprocess.Popen([sys.executable, "-m", "rhs_env.traffic.warm", "--lock", str(lock)], env=env,
-                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            start_new_session=True)
     _STARTED.append(proc)
-    with contextlib.suppress(OSError):
-        lock.write_text(str(proc.pid))  # the lock now lives as long as the background process
     return True
 
 
@@ -119,17 +110,9 @@ def workload() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    import argparse
+    from rhs_common.jit import background_main
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--lock", help="the lock file to remove when done")
-    a = ap.parse_args(argv)
-    try:
-        workload()
-    finally:
-        if a.lock:
-            Path(a.lock).unlink(missing_ok=True)
-    return 0
+    return background_main(workload, __doc__.splitlines()[0], argv)
 
 
 if __name__ == "__main__":

@@ -32,18 +32,17 @@ exits first, it says so in one stderr line (not with ``RHS_SLAM_QUIET=1``).
 
 from __future__ import annotations
 
-import contextlib
 import os
 import subprocess
 import sys
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from rhs_common.jit import BACKGROUND_SWITCH
+
 __all__ = ["main", "start", "synthetic_cloud", "workload"]
 
-_ENV_SWITCH = "RHS_SLAM_BACKGROUND_COMPILE"
 
 
 def _probes() -> tuple[Any, Any]:
@@ -57,9 +56,9 @@ def _probes() -> tuple[Any, Any]:
 
 def start() -> bool:
     """Start :func:`workload` in a background process if the kernels' cache is cold; True if it started."""
-    if os.environ.get(_ENV_SWITCH, "1") == "0":
+    if os.environ.get(BACKGROUND_SWITCH, "1") == "0":
         return False
-    from rhs_common.jit import background_compile_running, cache_index, compile_lock, numba_module
+    from rhs_common.jit import background_compile_running, cache_index, compile_lock, numba_module, spawn_background_compile
 
     if numba_module().config.DISABLE_JIT:
         return False
@@ -69,17 +68,9 @@ def start() -> bool:
         return False
     if background_compile_running(omp):
         return False
-    try:
-        lock.parent.mkdir(parents=True, exist_ok=True)
-        lock.write_text(str(os.getpid()))
-    except OSError:  # a cache folder we may not write: nothing to share through it
+    proc = spawn_background_compile("slam.gym.precompile", lock)
+    if proc is None:  # a cache folder we may not write: nothing to share through it
         return False
-    env = {**os.environ, _ENV_SWITCH: "0", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-    proc = subprocess.Popen([sys.executable, "-m", "slam.gym.precompile", "--lock", str(lock)], env=env,
-                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            start_new_session=True)
-    with contextlib.suppress(OSError):
-        lock.write_text(str(proc.pid))  # the lock now lives as long as the background process
     import atexit
 
     atexit.register(_tell_if_running, proc)
@@ -143,17 +134,9 @@ def workload(cycles: int = 8) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    import argparse
+    from rhs_common.jit import background_main
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--lock", help="the lock file to remove when done")
-    a = ap.parse_args(argv)
-    try:
-        workload()
-    finally:
-        if a.lock:
-            Path(a.lock).unlink(missing_ok=True)
-    return 0
+    return background_main(workload, __doc__.splitlines()[0], argv)
 
 
 if __name__ == "__main__":
