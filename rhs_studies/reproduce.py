@@ -133,8 +133,8 @@ STEPS: tuple[Step, ...] = (
     Step("long_drive", "long_drive.py", ("--seeds", "1700"), ("long_drive.json",), 1800,
          "a 3,000-cycle (10 min) highway SLAM drive, IDM + MOBIL at 15 m/s: NEES, KITTI drift, memory, step time "
          "against the cycle (~5 min per seed on a quiet core; the study's default drives seeds 1700-1702)"),
-    Step("racetrack_loops", "racetrack_loops.py", ("--seeds", "1710", "1711", "1712"), ("racetrack_loops.json",),
-         2400, "the racetrack over 5 laps with the loop closure off and on, then a keep_map episode (3 seeds)"),
+    Step("racetrack_loops", "racetrack_loops.py", (), ("racetrack_loops.json",),
+         2400, "the racetrack over 5 laps with the loop closure off and on, then a keep_map episode (10 seeds)"),
     Step("bc_from_dataset", "bc_from_dataset.py",
          ("--datasets", "data", "--dataset-id", "rhs-slam/highway-slam-fast/shipped-v0", "--out", "runs/bc", "--labels",
           "decisions", "--like", "agents/data/shipped.zip", "--eval-env", "rhs-highway-slam-v0", "--eval-episodes", "30",
