@@ -16,7 +16,8 @@ things, and compares each value with the one recorded in ``results/fingerprints.
 ``openblas-*``      OpenBLAS forced to its Sandybridge (AVX) and SkylakeX (AVX-512) kernels
 ``numpy-avx2``      numpy's SIMD dispatch capped below AVX-512 (``NPY_DISABLE_CPU_FEATURES``)
 ``torch-avx2``      torch's kernels capped at AVX2 (``ATEN_CPU_CAPABILITY``), MKL in AVX2 mode
-``avx2-machine``    all of the above at once: what an AVX2-only CPU computes
+``avx2-machine``    all of the above at once and numba's code for Haswell (``NUMBA_CPU_NAME``): what an
+                    AVX2-only CPU computes (this and ``numpy-avx2`` compile the kernels in a cache of their own)
 ``--python L=PY``   another environment named ``L``, e.g. one resolved to the oldest allowed
                     dependencies (``uv pip install --resolution lowest-direct -e .``)
 ==================  =====================================================================
@@ -53,6 +54,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -75,8 +77,12 @@ SETTINGS: dict[str, dict[str, str]] = {
     "numpy-avx2": {"NPY_DISABLE_CPU_FEATURES": _AVX512_OFF},
     "torch-avx2": {"ATEN_CPU_CAPABILITY": "avx2", "MKL_CBWR": "AVX2"},
     "avx2-machine": {"OPENBLAS_CORETYPE": "Haswell", "NPY_DISABLE_CPU_FEATURES": _AVX512_OFF,
-                     "ATEN_CPU_CAPABILITY": "avx2", "MKL_CBWR": "AVX2"},
+                     "ATEN_CPU_CAPABILITY": "avx2", "MKL_CBWR": "AVX2", "NUMBA_CPU_NAME": "haswell"},
 }
+#: settings whose kernels are compiled in a numba cache of their own, as on another machine: a cache compiled with
+#: numpy's full dispatch and loaded under ``NPY_DISABLE_CPU_FEATURES`` crashed in the traffic core (AMD EPYC with
+#: AVX-512, numba 0.68.1, numpy 2.4.6), which a machine without AVX-512 never meets (it compiles its own)
+OWN_NUMBA_CACHE = frozenset({"numpy-avx2", "avx2-machine"})
 
 
 def _steps(only: list[str] | None):
@@ -104,10 +110,11 @@ def worker(names: list[str]) -> None:
 def run_setting(label: str, env: dict[str, str], names: list[str], python: str) -> dict[str, Any]:
     """The fingerprints of ``names`` computed by ``python`` in a fresh process with ``env`` added."""
     t0 = time.time()
-    full = study_env(env, blas_single_thread=False)  # one OpenMP thread, as the tests run; a setting may add more
-    proc = subprocess.run([python, "-m", "rhs_studies.upkeep.fingerprint_tolerance", "--worker", *names], cwd=ROOT, env=full,
-                          capture_output=True,
-                          text=True, check=False)
+    with tempfile.TemporaryDirectory(prefix=f"rhs-fingerprint-{label}-") as cache:
+        own = {"NUMBA_CACHE_DIR": cache} if label in OWN_NUMBA_CACHE else {}
+        full = study_env({**env, **own}, blas_single_thread=False)  # one OpenMP thread, as the tests run
+        proc = subprocess.run([python, "-m", "rhs_studies.upkeep.fingerprint_tolerance", "--worker", *names], cwd=ROOT,
+                              env=full, capture_output=True, text=True, check=False)
     if proc.returncode != 0:
         raise RuntimeError(f"setting {label} failed (exit {proc.returncode}):\n{proc.stderr[-3000:]}")
     print(f"{label:22s} {time.time() - t0:6.1f} s", flush=True)
