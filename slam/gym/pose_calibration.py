@@ -106,7 +106,7 @@ def calibration_key(scene: str, kwargs: dict[str, Any], env: gym.Env) -> str:
     """12 hex digits naming the configuration's calibration (module docstring).
 
     Args:
-        scene: the scene's class name in :mod:`rhs_env.envs` (``RHSHighwayEnv``, ...).
+        scene: the scene's class name (``RHSHighwayEnv``, ``RHSRacetrackEnv``, ...: :func:`slam.gym.envs.scene_class`).
         kwargs: the ``gym.make`` settings the env was made with.
         env: the env they made (its resolved radar, SLAM and pipeline settings enter the key).
 
@@ -131,7 +131,9 @@ def cached_path(key: str) -> Path:
 
 def _swap_to_idm(env: gym.Env) -> None:
     """highway-env's IDM + MOBIL driver in the ego's seat (``IDMVehicle.create_from``; the env's ``road.act()``
-    then drives it; the meta-action sent is ignored), as ``agents.evaluate.IDMMobilPolicy`` does."""
+    then drives it; the meta-action sent is ignored), as ``agents.evaluate.IDMMobilPolicy`` does. An ego of a
+    steering action (the racetrack's plain ``Vehicle``) is given its lane as the target lane first, as the
+    racetrack study's driver does, and the lane's speed limit as its desired speed (30 m/s without either)."""
     from highway_env.vehicle.behavior import IDMVehicle
 
     base: Any = env.unwrapped
@@ -139,8 +141,12 @@ def _swap_to_idm(env: gym.Env) -> None:
     if ego is None or isinstance(ego, IDMVehicle):
         return
     speeds = getattr(base.action_type, "target_speeds", None)
+    limit = getattr(getattr(ego, "lane", None), "speed_limit", None)
+    target = float(np.max(speeds)) if speeds is not None else float(limit) if limit else 30.0
+    if not hasattr(ego, "target_lane_index"):
+        ego.target_lane_index, ego.route, ego.target_speed = ego.lane_index, None, target
     idm = IDMVehicle.create_from(ego)
-    idm.target_speed = float(np.max(speeds)) if speeds is not None else 30.0
+    idm.target_speed = target
     idm.crashed = ego.crashed
     vehicles = base.road.vehicles
     vehicles[next(i for i, v in enumerate(vehicles) if v is ego)] = idm
@@ -166,10 +172,11 @@ def calibration_rows(env: gym.Env, seed: int, cycles: int, policy: Any = None) -
     pipe = slam_wrapper(env).pipeline
     obs, info = env.reset(seed=seed)
     rows = []
+    ignored = np.zeros(env.action_space.shape, env.action_space.dtype) if isinstance(env.action_space, gym.spaces.Box) else 1
     for _ in range(cycles):
         if policy is None:
             _swap_to_idm(env)
-            action: Any = 1
+            action: Any = ignored
         else:
             action = np.asarray(policy.predict(obs, deterministic=True)[0])
             action = int(action) if action.ndim == 0 else action
@@ -190,7 +197,7 @@ def calibrate(scene: str, kwargs: dict[str, Any], seeds: tuple[int, ...] = CALIB
     """Fit the configuration's factors on ``seeds`` drives of ``cycles`` cycles (module docstring).
 
     Args:
-        scene: the scene's class name in :mod:`rhs_env.envs`.
+        scene: the scene's class name (:func:`slam.gym.envs.scene_class`).
         kwargs: the ``gym.make`` settings of the configuration.
         seeds: the calibration drives' seeds.
         cycles: cycles per drive.
@@ -272,7 +279,7 @@ def attach(env: gym.Env, scene: str, kwargs: dict[str, Any],
 
     Args:
         env: a SLAM env made with ``kwargs`` and ``pose_covariance="calibrated"``.
-        scene: the scene's class name in :mod:`rhs_env.envs`.
+        scene: the scene's class name (:func:`slam.gym.envs.scene_class`).
         kwargs: its ``gym.make`` settings.
         make: ``make(scene, kwargs)`` makes a SLAM env (:func:`slam.gym.envs.make_slam_env`): the calibration's.
 
