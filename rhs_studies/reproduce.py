@@ -145,7 +145,7 @@ STEPS: tuple[Step, ...] = (
          no_fingerprint="needs a Minari dataset recorded first (rhs-slam record, hours for 100k steps)", on_request=True),
     Step("campaign_curves", "campaign.py", ("curves", "--recipe", "ppo_scratch", "--seeds", "0", "1", "2"),
          ("campaign_ppo_scratch.json",), 60, "the training campaign's learning curves, read from its committed "
-         "checkpoints (agents/data/campaign/; the training itself: scripts/campaign.py train, a chunk at a time)",
+         "checkpoints (campaign/; the training itself: scripts/campaign.py train, a chunk at a time)",
          no_fingerprint="a record of training runs (env steps, returns, wall time), read from the committed state"),
     Step("campaign_floor", "campaign_report.py", ("floor", "--steps", "150", "--ppo-steps", "640"),
          ("campaign_floor.json",), 300, "env steps per CPU second of the fast and exact SLAM envs and of the "

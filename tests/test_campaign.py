@@ -110,3 +110,16 @@ def test_campaign_round_robin_deadline_and_curves(tmp_path):
     assert campaign._deadline(None) is None
     with pytest.raises(ValueError, match="--until"):
         campaign._deadline("6h")
+
+
+def test_the_checkpoints_live_outside_the_packages():
+    """The campaign's checkpoints are a study's state, committed in the repository but not package data: their
+    folder is none of the packages pyproject.toml ships, so they stay out of the wheel."""
+    from pathlib import Path
+
+    tomllib = pytest.importorskip("tomllib")  # Python 3.11+
+    root = Path(__file__).resolve().parent.parent
+    include = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]["find"]["include"]
+    top = campaign.CAMPAIGN_DIR.relative_to(root).parts[0]
+    assert not any(top == pattern.rstrip("*") for pattern in include), (top, include)
+    assert not (campaign.CAMPAIGN_DIR / "__init__.py").exists()

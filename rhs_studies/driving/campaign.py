@@ -53,8 +53,9 @@ from rhs_env.registration import HIGHWAY_SLAM_FAST_ID, HIGHWAY_SLAM_ID
 __all__ = ["CAMPAIGN_DIR", "RECIPES", "Recipe", "curves", "load_state", "new_model", "run_dir", "train_chunk", "train_campaign",
            "training_seed", "validation_seeds"]
 
-#: where the shipped campaign's checkpoints live (committed, small)
-CAMPAIGN_DIR = Path(__file__).resolve().parents[2] / "agents" / "data" / "campaign"
+#: where the campaign's checkpoints live: ``campaign/`` of the repository (committed, small, and not in the wheel:
+#: they are a study's state, not a policy the package ships)
+CAMPAIGN_DIR = Path(__file__).resolve().parents[2] / "campaign"
 #: the campaign's env settings: the students' five target speeds 10-30 m/s (agents/data/rl/*.json) on the default
 #: radar (the fast radar ships the default radar's calibration only; the students' 5 degree scan grid would need
 #: ``radar_model="fast-calibrate"``, :mod:`rhs_env.fast_radar`)
