@@ -65,7 +65,7 @@ if TYPE_CHECKING:
 __all__ = [
     "BACKGROUND_SWITCH", "COMPILE_LOCK", "KERNELS", "LOCK_STALE_S", "NOTICE", "QUIET_ENV", "KernelCacheWarning",
     "KernelTable", "Tiered", "background_compile_running", "background_main", "cache_index", "compile_lock",
-    "compile_stats", "discard_cache_entry", "njit", "numba_module", "python_body", "sort_small",
+    "compile_stats", "discard_cache_entry", "njit", "numba_module", "numpy_dispatch_stamp", "python_body", "sort_small",
     "spawn_background_compile", "warm_cache", "watch_compiles",
 ]
 
@@ -346,6 +346,9 @@ def _checked_cache() -> type:
                 package = _package_stamp(py_func)
                 if package:
                     self._cache_file._source_stamp = (self._cache_file._source_stamp, package)
+                dispatch = numpy_dispatch_stamp()
+                if dispatch:
+                    self._cache_file._source_stamp = (self._cache_file._source_stamp, dispatch)
 
             def load_overload(self, sig: Any, target_context: Any) -> Any:
                 try:
@@ -368,6 +371,25 @@ def _checked_cache() -> type:
 
         _CHECKED_CACHE = CheckedCache
     return _CHECKED_CACHE
+
+
+def numpy_dispatch_stamp() -> tuple[str, ...]:
+    """numpy's SIMD dispatch in this process, when it goes past AVX2: the AVX-512 targets it uses, e.g.
+    ``("AVX512_SKX", ...)``; () without AVX-512 (or under ``NPY_DISABLE_CPU_FEATURES`` capping it).
+
+    Part of every kernel's cache stamp: the compiled traffic calls numpy's own AVX-512 SVML functions by address
+    where numpy dispatches to them (:mod:`rhs_env.traffic.npmath`), and numba's cache key holds the CPU but not
+    numpy's dispatch, so a kernel compiled with it and loaded by a process that capped it called a null
+    address (a segmentation fault). With the stamp such a process compiles its own.
+    """
+    import importlib
+
+    try:
+        umath = importlib.import_module("numpy._core._multiarray_umath")
+    except ImportError:  # numpy < 2
+        return ()
+    features = getattr(umath, "__cpu_features__", {})
+    return tuple(sorted(k for k, on in features.items() if on and k.startswith("AVX512")))
 
 
 def _package_stamp(py_func: Callable) -> tuple:

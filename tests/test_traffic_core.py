@@ -328,3 +328,27 @@ def test_drivers_see_the_same_traffic(driver):
     a, b = (scene_state(env) for env in envs)
     np.testing.assert_allclose(a, b, rtol=0, atol=POSITION_TOL)
     assert envs[1].unwrapped.traffic_sim == "compiled"
+
+
+@pytest.mark.skipif(not npmath.USE_SVML, reason="numpy dispatches to its AVX-512 SVML functions only on AVX-512 CPUs")
+def test_a_cache_compiled_with_numpys_avx512_loads_under_a_capped_dispatch(tmp_path):
+    """The traffic kernels compiled where numpy dispatches to AVX-512 (they call its SVML functions), then run by a
+    process whose numpy is capped at AVX2 (``NPY_DISABLE_CPU_FEATURES``): the second compiles its own kernels
+    (:func:`rhs_common.jit.numpy_dispatch_stamp` is in the cache stamp) and steps the same traffic as
+    highway-env's numpy there; before, it loaded the first one's kernels and crashed on a null SVML address."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = ("import gymnasium as gym, rhs_env\n"
+              "env = gym.make('rhs-highway-v0', sim='compiled')\n"
+              "env.reset(seed=0)\n"
+              "for _ in range(5): env.step(1)\n"
+              "print('stepped')\n")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), "RHS_SLAM_BACKGROUND_COMPILE": "0", "OMP_NUM_THREADS": "1"}
+    root = Path(__file__).resolve().parent.parent
+    for extra in ({}, {"NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR"}):
+        proc = subprocess.run([sys.executable, "-c", script], cwd=root, env={**env, **extra}, capture_output=True,
+                              text=True, timeout=600, check=False)
+        assert proc.returncode == 0 and "stepped" in proc.stdout, (extra, proc.returncode, proc.stderr[-2000:])

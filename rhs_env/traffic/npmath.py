@@ -20,7 +20,9 @@ kernel for the CPU rounds each product (AMD EPYC, OpenBLAS 0.3.31's Zen kernel):
 numpy does here (:func:`numpy_dot_is_fma`, :func:`numpy_dot_is_plain`), and :func:`dot2` does the same.
 
 Cache. The choices are fixed when a kernel is compiled: :data:`USE_SVML` follows from the CPU and numba's target,
-both part of numba's cache key, so a cached kernel always matches the process that loads it.
+both part of numba's cache key, and from numpy's dispatch (``NPY_DISABLE_CPU_FEATURES`` can cap it), which every
+kernel's cache stamp holds (:func:`rhs_common.jit.numpy_dispatch_stamp`), so a cached kernel always matches the
+process that loads it.
 """
 
 from __future__ import annotations
