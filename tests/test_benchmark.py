@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 
 import numpy as np
@@ -71,8 +72,10 @@ def test_stage_table_and_start_line():
     several = {**start, "repeats": 3, "cold_runs_s": [11.0, 12.0, 31.0]}  # the median decides, every run is shown
     assert "median of 3 (cold: 11.0, 12.0, 31.0 s)" in "\n".join(benchmark._md_start({"start": several}))
     assert "background compile ended 40.0 s after" in "\n".join(benchmark._md_start({"start": {**start, "background_runs_s": [40.0]}}))
+    before = os.environ.get("RHS_SLAM_BACKGROUND_COMPILE")
     with pytest.raises(SystemExit):
         benchmark.main(["--sections", "start", "--start-repeats", "0"])
+    assert os.environ.get("RHS_SLAM_BACKGROUND_COMPILE") == before, "main() left the background compile switched off"
 
 
 def test_ratio_interval_brackets_the_ratio_and_narrows_with_blocks():

@@ -1191,15 +1191,30 @@ def main(argv: list[str] | None = None) -> int:
                     help="cold and warm starts measured (start section; the median is the result)")
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmark.json"))
     args = ap.parse_args(argv)
-    # the timed sections share no core with a background kernel compile (slam.gym.precompile); the start
-    # section's processes measure it as a new user meets it (bench_start switches it back on there)
-    os.environ["RHS_SLAM_BACKGROUND_COMPILE"] = "0"
     if args.start_repeats < 1:
         ap.error("--start-repeats must be at least 1")
     if args.env_runs < 1:
         ap.error("--env-runs must be at least 1")
     if args.train_repeats < 1:
         ap.error("--train-repeats must be at least 1")
+    # the timed sections share no core with a background kernel compile (slam.gym.precompile); the start
+    # section's processes measure it as a new user meets it (bench_start switches it back on there). The
+    # caller's setting is restored at the end (a test calling main() would otherwise leave it off for the rest)
+    from rhs_common.jit import BACKGROUND_SWITCH
+
+    before = os.environ.get(BACKGROUND_SWITCH)
+    os.environ[BACKGROUND_SWITCH] = "0"
+    try:
+        return _run_sections(args, argv)
+    finally:
+        if before is None:
+            os.environ.pop(BACKGROUND_SWITCH, None)
+        else:
+            os.environ[BACKGROUND_SWITCH] = before
+
+
+def _run_sections(args: argparse.Namespace, argv: list[str] | None) -> int:
+    """The sections of ``args`` run and written (:func:`main`)."""
     started = time.time()
     commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
     result: dict = {
