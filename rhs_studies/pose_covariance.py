@@ -242,7 +242,8 @@ def markdown(res: dict[str, Any]) -> str:
 
 
 def _merge(paths: list[str], out: Path, argv: list[str] | None) -> int:
-    """Write one results file from several runs' (disjoint configurations, the same seeds and cycles)."""
+    """Write one results file from several runs' (disjoint configurations, the same seeds and cycles); a merged
+    file among them brings the provenance of each run it was made of."""
     from rhs_common.output_files import write_text_atomic
 
     parts = [json.loads(Path(q).read_text()) for q in paths]
@@ -250,7 +251,7 @@ def _merge(paths: list[str], out: Path, argv: list[str] | None) -> int:
     if any(r["seeds"] != first["seeds"] or r["cycles"] != first["cycles"] for r in parts):
         raise SystemExit("--merge: the runs differ in seeds or cycles")
     res: dict[str, Any] = {"nees_band": first["nees_band"], "cycles": first["cycles"], "seeds": first["seeds"],
-                           "configs": {}, "runs_provenance": [r["provenance"] for r in parts]}
+                           "configs": {}, "runs_provenance": [p for r in parts for p in r.get("runs_provenance", [r["provenance"]])]}
     for r in parts:
         res["configs"].update(r["configs"])
     out.mkdir(parents=True, exist_ok=True)

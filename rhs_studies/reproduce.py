@@ -153,10 +153,11 @@ STEPS: tuple[Step, ...] = (
     Step("low_snr_slam", "low_snr_slam.py", ("--seeds", "100", "101", "102", "103", "104", "105", "106", "107"),
          ("low_snr_slam.json",), 900),
     Step("pose_covariance", "pose_covariance.py",
-         ("--configs", "default", "fast", "grid5", "policy_env", "dense", "--seeds", *(str(s) for s in range(12000, 12020)),
+         ("--configs", "default", "fast", "grid5", "policy_env", "dense", "phased", "random", "low_snr",
+          "--seeds", *(str(s) for s in range(12000, 12020)),
           "--cycles", "50", "--workers", "2"),
          ("pose_covariance.json",), 2400,
-         "NEES of the calibrated and adaptive pose covariances and of the drift densities, 5 configurations x 20 "
+         "NEES of the calibrated and adaptive pose covariances and of the drift densities, 8 configurations x 20 "
          "held-out seeds (each configuration calibrated at first use on seeds 13000-13009 unless shipped)",
          no_fingerprint="a calibration measurement of a report-only, opt-in covariance (pipeline option "
          "pose_covariance='calibrated'): no default path's numbers depend on it; its tests check it on a short drive"),

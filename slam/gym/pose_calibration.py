@@ -59,12 +59,15 @@ CALIBRATION_SEEDS = tuple(range(13000, 13010))
 CALIBRATION_CYCLES = 50
 #: the configurations whose calibrations the package ships (name -> env id, gym.make settings): the default env,
 #: the 5-degree grid of the shipped policies (their ``action`` setting does not enter the key), the dense env, the
-#: fast radar
+#: fast radar, and the claim study's other radars: the phased array, the random patterns and the low-SNR link
 SHIPPED_CONFIGS: dict[str, tuple[str, dict[str, Any]]] = {
     "default": ("rhs-highway-slam-v0", {}),
     "grid5": ("rhs-highway-slam-v0", {"radar": {"scan": {"grid_deg": 5}}}),
     "dense": ("rhs-dense-v0", {}),
     "fast": ("rhs-highway-slam-fast-v0", {}),
+    "phased": ("rhs-highway-slam-v0", {"antenna": "phased"}),
+    "random": ("rhs-highway-slam-v0", {"antenna": "random"}),
+    "low_snr": ("rhs-highway-slam-v0", {"radar": {"link": {"tx_power_dbm": 20.0}}}),
 }
 DATA_DIR = Path(__file__).resolve().parent.parent / "data" / "pose_calibration"
 #: gym.make settings that change only what the env reports, renders, how fast it runs, how long an episode lasts
