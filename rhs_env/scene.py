@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from rhs_common.geometry import rotation, wrap_angle
+from rhs_common.jit import KernelTable
 from rhs_common.validation import (
     build,
     check_choice,
@@ -523,18 +524,39 @@ def _face_scatterers(objs: list, ids: np.ndarray, static: np.ndarray, ego_motion
     motion, seen from the rotating ego frame: ``R^T (v_obj - v_ego) + w_obj x (q - c) - w_ego x q``.
     ``kernels="numba"``: the same operations compiled (:func:`rhs_env.kernels.face_scatterers`), else numpy.
     """
-    e_pos, e_head, e_vel, e_rate = (ego_motion[k][0] for k in ("pos", "heading", "vel", "yaw_rate"))
-    m = _motion_arrays(objs)
-    if kernels == "numba":
-        from rhs_env.kernels import face_scatterers
+    ego = tuple(ego_motion[k][0] for k in ("pos", "heading", "vel", "yaw_rate"))
+    faces = _STAGES.choose(kernels).faces  # the compiled or the numpy faces
+    return faces(_motion_arrays(objs), len(objs), ids, static, ego, cfg)
 
-        ego = np.array([e_pos[0], e_pos[1], e_head, e_vel[0], e_vel[1], e_rate], dtype=float)
-        xy, vel, rcs, box, segments = face_scatterers(m["pos"], m["heading"], m["vel"], m["yaw_rate"], m["length"],
-                                                      m["width"], ego, int(cfg.points_per_face), float(cfg.vehicle_rcs_m2))
-        return (Scatterers(xy=xy, velocity=vel, rcs=rcs, object_id=ids[box], is_static=static[box]),
-                Occluders(segments=segments, object_id=np.repeat(ids, 4)))
+
+#: the vehicles' faces in two implementations (:class:`rhs_common.jit.KernelTable`), chosen by the ``kernels`` of
+#: :func:`scene_scatterers` (the radar's ``RadarConfig.kernels``)
+_STAGES = KernelTable("rhs_env.scene")
+
+
+@_STAGES.stage("faces", "numba")
+def _faces_compiled(m: dict[str, np.ndarray], n_obj: int, ids: np.ndarray, static: np.ndarray, ego: tuple,
+                    cfg: ScatterConfig) -> tuple[Scatterers, Occluders]:
+    """:func:`_face_scatterers` of the ``n_obj`` boxes of motion ``m`` (:func:`_motion_arrays`) seen from ``ego``
+    (position, heading, velocity, yaw rate), the same operations compiled (:func:`rhs_env.kernels.face_scatterers`)."""
+    from rhs_env.kernels import face_scatterers
+
+    e_pos, e_head, e_vel, e_rate = ego
+    ego_row = np.array([e_pos[0], e_pos[1], e_head, e_vel[0], e_vel[1], e_rate], dtype=float)
+    xy, vel, rcs, box, segments = face_scatterers(m["pos"], m["heading"], m["vel"], m["yaw_rate"], m["length"],
+                                                  m["width"], ego_row, int(cfg.points_per_face), float(cfg.vehicle_rcs_m2))
+    return (Scatterers(xy=xy, velocity=vel, rcs=rcs, object_id=ids[box], is_static=static[box]),
+            Occluders(segments=segments, object_id=np.repeat(ids, 4)))
+
+
+@_STAGES.stage("faces", "numpy")
+def _faces_numpy(m: dict[str, np.ndarray], n_obj: int, ids: np.ndarray, static: np.ndarray, ego: tuple,
+                 cfg: ScatterConfig) -> tuple[Scatterers, Occluders]:
+    """:func:`_face_scatterers` of the ``n_obj`` boxes of motion ``m`` (:func:`_motion_arrays`) seen from ``ego``
+    (position, heading, velocity, yaw rate) in numpy (the reference)."""
+    e_pos, e_head, e_vel, e_rate = ego
     r_t = rotation(-e_head)  # world -> vehicle frame
-    n_obj, p = len(objs), cfg.points_per_face
+    p = cfg.points_per_face
     c = (m["pos"] - e_pos) @ r_t.T  # (V, 2) centres in the vehicle frame
     rot = rotation(m["heading"] - e_head)  # (V, 2, 2) object -> vehicle frame
     half = np.stack([m["length"], m["width"], m["length"], m["width"]], 1) / 2  # (V, 4)

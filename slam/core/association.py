@@ -46,6 +46,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from rhs_common.jit import KernelTable
+
 __all__ = [
     "NEW",
     "DROPPED",
@@ -66,6 +68,9 @@ NEW = -1
 #: association code: observation lost a conflict (another observation of the same
 #: cycle is closer to the same landmark) and is ignored in this particle
 DROPPED = -2
+#: the RANSAC, the clusters' components and their fusion in two implementations (:class:`rhs_common.jit.KernelTable`),
+#: chosen by the functions' ``kernels`` (the SLAM's ``SlamConfig.kernels``)
+_STAGES = KernelTable("slam.core.association")
 
 
 def static_mask(
@@ -154,13 +159,29 @@ def estimate_ego_velocity(
     i = rng.integers(0, n, n_hypotheses)
     j = rng.integers(0, n, n_hypotheses)
     sector = bearing_sectors(b, angular_bins)
-    if kernels == "numba":
-        from slam.core.kernels import doppler_ransac
+    fit = _STAGES.choose(kernels).velocity_fit  # the compiled or the numpy RANSAC
+    return fit(A, vr, i, j, sector, threshold, angular_bins, min_inliers, prior, max_change)
 
-        found, sol = doppler_ransac(A, vr, np.stack([i, j], axis=1), threshold, sector, angular_bins, min_inliers,
-                                    np.inf, np.zeros(2) if prior is None else np.asarray(prior, float)[:2],
-                                    int(prior is not None), float(max_change))
-        return sol if found else None
+
+@_STAGES.stage("velocity_fit", "numba")
+def _velocity_fit_compiled(A, vr, i, j, sector, threshold, angular_bins, min_inliers, prior, max_change) -> np.ndarray | None:
+    """The RANSAC of :func:`estimate_ego_velocity` on its point pairs ``(i, j)`` (rows of ``vr = A v``) in one
+    compiled call (:func:`slam.core.kernels.doppler_ransac`): solve, gate by the prior, score by ``sector``
+    coverage, refit."""
+    from slam.core.kernels import doppler_ransac
+
+    found, sol = doppler_ransac(A, vr, np.stack([i, j], axis=1), threshold, sector, angular_bins, min_inliers,
+                                np.inf, np.zeros(2) if prior is None else np.asarray(prior, float)[:2],
+                                int(prior is not None), float(max_change))
+    return sol if found else None
+
+
+@_STAGES.stage("velocity_fit", "numpy")
+def _velocity_fit_numpy(A, vr, i, j, sector, threshold, angular_bins, min_inliers, prior, max_change) -> np.ndarray | None:
+    """The RANSAC of :func:`estimate_ego_velocity` in numpy (the reference): each pair ``(i, j)`` solved (2 x 2),
+    scored by the ``sector`` coverage of its inliers, then their count, gated by the prior; least squares on the
+    winner's inliers."""
+    n = len(vr)
     a1, a2 = A[i], A[j]
     det = a1[:, 0] * a2[:, 1] - a1[:, 1] * a2[:, 0]
     good = np.abs(det) > 1e-3
@@ -216,18 +237,10 @@ def cluster_points(
         return np.zeros((0, 4)), np.zeros(0, dtype=int)
     if radius <= 0 or n == 1:
         return pts.copy(), np.arange(n)
-    if kernels == "numba":
-        from slam.core.kernels import radius_components
-
-        n_c, labels = radius_components(np.ascontiguousarray(pts[:, :2]), float(radius))
-        if n_c == n:  # no pair within the radius
-            return pts.copy(), np.arange(n)
-    else:
-        pairs = cKDTree(pts[:, :2]).query_pairs(radius, output_type="ndarray")
-        if len(pairs) == 0:
-            return pts.copy(), np.arange(n)
-        graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-        n_c, labels = connected_components(graph, directed=False)
+    components = _STAGES.choose(kernels).components(pts, radius)
+    if components is None:  # no pair within the radius
+        return pts.copy(), np.arange(n)
+    n_c, labels = components
     amp = np.maximum(pts[:, 3], 0.0)
     w = np.bincount(labels, weights=amp, minlength=n_c)
     cnt = np.bincount(labels, minlength=n_c).astype(float)
@@ -241,6 +254,28 @@ def cluster_points(
     obs[:, 3] = -np.inf
     np.maximum.at(obs[:, 3], labels, pts[:, 3])
     return obs, labels
+
+
+@_STAGES.stage("components", "numba")
+def _components_compiled(pts: np.ndarray, radius: float) -> tuple[int, np.ndarray] | None:
+    """The single-linkage clusters of :func:`cluster_points`, compiled (:func:`slam.core.kernels.radius_components`):
+    ``(count, labels (N,))``, None when no two points are within ``radius``."""
+    from slam.core.kernels import radius_components
+
+    n_c, labels = radius_components(np.ascontiguousarray(pts[:, :2]), float(radius))
+    return None if n_c == len(pts) else (n_c, labels)
+
+
+@_STAGES.stage("components", "numpy")
+def _components_numpy(pts: np.ndarray, radius: float) -> tuple[int, np.ndarray] | None:
+    """The single-linkage clusters of :func:`cluster_points` in numpy (the reference): the connected components of the
+    cKDTree's radius graph, ``(count, labels (N,))``, None when no two points are within ``radius``."""
+    n = len(pts)
+    pairs = cKDTree(pts[:, :2]).query_pairs(radius, output_type="ndarray")
+    if len(pairs) == 0:
+        return None
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    return connected_components(graph, directed=False)
 
 
 def to_map_frame(xy: np.ndarray, poses: np.ndarray) -> np.ndarray:
@@ -373,10 +408,22 @@ def cluster_covariance(
     0.24 / 0.19 m on tuning seeds 0 / 1), so it is not done. ``kernels="numba"``: the same sums in one compiled
     pass (:func:`slam.core.kernels.cluster_fusion`).
     """
-    if kernels == "numba":
-        from slam.core.kernels import cluster_fusion
+    return _STAGES.choose(kernels).fusion(points, labels, cov, n_clusters)
 
-        return cluster_fusion(points, labels, cov, n_clusters)
+
+@_STAGES.stage("fusion", "numba")
+def _fusion_compiled(points: np.ndarray, labels: np.ndarray, cov: np.ndarray, n_clusters: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`cluster_covariance`'s information sums and inverses in one compiled pass
+    (:func:`slam.core.kernels.cluster_fusion`)."""
+    from slam.core.kernels import cluster_fusion
+
+    return cluster_fusion(points, labels, cov, n_clusters)
+
+
+@_STAGES.stage("fusion", "numpy")
+def _fusion_numpy(points: np.ndarray, labels: np.ndarray, cov: np.ndarray, n_clusters: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`cluster_covariance` in numpy (the reference): the members' information and information-weighted
+    positions summed per cluster (bincount), inverted (:func:`sym2_inverse`)."""
     i00, i01, i11, _ = sym2_inverse(cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1])
     x, y = points[:, 0], points[:, 1]
     info = [np.bincount(labels, weights=w, minlength=n_clusters) for w in (i00, i01, i11)]

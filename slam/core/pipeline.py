@@ -41,6 +41,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rhs_common.geometry import apply_motion, compose, points_in_frame
+from rhs_common.jit import KernelTable
 from rhs_common.validation import check_choice, check_int, check_range, check_types
 from slam.core.association import bearing_sectors, estimate_ego_velocity, point_covariance, static_mask
 from slam.core.drift import DriftCovariance
@@ -285,13 +286,34 @@ def doppler_ego_motion(
     vr = pts[:, 2]
     idx = rng.integers(0, n, (n_hypotheses, 3))
     sector = bearing_sectors(np.arctan2(pts[:, 1], pts[:, 0]), angular_bins)
-    if kernels == "numba":
-        from slam.core.kernels import doppler_ransac
+    fit = _STAGES.choose(kernels).doppler_fit  # the compiled or the numpy RANSAC
+    return fit(A, vr, idx, sector, threshold, angular_bins, min_inliers, max_yaw_rate, prior, max_change, speed_only)
 
-        mode = 0 if prior is None else 2 if speed_only else 1
-        found, sol = doppler_ransac(A, vr, idx, threshold, sector, angular_bins, min_inliers, max_yaw_rate,
-                                    np.zeros(2) if prior is None else np.asarray(prior, float)[:2], mode, float(max_change))
-        return sol if found and abs(sol[2]) <= max_yaw_rate else None
+
+#: the Doppler RANSAC's two implementations, chosen by the ``kernels`` of :func:`doppler_ego_motion` (the SLAM's)
+_STAGES = KernelTable("slam.core.pipeline")
+
+
+@_STAGES.stage("doppler_fit", "numba")
+def _doppler_fit_compiled(A, vr, idx, sector, threshold, angular_bins, min_inliers, max_yaw_rate, prior, max_change,
+                          speed_only) -> np.ndarray | None:
+    """The RANSAC of :func:`doppler_ego_motion` on its hypotheses ``idx`` (H, 3) (rows of ``vr = A x``) in one
+    compiled call (:func:`slam.core.kernels.doppler_ransac`): solve, gate, score by ``sector`` coverage, refit."""
+    from slam.core.kernels import doppler_ransac
+
+    mode = 0 if prior is None else 2 if speed_only else 1
+    found, sol = doppler_ransac(A, vr, idx, threshold, sector, angular_bins, min_inliers, max_yaw_rate,
+                                np.zeros(2) if prior is None else np.asarray(prior, float)[:2], mode, float(max_change))
+    return sol if found and abs(sol[2]) <= max_yaw_rate else None
+
+
+@_STAGES.stage("doppler_fit", "numpy")
+def _doppler_fit_numpy(A, vr, idx, sector, threshold, angular_bins, min_inliers, max_yaw_rate, prior, max_change,
+                       speed_only) -> np.ndarray | None:
+    """The RANSAC of :func:`doppler_ego_motion` in numpy (the reference): each hypothesis of ``idx`` (H, 3) solved
+    (3 x 3), gated by the yaw rate and the prior, scored by the ``sector`` coverage of its inliers, then their count;
+    least squares on the winner's inliers."""
+    n = len(vr)
     M = A[idx]  # (H, 3, 3)
     good = np.abs(np.linalg.det(M)) > 1e-3
     if not good.any():

@@ -92,7 +92,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rhs_common.geometry import circular_mean, wrap_angle
-from rhs_common.jit import KERNELS
+from rhs_common.jit import KERNELS, KernelTable
 from rhs_common.timing import StageTimer
 from rhs_common.validation import check_bool, check_choice, check_int, check_memory, check_range, check_types
 from slam.core.association import (
@@ -119,6 +119,9 @@ ASSOCIATIONS = ("mahalanobis", "nearest")
 NOISE_MODELS = ("per_point", "fixed")
 _EYE2 = np.eye(2)
 _EYE2.setflags(write=False)
+#: up to this many particles the landmark statistics are compiled (:func:`slam.core.kernels.slot_estimates`, whose
+#: emulation of numpy's sums is tested up to there); with more they stay numpy's
+_SLOT_KERNEL_MAX_PARTICLES = 4096
 
 
 def log_sum_exp(a: np.ndarray) -> np.float64:
@@ -341,6 +344,7 @@ class RBPFSlam:
     def __init__(self, config: SlamConfig | None = None, rng=None) -> None:
         self.config = config if config is not None else SlamConfig()
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+        self._impl = _STAGES.choose(self.config.kernels)  # the compiled or the numpy stages
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -498,13 +502,26 @@ class RBPFSlam:
         used = np.flatnonzero(self.slot_used)
         if M == 0 or used.size == 0:
             return np.full((P, M), NEW, dtype=np.int64)
-        if c.association == "mahalanobis" and c.kernels == "numba":  # the same frames, distances and rounds, compiled
-            from slam.core.kernels import mahalanobis_association_at
+        return self._impl.associate(self, obs, used)
 
-            th = self.pose[:, 2]
-            return mahalanobis_association_at(self.pose, np.cos(th), np.sin(th), obs.z, *self._observation_with_pose(obs),
-                                              self.mean, self.cov, self.active, used, c.gate_mahalanobis**2,
-                                              c.new_gate_mahalanobis**2, c.association_rounds)
+    def _associate_compiled(self, obs: Observations, used: np.ndarray) -> np.ndarray:
+        """:meth:`_associate` of the observations against the held slots ``used``: the Mahalanobis association with
+        the same frames, distances and rounds, compiled (:func:`slam.core.kernels.mahalanobis_association_at`); the
+        nearest-landmark association stays numpy's (:meth:`_associate_numpy`)."""
+        c = self.config
+        if c.association != "mahalanobis":
+            return self._associate_numpy(obs, used)
+        from slam.core.kernels import mahalanobis_association_at
+
+        th = self.pose[:, 2]
+        return mahalanobis_association_at(self.pose, np.cos(th), np.sin(th), obs.z, *self._observation_with_pose(obs),
+                                          self.mean, self.cov, self.active, used, c.gate_mahalanobis**2,
+                                          c.new_gate_mahalanobis**2, c.association_rounds)
+
+    def _associate_numpy(self, obs: Observations, used: np.ndarray) -> np.ndarray:
+        """:meth:`_associate` of the observations against the held slots ``used`` in numpy (the reference): the map
+        frame per particle, then the nearest landmark within ``delta_m`` or the gated Mahalanobis rounds."""
+        c = self.config
         obs_map = to_map_frame(obs.z, self.pose)  # (P, M, 2)
         if c.association == "nearest":
             sub, _ = associate(obs_map, self.mean[:, used], self.active[:, used], c.delta_m)
@@ -547,12 +564,17 @@ class RBPFSlam:
     def _proposal_terms(self, pp, mm, ll, obs: Observations):
         """Per matched pair at mu: H_k (K, 2, 3), S_k^-1 (K, 2, 2), nu_k (K, 2), log det S_k (K,)."""
         th = self.pose[pp, 2]
-        cth, sth = np.cos(th), np.sin(th)
-        if self.config.kernels == "numba":  # the same operations pair by pair, compiled
-            from slam.core.kernels import proposal_terms
+        return self._impl.proposal_terms(self, pp, mm, ll, obs, np.cos(th), np.sin(th))
 
-            H, Si, nu, det = proposal_terms(self.pose, cth, sth, obs.z, obs.Q, self.mean, self.cov, pp, mm, ll)
-            return H, Si, nu, np.log(det)
+    def _proposal_terms_compiled(self, pp, mm, ll, obs: Observations, cth, sth):
+        """:meth:`_proposal_terms` with the same operations pair by pair, compiled (:func:`slam.core.kernels.proposal_terms`)."""
+        from slam.core.kernels import proposal_terms
+
+        H, Si, nu, det = proposal_terms(self.pose, cth, sth, obs.z, obs.Q, self.mean, self.cov, pp, mm, ll)
+        return H, Si, nu, np.log(det)
+
+    def _proposal_terms_numpy(self, pp, mm, ll, obs: Observations, cth, sth):
+        """:meth:`_proposal_terms` in numpy (the reference), at the headings' cosines ``cth`` and sines ``sth`` (K,)."""
         d = self.mean[pp, ll] - self.pose[pp, :2]
         hx, hy = cth * d[:, 0] + sth * d[:, 1], -sth * d[:, 0] + cth * d[:, 1]
         nu = obs.z[mm] - np.stack([hx, hy], axis=1)
@@ -572,9 +594,12 @@ class RBPFSlam:
         joint compatibility drops the pairs with ``r^T S^-1 r > gate^2``, ``r = nu - H delta``, and solves once
         more; ``p ~ N(mu + delta, Lambda_p^-1)``. Returns (log w increment (P,), idx without the dropped pairs).
         """
+        return self._impl.sample_proposal(self, idx, obs)
+
+    def _sample_proposal_numpy(self, idx: np.ndarray, obs: Observations) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_sample_proposal` in numpy (the reference): the information sums by ``np.add.at``, the inverse, the
+        joint-compatibility test, the weight and the draw."""
         c = self.config
-        if c.kernels == "numba":
-            return self._sample_proposal_compiled(idx, obs)
         P = c.n_particles
         pp, mm = _pairs(idx)
         H, Si, nu, logdet = self._proposal_terms(pp, mm, idx[pp, mm], obs)
@@ -642,13 +667,19 @@ class RBPFSlam:
     def _landmark_update(self, pp, mm, ll, obs: Observations) -> np.ndarray:
         """Kalman update of the matched landmarks at the particles' poses; log N(nu; 0, S) per pair."""
         th = self.pose[pp, 2]
-        cth, sth = np.cos(th), np.sin(th)
-        if self.config.kernels == "numba":  # the same operations pair by pair, compiled, in place
-            from slam.core.kernels import landmark_update
+        return self._impl.landmark_update(self, pp, mm, ll, obs, np.cos(th), np.sin(th))
 
-            maha, det = landmark_update(self.pose, cth, sth, obs.z, obs.Q, self.mean, self.cov, self.hits,
-                                        self.last_seen, pp, mm, ll, self.cycle)
-            return -0.5 * maha - _LOG2PI - 0.5 * np.log(det)
+    def _landmark_update_compiled(self, pp, mm, ll, obs: Observations, cth, sth) -> np.ndarray:
+        """:meth:`_landmark_update` with the same operations pair by pair, compiled, in place
+        (:func:`slam.core.kernels.landmark_update`)."""
+        from slam.core.kernels import landmark_update
+
+        maha, det = landmark_update(self.pose, cth, sth, obs.z, obs.Q, self.mean, self.cov, self.hits,
+                                    self.last_seen, pp, mm, ll, self.cycle)
+        return -0.5 * maha - _LOG2PI - 0.5 * np.log(det)
+
+    def _landmark_update_numpy(self, pp, mm, ll, obs: Observations, cth, sth) -> np.ndarray:
+        """:meth:`_landmark_update` in numpy (the reference), at the headings' cosines ``cth`` and sines ``sth`` (K,)."""
         pose, z = self.pose[pp], obs.z[mm]
         nu = pose[:, :2] + np.stack([cth * z[:, 0] - sth * z[:, 1], sth * z[:, 0] + cth * z[:, 1]], 1) - self.mean[pp, ll]
         q00, q01, q11 = rotate_sym2(cth, sth, obs.Q[mm, 0, 0], obs.Q[mm, 0, 1], obs.Q[mm, 1, 1])
@@ -768,11 +799,19 @@ class RBPFSlam:
         ``Sigma_s = sum_p Wn_ps (Lambda_ps + (e_ps - mu_s)(e_ps - mu_s)^T)``, hits ``sum_p Wn_ps h_ps``
         (compiled: :func:`slam.core.kernels.slot_estimates`, the same sums in the same order).
         """
-        w = self.weights
-        if self.config.kernels == "numba" and self.config.n_particles <= 4096:
-            from slam.core.kernels import slot_estimates
+        return self._impl.slot_estimates(self, slots, self.weights)
 
-            return slot_estimates(w, self.active, self.mean, self.cov, self.hits, slots)
+    def _slot_estimates_compiled(self, slots: np.ndarray, w: np.ndarray):
+        """:meth:`_slot_estimates` at the weights ``w`` (P,), compiled (:func:`slam.core.kernels.slot_estimates`) up to
+        :data:`_SLOT_KERNEL_MAX_PARTICLES` particles, numpy's (:meth:`_slot_estimates_numpy`) above."""
+        if self.config.n_particles > _SLOT_KERNEL_MAX_PARTICLES:
+            return self._slot_estimates_numpy(slots, w)
+        from slam.core.kernels import slot_estimates
+
+        return slot_estimates(w, self.active, self.mean, self.cov, self.hits, slots)
+
+    def _slot_estimates_numpy(self, slots: np.ndarray, w: np.ndarray):
+        """:meth:`_slot_estimates` at the weights ``w`` (P,) in numpy (the reference: einsum)."""
         W = w[:, None] * self.active[:, slots]  # (P, S)
         exist = W.sum(axis=0)
         Wn = W / np.where(exist > 0, exist, 1.0)
@@ -799,43 +838,43 @@ class RBPFSlam:
 
     def _prune(self) -> None:
         """Drop landmarks not re-observed for K cycles; free empty slots."""
-        c = self.config
-        if c.kernels == "numba":  # the same test per held landmark, compiled, over the slots in use
-            from slam.core.kernels import prune_slots
-
-            after, gone, n_kill = prune_slots(self.active, self.last_seen, self.hits, np.flatnonzero(self.slot_used),
-                                              self.cycle, c.prune_after_cycles, c.min_hits,
-                                              c.tentative_prune_after_cycles)
-            if n_kill == 0:
-                return
-        else:
-            age = self.cycle - self.last_seen
-            kill = self.active & (
-                (age > c.prune_after_cycles)
-                | ((self.hits < c.min_hits) & (age > c.tentative_prune_after_cycles))
-            )
-            if not kill.any():
-                return
-            after = self.active & ~kill
-            gone = np.flatnonzero(self.slot_used & ~after.any(axis=0))
+        kept = self._impl.prune(self)
+        if kept is None:
+            return
+        after, gone = kept
         self._retire(gone)  # statistics from the state before the kill
         self.active = after
         self.slot_used[gone] = False
+
+    def _prune_compiled(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The landmarks :meth:`_prune` keeps (P, Lmax) and the slots it empties, by the same test per held landmark,
+        compiled, over the slots in use (:func:`slam.core.kernels.prune_slots`); None when it drops none."""
+        from slam.core.kernels import prune_slots
+
+        c = self.config
+        after, gone, n_kill = prune_slots(self.active, self.last_seen, self.hits, np.flatnonzero(self.slot_used),
+                                          self.cycle, c.prune_after_cycles, c.min_hits, c.tentative_prune_after_cycles)
+        return None if n_kill == 0 else (after, gone)
+
+    def _prune_numpy(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The landmarks :meth:`_prune` keeps (P, Lmax) and the slots it empties, in numpy (the reference); None when
+        it drops none."""
+        c = self.config
+        age = self.cycle - self.last_seen
+        kill = self.active & (
+            (age > c.prune_after_cycles)
+            | ((self.hits < c.min_hits) & (age > c.tentative_prune_after_cycles))
+        )
+        if not kill.any():
+            return None
+        after = self.active & ~kill
+        return after, np.flatnonzero(self.slot_used & ~after.any(axis=0))
 
     def _estimate(self) -> SlamEstimate:
         c = self.config
         w = self.weights
         th = circular_mean(self.pose[:, 2], w)
-        if c.kernels == "numba":  # the same products and sums, compiled
-            from slam.core.kernels import pose_moments
-
-            x, y, vx, vy, vth = pose_moments(w, self.pose, wrap_angle(self.pose[:, 2] - th))
-        else:
-            x = float(np.sum(w * self.pose[:, 0]))
-            y = float(np.sum(w * self.pose[:, 1]))
-            vx = float(np.sum(w * (self.pose[:, 0] - x) ** 2))
-            vy = float(np.sum(w * (self.pose[:, 1] - y) ** 2))
-            vth = float(np.sum(w * wrap_angle(self.pose[:, 2] - th) ** 2))
+        x, y, vx, vy, vth = self._impl.pose_moments(self, w, th)
         sx, sy, sth = (math.sqrt(max(v, 0.0)) for v in (vx, vy, vth))
         used = np.flatnonzero(self.slot_used)
         if used.size:
@@ -856,6 +895,23 @@ class RBPFSlam:
             landmark_ids=ids,
             landmark_cov=lcov,
         )
+
+    def _pose_moments_compiled(self, w: np.ndarray, th: float):
+        """The weighted mean position and the variances of x, y and the heading about ``th`` (:meth:`_estimate`):
+        the same products and sums, compiled (:func:`slam.core.kernels.pose_moments`)."""
+        from slam.core.kernels import pose_moments
+
+        return pose_moments(w, self.pose, wrap_angle(self.pose[:, 2] - th))
+
+    def _pose_moments_numpy(self, w: np.ndarray, th: float) -> tuple[float, float, float, float, float]:
+        """The weighted mean position and the variances of x, y and the heading about ``th`` (:meth:`_estimate`) in
+        numpy (the reference)."""
+        x = float(np.sum(w * self.pose[:, 0]))
+        y = float(np.sum(w * self.pose[:, 1]))
+        vx = float(np.sum(w * (self.pose[:, 0] - x) ** 2))
+        vy = float(np.sum(w * (self.pose[:, 1] - y) ** 2))
+        vth = float(np.sum(w * wrap_angle(self.pose[:, 2] - th) ** 2))
+        return x, y, vx, vy, vth
 
     def relocalise(self, correction: np.ndarray, drop_from_id: int) -> None:
         """Move every particle by ``correction`` (a motion in its own vehicle frame, ``p <- p (+) m``) and
@@ -899,3 +955,22 @@ class RBPFSlam:
     def n_landmark_slots(self) -> int:
         """Slots in use (landmarks held by at least one particle)."""
         return int(self.slot_used.sum())
+
+
+#: the filter's stages in two implementations (:class:`rhs_common.jit.KernelTable`), chosen once by
+#: ``SlamConfig.kernels`` when an :class:`RBPFSlam` is made
+_STAGES = KernelTable("slam.core.rbpf")
+_STAGES.stage("associate", "numba")(RBPFSlam._associate_compiled)
+_STAGES.stage("associate", "numpy")(RBPFSlam._associate_numpy)
+_STAGES.stage("proposal_terms", "numba")(RBPFSlam._proposal_terms_compiled)
+_STAGES.stage("proposal_terms", "numpy")(RBPFSlam._proposal_terms_numpy)
+_STAGES.stage("sample_proposal", "numba")(RBPFSlam._sample_proposal_compiled)
+_STAGES.stage("sample_proposal", "numpy")(RBPFSlam._sample_proposal_numpy)
+_STAGES.stage("landmark_update", "numba")(RBPFSlam._landmark_update_compiled)
+_STAGES.stage("landmark_update", "numpy")(RBPFSlam._landmark_update_numpy)
+_STAGES.stage("slot_estimates", "numba")(RBPFSlam._slot_estimates_compiled)
+_STAGES.stage("slot_estimates", "numpy")(RBPFSlam._slot_estimates_numpy)
+_STAGES.stage("prune", "numba")(RBPFSlam._prune_compiled)
+_STAGES.stage("prune", "numpy")(RBPFSlam._prune_numpy)
+_STAGES.stage("pose_moments", "numba")(RBPFSlam._pose_moments_compiled)
+_STAGES.stage("pose_moments", "numpy")(RBPFSlam._pose_moments_numpy)

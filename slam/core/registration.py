@@ -31,6 +31,7 @@ from rhs_common.geometry import (
     relative_motion,
     wrap_angle,
 )
+from rhs_common.jit import KernelTable
 from rhs_common.validation import (
     build,
     check_choice,
@@ -173,10 +174,19 @@ class ICPRegistration:
         self.min_pairs = cfg.min_pairs
         self.amplitude_weights = cfg.amplitude_weights
         self.constant_velocity = cfg.constant_velocity
-        #: "numba": the fit compiled with brute-force nearest neighbours (:func:`slam.core.kernels.icp_fit`, the
-        #: clouds hold tens of points), "numpy": cKDTree and numpy; set from the SLAM config by the pipeline
-        self.kernels = "numba"
+        self.kernels = "numba"  # set from the SLAM config by the pipeline
         self.reset()
+
+    @property
+    def kernels(self) -> str:
+        """The heading search's implementation: "numba" compiled with brute-force nearest neighbours
+        (:func:`slam.core.kernels.icp_search`, the clouds hold tens of points), "numpy" cKDTree and numpy (the
+        reference); setting it chooses the search (:data:`_STAGES`)."""
+        return str(self._impl.kernels)
+
+    @kernels.setter
+    def kernels(self, kernels: str) -> None:
+        self._impl = _STAGES.choose(kernels)  # the compiled or the numpy heading search
 
     def reset(self) -> None:
         """Forget the constant-velocity prior."""
@@ -208,8 +218,7 @@ class ICPRegistration:
         else:
             amp_p = amp_c = None
         offsets = np.concatenate([[0.0], self.yaw_offsets[self.yaw_offsets != 0.0]])
-        search = self._search_compiled if self.kernels == "numba" else self._search_numpy
-        est, self.last_pairs, self.last_rmse = search(src, prev, guess, offsets, amp_p, amp_c)
+        est, self.last_pairs, self.last_rmse = self._impl.search(self, src, prev, guess, offsets, amp_p, amp_c)
         est[2] = wrap_angle(est[2])
         self.last_estimate = est.copy()
         return est
@@ -277,6 +286,12 @@ class ICPRegistration:
             ok = np.isfinite(d)
             last_rmse = float(np.sqrt(np.mean(d[ok] ** 2))) if ok.any() else float("nan")
         return est, last_pairs, last_rmse
+
+
+#: the ICP heading search's two implementations, chosen when :attr:`ICPRegistration.kernels` is set
+_STAGES = KernelTable("slam.core.registration")
+_STAGES.stage("search", "numpy")(ICPRegistration._search_numpy)
+_STAGES.stage("search", "numba")(ICPRegistration._search_compiled)
 
 
 class OdometryRegistration:
