@@ -50,6 +50,7 @@ compiled kernel from then on.
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import subprocess
 import sys
@@ -373,6 +374,7 @@ def _checked_cache() -> type:
     return _CHECKED_CACHE
 
 
+@functools.cache
 def numpy_dispatch_stamp() -> tuple[str, ...]:
     """numpy's SIMD dispatch in this process, when it goes past AVX2: the AVX-512 targets it uses, e.g.
     ``("AVX512_SKX", ...)``; () without AVX-512 (or under ``NPY_DISABLE_CPU_FEATURES`` capping it).
@@ -380,7 +382,8 @@ def numpy_dispatch_stamp() -> tuple[str, ...]:
     Part of every kernel's cache stamp: the compiled traffic calls numpy's own AVX-512 SVML functions by address
     where numpy dispatches to them (:mod:`rhs_env.traffic.npmath`), and numba's cache key holds the CPU but not
     numpy's dispatch, so a kernel compiled with it and loaded by a process that capped it called a null
-    address (a segmentation fault). With the stamp such a process compiles its own.
+    address (a segmentation fault). With the stamp such a process compiles its own. Computed once per process
+    (the dispatch is fixed at numpy's import), not once per kernel.
     """
     import importlib
 

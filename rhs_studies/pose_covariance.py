@@ -34,17 +34,13 @@ from typing import Any
 import numpy as np
 
 from rhs_studies.provenance import write_json
+from slam.gym.pose_calibration import SHIPPED_CONFIGS
 
-#: configuration name -> (env id, gym.make keyword arguments without the pipeline option)
+#: configuration name -> (env id, gym.make keyword arguments without the pipeline option): the configurations whose
+#: calibrations the package ships, and the shipped policy's env (agents/data/shipped.json: its action setting does
+#: not enter the calibration key, so it is calibrated as grid5)
 CONFIGS: dict[str, tuple[str, dict[str, Any]]] = {
-    "default": ("rhs-highway-slam-v0", {}),
-    "grid5": ("rhs-highway-slam-v0", {"radar": {"scan": {"grid_deg": 5}}}),
-    "phased": ("rhs-highway-slam-v0", {"antenna": "phased"}),
-    "random": ("rhs-highway-slam-v0", {"antenna": "random"}),
-    "dense": ("rhs-dense-v0", {}),
-    "low_snr": ("rhs-highway-slam-v0", {"radar": {"link": {"tx_power_dbm": 20.0}}}),
-    "fast": ("rhs-highway-slam-fast-v0", {}),
-    # the shipped policy's env (agents/data/shipped.json: its action setting does not enter the calibration key)
+    **SHIPPED_CONFIGS,
     "policy_env": ("rhs-highway-slam-v0", {"action": {"type": "DiscreteMetaAction", "target_speeds": [10, 15, 20, 25, 30]},
                                            "radar": {"scan": {"grid_deg": 5}}}),
 }
