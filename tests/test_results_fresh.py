@@ -1,4 +1,4 @@
-"""Results cannot silently disagree with the code (``rhs_studies/provenance.py`` explains the design).
+"""Results cannot silently disagree with the code (``rhs_studies/kit/provenance.py`` explains the design).
 
 * every script's small-config ``fingerprint()`` still gives the hash recorded in
   ``results/fingerprints.json``; if not, the results it guards are stale;

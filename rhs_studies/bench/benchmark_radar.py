@@ -1,7 +1,7 @@
 """Radar benchmark: time per stage of one four-radar scan on a typical highway scene.
 
 ``python scripts/benchmark_radar.py [--antenna rhs] [--repeats 20] [--out results/benchmark_radar.json]``
-or ``benchmark_radar()`` from Python. The scene (:func:`rhs_studies.scenes.typical_scene`): about 20
+or ``benchmark_radar()`` from Python. The scene (:func:`rhs_studies.kit.scenes.typical_scene`): about 20
 static roadside landmarks (5 m^2) on both road sides and 10 vehicles (boxes
 5 m x 2 m, a scattering point at the centre of each face that looks at the ego,
 10 m^2 in all per vehicle, moving at relative speeds of a few m/s), with the

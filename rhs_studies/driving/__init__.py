@@ -1,5 +1,5 @@
 """Driving studies: the policies trained and judged, the RL fine-tune and its fresh tests, the teachers,
-the crash analysis, the shield's sensing.
+the crash analysis, the shield's sensing, behaviour cloning from the recorded datasets.
 
 Each module is a study (or a part of one); it imports :mod:`rhs_studies.kit` and the packages, never another
 study (``tests/test_architecture.py``).

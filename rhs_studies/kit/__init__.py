@@ -7,7 +7,12 @@
   called fresh;
 * :mod:`~rhs_studies.kit.tables`: the driving tables and paired intervals;
 * :mod:`~rhs_studies.kit.driving`: the RL arms, their starts and labels, a policy's episodes, the targets;
-* :mod:`~rhs_studies.kit.provenance`, :mod:`~rhs_studies.kit.episodes`: provenance, episodes and scenes.
+* :mod:`~rhs_studies.kit.provenance`: the provenance and fingerprints of every results file;
+* :mod:`~rhs_studies.kit.episodes`, :mod:`~rhs_studies.kit.scenes`: the episode runner, the paper scene's episode,
+  the radar scenes;
+* :mod:`~rhs_studies.kit.subprocess_env`: the environment of a study's subprocesses;
+* :mod:`~rhs_studies.kit.slam_metrics`, :mod:`~rhs_studies.kit.stats`, :mod:`~rhs_studies.kit.protocol`: the SLAM
+  metrics, the RL aggregates, the select-then-test protocol.
 
 A study imports the kit and the packages, never another study (``tests/test_architecture.py``).
 """

@@ -5,7 +5,7 @@ record as their command), a frozen options dataclass whose fields are the comman
 gives a field its help text; :func:`parser_for` turns the fields into flags: ``validation_seed`` ->
 ``--validation-seed``), ``run`` (options -> the result dict), ``markdown`` (result -> the page) and ``fingerprint``.
 :func:`run_study` parses the options (a ``ValueError`` from the dataclass or from ``check`` becomes a usage error
-naming the flag), runs, writes ``OUT_DIR/NAME.json`` with provenance (:func:`rhs_studies.provenance.write_json`)
+naming the flag), runs, writes ``OUT_DIR/NAME.json`` with provenance (:func:`rhs_studies.kit.provenance.write_json`)
 and ``OUT_DIR/NAME.md``, and prints the page.
 """
 
@@ -97,7 +97,7 @@ class Study:
     run: Callable[[Any], dict[str, Any]]
     #: result -> the Markdown page
     markdown: Callable[[dict[str, Any]], str]
-    #: the small-config fingerprint (:mod:`rhs_studies.provenance`), or None
+    #: the small-config fingerprint (:mod:`rhs_studies.kit.provenance`), or None
     fingerprint: Callable[[], list[float]] | None = None
     #: the ``--help`` text
     description: str | None = None

@@ -12,7 +12,7 @@ elements) and, for both antennas, the Cramer-Rao bound of the cross-range error,
 of each radar: the swept-beam Fisher information of the angle over the I slots).
 The ratio CRB(phased) / CRB(RHS) is the angular advantage the larger aperture buys.
 Writes ``results/fig5b.{png,json,md}``; the JSON carries provenance and the
-fingerprint of :func:`fingerprint` (see ``rhs_studies/provenance.py``).
+fingerprint of :func:`fingerprint` (see ``rhs_studies/kit/provenance.py``).
 
     OMP_NUM_THREADS=1 python scripts/fig5b_pointcloud_vs_elements.py [--elements 20 40 60 80 100]
         [--grids 1 2 3 4 5] [--cycles 5] [--out results/fig5b]

@@ -4,7 +4,7 @@ Each profile (``PROFILES``: radar kwargs over the default, exactly as ``gym.make
 radar=...)`` takes them) is measured two ways, on the default antenna and 1-degree grid:
 
 * **speed**: wall time per stage of one four-radar scan of the typical highway scene
-  (:func:`rhs_studies.scenes.typical_scene`); the profiles take turns scan by scan, so
+  (:func:`rhs_studies.kit.scenes.typical_scene`); the profiles take turns scan by scan, so
   load on the machine slows all of them alike, and each is reported as the median
   over ``--repeats`` rounds and as a ratio to the default's total;
 * **quality**: :func:`radar_quality.evaluate` on the Fig. 5b scenes (detection rate,

@@ -39,7 +39,7 @@ def evaluate(cfg: RadarConfig, scenes: int, seed: int, noise_draws: int = 1, sce
     """Scan ``scenes`` Fig. 5b scenes with one radar; metrics with 95 % intervals.
 
     ``scene(rng, radar) -> Scatterers`` draws each scene (default
-    :func:`rhs_studies.scenes.landmark_scene`); the radar's generator is seeded ``seed``, the
+    :func:`rhs_studies.kit.scenes.landmark_scene`); the radar's generator is seeded ``seed``, the
     scenes' ``seed + 1``.
 
     ``noise_draws`` > 1 scans the same scenes again with as many independent noise

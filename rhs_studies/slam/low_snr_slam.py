@@ -9,7 +9,7 @@ low-SNR case). Vehicle ATE: position RMSE of the SLAM pose over the cycles
 (map frame = start pose, no alignment); also the final error, the map matched /
 missed / spurious counts (Hungarian, 2 m gate) and the points per cycle. Writes
 ``low_snr_slam.json`` (every episode, with the provenance of
-``rhs_studies.provenance.write_json``: commit, command line, config, and the
+``rhs_studies.kit.provenance.write_json``: commit, command line, config, and the
 fingerprint of the finished run) and ``.md``.
 """
 

@@ -86,15 +86,15 @@ OWN_NUMBA_CACHE = frozenset({"numpy-avx2", "avx2-machine"})
 
 
 def _steps(only: list[str] | None):
-    from rhs_studies import reproduce
+    from rhs_studies.upkeep import reproduce
 
     return [s for s in reproduce.STEPS if not s.no_fingerprint and (not only or s.name in only)]
 
 
 def worker(names: list[str]) -> None:
     """Print ``{step: values}`` as JSON on the last line (run in a subprocess under one setting)."""
-    from rhs_studies import reproduce
     from rhs_studies.kit.provenance import compute_fingerprint, package_versions
+    from rhs_studies.upkeep import reproduce
 
     if os.environ.get("RHS_TORCH_THREADS"):
         import torch

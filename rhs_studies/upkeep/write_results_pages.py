@@ -9,11 +9,11 @@ does not exist are left as they are.
 Some blocks are built here instead of copied: ``headline`` (the README's short table of
 headline results, each row linking to its results page), ``unverified`` (the list of results
 not verified against the code), ``tolerances`` (each fingerprint's measured tolerance) and
-``reproduce.STEP`` (a page's "how to reproduce" line: the :mod:`rhs_studies.reproduce` step
+``reproduce.STEP`` (a page's "how to reproduce" line: the :mod:`rhs_studies.upkeep.reproduce` step
 ``STEP``'s command and the script it runs, so a page cannot name a command that is gone).
 
 When ``results/NAME.json`` is not verified against the code (written before provenance
-existed, or the code's fingerprint changed since the run, see ``rhs_studies/provenance.py``),
+existed, or the code's fingerprint changed since the run, see ``rhs_studies/kit/provenance.py``),
 the block ends with a visible warning saying why and which step to rerun.
 
     python scripts/write_results_pages.py            # rewrite README.md and docs/**/*.md in place
@@ -45,7 +45,7 @@ def pages(root: Path = ROOT) -> list[Path]:
 
 def warning(name: str, results_dir: Path, fingerprints: dict) -> str:
     """A warning line when ``results/NAME.json`` is unverified, else ``""``."""
-    from rhs_studies.reproduce import step_for_result
+    from rhs_studies.upkeep.reproduce import step_for_result
 
     f = results_dir / f"{name}.json"
     if not f.exists():
@@ -259,10 +259,10 @@ REPRODUCE = "reproduce."
 
 
 def reproduce_line(step_name: str) -> str:
-    """The "how to reproduce" line of the :mod:`rhs_studies.reproduce` step ``step_name``.
+    """The "how to reproduce" line of the :mod:`rhs_studies.upkeep.reproduce` step ``step_name``.
 
     Args:
-        step_name: a step of ``rhs_studies.reproduce.STEPS``.
+        step_name: a step of ``rhs_studies.upkeep.reproduce.STEPS``.
 
     Returns:
         One markdown line: ``python scripts/reproduce.py --only STEP``, the script command it runs and the results
@@ -271,11 +271,11 @@ def reproduce_line(step_name: str) -> str:
     Raises:
         ValueError: no step of that name (the page names a command that does not exist).
     """
-    from rhs_studies.reproduce import STEPS
+    from rhs_studies.upkeep.reproduce import STEPS
 
     step = next((s for s in STEPS if s.name == step_name), None)
     if step is None:
-        raise ValueError(f"results block reproduce.{step_name}: no step {step_name!r} in rhs_studies/reproduce.py "
+        raise ValueError(f"results block reproduce.{step_name}: no step {step_name!r} in rhs_studies/upkeep/reproduce.py "
                          f"(steps: {', '.join(s.name for s in STEPS)})")
     command = " ".join(["python", f"scripts/{step.script}", *step.args])
     writes = ", ".join(f"`results/{r}`" for r in step.results)

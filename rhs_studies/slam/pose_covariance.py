@@ -13,7 +13,7 @@ filter's estimate does not depend on it), so each cycle scores the three models 
 calibrated one (``slam_pose_cov``), the adaptive one (its terms unscaled) and the drift densities (the pipeline's
 ``drift`` term plus the particles' variances: what ``pose_covariance="drift-constants"``, the default, reports).
 3-dof NEES ``e^T P^-1 e`` with ``e`` the estimated minus the true pose (heading wrapped), floors and the loss's std
-as in ``rhs_studies.slam_accuracy.pose_nees`` (reimplemented here: studies do not import each other).
+as in ``rhs_studies.slam.slam_accuracy.pose_nees`` (reimplemented here: studies do not import each other).
 
 Reported per configuration and model (:func:`slam.core.pose_calibration.nees_coverage`): cycles below / inside /
 above the 95 % chi-square band (3 dof), the median NEES, and the ANEES (mean NEES over the runs' cycles) with its
@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from rhs_studies.provenance import write_json
+from rhs_studies.kit.provenance import write_json
 from slam.gym.pose_calibration import SHIPPED_CONFIGS
 
 #: configuration name -> (env id, gym.make keyword arguments without the pipeline option): the configurations whose

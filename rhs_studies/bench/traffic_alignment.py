@@ -23,7 +23,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from rhs_studies.provenance import write_json
+from rhs_studies.kit.provenance import write_json
 
 #: the acceptance (module docstring)
 POSITION_TOL_M, SPEED_TOL_MPS, REWARD_TOL = 1e-6, 1e-6, 1e-9
@@ -157,7 +157,7 @@ def main(argv: list[str] | None = None) -> int:
         result.clear()
         result.update(scenes=current + added, passes=all(s["passes"] for s in current + added),
                       parts=[part["provenance"] for part in parts])
-        write_json(out, result, __file__, a, started, argv=argv)  # no fingerprint: see rhs_studies.reproduce
+        write_json(out, result, __file__, a, started, argv=argv)  # no fingerprint: see rhs_studies.upkeep.reproduce
         out.with_suffix(".md").write_text(markdown(result))
 
     for scene in a.scenes:  # written after every seed: a long run keeps the seeds it finished

@@ -65,6 +65,7 @@ import numpy as np
 
 from agents.policies.decision import IDLE, SLOWER
 from rhs_common.stats import mean_half_record as ci95
+from rhs_studies.kit.provenance import numbers, write_json
 from rhs_studies.kit.slam_metrics import (
     CFEAR_DRIFT_PCT,
     DRIFT_LENGTHS_M,
@@ -75,7 +76,6 @@ from rhs_studies.kit.slam_metrics import (
     pose_nees,
     segment_drift,
 )
-from rhs_studies.provenance import numbers, write_json
 
 POLICY_HZ = 5
 TARGETS = {

@@ -17,7 +17,7 @@ estimated seconds.
 with ``--reason``, records those that changed in ``results/fingerprints.json``. That
 does not make the old numbers fresh: their results files keep the fingerprint of the
 code that produced them, so they show as *unverified* (with the reason) on their pages
-until the step is rerun. See ``rhs_studies/provenance.py`` for the design.
+until the step is rerun. See ``rhs_studies/kit/provenance.py`` for the design.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from rhs_studies.provenance import (
+from rhs_studies.kit.provenance import (
     RESULTS,
     ROOT,
     compute_fingerprint,
@@ -42,7 +42,7 @@ from rhs_studies.provenance import (
     script_name,
     verification,
 )
-from rhs_studies.subprocess_env import study_env
+from rhs_studies.kit.subprocess_env import study_env
 
 SCRIPTS = ROOT / "scripts"
 #: studies whose module was renamed after results were recorded: ``scripts/<launcher>.py`` (the recorded command and

@@ -1,6 +1,6 @@
 """Start-up as a new user meets it: the first SLAM-env step of a new process on a fresh clone with empty caches.
 
-``python -m rhs_studies.startup_fresh_clone [--repo .] [--env-id rhs-highway-slam-v0] [--out FILE]`` clones the
+``python -m rhs_studies.bench.startup_fresh_clone [--repo .] [--env-id rhs-highway-slam-v0] [--out FILE]`` clones the
 repository's HEAD into a temporary folder (its ``__pycache__`` folders, where numba caches the kernels, are empty),
 points ``RHS_SLAM_CACHE`` at an empty folder (the project's other caches) and unsets ``NUMBA_CACHE_DIR``, then
 times, each in a new process run from the clone:
@@ -104,7 +104,7 @@ def fresh_clone_startup(repo: Path, env_id: str = "rhs-highway-slam-v0", wait_s:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from rhs_studies.provenance import write_json
+    from rhs_studies.kit.provenance import write_json
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--repo", default=".")

@@ -19,9 +19,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from rhs_studies.episodes import start_study
+from rhs_studies.kit.episodes import start_study
+from rhs_studies.kit.provenance import write_json
 from rhs_studies.kit.seeds import first
-from rhs_studies.provenance import write_json
 
 #: the front page's file must stay small
 MAX_BYTES = 2_000_000

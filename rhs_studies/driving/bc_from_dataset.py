@@ -21,7 +21,7 @@ summary gets the paired return difference (clone - policy, t interval) and the r
 with its paired bootstrap interval (seeds resampled together). The compared policy's runs are cached in
 ``OUT/compare_runs.json`` (reused when the policy, env, kwargs and seeds match; ``--compare-only`` drives and
 caches them without any training). ``--results PATH`` writes the summary with provenance
-(:func:`rhs_studies.provenance.write_json`) and a Markdown table beside it.
+(:func:`rhs_studies.kit.provenance.write_json`) and a Markdown table beside it.
 
     MINARI_DATASETS_PATH=data python scripts/bc_from_dataset.py --dataset-id rhs-slam/highway-slam/headway-v0 \\
         --out runs/bc --eval-episodes 20 --eval-seed 1000
@@ -268,7 +268,7 @@ def compare_runs(policy: str | Path, env_id: str, env_kwargs: dict[str, Any], se
     Returns:
         The runs and the cache's record (where and when they were driven, by which commit).
     """
-    from rhs_studies.provenance import git_state
+    from rhs_studies.kit.provenance import git_state
 
     key = {"policy": str(policy), "env_id": env_id, "env_kwargs": env_kwargs, "seeds": seeds}
     _wait_for(cache.with_name(cache.name + ".lock"))
@@ -464,7 +464,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"bc_from_dataset: error: {exc}", file=sys.stderr)
         return 2
     if args.results and not args.compare_only:
-        from rhs_studies.provenance import write_json
+        from rhs_studies.kit.provenance import write_json
 
         path = Path(args.results)
         write_json(path, summary, "scripts/bc_from_dataset.py", vars(args), started, argv=argv)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 
-from rhs_studies.provenance import ROOT
+from rhs_studies.kit.provenance import ROOT
 
 #: the thread-count variables of OpenMP, OpenBLAS and MKL
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")

@@ -22,7 +22,7 @@ import sys
 import time
 from pathlib import Path
 
-from rhs_studies.kit.seeds import first
+from rhs_studies.kit.seeds import first, seed_set
 
 __all__ = ["main"]
 
@@ -37,11 +37,11 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
     if a.seeds < 1 or a.steps < 1:
         p.error(f"--seeds and --steps must be >= 1, got {a.seeds} and {a.steps}")
-    from rhs_studies.fast_radar_fidelity import RADAR_FIRST_SEED, SLAM_FIRST_SEED
-
-    if a.first_seed < SLAM_FIRST_SEED + 100_000 and a.first_seed + a.seeds > RADAR_FIRST_SEED:
+    # the fidelity check's radar and SLAM seed sets, named in the ledger (rhs_studies.kit.seeds)
+    radar, slam = seed_set("fast_radar_fidelity"), seed_set("fast_radar_slam")
+    if a.first_seed <= slam.last and a.first_seed + a.seeds > radar.first:
         p.error(f"--first-seed {a.first_seed} with --seeds {a.seeds} overlaps the fidelity check's seeds "
-                f"({RADAR_FIRST_SEED}-{SLAM_FIRST_SEED + 99_999}); calibrate below {RADAR_FIRST_SEED}")
+                f"({radar.first}-{slam.last}); calibrate below {radar.first}")
     from rhs_env.fast_radar import calibrate
     from rhs_env.fast_radar_calibration import cached_table_path, shipped_table_path
     from rhs_env.wrappers import make_radar_config
