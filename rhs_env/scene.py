@@ -514,9 +514,11 @@ def _nearby_objects(road, ego, radius: float, include_obstacles: bool) -> tuple[
     return [o for o, k in zip(objs, keep) if k], np.asarray(ids, dtype=np.int64)[keep], np.asarray(static, bool)[keep]
 
 
-def _face_scatterers(objs: list, ids: np.ndarray, static: np.ndarray, ego_motion: dict[str, np.ndarray],
-                     cfg: ScatterConfig, kernels: str = "numba") -> tuple[Scatterers, Occluders]:
-    """Points on the visible faces of box objects and their four edges as occluders, vehicle frame.
+def _face_scatterers(m: dict[str, np.ndarray], ids: np.ndarray, static: np.ndarray, ego_motion: dict[str, np.ndarray],
+                     cfg: ScatterConfig, kernels: str = "numba") -> tuple[tuple[np.ndarray, ...], Occluders]:
+    """Points on the visible faces of box objects of motion ``m`` (:func:`_motion_arrays`) and their four edges as
+    occluders, vehicle frame: the points' fields ``(xy, velocity, rcs, object_id, is_static)`` of
+    :class:`Scatterers` (checked once, by :func:`scene_scatterers`) and the :class:`Occluders`.
 
     A face is visible when its outward normal points toward the ego centre; the
     object's ``vehicle_rcs_m2`` is shared among the ``points_per_face`` points of its
@@ -526,7 +528,7 @@ def _face_scatterers(objs: list, ids: np.ndarray, static: np.ndarray, ego_motion
     """
     ego = tuple(ego_motion[k][0] for k in ("pos", "heading", "vel", "yaw_rate"))
     faces = _STAGES.choose(kernels).faces  # the compiled or the numpy faces
-    return faces(_motion_arrays(objs), len(objs), ids, static, ego, cfg)
+    return faces(m, len(ids), ids, static, ego, cfg)
 
 
 #: the vehicles' faces in two implementations (:class:`rhs_common.jit.KernelTable`), chosen by the ``kernels`` of
@@ -536,7 +538,7 @@ _STAGES = KernelTable("rhs_env.scene")
 
 @_STAGES.stage("faces", "numba")
 def _faces_compiled(m: dict[str, np.ndarray], n_obj: int, ids: np.ndarray, static: np.ndarray, ego: tuple,
-                    cfg: ScatterConfig) -> tuple[Scatterers, Occluders]:
+                    cfg: ScatterConfig) -> tuple[tuple[np.ndarray, ...], Occluders]:
     """:func:`_face_scatterers` of the ``n_obj`` boxes of motion ``m`` (:func:`_motion_arrays`) seen from ``ego``
     (position, heading, velocity, yaw rate), the same operations compiled (:func:`rhs_env.kernels.face_scatterers`)."""
     from rhs_env.kernels import face_scatterers
@@ -545,13 +547,12 @@ def _faces_compiled(m: dict[str, np.ndarray], n_obj: int, ids: np.ndarray, stati
     ego_row = np.array([e_pos[0], e_pos[1], e_head, e_vel[0], e_vel[1], e_rate], dtype=float)
     xy, vel, rcs, box, segments = face_scatterers(m["pos"], m["heading"], m["vel"], m["yaw_rate"], m["length"],
                                                   m["width"], ego_row, int(cfg.points_per_face), float(cfg.vehicle_rcs_m2))
-    return (Scatterers(xy=xy, velocity=vel, rcs=rcs, object_id=ids[box], is_static=static[box]),
-            Occluders(segments=segments, object_id=np.repeat(ids, 4)))
+    return (xy, vel, rcs, ids[box], static[box]), Occluders(segments=segments, object_id=np.repeat(ids, 4))
 
 
 @_STAGES.stage("faces", "numpy")
 def _faces_numpy(m: dict[str, np.ndarray], n_obj: int, ids: np.ndarray, static: np.ndarray, ego: tuple,
-                 cfg: ScatterConfig) -> tuple[Scatterers, Occluders]:
+                 cfg: ScatterConfig) -> tuple[tuple[np.ndarray, ...], Occluders]:
     """:func:`_face_scatterers` of the ``n_obj`` boxes of motion ``m`` (:func:`_motion_arrays`) seen from ``ego``
     (position, heading, velocity, yaw rate) in numpy (the reference)."""
     e_pos, e_head, e_vel, e_rate = ego
@@ -581,14 +582,9 @@ def _faces_numpy(m: dict[str, np.ndarray], n_obj: int, ids: np.ndarray, static: 
     vis = np.broadcast_to((weight > 0)[..., None], (n_obj, 4, p))
     corners = mids - tangents * (face_len[..., None] / 2)  # start corner of each face
     ends = mids + tangents * (face_len[..., None] / 2)
-    scatterers = Scatterers(
-        xy=pts[vis],
-        velocity=vel[vis],
-        rcs=rcs[vis],
-        object_id=np.broadcast_to(ids[:, None, None], (n_obj, 4, p))[vis],
-        is_static=np.broadcast_to(static[:, None, None], (n_obj, 4, p))[vis],
-    )
-    return scatterers, Occluders(segments=np.stack([corners, ends], axis=2).reshape(-1, 2, 2), object_id=np.repeat(ids, 4))
+    fields = (pts[vis], vel[vis], rcs[vis], np.broadcast_to(ids[:, None, None], (n_obj, 4, p))[vis],
+              np.broadcast_to(static[:, None, None], (n_obj, 4, p))[vis])
+    return fields, Occluders(segments=np.stack([corners, ends], axis=2).reshape(-1, 2, 2), object_id=np.repeat(ids, 4))
 
 
 def scene_scatterers(
@@ -620,22 +616,20 @@ def scene_scatterers(
     ego = base.vehicle if ego is None else ego
     if ego is None:
         raise ValueError("scene_scatterers needs an ego vehicle (env.unwrapped.vehicle is None)")
-    em = _motion_arrays([ego])
+    objs, ids, static = _nearby_objects(base.road, ego, cfg.max_range_m, cfg.include_obstacles)
+    motion = _motion_arrays([ego, *objs])  # the ego's row first, then the objects' (one vectorized pass)
+    em = {k: v[:1] for k, v in motion.items()}
     r_t = rotation(-em["heading"][0])  # world -> vehicle frame
 
     lms = get_landmarks(base)  # static point landmarks
     idx = lms.near(np.asarray(ego.position, dtype=float), cfg.max_range_m)
     q_lm = (he_to_world_xy(lms.xy_he[idx]) - em["pos"][0]) @ r_t.T
     v_lm = np.broadcast_to(r_t @ (-em["vel"][0]), q_lm.shape) - _cross_z(em["yaw_rate"][0], q_lm)
-    landmarks = Scatterers(xy=q_lm, velocity=v_lm, rcs=lms.rcs[idx], object_id=idx.astype(np.int64),
-                           is_static=np.ones(len(idx), dtype=bool))
-
-    objs, ids, static = _nearby_objects(base.road, ego, cfg.max_range_m, cfg.include_obstacles)
+    landmarks = (q_lm, v_lm, lms.rcs[idx], idx.astype(np.int64), np.ones(len(idx), dtype=bool))
     if not objs:
-        return landmarks, Occluders(segments=np.zeros((0, 2, 2)), object_id=np.zeros(0, dtype=np.int64))
-    faces, occluders = _face_scatterers(objs, ids, static, em, cfg, kernels)
-    fields = ("xy", "velocity", "rcs", "object_id", "is_static")
-    return Scatterers(*(np.concatenate([getattr(landmarks, k), getattr(faces, k)]) for k in fields)), occluders
+        return Scatterers(*landmarks), Occluders(segments=np.zeros((0, 2, 2)), object_id=np.zeros(0, dtype=np.int64))
+    faces, occluders = _face_scatterers({k: v[1:] for k, v in motion.items()}, ids, static, em, cfg, kernels)
+    return Scatterers(*(np.concatenate([a, b]) for a, b in zip(landmarks, faces))), occluders
 
 
 def scatterers_to_dict(scatterers) -> dict[str, np.ndarray]:

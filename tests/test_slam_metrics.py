@@ -48,6 +48,39 @@ def test_hungarian_prefers_global_optimum():
     assert r["rmse"] == pytest.approx(math.sqrt((0.6**2 + 1.0**2) / 2))
 
 
+def _full_hungarian(est, true, gate):
+    """The reference: the Hungarian algorithm on the full (E, T) matrix, out-of-gate pairs priced above any sum."""
+    from scipy.optimize import linear_sum_assignment
+
+    d = np.linalg.norm(est[:, None, :] - true[None, :, :], axis=2)
+    r, c = linear_sum_assignment(np.where(d <= gate, d, gate * 1e3 + d.max() * 10 + 1.0))
+    ok = d[r, c] <= gate
+    return np.stack([r[ok], c[ok]], axis=1), d[r[ok], c[ok]]
+
+
+def test_map_metrics_is_the_full_hungarian():
+    """Matching only the in-gate candidates (the lone pairs outright, the shared ones by the Hungarian) gives the
+    full matrix's assignment: the same pairs, in the same order, and the same RMSE to the bit; crowded maps (many
+    estimates sharing candidates) included."""
+    rng = np.random.default_rng(5)
+    for k in range(400):
+        ne, nt = rng.integers(0, 30, 2)
+        side = rng.choice([5.0, 20.0, 100.0])
+        est, true = rng.uniform(0, side, (ne, 2)), rng.uniform(0, side, (nt, 2))
+        gate = float(rng.uniform(0.5, 4.0))
+        r = map_metrics(est, true, gate)
+        if ne == 0 or nt == 0:
+            assert r["matched"] == 0
+            continue
+        pairs, dist = _full_hungarian(est, true, gate)
+        assert np.array_equal(r["pairs"], pairs), k
+        assert r["matched"] == len(pairs) and r["missed"] == nt - len(pairs) and r["spurious"] == ne - len(pairs)
+        if len(pairs):
+            assert r["rmse"] == float(np.sqrt(np.mean(dist**2)))
+        else:
+            assert math.isnan(r["rmse"])
+
+
 def test_map_metrics_empty():
     r = map_metrics(np.zeros((0, 2)), np.ones((3, 2)), 1.0)
     assert r["matched"] == 0 and r["missed"] == 3 and r["spurious"] == 0 and math.isnan(r["rmse"])

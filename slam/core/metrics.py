@@ -79,8 +79,15 @@ def heading_rmse(est: np.ndarray, true: np.ndarray) -> float:
 def map_metrics(est: np.ndarray, true: np.ndarray, gate: float = 2.0) -> dict:
     """Hungarian map matching within ``gate`` (m).
 
+    The assignment maximises the number of pairs within the gate, then minimises the sum of their distances
+    ``d_ij = |e_i - t_j|``. Only the pairs within the gate take part, so the problem splits: a pair whose estimate
+    and true landmark have no other candidate is matched outright, and the Hungarian algorithm
+    (``scipy.optimize.linear_sum_assignment``) solves the rest, the rows and columns that share candidates. The
+    result is that of the Hungarian algorithm on the full (E, T) matrix with the out-of-gate pairs priced above
+    every in-gate sum, at the cost of the candidates alone.
+
     Returns ``dict(rmse, matched, missed, spurious, pairs)``: ``rmse`` over matched
-    pairs (NaN when none), ``pairs`` (matched, 2) int array of (est index, true index).
+    pairs (NaN when none), ``pairs`` (matched, 2) int array of (est index, true index), sorted by est index.
     """
     if not gate > 0:
         raise ValueError(f"gate must be in (0, inf), got {gate!r}")
@@ -89,15 +96,29 @@ def map_metrics(est: np.ndarray, true: np.ndarray, gate: float = 2.0) -> dict:
     ne, nt = len(est), len(true)
     if ne == 0 or nt == 0:
         return dict(rmse=float("nan"), matched=0, missed=nt, spurious=ne, pairs=np.zeros((0, 2), dtype=int))
-    d = np.linalg.norm(est[:, None, :] - true[None, :, :], axis=2)
-    big = gate * 1e3 + d.max() * 10 + 1.0
-    cost = np.where(d <= gate, d, big)
-    r, c = linear_sum_assignment(cost)
-    ok = d[r, c] <= gate
-    r, c = r[ok], c[ok]
-    m = int(ok.sum())
-    rmse = float(np.sqrt(np.mean(d[r, c] ** 2))) if m else float("nan")
-    return dict(rmse=rmse, matched=m, missed=nt - m, spurious=ne - m, pairs=np.stack([r, c], axis=1))
+    dx = est[:, None, 0] - true[None, :, 0]
+    dy = est[:, None, 1] - true[None, :, 1]
+    r, c = np.nonzero(dx * dx + dy * dy <= (gate * (1.0 + 1e-12)) ** 2)  # a superset of d <= gate
+    d = np.sqrt(dx[r, c] ** 2 + dy[r, c] ** 2)
+    inside = d <= gate
+    r, c, d = r[inside], c[inside], d[inside]
+    alone = (np.bincount(r, minlength=ne)[r] == 1) & (np.bincount(c, minlength=nt)[c] == 1)
+    rows, cols = r[alone], c[alone]
+    if not alone.all():  # the candidates that share a row or a column: the Hungarian algorithm on them
+        shared_rows, ri = np.unique(r[~alone], return_inverse=True)
+        shared_cols, ci = np.unique(c[~alone], return_inverse=True)
+        cost = np.full((len(shared_rows), len(shared_cols)), gate * 1e3 + d[~alone].max() * 10 + 1.0)
+        cost[ri, ci] = d[~alone]
+        hr, hc = linear_sum_assignment(cost)
+        ok = cost[hr, hc] <= gate
+        rows = np.concatenate([rows, shared_rows[hr[ok]]])
+        cols = np.concatenate([cols, shared_cols[hc[ok]]])
+    order = np.argsort(rows, kind="stable")
+    rows, cols = rows[order], cols[order]
+    m = len(rows)
+    dist = np.sqrt((est[rows, 0] - true[cols, 0]) ** 2 + (est[rows, 1] - true[cols, 1]) ** 2)
+    rmse = float(np.sqrt(np.mean(dist**2))) if m else float("nan")
+    return dict(rmse=rmse, matched=m, missed=nt - m, spurious=ne - m, pairs=np.stack([rows, cols], axis=1))
 
 
 def landmark_hits(points_xy: np.ndarray, landmarks_xy: np.ndarray, gate: float = MEASURED_GATE_M) -> np.ndarray:
