@@ -22,7 +22,8 @@ seed divided by IDM + MOBIL's on the same seed and env is a score, the seeds the
 gap with stratified bootstrap intervals, and the performance profile.
 
 The seeds (``--seed``, ``--episodes``) must be fresh: :func:`rhs_studies.kit.seeds.check_fresh` refuses any set of
-the ledger but this study's own (``campaign_pilot_test``, which it may drive again to reproduce).
+the ledger but this study's own (:data:`OWN_SETS`: ``campaign_pilot_test``, the pilot's 10 seeds, and
+``campaign_test``, the 100 seeds of the table; it may drive them again to reproduce).
 
     OMP_NUM_THREADS=1 python scripts/shield_table.py --episodes 10 --envs exact
 """
@@ -39,11 +40,11 @@ import numpy as np
 
 from rhs_env.registration import HIGHWAY_SLAM_FAST_ID, HIGHWAY_SLAM_ID
 
-__all__ = ["DEFAULT_ARMS", "OWN_SET", "arm_policy", "drive_arm", "main", "paired", "summarize_arm", "table",
+__all__ = ["DEFAULT_ARMS", "OWN_SETS", "arm_policy", "drive_arm", "main", "paired", "summarize_arm", "table",
            "test_seeds"]
 
-#: the ledger set this study drives (and may drive again)
-OWN_SET = "campaign_pilot_test"
+#: the ledger sets this study drives (and may drive again): the pilot's and the table's
+OWN_SETS = ("campaign_pilot_test", "campaign_test")
 #: the arms of the pilot: the three PPO-from-scratch runs, the scripted drivers, the trivial policies
 DEFAULT_ARMS = ("campaign:ppo_scratch:seed0", "campaign:ppo_scratch:seed1", "campaign:ppo_scratch:seed2", "idm",
                 "headway", "constant:1", "constant:3")
@@ -54,11 +55,11 @@ UNSHIELDABLE = ("idm",)
 
 def test_seeds(first: int, episodes: int) -> list[int]:
     """``episodes`` seeds from ``first``, refused (``ValueError``) when they touch a driven set other than
-    :data:`OWN_SET` (:func:`rhs_studies.kit.seeds.check_fresh`)."""
+    :data:`OWN_SETS` (:func:`rhs_studies.kit.seeds.check_fresh`)."""
     from rhs_studies.kit.seeds import check_fresh, consecutive
 
     seeds = consecutive(first, episodes)
-    check_fresh(seeds, "--seed", allow=(OWN_SET,))
+    check_fresh(seeds, "--seed", allow=OWN_SETS)
     return seeds
 
 

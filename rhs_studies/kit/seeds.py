@@ -64,6 +64,8 @@ LEDGER: tuple[SeedSet, ...] = (
     SeedSet("pose_calibration", 13000, 13009, "slam.gym.pose_calibration: the pose covariance's factors fitted"),
     SeedSet("campaign_validation", 20000, 20099, "the training campaign: the checkpoints chosen (driving.campaign)"),
     SeedSet("campaign_pilot_test", 21000, 21009, "the campaign pilot's shield table, fast and exact env"),
+    SeedSet("campaign_test", 21100, 21199, "the campaign's shield table: every arm with and without the shield, exact "
+            "and fast env, driven once (the scripted arms first; the campaign's chosen runs when it ends)"),
     SeedSet("bc_dataset", 30000, 30519, "bc_from_dataset: the shipped policy's recorded episodes (the Minari dataset)"),
     SeedSet("bc_test", 31000, 31029, "bc_from_dataset: the behaviour clone and the shipped policy compared once"),
     SeedSet("campaign_training", 1_000_000, 99_999_999, "the training campaign's training envs (driving.campaign)"),
