@@ -61,10 +61,10 @@ def _full_hungarian(est, true, gate):
 def test_map_metrics_is_the_full_hungarian():
     """Matching only the in-gate candidates (the lone pairs outright, the shared ones by the Hungarian) gives the
     full matrix's assignment: the same pairs, in the same order, and the same RMSE to the bit; crowded maps (many
-    estimates sharing candidates) included."""
+    estimates sharing candidates) and maps large enough for the k-d tree's candidates included."""
     rng = np.random.default_rng(5)
     for k in range(400):
-        ne, nt = rng.integers(0, 30, 2)
+        ne, nt = rng.integers(0, 30, 2) if k % 20 else rng.integers(60, 300, 2)  # every 20th past DENSE_PAIRS
         side = rng.choice([5.0, 20.0, 100.0])
         est, true = rng.uniform(0, side, (ne, 2)), rng.uniform(0, side, (nt, 2))
         gate = float(rng.uniform(0.5, 4.0))

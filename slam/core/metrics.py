@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
+from scipy.spatial import cKDTree
 
 from rhs_common.geometry import wrap_angle
 
@@ -76,6 +77,23 @@ def heading_rmse(est: np.ndarray, true: np.ndarray) -> float:
     return float(np.sqrt(np.mean(d**2))) if d.size else float("nan")
 
 
+#: above this many estimate x landmark pairs the candidates come from a k-d tree, not the full distance matrix
+DENSE_PAIRS = 4096
+
+
+def _candidates(est: np.ndarray, true: np.ndarray, gate: float) -> tuple[np.ndarray, np.ndarray]:
+    """The (est, true) index pairs that may lie within ``gate``: a superset of ``d <= gate`` (the caller computes
+    ``d`` and keeps those). Small maps test every pair; a long drive's map (thousands of landmarks with the
+    archive) asks a k-d tree, so the cost grows as ``E log T`` rather than ``E T``."""
+    reach = gate * (1.0 + 1e-9)
+    if len(est) * len(true) <= DENSE_PAIRS:
+        dx = est[:, None, 0] - true[None, :, 0]
+        dy = est[:, None, 1] - true[None, :, 1]
+        return np.nonzero(dx * dx + dy * dy <= reach * reach)
+    pairs = cKDTree(est).sparse_distance_matrix(cKDTree(true), reach, output_type="ndarray")
+    return pairs["i"].astype(np.intp), pairs["j"].astype(np.intp)
+
+
 def map_metrics(est: np.ndarray, true: np.ndarray, gate: float = 2.0) -> dict:
     """Hungarian map matching within ``gate`` (m).
 
@@ -84,7 +102,8 @@ def map_metrics(est: np.ndarray, true: np.ndarray, gate: float = 2.0) -> dict:
     and true landmark have no other candidate is matched outright, and the Hungarian algorithm
     (``scipy.optimize.linear_sum_assignment``) solves the rest, the rows and columns that share candidates. The
     result is that of the Hungarian algorithm on the full (E, T) matrix with the out-of-gate pairs priced above
-    every in-gate sum, at the cost of the candidates alone.
+    every in-gate sum, at the cost of the candidates alone (:func:`_candidates`: every pair of a small map, a k-d
+    tree's for a long drive's).
 
     Returns ``dict(rmse, matched, missed, spurious, pairs)``: ``rmse`` over matched
     pairs (NaN when none), ``pairs`` (matched, 2) int array of (est index, true index), sorted by est index.
@@ -96,10 +115,8 @@ def map_metrics(est: np.ndarray, true: np.ndarray, gate: float = 2.0) -> dict:
     ne, nt = len(est), len(true)
     if ne == 0 or nt == 0:
         return dict(rmse=float("nan"), matched=0, missed=nt, spurious=ne, pairs=np.zeros((0, 2), dtype=int))
-    dx = est[:, None, 0] - true[None, :, 0]
-    dy = est[:, None, 1] - true[None, :, 1]
-    r, c = np.nonzero(dx * dx + dy * dy <= (gate * (1.0 + 1e-12)) ** 2)  # a superset of d <= gate
-    d = np.sqrt(dx[r, c] ** 2 + dy[r, c] ** 2)
+    r, c = _candidates(est, true, gate)
+    d = np.sqrt((est[r, 0] - true[c, 0]) ** 2 + (est[r, 1] - true[c, 1]) ** 2)
     inside = d <= gate
     r, c, d = r[inside], c[inside], d[inside]
     alone = (np.bincount(r, minlength=ne)[r] == 1) & (np.bincount(c, minlength=nt)[c] == 1)
