@@ -56,6 +56,7 @@ from agents.policies.decision import held
 from agents.policies.expert import HeadwayDriver
 from agents.policies.lookahead import LookaheadDriver
 from agents.policies.shield import ShieldedPolicy, check_shield_env, shield_record
+from rhs_env.idm_driver import swap_ego_for_idm
 from rhs_env.registration import SLAM_ENV_SPECS
 from slam.core.trajectory_formats import FORMAT_CHOICES, formats_of
 from slam.gym.trajectory import sim_time
@@ -121,7 +122,8 @@ class IDMMobilPolicy:
     follows meta-actions) is replaced, in ``road.vehicles``, ``controlled_vehicles``
     and the action type, by a ``highway_env.vehicle.behavior.IDMVehicle`` at the
     same dynamical state (``IDMVehicle.create_from``) with desired speed
-    ``target_speed``. From then on the env's ``road.act()`` lets it decide at the
+    ``target_speed`` (:func:`rhs_env.idm_driver.swap_ego_for_idm`; a steering-only
+    ego, the racetrack's, gets its lane as the target lane first). From then on the env's ``road.act()`` lets it decide at the
     simulation rate like the traffic does: IDM longitudinal control,
 
         a = a_max [1 - (v / v0)^delta - (d*(v, dv) / d)^2],
@@ -150,23 +152,8 @@ class IDMMobilPolicy:
         self.target_speed = float(target_speed)
         self.idle = 1  # DiscreteMetaAction IDLE; IDMVehicle.act ignores it
 
-    def _swap_ego(self) -> None:
-        from highway_env.vehicle.behavior import IDMVehicle
-
-        base = self.env.unwrapped
-        ego = base.vehicle
-        if ego is None or isinstance(ego, IDMVehicle):
-            return
-        idm = IDMVehicle.create_from(ego)
-        idm.target_speed = self.target_speed
-        idm.crashed = ego.crashed
-        vehicles = base.road.vehicles
-        vehicles[next(i for i, v in enumerate(vehicles) if v is ego)] = idm
-        base.controlled_vehicles = [idm if v is ego else v for v in base.controlled_vehicles]
-        base.action_type.controlled_vehicle = idm
-
     def predict(self, obs, deterministic: bool = True):
-        self._swap_ego()
+        swap_ego_for_idm(self.env, self.target_speed)
         return self.idle, None
 
 

@@ -72,11 +72,7 @@ class _Driver:
         self.zero = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
 
     def act(self, obs: Any) -> np.ndarray:
-        ego = self.env.unwrapped.vehicle
-        if not hasattr(ego, "target_lane_index"):
-            ego.target_lane_index, ego.route = ego.lane_index, None
-            ego.target_speed = self.policy.target_speed
-        self.policy.predict(obs, True)
+        self.policy.predict(obs, True)  # gives the steering-only ego its lane as the target lane first
         return self.zero
 
 

@@ -35,6 +35,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from rhs_env.idm_driver import swap_ego_for_idm
 from slam.core.pose_calibration import ROW_COLUMNS, PoseCalibration, fit_calibration
 
 __all__ = [
@@ -132,31 +133,6 @@ def cached_path(key: str) -> Path:
     return cache_subdir("pose_calibration") / f"pose_cov_{key}.json"
 
 
-def _swap_to_idm(env: gym.Env) -> None:
-    """highway-env's IDM + MOBIL driver in the ego's seat (``IDMVehicle.create_from``; the env's ``road.act()``
-    then drives it; the meta-action sent is ignored), as ``agents.evaluate.IDMMobilPolicy`` does. An ego of a
-    steering action (the racetrack's plain ``Vehicle``) is given its lane as the target lane first, as the
-    racetrack study's driver does, and the lane's speed limit as its desired speed (30 m/s without either)."""
-    from highway_env.vehicle.behavior import IDMVehicle
-
-    base: Any = env.unwrapped
-    ego = base.vehicle
-    if ego is None or isinstance(ego, IDMVehicle):
-        return
-    speeds = getattr(base.action_type, "target_speeds", None)
-    limit = getattr(getattr(ego, "lane", None), "speed_limit", None)
-    target = float(np.max(speeds)) if speeds is not None else float(limit) if limit else 30.0
-    if not hasattr(ego, "target_lane_index"):
-        ego.target_lane_index, ego.route, ego.target_speed = ego.lane_index, None, target
-    idm = IDMVehicle.create_from(ego)
-    idm.target_speed = target
-    idm.crashed = ego.crashed
-    vehicles = base.road.vehicles
-    vehicles[next(i for i, v in enumerate(vehicles) if v is ego)] = idm
-    base.controlled_vehicles = [idm if v is ego else v for v in base.controlled_vehicles]
-    base.action_type.controlled_vehicle = idm
-
-
 def calibration_rows(env: gym.Env, seed: int, cycles: int, policy: Any = None) -> np.ndarray:
     """One drive's rows (T, 18) (:data:`slam.core.pose_calibration.ROW_COLUMNS`).
 
@@ -164,7 +140,8 @@ def calibration_rows(env: gym.Env, seed: int, cycles: int, policy: Any = None) -
         env: a SLAM env whose pipeline runs the adaptive or calibrated model.
         seed: the episode's seed.
         cycles: at most this many cycles (fewer if the episode ends).
-        policy: an object with ``predict(obs, deterministic=True) -> (action, state)``; None: IDM + MOBIL.
+        policy: an object with ``predict(obs, deterministic=True) -> (action, state)``; None: IDM + MOBIL
+            (:func:`rhs_env.idm_driver.swap_ego_for_idm` at its default target speed).
 
     Returns:
         The rows: pose error (estimated minus true, heading wrapped), particles' variances, drift, scale,
@@ -178,7 +155,7 @@ def calibration_rows(env: gym.Env, seed: int, cycles: int, policy: Any = None) -
     ignored = np.zeros(env.action_space.shape, env.action_space.dtype) if isinstance(env.action_space, gym.spaces.Box) else 1
     for _ in range(cycles):
         if policy is None:
-            _swap_to_idm(env)
+            swap_ego_for_idm(env)
             action: Any = ignored
         else:
             action = np.asarray(policy.predict(obs, deterministic=True)[0])
