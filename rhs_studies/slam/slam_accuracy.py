@@ -574,12 +574,12 @@ SHORT_DRIFT_LENGTHS_M = (25.0, 50.0)
 
 class ZeroActionDriver:
     """IDM + MOBIL in the ego's seat (:class:`agents.evaluate.IDMMobilPolicy`, which ignores its actions) on an env
-    with a ``Box`` action space (the racetrack's steering): it passes the zero action the env's step asks for, and
-    gives highway-env's plain ``Vehicle`` ego (``ContinuousAction``'s) the lane and route an ``IDMVehicle`` is made
-    from (its current lane, no route: the lanes' successors)."""
+    with a ``Box`` action space (the racetrack's steering): it passes the zero action the env's step asks for (the
+    driver's swap, :func:`rhs_env.idm_driver.swap_ego_for_idm`, gives highway-env's plain ``Vehicle`` ego the lane
+    and route an ``IDMVehicle`` is made from)."""
 
     def __init__(self, driver: Any, env: Any):
-        self.driver, self.env = driver, env
+        self.driver = driver
         self.zero = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
 
     def reset(self) -> None:
@@ -587,10 +587,6 @@ class ZeroActionDriver:
             self.driver.reset()
 
     def predict(self, obs: Any, deterministic: bool = True) -> tuple[np.ndarray, None]:
-        ego = self.env.unwrapped.vehicle
-        if not hasattr(ego, "target_lane_index"):
-            ego.target_lane_index, ego.route = ego.lane_index, None
-            ego.target_speed = self.driver.target_speed
         self.driver.predict(obs, deterministic)
         return self.zero, None
 
