@@ -65,6 +65,8 @@ class Options:
     speed: float = option(15.0, "the IDM + MOBIL driver's target speed, m/s")
     grid_deg: float = option(5.0, "the radar's scan grid, deg (5: the roads' cheap configuration; the env's default is 1)")
     window: int = option(500, "cycles of the first / last window of the step-time ratio")
+    pose_covariance: str = option("drift-constants", "the reported pose covariance (PipelineConfig.pose_covariance): "
+                                  "drift-constants (the default), adaptive or calibrated")
     out_dir: Path = option(Path("results"), "where long_drive.json / .md / _step_time.png go")
     no_plot: bool = option(False, "skip the PNG")
 
@@ -79,6 +81,10 @@ class Options:
             raise ValueError(f"grid_deg={self.grid_deg}: must lie in [0.1, 10] deg")
         if not 5 <= self.window <= self.cycles // 2:
             raise ValueError(f"window={self.window}: must lie in [5, cycles / 2]")
+        from slam.core.pipeline import POSE_COVARIANCE_MODELS
+
+        if self.pose_covariance not in POSE_COVARIANCE_MODELS:
+            raise ValueError(f"pose_covariance={self.pose_covariance!r}: must be one of {POSE_COVARIANCE_MODELS}")
 
 
 def rss_mb() -> float:
@@ -114,7 +120,8 @@ def drive(seed: int, o: Options) -> tuple[dict[str, Any], np.ndarray]:
     import rhs_env  # noqa: F401  (registers the ids)
     from agents.evaluate import load_policy
 
-    env = gym.make(ENV_ID, duration=o.cycles / POLICY_HZ, radar={"scan": {"grid_deg": o.grid_deg}})
+    model = {} if o.pose_covariance == "drift-constants" else {"pipeline": {"pose_covariance": o.pose_covariance}}
+    env = gym.make(ENV_ID, duration=o.cycles / POLICY_HZ, radar={"scan": {"grid_deg": o.grid_deg}}, **model)
     policy = load_policy(f"idm:{o.speed:g}", env, seed=seed)
     obs, info = env.reset(seed=seed)
     rows: list[tuple[float, ...]] = []
@@ -229,7 +236,8 @@ def plot(runs: list[dict[str, Any]], path: Path) -> None:
 
 
 def _result(o: Options, runs: list[dict[str, Any]]) -> dict[str, Any]:
-    return {"env": ENV_ID, "driver": f"idm:{o.speed:g}", "cycles": o.cycles, "grid_deg": o.grid_deg, "runs": runs,
+    return {"env": ENV_ID, "driver": f"idm:{o.speed:g}", "cycles": o.cycles, "grid_deg": o.grid_deg,
+            "pose_covariance": o.pose_covariance, "runs": runs,
             "summary": pooled(runs), "seeds_done": [r["seed"] for r in runs], "nees_interval": nees_interval(),
             "dro_drift_pct": DRO_DRIFT_PCT, "cfear_drift_pct": list(CFEAR_DRIFT_PCT)}
 
@@ -269,7 +277,8 @@ def markdown(res: dict[str, Any]) -> str:
     lines = [
         f"`{res['env']}` at its defaults but a {res.get('grid_deg', 1):g}-degree scan grid, {res['cycles']} cycles "
         f"({res['cycles'] / POLICY_HZ / 60:.0f} min) per drive, "
-        f"IDM + MOBIL at {res['driver'].split(':')[1]} m/s, no loop closure, {s['seeds']} seeds. Simulated.", "",
+        f"IDM + MOBIL at {res['driver'].split(':')[1]} m/s, no loop closure, {s['seeds']} seeds, the "
+        f"`{res.get('pose_covariance', 'drift-constants')}` pose covariance. Simulated.", "",
         f"- NEES inside its 95 % band [{lo:.2f}, {hi:.2f}] on {100 * s['nees_coverage']:.1f} % of {s['cycles']} cycles "
         f"(below {100 * s['nees_below_fraction']:.1f} %, above {100 * s['nees_above_fraction']:.1f} %): target >= 90 % "
         f"{_yes(t['nees_ge_90pct'])};",
