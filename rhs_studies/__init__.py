@@ -40,7 +40,7 @@ ROOMS: dict[str, tuple[str, ...]] = {
     "bench": ("benchmark", "benchmark_radar", "benchmark_patterns", "benchmark_rllib", "traffic_alignment",
               "startup_fresh_clone"),
     "upkeep": ("write_results_pages", "fingerprint_tolerance", "refresh_constraints", "ship_policy", "make_video",
-               "reproduce"),
+               "reproduce", "kit_counts"),
 }
 #: the shared modules that moved from the top of the package into the kit (``rhs_studies.NAME`` ->
 #: ``rhs_studies.kit.NAME``): provenance, the episodes, the scenes, a subprocess's environment

@@ -184,6 +184,11 @@ STEPS: tuple[Step, ...] = (
     Step("benchmark_rllib", "benchmark_rllib.py", (), ("benchmark_rllib.json",), 300,
          "timings; in the rllib environment (docs/usage/training.md: Ray RLlib)", no_fingerprint="timings",
          python=".venv-rllib/bin/python"),
+    Step("kit_counts", "kit_counts.py", ("--rev", "8adb345"), ("kit_counts.json",), 30,
+         "the research kit's counts (modules, lines, parsers, study-to-study imports, pools, kernels branches, "
+         "duplicate pairs) before the kit (8adb345) and in this checkout",
+         no_fingerprint="counts of the source tree, not numbers the code computes: they move with every commit to "
+         "rhs_studies/; tests/test_kit_counts.py checks the rules they measure on this checkout"),
 )
 BY_NAME = {s.name: s for s in STEPS}
 
