@@ -44,3 +44,14 @@ def test_a_short_drive_keeps_its_books():
     assert np.all(rows[:, 2] > 0) and np.all(rows[:, 3] >= 0)
     s = pooled([r])
     assert s["cycles"] == 30 and s["targets"]["slots_bounded"]
+
+
+def test_the_pose_covariance_option_names_its_results():
+    """The default covariance writes long_drive.*; another model writes long_drive_<model>.* beside it, so the two
+    runs of the page do not overwrite each other; an unknown model is refused, naming the field."""
+    from rhs_studies.slam.long_drive import Options
+
+    assert Options().result_name == "long_drive"
+    assert Options(pose_covariance="calibrated").result_name == "long_drive_calibrated"
+    with pytest.raises(ValueError, match="pose_covariance"):
+        Options(pose_covariance="exact")

@@ -70,6 +70,12 @@ class Options:
     out_dir: Path = option(Path("results"), "where long_drive.json / .md / _step_time.png go")
     no_plot: bool = option(False, "skip the PNG")
 
+    @property
+    def result_name(self) -> str:
+        """The results' file stem: ``long_drive`` with the default covariance, ``long_drive_<model>`` otherwise."""
+        model = self.pose_covariance
+        return "long_drive" if model == "drift-constants" else f"long_drive_{model.replace('-', '_')}"
+
     def __post_init__(self) -> None:
         if not self.seeds:
             raise ValueError("seeds: give at least one seed")
@@ -249,10 +255,10 @@ def run(o: Options) -> dict[str, Any]:
     started = time.time()
     for seed in o.seeds:
         if runs:
-            write_json(Path(o.out_dir) / "long_drive.json", _result(o, runs), STUDY.launcher, o, started)
-            (Path(o.out_dir) / "long_drive.md").write_text(markdown(_result(o, runs)))
+            write_json(Path(o.out_dir) / f"{o.result_name}.json", _result(o, runs), STUDY.launcher, o, started)
+            (Path(o.out_dir) / f"{o.result_name}.md").write_text(markdown(_result(o, runs)))
             if not o.no_plot:
-                plot(runs, Path(o.out_dir) / "long_drive_step_time.png")
+                plot(runs, Path(o.out_dir) / f"{o.result_name}_step_time.png")
         t0 = time.perf_counter()
         row, _ = drive(int(seed), o)
         runs.append({**row, "wall_s": time.perf_counter() - t0})
@@ -261,7 +267,7 @@ def run(o: Options) -> dict[str, Any]:
               f"step {row['step']['first_ms']:.0f} -> {row['step']['last_ms']:.0f} ms", file=sys.stderr, flush=True)
     if not o.no_plot:
         Path(o.out_dir).mkdir(parents=True, exist_ok=True)
-        plot(runs, Path(o.out_dir) / "long_drive_step_time.png")
+        plot(runs, Path(o.out_dir) / f"{o.result_name}_step_time.png")
     return _result(o, runs)
 
 
@@ -303,7 +309,9 @@ def markdown(res: dict[str, Any]) -> str:
             f"{'n/a' if d is None else f'{d:.3f}'} | {r['drift_rotation_deg_per_100m'] or 0:.4f} | {r['slots_max']} | "
             f"{r['archived_last']} | {r['rss_growth_mb']:.1f} | {st['first_ms']:.0f} / {st['last_ms']:.0f} | "
             f"{sl['first_ms']:.0f} / {sl['last_ms']:.0f} | {sl['slope_ms_per_1000_cycles']:+.2f} |")
-    lines += ["", "![step time against the cycle](long_drive_step_time.png)"]
+    model = res.get("pose_covariance", "drift-constants")
+    stem = "long_drive" if model == "drift-constants" else f"long_drive_{model.replace('-', '_')}"
+    lines += ["", f"![step time against the cycle]({stem}_step_time.png)"]
     return "\n".join(lines) + "\n"
 
 
@@ -315,7 +323,7 @@ def fingerprint() -> list[float]:
             float(r["archived_last"]), r["path_m"]]
 
 
-STUDY = Study("long_drive", "scripts/long_drive.py", Options, run, markdown, fingerprint, __doc__)
+STUDY = Study("", "scripts/long_drive.py", Options, run, markdown, fingerprint, __doc__)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -130,9 +130,12 @@ STEPS: tuple[Step, ...] = (
     Step("crash_analysis", "crash_analysis.py", (), ("crash_analysis.json",), 700,
          "the shipped radar + SLAM student's crashes against the expert's labels"),
     Step("detection_curves", "detection_curves.py", (), ("detection_curves.json",), 600),
-    Step("long_drive", "long_drive.py", ("--seeds", "1700"), ("long_drive.json",), 1800,
-         "a 3,000-cycle (10 min) highway SLAM drive, IDM + MOBIL at 15 m/s: NEES, KITTI drift, memory, step time "
-         "against the cycle (~5 min per seed on a quiet core; the study's default drives seeds 1700-1702)"),
+    Step("long_drive", "long_drive.py", (), ("long_drive.json",), 600,
+         "3,000-cycle (10 min) highway SLAM drives, IDM + MOBIL at 15 m/s, seeds 1700-1702: NEES, KITTI drift, memory, "
+         "step time against the cycle (~1 min per seed on a quiet core)"),
+    Step("long_drive_calibrated", "long_drive.py", ("--pose-covariance", "calibrated"), ("long_drive_calibrated.json",),
+         600, "the same drives with the calibrated pose covariance (fitted on 50-cycle drives)",
+         no_fingerprint="the long_drive step's fingerprint covers the study; this step changes one env option"),
     Step("racetrack_loops", "racetrack_loops.py", (), ("racetrack_loops.json",),
          2400, "the racetrack over 5 laps with the loop closure off and on, then a keep_map episode (10 seeds)"),
     Step("bc_from_dataset", "bc_from_dataset.py",
