@@ -150,6 +150,12 @@ STEPS: tuple[Step, ...] = (
          ("campaign_ppo_scratch.json",), 60, "the training campaign's learning curves, read from its committed "
          "checkpoints (campaign/; the training itself: scripts/campaign.py train, a chunk at a time)",
          no_fingerprint="a record of training runs (env steps, returns, wall time), read from the committed state"),
+    Step("shield_table_scripted", "shield_table.py",
+         ("--arms", "idm", "headway", "constant:1", "constant:3", "--envs", "exact", "fast", "--seed", "21100",
+          "--episodes", "100", "--out", "results/shield_table_scripted.json"), ("shield_table_scripted.json",), 2400,
+         "the shield as a measured feature on the campaign's 100 test seeds (21100-21199): the scripted and trivial "
+         "arms with and without it, exact and fast env (the campaign's runs join the table, --merge, when it ends)",
+         no_fingerprint="100 episodes per arm, env and shield on the exact env; the table's arithmetic is tested"),
     Step("campaign_floor", "campaign_report.py", ("floor", "--steps", "150", "--ppo-steps", "640"),
          ("campaign_floor.json",), 300, "env steps per CPU second of the fast and exact SLAM envs and of the "
          "campaign's PPO, and the hours its target budget needs", no_fingerprint="timings"),
