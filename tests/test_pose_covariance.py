@@ -148,3 +148,16 @@ def test_slam_accuracy_reports_below_and_above_the_band_separately() -> None:
     # the NEES itself: a covariance 3x too wide in std reads 1/9 of the consistent value
     e, std = np.array([0.1, -0.2]), np.array([0.1, 0.2, 0.01])
     assert pose_nees(e, 0.01, 3 * std) == pytest.approx(pose_nees(e, 0.01, std) / 9)
+
+
+def test_tail_concentration_finds_the_drives_that_hold_the_upper_tail() -> None:
+    """One drive whose NEES sits at 30 (above the band) among three inside it: the worst drive holds every cycle
+    above, the others hold none, and a 4x wider covariance brings it inside while the others stay inside."""
+    from rhs_studies.slam.pose_covariance import tail_concentration
+
+    runs = [{"seed": s, "nees": {"calibrated": [30.0] * 5 if s == 2 else [3.0] * 5},
+             "position_error_m": [0.5] * 5 if s == 2 else [0.05] * 5} for s in range(4)]
+    t = tail_concentration({"runs": runs}, (0.216, 9.35), worst=1, scales=(4.0,))
+    assert t["above"] == 5 and t["worst_above"] == 5 and t["worst_seeds"] == [2] and t["cycles"] == 20
+    assert t["worst_median_error_m"] == [0.5] and t["others_median_error_m"] == 0.05 and t["others_above"] == 0.0
+    assert t["scaled"] == [{"k": 4.0, "worst_above": 0.0, "others_below": 0.0}]
