@@ -32,6 +32,9 @@ def test_env_rate_is_positive_and_the_page_renders():
     assert "| seed 0 | 1280 | 20 | 64.0 | 7.0 | 1280, 7.0 |" in page
     assert "| campaign:r:seed0 | off | -1.00" in page  # exact - fast, paired
     assert cr.markdown(None, None, None).startswith("# Training campaign")
+    both = cr.markdown(curves, None, None, student=curves)
+    assert "imitation + RL" in both and both.count("| seed 0 | 1280 | 20 | 64.0 | 7.0 | 1280, 7.0 |") == 2
+    assert "imitation + RL" not in page
 
 
 def test_floor_hours_follow_the_rate(tmp_path, monkeypatch):
