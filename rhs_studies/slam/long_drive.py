@@ -126,7 +126,7 @@ def drive(seed: int, o: Options) -> tuple[dict[str, Any], np.ndarray]:
     import rhs_env  # noqa: F401  (registers the ids)
     from agents.evaluate import load_policy
 
-    model = {} if o.pose_covariance == "drift-constants" else {"pipeline": {"pose_covariance": o.pose_covariance}}
+    model: dict[str, Any] = {} if o.pose_covariance == "drift-constants" else {"pipeline": {"pose_covariance": o.pose_covariance}}
     env = gym.make(ENV_ID, duration=o.cycles / POLICY_HZ, radar={"scan": {"grid_deg": o.grid_deg}}, **model)
     policy = load_policy(f"idm:{o.speed:g}", env, seed=seed)
     obs, info = env.reset(seed=seed)

@@ -89,7 +89,8 @@ def _candidates(est: np.ndarray, true: np.ndarray, gate: float) -> tuple[np.ndar
     if len(est) * len(true) <= DENSE_PAIRS:
         dx = est[:, None, 0] - true[None, :, 0]
         dy = est[:, None, 1] - true[None, :, 1]
-        return np.nonzero(dx * dx + dy * dy <= reach * reach)
+        rows, cols = np.nonzero(dx * dx + dy * dy <= reach * reach)
+        return rows, cols
     pairs = cKDTree(est).sparse_distance_matrix(cKDTree(true), reach, output_type="ndarray")
     return pairs["i"].astype(np.intp), pairs["j"].astype(np.intp)
 
