@@ -72,9 +72,8 @@ class Options:
 
     @property
     def result_name(self) -> str:
-        """The results' file stem: ``long_drive`` with the default covariance, ``long_drive_<model>`` otherwise."""
-        model = self.pose_covariance
-        return "long_drive" if model == "drift-constants" else f"long_drive_{model.replace('-', '_')}"
+        """The results' file stem (:func:`result_stem` of the covariance model)."""
+        return result_stem(self.pose_covariance)
 
     def __post_init__(self) -> None:
         if not self.seeds:
@@ -91,6 +90,11 @@ class Options:
 
         if self.pose_covariance not in POSE_COVARIANCE_MODELS:
             raise ValueError(f"pose_covariance={self.pose_covariance!r}: must be one of {POSE_COVARIANCE_MODELS}")
+
+
+def result_stem(pose_covariance: str) -> str:
+    """The results' file stem: ``long_drive`` with the default covariance, ``long_drive_<model>`` otherwise."""
+    return "long_drive" if pose_covariance == "drift-constants" else f"long_drive_{pose_covariance.replace('-', '_')}"
 
 
 def rss_mb() -> float:
@@ -309,9 +313,8 @@ def markdown(res: dict[str, Any]) -> str:
             f"{'n/a' if d is None else f'{d:.3f}'} | {r['drift_rotation_deg_per_100m'] or 0:.4f} | {r['slots_max']} | "
             f"{r['archived_last']} | {r['rss_growth_mb']:.1f} | {st['first_ms']:.0f} / {st['last_ms']:.0f} | "
             f"{sl['first_ms']:.0f} / {sl['last_ms']:.0f} | {sl['slope_ms_per_1000_cycles']:+.2f} |")
-    model = res.get("pose_covariance", "drift-constants")
-    stem = "long_drive" if model == "drift-constants" else f"long_drive_{model.replace('-', '_')}"
-    lines += ["", f"![step time against the cycle]({stem}_step_time.png)"]
+    lines += ["", f"![step time against the cycle]({result_stem(res.get('pose_covariance', 'drift-constants'))}"
+                  "_step_time.png)"]
     return "\n".join(lines) + "\n"
 
 
@@ -331,7 +334,7 @@ def main(argv: list[str] | None = None) -> int:
     return run_study(STUDY, argv)
 
 
-__all__ = ["Options", "STUDY", "drive", "flatness", "main", "markdown", "pooled", "run", "summarise"]
+__all__ = ["Options", "STUDY", "drive", "result_stem", "flatness", "main", "markdown", "pooled", "run", "summarise"]
 
 if __name__ == "__main__":
     sys.exit(main())
