@@ -81,6 +81,33 @@ def test_chunks_accumulate_resume_exactly_and_keep_the_best(tmp_path):
         campaign.train_chunk(TINY, tmp_path / "a", 1, 32, validation_episodes=1)
 
 
+def test_selection_drives_the_candidates_and_goes_stale_with_training(tmp_path):
+    from rhs_studies.driving.shield_table import arm_policy
+
+    with pytest.raises(FileNotFoundError, match="train"):
+        campaign.select_checkpoint(TINY, tmp_path, 0, episodes=2)
+    for _ in range(2):
+        campaign.train_chunk(TINY, tmp_path, 0, 32, validation_episodes=1)
+    run = tmp_path / "tiny" / "seed0"
+    assert campaign.chosen_policy(tmp_path, "tiny", 0) == run / "best.zip"  # never selected: the chunks' best
+    sel = campaign.select_checkpoint(TINY, tmp_path, 0, episodes=2)
+    state = campaign.load_state(run)
+    assert sel["selected_at_env_steps"] == state["env_steps"] and sel["seeds"] == campaign.validation_seeds(2)
+    assert sel["candidates"]["best"]["env_steps"] == state["best"]["env_steps"]
+    assert set(sel["candidates"]) == ({"best"} if state["best"]["env_steps"] == state["env_steps"]
+                                      else {"best", "final"})
+    top = max(c["return"] for c in sel["candidates"].values())
+    assert sel["candidates"][sel["chosen"]]["return"] == top
+    src = run / ("best.zip" if sel["chosen"] == "best" else "model.zip")
+    assert (run / "chosen.zip").read_bytes() == src.read_bytes()
+    record = json.loads((run / "chosen.json").read_text())
+    assert record["timesteps"] == sel["candidates"][sel["chosen"]]["env_steps"]
+    assert arm_policy("campaign:tiny:seed0", tmp_path) == str(run / "chosen.zip")
+    campaign.train_chunk(TINY, tmp_path, 0, 32, validation_episodes=1)  # trained on: the selection is stale
+    with pytest.raises(ValueError, match="select"):
+        campaign.chosen_policy(tmp_path, "tiny", 0)
+
+
 def test_a_signal_stops_the_chunk_with_whole_files(tmp_path):
     from agents.algos.resume import InterruptGuard
 

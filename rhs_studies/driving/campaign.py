@@ -9,6 +9,8 @@ in ``<root>/<recipe>/seed<k>/``:
 * ``model.zip``: the latest policy with its optimizer state (stable-baselines3's zip: ``policy.pth`` and
   ``policy.optimizer.pth``), and ``model.json`` beside it (the record :func:`agents.evaluate.load_policy` reads);
 * ``best.zip`` / ``best.json``: the checkpoint with the highest mean validation return so far;
+* ``chosen.zip`` / ``chosen.json``: the checkpoint to evaluate, :func:`select_checkpoint`'s pick between ``best.zip``
+  and the latest on more validation seeds (5 seeds per chunk make the best a lucky draw too);
 * ``state.json``: the env steps and decisions trained, the chunks, the training wall and CPU time (the CPU
   seconds of this process: on a shared machine, steps per CPU second is the rate one free core would give), the RNG states
   (torch, numpy, Python) at the end of the last chunk, and the learning curve: per chunk, the env steps, the
@@ -29,7 +31,8 @@ The **curves** (:func:`curves`) put the runs of a recipe on a common grid of env
 max over the training seeds, against env steps and against the wall-clock seconds.
 
     python scripts/campaign.py train --recipe ppo_scratch --seeds 0 1 2 --steps 40000 --chunk 4096
-    python scripts/campaign.py report --recipe ppo_scratch
+    python scripts/campaign.py select --recipe ppo_scratch --seeds 0 1 2
+    python scripts/campaign.py curves --recipe ppo_scratch
 """
 
 from __future__ import annotations
@@ -50,8 +53,8 @@ import numpy as np
 from rhs_common.validation import check_int
 from rhs_env.registration import HIGHWAY_SLAM_FAST_ID, HIGHWAY_SLAM_ID
 
-__all__ = ["CAMPAIGN_DIR", "RECIPES", "Recipe", "curves", "load_state", "new_model", "run_dir", "train_chunk", "train_campaign",
-           "training_seed", "validation_seeds"]
+__all__ = ["CAMPAIGN_DIR", "RECIPES", "Recipe", "chosen_policy", "curves", "load_state", "new_model", "run_dir",
+           "select_checkpoint", "train_chunk", "train_campaign", "training_seed", "validation_seeds"]
 
 #: where the campaign's checkpoints live: ``campaign/`` of the repository (committed, small, and not in the wheel:
 #: they are a study's state, not a policy the package ships)
@@ -411,6 +414,67 @@ def train_campaign(recipe: Recipe, root: str | Path, seeds: list[int], total_ste
     return states
 
 
+# ----------------------------------------------------------------------------------------------- selection
+#: validation seeds :func:`select_checkpoint` drives each candidate on (the chunks' own validation: the first 5)
+SELECT_EPISODES = 50
+
+
+def select_checkpoint(recipe: Recipe, root: str | Path, seed: int, episodes: int = SELECT_EPISODES) -> dict[str, Any]:
+    """Choose run ``(recipe, seed)``'s checkpoint for evaluation on ``episodes`` validation seeds.
+
+    ``best.zip`` won its chunk's validation on 5 seeds: over many chunks the maximum of a noisy score favours luck
+    (the winner's curse). The selection drives the candidates, ``best.zip`` and the latest ``model.zip`` (one
+    candidate when they are the same chunk), on the first ``episodes`` validation seeds of the ledger and keeps the
+    one of highest mean return (fewer collisions break a tie) as ``chosen.zip`` / ``chosen.json``. The record says
+    at which env steps the run stood (``selected_at_env_steps``): a chunk trained after it makes it stale
+    (:func:`chosen_policy` refuses it).
+
+    Returns:
+        The selection: per candidate its env steps and validation (return, collisions, mean speed), the winner.
+    """
+    from stable_baselines3 import PPO
+
+    folder = run_dir(root, recipe.name, seed)
+    state = load_state(folder)
+    if state is None or state["best"] is None:
+        raise FileNotFoundError(f"{folder}: no trained run to select from (scripts/campaign.py train first)")
+    candidates = {"best": int(state["best"]["env_steps"]), "final": int(state["env_steps"])}
+    if candidates["best"] == candidates["final"]:
+        del candidates["final"]
+    seeds = validation_seeds(episodes)
+    scores = {}
+    for name, steps in candidates.items():
+        model = PPO.load(folder / ("best.zip" if name == "best" else "model.zip"), device="cpu")
+        scores[name] = {"env_steps": steps, **_validate(model, recipe, seeds)}
+    winner = max(scores, key=lambda k: (scores[k]["return"], -scores[k]["collisions"]))
+    zip_name = "best" if winner == "best" else "model"
+    shutil.copyfile(folder / f"{zip_name}.zip", folder / "chosen.tmp.zip")
+    os.replace(folder / "chosen.tmp.zip", folder / "chosen.zip")
+    selection = {"episodes": episodes, "seeds": [seeds[0], seeds[-1]], "candidates": scores, "chosen": winner,
+                 "selected_at_env_steps": int(state["env_steps"])}
+    record = json.loads((folder / f"{zip_name}.json").read_text())
+    record.update(model=str(folder / "chosen.zip"), selection=selection)
+    _write_atomic(folder / "chosen.json", json.dumps(record, indent=1))
+    return selection
+
+
+def chosen_policy(root: str | Path, recipe: str, seed: int) -> Path:
+    """The zip of run ``(recipe, seed)`` to evaluate: ``chosen.zip`` (:func:`select_checkpoint`) when the selection
+    is current, ``best.zip`` when the run was never selected; ValueError when a chunk was trained after the
+    selection (select again), FileNotFoundError when the run has no checkpoint."""
+    folder = run_dir(root, recipe, seed)
+    chosen, state = folder / "chosen.json", load_state(folder)
+    if chosen.exists() and state is not None:
+        at = json.loads(chosen.read_text())["selection"]["selected_at_env_steps"]
+        if at != state["env_steps"]:
+            raise ValueError(f"{folder}: the selection was made at {at} env steps, the run has {state['env_steps']}: "
+                             f"run scripts/campaign.py select --recipe {recipe} --seeds {seed} again")
+        return folder / "chosen.zip"
+    if not (folder / "best.zip").exists():
+        raise FileNotFoundError(f"{folder / 'best.zip'} not found (train the run first: scripts/campaign.py train)")
+    return folder / "best.zip"
+
+
 # ----------------------------------------------------------------------------------------------- curves
 def curves(root: str | Path, recipe: str, seeds: list[int], points: int = 20) -> dict[str, Any]:
     """The learning curves of ``recipe``'s runs ``seeds`` in ``root``: per run, validation return / collisions
@@ -462,18 +526,21 @@ def _deadline(text: str | None) -> float | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``campaign.py train`` (chunks until ``--steps`` per seed or ``--until``) / ``campaign.py curves``."""
+    """``campaign.py train`` (chunks until ``--steps`` per seed or ``--until``) / ``campaign.py select`` (the
+    checkpoint to evaluate, on ``--select-episodes`` validation seeds) / ``campaign.py curves``."""
     import argparse
 
     from rhs_studies.kit.provenance import write_json
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("command", choices=("train", "curves"))
+    ap.add_argument("command", choices=("train", "select", "curves"))
     ap.add_argument("--recipe", choices=sorted(RECIPES), default="ppo_scratch")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="training seeds")
     ap.add_argument("--steps", type=int, default=2_000_000, help="env steps per run (the campaign's target)")
     ap.add_argument("--chunk", type=int, default=4096, help="env steps per chunk (one checkpoint each)")
-    ap.add_argument("--validation-episodes", type=int, default=5)
+    ap.add_argument("--validation-episodes", type=int, default=5, help="train: validation seeds after each chunk")
+    ap.add_argument("--select-episodes", type=int, default=SELECT_EPISODES,
+                    help="select: validation seeds each candidate checkpoint is driven on")
     ap.add_argument("--until", default=None, help="HH:MM UTC: start no chunk that would end after it")
     ap.add_argument("--root", type=Path, default=CAMPAIGN_DIR)
     ap.add_argument("--out", type=Path, default=None, help="curves: the JSON (default results/campaign_<recipe>.json)")
@@ -485,6 +552,13 @@ def main(argv: list[str] | None = None) -> int:
         states = train_campaign(recipe, args.root, list(args.seeds), args.steps, args.chunk, args.validation_episodes,
                                 _deadline(args.until), log=lambda s: print(s, flush=True))
         print(json.dumps({s: st.get("env_steps") for s, st in states.items()}))
+        return 0
+    if args.command == "select":
+        for seed in args.seeds:
+            sel = select_checkpoint(recipe, args.root, seed, args.select_episodes)
+            print(f"campaign: {recipe.name} seed {seed}: chose {sel['chosen']} ("
+                  + ", ".join(f"{k} at {c['env_steps']} env steps: {c['return']:.2f}, {c['collisions']} collisions"
+                              for k, c in sel["candidates"].items()) + ")", flush=True)
         return 0
     result = curves(args.root, recipe.name, list(args.seeds))
     out = args.out or Path(__file__).resolve().parents[2] / "results" / f"campaign_{recipe.name}.json"

@@ -65,19 +65,16 @@ def test_seeds(first: int, episodes: int) -> list[int]:
 
 def arm_policy(arm: str, root: str | Path | None = None) -> str:
     """The policy :func:`agents.evaluate.load_policy` takes for ``arm`` (``campaign:<recipe>:seed<k>``: the run's
-    ``best.zip`` in ``root``, the campaign folder by default)."""
+    checkpoint chosen on the validation seeds, :func:`rhs_studies.driving.campaign.chosen_policy`, in ``root``, the
+    campaign folder by default)."""
     if not arm.startswith("campaign:"):
         return arm
-    from rhs_studies.driving.campaign import CAMPAIGN_DIR
+    from rhs_studies.driving.campaign import CAMPAIGN_DIR, chosen_policy
 
-    try:
-        _, recipe, seed = arm.split(":")
-    except ValueError:
-        raise ValueError(f"arm {arm!r}: a campaign arm is campaign:<recipe>:seed<k>") from None
-    path = Path(root or CAMPAIGN_DIR) / recipe / seed / "best.zip"
-    if not path.exists():
-        raise FileNotFoundError(f"arm {arm!r}: {path} not found (train the run first: scripts/campaign.py train)")
-    return str(path)
+    parts = arm.split(":")
+    if len(parts) != 3 or not parts[2].startswith("seed") or not parts[2][4:].isdigit():
+        raise ValueError(f"arm {arm!r}: a campaign arm is campaign:<recipe>:seed<k>")
+    return str(chosen_policy(root or CAMPAIGN_DIR, parts[1], int(parts[2][4:])))
 
 
 def _episode(env: Any, policy: Any, seed: int) -> dict[str, Any]:
