@@ -161,3 +161,28 @@ def test_tail_concentration_finds_the_drives_that_hold_the_upper_tail() -> None:
     assert t["above"] == 5 and t["worst_above"] == 5 and t["worst_seeds"] == [2] and t["cycles"] == 20
     assert t["worst_median_error_m"] == [0.5] and t["others_median_error_m"] == 0.05 and t["others_above"] == 0.0
     assert t["scaled"] == [{"k": 4.0, "worst_above": 0.0, "others_below": 0.0}]
+
+
+def test_heading_origin_finds_a_heading_error_turned_into_cross_track() -> None:
+    """Drives whose heading error is a constant h and whose cross-track error grows as h times the distance (20 m a
+    cycle): the cross-track error is all heading (R^2 1, the distance the drive covered), and a reported heading std
+    half the drives' RMS error reads as a ratio of 2; the drive of the largest error is the worst."""
+    from rhs_studies.slam.pose_covariance import heading_origin
+
+    cycles, sd = 11, 1e-4
+    runs = []
+    for s, h in enumerate([2e-4, -2e-4, 2e-4, -2e-4, 6e-4]):
+        parts = []
+        for t in range(cycles):
+            # error (3), particles' variances (3), drift P (9), residuals' scale, heading
+            parts.append([0.0, h * 20.0 * t, h, 1e-4, 1e-4, sd**2, *np.zeros(9), 1.0, 0.0])
+        nees = [float((h / sd) ** 2)] * cycles
+        runs.append({"seed": s, "parts": parts, "nees": {"calibrated": nees}})
+    config = {"runs": runs, "calibration": {"particles": 1.0, "along": 1.0, "cross": 1.0, "heading": 1.0}}
+    h = heading_origin(config, (0.216, 9.35), at=5, worst=1)
+    assert h["r2"] == pytest.approx(1.0) and h["slope_m"] == pytest.approx(20.0 * (cycles - 1))
+    rms = np.sqrt(np.mean(np.square([2e-4, -2e-4, 2e-4, -2e-4, 6e-4])))
+    assert h["spread_rad"] == pytest.approx(rms) and h["reported_rad"] == pytest.approx(sd)
+    assert h["ratio"] == pytest.approx(rms / sd) and h["ratio_end"] == pytest.approx(rms / sd)
+    assert h["worst_z"] == [pytest.approx(6.0)] and h["others_z"] == pytest.approx(2.0)
+    assert heading_origin({"runs": runs}, (0.216, 9.35)) is None  # no calibration: nothing to compare with

@@ -246,6 +246,79 @@ def _tail_lines(res: dict[str, Any]) -> list[str]:
     return lines
 
 
+def heading_origin(config: dict[str, Any], band: tuple[float, float], at: int = 5, worst: int = 3) -> dict[str, Any] | None:
+    """Where one configuration's pose error comes from: the heading error, turned into a cross-track error by the
+    distance driven (:mod:`slam.core.drift`'s ``F``), against the heading variance the calibrated model reports.
+
+    From the runs' per-cycle parts (:data:`slam.core.pose_calibration.ROW_COLUMNS` less ``lost``; the road runs
+    along x, so the map frame's y error is the cross-track error):
+
+    * ``r2`` / ``slope_m``: the least-squares line of each drive's last cross-track error on its mean heading error
+      over the drive (``y_end ~ slope h_mean``; ``slope`` is a distance, m) and its R^2 over the drives;
+    * ``spread_rad`` / ``reported_rad`` / ``ratio``: at cycle ``at`` (and at the last cycle, ``*_end``), the RMS over
+      the drives of the heading error against the median heading std the calibrated model reports
+      (:func:`slam.core.pose_calibration.calibrated_covariance` with the configuration's factors);
+    * ``worst_z`` / ``others_z``: the median |heading error| / reported heading std over the first 10 cycles of the
+      ``worst`` drives (most cycles above the NEES band) and the median of it over the other drives.
+
+    None without a calibration or without complete drives.
+    """
+    from slam.core.pose_calibration import calibrated_covariance
+
+    k = config.get("calibration") or {}
+    runs = [r for r in config["runs"] if r.get("parts") and "calibrated" in r["nees"]]
+    if not k or not runs:
+        return None
+    factors = np.array([k["particles"], k["along"], k["cross"], k["heading"]], float)
+    last = min(len(r["parts"]) for r in runs) - 1
+    at = min(at, last)
+    h_err, h_std, y_end, h_mean, above = [], [], [], [], []
+    for r in runs:
+        P = np.asarray(r["parts"], float)
+        std = np.sqrt([calibrated_covariance(row[3:6], row[6:15].reshape(3, 3), row[16], row[15], factors)[2, 2]
+                       for row in P])
+        h_err.append(P[:, 2])
+        h_std.append(std)
+        y_end.append(P[last, 1])
+        h_mean.append(P[: last + 1, 2].mean())
+        above.append(int(np.sum(np.asarray(r["nees"]["calibrated"]) > band[1])))
+    y, h = np.asarray(y_end), np.asarray(h_mean)
+    slope = float(h @ y / max(h @ h, 1e-30))
+    r2 = float(np.corrcoef(h, y)[0, 1] ** 2) if len(runs) > 2 else float("nan")
+    z = [float(np.median(np.abs(e[:10]) / np.maximum(sd[:10], 1e-12))) for e, sd in zip(h_err, h_std, strict=True)]
+    order = np.argsort(above)[::-1]
+    out: dict[str, Any] = {"drives": len(runs), "r2": r2, "slope_m": slope, "at": at,
+                           "worst_z": [z[i] for i in order[:worst]], "others_z": float(np.median([z[i] for i in order[worst:]]))}
+    for name, t in (("", at), ("_end", last)):
+        spread = float(np.sqrt(np.mean([e[t] ** 2 for e in h_err])))
+        reported = float(np.median([sd[t] for sd in h_std]))
+        out.update({f"spread_rad{name}": spread, f"reported_rad{name}": reported, f"ratio{name}": spread / reported})
+    return out
+
+
+def _heading_lines(res: dict[str, Any]) -> list[str]:
+    """The heading's share of the pose error per configuration (:func:`heading_origin`)."""
+    rows = [(name, heading_origin(c, res["nees_band"])) for name, c in res["configs"].items()]
+    rows = [(name, h) for name, h in rows if h is not None]
+    if not rows:
+        return []
+    at = rows[0][1]["at"]
+    lines = ["", "Where the error comes from (`heading_origin`): the last cycle's cross-track error of each drive "
+             "against its mean heading error (R^2 over the drives, and the fitted distance), and the heading error's "
+             f"RMS over the drives against the calibrated model's median heading std, at cycle {at} and at the end; "
+             "`z`: median |heading error| / reported std over the first 10 cycles, the 3 drives with the most cycles "
+             "above the band and the others' median:", "",
+             "| configuration | R^2 (cross-track ~ heading) | distance (m) | heading error RMS / reported std, "
+             f"cycle {at} (mrad) | at the end (mrad) | z, 3 worst drives | z, the others |",
+             "|---|---:|---:|---|---|---|---:|"]
+    for name, h in rows:
+        lines.append(f"| {name} | {h['r2']:.2f} | {h['slope_m']:.0f} | {1e3 * h['spread_rad']:.2f} / "
+                     f"{1e3 * h['reported_rad']:.2f} ({h['ratio']:.2f} x) | {1e3 * h['spread_rad_end']:.2f} / "
+                     f"{1e3 * h['reported_rad_end']:.2f} ({h['ratio_end']:.2f} x) | "
+                     + " / ".join(f"{v:.1f}" for v in h["worst_z"]) + f" | {h['others_z']:.2f} |")
+    return lines
+
+
 def markdown(res: dict[str, Any]) -> str:
     """The results table: per configuration and model, coverage below / inside / above, median NEES, ANEES;
     then each configuration's calibration (factors, calibration seeds)."""
@@ -273,6 +346,7 @@ def markdown(res: dict[str, Any]) -> str:
                          f"{_pct(s['above'])} | {s['median']:.2f} | {s['anees']:.2f} [{a_lo:.2f}, {a_hi:.2f}]"
                          f"{'' if s['anees_inside'] else ' (outside)'} | {'met' if s['goal_met'] else 'not met'} |")
     lines += _tail_lines(res)
+    lines += _heading_lines(res)
     lines += ["", "Calibrations (`k_p`, `k_along`, `k_cross`, `k_heading`; the model: `slam.core.pose_calibration`):", "",
               "| configuration | key | k_p | k_along | k_cross | k_heading | calibration seeds | cycles per drive |",
               "|---|---|---|---|---|---|---|---|"]
