@@ -142,8 +142,11 @@ def _detection(d: dict) -> tuple[str, str]:
 
 def _policies(d: dict) -> tuple[str, str]:
     rows = {r["key"]: r["summary"] for r in d["rows"]}
-    s, slower, idm = rows.get("shipped", rows["slam"]), rows["slower"], rows["idm"]
-    return (f"Driving on radar + SLAM (shipped policy, {s['episodes']} seeds): return, collisions",
+    key = "shipped" if "shipped" in rows else "slam"
+    shielded = next(r for r in d["rows"] if r["key"] == key).get("shield") is not None
+    s, slower, idm = rows[key], rows["slower"], rows["idm"]
+    shield = "behind its radar shield" if shielded else "shield off"
+    return (f"Driving on radar + SLAM (shipped policy, {shield}, {s['episodes']} seeds): return, collisions",
             f"{s['return']['mean']:.1f}, {s['collisions']}/{s['episodes']} "
             f"(always-SLOWER: {slower['return']['mean']:.1f}, {slower['collisions']}/{slower['episodes']}; "
             f"IDM + MOBIL: {idm['return']['mean']:.1f}, {idm['collisions']}/{idm['episodes']})")
