@@ -45,3 +45,26 @@ def test_floor_hours_follow_the_rate(tmp_path, monkeypatch):
     assert out["hours_one_core_at_env_rate"] == pytest.approx(6_000_000 / 100 / 3600, abs=0.05)
     assert out["hours_one_core_at_ppo_rate"] == pytest.approx(6_000_000 / 40 / 3600, abs=0.05)
     assert cr.floor(tmp_path, ["ppo_scratch"], [0], steps=10, ppo_steps=0)["hours_one_core_at_ppo_rate"] is None
+
+
+def test_targets_wall_clock_and_selection_on_the_page():
+    """A scratch run at 1.06 x IDM + MOBIL with 1 crash in 2 episodes misses the <= 2 / 100 target; one at 1.1 x with
+    no crash meets it; the wall-clock curve and the selection show per run."""
+    idm = [_ep(0, 100.0, False), _ep(1, 100.0, False)]
+    eps = {"idm": {"exact": {"off": idm}},
+           "campaign:ppo_scratch:seed0": {"exact": {"off": [_ep(0, 106.0, True), _ep(1, 106.0, False)]}},
+           "campaign:ppo_scratch:seed1": {"exact": {"off": [_ep(0, 110.0, False), _ep(1, 110.0, False)]}}}
+    lines = "\n".join(cr._target_lines(st.table(eps)))
+    assert "| PPO from scratch | seed0 | 106.0 (1.060 x) | 1/2 | 20.0 | >= 1.05 x, <= 2/100 | not met |" in lines
+    assert "| PPO from scratch | seed1 | 110.0 (1.100 x) | 0/2 | 20.0 | >= 1.05 x, <= 2/100 | met |" in lines
+    assert cr._target_lines(st.table({k: v for k, v in eps.items() if k != "idm"})) == []
+    sel = {"episodes": 2, "seeds": [20000, 20001], "chosen": "final", "selected_at_env_steps": 1280,
+           "candidates": {"best": {"env_steps": 640, "return": 5.0, "collisions": 1, "episodes": 2},
+                          "final": {"env_steps": 1280, "return": 6.0, "collisions": 0, "episodes": 2}}}
+    curves = {"runs": {"0": {"env_steps": [640, 1280], "train_wall_s": [3600.0, 7200.0], "steps_per_s": [64.0, 64.0],
+                             "validation_return": [5.0, 7.0], "best": {"env_steps": 1280, "validation_return": 7.0},
+                             "selection": sel}},
+              "by_wall_s": {"train_wall_s": [3600.0, 7200.0], "mean": [5.0, 7.0], "min": [5.0, 7.0], "max": [5.0, 7.0]}}
+    page = "\n".join(cr._curve_lines(curves))
+    assert "| train wall (h) | 1.00 | 2.00 |" in page and "| return | 5.0 [5.0, 5.0] | 7.0 [7.0, 7.0] |" in page
+    assert "| seed 0 | 20000-20001 | best (640): 5.0, 1/2; final (1280): 6.0, 0/2 | final |" in page

@@ -492,9 +492,19 @@ def curves(root: str | Path, recipe: str, seeds: list[int], points: int = 20) ->
                    "validation_episodes": c[-1]["validation"]["episodes"],
                    "training_return": [p["training"]["return"] for p in c],
                    "training_crash_rate": [p["training"]["crash_rate"] for p in c],
-                   "steps_per_s": [p["steps_per_s"] for p in c], "best": state["best"]}
+                   "steps_per_s": [p["steps_per_s"] for p in c], "best": state["best"],
+                   "selection": _current_selection(root, recipe, s, state)}
     return {"recipe": recipe, "runs": {str(s): r for s, r in runs.items()},
             "by_env_steps": _spread(runs, "env_steps", points), "by_wall_s": _spread(runs, "train_wall_s", points)}
+
+
+def _current_selection(root: str | Path, recipe: str, seed: int, state: Mapping[str, Any]) -> dict[str, Any] | None:
+    """The run's :func:`select_checkpoint` result when it is current (None: never selected, or trained on since)."""
+    path = run_dir(root, recipe, seed) / "chosen.json"
+    if not path.exists():
+        return None
+    sel = json.loads(path.read_text())["selection"]
+    return sel if sel["selected_at_env_steps"] == state["env_steps"] else None
 
 
 def _spread(runs: Mapping[int, Mapping[str, Any]], axis: str, points: int) -> dict[str, Any] | None:

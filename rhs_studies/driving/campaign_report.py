@@ -149,7 +149,50 @@ def _curve_lines(cur: dict[str, Any]) -> list[str]:
                   "| return | " + " | ".join(f"{m:.1f} [{lo:.1f}, {hi:.1f}]" for m, lo, hi in
                                            list(zip(g["mean"], g["min"], g["max"]))[::max(1, len(g['env_steps']) // 6)])
                   + " |"]
+    w = cur.get("by_wall_s")
+    if w:
+        step = max(1, len(w["train_wall_s"]) // 6)
+        lines += ["", "Against the training wall-clock (hours of one core; mean [min, max] over the seeds):", "",
+                  "| train wall (h) | " + " | ".join(f"{x / 3600:.2f}" for x in w["train_wall_s"][::step]) + " |",
+                  "|---|" + "---:|" * len(w["train_wall_s"][::step]),
+                  "| return | " + " | ".join(f"{m:.1f} [{lo:.1f}, {hi:.1f}]" for m, lo, hi in
+                                           list(zip(w["mean"], w["min"], w["max"]))[::step]) + " |"]
+    chosen = {s: r["selection"] for s, r in cur["runs"].items() if r.get("selection")}
+    if chosen:
+        lines += ["", "The checkpoint each run is tested with (`scripts/campaign.py select`: the chunks' best and the "
+                  "latest, driven on more validation seeds; the higher mean return wins):", "",
+                  "| run | validation seeds | candidate (env steps): return, collisions | chosen |", "|---|---|---|---|"]
+        for s, sel in chosen.items():
+            cands = "; ".join(f"{k} ({c['env_steps']}): {c['return']:.1f}, {c['collisions']}/{c['episodes']}"
+                              for k, c in sel["candidates"].items())
+            lines.append(f"| seed {s} | {sel['seeds'][0]}-{sel['seeds'][1]} | {cands} | {sel['chosen']} |")
     return lines
+
+
+#: the campaign's targets, shield off on the exact env: (label, recipe, return / IDM + MOBIL's, max collisions per 100)
+TARGETS = (("PPO from scratch", "ppo_scratch", 1.05, 2), ("imitation + RL", "ppo_student", 1.10, 1))
+
+
+def _target_lines(table: dict[str, Any], reference: str = "idm") -> list[str]:
+    """Each tested run, shield off on the exact env, against its recipe's target (:data:`TARGETS`)."""
+    ref = table.get(reference, {}).get("exact", {}).get("off")
+    if ref is None:
+        return []
+    lines = []
+    for label, recipe, ratio, crashes in TARGETS:
+        arms = sorted(a for a in table if a.startswith(f"campaign:{recipe}:") and "off" in table[a].get("exact", {}))
+        for arm in arms:
+            r = table[arm]["exact"]["off"]
+            per100 = 100 * r["collisions"] / r["episodes"]
+            met = r["return"] >= ratio * ref["return"] and per100 <= crashes
+            lines.append(f"| {label} | {arm.split(':')[-1]} | {r['return']:.1f} ({r['return'] / ref['return']:.3f} x) | "
+                         f"{r['collisions']}/{r['episodes']} | {_fmt(r['mean_speed'])} | >= {ratio:.2f} x, <= "
+                         f"{crashes}/100 | {'met' if met else 'not met'} |")
+    if not lines:
+        return []
+    return [f"Targets, shield off on the exact env (IDM + MOBIL: {ref['return']:.1f}, {ref['collisions']}/"
+            f"{ref['episodes']}):", "", "| recipe | run | return (/ IDM + MOBIL) | collisions | mean speed (m/s) | "
+            "target | |", "|---|---|---:|---:|---:|---|---|", *lines, ""]
 
 
 def _shield_lines(table: dict[str, Any]) -> list[str]:
@@ -214,7 +257,8 @@ def markdown(curves: dict[str, Any] | None, shield: dict[str, Any] | None, floor
                 "", *_curve_lines(student), ""]
     if shield:
         out += [f"## The shield, measured (seeds {shield['seeds'][0]}-{shield['seeds'][-1]}, fresh)", "",
-                *_shield_lines(shield["table"]), "", "Sim-to-sim gap (same seed, same arm):", "",
+                *_target_lines(shield["table"]), *_shield_lines(shield["table"]), "",
+                "Sim-to-sim gap (same seed, same arm):", "",
                 *_gap_lines(shield["table"]), "",
                 "Over the training seeds (score: return / IDM + MOBIL's on the same seed and env; stratified "
                 "bootstrap):", "", *_stats_lines(shield.get("training_seeds", {})), ""]

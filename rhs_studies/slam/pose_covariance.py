@@ -298,8 +298,8 @@ def heading_origin(config: dict[str, Any], band: tuple[float, float], at: int = 
 
 def _heading_lines(res: dict[str, Any]) -> list[str]:
     """The heading's share of the pose error per configuration (:func:`heading_origin`)."""
-    rows = [(name, heading_origin(c, res["nees_band"])) for name, c in res["configs"].items()]
-    rows = [(name, h) for name, h in rows if h is not None]
+    found = [(name, heading_origin(c, res["nees_band"])) for name, c in res["configs"].items()]
+    rows = [(name, h) for name, h in found if h is not None]
     if not rows:
         return []
     at = rows[0][1]["at"]
