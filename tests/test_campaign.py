@@ -103,6 +103,11 @@ def test_selection_drives_the_candidates_and_goes_stale_with_training(tmp_path):
     record = json.loads((run / "chosen.json").read_text())
     assert record["timesteps"] == sel["candidates"][sel["chosen"]]["env_steps"]
     assert arm_policy("campaign:tiny:seed0", tmp_path) == str(run / "chosen.zip")
+    from rhs_studies.driving.shield_table import arm_record
+
+    rec = arm_record("campaign:tiny:seed0", tmp_path)
+    assert rec["model"] == "chosen.zip" and rec["recipe"] == "tiny" and rec["seed"] == 0
+    assert rec["timesteps"] == record["timesteps"] and rec["selection"]["chosen"] == sel["chosen"]
     campaign.train_chunk(TINY, tmp_path, 0, 32, validation_episodes=1)  # trained on: the selection is stale
     with pytest.raises(ValueError, match="select"):
         campaign.chosen_policy(tmp_path, "tiny", 0)

@@ -77,6 +77,23 @@ def arm_policy(arm: str, root: str | Path | None = None) -> str:
     return str(chosen_policy(root or CAMPAIGN_DIR, parts[1], int(parts[2][4:])))
 
 
+def arm_record(arm: str, root: str | Path | None = None) -> dict[str, Any]:
+    """The record beside a campaign arm's zip (:func:`arm_policy`): recipe, training seed, env steps, training wall
+    time, commit and, for a selected checkpoint, the selection."""
+    path = Path(arm_policy(arm, root)).with_suffix(".json")
+    rec = json.loads(path.read_text())
+    keys = ("recipe", "seed", "timesteps", "train_wall_s", "commit", "train_env_id", "env_id", "selection")
+    return {"model": str(path.with_suffix(".zip").name), **{k: rec[k] for k in keys if k in rec}}
+
+
+def _merged_records(paths: Sequence[Path]) -> dict[str, Any]:
+    """The policy records of earlier results ``paths`` (the campaign arms they drove)."""
+    out: dict[str, Any] = {}
+    for path in paths:
+        out.update(json.loads(Path(path).read_text()).get("policies", {}))
+    return out
+
+
 def _episode(env: Any, policy: Any, seed: int) -> dict[str, Any]:
     """One episode of ``policy`` (:func:`agents.evaluate.run_episode`), kept small: return, crash, speed, steps and
     the shield's overrides (None unshielded)."""
@@ -242,11 +259,15 @@ def main(argv: list[str] | None = None) -> int:
     started = time.time()
     earlier = _merged(args.merge, seeds, env_kwargs)
 
+    records = {**_merged_records(args.merge),
+               **{arm: arm_record(arm, args.root) for arm in args.arms if arm.startswith("campaign:")}}
+
     def write(episodes: dict[str, Any]) -> None:
         episodes = {**earlier, **episodes}
         stats = {f"{env}_{sh}": training_seed_stats(episodes, args.recipe, env, sh)
                  for env in args.envs for sh in ("off", "on")}
-        result = {"seeds": seeds, "env_kwargs": env_kwargs, "arms": list(episodes), "table": table(episodes),
+        result = {"seeds": seeds, "env_kwargs": env_kwargs, "arms": list(episodes),
+                  "policies": {a: r for a, r in records.items() if a in episodes}, "table": table(episodes),
                   "training_seeds": stats, "episodes": episodes}
         write_json(args.out, result, "scripts/shield_table.py", vars(args), started, argv=argv)
 
