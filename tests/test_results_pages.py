@@ -58,3 +58,23 @@ def test_a_reproduce_block_is_filled_from_its_step_and_an_unknown_step_is_refuse
         write_results_pages.render(text.replace("policies", "nope"), ROOT / "results")
     # the README's headline rows link the study's own page
     assert all(Path(ROOT / p).is_file() for p in write_results_pages.PAGE.values())
+
+
+def test_the_campaign_row_reads_the_test_shield_off_and_waits_for_the_runs():
+    from rhs_studies.driving import shield_table as st
+
+    def ep(seed, ret, crashed):
+        return {"seed": seed, "return": ret, "crashed": crashed, "steps": 10, "mean_speed": 20.0, "overrides": None}
+
+    eps = {"idm": {"exact": {"off": [ep(0, 100.0, False), ep(1, 100.0, False)]}}}
+    d = {"table": st.table(eps), "policies": {}, "training_seeds": {"exact_off": None}}
+    assert write_results_pages._campaign_test(d) is None  # the runs have not joined the table
+    for k, ret in enumerate((104.0, 108.0)):
+        eps[f"campaign:ppo_scratch:seed{k}"] = {"exact": {"off": [ep(0, ret, k == 0), ep(1, ret, False)],
+                                                          "on": [ep(0, ret + 1, False), ep(1, ret + 1, False)]}}
+    d = {"table": st.table(eps), "training_seeds": {"exact_off": None},
+         "policies": {"campaign:ppo_scratch:seed0": {"timesteps": 2_000_000},
+                      "campaign:ppo_scratch:seed1": {"timesteps": 2_010_000}}}
+    what, value = write_results_pages._campaign_test(d)
+    assert "2 training seeds, 2.00-2.01M env steps each" in what and "shield off" in what
+    assert value.startswith("1.040 x / 1.080 x, 1/2 / 0/2 (IDM + MOBIL: 100.0, 0/2; behind the shield: 1.050 x, 0")
