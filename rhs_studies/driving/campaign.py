@@ -553,7 +553,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="select: validation seeds each candidate checkpoint is driven on")
     ap.add_argument("--until", default=None, help="HH:MM UTC: start no chunk that would end after it")
     ap.add_argument("--root", type=Path, default=CAMPAIGN_DIR)
-    ap.add_argument("--out", type=Path, default=None, help="curves: the JSON (default results/campaign_<recipe>.json)")
+    ap.add_argument("--out", type=Path, default=None, help="the JSON (curves: default results/campaign_<recipe>.json; "
+                    "select: results/campaign_select_<recipe>.json)")
     args = ap.parse_args(argv)
     recipe = RECIPES[args.recipe]
     started = time.time()
@@ -563,15 +564,20 @@ def main(argv: list[str] | None = None) -> int:
                                 _deadline(args.until), log=lambda s: print(s, flush=True))
         print(json.dumps({s: st.get("env_steps") for s, st in states.items()}))
         return 0
+    results = Path(__file__).resolve().parents[2] / "results"
     if args.command == "select":
+        chosen = {}
         for seed in args.seeds:
-            sel = select_checkpoint(recipe, args.root, seed, args.select_episodes)
+            sel = chosen[str(seed)] = select_checkpoint(recipe, args.root, seed, args.select_episodes)
             print(f"campaign: {recipe.name} seed {seed}: chose {sel['chosen']} ("
                   + ", ".join(f"{k} at {c['env_steps']} env steps: {c['return']:.2f}, {c['collisions']} collisions"
                               for k, c in sel["candidates"].items()) + ")", flush=True)
+        out = args.out or results / f"campaign_select_{recipe.name}.json"
+        write_json(out, {"recipe": recipe.name, "runs": chosen}, "scripts/campaign.py", vars(args), started, argv=argv)
+        print(f"wrote {out}")
         return 0
     result = curves(args.root, recipe.name, list(args.seeds))
-    out = args.out or Path(__file__).resolve().parents[2] / "results" / f"campaign_{recipe.name}.json"
+    out = args.out or results / f"campaign_{recipe.name}.json"
     write_json(out, {"recipe": recipe.record(), **result}, "scripts/campaign.py", vars(args), started,
                argv=argv)
     print(f"wrote {out}")

@@ -146,6 +146,10 @@ STEPS: tuple[Step, ...] = (
          "behaviour cloning of the shipped policy from a dataset recorded first with rhs-slam record "
          "(docs/usage/datasets.md has the recording command)",
          no_fingerprint="needs a Minari dataset recorded first (rhs-slam record, hours for 100k steps)", on_request=True),
+    Step("campaign_select", "campaign.py", ("select", "--recipe", "ppo_scratch", "--seeds", "0", "1", "2"),
+         ("campaign_select_ppo_scratch.json",), 600, "the checkpoint each PPO-from-scratch run is tested with: the "
+         "chunks' best against the latest, on 50 validation seeds (writes campaign/ppo_scratch/seed<k>/chosen.zip)",
+         no_fingerprint="a choice among the committed training checkpoints (minutes of driving per run)"),
     Step("campaign_curves", "campaign.py", ("curves", "--recipe", "ppo_scratch", "--seeds", "0", "1", "2"),
          ("campaign_ppo_scratch.json",), 60, "the training campaign's learning curves, read from its committed "
          "checkpoints (campaign/; the training itself: scripts/campaign.py train, a chunk at a time)",
@@ -159,6 +163,13 @@ STEPS: tuple[Step, ...] = (
           "--episodes", "100", "--out", "results/shield_table_scripted.json"), ("shield_table_scripted.json",), 2400,
          "the shield as a measured feature on the campaign's 100 test seeds (21100-21199): the scripted and trivial "
          "arms with and without it, exact and fast env (the campaign's runs join the table, --merge, when it ends)",
+         no_fingerprint="100 episodes per arm, env and shield on the exact env; the table's arithmetic is tested"),
+    Step("shield_table", "shield_table.py",
+         ("--arms", "campaign:ppo_scratch:seed0", "campaign:ppo_scratch:seed1", "campaign:ppo_scratch:seed2",
+          "--envs", "exact", "fast", "--seed", "21100", "--episodes", "100", "--merge",
+          "results/shield_table_scripted.json", "--out", "results/shield_table.json"), ("shield_table.json",), 2400,
+         "the campaign's test: each PPO-from-scratch run's chosen checkpoint on the 100 test seeds, with and without "
+         "the shield, exact and fast env, beside the scripted arms (merged from shield_table_scripted.json)",
          no_fingerprint="100 episodes per arm, env and shield on the exact env; the table's arithmetic is tested"),
     Step("campaign_floor", "campaign_report.py", ("floor", "--steps", "150", "--ppo-steps", "640"),
          ("campaign_floor.json",), 300, "env steps per CPU second of the fast and exact SLAM envs and of the "
