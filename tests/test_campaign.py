@@ -155,3 +155,27 @@ def test_the_checkpoints_live_outside_the_packages():
     top = campaign.CAMPAIGN_DIR.relative_to(root).parts[0]
     assert not any(top == pattern.rstrip("*") for pattern in include), (top, include)
     assert not (campaign.CAMPAIGN_DIR / "__init__.py").exists()
+
+
+def test_the_exact_env_never_gets_the_fast_radar():
+    """The imitation + RL recipe trains on the fast radar calibrated for its 5-degree grid
+    (``radar_model="fast-calibrate"``); on the exact id that setting would select the fast radar, so the records
+    and the evaluation's exact env drop it."""
+    import gymnasium as gym
+
+    import rhs_env  # noqa: F401
+    from rhs_env.fast_radar import FastRadarSystem
+
+    student = campaign.RECIPES["ppo_student"]
+    assert student.env_kwargs["radar_model"] == "fast-calibrate" and "radar_model" not in student.eval_env_kwargs()
+    assert student.eval_env_kwargs()["radar"] == {"scan": {"grid_deg": 5}}
+    record = campaign._policy_record(student, 0, {"env_steps": 10, "train_wall_s": 1.0}, campaign.CAMPAIGN_DIR / "x")
+    assert record["env_kwargs"] == student.eval_env_kwargs() and record["train_env_kwargs"]["radar_model"]
+    def radar_of(env):
+        while getattr(env, "radar", None) is None:
+            env = env.env
+        return env.radar
+
+    env = gym.make(record["env_id"], **record["env_kwargs"])
+    assert not isinstance(radar_of(env), FastRadarSystem)  # with the training kwargs it would be one
+    env.close()

@@ -53,7 +53,8 @@ import numpy as np
 from rhs_common.validation import check_int
 from rhs_env.registration import HIGHWAY_SLAM_FAST_ID, HIGHWAY_SLAM_ID
 
-__all__ = ["CAMPAIGN_DIR", "RECIPES", "Recipe", "chosen_policy", "curves", "load_state", "new_model", "run_dir",
+__all__ = ["CAMPAIGN_DIR", "RECIPES", "Recipe", "chosen_policy", "curves", "exact_env_kwargs", "load_state",
+           "new_model", "run_dir",
            "select_checkpoint", "train_chunk", "train_campaign", "training_seed", "validation_seeds"]
 
 #: where the campaign's checkpoints live: ``campaign/`` of the repository (committed, small, and not in the wheel:
@@ -116,6 +117,11 @@ class Recipe:
         args["policy_kwargs"] = resolve_policy_kwargs(args["policy_kwargs"])
         return args
 
+    def eval_env_kwargs(self) -> dict[str, Any]:
+        """The kwargs of the exact env the policy is judged on: :attr:`env_kwargs` without ``radar_model`` (a fast
+        radar setting such as ``"fast-calibrate"`` would turn the exact id's radar into the fast one)."""
+        return exact_env_kwargs(self.env_kwargs)
+
     def record(self) -> dict[str, Any]:
         """The recipe as JSON."""
         return {**asdict(self), "env_kwargs": dict(self.env_kwargs), "hyperparams": dict(self.hyperparams)}
@@ -134,6 +140,12 @@ RECIPES: dict[str, Recipe] = {
                           env_kwargs={**STUDENT_ENV_KWARGS, "radar_model": "fast-calibrate"},
                           hyperparams={"ent_coef": 0.0, "learning_rate": 1.0e-4}),
 }
+def exact_env_kwargs(kwargs: Mapping[str, Any]) -> dict[str, Any]:
+    """``kwargs`` for an exact id: without ``radar_model`` (the fast radar's setting; on an exact id it would select
+    the fast radar)."""
+    return {k: v for k, v in kwargs.items() if k != "radar_model"}
+
+
 #: first seed of the campaign's training envs: run k, chunk c resets env i with FIRST + k * PER_RUN + c * n_envs + i
 TRAINING_SEED_FIRST, TRAINING_SEED_PER_RUN = 1_000_000, 1_000_000
 
@@ -295,7 +307,8 @@ def _save_zip(model: Any, path: Path) -> None:
 def _policy_record(recipe: Recipe, seed: int, state: Mapping[str, Any], model_path: Path) -> dict[str, Any]:
     """The record beside a campaign zip (what :func:`agents.evaluate.load_policy` / ``resolve_env`` read)."""
     return {"algo": "ppo", "env_id": recipe.eval_env_id, "train_env_id": recipe.env_id,
-            "env_kwargs": dict(recipe.env_kwargs), "policy": "MultiInputPolicy",
+            "env_kwargs": recipe.eval_env_kwargs(), "train_env_kwargs": dict(recipe.env_kwargs),
+            "policy": "MultiInputPolicy",
             "decision_interval": recipe.decision_interval, "decision_mode": recipe.decision_mode,
             "recipe": recipe.name, "seed": seed, "timesteps": int(state["env_steps"]),
             "train_wall_s": round(float(state["train_wall_s"]), 1), "commit": state.get("commit"),

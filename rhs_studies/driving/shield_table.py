@@ -209,13 +209,17 @@ def drive_all(arms: Sequence[str], envs: Sequence[str], seeds: Sequence[int], en
               root: str | Path | None = None, log: Callable[[str], None] = print,
               done: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
     """Every arm on every env with the shield off and on (:data:`UNSHIELDABLE` off only); ``done`` sees the
-    episodes after each arm (to write partial results)."""
+    episodes after each arm (to write partial results). The exact env drops a fast radar's ``radar_model``
+    (:func:`rhs_studies.driving.campaign.exact_env_kwargs`)."""
+    from rhs_studies.driving.campaign import exact_env_kwargs
+
     episodes: dict[str, Any] = {}
     for arm in arms:
         for env in envs:
             for shield in (("off",) if arm in UNSHIELDABLE else ("off", "on")):
                 t = time.time()
-                runs = drive_arm(arm, ENVS[env], env_kwargs, seeds, shield == "on", root)
+                kwargs = exact_env_kwargs(env_kwargs) if env == "exact" else env_kwargs
+                runs = drive_arm(arm, ENVS[env], kwargs, seeds, shield == "on", root)
                 episodes.setdefault(arm, {}).setdefault(env, {})[shield] = runs
                 s = summarize_arm(runs)
                 log(f"shield_table: {arm} {env} shield {shield}: return {s['return']:.2f}, {s['collisions']} "
