@@ -94,6 +94,15 @@ def _merged_records(paths: Sequence[Path]) -> dict[str, Any]:
     return out
 
 
+def _merged_provenance(paths: Sequence[Path]) -> list[dict[str, Any]]:
+    """The provenance of each run whose episodes earlier results ``paths`` hold (theirs, and the runs they merged)."""
+    out: list[dict[str, Any]] = []
+    for path in paths:
+        old = json.loads(Path(path).read_text())
+        out += old.get("runs_provenance", []) + ([old["provenance"]] if "provenance" in old else [])
+    return out
+
+
 def _episode(env: Any, policy: Any, seed: int) -> dict[str, Any]:
     """One episode of ``policy`` (:func:`agents.evaluate.run_episode`), kept small: return, crash, speed, steps and
     the shield's overrides (None unshielded)."""
@@ -263,6 +272,7 @@ def main(argv: list[str] | None = None) -> int:
     started = time.time()
     earlier = _merged(args.merge, seeds, env_kwargs)
 
+    merged_provenance = _merged_provenance(args.merge)
     records = {**_merged_records(args.merge),
                **{arm: arm_record(arm, args.root) for arm in args.arms if arm.startswith("campaign:")}}
 
@@ -271,7 +281,8 @@ def main(argv: list[str] | None = None) -> int:
         stats = {f"{env}_{sh}": training_seed_stats(episodes, args.recipe, env, sh)
                  for env in args.envs for sh in ("off", "on")}
         result = {"seeds": seeds, "env_kwargs": env_kwargs, "arms": list(episodes),
-                  "policies": {a: r for a, r in records.items() if a in episodes}, "table": table(episodes),
+                  "policies": {a: r for a, r in records.items() if a in episodes},
+                  "runs_provenance": merged_provenance, "table": table(episodes),
                   "training_seeds": stats, "episodes": episodes}
         write_json(args.out, result, "scripts/shield_table.py", vars(args), started, argv=argv)
 
