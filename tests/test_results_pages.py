@@ -76,5 +76,5 @@ def test_the_campaign_row_reads_the_test_shield_off_and_waits_for_the_runs():
          "policies": {"campaign:ppo_scratch:seed0": {"timesteps": 2_000_000},
                       "campaign:ppo_scratch:seed1": {"timesteps": 2_010_000}}}
     what, value = write_results_pages._campaign_test(d)
-    assert "2 training seeds, 2.00-2.01M env steps each" in what and "shield off" in what
+    assert "2 training seeds; checkpoints at 2.00-2.01M env steps" in what and "shield off" in what
     assert value.startswith("1.040 x / 1.080 x, 1/2 / 0/2 (IDM + MOBIL: 100.0, 0/2; behind the shield: 1.050 x, 0")

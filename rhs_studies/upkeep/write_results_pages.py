@@ -209,7 +209,7 @@ def _campaign_test(d: dict) -> tuple[str, str] | None:
     iqm = (f"; IQM {stats['iqm']['value']:.3f} x [{stats['iqm']['low']:.3f}, {stats['iqm']['high']:.3f}]"
            if stats else "")
     on = ", ".join(f"{r['on']['return'] / idm['return']:.3f} x, {r['on']['collisions']}" for r in rows if "on" in r)
-    return (f"PPO from scratch on the fast SLAM env ({len(arms)} training seeds, {budget} env steps each; checkpoint "
+    return (f"PPO from scratch on the fast SLAM env ({len(arms)} training seeds; checkpoints at {budget} env steps, "
             f"chosen on validation seeds, tested once on {idm['episodes']} fresh seeds on the exact env, shield off): "
             "return / IDM + MOBIL's per seed, collisions (target >= 1.05 x, <= 2 / 100)",
             " / ".join(f"{r['off']['return'] / idm['return']:.3f} x" for r in rows) + ", "
