@@ -476,9 +476,9 @@ def chosen_policy(root: str | Path, recipe: str, seed: int) -> Path:
     is current, ``best.zip`` when the run was never selected; ValueError when a chunk was trained after the
     selection (select again), FileNotFoundError when the run has no checkpoint."""
     folder = run_dir(root, recipe, seed)
-    chosen, state = folder / "chosen.json", load_state(folder)
-    if chosen.exists() and state is not None:
-        at = json.loads(chosen.read_text())["selection"]["selected_at_env_steps"]
+    sel, state = _selection(folder), load_state(folder)
+    if sel is not None and state is not None:
+        at = sel["selected_at_env_steps"]
         if at != state["env_steps"]:
             raise ValueError(f"{folder}: the selection was made at {at} env steps, the run has {state['env_steps']}: "
                              f"run scripts/campaign.py select --recipe {recipe} --seeds {seed} again")
@@ -513,11 +513,14 @@ def curves(root: str | Path, recipe: str, seeds: list[int], points: int = 20) ->
 
 def _current_selection(root: str | Path, recipe: str, seed: int, state: Mapping[str, Any]) -> dict[str, Any] | None:
     """The run's :func:`select_checkpoint` result when it is current (None: never selected, or trained on since)."""
-    path = run_dir(root, recipe, seed) / "chosen.json"
-    if not path.exists():
-        return None
-    sel = json.loads(path.read_text())["selection"]
-    return sel if sel["selected_at_env_steps"] == state["env_steps"] else None
+    sel = _selection(run_dir(root, recipe, seed))
+    return sel if sel is not None and sel["selected_at_env_steps"] == state["env_steps"] else None
+
+
+def _selection(folder: Path) -> dict[str, Any] | None:
+    """The selection recorded in ``folder/chosen.json`` (None when the run was never selected)."""
+    path = folder / "chosen.json"
+    return json.loads(path.read_text())["selection"] if path.exists() else None
 
 
 def _spread(runs: Mapping[int, Mapping[str, Any]], axis: str, points: int) -> dict[str, Any] | None:
