@@ -102,6 +102,7 @@ def test_selection_drives_the_candidates_and_goes_stale_with_training(tmp_path):
     assert (run / "chosen.zip").read_bytes() == src.read_bytes()
     record = json.loads((run / "chosen.json").read_text())
     assert record["timesteps"] == sel["candidates"][sel["chosen"]]["env_steps"]
+    assert record["model"] == "chosen.zip"  # beside its record, not an absolute path of the machine it ran on
     assert arm_policy("campaign:tiny:seed0", tmp_path) == str(run / "chosen.zip")
     from rhs_studies.driving.shield_table import arm_record
 

@@ -312,7 +312,7 @@ def _policy_record(recipe: Recipe, seed: int, state: Mapping[str, Any], model_pa
             "decision_interval": recipe.decision_interval, "decision_mode": recipe.decision_mode,
             "recipe": recipe.name, "seed": seed, "timesteps": int(state["env_steps"]),
             "train_wall_s": round(float(state["train_wall_s"]), 1), "commit": state.get("commit"),
-            "model": str(model_path)}
+            "model": model_path.name}  # beside this record: the run folder moves with the repo
 
 
 def train_chunk(recipe: Recipe, root: str | Path, seed: int, chunk_steps: int, validation_episodes: int = 5,
@@ -466,7 +466,7 @@ def select_checkpoint(recipe: Recipe, root: str | Path, seed: int, episodes: int
     selection = {"episodes": episodes, "seeds": [seeds[0], seeds[-1]], "candidates": scores, "chosen": winner,
                  "selected_at_env_steps": int(state["env_steps"])}
     record = json.loads((folder / f"{zip_name}.json").read_text())
-    record.update(model=str(folder / "chosen.zip"), selection=selection)
+    record.update(model="chosen.zip", selection=selection)
     _write_atomic(folder / "chosen.json", json.dumps(record, indent=1))
     return selection
 
