@@ -13,10 +13,31 @@ import pytest
 import rhs_env  # noqa: F401
 from rhs_common.geometry import wrap_angle
 from rhs_studies.slam_accuracy import nees_interval, pose_nees
-from slam.core.drift import DriftCovariance, drift_step
+from slam.core.drift import MAP_START_M, DriftCovariance, MapStartHeading, drift_step
 from slam.core.pipeline import PipelineConfig
 
 CHEAP: dict[str, Any] = {"radar": {"scan": {"grid_deg": 5}}, "vehicles_count": 3}
+
+
+@pytest.mark.parametrize("heading", [0.0, math.pi / 2])
+def test_the_map_start_term_is_one_frozen_heading_error(heading):
+    """``B`` after ``s`` metres of a straight drive: a unit heading variance set over the first metres (``1 -
+    exp(-s/L)``), whose cross-track variance is the lever arm squared (``E[(s - X)^2] = (s - L)^2 + L^2`` for a
+    set-in distance ``X ~ Exp(L)``), and no along-track part; a new map starts it again."""
+    term, d, n = MapStartHeading(), 0.5, 600
+    for _ in range(n):
+        term.step(heading, np.array([d, 0.0, 0.0]))
+    s, L, B = n * d, MAP_START_M, term.cov
+    c, si = math.cos(heading), math.sin(heading)
+    cross, along = np.array([-si, c]), np.array([c, si])
+    assert B[2, 2] == pytest.approx(1.0 - math.exp(-s / L), rel=1e-9)
+    assert cross @ B[:2, :2] @ cross == pytest.approx((s - L) ** 2 + L**2, rel=0.01)
+    assert cross @ B[:2, 2] == pytest.approx(s - L, rel=0.01)
+    assert abs(along @ B[:2, :2] @ along) < 1e-9
+    term.reset()
+    assert not term.cov.any() and term.travelled == 0.0
+    with pytest.raises(ValueError, match="length"):
+        MapStartHeading(0.0)
 
 
 @pytest.mark.parametrize("heading", [0.0, math.pi / 2])

@@ -88,7 +88,8 @@ def episode(env: Any, seed: int, cycles: int, driver: str = "idm") -> dict[str, 
     out: dict[str, list[float]] = {m: [] for m in MODELS}
     err_m: list[float] = []
     lost: list[bool] = []
-    parts: list[list[float]] = []  # per cycle: error (3), particle variances (3), measured drift (9), scale
+    parts: list[list[float]] = []  # per cycle: error (3), particle variances (3), measured drift (9), scale,
+    #                                heading, map-start term (9)
     for _ in range(cycles):
         action, _ = policy.predict(obs, deterministic=True)
         a = np.asarray(action)
@@ -100,7 +101,8 @@ def episode(env: Any, seed: int, cycles: int, driver: str = "idm") -> dict[str, 
         var = np.square(np.asarray(pipe.slam.last_estimate.pose_std, float))
         cov_const = np.diag(var) + pipe.drift.cov
         cov_adaptive = pipe.residual_scale * (np.diag(var) + pipe.measured_drift.cov)
-        parts.append([*e, *var, *pipe.measured_drift.cov.ravel(), pipe.residual_scale, pipe.heading])
+        parts.append([*e, *var, *pipe.measured_drift.cov.ravel(), pipe.residual_scale, pipe.heading,
+                      *pipe.map_start.cov.ravel()])
         std_const = np.sqrt(np.maximum(np.diag(cov_const), 0.0))
         std_adaptive = np.sqrt(np.maximum(np.diag(cov_adaptive), 0.0))
         if info["slam_lost"]:  # the loss's floor (honest_pose_std), the same for all three
@@ -269,13 +271,14 @@ def heading_origin(config: dict[str, Any], band: tuple[float, float], at: int = 
     runs = [r for r in config["runs"] if r.get("parts") and "calibrated" in r["nees"]]
     if not k or not runs:
         return None
-    factors = np.array([k["particles"], k["along"], k["cross"], k["heading"]], float)
+    factors = np.array([k["particles"], k["along"], k["cross"], k["heading"], k.get("map_heading", 0.0)], float)
     last = min(len(r["parts"]) for r in runs) - 1
     at = min(at, last)
     h_err, h_std, y_end, h_mean, above = [], [], [], [], []
     for r in runs:
         P = np.asarray(r["parts"], float)
-        std = np.sqrt([calibrated_covariance(row[3:6], row[6:15].reshape(3, 3), row[16], row[15], factors)[2, 2]
+        std = np.sqrt([calibrated_covariance(row[3:6], row[6:15].reshape(3, 3), row[16], row[15], factors,
+                                             row[17:26].reshape(3, 3) if len(row) >= 26 else None)[2, 2]
                        for row in P])
         h_err.append(P[:, 2])
         h_std.append(std)
@@ -347,15 +350,17 @@ def markdown(res: dict[str, Any]) -> str:
                          f"{'' if s['anees_inside'] else ' (outside)'} | {'met' if s['goal_met'] else 'not met'} |")
     lines += _tail_lines(res)
     lines += _heading_lines(res)
-    lines += ["", "Calibrations (`k_p`, `k_along`, `k_cross`, `k_heading`; the model: `slam.core.pose_calibration`):", "",
-              "| configuration | key | k_p | k_along | k_cross | k_heading | calibration seeds | cycles per drive |",
-              "|---|---|---|---|---|---|---|---|"]
+    lines += ["", "Calibrations (`k_p`, `k_along`, `k_cross`, `k_heading`, and the map-start heading std `sqrt(k_map)`; "
+              "the model: `slam.core.pose_calibration`):", "",
+              "| configuration | key | k_p | k_along | k_cross | k_heading | sqrt(k_map) (mrad) | calibration seeds | "
+              "cycles per drive |", "|---|---|---|---|---|---|---|---|---|"]
     for name, c in res["configs"].items():
         k = c.get("calibration") or {}
         if k:
             cs = k.get("seeds", [])
             lines.append(f"| {name} | `{k['key']}` | {k['particles']:.3g} | {k['along']:.3g} | {k['cross']:.3g} | "
-                         f"{k['heading']:.3g} | {cs[0]}-{cs[-1]} | {k['cycles']} |" if cs else f"| {name} | - |")
+                         f"{k['heading']:.3g} | {1e3 * math.sqrt(k.get('map_heading', 0.0)):.3g} | {cs[0]}-{cs[-1]} | "
+                         f"{k['cycles']} |" if cs else f"| {name} | - |")
     return "\n".join(lines) + "\n"
 
 

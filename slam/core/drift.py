@@ -24,6 +24,20 @@ proportion to the distance driven, so the cross-track variance grows as ``q_head
 The reported pose covariance is the particles' covariance plus ``P`` (the two are independent:
 one is the scatter of the pose given the map, the other the map's error). ``P`` starts at zero
 with the map (the first pose is the map frame, known exactly) and restarts with a new map.
+
+The map's start (:class:`MapStartHeading`): a random walk starts near zero and grows, but the drives show
+a heading error set in the first cycles of a map (its first landmarks are placed from the first, least
+pinned poses) and then held by the map (``rhs_studies.slam.pose_covariance.heading_origin``: each drive's
+final cross-track error is its mean heading error times the distance, R^2 0.88-0.96). Its term is a unit
+heading variance injected over the map's first metres, ``w = exp(-s/L) - exp(-(s + d)/L)`` in the cycle that
+drives from ``s`` to ``s + d`` (m since the map began; ``L`` = :data:`MAP_START_M`), and carried by the same
+``F``:
+
+    ``B' = F B F^T + G diag(0, 0, w) G^T``,
+
+so that after the first metres ``B`` is the covariance of one heading error of unit variance frozen into the
+map: heading variance 1, cross-track variance ``(distance since the map began)^2``. The calibrated model
+(:mod:`slam.core.pose_calibration`) scales it by the configuration's fitted map-start heading variance.
 """
 
 from __future__ import annotations
@@ -34,7 +48,11 @@ import numpy as np
 
 from slam.core.pose_uncertainty import adaptive_drift_step
 
-__all__ = ["DriftCovariance", "drift_step"]
+__all__ = ["DriftCovariance", "MAP_START_M", "MapStartHeading", "drift_step"]
+
+#: the distance over which a new map's heading error is set (m; a few cycles: the drives' heading error at
+#: cycle 5 is already its value at the end, ``rhs_studies.slam.pose_covariance.heading_origin``)
+MAP_START_M = 10.0
 
 
 def drift_step(cov: np.ndarray, heading: float, motion: np.ndarray, densities: tuple[float, float, float]) -> np.ndarray:
@@ -74,4 +92,31 @@ class DriftCovariance:
         """Propagate over one cycle's motion with the cycle's measured increment ``Q`` (3, 3) (map frame) in
         place of the densities (``pose_covariance="adaptive"``, :mod:`slam.core.pose_uncertainty`); returns ``P``."""
         self.cov = adaptive_drift_step(self.cov, heading, motion, increment)
+        return self.cov
+
+
+class MapStartHeading:
+    """The map-start heading term ``B`` (3, 3) of a unit heading variance frozen into the map over its first
+    ``length`` metres (module docstring)."""
+
+    def __init__(self, length: float = MAP_START_M) -> None:
+        if not (math.isfinite(length) and length > 0):
+            raise ValueError(f"length must be a finite distance > 0 (m), got {length!r}")
+        self.length = float(length)
+        self.reset()
+
+    def reset(self) -> None:
+        """A new map: nothing injected yet, no distance driven."""
+        self.cov = np.zeros((3, 3))
+        self.travelled = 0.0
+
+    def step(self, heading: float, motion: np.ndarray) -> np.ndarray:
+        """Propagate over one cycle's motion (3,) from the estimated heading (rad) before it; returns ``B``."""
+        m = np.asarray(motion, dtype=float).reshape(3)
+        if not np.all(np.isfinite(m)):
+            return self.cov
+        d = math.hypot(m[0], m[1])
+        w = math.exp(-self.travelled / self.length) - math.exp(-(self.travelled + d) / self.length)
+        self.travelled += d
+        self.cov = drift_step(self.cov, heading, m, (0.0, 0.0, w / d if d > 0 else 0.0))
         return self.cov

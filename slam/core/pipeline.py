@@ -44,7 +44,7 @@ from rhs_common.geometry import apply_motion, compose, points_in_frame
 from rhs_common.jit import KernelTable
 from rhs_common.validation import check_choice, check_int, check_range, check_types
 from slam.core.association import bearing_sectors, estimate_ego_velocity, point_covariance, static_mask
-from slam.core.drift import DriftCovariance
+from slam.core.drift import DriftCovariance, MapStartHeading
 from slam.core.health import HealthConfig, TrackHealth
 from slam.core.loop_closure import LoopCloser
 from slam.core.pose_calibration import PoseCalibration, calibrated_covariance
@@ -439,6 +439,8 @@ class SlamPipeline:
         self.drift = DriftCovariance((o.drift_along_m2pm, o.drift_cross_m2pm, o.drift_heading_rad2pm))
         # the adaptive model's drift (pose_covariance="adaptive"; slam.core.pose_uncertainty): its densities unused
         self.measured_drift = DriftCovariance((0.0, 0.0, 0.0))
+        # the calibrated model's map-start heading term (slam.core.drift.MapStartHeading)
+        self.map_start = MapStartHeading()
         # the calibrated model's factors (pose_covariance="calibrated"; slam.core.pose_calibration); None: all 1
         self.pose_calibration: PoseCalibration | None = None
         self._reloc_icp = ICPRegistration(
@@ -473,6 +475,7 @@ class SlamPipeline:
         self.health.reset()
         self.drift.reset()
         self.measured_drift.reset()
+        self.map_start.reset()
         self.drift_information: CycleInformation | None = None  # the adaptive model's last measurement
         self._held_increment: np.ndarray | None = None  # its last J^-1 (held while a cycle pins nothing)
         self._chi2, self._dof = 0.0, 0  # the pairs' residual chi-square and degrees of freedom over the map
@@ -585,6 +588,7 @@ class SlamPipeline:
             self._held_increment = info.cov
         increment = np.zeros((3, 3)) if self._held_increment is None else info.fraction * self._held_increment
         self.measured_drift.step_measured(self.heading, motion, increment)
+        self.map_start.step(self.heading, motion)
 
     @property
     def residual_scale(self) -> float:
@@ -599,8 +603,9 @@ class SlamPipeline:
         est = self.slam.last_estimate
         var = np.zeros(3) if est is None else np.square(np.asarray(est.pose_std, dtype=float))
         if self.options.pose_covariance == "calibrated":
-            k = np.ones(4) if self.pose_calibration is None else self.pose_calibration.factors
-            return calibrated_covariance(var, self.measured_drift.cov, self.heading, self.residual_scale, k)
+            k = np.array([1.0, 1.0, 1.0, 1.0, 0.0]) if self.pose_calibration is None else self.pose_calibration.factors
+            return calibrated_covariance(var, self.measured_drift.cov, self.heading, self.residual_scale, k,
+                                         self.map_start.cov)
         if self.options.pose_covariance == "adaptive":
             return self.residual_scale * (np.diag(var) + self.measured_drift.cov)
         return np.diag(var) + self.drift.cov
@@ -661,6 +666,7 @@ class SlamPipeline:
             self.slam.restart_at(est.pose)
             self.drift.reset()
             self.measured_drift.reset()
+            self.map_start.reset()
             self._chi2, self._dof = 0.0, 0
             self.map_breaks += 1
             self.health.new_map()
@@ -681,6 +687,7 @@ class SlamPipeline:
         self.slam.last_estimate = new
         self.drift.reset()
         self.measured_drift.reset()
+        self.map_start.reset()
         new.stage_times["loop_closure"] = time.perf_counter() - t0
         return new
 

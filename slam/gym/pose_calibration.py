@@ -1,7 +1,7 @@
 """The calibrated pose covariance of one SLAM env configuration: keyed, shipped, cached or fitted at first use.
 
-``pipeline={"pose_covariance": "calibrated"}`` scales the adaptive model's terms by four factors
-(:mod:`slam.core.pose_calibration`) fitted for the configuration the user made. The configuration is named by
+``pipeline={"pose_covariance": "calibrated"}`` scales the adaptive model's terms by four factors and adds the
+map's start with a fifth (:mod:`slam.core.pose_calibration`), fitted for the configuration the user made. The configuration is named by
 :func:`calibration_key`: a sha256 of the scene (its class and its settings), the resolved radar settings
 (``RadarConfig.flat_dict``; the kernels and the synthesis path left out, as the fast radar's table key does),
 the SLAM, ICP and pipeline settings (the covariance model itself left out) and the registration: everything that
@@ -134,7 +134,7 @@ def cached_path(key: str) -> Path:
 
 
 def calibration_rows(env: gym.Env, seed: int, cycles: int, policy: Any = None) -> np.ndarray:
-    """One drive's rows (T, 18) (:data:`slam.core.pose_calibration.ROW_COLUMNS`).
+    """One drive's rows (T, 27) (:data:`slam.core.pose_calibration.ROW_COLUMNS`).
 
     Args:
         env: a SLAM env whose pipeline runs the adaptive or calibrated model.
@@ -145,7 +145,7 @@ def calibration_rows(env: gym.Env, seed: int, cycles: int, policy: Any = None) -
 
     Returns:
         The rows: pose error (estimated minus true, heading wrapped), particles' variances, drift, scale,
-        estimated heading, lost.
+        estimated heading, lost, map-start term.
     """
     from rhs_common.geometry import wrap_angle
 
@@ -165,7 +165,7 @@ def calibration_rows(env: gym.Env, seed: int, cycles: int, policy: Any = None) -
         e[2] = float(wrap_angle(e[2]))
         var = np.square(np.asarray(pipe.slam.last_estimate.pose_std, float))
         rows.append([*e, *var, *pipe.measured_drift.cov.ravel(), pipe.residual_scale, pipe.heading,
-                     float(bool(info["slam_lost"]))])
+                     float(bool(info["slam_lost"])), *pipe.map_start.cov.ravel()])
         if term or trunc:
             break
     return np.asarray(rows, dtype=float).reshape(-1, len(ROW_COLUMNS))
@@ -204,7 +204,8 @@ def calibrate(scene: str, kwargs: dict[str, Any], seeds: tuple[int, ...] = CALIB
             drive_env.close()
     factors, used = fit_calibration(rows)
     k = [float(f"{v:.6g}") for v in factors]
-    return PoseCalibration(particles=k[0], along=k[1], cross=k[2], heading=k[3], key=key, seeds=tuple(int(s) for s in seeds),
+    return PoseCalibration(particles=k[0], along=k[1], cross=k[2], heading=k[3], map_heading=k[4], key=key,
+                           seeds=tuple(int(s) for s in seeds),
                            cycles=int(cycles), fit_cycles=used, setup=setup)
 
 
