@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> int:
         cal = calibrate_env(env_id, kw, tuple(a.seeds), a.cycles)
         path = Path(a.out_dir) / f"pose_cov_{cal.key}.json"
         write_text_atomic(path, cal.to_json())
-        print(f"{name}: {cal.factors.round(4).tolist()} ({cal.fit_cycles} cycles, {time.perf_counter() - t0:.0f} s) "
+        print(f"{name}: {[float(f'{v:.4g}') for v in cal.factors]} ({cal.fit_cycles} cycles, {time.perf_counter() - t0:.0f} s) "
               f"-> {path}", flush=True)
     return 0
 
