@@ -47,6 +47,9 @@ __all__ = [
     "cached_path",
     "calibrate",
     "calibrate_env",
+    "calibrate_env_drives",
+    "calibration_drives",
+    "calibration_from_rows",
     "calibration_key",
     "calibration_rows",
     "find_calibration",
@@ -189,6 +192,16 @@ def calibrate(scene: str, kwargs: dict[str, Any], seeds: tuple[int, ...] = CALIB
     Returns:
         The :class:`slam.core.pose_calibration.PoseCalibration`.
     """
+    drives, key, setup = calibration_drives(scene, kwargs, seeds, cycles, env, make)
+    return calibration_from_rows(np.vstack(drives), key, seeds, cycles, setup)
+
+
+def calibration_drives(scene: str, kwargs: dict[str, Any], seeds: tuple[int, ...] = CALIBRATION_SEEDS,
+                       cycles: int = CALIBRATION_CYCLES, env: gym.Env | None = None,
+                       make: Callable[[str, dict[str, Any]], gym.Env] | None = None
+                       ) -> tuple[list[np.ndarray], str, dict[str, Any]]:
+    """The calibration drives of :func:`calibrate` (same arguments): each seed's rows (at most ``cycles``, in
+    the order of ``seeds``), the configuration's key and what the key was made of."""
     kw = dict(kwargs)
     own = env is None or slam_wrapper(env).pipeline_config.pose_covariance == "drift-constants"
     if own and make is None:
@@ -198,15 +211,21 @@ def calibrate(scene: str, kwargs: dict[str, Any], seeds: tuple[int, ...] = CALIB
     setup = _setup(scene, kw, drive_env)
     key = calibration_key(scene, kw, drive_env)
     try:
-        rows = np.vstack([calibration_rows(drive_env, int(s), int(cycles)) for s in seeds])
+        drives = [calibration_rows(drive_env, int(s), int(cycles)) for s in seeds]
     finally:
         if own:
             drive_env.close()
+    return drives, key, setup
+
+
+def calibration_from_rows(rows: np.ndarray, key: str, seeds: tuple[int, ...], cycles: int,
+                          setup: dict[str, Any] | None = None) -> PoseCalibration:
+    """The :class:`slam.core.pose_calibration.PoseCalibration` fitted on drives' ``rows`` (factors to 6 digits)."""
     factors, used = fit_calibration(rows)
     k = [float(f"{v:.6g}") for v in factors]
     return PoseCalibration(particles=k[0], along=k[1], cross=k[2], heading=k[3], map_heading=k[4], key=key,
                            seeds=tuple(int(s) for s in seeds),
-                           cycles=int(cycles), fit_cycles=used, setup=setup)
+                           cycles=int(cycles), fit_cycles=used, setup=dict(setup or {}))
 
 
 def _adaptive_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
@@ -246,10 +265,17 @@ def calibrate_env(env_id: str, kwargs: dict[str, Any], seeds: tuple[int, ...] = 
     Returns:
         The calibration (its ``key`` is the one :func:`attach` looks up for ``kwargs``).
     """
+    drives, key, setup = calibrate_env_drives(env_id, kwargs, seeds, cycles)
+    return calibration_from_rows(np.vstack(drives), key, seeds, cycles, setup)
+
+
+def calibrate_env_drives(env_id: str, kwargs: dict[str, Any], seeds: tuple[int, ...] = CALIBRATION_SEEDS,
+                         cycles: int = CALIBRATION_CYCLES) -> tuple[list[np.ndarray], str, dict[str, Any]]:
+    """:func:`calibration_drives` of the configuration ``gym.make(env_id, **kwargs)`` (:func:`calibrate_env`)."""
     env = gym.make(env_id, **_adaptive_kwargs(dict(kwargs)))
     try:
         scene, made = env.get_wrapper_attr("slam_make_args")
-        return calibrate(scene, made, seeds, cycles, env=env)
+        return calibration_drives(scene, made, seeds, cycles, env=env)
     finally:
         env.close()
 
