@@ -77,4 +77,11 @@ def test_the_campaign_row_reads_the_test_shield_off_and_waits_for_the_runs():
                       "campaign:ppo_scratch:seed1": {"timesteps": 2_010_000}}}
     what, value = write_results_pages._campaign_test(d)
     assert "2 training seeds; checkpoints at 2.00-2.01M env steps" in what and "shield off" in what
-    assert value.startswith("1.040 x / 1.080 x, 1/2 / 0/2 (IDM + MOBIL: 100.0, 0/2; behind the shield: 1.050 x, 0")
+    assert value == ("1.040 x / 1.080 x, 1/2 / 0/2: target not met (IDM + MOBIL: 100.0, 0/2; behind the shield: "
+                     "1.050 x / 1.090 x, 0/2 / 0/2)")
+    eps["campaign:ppo_scratch:seed0"]["exact"]["off"][0]["crashed"] = False  # both >= 1.05 x (seed 0 not: 1.04 x)
+    assert "target not met" in write_results_pages._campaign_test({**d, "table": st.table(eps)})[1]
+    for k in (0, 1):
+        for e in eps[f"campaign:ppo_scratch:seed{k}"]["exact"]["off"]:
+            e["return"] = 106.0
+    assert "target met" in write_results_pages._campaign_test({**d, "table": st.table(eps)})[1]
