@@ -60,8 +60,10 @@ LEDGER: tuple[SeedSet, ...] = (
     SeedSet("rl_confirm_validation", 7000, 7099, "rl_confirm: the fine-tune and PPO from scratch chosen"),
     SeedSet("lane_rule_test", 8000, 8099, "rl_lane_rule_trial: the fine-tune behind the chosen lane rule tested"),
     SeedSet("training_eval", 10000, 10999, "the training runs' evaluation envs"),
-    SeedSet("pose_covariance_heldout", 12000, 12019, "pose_covariance: the pose covariance models judged"),
-    SeedSet("pose_calibration", 13000, 13009, "slam.gym.pose_calibration: the pose covariance's factors fitted"),
+    SeedSet("pose_covariance_heldout", 12000, 12039, "pose_covariance: the pose covariance models judged (12000-12019 "
+            "at every model version; 12020-12039 first with the map-start term and 40 calibration drives)"),
+    SeedSet("pose_calibration", 13000, 13039, "slam.gym.pose_calibration: the pose covariance's factors fitted "
+            "(13000-13009 until the map-start term; 13000-13039 since)"),
     SeedSet("campaign_validation", 20000, 20099, "the training campaign: the checkpoints chosen (driving.campaign)"),
     SeedSet("campaign_pilot_test", 21000, 21009, "the campaign pilot's shield table, fast and exact env"),
     SeedSet("campaign_test", 21100, 21199, "the campaign's shield table: every arm with and without the shield, exact "

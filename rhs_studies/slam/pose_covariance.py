@@ -8,7 +8,7 @@ antennas, the dense env, low SNR, the fast radar) and held-out seed, one IDM + M
 (``agents.evaluate.IDMMobilPolicy``; on ``policy_env``, the shipped policy's env, that policy: :data:`POLICIES`)
 of ``--cycles`` cycles with ``pipeline={"pose_covariance": "calibrated"}``:
 the env attaches the configuration's calibration (:mod:`slam.gym.pose_calibration`: shipped, cached, or fitted
-at first use on the calibration seeds 13000-13009, which no evaluation uses). The covariance is report-only (the
+at first use on the calibration seeds 13000-13039, which no evaluation uses). The covariance is report-only (the
 filter's estimate does not depend on it), so each cycle scores the three models on the same estimate: the
 calibrated one (``slam_pose_cov``), the adaptive one (its terms unscaled) and the drift densities (the pipeline's
 ``drift`` term plus the particles' variances: what ``pose_covariance="drift-constants"``, the default, reports).
@@ -48,7 +48,7 @@ CONFIGS: dict[str, tuple[str, dict[str, Any]]] = {
 POLICIES: dict[str, str] = {"policy_env": "agents/data/rl/shield_flank_explore_lane_time.zip"}
 MODELS = ("calibrated", "adaptive", "drift-constants")
 #: held-out seeds (the densities were fitted on 1000-1009)
-SEEDS = tuple(range(12000, 12020))
+SEEDS = tuple(range(12000, 12040))
 NEES_FLOOR = np.array([1e-3, 1e-3, 1e-4])  # std floors (m, m, rad), as slam_accuracy's
 
 
@@ -322,6 +322,32 @@ def _heading_lines(res: dict[str, Any]) -> list[str]:
     return lines
 
 
+def halves(config: dict[str, Any], model: str = "calibrated") -> list[dict[str, Any]]:
+    """``model``'s coverage (:func:`summarize`) on the first and on the second half of one configuration's runs (in
+    seed order): how much the figures move between two sets of drives of the same configuration."""
+    runs = sorted(config["runs"], key=lambda r: r["seed"])
+    half = len(runs) // 2
+    return [{"seeds": [part[0]["seed"], part[-1]["seed"]], **summarize(part, model)}
+            for part in (runs[:half], runs[half:]) if part and all(model in r["nees"] for r in part)]
+
+
+def _halves_lines(res: dict[str, Any]) -> list[str]:
+    """The calibrated model's coverage on each half of the seeds (:func:`halves`), when there are at least 2 runs."""
+    rows = [(name, halves(c)) for name, c in res["configs"].items() if len(c["runs"]) >= 2]
+    rows = [(name, h) for name, h in rows if len(h) == 2]
+    if not rows:
+        return []
+    (a, b) = rows[0][1]
+    lines = ["", "The calibrated model on each half of the held-out seeds (below / inside / above; goal met or not):",
+             "", f"| configuration | seeds {a['seeds'][0]}-{a['seeds'][1]} | seeds {b['seeds'][0]}-{b['seeds'][1]} |",
+             "|---|---|---|"]
+    for name, h in rows:
+        lines.append(f"| {name} | " + " | ".join(
+            f"{_pct(x['below'])} / {_pct(x['inside'])} / {_pct(x['above'])} ({'met' if x['goal_met'] else 'not met'})"
+            for x in h) + " |")
+    return lines
+
+
 def markdown(res: dict[str, Any]) -> str:
     """The results table: per configuration and model, coverage below / inside / above, median NEES, ANEES;
     then each configuration's calibration (factors, calibration seeds)."""
@@ -348,6 +374,7 @@ def markdown(res: dict[str, Any]) -> str:
             lines.append(f"| {name} | {m} | {s['cycles']} | {_pct(s['below'])} | {_pct(s['inside'])} | "
                          f"{_pct(s['above'])} | {s['median']:.2f} | {s['anees']:.2f} [{a_lo:.2f}, {a_hi:.2f}]"
                          f"{'' if s['anees_inside'] else ' (outside)'} | {'met' if s['goal_met'] else 'not met'} |")
+    lines += _halves_lines(res)
     lines += _tail_lines(res)
     lines += _heading_lines(res)
     lines += ["", "Calibrations (`k_p`, `k_along`, `k_cross`, `k_heading`, and the map-start heading std `sqrt(k_map)`; "
