@@ -19,7 +19,7 @@ changes how accurately the filter tracks, nothing that only changes what it repo
    (:func:`rhs_common.output_files.write_text_atomic`). On the default radar that takes ~1-3 minutes, once.
 
 The calibration seeds (13000-13039) are not evaluation seeds (``rhs_studies.kit.seeds``). Forty drives, not ten: fits
-on disjoint sets of ten of them differ by up to 7x in ``k_cross`` (``scripts/calibrate_pose_covariance.py --spread 4``,
+on disjoint sets of ten of them differ by up to 10x in a factor (``scripts/calibrate_pose_covariance.py --spread 4``,
 ``results/pose_calibration_spread.json``), and a drive of 50 cycles takes about a second on the exact radar.
 """
 
