@@ -79,6 +79,7 @@ PAGE = {
     "benchmark": "docs/results/speed.md",
     "detection_curves": "docs/results/detection.md",
     "shield_table": "docs/results/campaign.md",
+    "pose_covariance": "docs/results/pose-covariance.md",
 }
 
 
@@ -104,6 +105,22 @@ def _highway(d: dict) -> tuple[str, str]:
     n = d["parts"]["highway"]["summary"]["position_rmse_m"]["n"]
     return (f"SLAM position RMSE on the highway env ({s['cycles']['mean']:.0f} cycles, {n} seeds)",
             f"{s['position_rmse_m']['mean']:.3f} ± {s['position_rmse_m']['ci95']:.3f} m")
+
+
+def _pose_covariance(d: dict) -> tuple[str, str] | None:
+    """The calibrated pose covariance's NEES on the default env, and how many configurations meet the goal."""
+    configs = d["configs"]
+    s = configs.get("default", {}).get("summary", {}).get("calibrated")
+    if not s or not s.get("cycles"):
+        return None
+    runs = len(configs["default"]["runs"])
+    met = [n for n, c in configs.items() if c["summary"].get("calibrated", {}).get("goal_met")]
+    missed = [n for n in configs if n not in met]
+    return (f"SLAM pose covariance, `pipeline={{\"pose_covariance\": \"calibrated\"}}`, default env ({runs} held-out "
+            f"IDM + MOBIL drives of {d['cycles']} cycles): NEES below / inside / above its 95 % band (goal: inside >= "
+            "90 %, each tail <= 7 %); the configurations that meet it",
+            f"{100 * s['below']:.1f} % / {100 * s['inside']:.1f} % / {100 * s['above']:.1f} %; {len(met)} of "
+            f"{len(configs)}" + (f" (not: {', '.join(missed)})" if missed else ""))
 
 
 def _slam_drivers(d: dict) -> tuple[str, str]:
@@ -229,6 +246,7 @@ HEADLINE: tuple[tuple[str, Callable[[dict], tuple[str, str] | None]], ...] = (
     ("slam_accuracy", _dense),
     ("slam_accuracy", _highway),
     ("slam_accuracy", _slam_drivers),
+    ("pose_covariance", _pose_covariance),
     ("registration", _registration),
     ("detection_curves", _detection),
     ("policies", _policies),
