@@ -186,3 +186,19 @@ def test_heading_origin_finds_a_heading_error_turned_into_cross_track() -> None:
     assert h["ratio"] == pytest.approx(rms / sd) and h["ratio_end"] == pytest.approx(rms / sd)
     assert h["worst_z"] == [pytest.approx(6.0)] and h["others_z"] == pytest.approx(2.0)
     assert heading_origin({"runs": runs}, (0.216, 9.35)) is None  # no calibration: nothing to compare with
+
+
+def test_drive_intervals_resample_drives_not_cycles() -> None:
+    """Ten drives of 50 cycles: nine inside the band, one above it throughout (10 % above). The interval over
+    drives holds the 10 % and is wide (a drive is the independent unit: 0 or 3 such drives in a resample are
+    likely), much wider than cycles taken as independent would give; with every drive alike it collapses."""
+    from rhs_studies.slam.pose_covariance import drive_intervals
+
+    runs = [{"seed": s, "nees": {"calibrated": [30.0] * 50 if s == 3 else [3.0] * 50}} for s in range(10)]
+    ci = drive_intervals({"runs": runs})
+    lo, hi = ci["above"]
+    assert lo <= 0.1 <= hi and lo == 0.0 and hi >= 0.2
+    assert ci["inside"][0] <= 0.9 <= ci["inside"][1] and ci["below"] == [0.0, 0.0]
+    same = drive_intervals({"runs": [{"seed": s, "nees": {"calibrated": [3.0, 30.0]}} for s in range(10)]})
+    assert same["above"] == [0.5, 0.5]
+    assert drive_intervals({"runs": runs[:1]}) == {}

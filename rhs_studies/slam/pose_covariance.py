@@ -331,18 +331,41 @@ def halves(config: dict[str, Any], model: str = "calibrated") -> list[dict[str, 
             for part in (runs[:half], runs[half:]) if part and all(model in r["nees"] for r in part)]
 
 
+def drive_intervals(config: dict[str, Any], model: str = "calibrated", draws: int = 2000, level: float = 0.95,
+                    seed: int = 0) -> dict[str, list[float]]:
+    """Percentile intervals of ``model``'s fractions below / inside / above the band over one configuration's
+    drives: the drives resampled with replacement (``draws`` times, a fixed ``seed``), each keeping all its cycles.
+    Successive cycles of a drive are correlated, so the drive, not the cycle, is the independent unit."""
+    lo, hi = chi2_band(3)
+    per = [np.asarray(r["nees"][model], float) for r in config["runs"] if model in r["nees"]]
+    if len(per) < 2:
+        return {}
+    counts = np.array([[np.sum(x < lo), np.sum((x >= lo) & (x <= hi)), np.sum(x > hi), x.size] for x in per], float)
+    pick = np.random.default_rng(seed).integers(0, len(per), size=(draws, len(per)))
+    sums = counts[pick].sum(axis=1)  # (draws, 4)
+    fr = sums[:, :3] / sums[:, 3:4]
+    q = np.quantile(fr, [(1 - level) / 2, (1 + level) / 2], axis=0)
+    return {k: [float(q[0, i]), float(q[1, i])] for i, k in enumerate(("below", "inside", "above"))}
+
+
 def _halves_lines(res: dict[str, Any]) -> list[str]:
-    """The calibrated model's coverage on each half of the seeds (:func:`halves`), when there are at least 2 runs."""
-    rows = [(name, halves(c)) for name, c in res["configs"].items() if len(c["runs"]) >= 2]
-    rows = [(name, h) for name, h in rows if len(h) == 2]
+    """The calibrated model's coverage with its intervals over drives (:func:`drive_intervals`) and on each half of
+    the seeds (:func:`halves`), when there are at least 2 runs."""
+    rows = [(name, c, halves(c)) for name, c in res["configs"].items() if len(c["runs"]) >= 2]
+    rows = [(name, c, h) for name, c, h in rows if len(h) == 2]
     if not rows:
         return []
-    (a, b) = rows[0][1]
-    lines = ["", "The calibrated model on each half of the held-out seeds (below / inside / above; goal met or not):",
-             "", f"| configuration | seeds {a['seeds'][0]}-{a['seeds'][1]} | seeds {b['seeds'][0]}-{b['seeds'][1]} |",
-             "|---|---|---|"]
-    for name, h in rows:
-        lines.append(f"| {name} | " + " | ".join(
+    (a, b) = rows[0][2]
+    lines = ["", "The calibrated model's coverage with 95 % intervals over drives (the drives resampled, each with all "
+             "its cycles: successive cycles are correlated), and on each half of the held-out seeds (below / inside / "
+             "above; goal met or not):", "",
+             f"| configuration | inside [95 %] | above [95 %] | seeds {a['seeds'][0]}-{a['seeds'][1]} | seeds "
+             f"{b['seeds'][0]}-{b['seeds'][1]} |", "|---|---|---|---|---|"]
+    for name, c, h in rows:
+        ci = drive_intervals(c)
+        s = c["summary"]["calibrated"]
+        lines.append(f"| {name} | {_pct(s['inside'])} [{_pct(ci['inside'][0])}, {_pct(ci['inside'][1])}] | "
+                     f"{_pct(s['above'])} [{_pct(ci['above'][0])}, {_pct(ci['above'][1])}] | " + " | ".join(
             f"{_pct(x['below'])} / {_pct(x['inside'])} / {_pct(x['above'])} ({'met' if x['goal_met'] else 'not met'})"
             for x in h) + " |")
     return lines
