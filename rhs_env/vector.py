@@ -61,12 +61,16 @@ __all__ = [
     "UNSTACKABLE_INFO_FLAGS",
     "AsyncVectorEnv",
     "SpecKwargs",
+    "WORKER_FAILURE",
     "WorkerError",
+    "WorkerPipe",
     "check_num_envs",
     "check_vector_info_flags",
     "differing_kwargs",
     "make_subproc_vec_env",
     "make_vec",
+    "raise_worker_failure",
+    "worker_gone",
 ]
 
 #: seconds ``close()`` waits for a pending call of a failed vector env before it terminates the workers
@@ -119,7 +123,7 @@ def _space_mismatch(exc: BaseException, kwargs_list: Sequence[Mapping[str, Any]]
                       f"(gymnasium: {str(exc).splitlines()[0]})")
 
 
-def _gone(index: int, process: Any) -> WorkerError:
+def worker_gone(index: int, process: Any) -> WorkerError:
     """The error for a worker process that is no longer there."""
     code = process.exitcode
     how = "still running but its pipe is closed" if code is None else f"exit code {code}"
@@ -163,7 +167,7 @@ class AsyncVectorEnv(gym.vector.AsyncVectorEnv):
     def _dead_worker(self) -> WorkerError | None:
         for i, process in enumerate(getattr(self, "processes", [])):
             if not process.is_alive():
-                return _gone(i, process)
+                return worker_gone(i, process)
         return None
 
     def _guard(self, call: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
@@ -263,7 +267,7 @@ def make_vec(env_id: str, num_envs: int = 1, vectorization_mode: str = "async",
 
 
 # --------------------------------------------------------------------------- stable-baselines3
-_FAILURE = "__rhs_vector_worker_error__"
+WORKER_FAILURE = "__rhs_vector_worker_error__"
 
 
 def _worker(remote: Any, parent_remote: Any, env_fn_wrapper: Any, index: int) -> None:  # pragma: no cover - a child
@@ -319,12 +323,12 @@ def _worker(remote: Any, parent_remote: Any, env_fn_wrapper: Any, index: int) ->
         return
     except Exception as exc:
         try:
-            remote.send((_FAILURE, type(exc).__name__, str(exc), "".join(traceback.format_exception(exc))))
+            remote.send((WORKER_FAILURE, type(exc).__name__, str(exc), "".join(traceback.format_exception(exc))))
         except Exception:
             pass
 
 
-def _raise_failure(index: int, message: tuple[Any, ...]) -> None:
+def raise_worker_failure(index: int, message: tuple[Any, ...]) -> None:
     """Raise a worker's exception in the parent: the builtin type it had (else :class:`WorkerError`), its message."""
     _, name, text, tb = message
     cls = getattr(builtins, name, None)
@@ -340,7 +344,7 @@ def _raise_failure(index: int, message: tuple[Any, ...]) -> None:
     raise err
 
 
-class _Remote:
+class WorkerPipe:
     """The parent end of a worker's pipe: raises the worker's exception, and notices a dead worker."""
 
     def __init__(self, conn: Any, process: Any, index: int) -> None:
@@ -350,18 +354,18 @@ class _Remote:
         try:
             self.conn.send(message)
         except _PIPE_ERRORS:
-            raise _gone(self.index, self.process) from None
+            raise worker_gone(self.index, self.process) from None
 
     def recv(self) -> Any:
         try:
             while not self.conn.poll(_POLL_S):
                 if not self.process.is_alive() and not self.conn.poll(0):
-                    raise _gone(self.index, self.process)
+                    raise worker_gone(self.index, self.process)
             message = self.conn.recv()
         except _PIPE_ERRORS:
-            raise _gone(self.index, self.process) from None
-        if isinstance(message, tuple) and len(message) == 4 and message[0] == _FAILURE:
-            _raise_failure(self.index, message)
+            raise worker_gone(self.index, self.process) from None
+        if isinstance(message, tuple) and len(message) == 4 and message[0] == WORKER_FAILURE:
+            raise_worker_failure(self.index, message)
         return message
 
     def poll(self, timeout: float = 0.0) -> bool:
@@ -401,7 +405,7 @@ def _make_subproc_class() -> type:
                 process.start()
                 self.processes.append(process)
                 work_remote.close()
-                remotes.append(_Remote(remote, process, i))
+                remotes.append(WorkerPipe(remote, process, i))
             self.remotes = remotes
             self.work_remotes = [w for _, w in pipes]
             try:

@@ -12,10 +12,14 @@ Keyword arguments of ``gym.make_vec`` go to every env (as for ``gym.make``) exce
   ``"Disabled"``);
 * ``copy`` (``True``: the returned observations are copies, as ``SyncVectorEnv``).
 
-What runs where: each env's step runs in turn, in this process, on one core. The per-env work is one method
-(:meth:`RhsVectorEnv.step_envs`), the seam where a batched step over envs plugs in. Threads across envs are not
-offered: the compiled kernels (numba, ``rhs_common.jit``) hold the GIL and the wrappers' BLAS limits
-(threadpoolctl) are process-wide, so threads would serialise and could leave the user's BLAS limits changed.
+* ``workers`` (1 by default): processes that step the envs (:mod:`rhs_env.vector_workers`).
+
+What runs where: by default each env's step runs in turn, in this process, on one core (one core stays one
+core). The per-env work is one method (:meth:`RhsVectorEnv.step_envs`), the seam where a batched step over envs
+plugs in. ``workers=W`` (opt-in) splits the envs into ``W`` groups, each stepped in a worker process of its own
+(:class:`rhs_env.vector_workers.EnvWorkers`), with the same results. Threads across envs are not offered: the
+compiled kernels (numba, ``rhs_common.jit``) hold the GIL and the wrappers' BLAS limits (threadpoolctl) are
+process-wide, so threads would serialise and could leave the user's BLAS limits changed.
 
 stable-baselines3 takes it through :func:`to_sb3` (a ``VecEnv`` adapter; the vector env in ``SAME_STEP`` mode).
 
@@ -66,31 +70,45 @@ class RhsVectorEnv(VectorEnv):
         env_fns: callables that each make one env (all with the same spaces).
         autoreset_mode: gymnasium's autoreset mode (``NEXT_STEP`` by default, as ``SyncVectorEnv``).
         copy: return copies of the batched observations (as ``SyncVectorEnv``).
+        workers: processes that hold and step the envs (1: this process, the envs in :attr:`envs`; more: worker
+            processes, :mod:`rhs_env.vector_workers`, and :attr:`envs` is empty).
+        context: the workers' multiprocessing start method (``"spawn"`` by default).
 
     Raises:
-        ValueError: no env, a bad ``autoreset_mode``, or envs whose spaces differ (naming the env).
+        ValueError: no env, a bad ``autoreset_mode`` or ``workers``, or envs whose spaces differ (naming the env).
     """
 
     def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], autoreset_mode: Any = AutoresetMode.NEXT_STEP,
-                 copy: bool = True) -> None:
+                 copy: bool = True, workers: int = 1, context: str = "spawn") -> None:
         from rhs_env.vector import check_num_envs
+        from rhs_env.vector_workers import EnvWorkers, check_workers
 
-        check_num_envs(len(env_fns))
+        self.num_envs = check_num_envs(len(env_fns))
+        workers = check_workers(workers, self.num_envs)
         self.autoreset_mode = _check_autoreset_mode(autoreset_mode)
         self.copy = bool(copy)
         self.envs: list[gym.Env] = []
+        #: the worker processes (None: the envs live in this process)
+        self.workers: EnvWorkers | None = None
         try:
-            for fn in env_fns:
-                self.envs.append(fn())
+            if workers > 1:
+                self.workers = EnvWorkers(env_fns, workers, self.autoreset_mode, context)
+            else:
+                for fn in env_fns:
+                    self.envs.append(fn())
         except BaseException:
             self.close()
             raise
-        self.num_envs = len(self.envs)
-        first = self.envs[0]
-        self.metadata = {**first.metadata, "autoreset_mode": self.autoreset_mode}
-        self.render_mode = first.render_mode
-        self.single_observation_space = first.observation_space
-        self.single_action_space = first.action_space
+        if self.workers is not None:
+            obs_space, act_space = self.workers.observation_space, self.workers.action_space
+            metadata, self.render_mode = self.workers.metadata, self.workers.render_mode
+        else:
+            first = self.envs[0]
+            obs_space, act_space, metadata, self.render_mode = (first.observation_space, first.action_space,
+                                                                first.metadata, first.render_mode)
+        self.metadata = {**metadata, "autoreset_mode": self.autoreset_mode}
+        self.single_observation_space = obs_space
+        self.single_action_space = act_space
         for i, env in enumerate(self.envs):
             if env.observation_space != self.single_observation_space or env.action_space != self.single_action_space:
                 self.close()
@@ -130,10 +148,15 @@ class RhsVectorEnv(VectorEnv):
         self._truncations[mask] = False
         self._autoreset_envs[mask] = False
         infos: dict[str, Any] = {}
-        for i in np.flatnonzero(mask):
-            self._env_obs[i], info = self.envs[i].reset(seed=seeds[i], options=options)
+        indices = [int(i) for i in np.flatnonzero(mask)]
+        if self.workers is not None:
+            results = self.workers.reset(indices, [seeds[i] for i in indices], options)
+        else:
+            results = [self.envs[i].reset(seed=seeds[i], options=options) for i in indices]
+        for i, (obs, info) in zip(indices, results, strict=True):
+            self._env_obs[i] = obs
             self.env_infos[i], self.final_obs[i], self.final_infos[i] = info, None, None
-            infos = self._add_info(infos, info, int(i))
+            infos = self._add_info(infos, info, i)
         self._observations = concatenate(self.single_observation_space, self._env_obs, self._observations)
         return (deepcopy(self._observations) if self.copy else self._observations), infos
 
@@ -163,6 +186,11 @@ class RhsVectorEnv(VectorEnv):
         (``_env_obs``, ``_rewards``, ``_terminations``, ``_truncations``, :attr:`env_infos`,
         :attr:`final_obs` / :attr:`final_infos` in ``SAME_STEP`` mode) for all envs at once.
         """
+        if self.workers is not None:
+            for i, (obs, rew, term, trunc, info, final_obs, final_info) in enumerate(self.workers.step(actions)):
+                self._env_obs[i], self._rewards[i], self._terminations[i], self._truncations[i] = obs, rew, term, trunc
+                self.env_infos[i], self.final_obs[i], self.final_infos[i] = info, final_obs, final_info
+            return
         mode = self.autoreset_mode
         for i, (env, action) in enumerate(zip(self.envs, actions, strict=True)):
             self.final_obs[i] = self.final_infos[i] = None
@@ -181,19 +209,17 @@ class RhsVectorEnv(VectorEnv):
 
     def render(self) -> tuple[Any, ...]:
         """Each env's frame."""
+        if self.workers is not None:
+            return tuple(self.workers.render())
         return tuple(env.render() for env in self.envs)
 
     def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
         """Call (or read, when not callable) ``name`` of each env."""
-        out = []
-        for env in self.envs:
-            attr = env.get_wrapper_attr(name)
-            out.append(attr(*args, **kwargs) if callable(attr) else attr)
-        return tuple(out)
+        return tuple(self.call_at(range(self.num_envs), name, args, kwargs))
 
     def get_attr(self, name: str) -> tuple[Any, ...]:
         """``name`` of each env."""
-        return tuple(env.get_wrapper_attr(name) for env in self.envs)
+        return tuple(self.get_attr_at(range(self.num_envs), name))
 
     def set_attr(self, name: str, values: Any) -> None:
         """Set ``name`` of each env to ``values`` (one value, or a list of one per env)."""
@@ -201,13 +227,54 @@ class RhsVectorEnv(VectorEnv):
             values = [values] * self.num_envs
         if len(values) != self.num_envs:
             raise ValueError(f"set_attr({name!r}): {len(values)} values for {self.num_envs} envs")
-        for env, value in zip(self.envs, values, strict=True):
-            env.set_wrapper_attr(name, value)
+        self.set_attr_at(range(self.num_envs), name, list(values))
+
+    def call_at(self, indices: Sequence[int], name: str, args: Sequence[Any] = (),
+                kwargs: dict[str, Any] | None = None) -> list[Any]:
+        """Call (or read, when not callable) ``name`` of envs ``indices``, wherever they live."""
+        if self.workers is not None:
+            return self.workers.call(list(indices), name, tuple(args), kwargs)
+        out = []
+        for i in indices:
+            attr = self.envs[i].get_wrapper_attr(name)
+            out.append(attr(*args, **(kwargs or {})) if callable(attr) else attr)
+        return out
+
+    def get_attr_at(self, indices: Sequence[int], name: str) -> list[Any]:
+        """``name`` of envs ``indices``."""
+        if self.workers is not None:
+            return self.workers.get_attr(list(indices), name)
+        return [self.envs[i].get_wrapper_attr(name) for i in indices]
+
+    def set_attr_at(self, indices: Sequence[int], name: str, values: Sequence[Any]) -> None:
+        """Set ``name`` of envs ``indices`` to ``values`` (one each)."""
+        if self.workers is not None:
+            self.workers.set_attr(list(indices), name, list(values))
+            return
+        for i, value in zip(indices, values, strict=True):
+            self.envs[i].set_wrapper_attr(name, value)
+
+    def is_wrapped_at(self, indices: Sequence[int], wrapper: type) -> list[bool]:
+        """Whether envs ``indices`` are wrapped in ``wrapper`` (a ``gymnasium.Wrapper`` class)."""
+        if self.workers is not None:
+            return self.workers.is_wrapped(list(indices), wrapper)
+        out = []
+        for i in indices:
+            env: Any = self.envs[i]
+            found = False
+            while isinstance(env, gym.Wrapper):
+                found = found or isinstance(env, wrapper)
+                env = env.env
+            out.append(found)
+        return out
 
     def close_extras(self, **kwargs: Any) -> None:
-        """Close every env."""
+        """Close every env (and the worker processes)."""
         for env in getattr(self, "envs", []):
             env.close()
+        if getattr(self, "workers", None) is not None:
+            self.workers.close()  # type: ignore[union-attr]
+            self.workers = None
 
     # ------------------------------------------------------------------ helpers
     def _seeds(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
@@ -234,7 +301,7 @@ class RhsVectorEnv(VectorEnv):
 
 
 def make_vector_env(env_id: str, num_envs: int = 1, autoreset_mode: Any = AutoresetMode.NEXT_STEP,
-                    copy: bool = True, **kwargs: Any) -> RhsVectorEnv:
+                    copy: bool = True, workers: int = 1, context: str = "spawn", **kwargs: Any) -> RhsVectorEnv:
     """:class:`RhsVectorEnv` of ``num_envs`` envs ``gym.make(env_id, **kwargs)`` (the vector entry point).
 
     Args:
@@ -242,20 +309,25 @@ def make_vector_env(env_id: str, num_envs: int = 1, autoreset_mode: Any = Autore
         num_envs: envs, [1, :data:`rhs_env.vector.MAX_ENVS`].
         autoreset_mode: gymnasium's autoreset mode (default ``NEXT_STEP``).
         copy: return copies of the observations.
+        workers: processes that step the envs (1: this process; :mod:`rhs_env.vector_workers`).
+        context: the workers' multiprocessing start method.
         **kwargs: every env's kwargs (as for ``gym.make``: config keys, ``radar={...}``, ``max_episode_steps``).
 
     Returns:
         The vector env.
 
     Raises:
-        ValueError: ``num_envs`` out of range, an unstackable info flag (``landmarks_in_info``), a bad kwarg.
+        ValueError: ``num_envs`` or ``workers`` out of range, an unstackable info flag (``landmarks_in_info``),
+            a bad kwarg.
     """
     from rhs_env.vector import check_num_envs
+    from rhs_env.vector_workers import check_workers
 
     n = check_num_envs(num_envs)
+    check_workers(workers, n)
     check_vector_info_flags(kwargs, force=True)
     return RhsVectorEnv([functools.partial(gym.make, env_id, **kwargs)] * n, autoreset_mode=autoreset_mode,
-                        copy=copy)
+                        copy=copy, workers=workers, context=context)
 
 
 def __getattr__(name: str) -> Any:
@@ -298,7 +370,6 @@ def to_sb3(vec_env: RhsVectorEnv) -> Any:
 @functools.cache
 def _sb3_class() -> type:
     """The adapter class, built on first use: importing this module does not import stable-baselines3 (torch)."""
-    from stable_baselines3.common.env_util import is_wrapped
     from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
     class Sb3VecEnv(VecEnv):
@@ -347,21 +418,18 @@ def _sb3_class() -> type:
         def get_images(self) -> Sequence[np.ndarray | None]:
             return list(self.vec_env.render())
 
-        def _targets(self, indices: Any) -> list[gym.Env]:
-            return [self.vec_env.envs[i] for i in self._get_indices(indices)]
-
         def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
-            return [env.get_wrapper_attr(attr_name) for env in self._targets(indices)]
+            return self.vec_env.get_attr_at(list(self._get_indices(indices)), attr_name)
 
         def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
-            for env in self._targets(indices):
-                setattr(env, attr_name, value)
+            targets = list(self._get_indices(indices))
+            self.vec_env.set_attr_at(targets, attr_name, [value] * len(targets))
 
         def env_method(self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any) -> list[Any]:
-            return [env.get_wrapper_attr(method_name)(*method_args, **method_kwargs) for env in self._targets(indices)]
+            return self.vec_env.call_at(list(self._get_indices(indices)), method_name, method_args, method_kwargs)
 
         def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: Any = None) -> list[bool]:
-            return [is_wrapped(env, wrapper_class) for env in self._targets(indices)]
+            return self.vec_env.is_wrapped_at(list(self._get_indices(indices)), wrapper_class)
 
     Sb3VecEnv.__module__ = __name__
     return Sb3VecEnv
