@@ -134,7 +134,7 @@ class EnvWorkers:
         self.groups = [list(map(int, part)) for part in np.array_split(np.arange(self.num_envs), workers)]
         #: env index -> (worker, index in its group)
         self.where = {i: (w, j) for w, group in enumerate(self.groups) for j, i in enumerate(group)}
-        ctx = mp.get_context(context)
+        ctx: Any = mp.get_context(context)
         self.pipes: list[WorkerPipe] = []
         try:
             for w, group in enumerate(self.groups):

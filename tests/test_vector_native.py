@@ -42,8 +42,10 @@ def _same(a, b, path="obs") -> None:
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b), err_msg=path)
 
 
-def _run_pair(env_id: str, kwargs: dict, n: int = 3, steps: int = 30, mode: AutoresetMode = AutoresetMode.NEXT_STEP):
-    native = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", autoreset_mode=mode, **kwargs)
+def _run_pair(env_id: str, kwargs: dict, n: int = 3, steps: int = 30, mode: AutoresetMode = AutoresetMode.NEXT_STEP,
+              workers: int = 1):
+    native = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", autoreset_mode=mode,
+                          workers=workers, **kwargs)
     sync = gym.make_vec(env_id, num_envs=n, vectorization_mode="sync", vector_kwargs={"autoreset_mode": mode},
                         **kwargs)
     try:
@@ -89,6 +91,47 @@ def test_native_equals_sync_slam(env_id):
     else:
         kw.update(small_env_kwargs(max_points=32))
     assert _run_pair(env_id, kw, n=2, steps=6) >= 4
+
+
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_native_in_worker_processes_equals_sync_highway(mode):
+    """``workers=2``: three envs in two worker processes (groups of 2 and 1), the same results as single envs."""
+    assert _run_pair(HW, HW_KW, mode=mode, workers=2) >= 3
+
+
+def test_native_in_worker_processes_equals_sync_slam():
+    kw = {"slam": {"n_particles": 8}, "max_landmarks": 8, "duration": 0.4, "vehicles_count": 3, "lanes_count": 2}
+    assert _run_pair("rhs-highway-slam-fast-v0", kw, n=3, steps=6, workers=2) >= 4
+
+
+def test_workers_attributes_calls_and_errors_reach_the_parent():
+    """In worker mode the envs' attributes and methods are read, set and called where the envs live, per env; a
+    bad kwarg raised in a worker is the same ``ValueError`` in the parent, naming the worker; a killed worker is a
+    ``WorkerError`` at the next step, and ``close()`` returns."""
+    from rhs_env.vector import WorkerError
+
+    for bad in (0, 4, True, 1.5):
+        with pytest.raises(ValueError, match=r"workers must be an integer in \[1, 3\]"):
+            gym.make_vec(HW, num_envs=3, vectorization_mode="vector_entry_point", workers=bad, **HW_KW)
+    with pytest.raises(ValueError, match="in vector env worker 0: .*vehicles_count"):
+        gym.make_vec(HW, num_envs=2, vectorization_mode="vector_entry_point", workers=2,
+                     **{**HW_KW, "vehicles_count": -1})
+    env = gym.make_vec(HW, num_envs=3, vectorization_mode="vector_entry_point", workers=2, **HW_KW)
+    try:
+        vec = env.unwrapped
+        assert vec.envs == [] and [len(g) for g in vec.workers.groups] == [2, 1]
+        env.reset(seed=0)
+        assert env.get_attr("render_mode") == (None, None, None)
+        vec.set_attr_at([2], "marker", [7])
+        assert vec.get_attr_at([0, 2], "spec")[1].id == HW
+        assert vec.call_at([2], "marker") == [7] and vec.is_wrapped_at([0], gym.wrappers.OrderEnforcing) == [True]
+        vec.workers.pipes[1].process.kill()
+        vec.workers.pipes[1].process.join(5)
+        with pytest.raises(WorkerError, match="worker 1 .* is gone"):
+            env.step(np.zeros(3, dtype=np.int64))
+    finally:
+        env.close()
+    assert vec.workers is None
 
 
 def test_every_id_has_a_vector_entry_point():
@@ -153,11 +196,12 @@ def test_disabled_mode_refuses_a_step_of_an_ended_env():
         env.close()
 
 
-def test_to_sb3_matches_dummy_vec_env():
+@pytest.mark.parametrize("workers", [1, 2])
+def test_to_sb3_matches_dummy_vec_env(workers):
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     native = to_sb3(gym.make_vec(HW, num_envs=2, vectorization_mode="vector_entry_point", autoreset_mode="SameStep",
-                                 **HW_KW))
+                                 workers=workers, **HW_KW))
     dummy = DummyVecEnv([lambda: gym.make(HW, **HW_KW) for _ in range(2)])
     try:
         native.seed(7)
@@ -217,14 +261,15 @@ def test_benchmark_section_times_native_sync_and_single(monkeypatch):
     from rhs_studies.bench import benchmark
 
     monkeypatch.setattr(benchmark, "machine_scaling", lambda: {"two_over_one_median": 1.9})
-    r = benchmark.bench_vec_native(steps=4, seed=0, block=1, n=2, env_id=HW)
-    assert r["env_steps_each"] == 4
-    for k in ("single", "native", "sync"):
+    r = benchmark.bench_vec_native(steps=4, seed=0, block=1, n=2, env_id=HW, workers=2)
+    assert r["env_steps_each"] == 4 and r["workers"] == 2
+    for k in ("single", "native", "workers", "sync"):
         assert r[f"{k}_steps_per_s"] > 0
-    lo, hi = r["vec_native_over_single_ci"]
-    assert lo <= r["vec_native_over_single"] <= hi
+    for k in ("vec_native_over_single", "vec_workers_over_single"):
+        lo, hi = r[f"{k}_ci"]
+        assert lo <= r[k] <= hi
     assert "vec_native" in benchmark.SECTIONS
     line = benchmark._md_vec_native(r)[0]
-    assert f"2 x `{HW}`" in line and "1.90 x" in line
+    assert f"2 x `{HW}`" in line and "1.90 x" in line and "`workers=2`" in line
     goals = benchmark._goals({"vec_native": r})
-    assert goals["vec_native_over_single"]["goal"] == 1.4
+    assert goals["vec_workers_over_single"]["goal"] == 1.4 and "vec_native_over_single" not in goals
