@@ -139,8 +139,9 @@ def test_machine_scaling_times_one_and_two_spin_processes():
 def test_training_rounds_pool_each_rate_and_keep_each_rounds_ratio(monkeypatch):
     import agents.algos.train
 
-    # per round: (slam, base) with update_threads="auto", then (slam, base, fast slam) with the default threads
-    rates = iter([30.0, 50.0, 40.0, 60.0, 200.0, 20.0, 50.0, 40.0, 60.0, 240.0])
+    # per round: (slam, base) with update_threads="auto", then (slam, base, fast slam) with the default threads, then
+    # the fast slam env through the native vector env in worker processes
+    rates = iter([30.0, 50.0, 40.0, 60.0, 200.0, 180.0, 20.0, 50.0, 40.0, 60.0, 240.0, 220.0])
 
     def fake_train(algo, env_id, timesteps, out, **kwargs):
         if env_id == "rhs-highway-slam-fast-v0":  # the exact SLAM env's hyperparameters, under the fast id
@@ -149,6 +150,7 @@ def test_training_rounds_pool_each_rate_and_keep_each_rounds_ratio(monkeypatch):
             assert load_hyperparams(algo, env_id, kwargs["hyperparams"]) == load_hyperparams(algo, "rhs-highway-slam-v0")
         else:
             assert kwargs["hyperparams"] is None
+        assert (kwargs.get("native_workers"), kwargs["n_envs"]) in ((None, 2), (2, 8))
         rate = next(rates)
         timing = {"update_threads": 2 if kwargs["update_threads"] else None, "setup_s": 1.0, "learn_s": timesteps / rate,
                   "steady_steps_per_s": rate, "steady_collect_s_per_rollout": 5.0, "steady_update_s_per_rollout": 0.1}
@@ -170,8 +172,14 @@ def test_training_rounds_pool_each_rate_and_keep_each_rounds_ratio(monkeypatch):
     assert t["ppo_fast_over_exact_runs"] == [5.0, 6.0]
     text = "\n".join(benchmark._md_ratios({"training": t}))
     assert "0.667 x" in text and "Pooled over 2 rounds" in text and "0.60, 0.40" in text
-    assert "fast SLAM env over the exact SLAM env, steady rate: 5.45 x (goal >= 5; each round: 5.00, 6.00)" in text
-    assert benchmark._goals({"training": t})["ppo_fast_over_exact"]["met"]
+    assert "2 subprocess envs each: 5.45 x (each round: 5.00, 6.00)" in text
+    native = t["native"]["rhs-highway-slam-fast-v0"]
+    assert native["steady_steps_per_s"] == pytest.approx(2 / (1 / 180 + 1 / 220)) and native["workers"] == 2
+    assert t["ppo_fast_native_over_exact"] == pytest.approx(native["steady_steps_per_s"] / 40.0)
+    assert t["ppo_fast_native_over_exact_runs"] == [4.5, 5.5]
+    assert "8 envs in the native vector env on 2 worker processes" in text and "(goal >= 5; each round: 4.50, 5.50)" in text
+    goals = benchmark._goals({"training": t})
+    assert not goals["ppo_fast_native_over_exact"]["met"] and "ppo_fast_over_exact" not in goals
 
 
 

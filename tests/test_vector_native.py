@@ -273,3 +273,21 @@ def test_benchmark_section_times_native_sync_and_single(monkeypatch):
     assert f"2 x `{HW}`" in line and "1.90 x" in line and "`workers=2`" in line
     goals = benchmark._goals({"vec_native": r})
     assert goals["vec_workers_over_single"]["goal"] == 1.4 and "vec_native_over_single" not in goals
+
+
+def test_ppo_trains_the_same_through_native_workers_as_through_subproc(tmp_path):
+    """``train(..., native_workers=2)``: the envs in two native worker processes instead of SB3's
+    ``SubprocVecEnv``; the same envs and seeds, so PPO ends with the same weights to the bit."""
+    import torch
+    from stable_baselines3 import PPO
+
+    from agents.algos.train import train
+
+    weights = []
+    for name, workers in (("subproc", None), ("native", 2)):
+        out = tmp_path / name
+        s = train("ppo", HW, 128, out, seed=0, n_envs=2, eval_freq=10**9, checkpoint_freq=10**9, progress=False,
+                  env_kwargs={"vehicles_count": 6, "duration": 2.0}, native_workers=workers)
+        assert s["timesteps"] >= 128
+        weights.append(torch.cat([p.detach().ravel() for p in PPO.load(out / "model.zip", device="cpu").policy.parameters()]))
+    assert torch.equal(weights[0], weights[1])

@@ -105,6 +105,7 @@ def train(
     update_threads: int | str | None = None,
     force: bool | None = None,
     command: list[str] | None = None,
+    native_workers: int | None = None,
 ) -> dict[str, Any]:
     """Train ``algo`` on ``env_id`` for ``timesteps`` steps; returns the summary written to ``out/train.json``.
 
@@ -121,7 +122,9 @@ def train(
     (None: ``torch_threads`` throughout; ``"auto"``: those workers' cores too; see
     :func:`agents.algos.threads.update_threads_for`, and why it is not the default). ``summary["timing"]`` splits the
     wall time: ``setup_s`` (vector env, kernel warm-up, model), ``learn_s``, the first rollout and the steady rate
-    from the second rollout on (:class:`agents.algos.callbacks.PhaseTimer`).
+    from the second rollout on (:class:`agents.algos.callbacks.PhaseTimer`). ``native_workers``: the training envs
+    in the project's native vector env with that many worker processes instead of one ``SubprocVecEnv`` worker per
+    env (:func:`agents.algos.vec_env.make_vec_env`).
 
     PPO / DQN: SIGINT / SIGTERM are caught for the whole run (:class:`agents.algos.resume.InterruptGuard`): the first
     stops at the next rollout boundary with a checkpoint (the subprocess workers ignore SIGINT, so a Ctrl-C in a
@@ -147,14 +150,14 @@ def train(
     with InterruptGuard() as guard:
         return _train_sb3(algo, env_id, timesteps, Path(out), seed, n_envs, hyperparams, env_kwargs, eval_freq,
                           eval_episodes, checkpoint_freq, progress, torch_threads, resume, update_threads, force,
-                          command, guard)
+                          command, guard, native_workers)
 
 
 def _train_sb3(algo: str, env_id: str, timesteps: int | None, out: Path, seed: int, n_envs: int | None,
                hyperparams: str | Path | None, env_kwargs: dict | None, eval_freq: int, eval_episodes: int,
                checkpoint_freq: int, progress: bool, torch_threads: int | None, resume: bool,
                update_threads: int | str | None, force: bool | None, command: list[str] | None,
-               guard: Any) -> dict[str, Any]:
+               guard: Any, native_workers: int | None = None) -> dict[str, Any]:
     """:func:`train` for PPO / DQN, under the run's :class:`agents.algos.resume.InterruptGuard` ``guard``."""
     import torch
 
@@ -174,7 +177,7 @@ def _train_sb3(algo: str, env_id: str, timesteps: int | None, out: Path, seed: i
     suffix = _resume_suffix(out) if found is not None else ""
     record = run_record(algo, env_id, run, seed)
     venv = make_vec_env(env_id, run.n_envs, seed, run.env_kwargs, monitor_dir=out / "monitor", decision_interval=k,
-                        decision_mode=run.decision_mode, monitor_suffix=suffix)
+                        decision_mode=run.decision_mode, monitor_suffix=suffix, native_workers=native_workers)
     decisions = -(-run.timesteps // k)
     eval_env = None
     try:

@@ -66,8 +66,15 @@ def make_vec_env(
     wrapper: Callable[[Any], Any] | None = None,
     decision_mode: str = "hold",
     monitor_suffix: str = "",
+    native_workers: int | None = None,
 ):
     """``n_envs`` copies of ``env_id`` (``Monitor`` logging ``crashed``), in subprocesses when n_envs > 1.
+
+    ``native_workers`` (None: SB3's ``SubprocVecEnv``, one worker per env) takes the project's native vector env
+    instead (:class:`rhs_env.vector_native.RhsVectorEnv` through :func:`rhs_env.vector_native.to_sb3`, the same
+    envs and seeds): its ``n_envs`` envs in this process (1) or in that many worker processes, contiguous groups
+    of envs each (:mod:`rhs_env.vector_workers`; started from the same preloaded forkserver). Fewer processes than
+    envs: 8 envs on 2 cores step in 2 processes, and the policy's forward pass takes all 8 observations at once.
 
     ``decision_interval`` > 1 wraps each ``Monitor`` in :class:`agents.policies.decision.HoldAction`
     (the monitor still counts env steps and per-step rewards), which repeats the action
@@ -90,7 +97,11 @@ def make_vec_env(
     if n_envs < 1:
         raise ValueError(f"n_envs must be >= 1, got {n_envs}")
     k = check_decision_interval(decision_interval)
-    in_workers = subprocess and n_envs > 1
+    if native_workers is not None:
+        from rhs_env.vector_workers import check_workers
+
+        check_workers(native_workers, n_envs)
+    in_workers = subprocess and n_envs > 1 and (native_workers is None or native_workers > 1)
     if in_workers:
         _preload_forkserver()
         warm_kernels(env_id, env_kwargs or {})
@@ -99,9 +110,22 @@ def make_vec_env(
     factories = [EnvFactory(worker_env_id(env_id), rank, seed, dict(env_kwargs or {}),
                             os.path.join(monitor_dir, f"{rank}{monitor_suffix}") if monitor_dir else None,
                             wrap, ignore_sigint=in_workers) for rank in range(n_envs)]
-    venv = SubprocVecEnv(factories) if in_workers else DummyVecEnv(factories)  # type: ignore[arg-type]
+    if native_workers is not None:
+        from rhs_env.vector_native import RhsVectorEnv, to_sb3
+
+        workers = native_workers if in_workers else 1
+        context = "forkserver" if "forkserver" in _start_methods() else "spawn"
+        venv = to_sb3(RhsVectorEnv(factories, autoreset_mode="SameStep", workers=workers, context=context))
+    else:
+        venv = SubprocVecEnv(factories) if in_workers else DummyVecEnv(factories)  # type: ignore[arg-type]
     venv.seed(seed)  # the seeds of the first reset, as stable-baselines3's make_vec_env sets them
     return venv
+
+
+def _start_methods() -> list[str]:
+    import multiprocessing
+
+    return multiprocessing.get_all_start_methods()
 
 
 @dataclass(frozen=True)

@@ -82,7 +82,7 @@ SECTIONS = ("envs", "start", "floor", "load", "vec", "radar", "patterns", "traff
             "targets")
 GOALS = {"radar_env_over_base": 0.75, "slam_env_over_base": 0.67, "loaded_over_quiet": 0.85,
          "two_workers_over_one": 1.8, "ppo_slam_over_base": 0.7, "vec_workers_over_single": 1.4,
-         "slam_over_highway_fast": 1.5, "slam_fast_over_highway_fast": 6.0, "ppo_fast_over_exact": 5.0}
+         "slam_over_highway_fast": 1.5, "slam_fast_over_highway_fast": 6.0, "ppo_fast_native_over_exact": 5.0}
 START_GOALS_S = {"cold_s": 30.0, "warm_s": 5.0}  # first step of a new user: empty kernel cache / warm cache
 LIBRARY_GOAL_S = 30.0  # the fast M = 60, 1-degree library, 2 workers, every grid pointing within half a grid
 
@@ -870,6 +870,9 @@ def machine_scaling(repeats: int = 5) -> dict[str, Any]:
 #: the ``training`` section's ids: the SLAM env, the base env (the ``ppo_slam_over_base`` goal) and the fast SLAM env
 #: (``ppo_fast_over_exact``: its PPO steps/s over the exact SLAM env's, default threads only)
 TRAINING_IDS = ("rhs-highway-slam-v0", "rhs-highway-v0", "rhs-highway-slam-fast-v0")
+#: the ``training`` section's PPO on the fast SLAM env through the native vector env: envs and worker processes
+#: (``ppo_fast_native_over_exact``: its steady rate over the exact SLAM env's with 2 subprocess envs)
+NATIVE_PPO_ENVS, NATIVE_PPO_WORKERS = 8, 2
 
 
 def _fast_hyperparams(folder: str) -> Path:
@@ -902,7 +905,10 @@ def bench_training(timesteps: int, seed: int, repeats: int = 3) -> dict:
     time: the harmonic mean of the rounds' rates, each round having the same steps), and each round's ratio is kept
     (``ratio_runs``). With the default threads, PPO also trains on ``rhs-highway-slam-fast-v0`` in each round:
     ``ppo_fast_over_exact`` is its pooled steady rate over the exact SLAM env's (each round's in
-    ``ppo_fast_over_exact_runs``).
+    ``ppo_fast_over_exact_runs``). Last in each round, PPO trains on the fast SLAM env the way its users would on
+    2 cores: :data:`NATIVE_PPO_ENVS` envs in the native vector env with :data:`NATIVE_PPO_WORKERS` worker processes
+    (``train(..., native_workers=...)``; ``native``); ``ppo_fast_native_over_exact`` is its pooled steady rate over
+    the exact SLAM env's with 2 subprocess envs (the goal's "today's PPO on the SLAM env").
     """
     import tempfile
 
@@ -926,6 +932,20 @@ def bench_training(timesteps: int, seed: int, repeats: int = 3) -> dict:
                      "setup_s": t["setup_s"], "learn_s": t["learn_s"], "whole_run_s": round(whole, 3),
                      "startup_s": round(whole - s["timesteps"] / steady, 3)}
                 rounds.setdefault(label, {}).setdefault(env_id, []).append(r)
+        with tempfile.TemporaryDirectory() as tmp:
+            s = train("ppo", TRAINING_IDS[2], timesteps, tmp, seed=seed, n_envs=NATIVE_PPO_ENVS, eval_freq=10**9,
+                      checkpoint_freq=10**9, progress=False, update_threads=None,
+                      hyperparams=_fast_hyperparams(tmp), native_workers=NATIVE_PPO_WORKERS)
+        t = s["timing"]
+        steady = t["steady_steps_per_s"] or s["steps_per_s"]
+        whole = t["setup_s"] + t["learn_s"]
+        rounds.setdefault("native", {}).setdefault(TRAINING_IDS[2], []).append(
+            {"n_envs": NATIVE_PPO_ENVS, "workers": NATIVE_PPO_WORKERS, "timesteps": s["timesteps"],
+             "update_threads": t["update_threads"], "steady_steps_per_s": steady, "steps_per_s_learn": s["steps_per_s"],
+             "steady_collect_s_per_rollout": t["steady_collect_s_per_rollout"],
+             "steady_update_s_per_rollout": t["steady_update_s_per_rollout"], "setup_s": t["setup_s"],
+             "learn_s": t["learn_s"], "whole_run_s": round(whole, 3), "startup_s": round(whole - s["timesteps"] / steady, 3)})
+    native_runs = rounds.pop("native")
     out: dict[str, Any] = {"repeats": repeats}
     for label, by_env in rounds.items():
         out[label] = {env_id: _pooled_training(runs) for env_id, runs in by_env.items()}
@@ -941,6 +961,11 @@ def bench_training(timesteps: int, seed: int, repeats: int = 3) -> dict:
     out["ppo_fast_over_exact"] = fast["steady_steps_per_s"] / exact["steady_steps_per_s"]
     out["ppo_fast_over_exact_runs"] = [round(a["steady_steps_per_s"] / b["steady_steps_per_s"], 3) for a, b in
                                        zip(rounds["default"][TRAINING_IDS[2]], rounds["default"]["rhs-highway-slam-v0"])]
+    native = out["native"] = {TRAINING_IDS[2]: _pooled_training(native_runs[TRAINING_IDS[2]])}
+    native[TRAINING_IDS[2]]["workers"] = NATIVE_PPO_WORKERS
+    out["ppo_fast_native_over_exact"] = native[TRAINING_IDS[2]]["steady_steps_per_s"] / exact["steady_steps_per_s"]
+    out["ppo_fast_native_over_exact_runs"] = [round(a["steady_steps_per_s"] / b["steady_steps_per_s"], 3) for a, b in
+                                              zip(native_runs[TRAINING_IDS[2]], rounds["default"]["rhs-highway-slam-v0"])]
     return out
 
 
@@ -1067,9 +1092,18 @@ def _md_ratios(result: dict) -> list[str]:
                       f"{t['update_threads_auto']['ppo_slam_over_base']:.3f} x). Start-up: the run's wall time less its "
                       "steps at the steady rate." + rounds, ""]
             if "ppo_fast_over_exact" in t:
-                lines[-1:-1] = [f"PPO on the fast SLAM env over the exact SLAM env, steady rate: "
-                                f"{t['ppo_fast_over_exact']:.2f} x (goal >= {GOALS['ppo_fast_over_exact']:g}; each "
-                                f"round: {', '.join(f'{x:.2f}' for x in t['ppo_fast_over_exact_runs'])})."]
+                text = (f"PPO on the fast SLAM env over the exact SLAM env, steady rate, 2 subprocess envs each: "
+                        f"{t['ppo_fast_over_exact']:.2f} x (each round: "
+                        f"{', '.join(f'{x:.2f}' for x in t['ppo_fast_over_exact_runs'])}).")
+                if "ppo_fast_native_over_exact" in t:
+                    r = t["native"][TRAINING_IDS[2]]
+                    text += (f" The fast env's PPO with {r['n_envs']} envs in the native vector env on {r['workers']} "
+                             f"worker processes: {r['steady_steps_per_s']:.1f} steps/s (collect / update per rollout "
+                             f"{r['steady_collect_s_per_rollout']:.2f} / {r['steady_update_s_per_rollout']:.2f} s), "
+                             f"{t['ppo_fast_native_over_exact']:.2f} x the exact env's with 2 subprocess envs (goal >= "
+                             f"{GOALS['ppo_fast_native_over_exact']:g}; each round: "
+                             f"{', '.join(f'{x:.2f}' for x in t['ppo_fast_native_over_exact_runs'])}).")
+                lines[-1:-1] = [text]
         else:
             lines += ["| PPO, 2 subprocess envs | steps/s |", "|---|---:|"]
             lines += [f"| `{k}` | {t[k]['steps_per_s']:.1f} |" for k in ("rhs-highway-slam-v0", "rhs-highway-v0")]
