@@ -4,8 +4,9 @@
 (``--merge a/pose_covariance.json b/pose_covariance.json`` combines runs of disjoint configurations)
 
 For each configuration (:data:`CONFIGS`: the default 1-degree env, ``grid_deg`` 5, the phased and random
-antennas, the dense env, low SNR, the fast radar) and held-out seed, one IDM + MOBIL drive
-(``agents.evaluate.IDMMobilPolicy``; on ``policy_env``, the shipped policy's env, that policy: :data:`POLICIES`)
+antennas, the dense env, low SNR, the fast radar, each driven by IDM + MOBIL and, as ``<name>_policy``, by the
+shipped policy; ``policy_env`` is the shipped policy in its own env, the 5-degree grid) and held-out seed, one drive
+(``agents.evaluate.IDMMobilPolicy`` or the shipped policy: :data:`POLICIES`)
 of ``--cycles`` cycles with ``pipeline={"pose_covariance": "calibrated"}``:
 the env attaches the configuration's calibration (:mod:`slam.gym.pose_calibration`: shipped, cached, or fitted
 at first use on the calibration seeds 13000-13039, which no evaluation uses). The covariance is report-only (the
@@ -39,13 +40,19 @@ from slam.gym.pose_calibration import SHIPPED_CONFIGS
 #: configuration name -> (env id, gym.make keyword arguments without the pipeline option): the configurations whose
 #: calibrations the package ships, and the shipped policy's env (agents/data/shipped.json: its action setting does
 #: not enter the calibration key, so it is calibrated as grid5)
+#: the shipped policy (a byte copy of this experiment) and the action setting it drives with
+SHIPPED_POLICY = "agents/data/rl/shield_flank_explore_lane_time.zip"
+POLICY_ACTION = {"type": "DiscreteMetaAction", "target_speeds": [10, 15, 20, 25, 30]}
+#: the configurations the shipped policy drives (name -> the configuration it drives in, with its action setting,
+#: which does not enter the calibration key); ``policy_env`` is its own env, the 5-degree grid
+POLICY_CONFIGS: dict[str, str] = {"policy_env": "grid5", **{f"{n}_policy": n for n in SHIPPED_CONFIGS if n != "grid5"}}
 CONFIGS: dict[str, tuple[str, dict[str, Any]]] = {
     **SHIPPED_CONFIGS,
-    "policy_env": ("rhs-highway-slam-v0", {"action": {"type": "DiscreteMetaAction", "target_speeds": [10, 15, 20, 25, 30]},
-                                           "radar": {"scan": {"grid_deg": 5}}}),
+    **{name: (SHIPPED_CONFIGS[base][0], {"action": POLICY_ACTION, **SHIPPED_CONFIGS[base][1]})
+       for name, base in POLICY_CONFIGS.items()},
 }
-#: the configurations' driver: IDM + MOBIL unless named here (the shipped policy, a byte copy of this experiment)
-POLICIES: dict[str, str] = {"policy_env": "agents/data/rl/shield_flank_explore_lane_time.zip"}
+#: the configurations' driver: IDM + MOBIL unless named here (the shipped policy)
+POLICIES: dict[str, str] = dict.fromkeys(POLICY_CONFIGS, SHIPPED_POLICY)
 MODELS = ("calibrated", "adaptive", "drift-constants")
 #: held-out seeds (the densities were fitted on 1000-1009)
 SEEDS = tuple(range(12000, 12040))

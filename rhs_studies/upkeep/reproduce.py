@@ -183,11 +183,13 @@ STEPS: tuple[Step, ...] = (
          "pose_covariance step's measurement"),
     Step("pose_covariance", "pose_covariance.py",
          ("--configs", "default", "fast", "grid5", "policy_env", "dense", "phased", "random", "low_snr",
+          "default_policy", "fast_policy", "dense_policy", "phased_policy", "random_policy", "low_snr_policy",
           "--seeds", *(str(s) for s in range(12000, 12040)),
           "--cycles", "50", "--workers", "2"),
          ("pose_covariance.json",), 2400,
-         "NEES of the calibrated and adaptive pose covariances and of the drift densities, 8 configurations x 40 "
-         "held-out seeds (each configuration calibrated at first use on seeds 13000-13039 unless shipped)",
+         "NEES of the calibrated and adaptive pose covariances and of the drift densities, 7 configurations driven by "
+         "IDM + MOBIL and by the shipped policy x 40 held-out seeds (each configuration calibrated at first use on "
+         "seeds 13000-13039 unless shipped)",
          no_fingerprint="a calibration measurement of a report-only, opt-in covariance (pipeline option "
          "pose_covariance='calibrated'): no default path's numbers depend on it; its tests check it on a short drive"),
     Step("claim_study", "claim_study.py", (), ("claim_study.json",), 3600,
