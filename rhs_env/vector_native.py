@@ -92,7 +92,7 @@ class RhsVectorEnv(VectorEnv):
         self.workers: EnvWorkers | None = None
         try:
             if workers > 1:
-                self.workers = EnvWorkers(env_fns, workers, self.autoreset_mode, context)
+                self.workers = EnvWorkers(env_fns, workers, self.autoreset_mode, RhsVectorEnv, context)
             else:
                 for fn in env_fns:
                     self.envs.append(fn())

@@ -2,9 +2,8 @@
 workers=W)``.
 
 One process steps its envs on one core. With ``workers=W`` (opt-in; 1 by default: one core stays one core) the
-``N`` envs are split into ``W`` contiguous groups, env ``i`` in group ``i * W // N``-ish
-(``numpy.array_split``), and each group is an :class:`rhs_env.vector_native.RhsVectorEnv` of its own in a worker
-process. A step sends each worker its envs' actions, then collects their per-env results; the parent keeps
+``N`` envs are split into ``W`` contiguous groups (``numpy.array_split``: 8 envs on 3 workers are 3 + 3 + 2),
+and each group is an :class:`rhs_env.vector_native.RhsVectorEnv` of its own in a worker process. A step sends each worker its envs' actions, then collects their per-env results; the parent keeps
 the per-env buffers and merges the infos as with one process, so the results are those of ``N`` single envs with
 the same seeds (env ``i`` is reset with ``seed + i``; each worker runs the same per-env autoreset). Only the
 envs' own work runs in parallel; the parent's batching, the infos' merge and the pipes' pickling stay serial.
@@ -88,14 +87,14 @@ _COMMANDS: dict[str, Callable[..., Any]] = {
 }
 
 
-def _serve(pipe: Any, env_fns: Sequence[Callable[[], gym.Env]], autoreset_mode: str) -> None:
-    """A worker: an :class:`RhsVectorEnv` of its envs, answering the parent's commands until ``close``."""
+def _serve(pipe: Any, env_fns: Sequence[Callable[[], gym.Env]], autoreset_mode: str, group_class: type) -> None:
+    """A worker: a ``group_class`` (:class:`rhs_env.vector_native.RhsVectorEnv`) of its envs in this process,
+    answering the parent's commands until ``close``."""
     import rhs_env  # noqa: F401  (registers the ids in a spawned process)
-    from rhs_env.vector_native import RhsVectorEnv
 
     group = None
     try:
-        group = RhsVectorEnv(env_fns, autoreset_mode=autoreset_mode, copy=False)
+        group = group_class(env_fns, autoreset_mode=autoreset_mode, copy=False)
         pipe.send((group.single_observation_space, group.single_action_space, group.metadata, group.render_mode))
         while True:
             cmd, payload = pipe.recv()
@@ -124,11 +123,13 @@ class EnvWorkers:
             **kwargs)``).
         workers: processes, [1, ``len(env_fns)``].
         autoreset_mode: the groups' :class:`~gymnasium.vector.AutoresetMode`.
+        group_class: the vector env each worker holds its envs in (:class:`rhs_env.vector_native.RhsVectorEnv`,
+            which passes itself: this module does not import it), made with ``copy=False`` and one process.
         context: the multiprocessing start method (``"spawn"``, ``"forkserver"``, ``"fork"``).
     """
 
     def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], workers: int, autoreset_mode: Any,
-                 context: str = "spawn") -> None:
+                 group_class: type, context: str = "spawn") -> None:
         self.num_envs = len(env_fns)
         workers = check_workers(workers, self.num_envs)
         self.groups = [list(map(int, part)) for part in np.array_split(np.arange(self.num_envs), workers)]
@@ -139,7 +140,8 @@ class EnvWorkers:
         try:
             for w, group in enumerate(self.groups):
                 parent, child = ctx.Pipe()
-                process = ctx.Process(target=_serve, args=(child, [env_fns[i] for i in group], str(autoreset_mode.value)),
+                process = ctx.Process(target=_serve, args=(child, [env_fns[i] for i in group],
+                                                           str(autoreset_mode.value), group_class),
                                       daemon=True, name=f"rhs-vector-worker-{w}")
                 process.start()
                 child.close()
