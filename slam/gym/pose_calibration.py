@@ -16,7 +16,7 @@ changes how accurately the filter tracks, nothing that only changes what it repo
    :data:`CALIBRATION_CYCLES` cycles of the configuration with the adaptive model, highway-env's IDM + MOBIL
    driver in the ego's seat (the scripted reference of the studies), their rows fitted
    (:func:`slam.core.pose_calibration.fit_calibration`) and written to the cache atomically
-   (:func:`rhs_common.output_files.write_text_atomic`). On the default radar that takes ~1-3 minutes, once.
+   (:func:`rhs_common.output_files.write_text_atomic`). On the default radar that takes about a minute, once.
 
 The calibration seeds (13000-13039) are not evaluation seeds (``rhs_studies.kit.seeds``). Forty drives, not ten: fits
 on disjoint sets of ten of them differ by up to 10x in a factor (``scripts/calibrate_pose_covariance.py --spread 4``,
