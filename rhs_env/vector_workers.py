@@ -3,10 +3,11 @@ workers=W)``.
 
 One process steps its envs on one core. With ``workers=W`` (opt-in; 1 by default: one core stays one core) the
 ``N`` envs are split into ``W`` contiguous groups (``numpy.array_split``: 8 envs on 3 workers are 3 + 3 + 2),
-and each group is an :class:`rhs_env.vector_native.RhsVectorEnv` of its own in a worker process. A step sends each worker its envs' actions, then collects their per-env results; the parent keeps
-the per-env buffers and merges the infos as with one process, so the results are those of ``N`` single envs with
-the same seeds (env ``i`` is reset with ``seed + i``; each worker runs the same per-env autoreset). Only the
-envs' own work runs in parallel; the parent's batching, the infos' merge and the pipes' pickling stay serial.
+and each group is an :class:`rhs_env.vector_native.RhsVectorEnv` of its own in a worker process. A step sends
+each worker its envs' actions, then collects their per-env results; the parent keeps the per-env buffers and
+merges the infos as with one process, so the results are those of ``N`` single envs with the same seeds (env ``i``
+is reset with ``seed + i``; each worker runs the same per-env autoreset). Only the envs' own work runs in
+parallel; the parent's batching, the infos' merge and the pipes' pickling stay serial.
 
 Processes, not threads: the compiled kernels hold the GIL and the BLAS limits (threadpoolctl) are process-wide.
 Workers start with ``spawn`` by default (no inherited locks or thread pools; each imports the package and loads

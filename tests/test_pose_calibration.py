@@ -95,10 +95,10 @@ def _drive(env_id: str, kwargs: dict, seed: int, cycles: int):
 
 def test_calibration_script_reproduces_the_shipped_fast_radar_calibration(tmp_path) -> None:
     """``scripts/calibrate_pose_covariance.py --configs fast`` writes the factors the package ships (same key,
-    the scale factors within 10 %, the map-start std within 25 %: the drives are seeded and the fit deterministic, but numpy's AVX-512 sin / cos / exp
-    round otherwise than its AVX2 loops, and over the 500 cycles that moves k_heading by 4.2 % on an AMD EPYC
-    with AVX-512 (6.87 against 6.59; with numpy, OpenBLAS and numba capped at AVX2 the factors are the shipped
-    ones within 2 %))."""
+    the scale factors within 10 %, the map-start std within 25 %): the drives are seeded and the fit
+    deterministic, but numpy's AVX-512 sin / cos / exp round otherwise than its AVX2 loops, and over 500 cycles that
+    moved k_heading by 4.2 % on an AMD EPYC with AVX-512 (6.87 against 6.59, the 10-drive calibration; with numpy,
+    OpenBLAS and numba capped at AVX2 the factors were the shipped ones within 2 %)."""
     import importlib.util
     from pathlib import Path
 

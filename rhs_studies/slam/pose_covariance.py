@@ -421,7 +421,7 @@ def markdown(res: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _merge(paths: list[str], out: Path, argv: list[str] | None) -> int:
+def _merge(paths: list[str], out: Path, argv: list[str] | None, name: str = "pose_covariance") -> int:
     """Write one results file from several runs' (disjoint configurations, the same seeds and cycles); a merged
     file among them brings the provenance of each run it was made of."""
     from rhs_common.output_files import write_text_atomic
@@ -436,8 +436,8 @@ def _merge(paths: list[str], out: Path, argv: list[str] | None) -> int:
         res["configs"].update(r["configs"])
     out.mkdir(parents=True, exist_ok=True)
     config = {"merged": [str(q) for q in paths], "configs": list(res["configs"])}
-    res["provenance"] = write_json(out / "pose_covariance.json", res, __file__, config, time.time(), argv=argv)
-    write_text_atomic(out / "pose_covariance.md", markdown(res))
+    res["provenance"] = write_json(out / f"{name}.json", res, __file__, config, time.time(), argv=argv)
+    write_text_atomic(out / f"{name}.md", markdown(res))
     return 0
 
 
@@ -448,11 +448,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cycles", type=int, default=150, help="cycles per drive (default 150)")
     p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     p.add_argument("--out-dir", default="results")
+    p.add_argument("--name", default="pose_covariance", help="the results files' stem (default pose_covariance)")
     p.add_argument("--merge", nargs="+", metavar="JSON", help="combine the configurations of earlier runs' "
                    "pose_covariance.json (same seeds and cycles; each run's provenance kept) instead of driving")
     a = p.parse_args(argv)
     if a.merge:
-        return _merge(a.merge, Path(a.out_dir), argv)
+        return _merge(a.merge, Path(a.out_dir), argv, a.name)
     if a.cycles < 1:
         p.error(f"--cycles must be >= 1, got {a.cycles}")
     if a.workers < 1:
@@ -462,8 +463,8 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(a.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     config = {"configs": a.configs, "seeds": a.seeds, "cycles": a.cycles}
-    res["provenance"] = write_json(out / "pose_covariance.json", res, __file__, config, started, argv=argv)
-    (out / "pose_covariance.md").write_text(markdown(res))
+    res["provenance"] = write_json(out / f"{a.name}.json", res, __file__, config, started, argv=argv)
+    (out / f"{a.name}.md").write_text(markdown(res))
     print(json.dumps({k: {m: {kk: v for kk, v in c["summary"][m].items() if kk != "anees_interval"}
                           for m in MODELS} for k, c in res["configs"].items()}, indent=1))
     return 0 if all(math.isfinite(c["summary"]["adaptive"].get("anees", 0.0)) for c in res["configs"].values()) else 1

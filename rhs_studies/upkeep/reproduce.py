@@ -192,6 +192,14 @@ STEPS: tuple[Step, ...] = (
          "seeds 13000-13039 unless shipped)",
          no_fingerprint="a calibration measurement of a report-only, opt-in covariance (pipeline option "
          "pose_covariance='calibrated'): no default path's numbers depend on it; its tests check it on a short drive"),
+    Step("pose_covariance_150", "pose_covariance.py",
+         ("--configs", "default", "fast", "grid5", "dense", "phased", "random", "low_snr",
+          "--seeds", *(str(s) for s in range(12000, 12020)), "--cycles", "150", "--workers", "2",
+          "--name", "pose_covariance_150"), ("pose_covariance_150.json",), 1800,
+         "the same calibrations on drives three times as long as their calibration drives: 150 cycles, IDM + MOBIL, "
+         "20 held-out seeds per configuration",
+         no_fingerprint="the pose_covariance step's study at another drive length (the study has no fingerprint: "
+         "a calibration measurement of a report-only, opt-in covariance)"),
     Step("claim_study", "claim_study.py", (), ("claim_study.json",), 3600,
          "point-cloud, element and SLAM levels; resumes from results/claim_study_cache_*.jsonl"),
     Step("ablations", "ablate_policy.py", ("--fresh",), ("ablations.json",), 4500,
