@@ -53,38 +53,14 @@ def _step(group: Any, actions: list[Any]) -> Any:
             group.final_obs, group.final_infos)
 
 
-def _call(group: Any, local: list[int], name: str, args: tuple, kwargs: dict) -> list[Any]:
-    out = []
-    for i in local:
-        attr = group.envs[i].get_wrapper_attr(name)
-        out.append(attr(*args, **kwargs) if callable(attr) else attr)
-    return out
-
-
-def _get_attr(group: Any, local: list[int], name: str) -> list[Any]:
-    return [group.envs[i].get_wrapper_attr(name) for i in local]
-
-
-def _set_attr(group: Any, local: list[int], name: str, values: list[Any]) -> None:
-    for i, value in zip(local, values, strict=True):
-        group.envs[i].set_wrapper_attr(name, value)
-
-
-def _is_wrapped(group: Any, local: list[int], wrapper: type) -> list[bool]:
-    out = []
-    for i in local:
-        env: Any = group.envs[i]
-        found = False
-        while isinstance(env, gym.Wrapper):
-            found = found or isinstance(env, wrapper)
-            env = env.env
-        out.append(found)
-    return out
-
-
 _COMMANDS: dict[str, Callable[..., Any]] = {
-    "reset": _reset, "step": _step, "call": _call, "get_attr": _get_attr, "set_attr": _set_attr,
-    "is_wrapped": _is_wrapped, "render": lambda group: list(group.render()),
+    "reset": _reset, "step": _step,
+    # the group is a one-process RhsVectorEnv: its per-env methods answer for the envs it holds
+    "call": lambda group, local, name, args, kwargs: group.call_at(local, name, args, kwargs),
+    "get_attr": lambda group, local, name: group.get_attr_at(local, name),
+    "set_attr": lambda group, local, name, values: group.set_attr_at(local, name, values),
+    "is_wrapped": lambda group, local, wrapper: group.is_wrapped_at(local, wrapper),
+    "render": lambda group: list(group.render()),
 }
 
 
