@@ -70,6 +70,7 @@ __all__ = [
     "make_subproc_vec_env",
     "make_vec",
     "raise_worker_failure",
+    "send_worker_failure",
     "worker_gone",
 ]
 
@@ -322,10 +323,16 @@ def _worker(remote: Any, parent_remote: Any, env_fn_wrapper: Any, index: int) ->
     except KeyboardInterrupt:
         return
     except Exception as exc:
-        try:
-            remote.send((WORKER_FAILURE, type(exc).__name__, str(exc), "".join(traceback.format_exception(exc))))
-        except Exception:
-            pass
+        send_worker_failure(remote, exc)
+
+
+def send_worker_failure(conn: Any, exc: BaseException) -> None:
+    """Send a worker's exception to the parent (type name, message, traceback: :func:`raise_worker_failure`
+    raises it there); a pipe already closed is left so."""
+    try:
+        conn.send((WORKER_FAILURE, type(exc).__name__, str(exc), "".join(traceback.format_exception(exc))))
+    except Exception:
+        pass
 
 
 def raise_worker_failure(index: int, message: tuple[Any, ...]) -> None:

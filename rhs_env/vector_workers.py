@@ -18,14 +18,13 @@ worker; a dead worker is a :class:`rhs_env.vector.WorkerError` at the next call 
 from __future__ import annotations
 
 import multiprocessing as mp
-import traceback
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from rhs_env.vector import CLOSE_TIMEOUT_S, WORKER_FAILURE, WorkerPipe
+from rhs_env.vector import CLOSE_TIMEOUT_S, WorkerPipe, send_worker_failure
 
 __all__ = ["EnvWorkers", "check_workers"]
 
@@ -81,10 +80,7 @@ def _serve(pipe: Any, env_fns: Sequence[Callable[[], gym.Env]], autoreset_mode: 
     except (KeyboardInterrupt, EOFError):
         pass
     except Exception as exc:
-        try:
-            pipe.send((WORKER_FAILURE, type(exc).__name__, str(exc), "".join(traceback.format_exception(exc))))
-        except Exception:
-            pass
+        send_worker_failure(pipe, exc)
     finally:
         if group is not None:
             group.close()
