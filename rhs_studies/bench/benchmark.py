@@ -932,8 +932,9 @@ def bench_training(timesteps: int, seed: int, repeats: int = 3) -> dict:
                      "setup_s": t["setup_s"], "learn_s": t["learn_s"], "whole_run_s": round(whole, 3),
                      "startup_s": round(whole - s["timesteps"] / steady, 3)}
                 rounds.setdefault(label, {}).setdefault(env_id, []).append(r)
-        with tempfile.TemporaryDirectory() as tmp:
-            s = train("ppo", TRAINING_IDS[2], timesteps, tmp, seed=seed, n_envs=NATIVE_PPO_ENVS, eval_freq=10**9,
+        with tempfile.TemporaryDirectory() as tmp:  # as many rollouts as the 2-env runs: a steady rate to compare
+            s = train("ppo", TRAINING_IDS[2], timesteps * NATIVE_PPO_ENVS // 2, tmp, seed=seed, n_envs=NATIVE_PPO_ENVS,
+                      eval_freq=10**9,
                       checkpoint_freq=10**9, progress=False, update_threads=None,
                       hyperparams=_fast_hyperparams(tmp), native_workers=NATIVE_PPO_WORKERS)
         t = s["timing"]
@@ -1097,9 +1098,11 @@ def _md_ratios(result: dict) -> list[str]:
                         f"{', '.join(f'{x:.2f}' for x in t['ppo_fast_over_exact_runs'])}).")
                 if "ppo_fast_native_over_exact" in t:
                     r = t["native"][TRAINING_IDS[2]]
+                    split = (f"{r['steady_collect_s_per_rollout']:.2f} / {r['steady_update_s_per_rollout']:.2f} s"
+                             if r["steady_collect_s_per_rollout"] is not None else "-")
                     text += (f" The fast env's PPO with {r['n_envs']} envs in the native vector env on {r['workers']} "
                              f"worker processes: {r['steady_steps_per_s']:.1f} steps/s (collect / update per rollout "
-                             f"{r['steady_collect_s_per_rollout']:.2f} / {r['steady_update_s_per_rollout']:.2f} s), "
+                             f"{split}), "
                              f"{t['ppo_fast_native_over_exact']:.2f} x the exact env's with 2 subprocess envs (goal >= "
                              f"{GOALS['ppo_fast_native_over_exact']:g}; each round: "
                              f"{', '.join(f'{x:.2f}' for x in t['ppo_fast_native_over_exact_runs'])}).")
