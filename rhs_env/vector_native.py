@@ -144,18 +144,9 @@ class RhsVectorEnv(VectorEnv):
         options = dict(options) if options is not None else None
         mask = self._reset_mask(options.pop("reset_mask")) if options and "reset_mask" in options \
             else np.ones(self.num_envs, dtype=np.bool_)
-        self._terminations[mask] = False
-        self._truncations[mask] = False
-        self._autoreset_envs[mask] = False
         infos: dict[str, Any] = {}
         indices = [int(i) for i in np.flatnonzero(mask)]
-        if self.workers is not None:
-            results = self.workers.reset(indices, [seeds[i] for i in indices], options)
-        else:
-            results = [self.envs[i].reset(seed=seeds[i], options=options) for i in indices]
-        for i, (obs, info) in zip(indices, results, strict=True):
-            self._env_obs[i] = obs
-            self.env_infos[i], self.final_obs[i], self.final_infos[i] = info, None, None
+        for i, (_, info) in zip(indices, self.reset_envs(indices, [seeds[i] for i in indices], options), strict=True):
             infos = self._add_info(infos, info, i)
         self._observations = concatenate(self.single_observation_space, self._env_obs, self._observations)
         return (deepcopy(self._observations) if self.copy else self._observations), infos
@@ -175,22 +166,43 @@ class RhsVectorEnv(VectorEnv):
                 infos = self._add_info(infos, {"final_obs": self.final_obs[i], "final_info": self.final_infos[i]}, i)
             infos = self._add_info(infos, self.env_infos[i], i)
         self._observations = concatenate(self.single_observation_space, self._env_obs, self._observations)
-        self._autoreset_envs = np.logical_or(self._terminations, self._truncations)
         return ((deepcopy(self._observations) if self.copy else self._observations), np.copy(self._rewards),
                 np.copy(self._terminations), np.copy(self._truncations), infos)
+
+    def reset_envs(self, indices: Sequence[int], seeds: Sequence[int | None],
+                   options: dict[str, Any] | None) -> list[tuple[Any, dict[str, Any]]]:
+        """Reset envs ``indices`` with ``seeds`` (one each), wherever they live, writing their per-env buffers
+        (observation, info, no final observation, flags cleared); their ``(obs, info)`` in that order."""
+        if self.workers is not None:
+            results = self.workers.reset(indices, seeds, options)
+        else:
+            results = [self.envs[i].reset(seed=seed, options=options) for i, seed in zip(indices, seeds, strict=True)]
+        for i, (obs, info) in zip(indices, results, strict=True):
+            self._env_obs[i], self.env_infos[i], self.final_obs[i], self.final_infos[i] = obs, info, None, None
+            self._terminations[i] = self._truncations[i] = self._autoreset_envs[i] = False
+        return results
 
     def step_envs(self, actions: Sequence[Any]) -> None:
         """Step (or autoreset) each env, writing its obs, reward, flags and info into the per-env buffers.
 
         This is the seam for a batched step over envs: an override writes the same buffers
         (``_env_obs``, ``_rewards``, ``_terminations``, ``_truncations``, :attr:`env_infos`,
-        :attr:`final_obs` / :attr:`final_infos` in ``SAME_STEP`` mode) for all envs at once.
+        :attr:`final_obs` / :attr:`final_infos` in ``SAME_STEP`` mode, and ``_autoreset_envs``, the envs whose
+        episode ended) for all envs at once.
         """
         if self.workers is not None:
+            ended = np.flatnonzero(self._autoreset_envs)
+            if self.autoreset_mode == AutoresetMode.DISABLED and ended.size:  # refused here: a worker would exit
+                raise _disabled_error(int(ended[0]))
             for i, (obs, rew, term, trunc, info, final_obs, final_info) in enumerate(self.workers.step(actions)):
                 self._env_obs[i], self._rewards[i], self._terminations[i], self._truncations[i] = obs, rew, term, trunc
                 self.env_infos[i], self.final_obs[i], self.final_infos[i] = info, final_obs, final_info
-            return
+        else:
+            self._step_here(actions)
+        self._autoreset_envs = np.logical_or(self._terminations, self._truncations)
+
+    def _step_here(self, actions: Sequence[Any]) -> None:
+        """:meth:`step_envs` for the envs of this process, in turn."""
         mode = self.autoreset_mode
         for i, (env, action) in enumerate(zip(self.envs, actions, strict=True)):
             self.final_obs[i] = self.final_infos[i] = None
@@ -199,8 +211,7 @@ class RhsVectorEnv(VectorEnv):
                 self._rewards[i], self._terminations[i], self._truncations[i] = 0.0, False, False
                 continue
             if mode == AutoresetMode.DISABLED and self._autoreset_envs[i]:
-                raise RuntimeError(f"env {i} ended and autoreset_mode is DISABLED: reset it first "
-                                   "(reset(options={'reset_mask': mask}))")
+                raise _disabled_error(i)
             (self._env_obs[i], self._rewards[i], self._terminations[i], self._truncations[i],
              self.env_infos[i]) = env.step(action)
             if mode == AutoresetMode.SAME_STEP and (self._terminations[i] or self._truncations[i]):
@@ -298,6 +309,11 @@ class RhsVectorEnv(VectorEnv):
     def __repr__(self) -> str:
         spec = getattr(self, "spec", None)
         return f"RhsVectorEnv({spec.id + ', ' if spec is not None else ''}num_envs={self.num_envs})"
+
+
+def _disabled_error(i: int) -> RuntimeError:
+    return RuntimeError(f"env {i} ended and autoreset_mode is DISABLED: reset it first "
+                        "(reset(options={'reset_mask': mask}))")
 
 
 def make_vector_env(env_id: str, num_envs: int = 1, autoreset_mode: Any = AutoresetMode.NEXT_STEP,

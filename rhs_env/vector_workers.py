@@ -37,27 +37,20 @@ def check_workers(workers: Any, num_envs: int) -> int:
 
 
 # --------------------------------------------------------------------------- the worker's side
-def _reset(group: Any, local: list[int], seeds: list[int | None], options: dict[str, Any] | None) -> Any:
-    for i, seed in zip(local, seeds, strict=True):
-        group._env_obs[i], group.env_infos[i] = group.envs[i].reset(seed=seed, options=options)
-        group.final_obs[i] = group.final_infos[i] = None
-        group._terminations[i] = group._truncations[i] = group._autoreset_envs[i] = False
-    return [group._env_obs[i] for i in local], [group.env_infos[i] for i in local]
-
-
 def _step(group: Any, actions: list[Any]) -> Any:
     group.step_envs(actions)
-    group._autoreset_envs = np.logical_or(group._terminations, group._truncations)
     return (group._env_obs, group._rewards, group._terminations, group._truncations, group.env_infos,
             group.final_obs, group.final_infos)
 
 
+#: the worker's commands: ``(group, local indices, per-env values..., common values...)``; the group is a
+#: one-process RhsVectorEnv, whose per-env methods answer for the envs it holds
 _COMMANDS: dict[str, Callable[..., Any]] = {
-    "reset": _reset, "step": _step,
-    # the group is a one-process RhsVectorEnv: its per-env methods answer for the envs it holds
+    "step": _step,
+    "reset": lambda group, local, seeds, options: group.reset_envs(local, seeds, options),
     "call": lambda group, local, name, args, kwargs: group.call_at(local, name, args, kwargs),
     "get_attr": lambda group, local, name: group.get_attr_at(local, name),
-    "set_attr": lambda group, local, name, values: group.set_attr_at(local, name, values),
+    "set_attr": lambda group, local, values, name: group.set_attr_at(local, name, values),
     "is_wrapped": lambda group, local, wrapper: group.is_wrapped_at(local, wrapper),
     "render": lambda group: list(group.render()),
 }
@@ -140,15 +133,7 @@ class EnvWorkers:
 
     def reset(self, indices: Sequence[int], seeds: Sequence[int | None], options: dict[str, Any] | None) -> list[Any]:
         """Reset envs ``indices`` with ``seeds``; their ``(obs, info)`` in that order."""
-        plan = self._by_worker(indices)
-        for w, pairs in plan.items():
-            self.pipes[w].send(("reset", ([j for _, j in pairs], [seeds[k] for k, _ in pairs], options)))
-        out: list[Any] = [None] * len(indices)
-        for w, pairs in plan.items():
-            obs, infos = self.pipes[w].recv()
-            for (k, _), o, info in zip(pairs, obs, infos, strict=True):
-                out[k] = (o, info)
-        return out
+        return self._ask(indices, "reset", per_env=(seeds,), common=(options,))
 
     def step(self, actions: Sequence[Any]) -> list[tuple[Any, ...]]:
         """Step every env with its action; per env ``(obs, reward, terminated, truncated, info, final_obs,
@@ -163,23 +148,19 @@ class EnvWorkers:
 
     def call(self, indices: Sequence[int], name: str, args: tuple = (), kwargs: dict | None = None) -> list[Any]:
         """``name`` of envs ``indices`` called with ``args`` / ``kwargs`` (or read, when not callable)."""
-        return self._ask(indices, "call", (name, tuple(args), dict(kwargs or {})))
+        return self._ask(indices, "call", common=(name, tuple(args), dict(kwargs or {})))
 
     def get_attr(self, indices: Sequence[int], name: str) -> list[Any]:
         """``name`` of envs ``indices``."""
-        return self._ask(indices, "get_attr", (name,))
+        return self._ask(indices, "get_attr", common=(name,))
 
     def set_attr(self, indices: Sequence[int], name: str, values: Sequence[Any]) -> None:
         """Set ``name`` of envs ``indices`` to ``values`` (one each)."""
-        plan = self._by_worker(indices)
-        for w, pairs in plan.items():
-            self.pipes[w].send(("set_attr", ([j for _, j in pairs], name, [values[k] for k, _ in pairs])))
-        for w in plan:
-            self.pipes[w].recv()
+        self._ask(indices, "set_attr", per_env=(values,), common=(name,), answers=False)
 
     def is_wrapped(self, indices: Sequence[int], wrapper: type) -> list[bool]:
         """Whether envs ``indices`` are wrapped in ``wrapper``."""
-        return self._ask(indices, "is_wrapped", (wrapper,))
+        return self._ask(indices, "is_wrapped", common=(wrapper,))
 
     def render(self) -> list[Any]:
         """Every env's frame, in env order."""
@@ -187,14 +168,21 @@ class EnvWorkers:
             pipe.send(("render", ()))
         return [frame for pipe in self.pipes for frame in pipe.recv()]
 
-    def _ask(self, indices: Sequence[int], cmd: str, common: tuple) -> list[Any]:
+    def _ask(self, indices: Sequence[int], cmd: str, per_env: tuple[Sequence[Any], ...] = (), common: tuple = (),
+             answers: bool = True) -> list[Any]:
+        """Send ``cmd`` to the workers that hold envs ``indices``, each with its envs' local indices, its slice of
+        each ``per_env`` sequence (one value per index) and ``common``, all before the first answer; the answers
+        (one per env) in the order of ``indices``, or None each when ``answers`` is False."""
         plan = self._by_worker(indices)
         for w, pairs in plan.items():
-            self.pipes[w].send((cmd, ([j for _, j in pairs], *common)))
+            sliced = [[values[k] for k, _ in pairs] for values in per_env]
+            self.pipes[w].send((cmd, ([j for _, j in pairs], *sliced, *common)))
         out: list[Any] = [None] * len(indices)
         for w, pairs in plan.items():
-            for (k, _), value in zip(pairs, self.pipes[w].recv(), strict=True):
-                out[k] = value
+            answer = self.pipes[w].recv()
+            if answers:
+                for (k, _), value in zip(pairs, answer, strict=True):
+                    out[k] = value
         return out
 
     def close(self) -> None:

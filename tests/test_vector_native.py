@@ -179,9 +179,11 @@ def test_bad_autoreset_mode_and_info_flag_are_named():
         gym.make_vec(RADAR, num_envs=2, vectorization_mode="vector_entry_point", landmarks_in_info=True, **RADAR_KW)
 
 
-def test_disabled_mode_refuses_a_step_of_an_ended_env():
+@pytest.mark.parametrize("workers", [1, 2])
+def test_disabled_mode_refuses_a_step_of_an_ended_env(workers):
+    """The refused step leaves the vector env usable (with workers too: refused before any worker steps)."""
     env = gym.make_vec(HW, num_envs=2, vectorization_mode="vector_entry_point", autoreset_mode="Disabled",
-                       **{**HW_KW, "duration": 0.4})
+                       workers=workers, **{**HW_KW, "duration": 0.4})
     try:
         env.reset(seed=0)
         a = env.action_space.sample()
