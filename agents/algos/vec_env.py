@@ -111,21 +111,17 @@ def make_vec_env(
                             os.path.join(monitor_dir, f"{rank}{monitor_suffix}") if monitor_dir else None,
                             wrap, ignore_sigint=in_workers) for rank in range(n_envs)]
     if native_workers is not None:
+        import multiprocessing
+
         from rhs_env.vector_native import RhsVectorEnv, to_sb3
 
         workers = native_workers if in_workers else 1
-        context = "forkserver" if "forkserver" in _start_methods() else "spawn"
+        context = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
         venv = to_sb3(RhsVectorEnv(factories, autoreset_mode="SameStep", workers=workers, context=context))
     else:
         venv = SubprocVecEnv(factories) if in_workers else DummyVecEnv(factories)  # type: ignore[arg-type]
     venv.seed(seed)  # the seeds of the first reset, as stable-baselines3's make_vec_env sets them
     return venv
-
-
-def _start_methods() -> list[str]:
-    import multiprocessing
-
-    return multiprocessing.get_all_start_methods()
 
 
 @dataclass(frozen=True)

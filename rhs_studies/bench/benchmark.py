@@ -922,30 +922,13 @@ def bench_training(timesteps: int, seed: int, repeats: int = 3) -> dict:
                     s = train("ppo", env_id, timesteps, tmp, seed=seed, n_envs=2, eval_freq=10**9,
                               checkpoint_freq=10**9, progress=False, update_threads=threads,
                               hyperparams=_fast_hyperparams(tmp) if env_id == TRAINING_IDS[2] else None)
-                t = s["timing"]
-                whole = t["setup_s"] + t["learn_s"]
-                steady = t["steady_steps_per_s"] or s["steps_per_s"]
-                r = {"n_envs": 2, "timesteps": s["timesteps"], "update_threads": t["update_threads"],
-                     "steady_steps_per_s": steady, "steps_per_s_learn": s["steps_per_s"],
-                     "steady_collect_s_per_rollout": t["steady_collect_s_per_rollout"],
-                     "steady_update_s_per_rollout": t["steady_update_s_per_rollout"],
-                     "setup_s": t["setup_s"], "learn_s": t["learn_s"], "whole_run_s": round(whole, 3),
-                     "startup_s": round(whole - s["timesteps"] / steady, 3)}
-                rounds.setdefault(label, {}).setdefault(env_id, []).append(r)
+                rounds.setdefault(label, {}).setdefault(env_id, []).append(_training_record(s, 2))
         with tempfile.TemporaryDirectory() as tmp:  # as many rollouts as the 2-env runs: a steady rate to compare
             s = train("ppo", TRAINING_IDS[2], timesteps * NATIVE_PPO_ENVS // 2, tmp, seed=seed, n_envs=NATIVE_PPO_ENVS,
-                      eval_freq=10**9,
-                      checkpoint_freq=10**9, progress=False, update_threads=None,
+                      eval_freq=10**9, checkpoint_freq=10**9, progress=False, update_threads=None,
                       hyperparams=_fast_hyperparams(tmp), native_workers=NATIVE_PPO_WORKERS)
-        t = s["timing"]
-        steady = t["steady_steps_per_s"] or s["steps_per_s"]
-        whole = t["setup_s"] + t["learn_s"]
         rounds.setdefault("native", {}).setdefault(TRAINING_IDS[2], []).append(
-            {"n_envs": NATIVE_PPO_ENVS, "workers": NATIVE_PPO_WORKERS, "timesteps": s["timesteps"],
-             "update_threads": t["update_threads"], "steady_steps_per_s": steady, "steps_per_s_learn": s["steps_per_s"],
-             "steady_collect_s_per_rollout": t["steady_collect_s_per_rollout"],
-             "steady_update_s_per_rollout": t["steady_update_s_per_rollout"], "setup_s": t["setup_s"],
-             "learn_s": t["learn_s"], "whole_run_s": round(whole, 3), "startup_s": round(whole - s["timesteps"] / steady, 3)})
+            {**_training_record(s, NATIVE_PPO_ENVS), "workers": NATIVE_PPO_WORKERS})
     native_runs = rounds.pop("native")
     out: dict[str, Any] = {"repeats": repeats}
     for label, by_env in rounds.items():
@@ -968,6 +951,21 @@ def bench_training(timesteps: int, seed: int, repeats: int = 3) -> dict:
     out["ppo_fast_native_over_exact_runs"] = [round(a["steady_steps_per_s"] / b["steady_steps_per_s"], 3) for a, b in
                                               zip(native_runs[TRAINING_IDS[2]], rounds["default"]["rhs-highway-slam-v0"])]
     return out
+
+
+def _training_record(summary: dict, n_envs: int) -> dict:
+    """One PPO run of :func:`bench_training` from its ``train`` summary: the steady rate (the whole run's when it
+    had no steady phase), the rollouts' collect / update split, and the start-up (wall time less the steps at the
+    steady rate)."""
+    t = summary["timing"]
+    whole = t["setup_s"] + t["learn_s"]
+    steady = t["steady_steps_per_s"] or summary["steps_per_s"]
+    return {"n_envs": n_envs, "timesteps": summary["timesteps"], "update_threads": t["update_threads"],
+            "steady_steps_per_s": steady, "steps_per_s_learn": summary["steps_per_s"],
+            "steady_collect_s_per_rollout": t["steady_collect_s_per_rollout"],
+            "steady_update_s_per_rollout": t["steady_update_s_per_rollout"],
+            "setup_s": t["setup_s"], "learn_s": t["learn_s"], "whole_run_s": round(whole, 3),
+            "startup_s": round(whole - summary["timesteps"] / steady, 3)}
 
 
 def _pooled_training(runs: list[dict]) -> dict:

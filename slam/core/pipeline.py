@@ -473,9 +473,7 @@ class SlamPipeline:
         self.fit_fraction: float | None = None  # current static points near a previous one after the fit
         self.registration_pairs = 0  # the kept registration's point pairs (0: it returned its guess)
         self.health.reset()
-        self.drift.reset()
-        self.measured_drift.reset()
-        self.map_start.reset()
+        self._restart_drift()
         self.drift_information: CycleInformation | None = None  # the adaptive model's last measurement
         self._held_increment: np.ndarray | None = None  # its last J^-1 (held while a cycle pins nothing)
         self._chi2, self._dof = 0.0, 0  # the pairs' residual chi-square and degrees of freedom over the map
@@ -590,6 +588,13 @@ class SlamPipeline:
         self.measured_drift.step_measured(self.heading, motion, increment)
         self.map_start.step(self.heading, motion)
 
+    def _restart_drift(self) -> None:
+        """The map-relative drift terms start again (a new map, or the pose re-anchored to an old one): the
+        densities' and the measured drift, and the map-start heading term."""
+        self.drift.reset()
+        self.measured_drift.reset()
+        self.map_start.reset()
+
     @property
     def residual_scale(self) -> float:
         """The adaptive model's ``s^2``: the chi-square of the pairs' residuals over their degrees of freedom,
@@ -664,9 +669,7 @@ class SlamPipeline:
             return new
         if self.health.lost_cycles >= self.options.new_map_after_cycles:
             self.slam.restart_at(est.pose)
-            self.drift.reset()
-            self.measured_drift.reset()
-            self.map_start.reset()
+            self._restart_drift()
             self._chi2, self._dof = 0.0, 0
             self.map_breaks += 1
             self.health.new_map()
@@ -685,9 +688,7 @@ class SlamPipeline:
         new.ess, new.n_static_points, new.n_observations = est.ess, est.n_static_points, est.n_observations
         new.n_matched, new.stage_times = est.n_matched, est.stage_times
         self.slam.last_estimate = new
-        self.drift.reset()
-        self.measured_drift.reset()
-        self.map_start.reset()
+        self._restart_drift()
         new.stage_times["loop_closure"] = time.perf_counter() - t0
         return new
 
