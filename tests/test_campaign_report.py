@@ -68,3 +68,23 @@ def test_targets_wall_clock_and_selection_on_the_page():
     page = "\n".join(cr._curve_lines(curves))
     assert "| train wall (h) | 1.00 | 2.00 |" in page and "| return | 5.0 [5.0, 5.0] | 7.0 [7.0, 7.0] |" in page
     assert "| seed 0 | 20000-20001 | best (640): 5.0, 1/2; final (1280): 6.0, 0/2 | final |" in page
+
+
+def test_student_target_needs_speed_and_the_start_is_paired():
+    """An imitation + RL run at 1.2 x IDM + MOBIL without a crash misses its target when its mean speed is under
+    24 m/s; each run is paired against its start, and pooled over the runs per seed."""
+    idm = [_ep(0, 100.0, False), _ep(1, 100.0, False)]
+    slow = [_ep(0, 120.0, False), _ep(1, 120.0, False)]  # _ep's mean speed: 20 m/s
+    eps = {"idm": {"exact": {"off": idm}}, "campaign:ppo_student:seed0": {"exact": {"off": slow}},
+           "campaign:ppo_student:seed1": {"exact": {"off": [_ep(0, 90.0, True), _ep(1, 130.0, False)]}},
+           "start.zip": {"exact": {"off": [_ep(0, 110.0, False), _ep(1, 110.0, True)]}}}
+    lines = "\n".join(cr._target_lines(st.table(eps)))
+    assert "| imitation + RL | seed0 | 120.0 (1.200 x) | 0/2 | 20.0 | >= 1.10 x, <= 1/100, >= 24 m/s | not met |" in lines
+    v = st.versus(eps, "ppo_student", "start.zip")
+    assert v["exact_off"]["campaign:ppo_student:seed0"]["return_diff"] == pytest.approx(10.0)
+    assert v["exact_off"]["campaign:ppo_student:seed1"]["only_a_crashed"] == 1
+    assert v["exact_off"]["campaign:ppo_student:seed1"]["only_b_crashed"] == 1
+    assert v["exact_off"]["pooled"]["return_diff"] == pytest.approx(((105 - 110) + (125 - 110)) / 2)
+    assert st.versus(eps, "ppo_student", "absent.zip") is None
+    page = "\n".join(cr._versus_lines(v))
+    assert "| exact, shield off | pooled over 2 runs | +5.00 [" in page and "| exact, shield off | seed1 | +0.00 [" in page

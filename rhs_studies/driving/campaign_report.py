@@ -5,7 +5,8 @@
   the runs' ``state.json``), and the hours ``steps x seeds x recipes`` need at the PPO rate on one core. The machine's
   load average is recorded with them (the rates are those of a shared machine).
 * :func:`markdown`: the page from ``results/campaign_<recipe>.json`` (:func:`rhs_studies.driving.campaign.curves`),
-  ``results/shield_table.json`` (:mod:`rhs_studies.driving.shield_table`) and the floor.
+  ``results/shield_table.json`` (:mod:`rhs_studies.driving.shield_table`), the imitation + RL recipe's
+  ``results/shield_table_student.json`` (its own env settings, each run paired against its start) and the floor.
 
     OMP_NUM_THREADS=1 python scripts/campaign_report.py floor
     python scripts/campaign_report.py page
@@ -169,8 +170,9 @@ def _curve_lines(cur: dict[str, Any]) -> list[str]:
     return lines
 
 
-#: the campaign's targets, shield off on the exact env: (label, recipe, return / IDM + MOBIL's, max collisions per 100)
-TARGETS = (("PPO from scratch", "ppo_scratch", 1.05, 2), ("imitation + RL", "ppo_student", 1.10, 1))
+#: the campaign's targets, shield off on the exact env: (label, recipe, return / IDM + MOBIL's, max collisions per
+#: 100, min mean speed m/s or None)
+TARGETS = (("PPO from scratch", "ppo_scratch", 1.05, 2, None), ("imitation + RL", "ppo_student", 1.10, 1, 24.0))
 
 
 def _target_lines(table: dict[str, Any], reference: str = "idm") -> list[str]:
@@ -179,15 +181,17 @@ def _target_lines(table: dict[str, Any], reference: str = "idm") -> list[str]:
     if ref is None:
         return []
     lines = []
-    for label, recipe, ratio, crashes in TARGETS:
+    for label, recipe, ratio, crashes, speed in TARGETS:
         arms = sorted(a for a in table if a.startswith(f"campaign:{recipe}:") and "off" in table[a].get("exact", {}))
         for arm in arms:
             r = table[arm]["exact"]["off"]
             per100 = 100 * r["collisions"] / r["episodes"]
-            met = r["return"] >= ratio * ref["return"] and per100 <= crashes
+            met = (r["return"] >= ratio * ref["return"] and per100 <= crashes
+                   and (speed is None or (r["mean_speed"] or 0.0) >= speed))
+            target = f">= {ratio:.2f} x, <= {crashes}/100" + (f", >= {speed:.0f} m/s" if speed else "")
             lines.append(f"| {label} | {arm.split(':')[-1]} | {r['return']:.1f} ({r['return'] / ref['return']:.3f} x) | "
-                         f"{r['collisions']}/{r['episodes']} | {_fmt(r['mean_speed'])} | >= {ratio:.2f} x, <= "
-                         f"{crashes}/100 | {'met' if met else 'not met'} |")
+                         f"{r['collisions']}/{r['episodes']} | {_fmt(r['mean_speed'])} | {target} | "
+                         f"{'met' if met else 'not met'} |")
     if not lines:
         return []
     return [f"Targets, shield off on the exact env (IDM + MOBIL: {ref['return']:.1f}, {ref['collisions']}/"
@@ -239,14 +243,45 @@ def _stats_lines(stats: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _versus_lines(v: dict[str, Any] | None) -> list[str]:
+    """Each run against the policy its recipe started from (:func:`rhs_studies.driving.shield_table.versus`)."""
+    if not v:
+        return []
+    lines = [f"Each run against `{v['reference']}`, the policy it started from (same seeds; return difference run - "
+             "start, 95 % bootstrap interval over the seeds; pooled: per seed the runs' mean):", "",
+             "| env, shield | run | return difference [95 %] | crashed: run only | start only |", "|---|---|---|---:|---:|"]
+    for key, row in v.items():
+        if key == "reference":
+            continue
+        for arm, p in row.items():
+            crashes = ("", "") if arm == "pooled" else (p["only_a_crashed"], p["only_b_crashed"])
+            name = f"pooled over {p['runs']} runs" if arm == "pooled" else arm.split(":")[-1]
+            lines.append(f"| {key.replace('_', ', shield ')} | {name} | {p['return_diff']:+.2f} "
+                         f"[{p['interval'][0]:+.2f}, {p['interval'][1]:+.2f}] | {crashes[0]} | {crashes[1]} |")
+    return [*lines, ""]
+
+
+def _shield_section(title: str, shield: dict[str, Any]) -> list[str]:
+    return [f"## {title} (seeds {shield['seeds'][0]}-{shield['seeds'][-1]}, fresh; env settings "
+            f"`{json.dumps(shield.get('env_kwargs', {}))}`)", "",
+            *_target_lines(shield["table"]), *_shield_lines(shield["table"]), "",
+            "Sim-to-sim gap (same seed, same arm):", "",
+            *_gap_lines(shield["table"]), "",
+            "Over the training seeds (score: return / IDM + MOBIL's on the same seed and env; stratified "
+            "bootstrap):", "", *_stats_lines(shield.get("training_seeds", {})), "",
+            *_versus_lines(shield.get("versus"))]
+
+
 def markdown(curves: dict[str, Any] | None, shield: dict[str, Any] | None, floor_result: dict[str, Any] | None,
-             student: dict[str, Any] | None = None) -> str:
+             student: dict[str, Any] | None = None, student_shield: dict[str, Any] | None = None) -> str:
     """The campaign page (any part may be missing): ``curves`` PPO from scratch's, ``student`` the imitation + RL
-    recipe's (``ppo_student``: PPO from the DAgger student's weights)."""
+    recipe's (``ppo_student``: PPO from the DAgger student's weights); ``shield`` and ``student_shield`` their shield
+    tables (the student's drives its own env settings)."""
     out = ["# Training campaign: pilot", "",
            "Generated by `python scripts/campaign_report.py page` from `results/campaign_ppo_scratch.json`, "
            "`results/shield_table.json` (until the campaign's runs join it: `results/shield_table_scripted.json`, the "
-           "scripted and trivial arms) and `results/campaign_floor.json` (each records its commit and command).", ""]
+           "scripted and trivial arms), `results/campaign_ppo_student.json`, `results/shield_table_student.json` and "
+           "`results/campaign_floor.json` (each records its commit and command).", ""]
     if floor_result:
         out += _floor_lines(floor_result)
     if curves:
@@ -256,12 +291,9 @@ def markdown(curves: dict[str, Any] | None, shield: dict[str, Any] | None, floor
         out += ["## Learning curves (PPO from the DAgger student: imitation + RL, fast env, validation seeds 20000..)",
                 "", *_curve_lines(student), ""]
     if shield:
-        out += [f"## The shield, measured (seeds {shield['seeds'][0]}-{shield['seeds'][-1]}, fresh)", "",
-                *_target_lines(shield["table"]), *_shield_lines(shield["table"]), "",
-                "Sim-to-sim gap (same seed, same arm):", "",
-                *_gap_lines(shield["table"]), "",
-                "Over the training seeds (score: return / IDM + MOBIL's on the same seed and env; stratified "
-                "bootstrap):", "", *_stats_lines(shield.get("training_seeds", {})), ""]
+        out += _shield_section("The shield, measured", shield)
+    if student_shield:
+        out += _shield_section("Imitation + RL, the shield measured", student_shield)
     return "\n".join(out)
 
 
@@ -294,7 +326,7 @@ def main(argv: list[str] | None = None) -> int:
         return json.loads(path.read_text()) if path.exists() else None
     shield = read("shield_table.json") or read("shield_table_scripted.json")  # the scripted arms until the runs join
     page = markdown(read(f"campaign_{args.recipes[0]}.json"), shield, read("campaign_floor.json"),
-                    read("campaign_ppo_student.json"))
+                    read("campaign_ppo_student.json"), read("shield_table_student.json"))
     (args.results / "campaign_pilot.md").write_text(page + "\n")
     print(page)
     return 0

@@ -41,7 +41,7 @@ import numpy as np
 from rhs_env.registration import HIGHWAY_SLAM_FAST_ID, HIGHWAY_SLAM_ID
 
 __all__ = ["DEFAULT_ARMS", "OWN_SETS", "arm_policy", "drive_arm", "main", "paired", "summarize_arm", "table",
-           "test_seeds"]
+           "test_seeds", "versus"]
 
 #: the ledger sets this study drives (and may drive again): the pilot's and the table's
 OWN_SETS = ("campaign_pilot_test", "campaign_test")
@@ -214,6 +214,39 @@ def training_seed_stats(episodes: dict[str, Any], recipe: str, env: str, shield:
             "profile": performance_profile(scores, np.linspace(0.5, 1.3, 17).round(3).tolist(), reps=reps)}
 
 
+def versus(episodes: dict[str, Any], recipe: str, reference: str) -> dict[str, Any] | None:
+    """Each run of ``recipe`` against the arm ``reference`` (the policy it started from, say) on the same seeds, per
+    env and shield: :func:`paired` per run, and pooled over the runs (per seed the runs' mean return minus the
+    reference's, its 95 % bootstrap interval over the seeds). None when the reference was not driven.
+
+    Example:
+        >>> ep = lambda r, c=False: {"seed": 0, "return": r, "crashed": c}
+        >>> episodes = {"campaign:x:seed0": {"exact": {"off": [ep(3.0)]}},
+        ...             "campaign:x:seed1": {"exact": {"off": [ep(1.0, True)]}}, "ref": {"exact": {"off": [ep(1.5)]}}}
+        >>> v = versus(episodes, "x", "ref")["exact_off"]
+        >>> v["pooled"]["return_diff"], v["campaign:x:seed1"]["only_a_crashed"]
+        (0.5, 1)
+    """
+    if reference not in episodes:
+        return None
+    arms = [a for a in episodes if a.startswith(f"campaign:{recipe}:")]
+    out: dict[str, Any] = {}
+    for env, by_shield in episodes[reference].items():
+        for shield, ref in by_shield.items():
+            runs = [a for a in arms if shield in episodes[a].get(env, {})]
+            if not runs:
+                continue
+            row: dict[str, Any] = {a: paired(episodes[a][env][shield], ref) for a in runs}
+            base = {r["seed"]: r["return"] for r in ref}
+            by_run = [{r["seed"]: r["return"] for r in episodes[a][env][shield]} for a in runs]
+            seeds = [s for s in base if all(s in b for b in by_run)]
+            d = np.asarray([np.mean([b[s] for b in by_run]) - base[s] for s in seeds])
+            row["pooled"] = {"runs": len(runs), "seeds": len(seeds), "return_diff": float(d.mean()),
+                             "interval": _interval(d)}
+            out[f"{env}_{shield}"] = row
+    return {"reference": reference, **out}
+
+
 def drive_all(arms: Sequence[str], envs: Sequence[str], seeds: Sequence[int], env_kwargs: dict[str, Any],
               root: str | Path | None = None, log: Callable[[str], None] = print,
               done: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
@@ -264,6 +297,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--recipe", choices=sorted(RECIPES), default="ppo_scratch", help="the env settings' recipe")
     ap.add_argument("--root", type=Path, default=CAMPAIGN_DIR)
     ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parents[2] / "results" / "shield_table.json")
+    ap.add_argument("--versus", default=None,
+                    help="an arm each campaign run is paired against (the policy its recipe starts from, say)")
     ap.add_argument("--merge", type=Path, nargs="*", default=[],
                     help="results of earlier runs (same seeds and env settings) whose arms join the table")
     args = ap.parse_args(argv)
@@ -284,6 +319,8 @@ def main(argv: list[str] | None = None) -> int:
                   "policies": {a: r for a, r in records.items() if a in episodes},
                   "runs_provenance": merged_provenance, "table": table(episodes),
                   "training_seeds": stats, "episodes": episodes}
+        if args.versus is not None:
+            result["versus"] = versus(episodes, args.recipe, args.versus)
         write_json(args.out, result, "scripts/shield_table.py", vars(args), started, argv=argv)
 
     write(drive_all(args.arms, args.envs, seeds, env_kwargs, args.root, log=lambda s: print(s, flush=True),

@@ -171,6 +171,25 @@ STEPS: tuple[Step, ...] = (
          "the campaign's test: each PPO-from-scratch run's chosen checkpoint on the 100 test seeds, with and without "
          "the shield, exact and fast env, beside the scripted arms (merged from shield_table_scripted.json)",
          no_fingerprint="100 episodes per arm, env and shield on the exact env; the table's arithmetic is tested"),
+    Step("campaign_select_student", "campaign.py", ("select", "--recipe", "ppo_student", "--seeds", "0", "1", "2"),
+         ("campaign_select_ppo_student.json",), 600, "the checkpoint each imitation + RL run is tested with: the "
+         "chunks' best against the latest, on 50 validation seeds (writes campaign/ppo_student/seed<k>/chosen.zip)",
+         no_fingerprint="a choice among the committed training checkpoints (minutes of driving per run)"),
+    Step("shield_table_student_scripted", "shield_table.py",
+         ("--recipe", "ppo_student", "--arms", "idm", "headway", "agents/data/dagger_rhs_highway_slam.zip",
+          "--envs", "exact", "fast", "--seed", "21100", "--episodes", "100", "--out",
+          "results/shield_table_student_scripted.json"), ("shield_table_student_scripted.json",), 1800,
+         "the imitation + RL recipe's env settings (5-degree scan) on the campaign's 100 test seeds: IDM + MOBIL, the "
+         "headway driver and the DAgger student the recipe starts from, with and without the shield",
+         no_fingerprint="100 episodes per arm, env and shield on the exact env; the table's arithmetic is tested"),
+    Step("shield_table_student", "shield_table.py",
+         ("--recipe", "ppo_student", "--arms", "campaign:ppo_student:seed0", "campaign:ppo_student:seed1",
+          "campaign:ppo_student:seed2", "--envs", "exact", "fast", "--seed", "21100", "--episodes", "100",
+          "--versus", "agents/data/dagger_rhs_highway_slam.zip", "--merge", "results/shield_table_student_scripted.json",
+          "--out", "results/shield_table_student.json"), ("shield_table_student.json",), 2400,
+         "the imitation + RL recipe's test: each run's chosen checkpoint on the 100 test seeds, with and without the "
+         "shield, exact and fast env, each paired against the DAgger student it started from",
+         no_fingerprint="100 episodes per arm, env and shield on the exact env; the table's arithmetic is tested"),
     Step("campaign_floor", "campaign_report.py", ("floor", "--steps", "150", "--ppo-steps", "640"),
          ("campaign_floor.json",), 300, "env steps per CPU second of the fast and exact SLAM envs and of the "
          "campaign's PPO, and the hours its target budget needs", no_fingerprint="timings"),
