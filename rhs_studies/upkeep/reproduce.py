@@ -177,10 +177,11 @@ STEPS: tuple[Step, ...] = (
          no_fingerprint="a choice among the committed training checkpoints (minutes of driving per run)"),
     Step("shield_table_student_scripted", "shield_table.py",
          ("--recipe", "ppo_student", "--arms", "idm", "headway", "agents/data/dagger_rhs_highway_slam.zip",
-          "--envs", "exact", "fast", "--seed", "21100", "--episodes", "100", "--out",
-          "results/shield_table_student_scripted.json"), ("shield_table_student_scripted.json",), 1800,
+          "agents/data/shipped.zip", "--envs", "exact", "fast", "--seed", "21100", "--episodes", "100", "--out",
+          "results/shield_table_student_scripted.json"), ("shield_table_student_scripted.json",), 2400,
          "the imitation + RL recipe's env settings (5-degree scan) on the campaign's 100 test seeds: IDM + MOBIL, the "
-         "headway driver and the DAgger student the recipe starts from, with and without the shield",
+         "headway driver, the DAgger student the recipe starts from and the shipped policy, with and without the "
+         "shield",
          no_fingerprint="100 episodes per arm, env and shield on the exact env; the table's arithmetic is tested"),
     Step("shield_table_student", "shield_table.py",
          ("--recipe", "ppo_student", "--arms", "campaign:ppo_student:seed0", "campaign:ppo_student:seed1",
