@@ -188,7 +188,7 @@ def _target_lines(table: dict[str, Any], reference: str = "idm") -> list[str]:
             per100 = 100 * r["collisions"] / r["episodes"]
             met = (r["return"] >= ratio * ref["return"] and per100 <= crashes
                    and (speed is None or (r["mean_speed"] or 0.0) >= speed))
-            target = f">= {ratio:.2f} x, <= {crashes}/100" + (f", >= {speed:.0f} m/s" if speed else "")
+            target = f">= {ratio:.2f} x, <= {crashes}/100" + (f", >= {speed:.0f} m/s" if speed is not None else "")
             lines.append(f"| {label} | {arm.split(':')[-1]} | {r['return']:.1f} ({r['return'] / ref['return']:.3f} x) | "
                          f"{r['collisions']}/{r['episodes']} | {_fmt(r['mean_speed'])} | {target} | "
                          f"{'met' if met else 'not met'} |")
