@@ -315,7 +315,7 @@ def main(argv: list[str] | None = None) -> int:
         episodes = {**earlier, **episodes}
         stats = {f"{env}_{sh}": training_seed_stats(episodes, args.recipe, env, sh)
                  for env in args.envs for sh in ("off", "on")}
-        result = {"seeds": seeds, "env_kwargs": env_kwargs, "arms": list(episodes),
+        result: dict[str, Any] = {"seeds": seeds, "env_kwargs": env_kwargs, "arms": list(episodes),
                   "policies": {a: r for a, r in records.items() if a in episodes},
                   "runs_provenance": merged_provenance, "table": table(episodes),
                   "training_seeds": stats, "episodes": episodes}
