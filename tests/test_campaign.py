@@ -180,3 +180,31 @@ def test_the_exact_env_never_gets_the_fast_radar():
     env = gym.make(record["env_id"], **record["env_kwargs"])
     assert not isinstance(radar_of(env), FastRadarSystem)  # with the training kwargs it would be one
     env.close()
+
+
+def test_a_shaped_recipe_prices_the_crash_in_training_only():
+    with pytest.raises(ValueError, match="recipe.reward_shaping.crash_penalty"):
+        campaign.Recipe("x", reward_shaping={"crash_penalty": -1.0})
+    with pytest.raises(ValueError, match="recipe.reward_shaping has unknown"):
+        campaign.Recipe("x", reward_shaping={"crash": 1.0})
+    safe = campaign.RECIPES["ppo_student_safe"]
+    assert json.loads(json.dumps(safe.record()))["reward_shaping"]["crash_penalty"] == 500.0
+    shaped = campaign.Recipe("tiny_shaped", env_id="rhs-highway-v0", eval_env_id="rhs-highway-v0",
+                             env_kwargs={"duration": 20}, decision_interval=1,
+                             reward_shaping={"crash_penalty": 500.0, "weight": 0.0})
+    venv = campaign.make_train_env(shaped)
+    try:
+        venv.seed(0)
+        venv.reset()
+        faster = np.full(venv.num_envs, 3)
+        for _ in range(200):  # always FASTER on a 30-vehicle road: a crash within seconds
+            _, rewards, dones, infos = venv.step(faster)
+            crashed = [i for i, info in enumerate(infos) if dones[i] and info.get("crashed")]
+            if crashed:
+                break
+        assert crashed, "always FASTER did not crash in 200 steps"
+        k = crashed[0]
+        # highway-env's normalised reward is in [0, 1]: the step's reward is it minus the penalty
+        assert -500.0 <= rewards[k] <= -499.0 and infos[k]["shaping"] == -500.0
+    finally:
+        venv.close()

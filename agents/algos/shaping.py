@@ -24,6 +24,20 @@ shield does the rest. The intervention cost makes the shield's work the policy's
 with ``c = shield_cost`` per replaced env step (``info["shield"]`` is not None; 0: off). The
 shield wraps the env inside this wrapper, so its reasons reach it.
 
+A crash can also be priced at the step where it happens:
+
+    r''' = r'' - P * [the ego crashed at this step]
+
+with ``P = crash_penalty`` (0: off). Why it is needed: with a discount ``gamma`` per decision, a
+per-decision reward ``r``, and a speed gain ``g`` that carries a crash hazard ``h`` per decision,
+driving faster pays while ``(r + g - P h) / (1 - gamma (1 - h)) > r / (1 - gamma)``, that is up to
+
+    h* = g (1 - gamma) / (r gamma + P (1 - gamma)).
+
+With highway-env's reward and decisions every 5 env steps (``r`` ~ 4.8; 23.6 -> 29 m/s is worth
+``g`` ~ 0.72), ``gamma = 0.8`` and ``P = 0`` give ``h*`` ~ 3.8 % per decision: a 40-decision episode
+may crash more often than not and still pay. ``gamma = 0.95`` with ``P = 500`` lowers ``h*`` to ~0.12 %.
+
 The wrapper sits outside the ``Monitor`` of :func:`agents.algos.vec_env.make_vec_env`, so the
 monitor files and the learning curves keep the unshaped return; ``info["shaping"]`` is the
 penalty of the step.
@@ -49,12 +63,14 @@ class ShapingConfig:
     ttc_s: float = 3.0  # T0: time to collision below which the penalty starts, s
     weight: float = 0.5  # w: the penalty at TTC = 0, per env step (highway-env's normalised reward is in [0, 1])
     shield_cost: float = 0.0  # c: the cost of an env step whose action the shield replaced (0: off)
+    crash_penalty: float = 0.0  # P: subtracted at the env step the ego crashes (0: off)
 
     def __post_init__(self) -> None:
         check_types(self)
         check_range("ttc_s", self.ttc_s, 0.0, 60.0, low_open=True)
         check_range("weight", self.weight, 0.0, 100.0)
         check_range("shield_cost", self.shield_cost, 0.0, 100.0)
+        check_range("crash_penalty", self.crash_penalty, 0.0, 1.0e4)
 
 
 def time_to_collision(env: gym.Env) -> float:
@@ -81,8 +97,9 @@ def ttc_penalty(ttc: float, config: ShapingConfig) -> float:
 
 
 class RewardShaping(gym.Wrapper):
-    """Subtract :func:`ttc_penalty` of the state reached and, for a step the shield replaced, ``shield_cost`` from
-    each step's reward (see the module docstring); ``info["shaping"]`` is the sum subtracted (<= 0).
+    """Subtract :func:`ttc_penalty` of the state reached, ``shield_cost`` for a step the shield replaced and
+    ``crash_penalty`` at a crash from each step's reward (see the module docstring); ``info["shaping"]`` is the sum
+    subtracted (<= 0).
 
     Examples:
         >>> import gymnasium as gym, rhs_env
@@ -99,7 +116,8 @@ class RewardShaping(gym.Wrapper):
 
     def step(self, action):
         obs, reward, terminated, truncated, info = self.env.step(action)
-        penalty = 0.0 if info.get("crashed") else ttc_penalty(time_to_collision(self.env), self.config)
+        crashed = bool(info.get("crashed"))
+        penalty = self.config.crash_penalty if crashed else ttc_penalty(time_to_collision(self.env), self.config)
         if info.get("shield") is not None:
             penalty += self.config.shield_cost
         return obs, float(reward) - penalty, terminated, truncated, {**info, "shaping": -penalty}
