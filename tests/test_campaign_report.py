@@ -88,3 +88,20 @@ def test_student_target_needs_speed_and_the_start_is_paired():
     assert st.versus(eps, "ppo_student", "absent.zip") is None
     page = "\n".join(cr._versus_lines(v))
     assert "| exact, shield off | pooled over 2 runs | +5.00 [" in page and "| exact, shield off | seed1 | +0.00 [" in page
+
+
+def test_the_hazard_table_compares_the_runs_crash_rate_with_the_break_even_of_their_speed():
+    def ep(ret, crashed, steps, speed):
+        return {"seed": 0, "return": ret, "crashed": crashed, "steps": steps, "mean_speed": speed, "overrides": None}
+
+    start = [ep(160.0, False, 200, 23.6)] * 4
+    run = [ep(192.0, False, 200, 29.0)] * 3 + [ep(80.0, True, 100, 29.0)]
+    episodes = {"start.zip": {"exact": {"off": start}}, "campaign:ppo_student:seed0": {"exact": {"off": run}}}
+    text = "\n".join(cr.hazard_lines(episodes, "ppo_student", "start.zip"))
+    # r = 160 * 5 / 200 = 4; g = 192 * 5 / 200 - 4 = 0.8; h* = 0.8 * 0.2 / (4 * 0.8) = 5 %; 1 crash in 140 decisions
+    assert "| seed0 | 1/4 | 80.0 | 100.0 | 192.0 | 29.0 | 0.71 % | +0.80 | 5.00 % |" in text
+    assert "gamma 0.8" in text and "crash penalty 0" in text
+    safe = "\n".join(cr.hazard_lines({**episodes, "campaign:ppo_student_safe:seed0": {"exact": {"off": run}}},
+                                     "ppo_student_safe", "start.zip"))
+    assert "crash penalty 500" in safe and "| 0.14 % |" in safe  # 0.8 * 0.05 / (4 * 0.95 + 25)
+    assert cr.hazard_lines(episodes, "ppo_student", "missing.zip") == []

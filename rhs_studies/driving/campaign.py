@@ -157,7 +157,7 @@ RECIPES: dict[str, Recipe] = {
                           env_kwargs={**STUDENT_ENV_KWARGS, "radar_model": "fast-calibrate"},
                           hyperparams={"ent_coef": 0.0, "learning_rate": 1.0e-4}),
     # the same start, trained on a reward that prices the crash (agents.algos.shaping: the break-even crash hazard
-    # of a speed gain falls from ~3.8 % to ~0.12 % per decision) and looks further ahead (gamma 0.95: 20 decisions)
+    # of a speed gain falls from ~4.6 % to ~0.13 % per decision) and looks further ahead (gamma 0.95: 20 decisions)
     "ppo_student_safe": Recipe("ppo_student_safe", init_policy="agents/data/dagger_rhs_highway_slam.zip",
                                env_kwargs={**STUDENT_ENV_KWARGS, "radar_model": "fast-calibrate"},
                                hyperparams={"ent_coef": 0.0, "learning_rate": 1.0e-4, "gamma": 0.95},

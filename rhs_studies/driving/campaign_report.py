@@ -261,6 +261,63 @@ def _versus_lines(v: dict[str, Any] | None) -> list[str]:
     return [*lines, ""]
 
 
+def break_even_hazard(gain: float, reward: float, gamma: float, penalty: float = 0.0) -> float:
+    """The crash hazard per decision up to which a speed gain pays (:mod:`agents.algos.shaping`):
+    ``h* = g (1 - gamma) / (r gamma + P (1 - gamma))``, with ``g`` the per-decision reward gain, ``r`` the
+    per-decision reward without it, ``gamma`` the discount per decision and ``P`` the crash penalty.
+
+    >>> round(break_even_hazard(0.75, 4.05, 0.8), 4), round(break_even_hazard(0.75, 4.05, 0.95, 500.0), 5)
+    (0.0463, 0.0013)
+    """
+    return gain * (1.0 - gamma) / (reward * gamma + penalty * (1.0 - gamma))
+
+
+def hazard_lines(episodes: dict[str, Any], recipe_name: str, start: str, env: str = "exact") -> list[str]:
+    """Why a recipe's runs crash, shield off: their crash and crash-free episodes apart, the crash hazard per
+    decision they drive with (collisions / decisions driven), and the break-even hazard of their speed gain over
+    ``start`` (:func:`break_even_hazard` with ``r`` the start's reward per decision and ``g`` the runs' gain per
+    decision in crash-free episodes, at the recipe's discount and crash penalty)."""
+    from rhs_studies.driving.campaign import RECIPES
+
+    recipe = RECIPES[recipe_name]
+    k = recipe.decision_interval
+    gamma = float(recipe.ppo_args()["gamma"])
+    shaping = recipe.shaping_config()
+    penalty = 0.0 if shaping is None else float(shaping.crash_penalty)
+    ref = episodes.get(start, {}).get(env, {}).get("off")
+    if not ref:
+        return []
+    r = float(np.mean([e["return"] for e in ref])) * k / float(np.mean([e["steps"] for e in ref]))
+    lines = []
+    for arm in sorted(a for a in episodes if a.startswith(f"campaign:{recipe_name}:")):
+        eps = episodes[arm].get(env, {}).get("off")
+        if not eps:
+            continue
+        crash = [e for e in eps if e["crashed"]]
+        free = [e for e in eps if not e["crashed"]]
+        if not free:
+            continue
+        decisions = sum(e["steps"] for e in eps) / k
+        g = float(np.mean([e["return"] for e in free])) * k / float(np.mean([e["steps"] for e in free])) - r
+        h_star = break_even_hazard(g, r, gamma, penalty) if g > 0 else 0.0
+
+        def mean(key: str, group: list[dict[str, Any]]) -> str:
+            vals = [e[key] for e in group if e[key] is not None]
+            return _fmt(float(np.mean(vals))) if vals else "-"
+        lines.append(f"| {arm.split(':')[-1]} | {len(crash)}/{len(eps)} | {mean('return', crash)} | "
+                     f"{_fmt(float(np.median([e['steps'] for e in crash]))) if crash else '-'} | "
+                     f"{mean('return', free)} | {mean('mean_speed', free)} | {100 * len(crash) / decisions:.2f} % | "
+                     f"{g:+.2f} | {100 * h_star:.2f} % |")
+    if not lines:
+        return []
+    return [f"Why the runs crash ({env} env, shield off; against `{start}`, {r:.2f} reward per decision; "
+            f"gamma {gamma:g} per decision of {k} env steps, crash penalty {penalty:g}): a run whose crash hazard "
+            "lies below the break-even hazard of its speed gain is paid for crashing by its training reward.", "",
+            "| run | crashed | return, crash episodes | crash env step (median) | return, crash-free | mean speed, "
+            "crash-free (m/s) | crash hazard / decision | speed gain / decision | break-even hazard |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|", *lines, ""]
+
+
 def _shield_section(title: str, shield: dict[str, Any]) -> list[str]:
     return [f"## {title} (seeds {shield['seeds'][0]}-{shield['seeds'][-1]}, fresh; env settings "
             f"`{json.dumps(shield.get('env_kwargs', {}))}`)", "",
@@ -269,7 +326,16 @@ def _shield_section(title: str, shield: dict[str, Any]) -> list[str]:
             *_gap_lines(shield["table"]), "",
             "Over the training seeds (score: return / IDM + MOBIL's on the same seed and env; stratified "
             "bootstrap):", "", *_stats_lines(shield.get("training_seeds", {})), "",
-            *_versus_lines(shield.get("versus"))]
+            *_versus_lines(shield.get("versus")), *_hazards(shield)]
+
+
+def _hazards(shield: dict[str, Any]) -> list[str]:
+    """:func:`hazard_lines` of each recipe whose runs the table holds, against the arm they are paired with."""
+    start = (shield.get("versus") or {}).get("reference")
+    recipes = sorted({a.split(":")[1] for a in shield.get("episodes", {}) if a.startswith("campaign:")})
+    if start is None:
+        return []
+    return [line for r in recipes for line in hazard_lines(shield["episodes"], r, start)]
 
 
 def markdown(curves: dict[str, Any] | None, shield: dict[str, Any] | None, floor_result: dict[str, Any] | None,
