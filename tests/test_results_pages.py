@@ -85,3 +85,29 @@ def test_the_campaign_row_reads_the_test_shield_off_and_waits_for_the_runs():
         for e in eps[f"campaign:ppo_scratch:seed{k}"]["exact"]["off"]:
             e["return"] = 106.0
     assert "target met" in write_results_pages._campaign_test({**d, "table": st.table(eps)})[1]
+
+
+def test_the_imitation_rl_row_holds_speed_the_pairing_and_whether_the_shipped_policy_needs_its_shield():
+    from rhs_studies.driving import shield_table as st
+
+    def ep(seed, ret, crashed, speed=25.0):
+        return {"seed": seed, "return": ret, "crashed": crashed, "steps": 10, "mean_speed": speed, "overrides": None}
+
+    start = "agents/data/dagger_rhs_highway_slam.zip"
+    eps = {"idm": {"exact": {"off": [ep(0, 100.0, False), ep(1, 100.0, False)]}},
+           start: {"exact": {"off": [ep(0, 105.0, False), ep(1, 105.0, False)]}}}
+    d = {"table": st.table(eps), "policies": {}, "versus": {"reference": start}}
+    assert write_results_pages._campaign_student(d) is None  # the runs have not joined the table
+    eps["campaign:ppo_student:seed0"] = {"exact": {"off": [ep(0, 112.0, False), ep(1, 112.0, False)],
+                                                   "on": [ep(0, 113.0, False), ep(1, 113.0, False)]}}
+    eps["agents/data/shipped.zip"] = {"exact": {"off": [ep(0, 80.0, True), ep(1, 90.0, False)],
+                                                "on": [ep(0, 110.0, False), ep(1, 110.0, False)]}}
+    d = {"table": st.table(eps), "policies": {"campaign:ppo_student:seed0": {"timesteps": 2_000_000}},
+         "versus": {"reference": start,
+                    "exact_off": {"pooled": {"runs": 1, "seeds": 2, "return_diff": 7.0, "interval": [7.0, 7.0]}}}}
+    what, value = write_results_pages._campaign_student(d)
+    assert "1 training seeds; checkpoints at 2.00-2.00M env steps" in what and ">= 24 m/s" in what
+    assert value.startswith("1.120 x, 0/2, 25.0 m/s: target met; over its start, pooled: +7.0 [+7.0, +7.0]")
+    assert "the shipped policy, which needs its shield: shield off 0.850 x, 1/2, behind it 1.100 x, 0/2" in value
+    eps["campaign:ppo_student:seed0"]["exact"]["off"][0]["mean_speed"] = 22.0  # below 24 m/s: not met
+    assert "target not met" in write_results_pages._campaign_student({**d, "table": st.table(eps)})[1]

@@ -177,11 +177,12 @@ STEPS: tuple[Step, ...] = (
          no_fingerprint="a choice among the committed training checkpoints (minutes of driving per run)"),
     Step("shield_table_student_scripted", "shield_table.py",
          ("--recipe", "ppo_student", "--arms", "idm", "headway", "agents/data/dagger_rhs_highway_slam.zip",
-          "agents/data/shipped.zip", "--envs", "exact", "fast", "--seed", "21100", "--episodes", "100", "--out",
-          "results/shield_table_student_scripted.json"), ("shield_table_student_scripted.json",), 2400,
+          "agents/data/shipped.zip", "constant:1", "constant:3", "--envs", "exact", "fast", "--seed", "21100",
+          "--episodes", "100", "--out", "results/shield_table_student_scripted.json"),
+         ("shield_table_student_scripted.json",), 3600,
          "the imitation + RL recipe's env settings (5-degree scan) on the campaign's 100 test seeds: IDM + MOBIL, the "
-         "headway driver, the DAgger student the recipe starts from and the shipped policy, with and without the "
-         "shield",
+         "headway driver, the DAgger student the recipe starts from, the shipped policy and the trivial policies "
+         "(always IDLE, always FASTER), with and without the shield",
          no_fingerprint="100 episodes per arm, env and shield on the exact env; the table's arithmetic is tested"),
     Step("shield_table_student", "shield_table.py",
          ("--recipe", "ppo_student", "--arms", "campaign:ppo_student:seed0", "campaign:ppo_student:seed1",

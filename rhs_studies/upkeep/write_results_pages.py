@@ -261,6 +261,13 @@ def _campaign_student(d: dict) -> tuple[str, str] | None:
     pooled = {sh: d["versus"].get(f"exact_{sh}", {}).get("pooled") for sh in ("off", "on")}
     on = " / ".join(f"{r['on']['collisions']}/{r['on']['episodes']}" for r in rows if "on" in r)
     so = start["off"]
+    shipped = d["table"].get("agents/data/shipped.zip", {}).get("exact", {})
+    unsafe = "off" in shipped and shipped["off"]["collisions"] > 0.01 * shipped["off"]["episodes"]
+    needs = (f"; the shipped policy{', which needs its shield' if unsafe else ''}: shield off "
+             f"{shipped['off']['return'] / idm['return']:.3f} x, "
+             f"{shipped['off']['collisions']}/{shipped['off']['episodes']}, behind it "
+             f"{shipped['on']['return'] / idm['return']:.3f} x, {shipped['on']['collisions']}/{shipped['on']['episodes']}"
+             if "off" in shipped and "on" in shipped else "")
     return (f"Imitation + RL on the fast SLAM env (PPO from the DAgger student's weights; {len(arms)} training seeds; "
             f"checkpoints at {budget} env steps, chosen on validation seeds, tested once on {idm['episodes']} fresh "
             "seeds on the exact env, shield off): return / IDM + MOBIL's per seed, collisions, mean speed (target "
@@ -271,7 +278,7 @@ def _campaign_student(d: dict) -> tuple[str, str] | None:
             + (f"; over its start, pooled: {paired_text(pooled['off'])}" if pooled["off"] else "")
             + f" (start: {so['return'] / idm['return']:.3f} x, {so['collisions']}/{so['episodes']}, "
             f"{so['mean_speed']:.1f} m/s; behind the shield: "
-            + (f"{paired_text(pooled['on'])}, " if pooled["on"] else "") + f"{on})")
+            + (f"{paired_text(pooled['on'])}, " if pooled["on"] else "") + f"{on}){needs}")
 
 
 #: (results file, row builder): the rows of the README's headline table, in order
