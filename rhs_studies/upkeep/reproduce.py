@@ -158,6 +158,11 @@ STEPS: tuple[Step, ...] = (
          ("campaign_ppo_student.json",), 60, "the imitation + RL recipe's learning curves (PPO from the DAgger "
          "student's weights), read from its committed checkpoints (campaign/ppo_student/)",
          no_fingerprint="a record of training runs (env steps, returns, wall time), read from the committed state"),
+    Step("campaign_curves_student_safe", "campaign.py",
+         ("curves", "--recipe", "ppo_student_safe", "--seeds", "0", "1", "2"), ("campaign_ppo_student_safe.json",), 60,
+         "the learning curves of the imitation + RL recipe trained on a reward that prices the crash "
+         "(ppo_student_safe), read from its committed checkpoints (campaign/ppo_student_safe/)",
+         no_fingerprint="a record of training runs (env steps, returns, wall time), read from the committed state"),
     Step("shield_table_scripted", "shield_table.py",
          ("--arms", "idm", "headway", "constant:1", "constant:3", "--envs", "exact", "fast", "--seed", "21100",
           "--episodes", "100", "--out", "results/shield_table_scripted.json"), ("shield_table_scripted.json",), 2400,
