@@ -110,5 +110,5 @@ def test_the_hazard_table_compares_the_runs_crash_rate_with_the_break_even_of_th
 def test_further_recipes_get_their_curves_and_their_shaping_on_the_page():
     curves = {"recipe": "ppo_student_safe", "runs": {}, "by_env_steps": None, "by_wall_s": None}
     page = cr.markdown(None, None, None, others={"ppo_student_safe": curves})
-    assert "## Learning curves (`ppo_student_safe`, in training" in page
+    assert "## Learning curves (`ppo_student_safe`, fast env" in page
     assert '"crash_penalty": 500.0' in page and "validation keeps highway-env's reward" in page
