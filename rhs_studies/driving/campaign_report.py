@@ -273,6 +273,12 @@ def break_even_hazard(gain: float, reward: float, gamma: float, penalty: float =
     return gain * (1.0 - gamma) / (reward * gamma + penalty * (1.0 - gamma))
 
 
+def _mean_of(key: str, episodes: list[dict[str, Any]]) -> str:
+    """The mean of ``key`` over the episodes that have it, formatted; "-" when none does."""
+    vals = [e[key] for e in episodes if e[key] is not None]
+    return _fmt(float(np.mean(vals))) if vals else "-"
+
+
 def hazard_lines(episodes: dict[str, Any], recipe_name: str, start: str, env: str = "exact") -> list[str]:
     """Why a recipe's runs crash, shield off: their crash and crash-free episodes apart, the crash hazard per
     decision they drive with (collisions / decisions driven), and the break-even hazard of their speed gain over
@@ -301,13 +307,9 @@ def hazard_lines(episodes: dict[str, Any], recipe_name: str, start: str, env: st
         decisions = sum(e["steps"] for e in eps) / k
         g = float(np.mean([e["return"] for e in free])) * k / float(np.mean([e["steps"] for e in free])) - r
         h_star = break_even_hazard(g, r, gamma, penalty) if g > 0 else 0.0
-
-        def mean(key: str, group: list[dict[str, Any]]) -> str:
-            vals = [e[key] for e in group if e[key] is not None]
-            return _fmt(float(np.mean(vals))) if vals else "-"
-        lines.append(f"| {arm.split(':')[-1]} | {len(crash)}/{len(eps)} | {mean('return', crash)} | "
+        lines.append(f"| {arm.split(':')[-1]} | {len(crash)}/{len(eps)} | {_mean_of('return', crash)} | "
                      f"{_fmt(float(np.median([e['steps'] for e in crash]))) if crash else '-'} | "
-                     f"{mean('return', free)} | {mean('mean_speed', free)} | {100 * len(crash) / decisions:.2f} % | "
+                     f"{_mean_of('return', free)} | {_mean_of('mean_speed', free)} | {100 * len(crash) / decisions:.2f} % | "
                      f"{g:+.2f} | {100 * h_star:.2f} % |")
     if not lines:
         return []
@@ -369,9 +371,9 @@ def _shield_section(title: str, shield: dict[str, Any]) -> list[str]:
 def _hazards(shield: dict[str, Any]) -> list[str]:
     """:func:`hazard_lines` of each recipe whose runs the table holds, against the arm they are paired with."""
     start = (shield.get("versus") or {}).get("reference")
-    recipes = sorted({a.split(":")[1] for a in shield.get("episodes", {}) if a.startswith("campaign:")})
     if start is None:
         return []
+    recipes = sorted({a.split(":")[1] for a in shield.get("episodes", {}) if a.startswith("campaign:")})
     return [line for r in recipes for line in hazard_lines(shield["episodes"], r, start)]
 
 
